@@ -1,0 +1,23 @@
+//! `arld`: Active Reinforcement Learning with Demonstration.
+//!
+//! DQN-family agents (prioritized double DQN with plain, bootstrapped or noisy output stages) that learn
+//! from an expert's demonstrations, either collected before training (DQfD) or asked for during training
+//! only where the agent is unsure (Active DQN, Chen et al.). The crate is organised along the flow of one
+//! training run:
+//!
+//! - [`env`]: the [`env::Env`] trait and Gymnasium-exact environments; [`rng`]: NumPy-compatible seeding.
+//! - [`nn`]: the fixed-shape Q-network (plain, K heads or noisy output), forward, backward, Adam, safetensors.
+//! - [`replay`]: sum-tree prioritized replay with a permanent demonstration part.
+//! - [`agent`]: acting (exploration, head sampling, noise), the learner (losses, target network), evaluation.
+//! - [`query`]: uncertainty measures, query rules and budget accounting.
+//! - [`expert`]: the [`expert::Expert`] trait and its kinds.
+//! - [`train`]: the training loop of one run, top to bottom.
+//! - [`experiment`]: presets, run directories, sweeps, steps to solve, tables and figures.
+//! - [`tboard`]: a minimal TensorBoard event-file writer for scalar curves.
+//!
+//! The binary `arld` is a thin command-line layer over this library.
+
+pub mod env;
+pub mod nn;
+pub mod replay;
+pub mod rng;

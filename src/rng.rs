@@ -1,0 +1,1 @@
+//! NumPy-compatible random numbers (SeedSequence, PCG64, Generator.uniform).
