@@ -1,0 +1,2 @@
+//! Subcommands of the `arld` binary, one file each.
+pub mod env_cmd;
