@@ -21,3 +21,4 @@ pub mod env;
 pub mod nn;
 pub mod replay;
 pub mod rng;
+pub mod tboard;
