@@ -17,8 +17,13 @@
 //!
 //! The binary `arld` is a thin command-line layer over this library.
 
+pub mod agent;
 pub mod env;
+pub mod experiment;
+pub mod expert;
 pub mod nn;
 pub mod replay;
+pub mod query;
 pub mod rng;
+pub mod train;
 pub mod tboard;

@@ -19,12 +19,15 @@ enum Command {
         #[command(subcommand)]
         cmd: cli::env_cmd::EnvCommand,
     },
+    /// Train one agent (DQN, DQfD, GDQN, BDQN, ADQN, ADQNP) and write a run directory.
+    Train(cli::train_cmd::TrainArgs),
 }
 
 fn main() -> std::process::ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Env { cmd } => cli::env_cmd::run(cmd),
+        Command::Train(args) => cli::train_cmd::run(args),
     };
     match result {
         Ok(code) => code,

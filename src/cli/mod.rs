@@ -1,2 +1,3 @@
 //! Subcommands of the `arld` binary, one file each.
 pub mod env_cmd;
+pub mod train_cmd;

@@ -1,0 +1,307 @@
+//! The agent: acting (ε-greedy over one bootstrapped head or a noise sample), learning (double-DQN TD loss plus
+//! the large-margin loss on demonstrations, Adam) and the test-time policy (majority vote or mean weights).
+//!
+//! One [`Agent`] owns the online and target networks, the optimiser, and every buffer an update needs, so a
+//! steady-state step allocates nothing. Losses follow ALGORITHM_NOTES.md §2–§5:
+//! `L = Σ_k mean_b w_b [ℓ(δ_kb) + λ·demo_b·L_E,kb]` with
+//! `δ_kb = Q_k(s_b, a_b) − (r_b + γ(1 − d_b) Q⁻_k(s'_b, argmax_a Q_k(s'_b, a)))` and
+//! `L_E = max_a [Q(s, a) + M·1(a ≠ a_E)] − Q(s, a_E)`.
+
+use crate::nn::{Adam, Grads, NoiseSample, OutputKind, QNet, Workspace, clip_grad_norm};
+use crate::query::{js_divergence, noisy_variance};
+use crate::replay::Batch;
+use crate::train::config::{NetKind, TdLoss, TrainConfig};
+use rand::{Rng, SeedableRng};
+use rand_pcg::Pcg64;
+
+/// What one gradient update measured (means over the batch, summed over heads).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct UpdateStats {
+    pub td_loss: f32,
+    pub margin_loss: f32,
+    pub grad_norm: f32,
+}
+
+/// A DQN-family agent with a plain, bootstrapped or noisy output stage.
+pub struct Agent {
+    online: QNet,
+    target: QNet,
+    adam: Adam,
+    grads: Grads,
+    ws_act: Workspace,
+    ws_batch: Workspace,
+    ws_next_online: Workspace,
+    ws_next_target: Workspace,
+    /// Independent noise samples for acting, the online Q(s, ·), the double-Q argmax and the target (§5).
+    noise_act: NoiseSample,
+    noise_online: NoiseSample,
+    noise_argmax: NoiseSample,
+    noise_target: NoiseSample,
+    active_head: usize,
+    rng: Pcg64,
+    dq: Vec<f32>,
+    abs_td: Vec<f32>,
+    gamma: f32,
+    loss: TdLoss,
+    grad_clip: f32,
+    margin: f32,
+    lambda: f32,
+    exact_factorised_var: bool,
+}
+
+/// The network output stage a configuration asks for.
+pub fn output_kind(net: NetKind, heads: usize) -> OutputKind {
+    match net {
+        NetKind::Plain => OutputKind::Plain,
+        NetKind::Bootstrap => OutputKind::Bootstrap { heads },
+        NetKind::Noisy => OutputKind::Noisy,
+    }
+}
+
+impl Agent {
+    /// A freshly initialised agent for an environment with `obs_dim` inputs and `n_actions` actions.
+    pub fn new(cfg: &TrainConfig, obs_dim: usize, n_actions: usize, seed: u64) -> Self {
+        let mut rng = Pcg64::seed_from_u64(seed);
+        let online = QNet::new(obs_dim, n_actions, output_kind(cfg.net, cfg.heads), &mut rng);
+        Self::from_network(cfg, online, rng)
+    }
+
+    /// An agent that starts from given online weights (for example a loaded checkpoint).
+    pub fn from_network(cfg: &TrainConfig, online: QNet, mut rng: Pcg64) -> Self {
+        let target = online.clone();
+        let n_actions = online.n_actions();
+        let batch = cfg.batch_size;
+        let mut noise = || {
+            let mut n = NoiseSample::new(n_actions);
+            n.resample(&mut rng);
+            n
+        };
+        let (noise_act, noise_online, noise_argmax, noise_target) = (noise(), noise(), noise(), noise());
+        let heads = online.heads();
+        Self {
+            adam: Adam::new(&online, cfg.lr as f32),
+            grads: Grads::new(&online),
+            ws_act: Workspace::new(&online, 1),
+            ws_batch: Workspace::new(&online, batch),
+            ws_next_online: Workspace::new(&online, batch),
+            ws_next_target: Workspace::new(&online, batch),
+            noise_act,
+            noise_online,
+            noise_argmax,
+            noise_target,
+            active_head: 0,
+            dq: vec![0.0; heads * batch * n_actions],
+            abs_td: vec![0.0; batch],
+            gamma: cfg.gamma as f32,
+            loss: cfg.loss,
+            grad_clip: cfg.grad_clip as f32,
+            margin: cfg.margin as f32,
+            lambda: cfg.lambda as f32,
+            exact_factorised_var: cfg.exact_factorised_var,
+            online,
+            target,
+            rng,
+        }
+    }
+
+    /// The online network.
+    pub fn network(&self) -> &QNet {
+        &self.online
+    }
+
+    /// Bootstrapped acting samples one head uniformly at the start of every episode [BS].
+    pub fn begin_episode(&mut self) {
+        if self.online.heads() > 1 {
+            self.active_head = self.rng.random_range(0..self.online.heads());
+        }
+    }
+
+    /// The behaviour policy: greedy under the active head (or the current noise sample), ε-greedy on top.
+    /// With `want_uncertainty`, also returns the uncertainty of the state (§7): the Jensen–Shannon divergence
+    /// of the heads' softmax policies, or the predictive variance of the noisy layer for the greedy action.
+    pub fn act(&mut self, obs: &[f32], epsilon: f64, want_uncertainty: bool) -> (usize, Option<f32>) {
+        let a = self.online.n_actions();
+        let heads = self.online.heads();
+        let noise = matches!(self.online.kind(), OutputKind::Noisy).then_some(&self.noise_act);
+        let q = self.online.forward(obs, 1, noise, &mut self.ws_act);
+        let greedy = argmax(&q[self.active_head * a..(self.active_head + 1) * a]);
+        let uncertainty = if want_uncertainty {
+            match self.online.kind() {
+                OutputKind::Bootstrap { .. } => Some(js_divergence(q, heads, a)),
+                OutputKind::Noisy => {
+                    let (sigma_w, sigma_b) = self.online.noisy_sigmas().expect("noisy network has sigmas");
+                    let h = QNet::HIDDEN;
+                    Some(noisy_variance(
+                        &self.ws_act.features()[..h],
+                        &sigma_w[greedy * h..(greedy + 1) * h],
+                        sigma_b[greedy],
+                        self.exact_factorised_var,
+                    ))
+                }
+                OutputKind::Plain => None,
+            }
+        } else {
+            None
+        };
+        let action = if epsilon > 0.0 && self.rng.random::<f64>() < epsilon { self.rng.random_range(0..a) } else { greedy };
+        (action, uncertainty)
+    }
+
+    /// The test-time policy, without exploration (§5): see [`test_policy_action`].
+    pub fn act_greedy(&mut self, obs: &[f32]) -> usize {
+        test_policy_action(&self.online, &mut self.ws_act, obs)
+    }
+
+    /// One gradient step on a minibatch; returns the statistics and leaves the new priorities
+    /// (mean over heads of |δ|) in [`Agent::abs_td`].
+    pub fn update(&mut self, batch: &Batch) -> UpdateStats {
+        let b = batch.actions.len();
+        let a = self.online.n_actions();
+        let heads = self.online.heads();
+        let noisy = matches!(self.online.kind(), OutputKind::Noisy);
+        let q = self.online.forward(&batch.obs, b, noisy.then_some(&self.noise_online), &mut self.ws_batch);
+        let qn_online =
+            self.online.forward(&batch.next_obs, b, noisy.then_some(&self.noise_argmax), &mut self.ws_next_online);
+        let qn_target =
+            self.target.forward(&batch.next_obs, b, noisy.then_some(&self.noise_target), &mut self.ws_next_target);
+
+        let dq = &mut self.dq[..heads * b * a];
+        dq.iter_mut().for_each(|g| *g = 0.0);
+        self.abs_td[..b].iter_mut().for_each(|x| *x = 0.0);
+        let mut td_loss = 0.0f32;
+        let mut margin_loss = 0.0f32;
+        let inv_b = 1.0 / b as f32;
+        for k in 0..heads {
+            for i in 0..b {
+                let row = (k * b + i) * a;
+                let qs = &q[row..row + a];
+                let next_a = argmax(&qn_online[row..row + a]);
+                let not_done = if batch.terminal[i] { 0.0 } else { 1.0 };
+                let y = batch.rewards[i] + self.gamma * not_done * qn_target[row + next_a];
+                let act = batch.actions[i];
+                let delta = qs[act] - y;
+                let w = batch.weights[i] * inv_b;
+                let (l, g) = match self.loss {
+                    TdLoss::Mse => (delta * delta, 2.0 * delta),
+                    TdLoss::Huber if delta.abs() <= 1.0 => (0.5 * delta * delta, delta),
+                    TdLoss::Huber => (delta.abs() - 0.5, delta.signum()),
+                };
+                td_loss += w * l;
+                dq[row + act] += w * g;
+                self.abs_td[i] += delta.abs() / heads as f32;
+                if batch.is_demo[i] && self.lambda > 0.0 {
+                    // Large-margin loss (§4): the expert's action must beat every other by M.
+                    let (m, a_max) = margin_term(qs, act, self.margin);
+                    margin_loss += w * m;
+                    dq[row + a_max] += self.lambda * w;
+                    dq[row + act] -= self.lambda * w;
+                }
+            }
+        }
+        self.online.backward(&mut self.ws_batch, &self.dq[..heads * b * a], &mut self.grads);
+        let grad_norm = clip_grad_norm(&mut self.grads, self.grad_clip);
+        self.adam.step(&mut self.online, &self.grads);
+        if noisy {
+            // New noise after every optimisation step, independent for each use (§5, [NN]).
+            for n in [&mut self.noise_act, &mut self.noise_online, &mut self.noise_argmax, &mut self.noise_target] {
+                n.resample(&mut self.rng);
+            }
+        }
+        UpdateStats { td_loss, margin_loss, grad_norm }
+    }
+
+    /// |δ| per sample of the last update (mean over heads): the new priorities.
+    pub fn abs_td(&self, batch_size: usize) -> &[f32] {
+        &self.abs_td[..batch_size]
+    }
+
+    /// Hard copy of the online weights into the target network.
+    pub fn sync_target(&mut self) {
+        self.target.copy_from(&self.online);
+    }
+
+    /// The agent's own generator (ε draws, head sampling, noise), for callers that need a draw in sequence.
+    pub fn rng(&mut self) -> &mut Pcg64 {
+        &mut self.rng
+    }
+}
+
+/// The test-time policy of a network, without exploration (ALGORITHM_NOTES.md §5): a majority vote over the
+/// bootstrapped heads with ties broken by the mean Q-value, the noise-free mean weights of a noisy layer, or
+/// plain argmax. Also the policy of a checkpoint expert.
+pub fn test_policy_action(net: &QNet, ws: &mut Workspace, obs: &[f32]) -> usize {
+    let a = net.n_actions();
+    let heads = net.heads();
+    let q = net.forward(obs, 1, None, ws);
+    if heads == 1 {
+        return argmax(&q[..a]);
+    }
+    const MAX_ACTIONS: usize = 32;
+    assert!(a <= MAX_ACTIONS, "at most {MAX_ACTIONS} actions are supported");
+    let mut votes = [0u32; MAX_ACTIONS];
+    let mut mean = [0f32; MAX_ACTIONS];
+    for k in 0..heads {
+        let row = &q[k * a..(k + 1) * a];
+        votes[argmax(row)] += 1;
+        for (m, v) in mean.iter_mut().zip(row) {
+            *m += v;
+        }
+    }
+    let top = votes[..a].iter().copied().max().unwrap_or(0);
+    let mut best = 0;
+    let mut best_q = f32::NEG_INFINITY;
+    for i in 0..a {
+        if votes[i] == top && mean[i] > best_q {
+            best = i;
+            best_q = mean[i];
+        }
+    }
+    best
+}
+
+/// `max_a [q(a) + M·1(a ≠ a_E)] − q(a_E)` and the maximising action.
+pub fn margin_term(q: &[f32], expert_action: usize, margin: f32) -> (f32, usize) {
+    let mut best = f32::NEG_INFINITY;
+    let mut best_a = expert_action;
+    for (i, &v) in q.iter().enumerate() {
+        let v = if i == expert_action { v } else { v + margin };
+        if v > best {
+            best = v;
+            best_a = i;
+        }
+    }
+    (best - q[expert_action], best_a)
+}
+
+/// Index of the largest value (the first on ties, as NumPy's argmax).
+pub fn argmax(v: &[f32]) -> usize {
+    let mut best = 0;
+    for i in 1..v.len() {
+        if v[i] > v[best] {
+            best = i;
+        }
+    }
+    best
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn margin_loss_matches_hand_computation() {
+        // Q = (1.0, 0.5, 0.9), expert action 0, M = 0.8:
+        // max(1.0, 0.5 + 0.8, 0.9 + 0.8) - 1.0 = 1.7 - 1.0 = 0.7, attained at action 2.
+        let (m, a) = margin_term(&[1.0, 0.5, 0.9], 0, 0.8);
+        assert!((m - 0.7).abs() < 1e-6);
+        assert_eq!(a, 2);
+        // When the expert's action already wins by the margin the loss is zero and the gradient cancels.
+        let (m, a) = margin_term(&[3.0, 0.5, 0.9], 0, 0.8);
+        assert_eq!((m, a), (0.0, 0));
+    }
+
+    #[test]
+    fn argmax_takes_first_maximum() {
+        assert_eq!(argmax(&[0.1, 0.5, 0.5, -1.0]), 1);
+    }
+}

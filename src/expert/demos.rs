@@ -1,0 +1,181 @@
+//! Demonstrations: transitions collected from an expert before training (DQfD), and their file format.
+//!
+//! File format (`.jsonl`, readable from any language): the first line is a header object
+//! `{"format": "arld-demos", "version": 1, "env": ID, "expert": SPEC, "seed": S, "obs_dim": D, "n_actions": A,
+//! "transitions": N, "episodes": E}`, then one object per transition in order:
+//! `{"episode": e, "obs": [...], "action": a, "reward": r, "next_obs": [...], "terminated": bool,
+//! "truncated": bool}`. `terminated` is the true end of the task; time-limit truncation is kept apart so that
+//! training can bootstrap through it. Collection follows DQfD: whole episodes from the start state, in order,
+//! until `N` transitions are gathered (the last episode is cut at `N`).
+
+use super::Expert;
+use crate::env;
+use anyhow::{Context, Result, bail, ensure};
+use serde::{Deserialize, Serialize};
+use std::io::{BufRead, BufReader, Write};
+use std::path::Path;
+
+/// One demonstrated transition.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct DemoTransition {
+    pub episode: usize,
+    pub obs: Vec<f32>,
+    pub action: usize,
+    pub reward: f32,
+    pub next_obs: Vec<f32>,
+    pub terminated: bool,
+    pub truncated: bool,
+    /// Bootstrap cut used by training (true termination only).
+    #[serde(skip, default)]
+    pub terminal: bool,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+struct Header {
+    format: String,
+    version: u32,
+    env: String,
+    expert: String,
+    seed: u64,
+    obs_dim: usize,
+    n_actions: usize,
+    transitions: usize,
+    episodes: usize,
+}
+
+/// A set of demonstrations for one environment.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Demonstrations {
+    pub env: String,
+    pub expert: String,
+    pub seed: u64,
+    pub transitions: Vec<DemoTransition>,
+}
+
+impl Demonstrations {
+    /// Collects `n` transitions from `expert` on `env_id` in whole episodes; episode i resets with seed `seed + i`.
+    pub fn collect(env_id: &str, expert: &mut dyn Expert, n: usize, seed: u64) -> Result<Self> {
+        let mut env = env::make(env_id)?;
+        let mut transitions = Vec::with_capacity(n);
+        let mut episode = 0usize;
+        while transitions.len() < n {
+            let mut obs = env.reset(Some(seed + episode as u64));
+            loop {
+                let action = expert.act(&obs).with_context(|| format!("expert {} failed", expert.describe()))?;
+                let s = env.step(action)?;
+                transitions.push(DemoTransition {
+                    episode,
+                    obs: std::mem::take(&mut obs),
+                    action,
+                    reward: s.reward as f32,
+                    next_obs: s.obs.clone(),
+                    terminated: s.terminated,
+                    truncated: s.truncated,
+                    terminal: s.terminated,
+                });
+                obs = s.obs;
+                if s.terminated || s.truncated || transitions.len() >= n {
+                    break;
+                }
+            }
+            episode += 1;
+        }
+        Ok(Self { env: env_id.to_string(), expert: expert.describe(), seed, transitions })
+    }
+
+    /// Number of episodes (whole or cut) in the set.
+    pub fn episodes(&self) -> usize {
+        self.transitions.last().map(|t| t.episode + 1).unwrap_or(0)
+    }
+
+    /// The first `n` transitions (ADQNP pre-trains on half of DQfD's demonstrations).
+    pub fn truncated_to(&self, n: usize) -> Self {
+        Self { transitions: self.transitions[..n.min(self.transitions.len())].to_vec(), ..self.clone() }
+    }
+
+    /// Writes the set atomically (temporary file, then rename).
+    pub fn save(&self, path: &Path) -> Result<()> {
+        let e = env::make(&self.env)?;
+        let header = Header {
+            format: "arld-demos".into(),
+            version: 1,
+            env: self.env.clone(),
+            expert: self.expert.clone(),
+            seed: self.seed,
+            obs_dim: e.obs_dim(),
+            n_actions: e.n_actions(),
+            transitions: self.transitions.len(),
+            episodes: self.episodes(),
+        };
+        let mut buf = Vec::new();
+        serde_json::to_writer(&mut buf, &header)?;
+        buf.push(b'\n');
+        for t in &self.transitions {
+            serde_json::to_writer(&mut buf, t)?;
+            buf.push(b'\n');
+        }
+        let tmp = path.with_extension("jsonl.tmp");
+        let mut f = std::fs::File::create(&tmp).with_context(|| format!("cannot create {}", tmp.display()))?;
+        f.write_all(&buf)?;
+        f.sync_all()?;
+        std::fs::rename(&tmp, path).with_context(|| format!("cannot write {}", path.display()))?;
+        Ok(())
+    }
+
+    /// Reads and checks a demonstration file; `expect_env` rejects a file recorded on another environment.
+    pub fn load(path: &Path, expect_env: Option<&str>) -> Result<Self> {
+        let file = std::fs::File::open(path).with_context(|| format!("cannot open demonstration file {}", path.display()))?;
+        let mut lines = BufReader::new(file).lines();
+        let first = lines.next().with_context(|| format!("{}: empty demonstration file", path.display()))??;
+        let header: Header = serde_json::from_str(&first)
+            .with_context(|| format!("{}:1: not an arld demonstration header", path.display()))?;
+        ensure!(header.format == "arld-demos", "{}:1: unknown format '{}'", path.display(), header.format);
+        ensure!(header.version == 1, "{}:1: unsupported version {}", path.display(), header.version);
+        if let Some(want) = expect_env {
+            ensure!(
+                header.env == want,
+                "{} holds demonstrations for {}, but the run is on {want}",
+                path.display(),
+                header.env
+            );
+        }
+        let e = env::make(&header.env).map_err(|err| anyhow::anyhow!("{}:1: {err}", path.display()))?;
+        let mut transitions = Vec::with_capacity(header.transitions);
+        for (i, line) in lines.enumerate() {
+            let line = line?;
+            if line.trim().is_empty() {
+                continue;
+            }
+            let lineno = i + 2;
+            let mut t: DemoTransition = serde_json::from_str(&line)
+                .with_context(|| format!("{}:{lineno}: malformed transition", path.display()))?;
+            ensure!(
+                t.obs.len() == e.obs_dim() && t.next_obs.len() == e.obs_dim(),
+                "{}:{lineno}: observation of length {} where {} has {}",
+                path.display(),
+                t.obs.len(),
+                header.env,
+                e.obs_dim()
+            );
+            ensure!(
+                t.action < e.n_actions(),
+                "{}:{lineno}: action {} out of range ({} has {} actions)",
+                path.display(),
+                t.action,
+                header.env,
+                e.n_actions()
+            );
+            t.terminal = t.terminated;
+            transitions.push(t);
+        }
+        if transitions.len() != header.transitions {
+            bail!(
+                "{}: truncated demonstration file: the header announces {} transitions, found {}",
+                path.display(),
+                header.transitions,
+                transitions.len()
+            );
+        }
+        Ok(Self { env: header.env, expert: header.expert, seed: header.seed, transitions })
+    }
+}

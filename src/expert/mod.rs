@@ -1,0 +1,141 @@
+//! Experts: whoever the agent may ask for an action.
+//!
+//! The [`Expert`] trait takes an observation and returns an action, or an error: an expert may be slow or
+//! interactive (a person answering in a browser, an external process), so nothing here assumes it answers
+//! instantly or always. Kinds: [`CheckpointExpert`] (a trained network acting greedily), [`NoisyExpert`] (acts at
+//! random with probability p), and [`scripted`] controllers. [`from_spec`] builds one from a short spec;
+//! [`demos`] collects demonstrations from an expert.
+
+pub mod demos;
+pub mod scripted;
+
+use crate::agent::test_policy_action;
+use crate::env::EnvSpec;
+use crate::nn::{QNet, Workspace};
+use anyhow::{Context, Result, bail, ensure};
+use rand::{Rng, SeedableRng};
+use rand_pcg::Pcg64;
+use std::path::{Path, PathBuf};
+
+/// Something that can be asked which action to take.
+pub trait Expert: Send {
+    /// The expert's action for `obs`. May block (a person, a process) and may fail.
+    fn act(&mut self, obs: &[f32]) -> Result<usize>;
+    /// A short human-readable description, e.g. `checkpoint:experts/CartPole-v0/weak.safetensors`.
+    fn describe(&self) -> String;
+}
+
+/// A trained Q-network acting with its test-time policy (greedy, majority vote, or mean weights).
+pub struct CheckpointExpert {
+    net: QNet,
+    ws: Workspace,
+    path: PathBuf,
+}
+
+impl CheckpointExpert {
+    /// Loads a checkpoint and checks that it fits the environment.
+    pub fn load(path: &Path, spec: &EnvSpec) -> Result<Self> {
+        let (net, meta) = QNet::load(path).with_context(|| format!("cannot load expert checkpoint {}", path.display()))?;
+        ensure!(
+            net.obs_dim() == spec.obs_dim && net.n_actions() == spec.n_actions,
+            "expert checkpoint {} has {} inputs and {} actions, but {} has {} and {}{}",
+            path.display(),
+            net.obs_dim(),
+            net.n_actions(),
+            spec.id,
+            spec.obs_dim,
+            spec.n_actions,
+            meta.get("env").map(|e| format!(" (it was trained on {e})")).unwrap_or_default()
+        );
+        let ws = Workspace::new(&net, 1);
+        Ok(Self { net, ws, path: path.to_path_buf() })
+    }
+}
+
+impl Expert for CheckpointExpert {
+    fn act(&mut self, obs: &[f32]) -> Result<usize> {
+        Ok(test_policy_action(&self.net, &mut self.ws, obs))
+    }
+    fn describe(&self) -> String {
+        format!("checkpoint:{}", self.path.display())
+    }
+}
+
+/// Wraps an expert so that it takes a uniformly random action with probability `p` (the paper's "perfect
+/// expert with 40% random actions").
+pub struct NoisyExpert {
+    inner: Box<dyn Expert>,
+    p: f64,
+    n_actions: usize,
+    rng: Pcg64,
+}
+
+impl NoisyExpert {
+    pub fn new(inner: Box<dyn Expert>, p: f64, n_actions: usize, seed: u64) -> Result<Self> {
+        ensure!((0.0..=1.0).contains(&p), "the random-action probability must be in [0, 1], got {p}");
+        Ok(Self { inner, p, n_actions, rng: Pcg64::seed_from_u64(seed) })
+    }
+}
+
+impl Expert for NoisyExpert {
+    fn act(&mut self, obs: &[f32]) -> Result<usize> {
+        // Ask the inner expert every time, so its own state (if any) advances as without noise.
+        let a = self.inner.act(obs)?;
+        Ok(if self.rng.random::<f64>() < self.p { self.rng.random_range(0..self.n_actions) } else { a })
+    }
+    fn describe(&self) -> String {
+        format!("noisy:{}:{}", self.p, self.inner.describe())
+    }
+}
+
+/// Directory of the experts shipped with the repository.
+pub fn shipped_dir() -> PathBuf {
+    std::env::var_os("ARLD_EXPERTS_DIR")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("experts"))
+}
+
+/// Path of a shipped expert: `experts/<env>/<quality>.safetensors` (v1/v3 ids share their v0/v2 experts).
+pub fn shipped_path(env_id: &str, quality: &str) -> PathBuf {
+    let env = match env_id {
+        "CartPole-v1" => "CartPole-v0",
+        "LunarLander-v3" => "LunarLander-v2",
+        e => e,
+    };
+    shipped_dir().join(env).join(format!("{quality}.safetensors"))
+}
+
+/// Help text for expert specs.
+pub const SPEC_HELP: &str = "Expert specs: `shipped:weak` or `shipped:perfect` (the experts in experts/), \
+`checkpoint:PATH` (a safetensors checkpoint acting greedily), `scripted` (a hand-written controller: Gymnasium's \
+heuristic lander, simple controllers for CartPole, MountainCar and Acrobot), `noisy:P:SPEC` (SPEC acting at random \
+with probability P).";
+
+/// Builds an expert from a spec for the environment `env_id`; `seed` seeds any randomness the expert has.
+pub fn from_spec(spec: &str, env_id: &str, seed: u64) -> Result<Box<dyn Expert>> {
+    let env = crate::env::make(env_id).map_err(|e| anyhow::anyhow!("{e}"))?;
+    let env_spec = EnvSpec {
+        id: env.id(),
+        obs_dim: env.obs_dim(),
+        n_actions: env.n_actions(),
+        max_episode_steps: env.max_episode_steps(),
+        solve_threshold: env.solve_threshold(),
+    };
+    let (kind, rest) = spec.split_once(':').unwrap_or((spec, ""));
+    match kind {
+        "checkpoint" if !rest.is_empty() => Ok(Box::new(CheckpointExpert::load(Path::new(rest), &env_spec)?)),
+        "shipped" if matches!(rest, "weak" | "perfect") => {
+            let path = shipped_path(env_id, rest);
+            ensure!(path.exists(), "no shipped {rest} expert for {env_id} (looked for {})", path.display());
+            Ok(Box::new(CheckpointExpert::load(&path, &env_spec)?))
+        }
+        "scripted" if rest.is_empty() => Ok(Box::new(scripted::ScriptedExpert::new(env_id)?)),
+        "noisy" => {
+            let (p, inner) = rest.split_once(':').context("noisy expert spec must be noisy:P:SPEC")?;
+            let p: f64 = p.parse().with_context(|| format!("bad probability '{p}' in expert spec '{spec}'"))?;
+            let inner = from_spec(inner, env_id, seed.wrapping_add(1))?;
+            Ok(Box::new(NoisyExpert::new(inner, p, env_spec.n_actions, seed)?))
+        }
+        _ => bail!("unknown expert spec '{spec}'. {SPEC_HELP}"),
+    }
+}

@@ -1,0 +1,57 @@
+//! Scripted experts: hand-written controllers where a good one is known.
+//!
+//! LunarLander uses Gymnasium's heuristic controller; CartPole a linear state-feedback rule; MountainCar pushes
+//! in the direction of motion (pumping energy); Acrobot applies torque in the direction of the first joint's
+//! swing. They are deterministic, fast and good, which makes them handy as "perfect" experts in tests.
+
+use super::Expert;
+use anyhow::{Result, bail};
+
+/// A hand-written controller for one environment.
+pub struct ScriptedExpert {
+    env: &'static str,
+    policy: fn(&[f32]) -> usize,
+}
+
+impl ScriptedExpert {
+    /// The scripted controller of `env_id`.
+    pub fn new(env_id: &str) -> Result<Self> {
+        let (env, policy): (&'static str, fn(&[f32]) -> usize) = match env_id {
+            "CartPole-v0" => ("CartPole-v0", cartpole),
+            "CartPole-v1" => ("CartPole-v1", cartpole),
+            "MountainCar-v0" => ("MountainCar-v0", mountain_car),
+            "Acrobot-v1" => ("Acrobot-v1", acrobot),
+            "LunarLander-v2" => ("LunarLander-v2", crate::env::lunar_lander::heuristic_action),
+            "LunarLander-v3" => ("LunarLander-v3", crate::env::lunar_lander::heuristic_action),
+            other => bail!("no scripted expert for '{other}'"),
+        };
+        Ok(Self { env, policy })
+    }
+}
+
+impl Expert for ScriptedExpert {
+    fn act(&mut self, obs: &[f32]) -> Result<usize> {
+        Ok((self.policy)(obs))
+    }
+    fn describe(&self) -> String {
+        format!("scripted({})", self.env)
+    }
+}
+
+/// Push the cart towards where the pole is falling, with a little position and velocity feedback to keep the
+/// cart near the centre. Observation: [x, x_dot, theta, theta_dot].
+pub fn cartpole(obs: &[f32]) -> usize {
+    let u = 0.1 * obs[0] + 0.5 * obs[1] + 10.0 * obs[2] + 2.0 * obs[3];
+    usize::from(u > 0.0)
+}
+
+/// Accelerate in the direction of motion. Observation: [position, velocity]; actions: 0 left, 1 none, 2 right.
+pub fn mountain_car(obs: &[f32]) -> usize {
+    if obs[1] >= 0.0 { 2 } else { 0 }
+}
+
+/// Torque in the direction of the first link's angular velocity, which pumps energy into the swing.
+/// Observation: [cos th1, sin th1, cos th2, sin th2, dth1, dth2]; actions: torque -1, 0, +1.
+pub fn acrobot(obs: &[f32]) -> usize {
+    if obs[4] > 0.0 { 2 } else { 0 }
+}

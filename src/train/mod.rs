@@ -1,0 +1,245 @@
+//! The training loop of one run, written to be read top to bottom (CleanRL style): [`train`] is the whole
+//! algorithm of every method in the paper — DQN, DQfD, GDQN, BDQN, ADQN and ADQNP, with a plain, bootstrapped or
+//! noisy network — and [`TrainConfig`] holds every hyperparameter.
+
+pub mod config;
+pub mod log;
+
+pub use config::{Method, NetKind, RuleKind, TdLoss, TrainConfig};
+pub use log::{EvalPoint, QueryEvent, RunLog, Summary, steps_to_solve};
+
+use crate::agent::Agent;
+use crate::env::{self, Env};
+use crate::expert::Expert;
+use crate::expert::demos::Demonstrations;
+use crate::query::{AdaptiveQuantileRule, QueryController, QueryRule};
+use crate::replay::{Batch, Replay, ReplayConfig};
+use anyhow::{Context, Result, bail, ensure};
+use rand::SeedableRng;
+use rand_pcg::Pcg64;
+use std::time::Instant;
+
+/// Independent generator seeds derived from the run's seed (SplitMix64 finaliser over a per-purpose tag).
+pub fn derive_seed(seed: u64, tag: u64) -> u64 {
+    let mut z = seed.wrapping_add(tag.wrapping_mul(0x9E37_79B9_7F4A_7C15));
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^ (z >> 31)
+}
+
+/// ε-greedy schedule: linear from `eps_start` to `eps_end` over `eps_fraction` of training (§5).
+pub fn epsilon_at(cfg: &TrainConfig, step: usize) -> f64 {
+    if !cfg.eps_greedy_on_top && cfg.net != NetKind::Plain {
+        return 0.0;
+    }
+    let horizon = (cfg.eps_fraction * cfg.train_steps as f64).max(1.0);
+    let frac = (step as f64 / horizon).min(1.0);
+    cfg.eps_start + frac * (cfg.eps_end - cfg.eps_start)
+}
+
+/// The query rule a configuration asks for (§8–9).
+pub fn query_rule(cfg: &TrainConfig) -> Result<QueryRule> {
+    Ok(match cfg.rule {
+        RuleKind::Never => QueryRule::Never,
+        RuleKind::Greedy => QueryRule::Greedy,
+        RuleKind::Bernoulli => QueryRule::Bernoulli { p: cfg.bernoulli_p },
+        RuleKind::Adaptive => QueryRule::Adaptive(AdaptiveQuantileRule::new(cfg.n_r, cfg.t_query)?),
+    })
+}
+
+/// Runs the test policy (no exploration) for `episodes` episodes and summarises the returns.
+pub fn evaluate(agent: &mut Agent, env: &mut dyn Env, episodes: usize, step: usize) -> Result<EvalPoint> {
+    let mut returns = Vec::with_capacity(episodes);
+    for _ in 0..episodes {
+        let mut obs = env.reset(None);
+        let mut ret = 0.0;
+        loop {
+            let s = env.step(agent.act_greedy(&obs))?;
+            ret += s.reward;
+            obs = s.obs;
+            if s.terminated || s.truncated {
+                break;
+            }
+        }
+        returns.push(ret);
+    }
+    let n = returns.len() as f64;
+    let mean = returns.iter().sum::<f64>() / n;
+    let std = (returns.iter().map(|r| (r - mean).powi(2)).sum::<f64>() / n).sqrt();
+    let min = returns.iter().cloned().fold(f64::INFINITY, f64::min);
+    let max = returns.iter().cloned().fold(f64::NEG_INFINITY, f64::max);
+    Ok(EvalPoint { step, mean, std, min, max })
+}
+
+/// Trains one agent as `cfg` says and returns its summary and the trained agent.
+///
+/// `expert` is asked during training by the querying methods; `demos` are the demonstrations that DQfD and ADQNP
+/// pre-train on. The loop, in order: pre-training on demonstrations (DQfD, ADQNP); then for every environment
+/// step: the agent proposes an action (and its uncertainty), the query rule decides whether the expert acts
+/// instead (5-step segments, under the budget), the transition goes to replay (as a demonstration when the
+/// expert acted), one prioritized double-DQN update, the target copy, and periodic evaluation.
+pub fn train(
+    cfg: &TrainConfig,
+    mut expert: Option<&mut dyn Expert>,
+    demos: Option<&Demonstrations>,
+    log: &mut RunLog,
+) -> Result<(Summary, Agent)> {
+    cfg.validate()?;
+    let started = Instant::now();
+    let mut env = env::make(&cfg.env)?;
+    let mut eval_env = env::make(&cfg.env)?;
+    let (obs_dim, n_actions) = (env.obs_dim(), env.n_actions());
+    ensure!(!cfg.method.queries() || expert.is_some(), "{} asks an expert during training, but none was given", cfg.method);
+
+    // Every generator comes from the run's seed.
+    let mut agent = Agent::new(cfg, obs_dim, n_actions, derive_seed(cfg.seed, 1));
+    let mut replay_rng = Pcg64::seed_from_u64(derive_seed(cfg.seed, 2));
+    let mut query_rng = Pcg64::seed_from_u64(derive_seed(cfg.seed, 3));
+    let env_seed = derive_seed(cfg.seed, 4) >> 32;
+    eval_env.reset(Some(derive_seed(cfg.seed, 5) >> 32));
+
+    let pretrain_demos = demos.map(|d| d.transitions.len()).unwrap_or(0);
+    let mut replay = Replay::new(
+        obs_dim,
+        &ReplayConfig {
+            capacity: cfg.replay_size,
+            demo_capacity: pretrain_demos + cfg.budget,
+            prioritized: cfg.prioritized,
+            alpha: cfg.alpha as f32,
+            eps_agent: cfg.eps_agent as f32,
+            eps_demo: cfg.eps_demo as f32,
+        },
+    );
+    let mut batch = Batch::default();
+
+    // Pre-training on demonstrations only (DQfD, ADQNP; §9).
+    if cfg.method.pretrains() {
+        let demos = demos.context("this method pre-trains on demonstrations, but none were given")?;
+        ensure!(demos.env == cfg.env, "the demonstrations are for {}, not {}", demos.env, cfg.env);
+        for t in &demos.transitions {
+            replay.push(&t.obs, t.action, t.reward, &t.next_obs, t.terminal, true)?;
+        }
+        log.set_prefix(format!("{} pre-training", cfg.run_name()));
+        for update in 1..=cfg.pretrain_steps {
+            replay.sample_demo_only(cfg.batch_size, cfg.beta0 as f32, &mut replay_rng, &mut batch);
+            agent.update(&batch);
+            replay.update_priorities(&batch.idx, agent.abs_td(batch.idx.len()));
+            if update % cfg.target_period == 0 {
+                agent.sync_target();
+            }
+        }
+        agent.sync_target();
+    }
+
+    let mut queries = QueryController::new(query_rule(cfg)?, cfg.budget, cfg.segment_len)?;
+    let want_uncertainty = queries.needs_uncertainty();
+    if want_uncertainty && cfg.net == NetKind::Plain {
+        bail!("the {:?} query rule needs the uncertainty of a bootstrapped or noisy network", cfg.rule);
+    }
+
+    log.set_prefix(cfg.run_name());
+    let mut obs = env.reset(Some(env_seed));
+    agent.begin_episode();
+    let (mut episode, mut ep_return, mut ep_len, mut ep_demo) = (0usize, 0.0f64, 0usize, 0usize);
+    let mut updates = 0usize;
+    for step in 0..cfg.train_steps {
+        // 1. Who acts: the agent, or the expert when a query is running or the rule asks for one now.
+        let action = if queries.expert_in_control() {
+            expert_action(&mut expert, &obs)?
+        } else {
+            let (agent_action, uncertainty) = agent.act(&obs, epsilon_at(cfg, step), want_uncertainty);
+            let decision = queries.decide(uncertainty, &mut query_rng);
+            if decision.query {
+                let expert_action = expert_action(&mut expert, &obs)?;
+                let threshold = decision.threshold;
+                log.query(&QueryEvent { step, episode, uncertainty, threshold, expert_action, agent_action })?;
+                expert_action
+            } else {
+                agent_action
+            }
+        };
+        let by_expert = queries.expert_in_control();
+        if by_expert {
+            queries.record_expert_step();
+            ep_demo += 1;
+        }
+
+        // 2. Step the environment; expert transitions are stored as demonstrations (margin loss, bonus priority).
+        let s = env.step(action)?;
+        let terminal = s.terminated || (s.truncated && cfg.timeout_as_terminal);
+        replay.push(&obs, action, s.reward as f32, &s.obs, terminal, by_expert)?;
+        ep_return += s.reward;
+        ep_len += 1;
+        obs = s.obs;
+        if s.terminated || s.truncated {
+            log.episode(episode, step + 1, ep_return, ep_len, ep_demo)?;
+            episode += 1;
+            (ep_return, ep_len, ep_demo) = (0.0, 0, 0);
+            obs = env.reset(None);
+            agent.begin_episode();
+            queries.end_episode();
+        }
+
+        // 3. Learn: one prioritized double-DQN update per `train_freq` steps, hard target copies.
+        if step + 1 >= cfg.learning_starts && (step + 1) % cfg.train_freq == 0 && replay.len() >= cfg.batch_size {
+            let beta = cfg.beta0 + (1.0 - cfg.beta0) * (step as f64 / cfg.train_steps as f64);
+            replay.sample(cfg.batch_size, beta as f32, &mut replay_rng, &mut batch);
+            let stats = agent.update(&batch);
+            replay.update_priorities(&batch.idx, agent.abs_td(batch.idx.len()));
+            updates += 1;
+            if updates % cfg.target_period == 0 {
+                agent.sync_target();
+            }
+            if updates % 1000 == 0 {
+                log.scalar("train/td_loss", step + 1, stats.td_loss)?;
+                log.scalar("train/margin_loss", step + 1, stats.margin_loss)?;
+                log.scalar("train/epsilon", step + 1, epsilon_at(cfg, step) as f32)?;
+                log.scalar("query/budget_used", step + 1, queries.budget_used() as f32)?;
+                if let Some(thr) = queries.threshold() {
+                    log.scalar("query/threshold", step + 1, thr)?;
+                }
+            }
+        }
+
+        // 4. Evaluate without exploration every `eval_period` steps.
+        if (step + 1) % cfg.eval_period == 0 || step + 1 == cfg.train_steps {
+            let point = evaluate(&mut agent, eval_env.as_mut(), cfg.eval_episodes, step + 1)?;
+            log.eval(point)?;
+            log.progress(step + 1);
+        }
+    }
+
+    let wall = started.elapsed().as_secs_f64();
+    let threshold = env.solve_threshold();
+    let (steps, solved) = steps_to_solve(log.curve(), threshold, cfg.train_steps);
+    let summary = Summary {
+        env: cfg.env.clone(),
+        method: cfg.method.to_string(),
+        net: cfg.net.to_string(),
+        seed: cfg.seed,
+        steps_to_solve: steps,
+        solved,
+        solve_threshold: threshold,
+        train_steps: cfg.train_steps,
+        final_score: log.curve().last().map(|p| p.mean).unwrap_or(f64::NAN),
+        demos_pretrain: pretrain_demos,
+        queries_used: queries.budget_used(),
+        episodes: episode,
+        wall_time_s: wall,
+        steps_per_s: cfg.train_steps as f64 / wall.max(1e-9),
+    };
+    if let Some(dir) = log.dir() {
+        let mut meta = std::collections::BTreeMap::new();
+        meta.insert("env".to_string(), cfg.env.clone());
+        meta.insert("method".to_string(), cfg.method.to_string());
+        meta.insert("seed".to_string(), cfg.seed.to_string());
+        agent.network().save(&dir.join("weights.safetensors"), &meta)?;
+    }
+    log.finish(&summary)?;
+    Ok((summary, agent))
+}
+
+fn expert_action(expert: &mut Option<&mut dyn Expert>, obs: &[f32]) -> Result<usize> {
+    let expert = expert.as_deref_mut().context("the query rule asked for the expert, but none was given")?;
+    expert.act(obs).with_context(|| format!("the expert ({}) failed to answer", expert.describe()))
+}
