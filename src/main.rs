@@ -21,6 +21,16 @@ enum Command {
     },
     /// Train one agent (DQN, DQfD, GDQN, BDQN, ADQN, ADQNP) and write a run directory.
     Train(cli::train_cmd::TrainArgs),
+    /// Experts: train and select them as the paper did, and measure their statistics.
+    Expert {
+        #[command(subcommand)]
+        cmd: cli::expert_cmd::ExpertCommand,
+    },
+    /// Demonstrations: collect expert episodes into a file that DQfD pre-training reads.
+    Demo {
+        #[command(subcommand)]
+        cmd: cli::expert_cmd::DemoCommand,
+    },
 }
 
 fn main() -> std::process::ExitCode {
@@ -28,6 +38,8 @@ fn main() -> std::process::ExitCode {
     let result = match cli.command {
         Command::Env { cmd } => cli::env_cmd::run(cmd),
         Command::Train(args) => cli::train_cmd::run(args),
+        Command::Expert { cmd } => cli::expert_cmd::run_expert(cmd),
+        Command::Demo { cmd } => cli::expert_cmd::run_demo(cmd),
     };
     match result {
         Ok(code) => code,

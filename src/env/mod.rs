@@ -96,3 +96,15 @@ pub fn make(id: &str) -> Result<Box<dyn Env>, EnvError> {
     // Filled in by the environment implementations.
     Err(EnvError::UnknownId { id: id.to_string() })
 }
+
+/// Static facts about a registered environment.
+pub fn spec(id: &str) -> Result<EnvSpec, EnvError> {
+    let e = make(id)?;
+    Ok(EnvSpec {
+        id: e.id(),
+        obs_dim: e.obs_dim(),
+        n_actions: e.n_actions(),
+        max_episode_steps: e.max_episode_steps(),
+        solve_threshold: e.solve_threshold(),
+    })
+}

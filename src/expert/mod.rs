@@ -7,6 +7,7 @@
 //! [`demos`] collects demonstrations from an expert.
 
 pub mod demos;
+pub mod pipeline;
 pub mod scripted;
 
 use crate::agent::test_policy_action;
@@ -113,14 +114,7 @@ with probability P).";
 
 /// Builds an expert from a spec for the environment `env_id`; `seed` seeds any randomness the expert has.
 pub fn from_spec(spec: &str, env_id: &str, seed: u64) -> Result<Box<dyn Expert>> {
-    let env = crate::env::make(env_id).map_err(|e| anyhow::anyhow!("{e}"))?;
-    let env_spec = EnvSpec {
-        id: env.id(),
-        obs_dim: env.obs_dim(),
-        n_actions: env.n_actions(),
-        max_episode_steps: env.max_episode_steps(),
-        solve_threshold: env.solve_threshold(),
-    };
+    let env_spec = crate::env::spec(env_id)?;
     let (kind, rest) = spec.split_once(':').unwrap_or((spec, ""));
     match kind {
         "checkpoint" if !rest.is_empty() => Ok(Box::new(CheckpointExpert::load(Path::new(rest), &env_spec)?)),

@@ -201,6 +201,8 @@ pub struct TrainConfig {
     pub eval_period: usize,
     /// Test episodes per evaluation \[P: 20\].
     pub eval_episodes: usize,
+    /// Save the online weights every this many steps into `checkpoints/` (0: only at the end) \[OURS\].
+    pub checkpoint_every: usize,
 }
 
 /// Per-task numbers of the paper's parameter table (ALGORITHM_NOTES.md §9).
@@ -346,6 +348,7 @@ impl TrainConfig {
             demo_file: String::new(),
             eval_period: p.eval_period,
             eval_episodes: 20,
+            checkpoint_every: 0,
         })
     }
 

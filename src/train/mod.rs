@@ -207,6 +207,14 @@ pub fn train(
             log.eval(point)?;
             log.progress(step + 1);
         }
+        if cfg.checkpoint_every > 0 && (step + 1) % cfg.checkpoint_every == 0 {
+            if let Some(dir) = log.dir() {
+                let dir = dir.join("checkpoints");
+                std::fs::create_dir_all(&dir)?;
+                let meta = weights_metadata(cfg, step + 1);
+                agent.network().save(&dir.join(format!("step_{:08}.safetensors", step + 1)), &meta)?;
+            }
+        }
     }
 
     let wall = started.elapsed().as_secs_f64();
@@ -229,14 +237,18 @@ pub fn train(
         steps_per_s: cfg.train_steps as f64 / wall.max(1e-9),
     };
     if let Some(dir) = log.dir() {
-        let mut meta = std::collections::BTreeMap::new();
-        meta.insert("env".to_string(), cfg.env.clone());
-        meta.insert("method".to_string(), cfg.method.to_string());
-        meta.insert("seed".to_string(), cfg.seed.to_string());
-        agent.network().save(&dir.join("weights.safetensors"), &meta)?;
+        agent.network().save(&dir.join("weights.safetensors"), &weights_metadata(cfg, cfg.train_steps))?;
     }
     log.finish(&summary)?;
     Ok((summary, agent))
+}
+
+/// Metadata stored with saved weights: where they come from.
+fn weights_metadata(cfg: &TrainConfig, step: usize) -> std::collections::BTreeMap<String, String> {
+    [("env", cfg.env.clone()), ("method", cfg.method.to_string()), ("seed", cfg.seed.to_string()), ("step", step.to_string())]
+        .into_iter()
+        .map(|(k, v)| (k.to_string(), v))
+        .collect()
 }
 
 fn expert_action(expert: &mut Option<&mut dyn Expert>, obs: &[f32]) -> Result<usize> {

@@ -1,0 +1,179 @@
+//! `arld expert ...` and `arld demo ...`: the expert pipeline, expert statistics, and demonstration collection.
+use anyhow::{Context, Result};
+use arld::expert::demos::Demonstrations;
+use arld::expert::pipeline::{Candidate, evaluate_expert, paper_expert_stats, select_experts};
+use arld::expert::{self, CheckpointExpert, SPEC_HELP};
+use arld::experiment::run_one;
+use arld::train::{Method, NetKind, TrainConfig};
+use clap::Subcommand;
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+
+#[derive(Subcommand)]
+pub enum ExpertCommand {
+    /// Train prioritized double DQN, checkpoint it, evaluate every checkpoint over 100 episodes, and select a
+    /// weak (paper-like) and a perfect expert.
+    Train {
+        #[arg(long)]
+        env: String,
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
+        /// Where the selected experts go [default: experts/<env>].
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Training run directory [default: runs/expert_<env>_seed<seed>].
+        #[arg(long)]
+        run_dir: Option<PathBuf>,
+        /// Steps between checkpoints [default: the task's evaluation period].
+        #[arg(long)]
+        checkpoint_every: Option<usize>,
+        /// Episodes per checkpoint evaluation.
+        #[arg(long, default_value_t = 100)]
+        episodes: usize,
+        /// Override one training config key (repeatable).
+        #[arg(long = "set", value_name = "KEY=VALUE")]
+        overrides: Vec<String>,
+    },
+    /// Print an expert's statistics: mean and std of the return, min, average steps, and the target.
+    #[command(after_help = SPEC_HELP)]
+    Eval {
+        #[arg(long)]
+        env: String,
+        /// Expert spec.
+        #[arg(long)]
+        expert: String,
+        #[arg(long, default_value_t = 100)]
+        episodes: usize,
+        /// Episode i resets with seed SEED + i.
+        #[arg(long, default_value_t = 10_000)]
+        seed: u64,
+        /// Print JSON instead of a table row.
+        #[arg(long)]
+        json: bool,
+    },
+}
+
+#[derive(Subcommand)]
+pub enum DemoCommand {
+    /// Collect whole expert episodes until N transitions are gathered, as DQfD does, into a .jsonl file.
+    #[command(after_help = SPEC_HELP)]
+    Collect {
+        #[arg(long)]
+        env: String,
+        /// Expert spec.
+        #[arg(long)]
+        expert: String,
+        /// Number of transitions.
+        #[arg(long)]
+        transitions: usize,
+        /// Episode i resets with seed SEED + i.
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
+        /// Output file.
+        #[arg(long, short)]
+        out: PathBuf,
+    },
+}
+
+pub fn run_expert(cmd: ExpertCommand) -> Result<ExitCode> {
+    match cmd {
+        ExpertCommand::Eval { env, expert, episodes, seed, json } => {
+            let mut e = expert::from_spec(&expert, &env, seed)?;
+            let s = evaluate_expert(e.as_mut(), &env, episodes, seed)?;
+            let target = arld::env::make(&env)?.solve_threshold();
+            if json {
+                println!("{}", serde_json::json!({"env": env, "expert": expert, "stats": s, "target": target}));
+            } else {
+                println!("| env | expert | mean ± std | min | avg steps | target |");
+                println!("|---|---|---|---|---|---|");
+                println!(
+                    "| {env} | {expert} | {:.2} ± {:.2} | {:.1} | {:.1} | {target} |",
+                    s.mean, s.std, s.min, s.mean_len
+                );
+                if let Some((m, sd, mn, len)) = paper_expert_stats(&env) {
+                    println!("| {env} | paper's expert | {m:.2} ± {sd:.2} | {mn:.1} | {len:.1} | {target} |");
+                }
+            }
+            Ok(ExitCode::SUCCESS)
+        }
+        ExpertCommand::Train { env, seed, out, run_dir, checkpoint_every, episodes, overrides } => {
+            let mut cfg = TrainConfig::preset(&env, Method::Dqn, NetKind::Plain, seed)?;
+            for o in &overrides {
+                cfg.apply_override(o)?;
+            }
+            cfg.checkpoint_every = checkpoint_every.unwrap_or(cfg.eval_period);
+            cfg.validate()?;
+            let run_dir = run_dir.unwrap_or_else(|| PathBuf::from("runs").join(format!("expert_{env}_seed{seed}")));
+            let summary = run_one(&cfg, Some(&run_dir), true)?;
+            eprintln!("trained: final score {:.2}; evaluating checkpoints over {episodes} episodes", summary.final_score);
+            let candidates = evaluate_checkpoints(&run_dir.join("checkpoints"), &env, episodes)?;
+            let (weak, perfect) = select_experts(&candidates, &env)?;
+            let out = out.unwrap_or_else(|| expert::shipped_dir().join(&env));
+            std::fs::create_dir_all(&out)?;
+            let command = std::env::args().collect::<Vec<_>>().join(" ");
+            let mut selection = serde_json::json!({ "env": env, "command": command, "candidates": candidates });
+            for (name, idx) in [("weak", weak), ("perfect", perfect)] {
+                match idx {
+                    Some(i) => {
+                        let c = &candidates[i];
+                        std::fs::copy(&c.path, out.join(format!("{name}.safetensors")))?;
+                        println!(
+                            "{name}: step {} mean {:.2} ± {:.2} (min {:.1}), {:.1} steps",
+                            c.step, c.stats.mean, c.stats.std, c.stats.min, c.stats.mean_len
+                        );
+                        selection[name] = serde_json::to_value(c)?;
+                    }
+                    None => println!("{name}: no checkpoint fits; train longer or with another seed"),
+                }
+            }
+            arld::train::log::write_atomic(
+                &out.join("selection.json"),
+                serde_json::to_string_pretty(&selection)?.as_bytes(),
+            )?;
+            Ok(ExitCode::SUCCESS)
+        }
+    }
+}
+
+fn evaluate_checkpoints(dir: &Path, env: &str, episodes: usize) -> Result<Vec<Candidate>> {
+    let spec = arld::env::spec(env)?;
+    let mut paths: Vec<PathBuf> = std::fs::read_dir(dir)
+        .with_context(|| format!("no checkpoints in {}", dir.display()))?
+        .flatten()
+        .map(|e| e.path())
+        .filter(|p| p.extension().is_some_and(|x| x == "safetensors"))
+        .collect();
+    paths.sort();
+    let mut out = Vec::new();
+    for path in paths {
+        let step = path
+            .file_stem()
+            .and_then(|s| s.to_str())
+            .and_then(|s| s.strip_prefix("step_"))
+            .and_then(|s| s.parse().ok())
+            .unwrap_or(0);
+        let mut e = CheckpointExpert::load(&path, &spec)?;
+        let stats = evaluate_expert(&mut e, env, episodes, 10_000)?;
+        out.push(Candidate { path, step, stats });
+    }
+    Ok(out)
+}
+
+pub fn run_demo(cmd: DemoCommand) -> Result<ExitCode> {
+    match cmd {
+        DemoCommand::Collect { env, expert, transitions, seed, out } => {
+            let mut e = expert::from_spec(&expert, &env, seed)?;
+            let demos = Demonstrations::collect(&env, e.as_mut(), transitions, seed)?;
+            demos.save(&out)?;
+            let ret: f32 = demos.transitions.iter().map(|t| t.reward).sum();
+            println!(
+                "{} transitions in {} episodes (mean return per episode {:.2}) -> {}",
+                demos.transitions.len(),
+                demos.episodes(),
+                ret / demos.episodes().max(1) as f32,
+                out.display()
+            );
+            Ok(ExitCode::SUCCESS)
+        }
+    }
+}
