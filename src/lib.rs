@@ -19,5 +19,6 @@
 
 pub mod env;
 pub mod nn;
+pub mod query;
 pub mod replay;
 pub mod rng;
