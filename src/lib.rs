@@ -22,6 +22,7 @@ pub mod env;
 pub mod experiment;
 pub mod expert;
 pub mod nn;
+pub mod query;
 pub mod replay;
 pub mod query;
 pub mod rng;

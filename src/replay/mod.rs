@@ -1,1 +1,507 @@
-//! Prioritized replay.
+//! Experience replay: proportional prioritized replay with a permanent demonstration part, or
+//! plain uniform replay.
+//!
+//! The memory has two parts (ALGORITHM_NOTES.md §3, following DQfD):
+//! - a **demonstration part** of at most `demo_capacity` transitions, filled in arrival order and
+//!   never overwritten (pushing more is a [`ReplayError::DemoCapacityFull`] error);
+//! - an **agent part**, a FIFO ring of `capacity` transitions: once full, each new agent transition
+//!   replaces the oldest one. Demonstrations do not count against `capacity`.
+//!
+//! Every stored transition has a *slot*, the handle reported in [`Batch::idx`] and accepted by
+//! [`Replay::update_priorities`]: demonstration `d` lives in slot `d`, agent ring position `r`
+//! in slot `demo_capacity + r`. A slot names a transition until the ring overwrites it, so
+//! priorities should be updated before the next push (as a learner does: sample, learn, update).
+//!
+//! **Prioritized sampling** (Schaul et al. 2016, proportional variant; ALGORITHM_NOTES.md §3):
+//! - priority `p_i = |δ_i| + ε`, with `ε = eps_demo` for demonstrations and `eps_agent` for agent
+//!   transitions (DQfD's demonstration bonus);
+//! - `P(i) = p_i^α / Σ_k p_k^α`; the masses `p_i^α` live in one [`SumMinTree`] per part;
+//! - a batch of `B` is drawn stratified: the total mass is cut into `B` equal segments and one
+//!   point is drawn uniformly in each, so every draw still has marginal law `P(i)`;
+//! - importance-sampling weights `w_i = (N P(i))^-β / max_j (N P(j))^-β`, with `N` the number of
+//!   stored transitions and `max_j` over the whole memory, not just the batch. The largest weight
+//!   belongs to the smallest mass, which the min-tree tracks, so `w_i = (p_i^α / min_j p_j^α)^-β ≤ 1`;
+//! - a new transition enters at the **maximum raw priority** `max p` seen so far (over every push and
+//!   update, both parts; it starts at 1 and never decreases), i.e. with mass `(max p)^α`. The
+//!   maximum is kept in raw priority space; since `p ↦ p^α` is increasing this is the same
+//!   transition as the maximum mass.
+//!
+//! **Uniform sampling** (`prioritized = false`): every stored transition is equally likely and all
+//! weights are 1. Priorities are still maintained, so the memory can be inspected the same way.
+//!
+//! [`Replay::sample_demo_only`] draws from the demonstration part alone (DQfD pre-training,
+//! ALGORITHM_NOTES.md §9), prioritized among demonstrations: `N` and the weight normaliser are then
+//! taken over the demonstrations only.
+//!
+//! Storage is a set of flat arrays preallocated for `demo_capacity + capacity` slots
+//! (observations as `[slot][obs_dim]`), and sampling writes into a reusable [`Batch`], so steady
+//! state training allocates nothing here. All randomness comes from the caller's generator.
+
+pub mod sum_tree;
+
+pub use sum_tree::SumMinTree;
+
+use rand::Rng;
+use serde::{Deserialize, Serialize};
+use thiserror::Error;
+
+/// Replay settings (defaults: ALGORITHM_NOTES.md §3 and the CartPole memory size of §9).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ReplayConfig {
+    /// Size of the agent FIFO ring ("Memory size" in the paper).
+    pub capacity: usize,
+    /// Maximum number of permanent demonstration transitions (not counted in `capacity`).
+    pub demo_capacity: usize,
+    /// Proportional prioritized sampling if true, uniform sampling if false.
+    pub prioritized: bool,
+    /// Priority exponent α in `P(i) ∝ p_i^α` (0.6, Schaul et al.).
+    pub alpha: f32,
+    /// Priority bonus ε for agent transitions (0.001, DQfD).
+    pub eps_agent: f32,
+    /// Priority bonus ε for demonstration transitions (1.0, DQfD).
+    pub eps_demo: f32,
+}
+
+impl Default for ReplayConfig {
+    fn default() -> Self {
+        Self {
+            capacity: 10_000,
+            demo_capacity: 0,
+            prioritized: true,
+            alpha: 0.6,
+            eps_agent: 0.001,
+            eps_demo: 1.0,
+        }
+    }
+}
+
+impl ReplayConfig {
+    /// Checks the values a user may have put in a configuration file.
+    pub fn validate(&self) -> Result<(), ReplayError> {
+        if !(self.alpha.is_finite() && self.alpha >= 0.0) {
+            return Err(ReplayError::InvalidConfig(format!(
+                "alpha must be finite and >= 0, got {}",
+                self.alpha
+            )));
+        }
+        for (name, eps) in [("eps_agent", self.eps_agent), ("eps_demo", self.eps_demo)] {
+            // A positive ε keeps every transition sampleable (Schaul et al. §3.3).
+            if !(eps.is_finite() && eps > 0.0) {
+                return Err(ReplayError::InvalidConfig(format!(
+                    "{name} must be finite and > 0, got {eps}"
+                )));
+            }
+        }
+        if self.capacity == 0 && self.demo_capacity == 0 {
+            return Err(ReplayError::InvalidConfig(
+                "capacity and demo_capacity are both 0: the memory could hold nothing".into(),
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// Errors from storing transitions or from a bad configuration.
+#[derive(Debug, Error, Clone, PartialEq)]
+pub enum ReplayError {
+    #[error(
+        "the demonstration part is full ({demo_capacity} transitions); demonstrations are never evicted"
+    )]
+    DemoCapacityFull { demo_capacity: usize },
+    #[error("the agent part has capacity 0: cannot store an agent transition")]
+    NoAgentCapacity,
+    #[error("{what} has length {got}, expected the observation size {expected}")]
+    ObsDimMismatch {
+        what: &'static str,
+        expected: usize,
+        got: usize,
+    },
+    #[error("{what} contains a non-finite value (NaN or infinity)")]
+    NonFinite { what: &'static str },
+    #[error("invalid replay configuration: {0}")]
+    InvalidConfig(String),
+}
+
+/// A sampled batch, laid out for the learner; reused across calls so sampling does not allocate.
+#[derive(Clone, Debug, Default)]
+pub struct Batch {
+    /// Slot of each sample, to pass back to [`Replay::update_priorities`].
+    pub idx: Vec<usize>,
+    /// Importance-sampling weight of each sample (all 1 in uniform mode).
+    pub weights: Vec<f32>,
+    /// Observations, `[sample][obs_dim]` row-major.
+    pub obs: Vec<f32>,
+    pub actions: Vec<usize>,
+    pub rewards: Vec<f32>,
+    /// Next observations, `[sample][obs_dim]` row-major.
+    pub next_obs: Vec<f32>,
+    /// Bootstrap cut: the target must not bootstrap from `next_obs`.
+    pub terminal: Vec<bool>,
+    /// The sample is a demonstration (the large-margin loss applies, ALGORITHM_NOTES.md §4).
+    pub is_demo: Vec<bool>,
+}
+
+impl Batch {
+    /// Number of samples.
+    pub fn len(&self) -> usize {
+        self.idx.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.idx.is_empty()
+    }
+
+    fn clear(&mut self) {
+        self.idx.clear();
+        self.weights.clear();
+        self.obs.clear();
+        self.actions.clear();
+        self.rewards.clear();
+        self.next_obs.clear();
+        self.terminal.clear();
+        self.is_demo.clear();
+    }
+}
+
+/// A borrowed view of one stored transition.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TransitionRef<'a> {
+    pub obs: &'a [f32],
+    pub action: usize,
+    pub reward: f32,
+    pub next_obs: &'a [f32],
+    pub terminal: bool,
+    pub is_demo: bool,
+}
+
+/// The replay memory (see the module docs for layout and sampling rules).
+#[derive(Clone, Debug)]
+pub struct Replay {
+    obs_dim: usize,
+    cfg: ReplayConfig,
+    // Per-slot storage for `demo_capacity + capacity` slots, demonstrations first.
+    obs: Vec<f32>,
+    next_obs: Vec<f32>,
+    actions: Vec<usize>,
+    rewards: Vec<f32>,
+    terminal: Vec<bool>,
+    /// Raw priority `p = |δ| + ε` of each slot.
+    priorities: Vec<f32>,
+    /// Masses `p^α` of the demonstration slots (leaf `d` = slot `d`).
+    demo_tree: SumMinTree,
+    /// Masses `p^α` of the agent ring (leaf `r` = slot `demo_capacity + r`).
+    agent_tree: SumMinTree,
+    n_demo: usize,
+    n_agent: usize,
+    /// Ring position the next agent transition is written to (the oldest one once full).
+    agent_next: usize,
+    /// Largest raw priority seen so far; new transitions enter with it.
+    max_priority: f32,
+}
+
+impl Replay {
+    /// An empty memory for observations of length `obs_dim`.
+    ///
+    /// # Panics
+    /// If `cfg` fails [`ReplayConfig::validate`]; configuration loaders should call that first
+    /// and report the error.
+    pub fn new(obs_dim: usize, cfg: &ReplayConfig) -> Self {
+        if let Err(e) = cfg.validate() {
+            panic!("{e}");
+        }
+        let slots = cfg.demo_capacity + cfg.capacity;
+        Self {
+            obs_dim,
+            cfg: cfg.clone(),
+            obs: vec![0.0; slots * obs_dim],
+            next_obs: vec![0.0; slots * obs_dim],
+            actions: vec![0; slots],
+            rewards: vec![0.0; slots],
+            terminal: vec![false; slots],
+            priorities: vec![0.0; slots],
+            demo_tree: SumMinTree::new(cfg.demo_capacity),
+            agent_tree: SumMinTree::new(cfg.capacity),
+            n_demo: 0,
+            n_agent: 0,
+            agent_next: 0,
+            max_priority: 1.0,
+        }
+    }
+
+    /// Stores one transition. `terminal` is the bootstrap cut (true termination, or truncation
+    /// when so configured). A demonstration goes to the permanent part; an agent transition to the
+    /// ring, evicting the oldest agent transition when the ring is full. Either enters with the
+    /// current maximum priority.
+    pub fn push(
+        &mut self,
+        obs: &[f32],
+        action: usize,
+        reward: f32,
+        next_obs: &[f32],
+        terminal: bool,
+        is_demo: bool,
+    ) -> Result<(), ReplayError> {
+        for (what, o) in [("obs", obs), ("next_obs", next_obs)] {
+            if o.len() != self.obs_dim {
+                return Err(ReplayError::ObsDimMismatch {
+                    what,
+                    expected: self.obs_dim,
+                    got: o.len(),
+                });
+            }
+            if !o.iter().all(|x| x.is_finite()) {
+                return Err(ReplayError::NonFinite { what });
+            }
+        }
+        if !reward.is_finite() {
+            return Err(ReplayError::NonFinite { what: "reward" });
+        }
+        let slot = if is_demo {
+            if self.n_demo == self.cfg.demo_capacity {
+                return Err(ReplayError::DemoCapacityFull {
+                    demo_capacity: self.cfg.demo_capacity,
+                });
+            }
+            self.n_demo += 1;
+            self.n_demo - 1
+        } else {
+            if self.cfg.capacity == 0 {
+                return Err(ReplayError::NoAgentCapacity);
+            }
+            let ring_pos = self.agent_next;
+            self.agent_next = (self.agent_next + 1) % self.cfg.capacity;
+            self.n_agent = (self.n_agent + 1).min(self.cfg.capacity);
+            self.cfg.demo_capacity + ring_pos
+        };
+        let row = slot * self.obs_dim..(slot + 1) * self.obs_dim;
+        self.obs[row.clone()].copy_from_slice(obs);
+        self.next_obs[row].copy_from_slice(next_obs);
+        self.actions[slot] = action;
+        self.rewards[slot] = reward;
+        self.terminal[slot] = terminal;
+        self.set_priority(slot, self.max_priority);
+        Ok(())
+    }
+
+    /// Number of stored transitions (demonstrations plus agent transitions).
+    pub fn len(&self) -> usize {
+        self.n_demo + self.n_agent
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Number of stored demonstrations.
+    pub fn n_demo(&self) -> usize {
+        self.n_demo
+    }
+
+    /// Number of stored agent transitions.
+    pub fn n_agent(&self) -> usize {
+        self.n_agent
+    }
+
+    pub fn obs_dim(&self) -> usize {
+        self.obs_dim
+    }
+
+    pub fn config(&self) -> &ReplayConfig {
+        &self.cfg
+    }
+
+    /// Largest raw priority seen so far (the priority new transitions get).
+    pub fn max_priority(&self) -> f32 {
+        self.max_priority
+    }
+
+    /// Raw priority `p` of a stored slot, `None` if the slot holds nothing.
+    pub fn priority(&self, slot: usize) -> Option<f32> {
+        self.is_stored(slot).then(|| self.priorities[slot])
+    }
+
+    /// The transition in `slot`, `None` if the slot holds nothing.
+    pub fn transition(&self, slot: usize) -> Option<TransitionRef<'_>> {
+        if !self.is_stored(slot) {
+            return None;
+        }
+        let row = slot * self.obs_dim..(slot + 1) * self.obs_dim;
+        Some(TransitionRef {
+            obs: &self.obs[row.clone()],
+            action: self.actions[slot],
+            reward: self.rewards[slot],
+            next_obs: &self.next_obs[row],
+            terminal: self.terminal[slot],
+            is_demo: self.is_demo_slot(slot),
+        })
+    }
+
+    /// Slots that currently hold a transition: demonstrations first, then the agent ring in ring
+    /// order (not age order).
+    pub fn stored_slots(&self) -> impl Iterator<Item = usize> + '_ {
+        (0..self.n_demo).chain(self.cfg.demo_capacity..self.cfg.demo_capacity + self.n_agent)
+    }
+
+    /// Draws `batch_size` transitions (with replacement) into `out`, replacing its contents.
+    /// Prioritized: stratified proportional draws with IS weights for exponent `beta`;
+    /// uniform: equally likely, weights 1.
+    ///
+    /// # Panics
+    /// If the memory is empty.
+    pub fn sample(&mut self, batch_size: usize, beta: f32, rng: &mut impl Rng, out: &mut Batch) {
+        assert!(!self.is_empty(), "sample from an empty replay memory");
+        out.clear();
+        if !self.cfg.prioritized {
+            let n = self.len();
+            for _ in 0..batch_size {
+                let k = rng.random_range(0..n);
+                let slot = if k < self.n_demo {
+                    k
+                } else {
+                    self.cfg.demo_capacity + (k - self.n_demo)
+                };
+                self.write_sample(slot, 1.0, out);
+            }
+            return;
+        }
+        let demo_total = self.demo_tree.total();
+        let agent_total = self.agent_tree.total();
+        let total = demo_total + agent_total;
+        let min_mass = self.demo_tree.min().min(self.agent_tree.min());
+        let segment = total / batch_size as f64;
+        for k in 0..batch_size {
+            let u = (k as f64 + rng.random::<f64>()) * segment;
+            // The demonstration part covers [0, demo_total) of the mass, the ring the rest.
+            let slot = if agent_total <= 0.0 || (u < demo_total && demo_total > 0.0) {
+                self.demo_tree.find_prefix(u)
+            } else {
+                self.cfg.demo_capacity + self.agent_tree.find_prefix(u - demo_total)
+            };
+            let weight = is_weight(self.mass(slot), min_mass, beta);
+            self.write_sample(slot, weight, out);
+        }
+    }
+
+    /// Like [`Replay::sample`], but from the demonstration part only (DQfD pre-training). In
+    /// prioritized mode `P(i)` is normalised over the demonstrations and the IS weights use
+    /// `N = n_demo` and the smallest demonstration mass.
+    ///
+    /// # Panics
+    /// If no demonstration is stored.
+    pub fn sample_demo_only(
+        &mut self,
+        batch_size: usize,
+        beta: f32,
+        rng: &mut impl Rng,
+        out: &mut Batch,
+    ) {
+        assert!(
+            self.n_demo > 0,
+            "sample_demo_only with no demonstrations stored"
+        );
+        out.clear();
+        if !self.cfg.prioritized {
+            for _ in 0..batch_size {
+                let slot = rng.random_range(0..self.n_demo);
+                self.write_sample(slot, 1.0, out);
+            }
+            return;
+        }
+        let segment = self.demo_tree.total() / batch_size as f64;
+        let min_mass = self.demo_tree.min();
+        for k in 0..batch_size {
+            let u = (k as f64 + rng.random::<f64>()) * segment;
+            let slot = self.demo_tree.find_prefix(u);
+            let weight = is_weight(self.mass(slot), min_mass, beta);
+            self.write_sample(slot, weight, out);
+        }
+    }
+
+    /// Sets `p = |δ| + ε` for each sampled slot, with ε by the slot's kind, and raises the
+    /// maximum priority if exceeded.
+    ///
+    /// # Panics
+    /// If the slices differ in length, a slot holds nothing, or a TD error is not finite
+    /// (a diverged learner; continuing would corrupt the sampling distribution).
+    pub fn update_priorities(&mut self, idx: &[usize], abs_td: &[f32]) {
+        assert_eq!(
+            idx.len(),
+            abs_td.len(),
+            "update_priorities: {} slots but {} TD errors",
+            idx.len(),
+            abs_td.len()
+        );
+        for (&slot, &td) in idx.iter().zip(abs_td) {
+            assert!(
+                self.is_stored(slot),
+                "update_priorities: slot {slot} holds no transition"
+            );
+            assert!(
+                td.is_finite(),
+                "update_priorities: non-finite TD error {td} for slot {slot}"
+            );
+            let eps = if self.is_demo_slot(slot) {
+                self.cfg.eps_demo
+            } else {
+                self.cfg.eps_agent
+            };
+            let p = td.abs() + eps;
+            self.max_priority = self.max_priority.max(p);
+            self.set_priority(slot, p);
+        }
+    }
+
+    fn is_demo_slot(&self, slot: usize) -> bool {
+        slot < self.cfg.demo_capacity
+    }
+
+    fn is_stored(&self, slot: usize) -> bool {
+        if self.is_demo_slot(slot) {
+            slot < self.n_demo
+        } else {
+            slot - self.cfg.demo_capacity < self.n_agent
+        }
+    }
+
+    /// Sampling mass `p^α` of a stored slot.
+    fn mass(&self, slot: usize) -> f64 {
+        if self.is_demo_slot(slot) {
+            self.demo_tree.get(slot)
+        } else {
+            self.agent_tree.get(slot - self.cfg.demo_capacity)
+        }
+    }
+
+    fn set_priority(&mut self, slot: usize, p: f32) {
+        self.priorities[slot] = p;
+        let mass = f64::from(p).powf(f64::from(self.cfg.alpha));
+        if self.is_demo_slot(slot) {
+            self.demo_tree.set(slot, mass);
+        } else {
+            self.agent_tree.set(slot - self.cfg.demo_capacity, mass);
+        }
+    }
+
+    fn write_sample(&self, slot: usize, weight: f32, out: &mut Batch) {
+        let row = slot * self.obs_dim..(slot + 1) * self.obs_dim;
+        out.idx.push(slot);
+        out.weights.push(weight);
+        out.obs.extend_from_slice(&self.obs[row.clone()]);
+        out.actions.push(self.actions[slot]);
+        out.rewards.push(self.rewards[slot]);
+        out.next_obs.extend_from_slice(&self.next_obs[row]);
+        out.terminal.push(self.terminal[slot]);
+        out.is_demo.push(self.is_demo_slot(slot));
+    }
+}
+
+/// Normalised IS weight `(N P(i))^-β / max_j (N P(j))^-β`. With `P(i) = m_i / Σ m` the factors
+/// `N` and `Σ m` cancel and the maximum belongs to the smallest mass, leaving
+/// `(m_i / m_min)^-β` (Schaul et al. 2016, §3.4).
+fn is_weight(mass: f64, min_mass: f64, beta: f32) -> f32 {
+    (mass / min_mass).powf(-f64::from(beta)) as f32
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,632 @@
+//! Saving and loading a [`QNet`] as a safetensors file, readable from Python (`safetensors.torch.load_file`).
+//!
+//! Every tensor is written in PyTorch's `nn.Linear` layout (`weight [out][in]`, `bias [out]`) under a
+//! readable name, whatever the in-memory layout:
+//! - trunk: `fc1.weight [64][obs_dim]`, `fc1.bias`, `fc2.weight [64][64]`, `fc2.bias`;
+//! - `Plain`: `out.weight [A][64]`, `out.bias [A]`;
+//! - `Bootstrap`: `heads.{k}.weight [A][64]`, `heads.{k}.bias [A]` for k = 0..K;
+//! - `Noisy`: `noisy.mu_w [A][64]`, `noisy.sigma_w [A][64]`, `noisy.mu_b [A]`, `noisy.sigma_b [A]`.
+//!
+//! The header metadata holds `kind` (`plain`/`bootstrap`/`noisy`), `heads`, `obs_dim` and `n_actions`, plus
+//! the caller's own keys, which [`QNet::load`] hands back. Files are written atomically (temporary file in
+//! the same directory, then rename), and loading validates everything before building a network.
+
+use std::collections::{BTreeMap, HashMap};
+use std::fs;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+use safetensors::tensor::TensorView;
+use safetensors::{Dtype, SafeTensors};
+use thiserror::Error;
+
+use super::linear::MatView;
+use super::{HIDDEN, Layout, OutputKind, QNet};
+
+/// Metadata keys the network itself writes; callers may not use them.
+const RESERVED_KEYS: [&str; 4] = ["kind", "heads", "obs_dim", "n_actions"];
+
+/// Errors reading or writing a model file.
+#[derive(Debug, Error)]
+pub enum ModelFileError {
+    #[error("cannot read model file {path}: {source}")]
+    Read {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    #[error("cannot write model file {path}: {source}")]
+    Write {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    #[error("{path} is not a valid safetensors file (truncated or corrupt?): {source}")]
+    Corrupt {
+        path: PathBuf,
+        source: safetensors::SafeTensorError,
+    },
+    #[error("{path}: metadata key '{key}' {problem}")]
+    Metadata {
+        path: PathBuf,
+        key: String,
+        problem: String,
+    },
+    #[error(
+        "{path}: tensor '{name}' is missing (a {kind} network with {n_actions} actions needs it)"
+    )]
+    MissingTensor {
+        path: PathBuf,
+        name: String,
+        kind: String,
+        n_actions: usize,
+    },
+    #[error("{path}: unexpected tensor '{name}' for this network kind")]
+    UnexpectedTensor { path: PathBuf, name: String },
+    #[error("{path}: tensor '{name}' has shape {found:?}, expected {expected:?}")]
+    Shape {
+        path: PathBuf,
+        name: String,
+        expected: Vec<usize>,
+        found: Vec<usize>,
+    },
+    #[error("{path}: tensor '{name}' has dtype {found}, expected F32")]
+    Dtype {
+        path: PathBuf,
+        name: String,
+        found: String,
+    },
+    #[error("{path}: tensor '{name}' contains a non-finite value")]
+    NonFinite { path: PathBuf, name: String },
+    #[error("metadata key '{key}' is reserved for the network description")]
+    ReservedKey { key: String },
+}
+
+/// One tensor of the file: its name, PyTorch shape, and where its elements live in the flat parameters.
+struct FileTensor {
+    name: String,
+    shape: Vec<usize>,
+    /// Offset of element (0, 0) in the flat parameter vector.
+    base: usize,
+    /// Placement of the `[rows][cols]` file matrix (a bias is `[n][1]`) relative to `base`.
+    view: MatView,
+}
+
+impl FileTensor {
+    fn matrix(
+        name: impl Into<String>,
+        rows: usize,
+        cols: usize,
+        base: usize,
+        view: MatView,
+    ) -> Self {
+        Self {
+            name: name.into(),
+            shape: vec![rows, cols],
+            base,
+            view,
+        }
+    }
+
+    fn vector(name: impl Into<String>, len: usize, base: usize) -> Self {
+        Self {
+            name: name.into(),
+            shape: vec![len],
+            base,
+            view: MatView::row_major(len, 1),
+        }
+    }
+
+    fn len(&self) -> usize {
+        self.view.rows * self.view.cols
+    }
+
+    /// Flat-parameter index of every file element, in file (row-major) order.
+    fn indices(&self) -> impl Iterator<Item = usize> + '_ {
+        (0..self.view.rows).flat_map(move |r| {
+            (0..self.view.cols)
+                .map(move |c| self.base + r * self.view.row_stride + c * self.view.col_stride)
+        })
+    }
+}
+
+/// The file's tensors for a network layout (see the module docs).
+fn file_tensors(layout: &Layout) -> Vec<FileTensor> {
+    let (d, a, width) = (layout.obs_dim, layout.n_actions, layout.out_width);
+    // Storage is [in][out]: the file's [out][in] element (o, i) sits at i*out + o.
+    let transposed = |outputs: usize, inputs: usize| MatView::row_major(inputs, outputs).t();
+    let mut tensors = vec![
+        FileTensor::matrix(
+            "fc1.weight",
+            HIDDEN,
+            d,
+            layout.fc1_w.start,
+            transposed(HIDDEN, d),
+        ),
+        FileTensor::vector("fc1.bias", HIDDEN, layout.fc1_b.start),
+        FileTensor::matrix(
+            "fc2.weight",
+            HIDDEN,
+            HIDDEN,
+            layout.fc2_w.start,
+            transposed(HIDDEN, HIDDEN),
+        ),
+        FileTensor::vector("fc2.bias", HIDDEN, layout.fc2_b.start),
+    ];
+    match layout.kind {
+        OutputKind::Plain => {
+            tensors.push(FileTensor::matrix(
+                "out.weight",
+                a,
+                HIDDEN,
+                layout.out_w.start,
+                transposed(a, HIDDEN),
+            ));
+            tensors.push(FileTensor::vector("out.bias", a, layout.out_b.start));
+        }
+        OutputKind::Bootstrap { heads } => {
+            for head in 0..heads {
+                // Head k: columns k*A..(k+1)*A of the fused [64][K*A] storage.
+                let view = MatView {
+                    rows: a,
+                    cols: HIDDEN,
+                    row_stride: 1,
+                    col_stride: width,
+                };
+                tensors.push(FileTensor::matrix(
+                    format!("heads.{head}.weight"),
+                    a,
+                    HIDDEN,
+                    layout.out_w.start + head * a,
+                    view,
+                ));
+                tensors.push(FileTensor::vector(
+                    format!("heads.{head}.bias"),
+                    a,
+                    layout.out_b.start + head * a,
+                ));
+            }
+        }
+        OutputKind::Noisy => {
+            let row_major = MatView::row_major(a, HIDDEN);
+            tensors.push(FileTensor::matrix(
+                "noisy.mu_w",
+                a,
+                HIDDEN,
+                layout.out_w.start,
+                row_major,
+            ));
+            tensors.push(FileTensor::matrix(
+                "noisy.sigma_w",
+                a,
+                HIDDEN,
+                layout.sigma_w.start,
+                row_major,
+            ));
+            tensors.push(FileTensor::vector("noisy.mu_b", a, layout.out_b.start));
+            tensors.push(FileTensor::vector("noisy.sigma_b", a, layout.sigma_b.start));
+        }
+    }
+    tensors
+}
+
+fn kind_name(kind: OutputKind) -> &'static str {
+    match kind {
+        OutputKind::Plain => "plain",
+        OutputKind::Bootstrap { .. } => "bootstrap",
+        OutputKind::Noisy => "noisy",
+    }
+}
+
+/// Writes `bytes` to `path` atomically: a temporary file in the same directory, synced, then renamed.
+pub(crate) fn write_atomically(path: &Path, bytes: &[u8]) -> Result<(), ModelFileError> {
+    let write_error = |source| ModelFileError::Write {
+        path: path.to_path_buf(),
+        source,
+    };
+    let file_name = path
+        .file_name()
+        .ok_or_else(|| write_error(std::io::Error::other("the path has no file name")))?;
+    let mut temporary_name = std::ffi::OsString::from(".");
+    temporary_name.push(file_name);
+    temporary_name.push(format!(".{}.tmp", std::process::id()));
+    let temporary = path.with_file_name(temporary_name);
+    let result = (|| {
+        let mut file = fs::File::create(&temporary)?;
+        file.write_all(bytes)?;
+        file.sync_all()?;
+        fs::rename(&temporary, path)
+    })();
+    if result.is_err() {
+        let _ = fs::remove_file(&temporary);
+    }
+    result.map_err(write_error)
+}
+
+impl QNet {
+    /// Saves the network as safetensors at `path` (atomically), with `metadata` added to the header.
+    ///
+    /// Fails if `metadata` uses a reserved key (`kind`, `heads`, `obs_dim`, `n_actions`) or the file
+    /// cannot be written.
+    pub fn save(&self, path: &Path, metadata: &BTreeMap<String, String>) -> anyhow::Result<()> {
+        let layout = self.layout();
+        let mut header: HashMap<String, String> = HashMap::new();
+        for (key, value) in metadata {
+            if RESERVED_KEYS.contains(&key.as_str()) {
+                return Err(ModelFileError::ReservedKey { key: key.clone() }.into());
+            }
+            header.insert(key.clone(), value.clone());
+        }
+        header.insert("kind".into(), kind_name(layout.kind).into());
+        header.insert("heads".into(), layout.heads().to_string());
+        header.insert("obs_dim".into(), layout.obs_dim.to_string());
+        header.insert("n_actions".into(), layout.n_actions.to_string());
+
+        let params = self.parameters();
+        let tensors = file_tensors(layout);
+        let buffers: Vec<Vec<u8>> = tensors
+            .iter()
+            .map(|t| t.indices().flat_map(|i| params[i].to_le_bytes()).collect())
+            .collect();
+        let views = tensors
+            .iter()
+            .zip(&buffers)
+            .map(|(t, bytes)| {
+                Ok((
+                    t.name.clone(),
+                    TensorView::new(Dtype::F32, t.shape.clone(), bytes)?,
+                ))
+            })
+            .collect::<Result<Vec<_>, safetensors::SafeTensorError>>()?;
+        let bytes = safetensors::serialize(views, Some(header))?;
+        write_atomically(path, &bytes)?;
+        Ok(())
+    }
+
+    /// Loads a network saved by [`QNet::save`]; returns it with the caller's metadata (reserved keys removed).
+    ///
+    /// Validates the whole file: readable, a complete safetensors file, a known kind with positive sizes,
+    /// every expected tensor present as F32 with the right shape and finite values, and no extra tensors.
+    pub fn load(path: &Path) -> anyhow::Result<(QNet, BTreeMap<String, String>)> {
+        Ok(load_file(path)?)
+    }
+}
+
+fn load_file(path: &Path) -> Result<(QNet, BTreeMap<String, String>), ModelFileError> {
+    let path_buf = || path.to_path_buf();
+    let bytes = fs::read(path).map_err(|source| ModelFileError::Read {
+        path: path_buf(),
+        source,
+    })?;
+    let corrupt = |source| ModelFileError::Corrupt {
+        path: path_buf(),
+        source,
+    };
+    let (_, header) = SafeTensors::read_metadata(&bytes).map_err(corrupt)?;
+    let file = SafeTensors::deserialize(&bytes).map_err(corrupt)?;
+    let mut metadata: BTreeMap<String, String> = header
+        .metadata()
+        .clone()
+        .unwrap_or_default()
+        .into_iter()
+        .collect();
+
+    let metadata_error = |key: &str, problem: String| ModelFileError::Metadata {
+        path: path_buf(),
+        key: key.to_string(),
+        problem,
+    };
+    let mut take = |key: &str| {
+        metadata
+            .remove(key)
+            .ok_or_else(|| metadata_error(key, "is missing".into()))
+    };
+    let kind_text = take("kind")?;
+    let heads_text = take("heads")?;
+    let obs_dim_text = take("obs_dim")?;
+    let n_actions_text = take("n_actions")?;
+    let positive = |key: &str, text: &str| match text.parse::<usize>() {
+        Ok(value) if value > 0 => Ok(value),
+        _ => Err(metadata_error(
+            key,
+            format!("must be a positive integer, found '{text}'"),
+        )),
+    };
+    let heads = positive("heads", &heads_text)?;
+    let obs_dim = positive("obs_dim", &obs_dim_text)?;
+    let n_actions = positive("n_actions", &n_actions_text)?;
+    let kind = match kind_text.as_str() {
+        "plain" => OutputKind::Plain,
+        "bootstrap" => OutputKind::Bootstrap { heads },
+        "noisy" => OutputKind::Noisy,
+        other => {
+            return Err(metadata_error(
+                "kind",
+                format!("must be plain, bootstrap or noisy, found '{other}'"),
+            ));
+        }
+    };
+    if kind.heads() != heads {
+        return Err(metadata_error(
+            "heads",
+            format!("is {heads}, but a {kind_text} network has {}", kind.heads()),
+        ));
+    }
+
+    let layout = Layout::new(obs_dim, n_actions, kind);
+    let expected = file_tensors(&layout);
+    for name in file.names() {
+        if !expected.iter().any(|t| t.name == name) {
+            return Err(ModelFileError::UnexpectedTensor {
+                path: path_buf(),
+                name: name.to_string(),
+            });
+        }
+    }
+    let mut params = vec![0.0f32; layout.len];
+    for tensor in &expected {
+        let view = file
+            .tensor(&tensor.name)
+            .map_err(|_| ModelFileError::MissingTensor {
+                path: path_buf(),
+                name: tensor.name.clone(),
+                kind: kind_text.clone(),
+                n_actions,
+            })?;
+        if view.dtype() != Dtype::F32 {
+            return Err(ModelFileError::Dtype {
+                path: path_buf(),
+                name: tensor.name.clone(),
+                found: view.dtype().to_string(),
+            });
+        }
+        if view.shape() != tensor.shape.as_slice() {
+            return Err(ModelFileError::Shape {
+                path: path_buf(),
+                name: tensor.name.clone(),
+                expected: tensor.shape.clone(),
+                found: view.shape().to_vec(),
+            });
+        }
+        let data = view.data();
+        debug_assert_eq!(data.len(), tensor.len() * 4);
+        for (index, chunk) in tensor.indices().zip(data.chunks_exact(4)) {
+            let value = f32::from_le_bytes([chunk[0], chunk[1], chunk[2], chunk[3]]);
+            if !value.is_finite() {
+                return Err(ModelFileError::NonFinite {
+                    path: path_buf(),
+                    name: tensor.name.clone(),
+                });
+            }
+            params[index] = value;
+        }
+    }
+    Ok((QNet::from_parts(layout, params), metadata))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::SeedableRng;
+
+    fn example_metadata() -> BTreeMap<String, String> {
+        BTreeMap::from([
+            ("env".to_string(), "CartPole-v0".to_string()),
+            ("seed".to_string(), "7".to_string()),
+        ])
+    }
+
+    #[test]
+    fn save_then_load_round_trips_every_kind() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut rng = rand_pcg::Pcg64::seed_from_u64(11);
+        for kind in [
+            OutputKind::Plain,
+            OutputKind::Bootstrap { heads: 3 },
+            OutputKind::Noisy,
+        ] {
+            let mut net = QNet::new(5, 3, kind, &mut rng);
+            // Make sigma distinct from its constant initial value so a mix-up would show.
+            for (i, p) in net.parameters_mut().iter_mut().enumerate() {
+                *p += i as f32 * 1e-4;
+            }
+            let path = dir.path().join(format!("{kind:?}.safetensors"));
+            net.save(&path, &example_metadata()).unwrap();
+            let (loaded, metadata) = QNet::load(&path).unwrap();
+            assert_eq!(loaded.kind(), kind);
+            assert_eq!(loaded.obs_dim(), 5);
+            assert_eq!(loaded.n_actions(), 3);
+            assert_eq!(loaded.parameters(), net.parameters());
+            assert_eq!(metadata, example_metadata());
+            // No temporary file is left behind.
+            let leftovers: Vec<_> = fs::read_dir(dir.path())
+                .unwrap()
+                .filter_map(|e| e.ok())
+                .filter(|e| e.file_name().to_string_lossy().ends_with(".tmp"))
+                .collect();
+            assert!(leftovers.is_empty());
+        }
+    }
+
+    /// The file holds PyTorch-layout tensors: check `fc1.weight[o][i]` against the network's own
+    /// single-state forward (an independent path through the in-memory layout).
+    #[test]
+    fn file_tensors_are_in_pytorch_layout() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut rng = rand_pcg::Pcg64::seed_from_u64(12);
+        let net = QNet::new(3, 2, OutputKind::Bootstrap { heads: 2 }, &mut rng);
+        let path = dir.path().join("net.safetensors");
+        net.save(&path, &BTreeMap::new()).unwrap();
+        let bytes = fs::read(&path).unwrap();
+        let file = SafeTensors::deserialize(&bytes).unwrap();
+        let read = |name: &str| -> Vec<f32> {
+            let view = file.tensor(name).unwrap();
+            view.data()
+                .chunks_exact(4)
+                .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+                .collect()
+        };
+        let (w1, b1, w2, b2) = (
+            read("fc1.weight"),
+            read("fc1.bias"),
+            read("fc2.weight"),
+            read("fc2.bias"),
+        );
+        assert_eq!(file.tensor("heads.1.weight").unwrap().shape(), &[2, HIDDEN]);
+        let obs = [0.3f32, -0.7, 1.1];
+        let mut expected = Vec::new();
+        for head in 0..2 {
+            let (wh, bh) = (
+                read(&format!("heads.{head}.weight")),
+                read(&format!("heads.{head}.bias")),
+            );
+            let h1: Vec<f32> = (0..HIDDEN)
+                .map(|o| (b1[o] + (0..3).map(|i| w1[o * 3 + i] * obs[i]).sum::<f32>()).max(0.0))
+                .collect();
+            let h2: Vec<f32> = (0..HIDDEN)
+                .map(|o| {
+                    (b2[o] + (0..HIDDEN).map(|i| w2[o * HIDDEN + i] * h1[i]).sum::<f32>()).max(0.0)
+                })
+                .collect();
+            for a in 0..2 {
+                expected.push(bh[a] + (0..HIDDEN).map(|i| wh[a * HIDDEN + i] * h2[i]).sum::<f32>());
+            }
+        }
+        let mut q = [0.0f32; 4];
+        net.q_values_single(&obs, None, &mut q);
+        for (x, y) in q.iter().zip(&expected) {
+            assert!((x - y).abs() < 1e-5, "{q:?} vs {expected:?}");
+        }
+    }
+
+    fn load_error(path: &Path) -> ModelFileError {
+        QNet::load(path)
+            .unwrap_err()
+            .downcast::<ModelFileError>()
+            .unwrap()
+    }
+
+    #[test]
+    fn missing_truncated_and_foreign_files_give_clear_errors() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut rng = rand_pcg::Pcg64::seed_from_u64(13);
+        let net = QNet::new(4, 2, OutputKind::Noisy, &mut rng);
+        let path = dir.path().join("net.safetensors");
+        net.save(&path, &BTreeMap::new()).unwrap();
+        let bytes = fs::read(&path).unwrap();
+
+        let missing = dir.path().join("absent.safetensors");
+        let error = load_error(&missing);
+        assert!(matches!(error, ModelFileError::Read { .. }), "{error}");
+        assert!(error.to_string().contains("absent.safetensors"));
+
+        let truncated = dir.path().join("truncated.safetensors");
+        fs::write(&truncated, &bytes[..bytes.len() - 10]).unwrap();
+        let error = load_error(&truncated);
+        assert!(matches!(error, ModelFileError::Corrupt { .. }), "{error}");
+        assert!(
+            error.to_string().contains("truncated or corrupt"),
+            "{error}"
+        );
+
+        let text = dir.path().join("notes.txt");
+        fs::write(&text, "this is not a model").unwrap();
+        assert!(matches!(load_error(&text), ModelFileError::Corrupt { .. }));
+
+        // A valid safetensors file that is not a Q-network: no metadata.
+        let foreign = dir.path().join("foreign.safetensors");
+        let data = [0u8; 8];
+        let view = TensorView::new(Dtype::F32, vec![2], &data).unwrap();
+        fs::write(
+            &foreign,
+            safetensors::serialize([("x", view)], None).unwrap(),
+        )
+        .unwrap();
+        let error = load_error(&foreign);
+        assert!(
+            matches!(&error, ModelFileError::Metadata { key, .. } if key == "kind"),
+            "{error}"
+        );
+    }
+
+    /// Rewrites a saved file with one tensor changed (or dropped) and checks the matching error.
+    #[test]
+    fn inconsistent_tensors_are_rejected() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut rng = rand_pcg::Pcg64::seed_from_u64(14);
+        let net = QNet::new(4, 2, OutputKind::Bootstrap { heads: 2 }, &mut rng);
+        let path = dir.path().join("net.safetensors");
+        net.save(&path, &BTreeMap::new()).unwrap();
+        let bytes = fs::read(&path).unwrap();
+        let original = SafeTensors::deserialize(&bytes).unwrap();
+        let header = SafeTensors::read_metadata(&bytes)
+            .unwrap()
+            .1
+            .metadata()
+            .clone();
+
+        let rewrite = |name: &str,
+                       change: &dyn Fn(&TensorView) -> Option<(Vec<usize>, Vec<u8>)>|
+         -> ModelFileError {
+            let mut owned: Vec<(String, Dtype, Vec<usize>, Vec<u8>)> = Vec::new();
+            for (n, view) in original.tensors() {
+                if n == name {
+                    if let Some((shape, data)) = change(&view) {
+                        owned.push((n, view.dtype(), shape, data));
+                    }
+                } else {
+                    owned.push((n, view.dtype(), view.shape().to_vec(), view.data().to_vec()));
+                }
+            }
+            let views: Vec<_> = owned
+                .iter()
+                .map(|(n, dtype, shape, data)| {
+                    (
+                        n.clone(),
+                        TensorView::new(*dtype, shape.clone(), data).unwrap(),
+                    )
+                })
+                .collect();
+            let out = dir.path().join("changed.safetensors");
+            fs::write(&out, safetensors::serialize(views, header.clone()).unwrap()).unwrap();
+            load_error(&out)
+        };
+
+        let error = rewrite("heads.1.bias", &|_| None);
+        assert!(
+            matches!(&error, ModelFileError::MissingTensor { name, .. } if name == "heads.1.bias"),
+            "{error}"
+        );
+
+        let error = rewrite("fc1.weight", &|view| {
+            Some((vec![4, HIDDEN], view.data().to_vec()))
+        });
+        assert!(
+            matches!(&error, ModelFileError::Shape { name, .. } if name == "fc1.weight"),
+            "{error}"
+        );
+
+        let error = rewrite("fc2.bias", &|view| {
+            let mut data = view.data().to_vec();
+            data[..4].copy_from_slice(&f32::NAN.to_le_bytes());
+            Some((view.shape().to_vec(), data))
+        });
+        assert!(
+            matches!(&error, ModelFileError::NonFinite { .. }),
+            "{error}"
+        );
+    }
+
+    #[test]
+    fn reserved_metadata_keys_are_refused_on_save() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut rng = rand_pcg::Pcg64::seed_from_u64(15);
+        let net = QNet::new(2, 2, OutputKind::Plain, &mut rng);
+        let metadata = BTreeMap::from([("kind".to_string(), "mine".to_string())]);
+        let error = net
+            .save(&dir.path().join("x.safetensors"), &metadata)
+            .unwrap_err();
+        assert!(matches!(
+            error.downcast_ref::<ModelFileError>(),
+            Some(ModelFileError::ReservedKey { .. })
+        ));
+    }
+}

@@ -1,0 +1,174 @@
+//! Factorised Gaussian noise for the NoisyNet output layer (ALGORITHM_NOTES.md §6, Fortunato et al. 2018).
+//!
+//! The layer computes `y = (mu_w + sigma_w ⊙ eps_w) x + mu_b + sigma_b ⊙ eps_b` with factorised noise
+//! `eps_w[j,i] = f(eps_j) f(eps_i)`, `eps_b[j] = f(eps_j)`, `f(x) = sgn(x) sqrt|x|`, `eps ~ N(0,1)`.
+//! A [`NoiseSample`] holds the already-transformed factors `f(eps_i)` (one per input) and `f(eps_j)` (one per
+//! output); the network turns a sample into effective weights once per forward pass ([`effective_weights`])
+//! and, in the backward pass, derives the sigma gradients from the mu gradients ([`sigma_gradients`]):
+//! since `W = mu + sigma ⊙ eps`, `dL/dsigma = eps ⊙ dL/dmu`.
+
+use rand::Rng;
+use rand_distr::StandardNormal;
+
+use super::HIDDEN;
+
+/// `f(x) = sgn(x) sqrt|x|`, the factorised-noise transform of NoisyNet (ALGORITHM_NOTES.md §6).
+#[inline]
+pub fn noise_transform(x: f32) -> f32 {
+    x.signum() * x.abs().sqrt()
+}
+
+/// One draw of factorised noise for a `HIDDEN -> n_actions` noisy layer.
+///
+/// A fresh sample (from [`NoiseSample::new`]) is all zeros, i.e. it gives the mean weights, until
+/// [`NoiseSample::resample`] is called.
+#[derive(Clone, Debug, PartialEq)]
+pub struct NoiseSample {
+    /// `f(eps_i)` for the layer's `HIDDEN` inputs.
+    input_factors: [f32; HIDDEN],
+    /// `f(eps_j)` for the layer's outputs (one per action).
+    output_factors: Vec<f32>,
+}
+
+impl NoiseSample {
+    /// A zero sample for a layer with `n_actions` outputs.
+    pub fn new(n_actions: usize) -> Self {
+        Self {
+            input_factors: [0.0; HIDDEN],
+            output_factors: vec![0.0; n_actions],
+        }
+    }
+
+    /// Draws new noise: `HIDDEN` input factors first, then one output factor per action, each
+    /// `f(eps)` with `eps ~ N(0, 1)` from the caller's generator.
+    pub fn resample(&mut self, rng: &mut impl Rng) {
+        for factor in self
+            .input_factors
+            .iter_mut()
+            .chain(self.output_factors.iter_mut())
+        {
+            let eps: f32 = rng.sample(StandardNormal);
+            *factor = noise_transform(eps);
+        }
+    }
+
+    /// Number of outputs (actions) this sample is for.
+    pub fn n_actions(&self) -> usize {
+        self.output_factors.len()
+    }
+
+    /// `f(eps_i)`, one per input unit.
+    pub fn input_factors(&self) -> &[f32; HIDDEN] {
+        &self.input_factors
+    }
+
+    /// `f(eps_j)`, one per output unit; also the bias noise `eps_b`.
+    pub fn output_factors(&self) -> &[f32] {
+        &self.output_factors
+    }
+
+    /// Sets the factors directly (tests and replays of a recorded sample).
+    pub fn set_factors(&mut self, input_factors: &[f32; HIDDEN], output_factors: &[f32]) {
+        assert_eq!(
+            output_factors.len(),
+            self.output_factors.len(),
+            "noise sample: wrong action count"
+        );
+        self.input_factors = *input_factors;
+        self.output_factors.copy_from_slice(output_factors);
+    }
+
+    /// Resets to the zero sample (mean weights).
+    pub fn clear(&mut self) {
+        self.input_factors.fill(0.0);
+        self.output_factors.fill(0.0);
+    }
+}
+
+/// Builds the effective weights `mu + sigma ⊙ eps` of one forward pass.
+///
+/// `mu_w`, `sigma_w` are `[A][HIDDEN]` (PyTorch layout); the result `w_eff_t` is written transposed,
+/// `[HIDDEN][A]`, because the batch product `h2 · W^T` reads it row by row. `input`/`output` are the noise
+/// factors (all zeros for the mean network).
+pub(crate) fn effective_weights(
+    mu_w: &[f32],
+    sigma_w: &[f32],
+    mu_b: &[f32],
+    sigma_b: &[f32],
+    input: &[f32; HIDDEN],
+    output: &[f32],
+    w_eff_t: &mut [f32],
+    b_eff: &mut [f32],
+) {
+    let n_actions = output.len();
+    for (a, (&eps_out, (mu_row, sigma_row))) in output
+        .iter()
+        .zip(mu_w.chunks_exact(HIDDEN).zip(sigma_w.chunks_exact(HIDDEN)))
+        .enumerate()
+    {
+        for i in 0..HIDDEN {
+            w_eff_t[i * n_actions + a] = mu_row[i] + sigma_row[i] * (eps_out * input[i]);
+        }
+    }
+    for (((b, &mu), &sigma), &eps) in b_eff.iter_mut().zip(mu_b).zip(sigma_b).zip(output) {
+        *b = mu + sigma * eps;
+    }
+}
+
+/// `dL/dsigma = eps ⊙ dL/dmu` for the weights (`[A][HIDDEN]`) and the bias (`[A]`).
+pub(crate) fn sigma_gradients(
+    grad_mu_w: &[f32],
+    grad_mu_b: &[f32],
+    input: &[f32; HIDDEN],
+    output: &[f32],
+    grad_sigma_w: &mut [f32],
+    grad_sigma_b: &mut [f32],
+) {
+    for ((&eps_out, g_mu), g_sigma) in output
+        .iter()
+        .zip(grad_mu_w.chunks_exact(HIDDEN))
+        .zip(grad_sigma_w.chunks_exact_mut(HIDDEN))
+    {
+        for ((gs, &gm), &eps_in) in g_sigma.iter_mut().zip(g_mu).zip(input) {
+            *gs = gm * (eps_out * eps_in);
+        }
+    }
+    for ((gs, &gm), &eps) in grad_sigma_b.iter_mut().zip(grad_mu_b).zip(output) {
+        *gs = gm * eps;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::SeedableRng;
+
+    #[test]
+    fn transform_is_signed_square_root() {
+        assert_eq!(noise_transform(4.0), 2.0);
+        assert_eq!(noise_transform(-9.0), -3.0);
+        assert_eq!(noise_transform(0.0), 0.0);
+    }
+
+    /// E[f(eps)^2] = E|eps| = sqrt(2/pi) (ALGORITHM_NOTES.md §7): checks the draws are transformed
+    /// standard normals, not raw ones (whose second moment is 1).
+    #[test]
+    fn resampled_factors_have_the_factorised_second_moment() {
+        let mut rng = rand_pcg::Pcg64::seed_from_u64(7);
+        let mut sample = NoiseSample::new(4);
+        let (mut sum_sq, mut count) = (0.0f64, 0usize);
+        for _ in 0..2000 {
+            sample.resample(&mut rng);
+            for &f in sample.input_factors().iter().chain(sample.output_factors()) {
+                sum_sq += (f as f64) * (f as f64);
+                count += 1;
+            }
+        }
+        let second_moment = sum_sq / count as f64;
+        let expected = (2.0 / std::f64::consts::PI).sqrt();
+        assert!(
+            (second_moment - expected).abs() < 0.01,
+            "{second_moment} vs {expected}"
+        );
+    }
+}

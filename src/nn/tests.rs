@@ -1,0 +1,468 @@
+//! Gradient and forward checks of the hand-written network against two independent oracles:
+//! - candle (autodiff): the same network built from the same weights, scalar loss `sum(w ⊙ Q)`, with the
+//!   Bootstrapped 1/K trunk scaling built as `h/K + detach(h)(1 - 1/K)` (same value, 1/K gradient);
+//! - central finite differences of an f64 re-implementation of the forward pass (true gradients; for
+//!   Bootstrap the trunk's analytic gradient times K must match them).
+
+use candle_core::{Device, Tensor, Var};
+use rand::{Rng, SeedableRng};
+use rand_pcg::Pcg64;
+
+use super::*;
+
+const OBS_DIM: usize = 3;
+const N_ACTIONS: usize = 2;
+const BATCH: usize = 5;
+
+struct Case {
+    net: QNet,
+    x: Vec<f32>,
+    /// Loss weights in forward's output layout [head][batch][action]: `L = sum(w ⊙ Q)`, so `dL/dQ = w`.
+    w: Vec<f32>,
+    noise: Option<NoiseSample>,
+}
+
+fn case(kind: OutputKind, seed: u64, with_noise: bool) -> Case {
+    let mut rng = Pcg64::seed_from_u64(seed);
+    let mut net = QNet::new(OBS_DIM, N_ACTIONS, kind, &mut rng);
+    // Spread sigma so every sigma entry gets a distinct value (the initial value is a constant).
+    if let OutputKind::Noisy = kind {
+        let layout = *net.layout();
+        for p in &mut net.parameters_mut()
+            [layout.sigma_w.start..layout.sigma_b.start + layout.sigma_b.len]
+        {
+            *p *= rng.random_range(0.5f32..1.5);
+        }
+    }
+    let x = (0..BATCH * OBS_DIM)
+        .map(|_| rng.random_range(-2.0f32..2.0))
+        .collect();
+    let w = (0..kind.heads() * BATCH * N_ACTIONS)
+        .map(|_| rng.random_range(-1.0f32..1.0))
+        .collect();
+    let noise = with_noise.then(|| {
+        let mut sample = NoiseSample::new(N_ACTIONS);
+        sample.resample(&mut rng);
+        sample
+    });
+    Case { net, x, w, noise }
+}
+
+fn analytic(case: &Case) -> (Vec<f32>, Grads) {
+    let mut ws = Workspace::new(&case.net, BATCH + 3);
+    let q = case
+        .net
+        .forward(&case.x, BATCH, case.noise.as_ref(), &mut ws)
+        .to_vec();
+    let mut grads = Grads::new(&case.net);
+    // Garbage in the gradient buffer must be overwritten, not accumulated.
+    grads.data.fill(123.0);
+    case.net.backward(&mut ws, &case.w, &mut grads);
+    (q, grads)
+}
+
+/// Independent f64 forward pass on the flat parameters, following the layout documented on `Layout`
+/// with explicit index arithmetic. Returns Q in [head][batch][action] order.
+fn reference_q(layout: &Layout, p: &[f64], x: &[f64], noise: Option<&NoiseSample>) -> Vec<f64> {
+    let (d, a, width, heads) = (
+        layout.obs_dim,
+        layout.n_actions,
+        layout.out_width,
+        layout.heads(),
+    );
+    let batch = x.len() / d;
+    let mut q = vec![0.0; heads * batch * a];
+    for b in 0..batch {
+        let mut h1 = [0.0f64; HIDDEN];
+        for (o, h) in h1.iter_mut().enumerate() {
+            let mut s = p[layout.fc1_b.start + o];
+            for i in 0..d {
+                s += x[b * d + i] * p[layout.fc1_w.start + i * HIDDEN + o];
+            }
+            *h = s.max(0.0);
+        }
+        let mut h2 = [0.0f64; HIDDEN];
+        for (o, h) in h2.iter_mut().enumerate() {
+            let mut s = p[layout.fc2_b.start + o];
+            for (i, &h1_i) in h1.iter().enumerate() {
+                s += h1_i * p[layout.fc2_w.start + i * HIDDEN + o];
+            }
+            *h = s.max(0.0);
+        }
+        match layout.kind {
+            OutputKind::Plain | OutputKind::Bootstrap { .. } => {
+                for k in 0..heads {
+                    for act in 0..a {
+                        let col = k * a + act;
+                        let mut s = p[layout.out_b.start + col];
+                        for (i, &h2_i) in h2.iter().enumerate() {
+                            s += h2_i * p[layout.out_w.start + i * width + col];
+                        }
+                        q[(k * batch + b) * a + act] = s;
+                    }
+                }
+            }
+            OutputKind::Noisy => {
+                for act in 0..a {
+                    let (eps_out, eps_in): (f64, Vec<f64>) = match noise {
+                        Some(n) => (
+                            n.output_factors()[act] as f64,
+                            n.input_factors().iter().map(|&e| e as f64).collect(),
+                        ),
+                        None => (0.0, vec![0.0; HIDDEN]),
+                    };
+                    let mut s =
+                        p[layout.out_b.start + act] + p[layout.sigma_b.start + act] * eps_out;
+                    for i in 0..HIDDEN {
+                        let weight = p[layout.out_w.start + act * HIDDEN + i]
+                            + p[layout.sigma_w.start + act * HIDDEN + i] * eps_out * eps_in[i];
+                        s += weight * h2[i];
+                    }
+                    q[b * a + act] = s;
+                }
+            }
+        }
+    }
+    q
+}
+
+fn reference_loss(case: &Case, p: &[f64]) -> f64 {
+    let x: Vec<f64> = case.x.iter().map(|&v| v as f64).collect();
+    let q = reference_q(case.net.layout(), p, &x, case.noise.as_ref());
+    q.iter().zip(&case.w).map(|(q, &w)| q * w as f64).sum()
+}
+
+/// `(segment, name, is_trunk)` for every tensor of the layout.
+fn segments(layout: &Layout) -> Vec<(Segment, &'static str, bool)> {
+    vec![
+        (layout.fc1_w, "fc1_w", true),
+        (layout.fc1_b, "fc1_b", true),
+        (layout.fc2_w, "fc2_w", true),
+        (layout.fc2_b, "fc2_b", true),
+        (layout.out_w, "out_w", false),
+        (layout.out_b, "out_b", false),
+        (layout.sigma_w, "sigma_w", false),
+        (layout.sigma_b, "sigma_b", false),
+    ]
+}
+
+fn assert_close(name: &str, actual: &[f32], expected: &[f64], rtol: f64) {
+    assert_eq!(actual.len(), expected.len(), "{name}: length");
+    let scale = expected
+        .iter()
+        .fold(0.0f64, |m, v| m.max(v.abs()))
+        .max(1e-3);
+    for (i, (&a, &e)) in actual.iter().zip(expected).enumerate() {
+        assert!(
+            (a as f64 - e).abs() <= rtol * (e.abs() + 0.01 * scale),
+            "{name}[{i}]: analytic {a} vs reference {e}"
+        );
+    }
+}
+
+fn check_against_finite_differences(case: &Case) {
+    let layout = *case.net.layout();
+    let (q, grads) = analytic(case);
+    let p64: Vec<f64> = case.net.parameters().iter().map(|&v| v as f64).collect();
+    let x64: Vec<f64> = case.x.iter().map(|&v| v as f64).collect();
+    assert_close(
+        "Q",
+        &q,
+        &reference_q(&layout, &p64, &x64, case.noise.as_ref()),
+        1e-4,
+    );
+
+    let h = 1e-6;
+    let mut perturbed = p64.clone();
+    let mut fd = vec![0.0f64; p64.len()];
+    for (i, g) in fd.iter_mut().enumerate() {
+        perturbed[i] = p64[i] + h;
+        let up = reference_loss(case, &perturbed);
+        perturbed[i] = p64[i] - h;
+        let down = reference_loss(case, &perturbed);
+        perturbed[i] = p64[i];
+        *g = (up - down) / (2.0 * h);
+    }
+    let trunk_factor = layout.heads() as f32;
+    for (segment, name, is_trunk) in segments(&layout) {
+        let analytic: Vec<f32> = grads
+            .tensor(segment)
+            .iter()
+            .map(|&g| if is_trunk { g * trunk_factor } else { g })
+            .collect();
+        assert_close(name, &analytic, &fd[segment.range()], 1e-3);
+    }
+}
+
+#[test]
+fn plain_gradients_match_finite_differences() {
+    check_against_finite_differences(&case(OutputKind::Plain, 1, false));
+}
+
+#[test]
+fn bootstrap_gradients_match_finite_differences_with_trunk_scaled_by_one_over_k() {
+    check_against_finite_differences(&case(OutputKind::Bootstrap { heads: 4 }, 2, false));
+}
+
+#[test]
+fn noisy_gradients_match_finite_differences_under_a_fixed_noise_sample() {
+    check_against_finite_differences(&case(OutputKind::Noisy, 3, true));
+}
+
+#[test]
+fn noisy_without_noise_matches_finite_differences_and_has_zero_sigma_gradients() {
+    let c = case(OutputKind::Noisy, 4, false);
+    check_against_finite_differences(&c);
+    let (_, grads) = analytic(&c);
+    let layout = *c.net.layout();
+    assert!(grads.tensor(layout.sigma_w).iter().all(|&g| g == 0.0));
+    assert!(grads.tensor(layout.sigma_b).iter().all(|&g| g == 0.0));
+}
+
+// ---- candle ----
+
+fn var(data: &[f32], shape: &[usize]) -> Var {
+    Var::from_slice(data, shape, &Device::Cpu).unwrap()
+}
+
+fn to_vec(t: &Tensor) -> Vec<f64> {
+    t.flatten_all()
+        .unwrap()
+        .to_vec1::<f32>()
+        .unwrap()
+        .into_iter()
+        .map(|v| v as f64)
+        .collect()
+}
+
+/// Columns `cols` of the row-major `[rows][width]` matrix `m`, as a row-major `[rows][cols.len()]` copy.
+fn columns(m: &[f32], width: usize, cols: Range<usize>) -> Vec<f32> {
+    m.chunks_exact(width)
+        .flat_map(|row| row[cols.clone()].to_vec())
+        .collect()
+}
+
+fn check_against_candle(case: &Case) {
+    let layout = *case.net.layout();
+    let (d, a, width, heads) = (
+        layout.obs_dim,
+        layout.n_actions,
+        layout.out_width,
+        layout.heads(),
+    );
+    let (q, grads) = analytic(case);
+    let p = case.net.parameters();
+    let t = |s: Segment| &p[s.range()];
+
+    let x = Tensor::from_slice(&case.x, (BATCH, d), &Device::Cpu).unwrap();
+    let w1 = var(t(layout.fc1_w), &[d, HIDDEN]);
+    let b1 = var(t(layout.fc1_b), &[HIDDEN]);
+    let w2 = var(t(layout.fc2_w), &[HIDDEN, HIDDEN]);
+    let b2 = var(t(layout.fc2_b), &[HIDDEN]);
+    let h1 = x
+        .matmul(&w1)
+        .unwrap()
+        .broadcast_add(&b1)
+        .unwrap()
+        .relu()
+        .unwrap();
+    let h2 = h1
+        .matmul(&w2)
+        .unwrap()
+        .broadcast_add(&b2)
+        .unwrap()
+        .relu()
+        .unwrap();
+    let loss_weights = |k: usize| {
+        Tensor::from_slice(
+            &case.w[k * BATCH * a..(k + 1) * BATCH * a],
+            (BATCH, a),
+            &Device::Cpu,
+        )
+        .unwrap()
+    };
+
+    let mut checks: Vec<(&str, Vec<f32>, Var)> = vec![
+        ("fc1_w", grads.tensor(layout.fc1_w).to_vec(), w1.clone()),
+        ("fc1_b", grads.tensor(layout.fc1_b).to_vec(), b1.clone()),
+        ("fc2_w", grads.tensor(layout.fc2_w).to_vec(), w2.clone()),
+        ("fc2_b", grads.tensor(layout.fc2_b).to_vec(), b2.clone()),
+    ];
+    let mut q_parts = Vec::new();
+    let mut loss = Tensor::zeros((), candle_core::DType::F32, &Device::Cpu).unwrap();
+    match layout.kind {
+        OutputKind::Plain | OutputKind::Bootstrap { .. } => {
+            // Same forward value, gradient into the trunk scaled by 1/K (a backward hook in PyTorch).
+            let scale = 1.0 / heads as f64;
+            let h2_hooked = (h2.affine(scale, 0.0).unwrap()
+                + h2.detach().affine(1.0 - scale, 0.0).unwrap())
+            .unwrap();
+            for k in 0..heads {
+                let cols = k * a..(k + 1) * a;
+                let wk = var(&columns(t(layout.out_w), width, cols.clone()), &[HIDDEN, a]);
+                let bk = var(&t(layout.out_b)[cols.clone()], &[a]);
+                let qk = h2_hooked.matmul(&wk).unwrap().broadcast_add(&bk).unwrap();
+                loss = (loss + (&qk * &loss_weights(k)).unwrap().sum_all().unwrap()).unwrap();
+                q_parts.push(qk);
+                checks.push((
+                    "head_w",
+                    columns(grads.tensor(layout.out_w), width, cols.clone()),
+                    wk,
+                ));
+                checks.push(("head_b", grads.tensor(layout.out_b)[cols].to_vec(), bk));
+            }
+        }
+        OutputKind::Noisy => {
+            let noise = case.noise.clone().unwrap_or_else(|| NoiseSample::new(a));
+            let eps_in =
+                Tensor::from_slice(noise.input_factors(), (1, HIDDEN), &Device::Cpu).unwrap();
+            let eps_out = Tensor::from_slice(noise.output_factors(), (a, 1), &Device::Cpu).unwrap();
+            let eps_w = eps_out.matmul(&eps_in).unwrap();
+            let eps_b = eps_out.flatten_all().unwrap();
+            let mu_w = var(t(layout.out_w), &[a, HIDDEN]);
+            let sigma_w = var(t(layout.sigma_w), &[a, HIDDEN]);
+            let mu_b = var(t(layout.out_b), &[a]);
+            let sigma_b = var(t(layout.sigma_b), &[a]);
+            let weight = (mu_w.as_tensor() + (sigma_w.as_tensor() * &eps_w).unwrap()).unwrap();
+            let bias = (mu_b.as_tensor() + (sigma_b.as_tensor() * &eps_b).unwrap()).unwrap();
+            let q0 = h2
+                .matmul(&weight.t().unwrap())
+                .unwrap()
+                .broadcast_add(&bias)
+                .unwrap();
+            loss = (&q0 * &loss_weights(0)).unwrap().sum_all().unwrap();
+            q_parts.push(q0);
+            checks.push(("mu_w", grads.tensor(layout.out_w).to_vec(), mu_w));
+            checks.push(("sigma_w", grads.tensor(layout.sigma_w).to_vec(), sigma_w));
+            checks.push(("mu_b", grads.tensor(layout.out_b).to_vec(), mu_b));
+            checks.push(("sigma_b", grads.tensor(layout.sigma_b).to_vec(), sigma_b));
+        }
+    }
+    let candle_q: Vec<f64> = q_parts.iter().flat_map(to_vec).collect();
+    assert_close("Q", &q, &candle_q, 1e-4);
+    let store = loss.backward().unwrap();
+    for (name, ours, variable) in checks {
+        let reference = to_vec(store.get(variable.as_tensor()).expect("candle gradient"));
+        assert_close(name, &ours, &reference, 1e-4);
+    }
+}
+
+#[test]
+fn plain_gradients_match_candle() {
+    check_against_candle(&case(OutputKind::Plain, 5, false));
+}
+
+#[test]
+fn bootstrap_gradients_match_candle_with_the_trunk_hook() {
+    check_against_candle(&case(OutputKind::Bootstrap { heads: 10 }, 6, false));
+}
+
+#[test]
+fn noisy_gradients_match_candle_under_a_fixed_noise_sample() {
+    check_against_candle(&case(OutputKind::Noisy, 7, true));
+}
+
+// ---- consistency of the other entry points ----
+
+#[test]
+fn single_state_forward_matches_the_batch_forward_for_every_kind() {
+    for (kind, with_noise) in [
+        (OutputKind::Plain, false),
+        (OutputKind::Bootstrap { heads: 3 }, false),
+        (OutputKind::Noisy, false),
+        (OutputKind::Noisy, true),
+    ] {
+        let c = case(kind, 8, with_noise);
+        let mut ws = Workspace::new(&c.net, BATCH);
+        let q = c
+            .net
+            .forward(&c.x, BATCH, c.noise.as_ref(), &mut ws)
+            .to_vec();
+        let (heads, a) = (kind.heads(), N_ACTIONS);
+        for b in 0..BATCH {
+            let mut single = vec![0.0f32; heads * a];
+            let mut features = [0.0f32; HIDDEN];
+            c.net.q_values_single_with_features(
+                &c.x[b * OBS_DIM..(b + 1) * OBS_DIM],
+                c.noise.as_ref(),
+                &mut single,
+                &mut features,
+            );
+            for k in 0..heads {
+                for act in 0..a {
+                    let batch_value = q[(k * BATCH + b) * a + act];
+                    assert!(
+                        (single[k * a + act] - batch_value).abs() < 1e-5,
+                        "{kind:?} b{b} k{k} a{act}"
+                    );
+                }
+            }
+            for (f, g) in features
+                .iter()
+                .zip(&ws.features()[b * HIDDEN..(b + 1) * HIDDEN])
+            {
+                assert!((f - g).abs() < 1e-5);
+            }
+        }
+    }
+}
+
+#[test]
+fn workspace_reuse_with_a_smaller_batch_gives_the_same_gradients() {
+    let c = case(OutputKind::Bootstrap { heads: 2 }, 9, false);
+    let (_, expected) = analytic(&c);
+    // A larger earlier pass must leave nothing behind that the smaller one picks up.
+    let mut ws = Workspace::new(&c.net, 16);
+    let big_x: Vec<f32> = (0..16 * OBS_DIM).map(|i| (i as f32).sin() * 3.0).collect();
+    let big_dq = vec![1.0f32; 2 * 16 * N_ACTIONS];
+    let mut grads = Grads::new(&c.net);
+    c.net.forward(&big_x, 16, None, &mut ws);
+    c.net.backward(&mut ws, &big_dq, &mut grads);
+    c.net.forward(&c.x, BATCH, None, &mut ws);
+    c.net.backward(&mut ws, &c.w, &mut grads);
+    assert_eq!(grads.as_slice(), expected.as_slice());
+}
+
+#[test]
+fn copy_from_makes_an_identical_network() {
+    let mut rng = Pcg64::seed_from_u64(10);
+    let online = QNet::new(4, 3, OutputKind::Noisy, &mut rng);
+    let mut target = QNet::new(4, 3, OutputKind::Noisy, &mut rng);
+    assert_ne!(online.parameters(), target.parameters());
+    target.copy_from(&online);
+    assert_eq!(online.parameters(), target.parameters());
+}
+
+#[test]
+fn initialisation_follows_the_documented_ranges() {
+    let mut rng = Pcg64::seed_from_u64(11);
+    let net = QNet::new(6, 4, OutputKind::Noisy, &mut rng);
+    let l = *net.layout();
+    let p = net.parameters();
+    let within = |s: Segment, bound: f32| p[s.range()].iter().all(|v| v.abs() <= bound);
+    assert!(within(l.fc1_w, 1.0 / 6f32.sqrt()) && within(l.fc1_b, 1.0 / 6f32.sqrt()));
+    assert!(within(l.fc2_w, 0.125) && within(l.out_w, 0.125) && within(l.out_b, 0.125));
+    assert!(
+        p[l.sigma_w.range()]
+            .iter()
+            .chain(&p[l.sigma_b.range()])
+            .all(|&s| s == 0.5 / 8.0)
+    );
+    // The draws fill the range (not, say, a tenth of it).
+    assert!(p[l.fc2_w.range()].iter().any(|v| v.abs() > 0.12));
+
+    // Bootstrap heads are initialised independently: no two heads are equal.
+    let boot = QNet::new(6, 4, OutputKind::Bootstrap { heads: 3 }, &mut rng);
+    let bl = *boot.layout();
+    let w = &boot.parameters()[bl.out_w.range()];
+    let head = |k: usize| columns(w, bl.out_width, k * 4..(k + 1) * 4);
+    assert_ne!(head(0), head(1));
+    assert_ne!(head(1), head(2));
+}
+
+#[test]
+fn argmax_takes_the_first_maximum() {
+    assert_eq!(argmax(&[1.0, 3.0, 3.0, -1.0]), 1);
+    assert_eq!(argmax(&[-2.0]), 0);
+    assert_eq!(argmax(&[0.0, -1.0, 5.0]), 2);
+}
