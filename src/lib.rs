@@ -24,7 +24,6 @@ pub mod expert;
 pub mod nn;
 pub mod query;
 pub mod replay;
-pub mod query;
 pub mod rng;
-pub mod train;
 pub mod tboard;
+pub mod train;

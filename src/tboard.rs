@@ -185,7 +185,7 @@ pub fn read_scalars(path: &Path) -> anyhow::Result<Vec<(String, u64, f32)>> {
 
 enum ProtoValue<'a> {
     Varint(u64),
-    Fixed64(u64),
+    Fixed64,
     Fixed32(u32),
     Bytes(&'a [u8]),
     Invalid,
@@ -232,9 +232,7 @@ impl<'a> Iterator for ProtoFields<'a> {
         };
         let value = match key & 7 {
             0 => self.varint().map(ProtoValue::Varint),
-            1 => self
-                .take(8)
-                .map(|b| ProtoValue::Fixed64(u64::from_le_bytes(b.try_into().unwrap()))),
+            1 => self.take(8).map(|_| ProtoValue::Fixed64),
             2 => self
                 .varint()
                 .and_then(|n| self.take(n as usize))

@@ -62,7 +62,12 @@ impl Agent {
     /// A freshly initialised agent for an environment with `obs_dim` inputs and `n_actions` actions.
     pub fn new(cfg: &TrainConfig, obs_dim: usize, n_actions: usize, seed: u64) -> Self {
         let mut rng = Pcg64::seed_from_u64(seed);
-        let online = QNet::new(obs_dim, n_actions, output_kind(cfg.net, cfg.heads), &mut rng);
+        let online = QNet::new(
+            obs_dim,
+            n_actions,
+            output_kind(cfg.net, cfg.heads),
+            &mut rng,
+        );
         Self::from_network(cfg, online, rng)
     }
 
@@ -76,7 +81,8 @@ impl Agent {
             n.resample(&mut rng);
             n
         };
-        let (noise_act, noise_online, noise_argmax, noise_target) = (noise(), noise(), noise(), noise());
+        let (noise_act, noise_online, noise_argmax, noise_target) =
+            (noise(), noise(), noise(), noise());
         let heads = online.heads();
         Self {
             adam: Adam::new(&online, cfg.lr as f32),
@@ -119,7 +125,12 @@ impl Agent {
     /// The behaviour policy: greedy under the active head (or the current noise sample), ε-greedy on top.
     /// With `want_uncertainty`, also returns the uncertainty of the state (§7): the Jensen–Shannon divergence
     /// of the heads' softmax policies, or the predictive variance of the noisy layer for the greedy action.
-    pub fn act(&mut self, obs: &[f32], epsilon: f64, want_uncertainty: bool) -> (usize, Option<f32>) {
+    pub fn act(
+        &mut self,
+        obs: &[f32],
+        epsilon: f64,
+        want_uncertainty: bool,
+    ) -> (usize, Option<f32>) {
         let a = self.online.n_actions();
         let heads = self.online.heads();
         let noise = matches!(self.online.kind(), OutputKind::Noisy).then_some(&self.noise_act);
@@ -129,7 +140,10 @@ impl Agent {
             match self.online.kind() {
                 OutputKind::Bootstrap { .. } => Some(js_divergence(q, heads, a)),
                 OutputKind::Noisy => {
-                    let (sigma_w, sigma_b) = self.online.noisy_sigmas().expect("noisy network has sigmas");
+                    let (sigma_w, sigma_b) = self
+                        .online
+                        .noisy_sigmas()
+                        .expect("noisy network has sigmas");
                     let h = QNet::HIDDEN;
                     Some(noisy_variance(
                         &self.ws_act.features()[..h],
@@ -143,7 +157,11 @@ impl Agent {
         } else {
             None
         };
-        let action = if epsilon > 0.0 && self.rng.random::<f64>() < epsilon { self.rng.random_range(0..a) } else { greedy };
+        let action = if epsilon > 0.0 && self.rng.random::<f64>() < epsilon {
+            self.rng.random_range(0..a)
+        } else {
+            greedy
+        };
         (action, uncertainty)
     }
 
@@ -159,55 +177,67 @@ impl Agent {
         let a = self.online.n_actions();
         let heads = self.online.heads();
         let noisy = matches!(self.online.kind(), OutputKind::Noisy);
-        let q = self.online.forward(&batch.obs, b, noisy.then_some(&self.noise_online), &mut self.ws_batch);
-        let qn_online =
-            self.online.forward(&batch.next_obs, b, noisy.then_some(&self.noise_argmax), &mut self.ws_next_online);
-        let qn_target =
-            self.target.forward(&batch.next_obs, b, noisy.then_some(&self.noise_target), &mut self.ws_next_target);
+        let q = self.online.forward(
+            &batch.obs,
+            b,
+            noisy.then_some(&self.noise_online),
+            &mut self.ws_batch,
+        );
+        let qn_online = self.online.forward(
+            &batch.next_obs,
+            b,
+            noisy.then_some(&self.noise_argmax),
+            &mut self.ws_next_online,
+        );
+        let qn_target = self.target.forward(
+            &batch.next_obs,
+            b,
+            noisy.then_some(&self.noise_target),
+            &mut self.ws_next_target,
+        );
 
-        let dq = &mut self.dq[..heads * b * a];
-        dq.iter_mut().for_each(|g| *g = 0.0);
-        self.abs_td[..b].iter_mut().for_each(|x| *x = 0.0);
-        let mut td_loss = 0.0f32;
-        let mut margin_loss = 0.0f32;
-        let inv_b = 1.0 / b as f32;
-        for k in 0..heads {
-            for i in 0..b {
-                let row = (k * b + i) * a;
-                let qs = &q[row..row + a];
-                let next_a = argmax(&qn_online[row..row + a]);
-                let not_done = if batch.terminal[i] { 0.0 } else { 1.0 };
-                let y = batch.rewards[i] + self.gamma * not_done * qn_target[row + next_a];
-                let act = batch.actions[i];
-                let delta = qs[act] - y;
-                let w = batch.weights[i] * inv_b;
-                let (l, g) = match self.loss {
-                    TdLoss::Mse => (delta * delta, 2.0 * delta),
-                    TdLoss::Huber if delta.abs() <= 1.0 => (0.5 * delta * delta, delta),
-                    TdLoss::Huber => (delta.abs() - 0.5, delta.signum()),
-                };
-                td_loss += w * l;
-                dq[row + act] += w * g;
-                self.abs_td[i] += delta.abs() / heads as f32;
-                if batch.is_demo[i] && self.lambda > 0.0 {
-                    // Large-margin loss (§4): the expert's action must beat every other by M.
-                    let (m, a_max) = margin_term(qs, act, self.margin);
-                    margin_loss += w * m;
-                    dq[row + a_max] += self.lambda * w;
-                    dq[row + act] -= self.lambda * w;
-                }
-            }
-        }
-        self.online.backward(&mut self.ws_batch, &self.dq[..heads * b * a], &mut self.grads);
+        let losses = LossParams {
+            gamma: self.gamma,
+            loss: self.loss,
+            margin: self.margin,
+            lambda: self.lambda,
+        };
+        let (td_loss, margin_loss) = double_dqn_loss(
+            &losses,
+            batch,
+            Heads {
+                q,
+                qn_online,
+                qn_target,
+                heads,
+                n_actions: a,
+            },
+            &mut self.dq[..heads * b * a],
+            &mut self.abs_td[..b],
+        );
+        self.online.backward(
+            &mut self.ws_batch,
+            &self.dq[..heads * b * a],
+            &mut self.grads,
+        );
         let grad_norm = clip_grad_norm(&mut self.grads, self.grad_clip);
         self.adam.step(&mut self.online, &self.grads);
         if noisy {
             // New noise after every optimisation step, independent for each use (§5, [NN]).
-            for n in [&mut self.noise_act, &mut self.noise_online, &mut self.noise_argmax, &mut self.noise_target] {
+            for n in [
+                &mut self.noise_act,
+                &mut self.noise_online,
+                &mut self.noise_argmax,
+                &mut self.noise_target,
+            ] {
                 n.resample(&mut self.rng);
             }
         }
-        UpdateStats { td_loss, margin_loss, grad_norm }
+        UpdateStats {
+            td_loss,
+            margin_loss,
+            grad_norm,
+        }
     }
 
     /// |δ| per sample of the last update (mean over heads): the new priorities.
@@ -237,7 +267,10 @@ pub fn test_policy_action(net: &QNet, ws: &mut Workspace, obs: &[f32]) -> usize 
         return argmax(&q[..a]);
     }
     const MAX_ACTIONS: usize = 32;
-    assert!(a <= MAX_ACTIONS, "at most {MAX_ACTIONS} actions are supported");
+    assert!(
+        a <= MAX_ACTIONS,
+        "at most {MAX_ACTIONS} actions are supported"
+    );
     let mut votes = [0u32; MAX_ACTIONS];
     let mut mean = [0f32; MAX_ACTIONS];
     for k in 0..heads {
@@ -257,6 +290,73 @@ pub fn test_policy_action(net: &QNet, ws: &mut Workspace, obs: &[f32]) -> usize 
         }
     }
     best
+}
+
+/// The constants of the loss.
+#[derive(Clone, Copy, Debug)]
+pub struct LossParams {
+    pub gamma: f32,
+    pub loss: TdLoss,
+    pub margin: f32,
+    pub lambda: f32,
+}
+
+/// Network outputs for a batch, each laid out `[head][batch][action]`: Q(s, ·) under the online network,
+/// Q(s', ·) under the online network (for the double-Q argmax) and under the target network.
+pub struct Heads<'a> {
+    pub q: &'a [f32],
+    pub qn_online: &'a [f32],
+    pub qn_target: &'a [f32],
+    pub heads: usize,
+    pub n_actions: usize,
+}
+
+/// The loss of one minibatch and its gradient with respect to Q(s, ·) (ALGORITHM_NOTES.md §2, §4):
+/// `L = Σ_k (1/B) Σ_b w_b [ℓ(δ_kb) + λ·demo_b·L_E,kb]`, with double-DQN targets
+/// `y_kb = r_b + γ(1 − d_b) Q⁻_k(s'_b, argmax_a Q_k(s'_b, a))` held constant. Writes `dL/dQ` into `dq` and the
+/// new priorities `mean_k |δ_kb|` into `abs_td`; returns the TD and margin parts of `L`.
+pub fn double_dqn_loss(
+    p: &LossParams,
+    batch: &Batch,
+    h: Heads<'_>,
+    dq: &mut [f32],
+    abs_td: &mut [f32],
+) -> (f32, f32) {
+    let b = batch.actions.len();
+    let a = h.n_actions;
+    dq.iter_mut().for_each(|g| *g = 0.0);
+    abs_td.iter_mut().for_each(|x| *x = 0.0);
+    let mut td_loss = 0.0f32;
+    let mut margin_loss = 0.0f32;
+    let inv_b = 1.0 / b as f32;
+    for k in 0..h.heads {
+        for i in 0..b {
+            let row = (k * b + i) * a;
+            let qs = &h.q[row..row + a];
+            let next_a = argmax(&h.qn_online[row..row + a]);
+            let not_done = if batch.terminal[i] { 0.0 } else { 1.0 };
+            let y = batch.rewards[i] + p.gamma * not_done * h.qn_target[row + next_a];
+            let act = batch.actions[i];
+            let delta = qs[act] - y;
+            let w = batch.weights[i] * inv_b;
+            let (l, g) = match p.loss {
+                TdLoss::Mse => (delta * delta, 2.0 * delta),
+                TdLoss::Huber if delta.abs() <= 1.0 => (0.5 * delta * delta, delta),
+                TdLoss::Huber => (delta.abs() - 0.5, delta.signum()),
+            };
+            td_loss += w * l;
+            dq[row + act] += w * g;
+            abs_td[i] += delta.abs() / h.heads as f32;
+            if batch.is_demo[i] && p.lambda > 0.0 {
+                // Large-margin loss (§4): the expert's action must beat every other action by M.
+                let (m, a_max) = margin_term(qs, act, p.margin);
+                margin_loss += w * m;
+                dq[row + a_max] += p.lambda * w;
+                dq[row + act] -= p.lambda * w;
+            }
+        }
+    }
+    (td_loss, margin_loss)
 }
 
 /// `max_a [q(a) + M·1(a ≠ a_E)] − q(a_E)` and the maximising action.
@@ -298,6 +398,114 @@ mod tests {
         // When the expert's action already wins by the margin the loss is zero and the gradient cancels.
         let (m, a) = margin_term(&[3.0, 0.5, 0.9], 0, 0.8);
         assert_eq!((m, a), (0.0, 0));
+    }
+
+    fn batch_of(
+        actions: Vec<usize>,
+        rewards: Vec<f32>,
+        terminal: Vec<bool>,
+        is_demo: Vec<bool>,
+    ) -> Batch {
+        let n = actions.len();
+        Batch {
+            idx: (0..n).collect(),
+            weights: (0..n).map(|i| 1.0 - 0.1 * i as f32).collect(),
+            actions,
+            rewards,
+            terminal,
+            is_demo,
+            ..Batch::default()
+        }
+    }
+
+    /// The analytic dL/dQ of the whole minibatch loss agrees with central finite differences, for both losses,
+    /// several heads, terminal and demonstration samples.
+    #[test]
+    fn loss_gradient_matches_finite_differences() {
+        let (heads, b, a) = (3, 4, 3);
+        let batch = batch_of(
+            vec![0, 2, 1, 2],
+            vec![1.0, -0.5, 0.0, 2.0],
+            vec![false, true, false, false],
+            vec![true, false, true, false],
+        );
+        let q: Vec<f32> = (0..heads * b * a)
+            .map(|i| ((i * 37 % 11) as f32 - 5.0) * 0.3)
+            .collect();
+        let qn_online: Vec<f32> = (0..heads * b * a)
+            .map(|i| ((i * 17 % 7) as f32 - 3.0) * 0.5)
+            .collect();
+        let qn_target: Vec<f32> = (0..heads * b * a)
+            .map(|i| ((i * 13 % 5) as f32 - 2.0) * 0.7)
+            .collect();
+        for loss in [TdLoss::Mse, TdLoss::Huber] {
+            let p = LossParams {
+                gamma: 0.9,
+                loss,
+                margin: 0.8,
+                lambda: 0.5,
+            };
+            let total = |q: &[f32]| -> f64 {
+                let mut dq = vec![0.0; q.len()];
+                let mut abs_td = vec![0.0; b];
+                let h = Heads {
+                    q,
+                    qn_online: &qn_online,
+                    qn_target: &qn_target,
+                    heads,
+                    n_actions: a,
+                };
+                let (td, m) = double_dqn_loss(&p, &batch, h, &mut dq, &mut abs_td);
+                td as f64 + p.lambda as f64 * m as f64
+            };
+            let mut dq = vec![0.0; q.len()];
+            let mut abs_td = vec![0.0; b];
+            let h = Heads {
+                q: &q,
+                qn_online: &qn_online,
+                qn_target: &qn_target,
+                heads,
+                n_actions: a,
+            };
+            double_dqn_loss(&p, &batch, h, &mut dq, &mut abs_td);
+            for i in 0..q.len() {
+                let eps = 1e-3;
+                let (mut plus, mut minus) = (q.clone(), q.clone());
+                plus[i] += eps;
+                minus[i] -= eps;
+                let fd = (total(&plus) - total(&minus)) / (2.0 * eps as f64);
+                assert!(
+                    (fd - dq[i] as f64).abs() < 2e-3,
+                    "{loss:?} dq[{i}]: analytic {} vs numeric {fd}",
+                    dq[i]
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn td_target_uses_online_argmax_and_target_value() {
+        // One head, one sample: online next-state Q picks action 1, target Q of action 1 is 2.0.
+        let batch = batch_of(vec![0], vec![1.0], vec![false], vec![false]);
+        let p = LossParams {
+            gamma: 0.5,
+            loss: TdLoss::Mse,
+            margin: 0.8,
+            lambda: 0.0,
+        };
+        let (q, qn_online, qn_target) = ([3.0f32, 0.0], [0.0f32, 1.0], [10.0f32, 2.0]);
+        let (mut dq, mut abs_td) = ([0.0f32; 2], [0.0f32; 1]);
+        let h = Heads {
+            q: &q,
+            qn_online: &qn_online,
+            qn_target: &qn_target,
+            heads: 1,
+            n_actions: 2,
+        };
+        let (td, _) = double_dqn_loss(&p, &batch, h, &mut dq, &mut abs_td);
+        // y = 1 + 0.5 * 2 = 2; delta = 3 - 2 = 1.
+        assert!((td - 1.0).abs() < 1e-6 && (abs_td[0] - 1.0).abs() < 1e-6);
+        assert!((dq[0] - 2.0).abs() < 1e-6 && dq[1] == 0.0);
     }
 
     #[test]

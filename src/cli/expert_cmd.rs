@@ -1,9 +1,9 @@
 //! `arld expert ...` and `arld demo ...`: the expert pipeline, expert statistics, and demonstration collection.
 use anyhow::{Context, Result};
+use arld::experiment::run_one;
 use arld::expert::demos::Demonstrations;
 use arld::expert::pipeline::{Candidate, evaluate_expert, paper_expert_stats, select_experts};
 use arld::expert::{self, CheckpointExpert, SPEC_HELP};
-use arld::experiment::run_one;
 use arld::train::{Method, NetKind, TrainConfig};
 use clap::Subcommand;
 use std::path::{Path, PathBuf};
@@ -77,12 +77,21 @@ pub enum DemoCommand {
 
 pub fn run_expert(cmd: ExpertCommand) -> Result<ExitCode> {
     match cmd {
-        ExpertCommand::Eval { env, expert, episodes, seed, json } => {
+        ExpertCommand::Eval {
+            env,
+            expert,
+            episodes,
+            seed,
+            json,
+        } => {
             let mut e = expert::from_spec(&expert, &env, seed)?;
             let s = evaluate_expert(e.as_mut(), &env, episodes, seed)?;
             let target = arld::env::make(&env)?.solve_threshold();
             if json {
-                println!("{}", serde_json::json!({"env": env, "expert": expert, "stats": s, "target": target}));
+                println!(
+                    "{}",
+                    serde_json::json!({"env": env, "expert": expert, "stats": s, "target": target})
+                );
             } else {
                 println!("| env | expert | mean ± std | min | avg steps | target |");
                 println!("|---|---|---|---|---|---|");
@@ -91,27 +100,42 @@ pub fn run_expert(cmd: ExpertCommand) -> Result<ExitCode> {
                     s.mean, s.std, s.min, s.mean_len
                 );
                 if let Some((m, sd, mn, len)) = paper_expert_stats(&env) {
-                    println!("| {env} | paper's expert | {m:.2} ± {sd:.2} | {mn:.1} | {len:.1} | {target} |");
+                    println!(
+                        "| {env} | paper's expert | {m:.2} ± {sd:.2} | {mn:.1} | {len:.1} | {target} |"
+                    );
                 }
             }
             Ok(ExitCode::SUCCESS)
         }
-        ExpertCommand::Train { env, seed, out, run_dir, checkpoint_every, episodes, overrides } => {
+        ExpertCommand::Train {
+            env,
+            seed,
+            out,
+            run_dir,
+            checkpoint_every,
+            episodes,
+            overrides,
+        } => {
             let mut cfg = TrainConfig::preset(&env, Method::Dqn, NetKind::Plain, seed)?;
             for o in &overrides {
                 cfg.apply_override(o)?;
             }
             cfg.checkpoint_every = checkpoint_every.unwrap_or(cfg.eval_period);
             cfg.validate()?;
-            let run_dir = run_dir.unwrap_or_else(|| PathBuf::from("runs").join(format!("expert_{env}_seed{seed}")));
+            let run_dir = run_dir
+                .unwrap_or_else(|| PathBuf::from("runs").join(format!("expert_{env}_seed{seed}")));
             let summary = run_one(&cfg, Some(&run_dir), true)?;
-            eprintln!("trained: final score {:.2}; evaluating checkpoints over {episodes} episodes", summary.final_score);
+            eprintln!(
+                "trained: final score {:.2}; evaluating checkpoints over {episodes} episodes",
+                summary.final_score
+            );
             let candidates = evaluate_checkpoints(&run_dir.join("checkpoints"), &env, episodes)?;
             let (weak, perfect) = select_experts(&candidates, &env)?;
             let out = out.unwrap_or_else(|| expert::shipped_dir().join(&env));
             std::fs::create_dir_all(&out)?;
             let command = std::env::args().collect::<Vec<_>>().join(" ");
-            let mut selection = serde_json::json!({ "env": env, "command": command, "candidates": candidates });
+            let mut selection =
+                serde_json::json!({ "env": env, "command": command, "candidates": candidates });
             for (name, idx) in [("weak", weak), ("perfect", perfect)] {
                 match idx {
                     Some(i) => {
@@ -123,7 +147,9 @@ pub fn run_expert(cmd: ExpertCommand) -> Result<ExitCode> {
                         );
                         selection[name] = serde_json::to_value(c)?;
                     }
-                    None => println!("{name}: no checkpoint fits; train longer or with another seed"),
+                    None => {
+                        println!("{name}: no checkpoint fits; train longer or with another seed")
+                    }
                 }
             }
             arld::train::log::write_atomic(
@@ -161,7 +187,13 @@ fn evaluate_checkpoints(dir: &Path, env: &str, episodes: usize) -> Result<Vec<Ca
 
 pub fn run_demo(cmd: DemoCommand) -> Result<ExitCode> {
     match cmd {
-        DemoCommand::Collect { env, expert, transitions, seed, out } => {
+        DemoCommand::Collect {
+            env,
+            expert,
+            transitions,
+            seed,
+            out,
+        } => {
             let mut e = expert::from_spec(&expert, &env, seed)?;
             let demos = Demonstrations::collect(&env, e.as_mut(), transitions, seed)?;
             demos.save(&out)?;

@@ -6,10 +6,12 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 #[derive(Args)]
-#[command(after_help = "Examples:\n  arld train --env CartPole-v0 --method dqn --net bootstrap --seed 0\n  \
+#[command(
+    after_help = "Examples:\n  arld train --env CartPole-v0 --method dqn --net bootstrap --seed 0\n  \
 arld train --env Acrobot-v1 --method adqn --net noisy --set t_query=0.1 --set train_steps=50000\n\n\
 Configuration is layered: the paper's preset for the task and method, then --config FILE (TOML with any of the \
-keys), then each --set key=value. `arld train --env ID --method M --print-config` shows every key with its value.")]
+keys), then each --set key=value. `arld train --env ID --method M --print-config` shows every key with its value."
+)]
 pub struct TrainArgs {
     /// Gymnasium id: CartPole-v0, CartPole-v1, Acrobot-v1, MountainCar-v0, LunarLander-v2, LunarLander-v3.
     #[arg(long)]
@@ -72,7 +74,10 @@ pub fn run(args: TrainArgs) -> anyhow::Result<ExitCode> {
         print!("{}", cfg.to_toml());
         return Ok(ExitCode::SUCCESS);
     }
-    let dir = args.out.clone().unwrap_or_else(|| PathBuf::from("runs").join(cfg.run_name()));
+    let dir = args
+        .out
+        .clone()
+        .unwrap_or_else(|| PathBuf::from("runs").join(cfg.run_name()));
     let s = run_one(&cfg, Some(&dir), !args.quiet)?;
     println!(
         "{}: steps to solve {}{}, final score {:.2}, queries {}, {:.0} steps/s, {:.1} s -> {}",

@@ -11,20 +11,28 @@ use std::path::Path;
 pub fn run_one(cfg: &TrainConfig, out_dir: Option<&Path>, progress: bool) -> Result<Summary> {
     cfg.validate()?;
     let mut expert = if cfg.method.needs_expert() {
-        Some(expert::from_spec(&cfg.expert, &cfg.env, derive_seed(cfg.seed, 6))?)
+        Some(expert::from_spec(
+            &cfg.expert,
+            &cfg.env,
+            derive_seed(cfg.seed, 6),
+        )?)
     } else {
         None
     };
     let demos = if cfg.method.pretrains() {
         Some(if cfg.demo_file.is_empty() {
-            let e = expert.as_deref_mut().context("pre-training needs an expert")?;
+            let e = expert
+                .as_deref_mut()
+                .context("pre-training needs an expert")?;
             Demonstrations::collect(&cfg.env, e, cfg.n_demo, derive_seed(cfg.seed, 7) >> 33)?
         } else {
-            Demonstrations::load(Path::new(&cfg.demo_file), Some(&cfg.env))?.truncated_to(if cfg.n_demo > 0 {
-                cfg.n_demo
-            } else {
-                usize::MAX
-            })
+            Demonstrations::load(Path::new(&cfg.demo_file), Some(&cfg.env))?.truncated_to(
+                if cfg.n_demo > 0 {
+                    cfg.n_demo
+                } else {
+                    usize::MAX
+                },
+            )
         })
     } else {
         None
@@ -33,6 +41,11 @@ pub fn run_one(cfg: &TrainConfig, out_dir: Option<&Path>, progress: bool) -> Res
         Some(dir) => RunLog::create(dir, &cfg.to_toml(), cfg.train_steps as u64, progress)?,
         None => RunLog::in_memory(),
     };
-    let (summary, _agent) = train::train(cfg, expert.as_deref_mut(), demos.as_ref(), &mut log)?;
+    let (summary, _agent) = train::train(
+        cfg,
+        expert.as_mut().map(|e| &mut **e as &mut dyn expert::Expert),
+        demos.as_ref(),
+        &mut log,
+    )?;
     Ok(summary)
 }

@@ -61,7 +61,9 @@ impl Demonstrations {
         while transitions.len() < n {
             let mut obs = env.reset(Some(seed + episode as u64));
             loop {
-                let action = expert.act(&obs).with_context(|| format!("expert {} failed", expert.describe()))?;
+                let action = expert
+                    .act(&obs)
+                    .with_context(|| format!("expert {} failed", expert.describe()))?;
                 let s = env.step(action)?;
                 transitions.push(DemoTransition {
                     episode,
@@ -80,7 +82,12 @@ impl Demonstrations {
             }
             episode += 1;
         }
-        Ok(Self { env: env_id.to_string(), expert: expert.describe(), seed, transitions })
+        Ok(Self {
+            env: env_id.to_string(),
+            expert: expert.describe(),
+            seed,
+            transitions,
+        })
     }
 
     /// Number of episodes (whole or cut) in the set.
@@ -90,7 +97,10 @@ impl Demonstrations {
 
     /// The first `n` transitions (ADQNP pre-trains on half of DQfD's demonstrations).
     pub fn truncated_to(&self, n: usize) -> Self {
-        Self { transitions: self.transitions[..n.min(self.transitions.len())].to_vec(), ..self.clone() }
+        Self {
+            transitions: self.transitions[..n.min(self.transitions.len())].to_vec(),
+            ..self.clone()
+        }
     }
 
     /// Writes the set atomically (temporary file, then rename).
@@ -115,7 +125,8 @@ impl Demonstrations {
             buf.push(b'\n');
         }
         let tmp = path.with_extension("jsonl.tmp");
-        let mut f = std::fs::File::create(&tmp).with_context(|| format!("cannot create {}", tmp.display()))?;
+        let mut f = std::fs::File::create(&tmp)
+            .with_context(|| format!("cannot create {}", tmp.display()))?;
         f.write_all(&buf)?;
         f.sync_all()?;
         std::fs::rename(&tmp, path).with_context(|| format!("cannot write {}", path.display()))?;
@@ -124,13 +135,26 @@ impl Demonstrations {
 
     /// Reads and checks a demonstration file; `expect_env` rejects a file recorded on another environment.
     pub fn load(path: &Path, expect_env: Option<&str>) -> Result<Self> {
-        let file = std::fs::File::open(path).with_context(|| format!("cannot open demonstration file {}", path.display()))?;
+        let file = std::fs::File::open(path)
+            .with_context(|| format!("cannot open demonstration file {}", path.display()))?;
         let mut lines = BufReader::new(file).lines();
-        let first = lines.next().with_context(|| format!("{}: empty demonstration file", path.display()))??;
+        let first = lines
+            .next()
+            .with_context(|| format!("{}: empty demonstration file", path.display()))??;
         let header: Header = serde_json::from_str(&first)
             .with_context(|| format!("{}:1: not an arld demonstration header", path.display()))?;
-        ensure!(header.format == "arld-demos", "{}:1: unknown format '{}'", path.display(), header.format);
-        ensure!(header.version == 1, "{}:1: unsupported version {}", path.display(), header.version);
+        ensure!(
+            header.format == "arld-demos",
+            "{}:1: unknown format '{}'",
+            path.display(),
+            header.format
+        );
+        ensure!(
+            header.version == 1,
+            "{}:1: unsupported version {}",
+            path.display(),
+            header.version
+        );
         if let Some(want) = expect_env {
             ensure!(
                 header.env == want,
@@ -139,7 +163,8 @@ impl Demonstrations {
                 header.env
             );
         }
-        let e = env::make(&header.env).map_err(|err| anyhow::anyhow!("{}:1: {err}", path.display()))?;
+        let e =
+            env::make(&header.env).map_err(|err| anyhow::anyhow!("{}:1: {err}", path.display()))?;
         let mut transitions = Vec::with_capacity(header.transitions);
         for (i, line) in lines.enumerate() {
             let line = line?;
@@ -176,6 +201,11 @@ impl Demonstrations {
                 transitions.len()
             );
         }
-        Ok(Self { env: header.env, expert: header.expert, seed: header.seed, transitions })
+        Ok(Self {
+            env: header.env,
+            expert: header.expert,
+            seed: header.seed,
+            transitions,
+        })
     }
 }

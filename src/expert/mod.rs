@@ -36,7 +36,8 @@ pub struct CheckpointExpert {
 impl CheckpointExpert {
     /// Loads a checkpoint and checks that it fits the environment.
     pub fn load(path: &Path, spec: &EnvSpec) -> Result<Self> {
-        let (net, meta) = QNet::load(path).with_context(|| format!("cannot load expert checkpoint {}", path.display()))?;
+        let (net, meta) = QNet::load(path)
+            .with_context(|| format!("cannot load expert checkpoint {}", path.display()))?;
         ensure!(
             net.obs_dim() == spec.obs_dim && net.n_actions() == spec.n_actions,
             "expert checkpoint {} has {} inputs and {} actions, but {} has {} and {}{}",
@@ -46,10 +47,16 @@ impl CheckpointExpert {
             spec.id,
             spec.obs_dim,
             spec.n_actions,
-            meta.get("env").map(|e| format!(" (it was trained on {e})")).unwrap_or_default()
+            meta.get("env")
+                .map(|e| format!(" (it was trained on {e})"))
+                .unwrap_or_default()
         );
         let ws = Workspace::new(&net, 1);
-        Ok(Self { net, ws, path: path.to_path_buf() })
+        Ok(Self {
+            net,
+            ws,
+            path: path.to_path_buf(),
+        })
     }
 }
 
@@ -73,8 +80,16 @@ pub struct NoisyExpert {
 
 impl NoisyExpert {
     pub fn new(inner: Box<dyn Expert>, p: f64, n_actions: usize, seed: u64) -> Result<Self> {
-        ensure!((0.0..=1.0).contains(&p), "the random-action probability must be in [0, 1], got {p}");
-        Ok(Self { inner, p, n_actions, rng: Pcg64::seed_from_u64(seed) })
+        ensure!(
+            (0.0..=1.0).contains(&p),
+            "the random-action probability must be in [0, 1], got {p}"
+        );
+        Ok(Self {
+            inner,
+            p,
+            n_actions,
+            rng: Pcg64::seed_from_u64(seed),
+        })
     }
 }
 
@@ -82,7 +97,11 @@ impl Expert for NoisyExpert {
     fn act(&mut self, obs: &[f32]) -> Result<usize> {
         // Ask the inner expert every time, so its own state (if any) advances as without noise.
         let a = self.inner.act(obs)?;
-        Ok(if self.rng.random::<f64>() < self.p { self.rng.random_range(0..self.n_actions) } else { a })
+        Ok(if self.rng.random::<f64>() < self.p {
+            self.rng.random_range(0..self.n_actions)
+        } else {
+            a
+        })
     }
     fn describe(&self) -> String {
         format!("noisy:{}:{}", self.p, self.inner.describe())
@@ -103,7 +122,9 @@ pub fn shipped_path(env_id: &str, quality: &str) -> PathBuf {
         "LunarLander-v3" => "LunarLander-v2",
         e => e,
     };
-    shipped_dir().join(env).join(format!("{quality}.safetensors"))
+    shipped_dir()
+        .join(env)
+        .join(format!("{quality}.safetensors"))
 }
 
 /// Help text for expert specs.
@@ -117,18 +138,34 @@ pub fn from_spec(spec: &str, env_id: &str, seed: u64) -> Result<Box<dyn Expert>>
     let env_spec = crate::env::spec(env_id)?;
     let (kind, rest) = spec.split_once(':').unwrap_or((spec, ""));
     match kind {
-        "checkpoint" if !rest.is_empty() => Ok(Box::new(CheckpointExpert::load(Path::new(rest), &env_spec)?)),
+        "checkpoint" if !rest.is_empty() => Ok(Box::new(CheckpointExpert::load(
+            Path::new(rest),
+            &env_spec,
+        )?)),
         "shipped" if matches!(rest, "weak" | "perfect") => {
             let path = shipped_path(env_id, rest);
-            ensure!(path.exists(), "no shipped {rest} expert for {env_id} (looked for {})", path.display());
+            ensure!(
+                path.exists(),
+                "no shipped {rest} expert for {env_id} (looked for {})",
+                path.display()
+            );
             Ok(Box::new(CheckpointExpert::load(&path, &env_spec)?))
         }
         "scripted" if rest.is_empty() => Ok(Box::new(scripted::ScriptedExpert::new(env_id)?)),
         "noisy" => {
-            let (p, inner) = rest.split_once(':').context("noisy expert spec must be noisy:P:SPEC")?;
-            let p: f64 = p.parse().with_context(|| format!("bad probability '{p}' in expert spec '{spec}'"))?;
+            let (p, inner) = rest
+                .split_once(':')
+                .context("noisy expert spec must be noisy:P:SPEC")?;
+            let p: f64 = p
+                .parse()
+                .with_context(|| format!("bad probability '{p}' in expert spec '{spec}'"))?;
             let inner = from_spec(inner, env_id, seed.wrapping_add(1))?;
-            Ok(Box::new(NoisyExpert::new(inner, p, env_spec.n_actions, seed)?))
+            Ok(Box::new(NoisyExpert::new(
+                inner,
+                p,
+                env_spec.n_actions,
+                seed,
+            )?))
         }
         _ => bail!("unknown expert spec '{spec}'. {SPEC_HELP}"),
     }

@@ -37,7 +37,12 @@ pub fn paper_expert_stats(env_id: &str) -> Option<(f64, f64, f64, f64)> {
 }
 
 /// Runs `episodes` episodes of `expert` on `env_id`; episode i resets with seed `seed + i`.
-pub fn evaluate_expert(expert: &mut dyn Expert, env_id: &str, episodes: usize, seed: u64) -> Result<ExpertStats> {
+pub fn evaluate_expert(
+    expert: &mut dyn Expert,
+    env_id: &str,
+    episodes: usize,
+    seed: u64,
+) -> Result<ExpertStats> {
     let mut env = env::make(env_id)?;
     let mut returns = Vec::with_capacity(episodes);
     let mut lengths = Vec::with_capacity(episodes);
@@ -83,7 +88,10 @@ pub struct Candidate {
 
 /// Picks the weak (paper-like) and the perfect expert among evaluated checkpoints; see the module docs.
 /// Returns indices into `candidates`; the weak one is `None` when no checkpoint fits the paper's criteria.
-pub fn select_experts(candidates: &[Candidate], env_id: &str) -> Result<(Option<usize>, Option<usize>)> {
+pub fn select_experts(
+    candidates: &[Candidate],
+    env_id: &str,
+) -> Result<(Option<usize>, Option<usize>)> {
     let e = env::make(env_id)?;
     let threshold = e.solve_threshold();
     let limit = e.max_episode_steps() as f64;
@@ -106,7 +114,9 @@ pub fn select_experts(candidates: &[Candidate], env_id: &str) -> Result<(Option<
                 && (!needs_finish || (s.finished >= 0.9 && s.mean_len < limit))
         })
         .min_by(|(_, a), (_, b)| {
-            let d = |s: &ExpertStats| ((s.mean - pm) / scale).abs() + 0.5 * ((s.std - ps) / scale).abs();
+            let d = |s: &ExpertStats| {
+                ((s.mean - pm) / scale).abs() + 0.5 * ((s.std - ps) / scale).abs()
+            };
             d(&a.stats).total_cmp(&d(&b.stats))
         })
         .map(|(i, _)| i);
@@ -121,18 +131,26 @@ mod tests {
         Candidate {
             path: PathBuf::from(format!("c{step}")),
             step,
-            stats: ExpertStats { episodes: 100, mean, std, min: mean - std, max: mean + std, mean_len: len, finished },
+            stats: ExpertStats {
+                episodes: 100,
+                mean,
+                std,
+                min: mean - std,
+                max: mean + std,
+                mean_len: len,
+                finished,
+            },
         }
     }
 
     #[test]
     fn selection_prefers_paper_like_weak_and_best_perfect() {
         let cands = vec![
-            cand(1, 20.0, 10.0, 20.0, 1.0),    // poor
-            cand(2, 160.0, 35.0, 160.0, 1.0),  // paper-like
-            cand(3, 170.0, 90.0, 170.0, 1.0),  // too noisy
-            cand(4, 200.0, 0.0, 200.0, 0.0),   // perfect
-            cand(5, 199.0, 3.0, 199.0, 0.2),   // nearly perfect
+            cand(1, 20.0, 10.0, 20.0, 1.0),   // poor
+            cand(2, 160.0, 35.0, 160.0, 1.0), // paper-like
+            cand(3, 170.0, 90.0, 170.0, 1.0), // too noisy
+            cand(4, 200.0, 0.0, 200.0, 0.0),  // perfect
+            cand(5, 199.0, 3.0, 199.0, 0.2),  // nearly perfect
         ];
         let (weak, perfect) = select_experts(&cands, "CartPole-v0").unwrap();
         assert_eq!(weak, Some(1));

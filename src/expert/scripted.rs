@@ -21,8 +21,7 @@ impl ScriptedExpert {
             "CartPole-v1" => ("CartPole-v1", cartpole),
             "MountainCar-v0" => ("MountainCar-v0", mountain_car),
             "Acrobot-v1" => ("Acrobot-v1", acrobot),
-            "LunarLander-v2" => ("LunarLander-v2", crate::env::lunar_lander::heuristic_action),
-            "LunarLander-v3" => ("LunarLander-v3", crate::env::lunar_lander::heuristic_action),
+            // LUNAR: scripted lander arrives with the LunarLander environment.
             other => bail!("no scripted expert for '{other}'"),
         };
         Ok(Self { env, policy })

@@ -29,7 +29,14 @@ pub enum Method {
 }
 
 impl Method {
-    pub const ALL: [Method; 6] = [Method::Dqn, Method::Dqfd, Method::Gdqn, Method::Bdqn, Method::Adqn, Method::Adqnp];
+    pub const ALL: [Method; 6] = [
+        Method::Dqn,
+        Method::Dqfd,
+        Method::Gdqn,
+        Method::Bdqn,
+        Method::Adqn,
+        Method::Adqnp,
+    ];
 
     /// Does the method pre-train on demonstrations collected before training?
     pub fn pretrains(self) -> bool {
@@ -38,7 +45,10 @@ impl Method {
 
     /// Does the method query the expert during training?
     pub fn queries(self) -> bool {
-        matches!(self, Method::Gdqn | Method::Bdqn | Method::Adqn | Method::Adqnp)
+        matches!(
+            self,
+            Method::Gdqn | Method::Bdqn | Method::Adqn | Method::Adqnp
+        )
     }
 
     /// Does the method need an expert at all?
@@ -281,7 +291,12 @@ pub fn task_preset(env: &str) -> Result<TaskPreset> {
             learning_starts: 1_000,
             target_period: 1_000,
         },
-        other => bail!("{}", crate::env::EnvError::UnknownId { id: other.to_string() }),
+        other => bail!(
+            "{}",
+            crate::env::EnvError::UnknownId {
+                id: other.to_string()
+            }
+        ),
     };
     Ok(p)
 }
@@ -336,7 +351,11 @@ impl TrainConfig {
             margin: 0.8,
             lambda: p.lambda,
             n_demo,
-            pretrain_steps: if method.pretrains() { p.pretrain_steps } else { 0 },
+            pretrain_steps: if method.pretrains() {
+                p.pretrain_steps
+            } else {
+                0
+            },
             rule,
             budget,
             t_query,
@@ -354,11 +373,13 @@ impl TrainConfig {
 
     /// Applies a TOML file's keys on top of this configuration.
     pub fn apply_file(&mut self, path: &Path) -> Result<()> {
-        let text = std::fs::read_to_string(path).with_context(|| format!("cannot read config file {}", path.display()))?;
-        let table: toml::Table =
-            toml::from_str(&text).with_context(|| format!("config file {} is not valid TOML", path.display()))?;
+        let text = std::fs::read_to_string(path)
+            .with_context(|| format!("cannot read config file {}", path.display()))?;
+        let table: toml::Table = toml::from_str(&text)
+            .with_context(|| format!("config file {} is not valid TOML", path.display()))?;
         for (key, value) in table {
-            self.set_value(&key, value).with_context(|| format!("in config file {}", path.display()))?;
+            self.set_value(&key, value)
+                .with_context(|| format!("in config file {}", path.display()))?;
         }
         Ok(())
     }
@@ -379,7 +400,10 @@ impl TrainConfig {
     fn set_value(&mut self, key: &str, value: toml::Value) -> Result<()> {
         let mut table = toml::Table::try_from(&*self).context("serialising the configuration")?;
         if !table.contains_key(key) {
-            bail!("unknown config key '{key}'; valid keys: {}", Self::valid_keys().join(", "));
+            bail!(
+                "unknown config key '{key}'; valid keys: {}",
+                Self::valid_keys().join(", ")
+            );
         }
         // Integers may be given where floats are expected (`lr=1` means 1.0).
         let value = match (&table[key], value) {
@@ -396,8 +420,13 @@ impl TrainConfig {
 
     /// Names of every configuration key.
     pub fn valid_keys() -> Vec<String> {
-        let cfg = Self::preset("CartPole-v0", Method::Dqn, NetKind::Plain, 0).expect("CartPole preset exists");
-        toml::Table::try_from(&cfg).expect("config serialises").keys().cloned().collect()
+        let cfg = Self::preset("CartPole-v0", Method::Dqn, NetKind::Plain, 0)
+            .expect("CartPole preset exists");
+        toml::Table::try_from(&cfg)
+            .expect("config serialises")
+            .keys()
+            .cloned()
+            .collect()
     }
 
     /// The configuration as TOML, for the run directory.
@@ -409,7 +438,10 @@ impl TrainConfig {
     pub fn validate(&self) -> Result<()> {
         crate::env::make(&self.env).map_err(|e| anyhow::anyhow!("{e}"))?;
         let unit = |name: &str, v: f64| -> Result<()> {
-            ensure!((0.0..=1.0).contains(&v), "{name} must be in [0, 1], got {v}");
+            ensure!(
+                (0.0..=1.0).contains(&v),
+                "{name} must be in [0, 1], got {v}"
+            );
             Ok(())
         };
         unit("t_query", self.t_query)?;
@@ -419,11 +451,22 @@ impl TrainConfig {
         unit("eps_fraction", self.eps_fraction)?;
         unit("alpha", self.alpha)?;
         unit("beta0", self.beta0)?;
-        ensure!(self.gamma >= 0.0 && self.gamma <= 1.0, "gamma must be in [0, 1], got {}", self.gamma);
-        ensure!(self.lr > 0.0 && self.lr.is_finite(), "lr must be positive, got {}", self.lr);
+        ensure!(
+            self.gamma >= 0.0 && self.gamma <= 1.0,
+            "gamma must be in [0, 1], got {}",
+            self.gamma
+        );
+        ensure!(
+            self.lr > 0.0 && self.lr.is_finite(),
+            "lr must be positive, got {}",
+            self.lr
+        );
         ensure!(self.train_steps > 0, "train_steps must be positive");
         ensure!(self.batch_size > 0, "batch_size must be positive");
-        ensure!(self.replay_size >= self.batch_size, "replay_size must be at least batch_size");
+        ensure!(
+            self.replay_size >= self.batch_size,
+            "replay_size must be at least batch_size"
+        );
         ensure!(self.train_freq > 0, "train_freq must be positive");
         ensure!(self.target_period > 0, "target_period must be positive");
         ensure!(self.eval_period > 0, "eval_period must be positive");
@@ -431,7 +474,10 @@ impl TrainConfig {
         ensure!(self.segment_len > 0, "segment_len must be positive");
         ensure!(self.n_r > 0, "n_r must be positive");
         ensure!(self.heads > 0, "heads must be positive");
-        ensure!(self.margin >= 0.0 && self.lambda >= 0.0, "margin and lambda must be non-negative");
+        ensure!(
+            self.margin >= 0.0 && self.lambda >= 0.0,
+            "margin and lambda must be non-negative"
+        );
         ensure!(self.grad_clip > 0.0, "grad_clip must be positive");
         if self.rule == RuleKind::Adaptive && self.net == NetKind::Plain {
             bail!(
@@ -451,7 +497,10 @@ impl TrainConfig {
 
     /// A short name for the run directory: `CartPole-v0_adqn-bootstrap_seed3`.
     pub fn run_name(&self) -> String {
-        format!("{}_{}-{}_seed{}", self.env, self.method, self.net, self.seed)
+        format!(
+            "{}_{}-{}_seed{}",
+            self.env, self.method, self.net, self.seed
+        )
     }
 }
 
@@ -462,11 +511,17 @@ mod tests {
     #[test]
     fn presets_follow_the_paper_table() {
         let c = TrainConfig::preset("Acrobot-v1", Method::Adqnp, NetKind::Noisy, 1).unwrap();
-        assert_eq!((c.gamma, c.lr, c.train_steps, c.replay_size), (0.99, 1e-4, 200_000, 100_000));
+        assert_eq!(
+            (c.gamma, c.lr, c.train_steps, c.replay_size),
+            (0.99, 1e-4, 200_000, 100_000)
+        );
         assert_eq!((c.n_demo, c.budget, c.pretrain_steps), (50, 50, 10_000));
         assert_eq!(c.t_query, 0.3);
         let c = TrainConfig::preset("CartPole-v0", Method::Adqn, NetKind::Noisy, 1).unwrap();
-        assert_eq!((c.budget, c.n_demo, c.t_query, c.rule), (200, 0, 0.5, RuleKind::Adaptive));
+        assert_eq!(
+            (c.budget, c.n_demo, c.t_query, c.rule),
+            (200, 0, 0.5, RuleKind::Adaptive)
+        );
     }
 
     #[test]
@@ -477,7 +532,10 @@ mod tests {
         c.apply_override("prioritized=false").unwrap();
         c.apply_override("loss=huber").unwrap();
         c.apply_override("gamma=1").unwrap();
-        assert_eq!((c.lr, c.train_steps, c.prioritized, c.loss, c.gamma), (0.001, 5000, false, TdLoss::Huber, 1.0));
+        assert_eq!(
+            (c.lr, c.train_steps, c.prioritized, c.loss, c.gamma),
+            (0.001, 5000, false, TdLoss::Huber, 1.0)
+        );
     }
 
     #[test]
@@ -490,7 +548,8 @@ mod tests {
 
     #[test]
     fn bad_values_are_rejected() {
-        let mut c = TrainConfig::preset("CartPole-v0", Method::Adqn, NetKind::Bootstrap, 0).unwrap();
+        let mut c =
+            TrainConfig::preset("CartPole-v0", Method::Adqn, NetKind::Bootstrap, 0).unwrap();
         let err = format!("{:#}", c.apply_override("train_steps=many").unwrap_err());
         assert!(err.contains("train_steps"), "{err}");
         assert!(c.apply_override("budget=-5").is_err());

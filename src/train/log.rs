@@ -68,17 +68,23 @@ pub fn steps_to_solve(curve: &[EvalPoint], threshold: f64, train_steps: usize) -
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
     let tmp = path.with_extension(format!(
         "{}.tmp",
-        path.extension().map(|e| e.to_string_lossy().into_owned()).unwrap_or_default()
+        path.extension()
+            .map(|e| e.to_string_lossy().into_owned())
+            .unwrap_or_default()
     ));
     std::fs::write(&tmp, bytes).with_context(|| format!("cannot write {}", tmp.display()))?;
-    std::fs::rename(&tmp, path).with_context(|| format!("cannot rename {} to {}", tmp.display(), path.display()))
+    std::fs::rename(&tmp, path)
+        .with_context(|| format!("cannot rename {} to {}", tmp.display(), path.display()))
 }
 
 /// The evaluation curve as CSV text (`step,mean,std,min,max`).
 pub fn curve_csv(curve: &[EvalPoint]) -> String {
     let mut s = String::from("step,mean,std,min,max\n");
     for p in curve {
-        s.push_str(&format!("{},{},{},{},{}\n", p.step, p.mean, p.std, p.min, p.max));
+        s.push_str(&format!(
+            "{},{},{},{},{}\n",
+            p.step, p.mean, p.std, p.min, p.max
+        ));
     }
     s
 }
@@ -96,31 +102,52 @@ pub struct RunLog {
 impl RunLog {
     /// A log that keeps results in memory only (tests, sweeps that only need the summary).
     pub fn in_memory() -> Self {
-        Self { dir: None, curve: Vec::new(), episodes: None, queries: None, events: None, progress: ProgressBar::hidden() }
+        Self {
+            dir: None,
+            curve: Vec::new(),
+            episodes: None,
+            queries: None,
+            events: None,
+            progress: ProgressBar::hidden(),
+        }
     }
 
     /// A log writing into `dir` (created if needed; an earlier incomplete run there is overwritten).
     /// `progress` shows a bar with steps/s and ETA when standard error is a terminal.
     pub fn create(dir: &Path, config_toml: &str, total_steps: u64, progress: bool) -> Result<Self> {
-        std::fs::create_dir_all(dir).with_context(|| format!("cannot create run directory {}", dir.display()))?;
+        std::fs::create_dir_all(dir)
+            .with_context(|| format!("cannot create run directory {}", dir.display()))?;
         let _ = std::fs::remove_file(dir.join("summary.json"));
         for entry in std::fs::read_dir(dir)?.flatten() {
-            if entry.file_name().to_string_lossy().starts_with("events.out.tfevents.") {
+            if entry
+                .file_name()
+                .to_string_lossy()
+                .starts_with("events.out.tfevents.")
+            {
                 let _ = std::fs::remove_file(entry.path());
             }
         }
         write_atomic(&dir.join("config.toml"), config_toml.as_bytes())?;
         let open = |name: &str, header: &str| -> Result<BufWriter<File>> {
             let path = dir.join(name);
-            let mut f = BufWriter::new(File::create(&path).with_context(|| format!("cannot create {}", path.display()))?);
+            let mut f = BufWriter::new(
+                File::create(&path).with_context(|| format!("cannot create {}", path.display()))?,
+            );
             f.write_all(header.as_bytes())?;
             Ok(f)
         };
         let episodes = open("episodes.csv", "episode,step,return,length,demo_steps\n")?;
-        let queries = open("queries.csv", "step,episode,uncertainty,threshold,expert_action,agent_action\n")?;
-        let events = EventWriter::create(dir).context("cannot create the TensorBoard event file")?;
+        let queries = open(
+            "queries.csv",
+            "step,episode,uncertainty,threshold,expert_action,agent_action\n",
+        )?;
+        let events =
+            EventWriter::create(dir).context("cannot create the TensorBoard event file")?;
         let bar = if progress && std::io::stderr().is_terminal() {
-            let bar = ProgressBar::with_draw_target(Some(total_steps), ProgressDrawTarget::stderr_with_hz(4));
+            let bar = ProgressBar::with_draw_target(
+                Some(total_steps),
+                ProgressDrawTarget::stderr_with_hz(4),
+            );
             bar.set_style(
                 ProgressStyle::with_template(
                     "{prefix} [{elapsed_precise}] {wide_bar} {pos}/{len} steps {per_sec} ETA {eta} {msg}",
@@ -151,7 +178,14 @@ impl RunLog {
         self.progress.set_position(step as u64);
     }
 
-    pub fn episode(&mut self, episode: usize, step: usize, ret: f64, len: usize, demo_steps: usize) -> Result<()> {
+    pub fn episode(
+        &mut self,
+        episode: usize,
+        step: usize,
+        ret: f64,
+        len: usize,
+        demo_steps: usize,
+    ) -> Result<()> {
         if let Some(f) = &mut self.episodes {
             writeln!(f, "{episode},{step},{ret},{len},{demo_steps}")?;
         }
@@ -208,7 +242,10 @@ impl RunLog {
     /// Flushes the streams and writes `summary.json` last, marking the run complete.
     pub fn finish(&mut self, summary: &Summary) -> Result<()> {
         self.progress.finish_and_clear();
-        for f in [&mut self.episodes, &mut self.queries].into_iter().flatten() {
+        for f in [&mut self.episodes, &mut self.queries]
+            .into_iter()
+            .flatten()
+        {
             f.flush()?;
         }
         if let Some(ev) = &mut self.events {
@@ -227,12 +264,23 @@ mod tests {
     use super::*;
 
     fn point(step: usize, mean: f64) -> EvalPoint {
-        EvalPoint { step, mean, std: 0.0, min: mean, max: mean }
+        EvalPoint {
+            step,
+            mean,
+            std: 0.0,
+            min: mean,
+            max: mean,
+        }
     }
 
     #[test]
     fn steps_to_solve_takes_first_evaluation_at_threshold() {
-        let curve = vec![point(1000, 50.0), point(2000, 195.0), point(3000, 120.0), point(4000, 200.0)];
+        let curve = vec![
+            point(1000, 50.0),
+            point(2000, 195.0),
+            point(3000, 120.0),
+            point(4000, 200.0),
+        ];
         assert_eq!(steps_to_solve(&curve, 195.0, 20_000), (2000, true));
     }
 

@@ -48,7 +48,12 @@ pub fn query_rule(cfg: &TrainConfig) -> Result<QueryRule> {
 }
 
 /// Runs the test policy (no exploration) for `episodes` episodes and summarises the returns.
-pub fn evaluate(agent: &mut Agent, env: &mut dyn Env, episodes: usize, step: usize) -> Result<EvalPoint> {
+pub fn evaluate(
+    agent: &mut Agent,
+    env: &mut dyn Env,
+    episodes: usize,
+    step: usize,
+) -> Result<EvalPoint> {
     let mut returns = Vec::with_capacity(episodes);
     for _ in 0..episodes {
         let mut obs = env.reset(None);
@@ -68,7 +73,13 @@ pub fn evaluate(agent: &mut Agent, env: &mut dyn Env, episodes: usize, step: usi
     let std = (returns.iter().map(|r| (r - mean).powi(2)).sum::<f64>() / n).sqrt();
     let min = returns.iter().cloned().fold(f64::INFINITY, f64::min);
     let max = returns.iter().cloned().fold(f64::NEG_INFINITY, f64::max);
-    Ok(EvalPoint { step, mean, std, min, max })
+    Ok(EvalPoint {
+        step,
+        mean,
+        std,
+        min,
+        max,
+    })
 }
 
 /// Trains one agent as `cfg` says and returns its summary and the trained agent.
@@ -89,7 +100,11 @@ pub fn train(
     let mut env = env::make(&cfg.env)?;
     let mut eval_env = env::make(&cfg.env)?;
     let (obs_dim, n_actions) = (env.obs_dim(), env.n_actions());
-    ensure!(!cfg.method.queries() || expert.is_some(), "{} asks an expert during training, but none was given", cfg.method);
+    ensure!(
+        !cfg.method.queries() || expert.is_some(),
+        "{} asks an expert during training, but none was given",
+        cfg.method
+    );
 
     // Every generator comes from the run's seed.
     let mut agent = Agent::new(cfg, obs_dim, n_actions, derive_seed(cfg.seed, 1));
@@ -114,14 +129,25 @@ pub fn train(
 
     // Pre-training on demonstrations only (DQfD, ADQNP; §9).
     if cfg.method.pretrains() {
-        let demos = demos.context("this method pre-trains on demonstrations, but none were given")?;
-        ensure!(demos.env == cfg.env, "the demonstrations are for {}, not {}", demos.env, cfg.env);
+        let demos =
+            demos.context("this method pre-trains on demonstrations, but none were given")?;
+        ensure!(
+            demos.env == cfg.env,
+            "the demonstrations are for {}, not {}",
+            demos.env,
+            cfg.env
+        );
         for t in &demos.transitions {
             replay.push(&t.obs, t.action, t.reward, &t.next_obs, t.terminal, true)?;
         }
         log.set_prefix(format!("{} pre-training", cfg.run_name()));
         for update in 1..=cfg.pretrain_steps {
-            replay.sample_demo_only(cfg.batch_size, cfg.beta0 as f32, &mut replay_rng, &mut batch);
+            replay.sample_demo_only(
+                cfg.batch_size,
+                cfg.beta0 as f32,
+                &mut replay_rng,
+                &mut batch,
+            );
             agent.update(&batch);
             replay.update_priorities(&batch.idx, agent.abs_td(batch.idx.len()));
             if update % cfg.target_period == 0 {
@@ -134,7 +160,10 @@ pub fn train(
     let mut queries = QueryController::new(query_rule(cfg)?, cfg.budget, cfg.segment_len)?;
     let want_uncertainty = queries.needs_uncertainty();
     if want_uncertainty && cfg.net == NetKind::Plain {
-        bail!("the {:?} query rule needs the uncertainty of a bootstrapped or noisy network", cfg.rule);
+        bail!(
+            "the {:?} query rule needs the uncertainty of a bootstrapped or noisy network",
+            cfg.rule
+        );
     }
 
     log.set_prefix(cfg.run_name());
@@ -147,12 +176,20 @@ pub fn train(
         let action = if queries.expert_in_control() {
             expert_action(&mut expert, &obs)?
         } else {
-            let (agent_action, uncertainty) = agent.act(&obs, epsilon_at(cfg, step), want_uncertainty);
+            let (agent_action, uncertainty) =
+                agent.act(&obs, epsilon_at(cfg, step), want_uncertainty);
             let decision = queries.decide(uncertainty, &mut query_rng);
             if decision.query {
                 let expert_action = expert_action(&mut expert, &obs)?;
                 let threshold = decision.threshold;
-                log.query(&QueryEvent { step, episode, uncertainty, threshold, expert_action, agent_action })?;
+                log.query(&QueryEvent {
+                    step,
+                    episode,
+                    uncertainty,
+                    threshold,
+                    expert_action,
+                    agent_action,
+                })?;
                 expert_action
             } else {
                 agent_action
@@ -181,7 +218,10 @@ pub fn train(
         }
 
         // 3. Learn: one prioritized double-DQN update per `train_freq` steps, hard target copies.
-        if step + 1 >= cfg.learning_starts && (step + 1) % cfg.train_freq == 0 && replay.len() >= cfg.batch_size {
+        if step + 1 >= cfg.learning_starts
+            && (step + 1) % cfg.train_freq == 0
+            && replay.len() >= cfg.batch_size
+        {
             let beta = cfg.beta0 + (1.0 - cfg.beta0) * (step as f64 / cfg.train_steps as f64);
             replay.sample(cfg.batch_size, beta as f32, &mut replay_rng, &mut batch);
             let stats = agent.update(&batch);
@@ -195,7 +235,9 @@ pub fn train(
                 log.scalar("train/margin_loss", step + 1, stats.margin_loss)?;
                 log.scalar("train/epsilon", step + 1, epsilon_at(cfg, step) as f32)?;
                 log.scalar("query/budget_used", step + 1, queries.budget_used() as f32)?;
-                if let Some(thr) = queries.threshold() {
+                if let QueryRule::Adaptive(rule) = queries.rule()
+                    && let Some(thr) = rule.threshold()
+                {
                     log.scalar("query/threshold", step + 1, thr)?;
                 }
             }
@@ -212,7 +254,10 @@ pub fn train(
                 let dir = dir.join("checkpoints");
                 std::fs::create_dir_all(&dir)?;
                 let meta = weights_metadata(cfg, step + 1);
-                agent.network().save(&dir.join(format!("step_{:08}.safetensors", step + 1)), &meta)?;
+                agent.network().save(
+                    &dir.join(format!("step_{:08}.safetensors", step + 1)),
+                    &meta,
+                )?;
             }
         }
     }
@@ -237,7 +282,10 @@ pub fn train(
         steps_per_s: cfg.train_steps as f64 / wall.max(1e-9),
     };
     if let Some(dir) = log.dir() {
-        agent.network().save(&dir.join("weights.safetensors"), &weights_metadata(cfg, cfg.train_steps))?;
+        agent.network().save(
+            &dir.join("weights.safetensors"),
+            &weights_metadata(cfg, cfg.train_steps),
+        )?;
     }
     log.finish(&summary)?;
     Ok((summary, agent))
@@ -245,13 +293,22 @@ pub fn train(
 
 /// Metadata stored with saved weights: where they come from.
 fn weights_metadata(cfg: &TrainConfig, step: usize) -> std::collections::BTreeMap<String, String> {
-    [("env", cfg.env.clone()), ("method", cfg.method.to_string()), ("seed", cfg.seed.to_string()), ("step", step.to_string())]
-        .into_iter()
-        .map(|(k, v)| (k.to_string(), v))
-        .collect()
+    [
+        ("env", cfg.env.clone()),
+        ("method", cfg.method.to_string()),
+        ("seed", cfg.seed.to_string()),
+        ("step", step.to_string()),
+    ]
+    .into_iter()
+    .map(|(k, v)| (k.to_string(), v))
+    .collect()
 }
 
 fn expert_action(expert: &mut Option<&mut dyn Expert>, obs: &[f32]) -> Result<usize> {
-    let expert = expert.as_deref_mut().context("the query rule asked for the expert, but none was given")?;
-    expert.act(obs).with_context(|| format!("the expert ({}) failed to answer", expert.describe()))
+    let expert = expert
+        .as_deref_mut()
+        .context("the query rule asked for the expert, but none was given")?;
+    expert
+        .act(obs)
+        .with_context(|| format!("the expert ({}) failed to answer", expert.describe()))
 }
