@@ -7,7 +7,9 @@
 //! `δ_kb = Q_k(s_b, a_b) − (r_b + γ(1 − d_b) Q⁻_k(s'_b, argmax_a Q_k(s'_b, a)))` and
 //! `L_E = max_a [Q(s, a) + M·1(a ≠ a_E)] − Q(s, a_E)`.
 
-use crate::nn::{Adam, Grads, NoiseSample, OutputKind, QNet, Workspace, clip_grad_norm};
+use crate::nn::{
+    Adam, Grads, HIDDEN, NoiseSample, OutputKind, QNet, Workspace, argmax, clip_grad_norm,
+};
 use crate::query::{js_divergence, noisy_variance};
 use crate::replay::Batch;
 use crate::train::config::{NetKind, TdLoss, TrainConfig};
@@ -28,7 +30,8 @@ pub struct Agent {
     target: QNet,
     adam: Adam,
     grads: Grads,
-    ws_act: Workspace,
+    q_act: Vec<f32>,
+    phi: [f32; HIDDEN],
     ws_batch: Workspace,
     ws_next_online: Workspace,
     ws_next_target: Workspace,
@@ -87,7 +90,8 @@ impl Agent {
         Self {
             adam: Adam::new(&online, cfg.lr as f32),
             grads: Grads::new(&online),
-            ws_act: Workspace::new(&online, 1),
+            q_act: vec![0.0; heads * n_actions],
+            phi: [0.0; HIDDEN],
             ws_batch: Workspace::new(&online, batch),
             ws_next_online: Workspace::new(&online, batch),
             ws_next_target: Workspace::new(&online, batch),
@@ -134,7 +138,9 @@ impl Agent {
         let a = self.online.n_actions();
         let heads = self.online.heads();
         let noise = matches!(self.online.kind(), OutputKind::Noisy).then_some(&self.noise_act);
-        let q = self.online.forward(obs, 1, noise, &mut self.ws_act);
+        self.online
+            .q_values_single_with_features(obs, noise, &mut self.q_act, &mut self.phi);
+        let q = &self.q_act;
         let greedy = argmax(&q[self.active_head * a..(self.active_head + 1) * a]);
         let uncertainty = if want_uncertainty {
             match self.online.kind() {
@@ -144,10 +150,9 @@ impl Agent {
                         .online
                         .noisy_sigmas()
                         .expect("noisy network has sigmas");
-                    let h = QNet::HIDDEN;
                     Some(noisy_variance(
-                        &self.ws_act.features()[..h],
-                        &sigma_w[greedy * h..(greedy + 1) * h],
+                        &self.phi,
+                        &sigma_w[greedy * HIDDEN..(greedy + 1) * HIDDEN],
                         sigma_b[greedy],
                         self.exact_factorised_var,
                     ))
@@ -167,7 +172,7 @@ impl Agent {
 
     /// The test-time policy, without exploration (§5): see [`test_policy_action`].
     pub fn act_greedy(&mut self, obs: &[f32]) -> usize {
-        test_policy_action(&self.online, &mut self.ws_act, obs)
+        test_policy_action(&self.online, &mut self.q_act, obs)
     }
 
     /// One gradient step on a minibatch; returns the statistics and leaves the new priorities
@@ -259,10 +264,11 @@ impl Agent {
 /// The test-time policy of a network, without exploration (ALGORITHM_NOTES.md §5): a majority vote over the
 /// bootstrapped heads with ties broken by the mean Q-value, the noise-free mean weights of a noisy layer, or
 /// plain argmax. Also the policy of a checkpoint expert.
-pub fn test_policy_action(net: &QNet, ws: &mut Workspace, obs: &[f32]) -> usize {
+/// `q` is a buffer of `heads * n_actions` values.
+pub fn test_policy_action(net: &QNet, q: &mut [f32], obs: &[f32]) -> usize {
     let a = net.n_actions();
     let heads = net.heads();
-    let q = net.forward(obs, 1, None, ws);
+    net.q_values_single(obs, None, q);
     if heads == 1 {
         return argmax(&q[..a]);
     }
@@ -371,17 +377,6 @@ pub fn margin_term(q: &[f32], expert_action: usize, margin: f32) -> (f32, usize)
         }
     }
     (best - q[expert_action], best_a)
-}
-
-/// Index of the largest value (the first on ties, as NumPy's argmax).
-pub fn argmax(v: &[f32]) -> usize {
-    let mut best = 0;
-    for i in 1..v.len() {
-        if v[i] > v[best] {
-            best = i;
-        }
-    }
-    best
 }
 
 #[cfg(test)]
@@ -506,10 +501,5 @@ mod tests {
         // y = 1 + 0.5 * 2 = 2; delta = 3 - 2 = 1.
         assert!((td - 1.0).abs() < 1e-6 && (abs_td[0] - 1.0).abs() < 1e-6);
         assert!((dq[0] - 2.0).abs() < 1e-6 && dq[1] == 0.0);
-    }
-
-    #[test]
-    fn argmax_takes_first_maximum() {
-        assert_eq!(argmax(&[0.1, 0.5, 0.5, -1.0]), 1);
     }
 }

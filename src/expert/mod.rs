@@ -12,7 +12,7 @@ pub mod scripted;
 
 use crate::agent::test_policy_action;
 use crate::env::EnvSpec;
-use crate::nn::{QNet, Workspace};
+use crate::nn::QNet;
 use anyhow::{Context, Result, bail, ensure};
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64;
@@ -29,7 +29,7 @@ pub trait Expert: Send {
 /// A trained Q-network acting with its test-time policy (greedy, majority vote, or mean weights).
 pub struct CheckpointExpert {
     net: QNet,
-    ws: Workspace,
+    q: Vec<f32>,
     path: PathBuf,
 }
 
@@ -51,10 +51,10 @@ impl CheckpointExpert {
                 .map(|e| format!(" (it was trained on {e})"))
                 .unwrap_or_default()
         );
-        let ws = Workspace::new(&net, 1);
+        let q = vec![0.0; net.heads() * net.n_actions()];
         Ok(Self {
             net,
-            ws,
+            q,
             path: path.to_path_buf(),
         })
     }
@@ -62,7 +62,7 @@ impl CheckpointExpert {
 
 impl Expert for CheckpointExpert {
     fn act(&mut self, obs: &[f32]) -> Result<usize> {
-        Ok(test_policy_action(&self.net, &mut self.ws, obs))
+        Ok(test_policy_action(&self.net, &mut self.q, obs))
     }
     fn describe(&self) -> String {
         format!("checkpoint:{}", self.path.display())
