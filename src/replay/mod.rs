@@ -27,7 +27,8 @@
 //!   transition as the maximum mass.
 //!
 //! **Uniform sampling** (`prioritized = false`): every stored transition is equally likely and all
-//! weights are 1. Priorities are still maintained, so the memory can be inspected the same way.
+//! weights are 1. Raw priorities are still recorded (see [`Replay::priority`]), but the trees are
+//! not maintained.
 //!
 //! [`Replay::sample_demo_only`] draws from the demonstration part alone (DQfD pre-training,
 //! ALGORITHM_NOTES.md §9), prioritized among demonstrations: `N` and the weight normaliser are then
@@ -475,6 +476,10 @@ impl Replay {
 
     fn set_priority(&mut self, slot: usize, p: f32) {
         self.priorities[slot] = p;
+        if !self.cfg.prioritized {
+            // Uniform sampling never reads the trees; the raw priorities above stay inspectable.
+            return;
+        }
         let mass = f64::from(p).powf(f64::from(self.cfg.alpha));
         if self.is_demo_slot(slot) {
             self.demo_tree.set(slot, mass);
