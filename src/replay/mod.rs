@@ -205,14 +205,17 @@ impl Replay {
     /// An empty memory for observations of length `obs_dim`.
     ///
     /// # Panics
-    /// If `cfg` fails [`ReplayConfig::validate`]; configuration loaders should call that first
-    /// and report the error.
+    /// If `cfg` fails [`ReplayConfig::validate`]; use [`Replay::try_new`] for configurations that
+    /// come from the user.
     pub fn new(obs_dim: usize, cfg: &ReplayConfig) -> Self {
-        if let Err(e) = cfg.validate() {
-            panic!("{e}");
-        }
+        Self::try_new(obs_dim, cfg).unwrap_or_else(|e| panic!("{e}"))
+    }
+
+    /// An empty memory, or the configuration error.
+    pub fn try_new(obs_dim: usize, cfg: &ReplayConfig) -> Result<Self, ReplayError> {
+        cfg.validate()?;
         let slots = cfg.demo_capacity + cfg.capacity;
-        Self {
+        Ok(Self {
             obs_dim,
             cfg: cfg.clone(),
             obs: vec![0.0; slots * obs_dim],
@@ -227,7 +230,7 @@ impl Replay {
             n_agent: 0,
             agent_next: 0,
             max_priority: 1.0,
-        }
+        })
     }
 
     /// Stores one transition. `terminal` is the bootstrap cut (true termination, or truncation

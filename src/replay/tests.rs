@@ -424,6 +424,10 @@ fn invalid_configs_are_rejected() {
             matches!(cfg.validate(), Err(ReplayError::InvalidConfig(_))),
             "{cfg:?}"
         );
+        assert!(matches!(
+            Replay::try_new(OBS_DIM, &cfg),
+            Err(ReplayError::InvalidConfig(_))
+        ));
     }
 }
 
