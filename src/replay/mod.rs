@@ -27,7 +27,8 @@
 //!   transition as the maximum mass.
 //!
 //! **Uniform sampling** (`prioritized = false`): every stored transition is equally likely and all
-//! weights are 1. Priorities are still maintained, so the memory can be inspected the same way.
+//! weights are 1. Raw priorities are still recorded (see [`Replay::priority`]), but the trees are
+//! not maintained.
 //!
 //! [`Replay::sample_demo_only`] draws from the demonstration part alone (DQfD pre-training,
 //! ALGORITHM_NOTES.md §9), prioritized among demonstrations: `N` and the weight normaliser are then
@@ -204,14 +205,17 @@ impl Replay {
     /// An empty memory for observations of length `obs_dim`.
     ///
     /// # Panics
-    /// If `cfg` fails [`ReplayConfig::validate`]; configuration loaders should call that first
-    /// and report the error.
+    /// If `cfg` fails [`ReplayConfig::validate`]; use [`Replay::try_new`] for configurations that
+    /// come from the user.
     pub fn new(obs_dim: usize, cfg: &ReplayConfig) -> Self {
-        if let Err(e) = cfg.validate() {
-            panic!("{e}");
-        }
+        Self::try_new(obs_dim, cfg).unwrap_or_else(|e| panic!("{e}"))
+    }
+
+    /// An empty memory, or the configuration error.
+    pub fn try_new(obs_dim: usize, cfg: &ReplayConfig) -> Result<Self, ReplayError> {
+        cfg.validate()?;
         let slots = cfg.demo_capacity + cfg.capacity;
-        Self {
+        Ok(Self {
             obs_dim,
             cfg: cfg.clone(),
             obs: vec![0.0; slots * obs_dim],
@@ -226,7 +230,7 @@ impl Replay {
             n_agent: 0,
             agent_next: 0,
             max_priority: 1.0,
-        }
+        })
     }
 
     /// Stores one transition. `terminal` is the bootstrap cut (true termination, or truncation
@@ -475,6 +479,10 @@ impl Replay {
 
     fn set_priority(&mut self, slot: usize, p: f32) {
         self.priorities[slot] = p;
+        if !self.cfg.prioritized {
+            // Uniform sampling never reads the trees; the raw priorities above stay inspectable.
+            return;
+        }
         let mass = f64::from(p).powf(f64::from(self.cfg.alpha));
         if self.is_demo_slot(slot) {
             self.demo_tree.set(slot, mass);

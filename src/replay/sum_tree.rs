@@ -4,7 +4,7 @@
 //! of the sampling masses `p_i^α`, each in O(log n): the total mass (to normalise), the leaf in
 //! which a point `u ∈ [0, total)` of the cumulative mass falls (to sample), and the smallest mass
 //! over the stored transitions (for the largest importance-sampling weight). [`SumMinTree`] keeps
-//! one complete binary tree per reduction in two flat arrays with the usual heap layout: node `n`
+//! a complete binary tree with both reductions per node in one flat array with the usual heap layout: node `n`
 //! has children `2n` and `2n + 1`, the root is node 1 and leaf `i` is node `size + i`, where
 //! `size` is the leaf count rounded up to a power of two.
 //!
@@ -21,10 +21,22 @@ pub struct SumMinTree {
     capacity: usize,
     /// Leaf count rounded up to a power of two; leaf `i` is node `size + i`.
     size: usize,
-    /// `sums[n]` is the total of the leaves below node `n` (index 0 unused).
-    sums: Vec<f64>,
-    /// `mins[n]` is the smallest leaf below node `n` (index 0 unused).
-    mins: Vec<f64>,
+    /// Node `n` holds the total and the minimum of the leaves below it (index 0 unused). Keeping
+    /// both in one element means an update touches one cache line per level, not two.
+    nodes: Vec<Node>,
+}
+
+#[derive(Clone, Copy, Debug)]
+struct Node {
+    sum: f64,
+    min: f64,
+}
+
+impl Node {
+    const EMPTY: Node = Node {
+        sum: 0.0,
+        min: f64::INFINITY,
+    };
 }
 
 impl SumMinTree {
@@ -34,8 +46,7 @@ impl SumMinTree {
         Self {
             capacity,
             size,
-            sums: vec![0.0; 2 * size],
-            mins: vec![f64::INFINITY; 2 * size],
+            nodes: vec![Node::EMPTY; 2 * size],
         }
     }
 
@@ -59,12 +70,17 @@ impl SumMinTree {
             "leaf value must be finite and non-negative, got {value}"
         );
         let mut node = self.size + leaf;
-        self.sums[node] = value;
-        self.mins[node] = value;
+        self.nodes[node] = Node {
+            sum: value,
+            min: value,
+        };
         while node > 1 {
             node /= 2;
-            self.sums[node] = self.sums[2 * node] + self.sums[2 * node + 1];
-            self.mins[node] = self.mins[2 * node].min(self.mins[2 * node + 1]);
+            let (left, right) = (self.nodes[2 * node], self.nodes[2 * node + 1]);
+            self.nodes[node] = Node {
+                sum: left.sum + right.sum,
+                min: left.min.min(right.min),
+            };
         }
     }
 
@@ -75,17 +91,17 @@ impl SumMinTree {
             "leaf {leaf} out of range 0..{}",
             self.capacity
         );
-        self.sums[self.size + leaf]
+        self.nodes[self.size + leaf].sum
     }
 
     /// Sum of all leaves.
     pub fn total(&self) -> f64 {
-        self.sums[1]
+        self.nodes[1].sum
     }
 
     /// Smallest value over the leaves that were set, `+∞` if none was.
     pub fn min(&self) -> f64 {
-        self.mins[1]
+        self.nodes[1].min
     }
 
     /// The leaf `i` whose cumulative interval `[c_{i-1}, c_i)` contains `u`, where
@@ -104,13 +120,14 @@ impl SumMinTree {
         );
         let mut u = u.max(0.0);
         let mut node = 1;
-        // Invariant: sums[node] > 0. Going left when `u < left` keeps it because u >= 0; going
-        // right is only done into a positive subtree; otherwise left holds all the mass.
+        // Invariant: the sum at `node` is > 0. Going left when `u < left` keeps it because
+        // u >= 0; going right is only done into a positive subtree; otherwise left holds all
+        // the mass.
         while node < self.size {
-            let left = self.sums[2 * node];
-            let right = self.sums[2 * node + 1];
+            let left = self.nodes[2 * node].sum;
+            let right = self.nodes[2 * node + 1].sum;
             if u < left || right <= 0.0 {
-                node = 2 * node;
+                node *= 2;
             } else {
                 u -= left;
                 node = 2 * node + 1;

@@ -28,7 +28,7 @@ fn push_tagged(replay: &mut Replay, tag: f32, is_demo: bool) -> Result<(), Repla
         tag as usize % 2,
         tag,
         &obs_of(tag + 0.5),
-        tag as usize % 3 == 0,
+        (tag as usize).is_multiple_of(3),
         is_demo,
     )
 }
@@ -241,7 +241,7 @@ fn batch_contents_match_stored_transitions() {
         );
         assert_eq!(batch.actions[i], tag as usize % 2);
         assert_eq!(batch.rewards[i], tag);
-        assert_eq!(batch.terminal[i], tag as usize % 3 == 0);
+        assert_eq!(batch.terminal[i], (tag as usize).is_multiple_of(3));
         assert_eq!(batch.is_demo[i], tag >= 100.0);
     }
 }
@@ -251,8 +251,8 @@ fn demos_are_never_evicted_when_the_ring_wraps() {
     let mut replay = Replay::new(OBS_DIM, &config(4, 5, true));
     // Interleave demonstrations with agent transitions while the ring wraps several times.
     let mut demo_tags = Vec::new();
-    for i in 0..25 {
-        if i % 5 == 0 {
+    for i in 0..25usize {
+        if i.is_multiple_of(5) {
             let tag = 1000.0 + i as f32;
             push_tagged(&mut replay, tag, true).unwrap();
             demo_tags.push(tag);
@@ -424,6 +424,10 @@ fn invalid_configs_are_rejected() {
             matches!(cfg.validate(), Err(ReplayError::InvalidConfig(_))),
             "{cfg:?}"
         );
+        assert!(matches!(
+            Replay::try_new(OBS_DIM, &cfg),
+            Err(ReplayError::InvalidConfig(_))
+        ));
     }
 }
 
