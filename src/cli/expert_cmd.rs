@@ -162,7 +162,7 @@ pub fn run_expert(cmd: ExpertCommand) -> Result<ExitCode> {
 }
 
 fn evaluate_checkpoints(dir: &Path, env: &str, episodes: usize) -> Result<Vec<Candidate>> {
-    let spec = arld::env::spec(env)?;
+    let spec = *arld::env::spec(env)?;
     let mut paths: Vec<PathBuf> = std::fs::read_dir(dir)
         .with_context(|| format!("no checkpoints in {}", dir.display()))?
         .flatten()

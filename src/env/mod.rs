@@ -273,14 +273,3 @@ pub(crate) fn check_state(env: &'static str, state: &[f64], len: usize) -> Resul
     Ok(())
 }
 
-/// Static facts about a registered environment.
-pub fn spec(id: &str) -> Result<EnvSpec, EnvError> {
-    let e = make(id)?;
-    Ok(EnvSpec {
-        id: e.id(),
-        obs_dim: e.obs_dim(),
-        n_actions: e.n_actions(),
-        max_episode_steps: e.max_episode_steps(),
-        solve_threshold: e.solve_threshold(),
-    })
-}

@@ -135,7 +135,7 @@ with probability P).";
 
 /// Builds an expert from a spec for the environment `env_id`; `seed` seeds any randomness the expert has.
 pub fn from_spec(spec: &str, env_id: &str, seed: u64) -> Result<Box<dyn Expert>> {
-    let env_spec = crate::env::spec(env_id)?;
+    let env_spec = *crate::env::spec(env_id)?;
     let (kind, rest) = spec.split_once(':').unwrap_or((spec, ""));
     match kind {
         "checkpoint" if !rest.is_empty() => Ok(Box::new(CheckpointExpert::load(
