@@ -129,32 +129,9 @@ pub fn train(
 
     // Pre-training on demonstrations only (DQfD, ADQNP; §9).
     if cfg.method.pretrains() {
-        let demos =
-            demos.context("this method pre-trains on demonstrations, but none were given")?;
-        ensure!(
-            demos.env == cfg.env,
-            "the demonstrations are for {}, not {}",
-            demos.env,
-            cfg.env
-        );
-        for t in &demos.transitions {
-            replay.push(&t.obs, t.action, t.reward, &t.next_obs, t.terminal, true)?;
-        }
+        let demos = demos.context("this method pre-trains on demonstrations, but none were given")?;
         log.set_prefix(format!("{} pre-training", cfg.run_name()));
-        for update in 1..=cfg.pretrain_steps {
-            replay.sample_demo_only(
-                cfg.batch_size,
-                cfg.beta0 as f32,
-                &mut replay_rng,
-                &mut batch,
-            );
-            agent.update(&batch);
-            replay.update_priorities(&batch.idx, agent.abs_td(batch.idx.len()));
-            if update % cfg.target_period == 0 {
-                agent.sync_target();
-            }
-        }
-        agent.sync_target();
+        pretrain(cfg, &mut agent, &mut replay, demos, &mut replay_rng, &mut batch)?;
     }
 
     let mut queries = QueryController::new(query_rule(cfg)?, cfg.budget, cfg.segment_len)?;
@@ -302,6 +279,32 @@ fn weights_metadata(cfg: &TrainConfig, step: usize) -> std::collections::BTreeMa
     .into_iter()
     .map(|(k, v)| (k.to_string(), v))
     .collect()
+}
+
+/// DQfD pre-training (§9): the demonstrations enter replay permanently, then `pretrain_steps` updates sample
+/// from them alone (TD plus margin loss, prioritized among demonstrations), with the usual target copies.
+pub fn pretrain(
+    cfg: &TrainConfig,
+    agent: &mut Agent,
+    replay: &mut Replay,
+    demos: &Demonstrations,
+    rng: &mut Pcg64,
+    batch: &mut Batch,
+) -> Result<()> {
+    ensure!(demos.env == cfg.env, "the demonstrations are for {}, not {}", demos.env, cfg.env);
+    for t in &demos.transitions {
+        replay.push(&t.obs, t.action, t.reward, &t.next_obs, t.terminal, true)?;
+    }
+    for update in 1..=cfg.pretrain_steps {
+        replay.sample_demo_only(cfg.batch_size, cfg.beta0 as f32, rng, batch);
+        agent.update(batch);
+        replay.update_priorities(&batch.idx, agent.abs_td(batch.idx.len()));
+        if update % cfg.target_period == 0 {
+            agent.sync_target();
+        }
+    }
+    agent.sync_target();
+    Ok(())
 }
 
 fn expert_action(expert: &mut Option<&mut dyn Expert>, obs: &[f32]) -> Result<usize> {
