@@ -135,8 +135,8 @@ pub fn train(
     }
 
     let mut queries = QueryController::new(query_rule(cfg)?, cfg.budget, cfg.segment_len)?;
-    let want_uncertainty = queries.needs_uncertainty();
-    if want_uncertainty && cfg.net == NetKind::Plain {
+    let needs_uncertainty = queries.needs_uncertainty();
+    if needs_uncertainty && cfg.net == NetKind::Plain {
         bail!(
             "the {:?} query rule needs the uncertainty of a bootstrapped or noisy network",
             cfg.rule
@@ -153,6 +153,7 @@ pub fn train(
         let action = if queries.expert_in_control() {
             expert_action(&mut expert, &obs)?
         } else {
+            let want_uncertainty = queries.uncertainty_wanted_now();
             let (agent_action, uncertainty) =
                 agent.act(&obs, epsilon_at(cfg, step), want_uncertainty);
             let decision = queries.decide(uncertainty, &mut query_rng);
