@@ -50,7 +50,7 @@ impl Default for OrderStatistics {
 
 impl OrderStatistics {
     /// Seed of the priority generator used by [`OrderStatistics::new`].
-    pub const DEFAULT_SEED: u64 = 0x5EED_0F_B57;
+    pub const DEFAULT_SEED: u64 = 0x5EED_0F0B_5EED_0F0B;
 
     /// An empty multiset with the default priority seed.
     pub fn new() -> Self {
@@ -59,7 +59,12 @@ impl OrderStatistics {
 
     /// An empty multiset whose treap priorities come from `seed` (the shape changes, the answers do not).
     pub fn with_seed(seed: u64) -> Self {
-        Self { nodes: Vec::new(), free_slots: Vec::new(), root: NIL, priority_state: seed }
+        Self {
+            nodes: Vec::new(),
+            free_slots: Vec::new(),
+            root: NIL,
+            priority_state: seed,
+        }
     }
 
     /// An empty multiset with room for `capacity` distinct keys before the arena reallocates.
@@ -130,11 +135,19 @@ impl OrderStatistics {
     /// The `k`-th smallest value, 0-based, or `None` if `k >= len()`.
     pub fn kth_smallest(&self, k: usize) -> Option<f32> {
         let len = self.len();
-        if k >= len { None } else { self.kth_largest(len - 1 - k) }
+        if k >= len {
+            None
+        } else {
+            self.kth_largest(len - 1 - k)
+        }
     }
 
     fn size_of(&self, index: u32) -> u32 {
-        if index == NIL { 0 } else { self.nodes[index as usize].size }
+        if index == NIL {
+            0
+        } else {
+            self.nodes[index as usize].size
+        }
     }
 
     /// Recomputes a node's subtree size from its children.
@@ -154,7 +167,14 @@ impl OrderStatistics {
     }
 
     fn allocate(&mut self, key: f32) -> u32 {
-        let node = Node { key, priority: self.next_priority(), left: NIL, right: NIL, count: 1, size: 1 };
+        let node = Node {
+            key,
+            priority: self.next_priority(),
+            left: NIL,
+            right: NIL,
+            count: 1,
+            size: 1,
+        };
         match self.free_slots.pop() {
             Some(slot) => {
                 self.nodes[slot as usize] = node;
@@ -279,30 +299,54 @@ impl OrderStatistics {
     /// Checks every structural invariant; used by the tests.
     #[cfg(test)]
     fn check_invariants(&self) {
-        fn walk(tree: &OrderStatistics, index: u32, low: Option<f32>, high: Option<f32>) -> (u32, usize) {
+        fn walk(
+            tree: &OrderStatistics,
+            index: u32,
+            low: Option<f32>,
+            high: Option<f32>,
+        ) -> (u32, usize) {
             if index == NIL {
                 return (0, 0);
             }
             let node = &tree.nodes[index as usize];
             assert!(node.count > 0);
             if let Some(low) = low {
-                assert_eq!(low.total_cmp(&node.key), Ordering::Less, "search order violated");
+                assert_eq!(
+                    low.total_cmp(&node.key),
+                    Ordering::Less,
+                    "search order violated"
+                );
             }
             if let Some(high) = high {
-                assert_eq!(node.key.total_cmp(&high), Ordering::Less, "search order violated");
+                assert_eq!(
+                    node.key.total_cmp(&high),
+                    Ordering::Less,
+                    "search order violated"
+                );
             }
             for child in [node.left, node.right] {
                 if child != NIL {
-                    assert!(tree.nodes[child as usize].priority <= node.priority, "heap order violated");
+                    assert!(
+                        tree.nodes[child as usize].priority <= node.priority,
+                        "heap order violated"
+                    );
                 }
             }
             let (left_size, left_nodes) = walk(tree, node.left, low, Some(node.key));
             let (right_size, right_nodes) = walk(tree, node.right, Some(node.key), high);
-            assert_eq!(node.size, left_size + right_size + node.count, "subtree size wrong");
+            assert_eq!(
+                node.size,
+                left_size + right_size + node.count,
+                "subtree size wrong"
+            );
             (node.size, left_nodes + right_nodes + 1)
         }
         let (_, live_nodes) = walk(self, self.root, None, None);
-        assert_eq!(live_nodes + self.free_slots.len(), self.nodes.len(), "arena slots leaked");
+        assert_eq!(
+            live_nodes + self.free_slots.len(),
+            self.nodes.len(),
+            "arena slots leaked"
+        );
     }
 }
 
@@ -392,7 +436,9 @@ mod tests {
         let mut recent = std::collections::VecDeque::new();
         let mut state = 1u64;
         let mut next_value = || {
-            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
             (state >> 40) as f32
         };
         for _ in 0..window {
@@ -408,7 +454,9 @@ mod tests {
             tree.insert(value);
             recent.push_back(value);
             assert!(tree.remove(recent.pop_front().unwrap()));
-            if tree.nodes.capacity() != arena_capacity || tree.free_slots.capacity() != free_capacity {
+            if tree.nodes.capacity() != arena_capacity
+                || tree.free_slots.capacity() != free_capacity
+            {
                 reallocations += 1;
                 arena_capacity = tree.nodes.capacity();
                 free_capacity = tree.free_slots.capacity();
@@ -418,7 +466,10 @@ mod tests {
         assert_eq!(tree.len(), window);
         // The arena never grows past window + 1 live slots; after the first growths it is stable.
         assert!(tree.nodes.len() <= window + 1);
-        assert!(reallocations <= 2, "{reallocations} reallocations in steady state");
+        assert!(
+            reallocations <= 2,
+            "{reallocations} reallocations in steady state"
+        );
     }
 
     #[test]

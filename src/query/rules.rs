@@ -68,7 +68,11 @@ pub struct Decision {
 }
 
 impl Decision {
-    const NO_QUERY: Decision = Decision { query: false, threshold: None, expert_steps: 0 };
+    const NO_QUERY: Decision = Decision {
+        query: false,
+        threshold: None,
+        expert_steps: 0,
+    };
 }
 
 /// The paper's adaptive query rule (Algorithm 1; ALGORITHM_NOTES.md section 8).
@@ -138,7 +142,10 @@ impl AdaptiveQuantileRule {
     /// segments are the controller's business.
     pub fn decide(&mut self, uncertainty: f32) -> Decision {
         if uncertainty.is_nan() {
-            return Decision { threshold: self.threshold(), ..Decision::NO_QUERY };
+            return Decision {
+                threshold: self.threshold(),
+                ..Decision::NO_QUERY
+            };
         }
         let threshold = self.threshold();
         let query = threshold.is_some_and(|threshold| uncertainty > threshold);
@@ -149,7 +156,11 @@ impl AdaptiveQuantileRule {
             let removed = self.ranked.remove(oldest);
             debug_assert!(removed, "deque and tree out of sync");
         }
-        Decision { query, threshold, expert_steps: 0 }
+        Decision {
+            query,
+            threshold,
+            expert_steps: 0,
+        }
     }
 }
 
@@ -186,7 +197,9 @@ impl QueryRule {
 
     /// A validated adaptive rule.
     pub fn adaptive(n_r: usize, t_query: f64) -> Result<Self, QueryError> {
-        Ok(QueryRule::Adaptive(AdaptiveQuantileRule::new(n_r, t_query)?))
+        Ok(QueryRule::Adaptive(AdaptiveQuantileRule::new(
+            n_r, t_query,
+        )?))
     }
 
     /// Short lowercase name, as used in configs and logs.
@@ -205,7 +218,10 @@ impl QueryRule {
     }
 
     /// Rejects, up front, a rule that needs an uncertainty when the network provides none (plain output stage).
-    pub fn check_uncertainty_source(&self, network_has_uncertainty: bool) -> Result<(), QueryError> {
+    pub fn check_uncertainty_source(
+        &self,
+        network_has_uncertainty: bool,
+    ) -> Result<(), QueryError> {
         if self.needs_uncertainty() && !network_has_uncertainty {
             return Err(QueryError::NoUncertaintySource { rule: self.name() });
         }
@@ -216,7 +232,9 @@ impl QueryRule {
     pub fn validate(&self) -> Result<(), QueryError> {
         match self {
             QueryRule::Never | QueryRule::Greedy => Ok(()),
-            QueryRule::Bernoulli { p } if !(0.0..=1.0).contains(p) => Err(QueryError::ProbabilityOutOfRange(*p)),
+            QueryRule::Bernoulli { p } if !(0.0..=1.0).contains(p) => {
+                Err(QueryError::ProbabilityOutOfRange(*p))
+            }
             QueryRule::Bernoulli { .. } => Ok(()),
             QueryRule::Adaptive(rule) => validate_adaptive(rule.n_r, rule.t_query),
         }
@@ -248,7 +266,14 @@ impl QueryController {
         if segment_len == 0 {
             return Err(QueryError::EmptySegment);
         }
-        Ok(Self { rule, budget, budget_used: 0, segment_len, segment_left: 0, queries: 0 })
+        Ok(Self {
+            rule,
+            budget,
+            budget_used: 0,
+            segment_len,
+            segment_left: 0,
+            queries: 0,
+        })
     }
 
     /// The rule, e.g. to read the adaptive window.
@@ -282,16 +307,26 @@ impl QueryController {
     /// passing `None` to a rule that [`needs_uncertainty`](Self::needs_uncertainty) while budget is left (reject
     /// that configuration up front with [`QueryRule::check_uncertainty_source`]).
     pub fn decide<R: Rng + ?Sized>(&mut self, uncertainty: Option<f32>, rng: &mut R) -> Decision {
-        assert!(!self.expert_in_control(), "decide called during expert control; call record_expert_step instead");
+        assert!(
+            !self.expert_in_control(),
+            "decide called during expert control; call record_expert_step instead"
+        );
         if self.budget_left() == 0 {
             return Decision::NO_QUERY;
         }
         let rule_decision = match &mut self.rule {
             QueryRule::Never => Decision::NO_QUERY,
-            QueryRule::Greedy => Decision { query: true, ..Decision::NO_QUERY },
-            QueryRule::Bernoulli { p } => Decision { query: rng.random_bool(*p), ..Decision::NO_QUERY },
+            QueryRule::Greedy => Decision {
+                query: true,
+                ..Decision::NO_QUERY
+            },
+            QueryRule::Bernoulli { p } => Decision {
+                query: rng.random_bool(*p),
+                ..Decision::NO_QUERY
+            },
             QueryRule::Adaptive(rule) => {
-                let uncertainty = uncertainty.expect("the adaptive query rule needs an uncertainty at every decision");
+                let uncertainty = uncertainty
+                    .expect("the adaptive query rule needs an uncertainty at every decision");
                 rule.decide(uncertainty)
             }
         };
@@ -300,7 +335,10 @@ impl QueryController {
         }
         self.queries += 1;
         self.segment_left = self.segment_len.min(self.budget_left());
-        Decision { expert_steps: self.segment_left, ..rule_decision }
+        Decision {
+            expert_steps: self.segment_left,
+            ..rule_decision
+        }
     }
 
     /// Records one demonstrated transition: spends one unit of budget and advances the segment.
@@ -308,7 +346,10 @@ impl QueryController {
     /// # Panics
     /// If the expert is not in control (a caller bug: the budget would be spent outside a query).
     pub fn record_expert_step(&mut self) {
-        assert!(self.expert_in_control(), "record_expert_step called while the agent is in control");
+        assert!(
+            self.expert_in_control(),
+            "record_expert_step called while the agent is in control"
+        );
         self.segment_left -= 1;
         self.budget_used += 1;
     }
@@ -353,16 +394,34 @@ mod tests {
 
     #[test]
     fn invalid_parameters_are_rejected_with_errors() {
-        assert_eq!(AdaptiveQuantileRule::new(10, 1.5).unwrap_err(), QueryError::TQueryOutOfRange(1.5));
-        assert_eq!(AdaptiveQuantileRule::new(10, -0.1).unwrap_err(), QueryError::TQueryOutOfRange(-0.1));
-        assert!(matches!(AdaptiveQuantileRule::new(10, f64::NAN), Err(QueryError::TQueryOutOfRange(_))));
-        assert_eq!(AdaptiveQuantileRule::new(0, 0.3).unwrap_err(), QueryError::EmptyWindow);
-        assert_eq!(QueryRule::bernoulli(1.01).unwrap_err(), QueryError::ProbabilityOutOfRange(1.01));
+        assert_eq!(
+            AdaptiveQuantileRule::new(10, 1.5).unwrap_err(),
+            QueryError::TQueryOutOfRange(1.5)
+        );
+        assert_eq!(
+            AdaptiveQuantileRule::new(10, -0.1).unwrap_err(),
+            QueryError::TQueryOutOfRange(-0.1)
+        );
+        assert!(matches!(
+            AdaptiveQuantileRule::new(10, f64::NAN),
+            Err(QueryError::TQueryOutOfRange(_))
+        ));
+        assert_eq!(
+            AdaptiveQuantileRule::new(0, 0.3).unwrap_err(),
+            QueryError::EmptyWindow
+        );
+        assert_eq!(
+            QueryRule::bernoulli(1.01).unwrap_err(),
+            QueryError::ProbabilityOutOfRange(1.01)
+        );
         assert_eq!(
             QueryController::new(QueryRule::Bernoulli { p: -0.5 }, 10, 5).unwrap_err(),
             QueryError::ProbabilityOutOfRange(-0.5)
         );
-        assert_eq!(QueryController::new(QueryRule::Greedy, 10, 0).unwrap_err(), QueryError::EmptySegment);
+        assert_eq!(
+            QueryController::new(QueryRule::Greedy, 10, 0).unwrap_err(),
+            QueryError::EmptySegment
+        );
         let adaptive = QueryRule::adaptive(100, 0.3).unwrap();
         assert_eq!(
             adaptive.check_uncertainty_source(false).unwrap_err(),
@@ -371,7 +430,9 @@ mod tests {
         assert!(adaptive.check_uncertainty_source(true).is_ok());
         assert!(QueryRule::Greedy.check_uncertainty_source(false).is_ok());
         // Boundary values are valid.
-        assert!(AdaptiveQuantileRule::new(1, 0.0).is_ok() && AdaptiveQuantileRule::new(1, 1.0).is_ok());
+        assert!(
+            AdaptiveQuantileRule::new(1, 0.0).is_ok() && AdaptiveQuantileRule::new(1, 1.0).is_ok()
+        );
         assert!(QueryRule::bernoulli(0.0).is_ok() && QueryRule::bernoulli(1.0).is_ok());
     }
 
@@ -422,7 +483,10 @@ mod tests {
                 })
                 .count();
             let fraction = queries as f64 / steps as f64;
-            assert!((fraction - t_query).abs() <= 0.02, "t_query {t_query}: queried {fraction}");
+            assert!(
+                (fraction - t_query).abs() <= 0.02,
+                "t_query {t_query}: queried {fraction}"
+            );
         }
     }
 
@@ -442,12 +506,18 @@ mod tests {
     enum Actor {
         Agent,
         /// The expert, with the index of the query that handed it control.
-        Expert { query: usize },
+        Expert {
+            query: usize,
+        },
     }
 
     /// Drives a controller through episodes of the given lengths, as the training loop would, and returns who
     /// acted at every step of every episode.
-    fn simulate(controller: &mut QueryController, episode_lengths: &[usize], rng: &mut Pcg64) -> Vec<Vec<Actor>> {
+    fn simulate(
+        controller: &mut QueryController,
+        episode_lengths: &[usize],
+        rng: &mut Pcg64,
+    ) -> Vec<Vec<Actor>> {
         let mut query_index = 0;
         let mut current_query = None;
         episode_lengths
@@ -457,7 +527,9 @@ mod tests {
                     .map(|_| {
                         let in_control = controller.expert_in_control();
                         let expert_acts = in_control || {
-                            let uncertainty = controller.uncertainty_wanted_now().then(|| rng.random::<f32>());
+                            let uncertainty = controller
+                                .uncertainty_wanted_now()
+                                .then(|| rng.random::<f32>());
                             let decision = controller.decide(uncertainty, rng);
                             if decision.query {
                                 assert!(decision.expert_steps >= 1);
@@ -468,7 +540,9 @@ mod tests {
                         };
                         if expert_acts {
                             controller.record_expert_step();
-                            Actor::Expert { query: current_query.unwrap() }
+                            Actor::Expert {
+                                query: current_query.unwrap(),
+                            }
                         } else {
                             Actor::Agent
                         }
@@ -581,12 +655,19 @@ mod tests {
     #[test]
     fn adaptive_rule_is_not_evaluated_during_expert_control() {
         // Every uncertainty pushed is an agent decision: window length = agent decisions made (below N_r).
-        let mut controller = QueryController::new(QueryRule::adaptive(10_000, 0.5).unwrap(), 10_000, 5).unwrap();
+        let mut controller =
+            QueryController::new(QueryRule::adaptive(10_000, 0.5).unwrap(), 10_000, 5).unwrap();
         let mut rng = Pcg64::seed_from_u64(3);
         let episodes = simulate(&mut controller, &[200, 150, 300], &mut rng);
-        let agent_steps = episodes.iter().flatten().filter(|a| **a == Actor::Agent).count();
+        let agent_steps = episodes
+            .iter()
+            .flatten()
+            .filter(|a| **a == Actor::Agent)
+            .count();
         let decisions = agent_steps + controller.queries();
-        let QueryRule::Adaptive(rule) = controller.rule() else { unreachable!() };
+        let QueryRule::Adaptive(rule) = controller.rule() else {
+            unreachable!()
+        };
         assert!(controller.queries() > 0);
         assert_eq!(rule.window_len(), decisions);
     }
@@ -594,7 +675,8 @@ mod tests {
     #[test]
     fn bernoulli_rule_queries_at_its_probability() {
         let p = 0.2;
-        let mut controller = QueryController::new(QueryRule::bernoulli(p).unwrap(), usize::MAX, 1).unwrap();
+        let mut controller =
+            QueryController::new(QueryRule::bernoulli(p).unwrap(), usize::MAX, 1).unwrap();
         let mut rng = Pcg64::seed_from_u64(4);
         let decisions = 50_000;
         let mut queries = 0;
@@ -611,7 +693,8 @@ mod tests {
     #[test]
     #[should_panic(expected = "needs an uncertainty")]
     fn adaptive_rule_without_uncertainty_is_a_programming_error() {
-        let mut controller = QueryController::new(QueryRule::adaptive(10, 0.3).unwrap(), 10, 5).unwrap();
+        let mut controller =
+            QueryController::new(QueryRule::adaptive(10, 0.3).unwrap(), 10, 5).unwrap();
         let _ = controller.decide(None, &mut Pcg64::seed_from_u64(5));
     }
 }

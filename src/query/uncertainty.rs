@@ -26,7 +26,10 @@ const STACK_ACTIONS: usize = 32;
 /// # Panics
 /// If `heads` or `n_actions` is zero, or `q.len() != heads * n_actions` (a caller's shape bug, not user input).
 pub fn js_divergence(q: &[f32], heads: usize, n_actions: usize) -> f32 {
-    assert!(heads > 0 && n_actions > 0, "js_divergence needs at least one head and one action");
+    assert!(
+        heads > 0 && n_actions > 0,
+        "js_divergence needs at least one head and one action"
+    );
     assert_eq!(
         q.len(),
         heads * n_actions,
@@ -34,15 +37,28 @@ pub fn js_divergence(q: &[f32], heads: usize, n_actions: usize) -> f32 {
     );
     if n_actions <= STACK_ACTIONS {
         let mut mean_policy = [0.0f64; STACK_ACTIONS];
-        js_divergence_with_buffer(q, heads, n_actions, &mut mean_policy[..n_actions])
+        let mut exps = [0.0f64; STACK_ACTIONS];
+        js_divergence_with_buffers(
+            q,
+            heads,
+            &mut mean_policy[..n_actions],
+            &mut exps[..n_actions],
+        )
     } else {
         let mut mean_policy = vec![0.0f64; n_actions];
-        js_divergence_with_buffer(q, heads, n_actions, &mut mean_policy)
+        let mut exps = vec![0.0f64; n_actions];
+        js_divergence_with_buffers(q, heads, &mut mean_policy, &mut exps)
     }
 }
 
-/// Body of [`js_divergence`]; `mean_policy` is a zeroed scratch buffer of length `n_actions`.
-fn js_divergence_with_buffer(q: &[f32], heads: usize, n_actions: usize, mean_policy: &mut [f64]) -> f32 {
+/// Body of [`js_divergence`]. `mean_policy` (zeroed) and `exps` are scratch buffers of length `n_actions`.
+fn js_divergence_with_buffers(
+    q: &[f32],
+    heads: usize,
+    mean_policy: &mut [f64],
+    exps: &mut [f64],
+) -> f32 {
+    let n_actions = mean_policy.len();
     let inv_heads = 1.0 / heads as f64;
     let mut mean_head_entropy = 0.0f64;
     for head_q in q.chunks_exact(n_actions) {
@@ -50,21 +66,25 @@ fn js_divergence_with_buffer(q: &[f32], heads: usize, n_actions: usize, mean_pol
         // ln pi_a = z_a - ln s, hence H(pi) = ln s - sum_a pi_a z_a, with no log of a possibly-zero pi_a.
         let max_q = head_q.iter().fold(f32::NEG_INFINITY, |m, &v| m.max(v)) as f64;
         let mut sum_exp = 0.0f64;
-        for &value in head_q {
-            sum_exp += (value as f64 - max_q).exp();
+        let mut weighted_shift = 0.0f64;
+        for (&value, exp) in head_q.iter().zip(exps.iter_mut()) {
+            let shifted = value as f64 - max_q;
+            *exp = shifted.exp();
+            sum_exp += *exp;
+            weighted_shift += *exp * shifted;
         }
         let inv_sum = 1.0 / sum_exp;
-        let mut expected_shifted_q = 0.0f64;
-        for (&value, mean) in head_q.iter().zip(mean_policy.iter_mut()) {
-            let shifted = value as f64 - max_q;
-            let probability = shifted.exp() * inv_sum;
-            expected_shifted_q += probability * shifted;
-            *mean += probability * inv_heads;
+        for (&exp, mean) in exps.iter().zip(mean_policy.iter_mut()) {
+            *mean += exp * inv_sum * inv_heads;
         }
-        mean_head_entropy += (sum_exp.ln() - expected_shifted_q) * inv_heads;
+        mean_head_entropy += (sum_exp.ln() - weighted_shift * inv_sum) * inv_heads;
     }
     // 0 ln 0 = 0: actions whose mean probability underflowed contribute nothing.
-    let entropy_of_mean: f64 = mean_policy.iter().filter(|&&p| p > 0.0).map(|&p| -p * p.ln()).sum();
+    let entropy_of_mean: f64 = mean_policy
+        .iter()
+        .filter(|&&p| p > 0.0)
+        .map(|&p| -p * p.ln())
+        .sum();
     let divergence = entropy_of_mean - mean_head_entropy;
     if divergence.is_nan() {
         f32::NAN
@@ -88,7 +108,12 @@ fn js_divergence_with_buffer(q: &[f32], heads: usize, n_actions: usize, mean_pol
 ///
 /// # Panics
 /// If `features` and `sigma_w_row` differ in length (a caller's shape bug).
-pub fn noisy_variance(features: &[f32], sigma_w_row: &[f32], sigma_b: f32, exact_factorised: bool) -> f32 {
+pub fn noisy_variance(
+    features: &[f32],
+    sigma_w_row: &[f32],
+    sigma_b: f32,
+    exact_factorised: bool,
+) -> f32 {
     assert_eq!(
         features.len(),
         sigma_w_row.len(),
@@ -132,16 +157,21 @@ mod tests {
     fn naive_jsd(q: &[f32], heads: usize, n_actions: usize) -> f64 {
         let policies: Vec<Vec<f64>> = (0..heads)
             .map(|k| {
-                let row: Vec<f64> = q[k * n_actions..(k + 1) * n_actions].iter().map(|&v| v as f64).collect();
+                let row: Vec<f64> = q[k * n_actions..(k + 1) * n_actions]
+                    .iter()
+                    .map(|&v| v as f64)
+                    .collect();
                 let max = row.iter().cloned().fold(f64::NEG_INFINITY, f64::max);
                 let exps: Vec<f64> = row.iter().map(|v| (v - max).exp()).collect();
                 let total: f64 = exps.iter().sum();
                 exps.iter().map(|e| e / total).collect()
             })
             .collect();
-        let entropy = |p: &[f64]| -> f64 { p.iter().filter(|&&x| x > 0.0).map(|&x| -x * x.ln()).sum() };
-        let mean: Vec<f64> =
-            (0..n_actions).map(|a| policies.iter().map(|p| p[a]).sum::<f64>() / heads as f64).collect();
+        let entropy =
+            |p: &[f64]| -> f64 { p.iter().filter(|&&x| x > 0.0).map(|&x| -x * x.ln()).sum() };
+        let mean: Vec<f64> = (0..n_actions)
+            .map(|a| policies.iter().map(|p| p[a]).sum::<f64>() / heads as f64)
+            .collect();
         let mean_entropy = policies.iter().map(|p| entropy(p)).sum::<f64>() / heads as f64;
         entropy(&mean) - mean_entropy
     }
@@ -162,7 +192,10 @@ mod tests {
         let mild = [a0, a1, b0, b1];
         let u_opposed = js_divergence(&opposed, 2, 2);
         let u_mild = js_divergence(&mild, 2, 2);
-        assert!(u_opposed > u_mild, "opposed {u_opposed} should exceed mild {u_mild}");
+        assert!(
+            u_opposed > u_mild,
+            "opposed {u_opposed} should exceed mild {u_mild}"
+        );
         // Near-one-hot opposed heads reach the bound ln 2; the mild pair stays far below it.
         assert!((u_opposed as f64 - 2f64.ln()).abs() < 1e-6);
         assert!((u_mild as f64 - naive_jsd(&mild, 2, 2)).abs() < 1e-6);
@@ -197,7 +230,11 @@ mod tests {
 
     fn q_strategy() -> impl Strategy<Value = (usize, usize, Vec<f32>)> {
         (1usize..12, 1usize..8).prop_flat_map(|(heads, n_actions)| {
-            (Just(heads), Just(n_actions), proptest::collection::vec(-50.0f32..50.0, heads * n_actions))
+            (
+                Just(heads),
+                Just(n_actions),
+                proptest::collection::vec(-50.0f32..50.0, heads * n_actions),
+            )
         })
     }
 
@@ -260,7 +297,8 @@ mod tests {
                 let mut y = params.mu_b as f64 + params.sigma_b as f64 * out_noise;
                 for i in 0..params.features.len() {
                     let in_noise = scale(StandardNormal.sample(rng));
-                    let weight = params.mu_w[i] as f64 + params.sigma_w[i] as f64 * out_noise * in_noise;
+                    let weight =
+                        params.mu_w[i] as f64 + params.sigma_w[i] as f64 * out_noise * in_noise;
                     y += weight * params.features[i] as f64;
                 }
                 y
@@ -274,10 +312,16 @@ mod tests {
         let mut rng = Pcg64::seed_from_u64(2024);
         let empirical = sample_variance(&factorised_samples(&params, &mut rng));
         let exact = noisy_variance(&params.features, &params.sigma_w, params.sigma_b, true) as f64;
-        assert!((empirical / exact - 1.0).abs() < 0.02, "empirical {empirical} exact {exact}");
+        assert!(
+            (empirical / exact - 1.0).abs() < 0.02,
+            "empirical {empirical} exact {exact}"
+        );
         // The paper's independent-noise form is visibly different under factorised noise: the flag matters.
         let paper = noisy_variance(&params.features, &params.sigma_w, params.sigma_b, false) as f64;
-        assert!((empirical / paper - 1.0).abs() > 0.1, "empirical {empirical} paper {paper}");
+        assert!(
+            (empirical / paper - 1.0).abs() > 0.1,
+            "empirical {empirical} paper {paper}"
+        );
     }
 
     #[test]
@@ -298,7 +342,10 @@ mod tests {
             .collect();
         let empirical = sample_variance(&samples);
         let paper = noisy_variance(&params.features, &params.sigma_w, params.sigma_b, false) as f64;
-        assert!((empirical / paper - 1.0).abs() < 0.02, "empirical {empirical} paper {paper}");
+        assert!(
+            (empirical / paper - 1.0).abs() < 0.02,
+            "empirical {empirical} paper {paper}"
+        );
     }
 
     proptest! {
