@@ -1,4 +1,4 @@
-//! The two uncertainty measures of Active DQN (paper section 3.2 and 3.3; ALGORITHM_NOTES.md section 7).
+//! The two uncertainty measures of Active DQN (paper sections 4.3 and 4.4; ALGORITHM_NOTES.md section 7).
 //!
 //! - [`js_divergence`]: disagreement between the K heads of a bootstrapped Q-network. Each head's Q-values are
 //!   turned into a policy by a temperature-1 softmax, and the uncertainty is the generalised Jensen-Shannon
@@ -14,7 +14,7 @@ const STACK_ACTIONS: usize = 32;
 /// Generalised Jensen-Shannon divergence between the softmax policies of `heads` bootstrapped Q-heads.
 ///
 /// `q` holds the Q-values laid out `[head][action]` (length `heads * n_actions`). With
-/// `pi_k = softmax(Q_k)` at temperature 1 (paper section 3.2, no rescaling of Q, ALGORITHM_NOTES.md section 7):
+/// `pi_k = softmax(Q_k)` at temperature 1 (paper section 4.3, no rescaling of Q, ALGORITHM_NOTES.md section 7):
 ///
 /// `U_D = H(mean_k pi_k) - mean_k H(pi_k)`, natural-log entropies.
 ///
@@ -93,7 +93,7 @@ fn js_divergence_with_buffers(
     }
 }
 
-/// Predictive variance of one action's Q-value under a noisy output layer (paper section 3.3).
+/// Predictive variance of one action's Q-value under a noisy output layer (paper section 4.4).
 ///
 /// `features` is phi(s), the input of the noisy layer (the penultimate activations); `sigma_w_row` is the row
 /// `sigma_w[a, :]` and `sigma_b` the entry `sigma_b[a]` for the action `a` the agent would take (the caller picks
@@ -183,7 +183,7 @@ mod tests {
 
     #[test]
     fn paper_example_opposed_confident_heads_are_more_uncertain() {
-        // Paper section 3.2: heads giving (1, 0) and (0, 1) must be more uncertain than (0.5, 0.4) and (0.4, 0.5).
+        // Paper section 4.3: heads giving (1, 0) and (0, 1) must be more uncertain than (0.5, 0.4) and (0.4, 0.5).
         // Large logits give near-one-hot softmaxes; the second state uses logits whose softmax normalises
         // (0.5, 0.4) and (0.4, 0.5).
         let opposed = [20.0f32, 0.0, 0.0, 20.0];
