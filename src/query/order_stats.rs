@@ -50,7 +50,7 @@ impl Default for OrderStatistics {
 
 impl OrderStatistics {
     /// Seed of the priority generator used by [`OrderStatistics::new`].
-    pub const DEFAULT_SEED: u64 = 0x5EED_0F_B57;
+    pub const DEFAULT_SEED: u64 = 0x5EED_0F0B_5EED_0F0B;
 
     /// An empty multiset with the default priority seed.
     pub fn new() -> Self {

@@ -4,7 +4,7 @@
 //!   uncertainties in a deque (for eviction order) and an [`OrderStatistics`] tree (for ranks), and queries when
 //!   the current uncertainty exceeds the `floor(|D| * t_query)`-th largest recent one, so that about a fraction
 //!   `t_query` of agent decisions trigger a query whatever the scale of the uncertainty.
-//! - [`QueryRule`]: the four strategies compared in the paper (section 4.1; ALGORITHM_NOTES.md section 9): never
+//! - [`QueryRule`]: the four strategies compared in the paper (section 5.1; ALGORITHM_NOTES.md section 9): never
 //!   (DQN, DQfD), greedy (GDQN), Bernoulli (BDQN) and adaptive (ADQN, ADQNP).
 //! - [`QueryController`]: owns a rule, the budget and the current segment. The budget counts demonstrated
 //!   *transitions* and is never exceeded; one query hands the expert control for `segment_len` consecutive steps
@@ -174,7 +174,7 @@ fn validate_adaptive(n_r: usize, t_query: f64) -> Result<(), QueryError> {
     Ok(())
 }
 
-/// When the agent asks the expert (paper section 4.1; ALGORITHM_NOTES.md section 9).
+/// When the agent asks the expert (paper section 5.1; ALGORITHM_NOTES.md section 9).
 #[derive(Clone, Debug)]
 pub enum QueryRule {
     /// Never query (DQN, DQfD).
@@ -257,7 +257,7 @@ pub struct QueryController {
 }
 
 impl QueryController {
-    /// Default expert steps per query: the paper's "five consecutive expert demonstrations" (section 4.1).
+    /// Default expert steps per query: the paper's "five consecutive expert demonstrations" (section 5.1).
     pub const DEFAULT_SEGMENT_LEN: usize = 5;
 
     /// A controller spending at most `budget` demonstrated transitions, `segment_len` steps per query.

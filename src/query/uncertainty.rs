@@ -1,4 +1,4 @@
-//! The two uncertainty measures of Active DQN (paper section 3.2 and 3.3; ALGORITHM_NOTES.md section 7).
+//! The two uncertainty measures of Active DQN (paper sections 4.3 and 4.4; ALGORITHM_NOTES.md section 7).
 //!
 //! - [`js_divergence`]: disagreement between the K heads of a bootstrapped Q-network. Each head's Q-values are
 //!   turned into a policy by a temperature-1 softmax, and the uncertainty is the generalised Jensen-Shannon
@@ -14,7 +14,7 @@ const STACK_ACTIONS: usize = 32;
 /// Generalised Jensen-Shannon divergence between the softmax policies of `heads` bootstrapped Q-heads.
 ///
 /// `q` holds the Q-values laid out `[head][action]` (length `heads * n_actions`). With
-/// `pi_k = softmax(Q_k)` at temperature 1 (paper section 3.2, no rescaling of Q, ALGORITHM_NOTES.md section 7):
+/// `pi_k = softmax(Q_k)` at temperature 1 (paper section 4.3, no rescaling of Q, ALGORITHM_NOTES.md section 7):
 ///
 /// `U_D = H(mean_k pi_k) - mean_k H(pi_k)`, natural-log entropies.
 ///
@@ -37,20 +37,28 @@ pub fn js_divergence(q: &[f32], heads: usize, n_actions: usize) -> f32 {
     );
     if n_actions <= STACK_ACTIONS {
         let mut mean_policy = [0.0f64; STACK_ACTIONS];
-        js_divergence_with_buffer(q, heads, n_actions, &mut mean_policy[..n_actions])
+        let mut exps = [0.0f64; STACK_ACTIONS];
+        js_divergence_with_buffers(
+            q,
+            heads,
+            &mut mean_policy[..n_actions],
+            &mut exps[..n_actions],
+        )
     } else {
         let mut mean_policy = vec![0.0f64; n_actions];
-        js_divergence_with_buffer(q, heads, n_actions, &mut mean_policy)
+        let mut exps = vec![0.0f64; n_actions];
+        js_divergence_with_buffers(q, heads, &mut mean_policy, &mut exps)
     }
 }
 
-/// Body of [`js_divergence`]; `mean_policy` is a zeroed scratch buffer of length `n_actions`.
-fn js_divergence_with_buffer(
+/// Body of [`js_divergence`]. `mean_policy` (zeroed) and `exps` are scratch buffers of length `n_actions`.
+fn js_divergence_with_buffers(
     q: &[f32],
     heads: usize,
-    n_actions: usize,
     mean_policy: &mut [f64],
+    exps: &mut [f64],
 ) -> f32 {
+    let n_actions = mean_policy.len();
     let inv_heads = 1.0 / heads as f64;
     let mut mean_head_entropy = 0.0f64;
     for head_q in q.chunks_exact(n_actions) {
@@ -58,18 +66,18 @@ fn js_divergence_with_buffer(
         // ln pi_a = z_a - ln s, hence H(pi) = ln s - sum_a pi_a z_a, with no log of a possibly-zero pi_a.
         let max_q = head_q.iter().fold(f32::NEG_INFINITY, |m, &v| m.max(v)) as f64;
         let mut sum_exp = 0.0f64;
-        for &value in head_q {
-            sum_exp += (value as f64 - max_q).exp();
+        let mut weighted_shift = 0.0f64;
+        for (&value, exp) in head_q.iter().zip(exps.iter_mut()) {
+            let shifted = value as f64 - max_q;
+            *exp = shifted.exp();
+            sum_exp += *exp;
+            weighted_shift += *exp * shifted;
         }
         let inv_sum = 1.0 / sum_exp;
-        let mut expected_shifted_q = 0.0f64;
-        for (&value, mean) in head_q.iter().zip(mean_policy.iter_mut()) {
-            let shifted = value as f64 - max_q;
-            let probability = shifted.exp() * inv_sum;
-            expected_shifted_q += probability * shifted;
-            *mean += probability * inv_heads;
+        for (&exp, mean) in exps.iter().zip(mean_policy.iter_mut()) {
+            *mean += exp * inv_sum * inv_heads;
         }
-        mean_head_entropy += (sum_exp.ln() - expected_shifted_q) * inv_heads;
+        mean_head_entropy += (sum_exp.ln() - weighted_shift * inv_sum) * inv_heads;
     }
     // 0 ln 0 = 0: actions whose mean probability underflowed contribute nothing.
     let entropy_of_mean: f64 = mean_policy
@@ -85,7 +93,7 @@ fn js_divergence_with_buffer(
     }
 }
 
-/// Predictive variance of one action's Q-value under a noisy output layer (paper section 3.3).
+/// Predictive variance of one action's Q-value under a noisy output layer (paper section 4.4).
 ///
 /// `features` is phi(s), the input of the noisy layer (the penultimate activations); `sigma_w_row` is the row
 /// `sigma_w[a, :]` and `sigma_b` the entry `sigma_b[a]` for the action `a` the agent would take (the caller picks
@@ -175,7 +183,7 @@ mod tests {
 
     #[test]
     fn paper_example_opposed_confident_heads_are_more_uncertain() {
-        // Paper section 3.2: heads giving (1, 0) and (0, 1) must be more uncertain than (0.5, 0.4) and (0.4, 0.5).
+        // Paper section 4.3: heads giving (1, 0) and (0, 1) must be more uncertain than (0.5, 0.4) and (0.4, 0.5).
         // Large logits give near-one-hot softmaxes; the second state uses logits whose softmax normalises
         // (0.5, 0.4) and (0.4, 0.5).
         let opposed = [20.0f32, 0.0, 0.0, 20.0];
