@@ -5,6 +5,8 @@
 //! comes from [`crate::rng::NumpyRng`], a bit-exact port of NumPy's `PCG64(SeedSequence(seed))`.
 //! `../conformance` traces recorded from Gymnasium are the test (see [`conformance`]).
 
+pub mod lunar_lander;
+
 use thiserror::Error;
 
 /// What one environment step returns (Gymnasium's 5-tuple without `info`).
@@ -93,6 +95,9 @@ pub fn known_ids() -> Vec<&'static str> {
 
 /// Builds an environment by Gymnasium id.
 pub fn make(id: &str) -> Result<Box<dyn Env>, EnvError> {
-    // Filled in by the environment implementations.
-    Err(EnvError::UnknownId { id: id.to_string() })
+    match id {
+        "LunarLander-v2" => Ok(Box::new(lunar_lander::LunarLander::new("LunarLander-v2"))),
+        "LunarLander-v3" => Ok(Box::new(lunar_lander::LunarLander::new("LunarLander-v3"))),
+        _ => Err(EnvError::UnknownId { id: id.to_string() }),
+    }
 }
