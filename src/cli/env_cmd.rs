@@ -1,10 +1,216 @@
-//! `arld env ...`: conformance checks against Gymnasium traces and random-policy rollouts.
-use clap::Subcommand;
+//! `arld env ...`: conformance checks against Gymnasium traces, random-policy rollouts, the registry.
+//!
+//! `check` streams trace files through [`arld::env::conformance`] and prints one table row per environment
+//! and file; `rollout` plays a policy for a number of seeded episodes and prints return and length
+//! statistics; `list` prints the registered environments.
+
+use anyhow::{Context, bail};
+use arld::env::conformance::{EnvReport, check_file};
+use arld::env::{self, Env};
+use arld::rng::NumpyRng;
+use clap::{Subcommand, ValueEnum};
+use rand::Rng;
+use std::path::PathBuf;
 use std::process::ExitCode;
 
 #[derive(Subcommand)]
-pub enum EnvCommand {}
+pub enum EnvCommand {
+    /// Replay Gymnasium conformance traces and report how closely each environment follows them.
+    ///
+    /// Each FILE holds JSON lines as recorded from Gymnasium (a meta line, then per episode a start line
+    /// and its step lines). Every episode is reset with its seed (or set to its recorded state), the
+    /// recorded actions are replayed, and observations, rewards and episode ends are compared. Classic
+    /// control must stay within 1e-6 on every observation and reward; LunarLander within 1e-4 on the
+    /// seeded episodes, with at most 10% of the long heuristic episodes allowed to drift. Exits with a
+    /// non-zero status if any environment fails or a file cannot be read or parsed.
+    Check {
+        /// Trace files (JSON lines).
+        #[arg(required = true, value_name = "FILE")]
+        files: Vec<PathBuf>,
+    },
+    /// Play a policy for several seeded episodes and print the mean and standard deviation of return and length.
+    ///
+    /// Episode i is reset with seed SEED+i; the random policy draws its actions from a generator seeded
+    /// with SEED, so a run is reproducible. Standard deviations are population ones (NumPy's `np.std`).
+    Rollout {
+        /// Gymnasium environment id, e.g. CartPole-v1 (see `arld env list`).
+        #[arg(long = "env", value_name = "ID")]
+        env_id: String,
+        /// Policy that chooses the actions.
+        #[arg(long, value_enum, default_value_t = RolloutPolicy::Random)]
+        policy: RolloutPolicy,
+        /// Number of episodes.
+        #[arg(long, default_value_t = 100, value_name = "N")]
+        episodes: u64,
+        /// Base seed: episode i resets with SEED+i, and the policy's generator is seeded with SEED.
+        #[arg(long, default_value_t = 0, value_name = "S")]
+        seed: u64,
+        /// Print one JSON object instead of text.
+        #[arg(long)]
+        json: bool,
+    },
+    /// List the registered environments with their sizes, time limits and solve thresholds.
+    List,
+}
+
+/// Policies `rollout` can play.
+#[derive(Clone, Copy, Debug, ValueEnum)]
+pub enum RolloutPolicy {
+    /// Uniformly random actions.
+    Random,
+}
 
 pub fn run(cmd: EnvCommand) -> anyhow::Result<ExitCode> {
-    match cmd {}
+    match cmd {
+        EnvCommand::Check { files } => check(&files),
+        EnvCommand::Rollout {
+            env_id,
+            policy,
+            episodes,
+            seed,
+            json,
+        } => rollout(&env_id, policy, episodes, seed, json),
+        EnvCommand::List => {
+            println!(
+                "{:<16} {:>7} {:>7} {:>9} {:>15}",
+                "id", "obs dim", "actions", "max steps", "solve threshold"
+            );
+            for spec in env::SPECS.iter() {
+                println!(
+                    "{:<16} {:>7} {:>7} {:>9} {:>15}",
+                    spec.id,
+                    spec.obs_dim,
+                    spec.n_actions,
+                    spec.max_episode_steps,
+                    spec.solve_threshold
+                );
+            }
+            Ok(ExitCode::SUCCESS)
+        }
+    }
+}
+
+fn check(files: &[PathBuf]) -> anyhow::Result<ExitCode> {
+    let mut rows: Vec<(String, EnvReport)> = Vec::new();
+    for file in files {
+        let reports = check_file(file)?;
+        let name = file
+            .file_name()
+            .map(|name| name.to_string_lossy().into_owned())
+            .unwrap_or_else(|| file.display().to_string());
+        rows.extend(reports.into_iter().map(|report| (name.clone(), report)));
+    }
+    println!(
+        "{:<24} {:<15} {:>8} {:>6} {:>8} {:>7} {:>11} {:>11}  {:<6} first divergence",
+        "file",
+        "env",
+        "episodes",
+        "exact",
+        "diverged",
+        "steps",
+        "max |dobs|",
+        "max |drew|",
+        "result"
+    );
+    let mut all_passed = true;
+    for (file, report) in &rows {
+        let passed = report.passed();
+        all_passed &= passed;
+        let first = report
+            .first_divergence
+            .as_ref()
+            .map_or_else(|| "-".to_string(), ToString::to_string);
+        println!(
+            "{:<24} {:<15} {:>8} {:>6} {:>8} {:>7} {:>11.3e} {:>11.3e}  {:<6} {}",
+            file,
+            report.env,
+            report.episodes,
+            report.episodes_exact,
+            report.episodes_diverged(),
+            report.steps,
+            report.max_obs_deviation,
+            report.max_reward_deviation,
+            if passed { "PASS" } else { "FAIL" },
+            first
+        );
+    }
+    if rows.is_empty() {
+        bail!("the trace files contain no episodes");
+    }
+    Ok(if all_passed {
+        ExitCode::SUCCESS
+    } else {
+        ExitCode::FAILURE
+    })
+}
+
+/// Mean and population standard deviation.
+fn mean_std(values: &[f64]) -> (f64, f64) {
+    let n = values.len() as f64;
+    let mean = values.iter().sum::<f64>() / n;
+    let variance = values.iter().map(|v| (v - mean) * (v - mean)).sum::<f64>() / n;
+    (mean, variance.sqrt())
+}
+
+fn rollout(
+    env_id: &str,
+    policy: RolloutPolicy,
+    episodes: u64,
+    seed: u64,
+    json: bool,
+) -> anyhow::Result<ExitCode> {
+    if episodes == 0 {
+        bail!("--episodes must be at least 1");
+    }
+    let last_seed = seed
+        .checked_add(episodes - 1)
+        .context("--seed plus --episodes overflows the 64-bit seed range")?;
+    let mut env: Box<dyn Env> = env::make(env_id)?;
+    let mut action_rng = NumpyRng::new(seed);
+    let mut returns = Vec::with_capacity(episodes as usize);
+    let mut lengths = Vec::with_capacity(episodes as usize);
+    for episode in 0..episodes {
+        env.reset(Some(seed + episode));
+        let mut episode_return = 0.0;
+        let mut length = 0usize;
+        loop {
+            let action = match policy {
+                RolloutPolicy::Random => action_rng.random_range(0..env.n_actions()),
+            };
+            let step = env.step(action)?;
+            episode_return += step.reward;
+            length += 1;
+            if step.terminated || step.truncated {
+                break;
+            }
+        }
+        returns.push(episode_return);
+        lengths.push(length as f64);
+    }
+    let (return_mean, return_std) = mean_std(&returns);
+    let (length_mean, length_std) = mean_std(&lengths);
+    let policy_name = match policy {
+        RolloutPolicy::Random => "random",
+    };
+    if json {
+        let summary = serde_json::json!({
+            "env": env.id(),
+            "policy": policy_name,
+            "episodes": episodes,
+            "seeds": [seed, last_seed],
+            "return_mean": return_mean,
+            "return_std": return_std,
+            "length_mean": length_mean,
+            "length_std": length_std,
+        });
+        println!("{summary}");
+    } else {
+        println!(
+            "{} policy={policy_name} episodes={episodes} seeds={seed}..={last_seed}",
+            env.id()
+        );
+        println!("return  {return_mean:.3} +- {return_std:.3}");
+        println!("length  {length_mean:.3} +- {length_std:.3}");
+    }
+    Ok(ExitCode::SUCCESS)
 }

@@ -24,7 +24,7 @@ use wrapped2d::b2;
 use wrapped2d::dynamics::world::callbacks::ContactAccess;
 use wrapped2d::user_data::{UserData, UserDataTypes};
 
-use super::{Env, EnvError, Step};
+use super::{Env, EnvError, EpisodeClock, Step};
 use crate::rng::NumpyRng;
 
 // Constants of Gymnasium's lunar_lander.py (pixels unless stated; SCALE converts pixels to metres).
@@ -168,7 +168,11 @@ impl Scene {
         }
         let smooth_y: Vec<f64> = (0..CHUNKS)
             .map(|i| {
-                let left = if i == 0 { height[CHUNKS] } else { height[i - 1] };
+                let left = if i == 0 {
+                    height[CHUNKS]
+                } else {
+                    height[i - 1]
+                };
                 0.33 * (left + height[i] + height[i + 1])
             })
             .collect();
@@ -235,7 +239,8 @@ impl Scene {
             };
             let leg = world.create_body_with(&leg_def, BodyRole::Leg(leg_index));
             {
-                let shape = b2::PolygonShape::new_box((LEG_W / SCALE) as f32, (LEG_H / SCALE) as f32);
+                let shape =
+                    b2::PolygonShape::new_box((LEG_W / SCALE) as f32, (LEG_H / SCALE) as f32);
                 let mut def = b2::FixtureDef {
                     density: 1.0,
                     restitution: 0.0,
@@ -327,8 +332,7 @@ impl Scene {
                 .apply_linear_impulse(&impulse, &impulse_pos, true);
         }
 
-        self.world
-            .step((1.0 / FPS) as f32, 6 * 30, 2 * 30);
+        self.world.step((1.0 / FPS) as f32, 6 * 30, 2 * 30);
         (m_power, s_power)
     }
 
@@ -368,7 +372,8 @@ impl Scene {
 /// The shaping potential of a state: closer to the pad, slower, more upright and with legs down is
 /// better (Gymnasium's `shaping`; the reward is its change plus fuel costs and terminal bonuses).
 fn shaping(s: &[f64; OBS_DIM]) -> f64 {
-    -100.0 * (s[0] * s[0] + s[1] * s[1]).sqrt() - 100.0 * (s[2] * s[2] + s[3] * s[3]).sqrt()
+    -100.0 * (s[0] * s[0] + s[1] * s[1]).sqrt()
+        - 100.0 * (s[2] * s[2] + s[3] * s[3]).sqrt()
         - 100.0 * s[4].abs()
         + 10.0 * s[6]
         + 10.0 * s[7]
@@ -380,9 +385,8 @@ pub struct LunarLander {
     rng: Option<NumpyRng>,
     scene: Option<Scene>,
     prev_shaping: f64,
-    elapsed_steps: usize,
-    /// An episode is running: reset was called and no terminal or truncated step has happened since.
-    running: bool,
+    /// Running flag and time limit.
+    clock: EpisodeClock,
 }
 
 // SAFETY: `wrapped2d::World` holds raw pointers to a C++ `b2World` (and its bodies) that this struct
@@ -401,22 +405,34 @@ impl LunarLander {
             rng: None,
             scene: None,
             prev_shaping: 0.0,
-            elapsed_steps: 0,
-            running: false,
+            clock: EpisodeClock::new(id, N_ACTIONS, MAX_EPISODE_STEPS),
         }
     }
 
     /// One frame of Gymnasium's `step` without the time limit: engines, physics, observation, reward.
     fn frame(&mut self, action: usize, first: bool) -> (Vec<f32>, f64, bool) {
-        let rng = self.rng.as_mut().expect("frame() runs only after reset() set the generator");
-        let scene = self.scene.as_mut().expect("frame() runs only after reset() built the world");
+        let rng = self
+            .rng
+            .as_mut()
+            .expect("frame() runs only after reset() set the generator");
+        let scene = self
+            .scene
+            .as_mut()
+            .expect("frame() runs only after reset() built the world");
         // Two dispersion draws on every frame, whether or not an engine fires.
-        let dispersion = [rng.uniform(-1.0, 1.0) / SCALE, rng.uniform(-1.0, 1.0) / SCALE];
+        let dispersion = [
+            rng.uniform(-1.0, 1.0) / SCALE,
+            rng.uniform(-1.0, 1.0) / SCALE,
+        ];
         let (m_power, s_power) = scene.advance(action, dispersion);
         let state = scene.state();
 
         let shaping_now = shaping(&state);
-        let mut reward = if first { 0.0 } else { shaping_now - self.prev_shaping };
+        let mut reward = if first {
+            0.0
+        } else {
+            shaping_now - self.prev_shaping
+        };
         self.prev_shaping = shaping_now;
         reward -= m_power * 0.30;
         reward -= s_power * 0.03;
@@ -447,30 +463,16 @@ impl Env for LunarLander {
         // Drop the old world before building the new one (Gymnasium destroys, then creates).
         self.scene = None;
         self.scene = Some(Scene::build(rng));
-        self.elapsed_steps = 0;
-        self.running = true;
+        self.clock.start();
         // Gymnasium's reset returns the observation of one no-op step (outside the time limit count).
         let (obs, _, _) = self.frame(0, true);
         obs
     }
 
     fn step(&mut self, action: usize) -> Result<Step, EnvError> {
-        if action >= N_ACTIONS {
-            return Err(EnvError::ActionOutOfRange {
-                env: self.id,
-                action,
-                n_actions: N_ACTIONS,
-            });
-        }
-        if !self.running {
-            return Err(EnvError::NeedsReset { env: self.id });
-        }
+        self.clock.check_step(action)?;
         let (obs, reward, terminated) = self.frame(action, false);
-        self.elapsed_steps += 1;
-        let truncated = !terminated && self.elapsed_steps >= MAX_EPISODE_STEPS;
-        if terminated || truncated {
-            self.running = false;
-        }
+        let truncated = self.clock.finish_step(terminated);
         Ok(Step {
             obs,
             reward,

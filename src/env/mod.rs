@@ -5,9 +5,19 @@
 //! comes from [`crate::rng::NumpyRng`], a bit-exact port of NumPy's `PCG64(SeedSequence(seed))`.
 //! `../conformance` traces recorded from Gymnasium are the test (see [`conformance`]).
 
-pub mod lunar_lander;
-
+use crate::rng::NumpyRng;
 use thiserror::Error;
+
+pub mod acrobot;
+pub mod cartpole;
+pub mod conformance;
+pub mod lunar_lander;
+pub mod mountain_car;
+
+pub use acrobot::Acrobot;
+pub use cartpole::CartPole;
+pub use lunar_lander::LunarLander;
+pub use mountain_car::MountainCar;
 
 /// What one environment step returns (Gymnasium's 5-tuple without `info`).
 #[derive(Debug, Clone, PartialEq)]
@@ -18,7 +28,8 @@ pub struct Step {
     pub reward: f64,
     /// The episode reached a terminal state of the task.
     pub terminated: bool,
-    /// The episode was cut by the time limit (and did not terminate).
+    /// The episode was cut by the time limit. As in Gymnasium's `TimeLimit` wrapper this is set on the
+    /// limit step even if the episode also terminated on it (learners should let `terminated` win).
     pub truncated: bool,
 }
 
@@ -39,12 +50,17 @@ pub enum EnvError {
     NeedsReset { env: &'static str },
     #[error("{env}: {msg}")]
     BadState { env: &'static str, msg: String },
+    #[error("environment '{id}' is registered but not available in this build: {reason}")]
+    Unavailable {
+        id: &'static str,
+        reason: &'static str,
+    },
 }
 
 /// A Gymnasium-style episodic environment with a discrete action space.
 ///
 /// The time limit is part of the environment (as Gymnasium's `TimeLimit` wrapper is part of `gym.make`):
-/// `step` sets `truncated` when the limit is reached without termination.
+/// `step` sets `truncated` when the limit is reached (on the limit step, also if it terminated there).
 pub trait Env: Send {
     /// Starts an episode. `Some(seed)` reseeds the generator exactly as `reset(seed=seed)` does in Gymnasium;
     /// `None` continues the current generator (the first unseeded reset seeds from OS entropy, as Gymnasium).
@@ -81,23 +97,175 @@ pub struct EnvSpec {
     pub solve_threshold: f64,
 }
 
+/// Static facts of every registered environment, in registry order (Gymnasium's registrations).
+pub const SPECS: [EnvSpec; 6] = [
+    EnvSpec {
+        id: "CartPole-v0",
+        obs_dim: 4,
+        n_actions: 2,
+        max_episode_steps: 200,
+        solve_threshold: 195.0,
+    },
+    EnvSpec {
+        id: "CartPole-v1",
+        obs_dim: 4,
+        n_actions: 2,
+        max_episode_steps: 500,
+        solve_threshold: 475.0,
+    },
+    EnvSpec {
+        id: "Acrobot-v1",
+        obs_dim: 6,
+        n_actions: 3,
+        max_episode_steps: 500,
+        solve_threshold: -100.0,
+    },
+    EnvSpec {
+        id: "MountainCar-v0",
+        obs_dim: 2,
+        n_actions: 3,
+        max_episode_steps: 200,
+        solve_threshold: -110.0,
+    },
+    EnvSpec {
+        id: "LunarLander-v2",
+        obs_dim: 8,
+        n_actions: 4,
+        max_episode_steps: 1000,
+        solve_threshold: 200.0,
+    },
+    EnvSpec {
+        id: "LunarLander-v3",
+        obs_dim: 8,
+        n_actions: 4,
+        max_episode_steps: 1000,
+        solve_threshold: 200.0,
+    },
+];
+
 /// Every registered environment id.
 pub fn known_ids() -> Vec<&'static str> {
-    vec![
-        "CartPole-v0",
-        "CartPole-v1",
-        "Acrobot-v1",
-        "MountainCar-v0",
-        "LunarLander-v2",
-        "LunarLander-v3",
-    ]
+    SPECS.iter().map(|spec| spec.id).collect()
+}
+
+/// The static facts of a registered environment, or `UnknownId`.
+pub fn spec(id: &str) -> Result<&'static EnvSpec, EnvError> {
+    SPECS
+        .iter()
+        .find(|spec| spec.id == id)
+        .ok_or_else(|| EnvError::UnknownId { id: id.to_string() })
 }
 
 /// Builds an environment by Gymnasium id.
 pub fn make(id: &str) -> Result<Box<dyn Env>, EnvError> {
-    match id {
-        "LunarLander-v2" => Ok(Box::new(lunar_lander::LunarLander::new("LunarLander-v2"))),
-        "LunarLander-v3" => Ok(Box::new(lunar_lander::LunarLander::new("LunarLander-v3"))),
+    let spec = spec(id)?;
+    match spec.id {
+        "CartPole-v0" | "CartPole-v1" => Ok(Box::new(CartPole::new(spec.id))),
+        "Acrobot-v1" => Ok(Box::new(Acrobot::new())),
+        "MountainCar-v0" => Ok(Box::new(MountainCar::new())),
+        "LunarLander-v2" | "LunarLander-v3" => Ok(Box::new(LunarLander::new(spec.id))),
         _ => Err(EnvError::UnknownId { id: id.to_string() }),
     }
+}
+
+/// The seeding rule every environment shares (Gymnasium's `Env.reset(seed=...)` and `np_random`).
+///
+/// `Some(seed)` builds a fresh `np.random.default_rng(seed)`; `None` keeps drawing from the current generator,
+/// and only the very first unseeded reset takes OS entropy, as Gymnasium does.
+#[derive(Debug, Clone, Default)]
+pub struct EnvRng {
+    rng: Option<NumpyRng>,
+}
+
+impl EnvRng {
+    /// Applies the reset seed and returns the generator to draw the initial state from.
+    pub fn reseed(&mut self, seed: Option<u64>) -> &mut NumpyRng {
+        match seed {
+            Some(seed) => self.rng.insert(NumpyRng::new(seed)),
+            None => self.rng.get_or_insert_with(NumpyRng::from_entropy),
+        }
+    }
+}
+
+/// Step bookkeeping every environment shares: the running flag and Gymnasium's `TimeLimit` counter.
+#[derive(Debug, Clone)]
+pub struct EpisodeClock {
+    env: &'static str,
+    n_actions: usize,
+    max_episode_steps: usize,
+    elapsed_steps: usize,
+    running: bool,
+}
+
+impl EpisodeClock {
+    pub fn new(env: &'static str, n_actions: usize, max_episode_steps: usize) -> Self {
+        Self {
+            env,
+            n_actions,
+            max_episode_steps,
+            elapsed_steps: 0,
+            running: false,
+        }
+    }
+
+    /// A new episode starts (reset or state overwrite).
+    #[inline]
+    pub fn start(&mut self) {
+        self.elapsed_steps = 0;
+        self.running = true;
+    }
+
+    /// Checks that a step with `action` may run now.
+    #[inline]
+    pub fn check_step(&self, action: usize) -> Result<(), EnvError> {
+        if !self.running {
+            return Err(EnvError::NeedsReset { env: self.env });
+        }
+        if action >= self.n_actions {
+            return Err(EnvError::ActionOutOfRange {
+                env: self.env,
+                action,
+                n_actions: self.n_actions,
+            });
+        }
+        Ok(())
+    }
+
+    /// Counts a finished step; returns `truncated` (`elapsed >= max_episode_steps`, as `TimeLimit` does).
+    /// After a terminal or truncated step the episode needs a reset.
+    #[inline]
+    pub fn finish_step(&mut self, terminated: bool) -> bool {
+        self.elapsed_steps += 1;
+        let truncated = self.elapsed_steps >= self.max_episode_steps;
+        if terminated || truncated {
+            self.running = false;
+        }
+        truncated
+    }
+
+    /// Steps taken in the current episode.
+    pub fn elapsed_steps(&self) -> usize {
+        self.elapsed_steps
+    }
+
+    pub fn max_episode_steps(&self) -> usize {
+        self.max_episode_steps
+    }
+}
+
+/// Checks a state vector given to `set_state`: right length, finite values.
+pub(crate) fn check_state(env: &'static str, state: &[f64], len: usize) -> Result<(), EnvError> {
+    if state.len() != len {
+        return Err(EnvError::BadState {
+            env,
+            msg: format!("the state has {len} values, got {}", state.len()),
+        });
+    }
+    if let Some(bad) = state.iter().find(|value| !value.is_finite()) {
+        return Err(EnvError::BadState {
+            env,
+            msg: format!("state values must be finite, got {bad}"),
+        });
+    }
+    Ok(())
 }

@@ -1,0 +1,663 @@
+//! Conformance checking: replays Gymnasium-recorded traces against our environments.
+//!
+//! A trace file (format in `conformance/README.md`) is JSON lines: a `meta` line, then per episode a `start`
+//! line (environment id, case, seed, the first observation, for the `set` case the float64 state to set)
+//! followed by its `step` lines (action, observation, reward, terminated, truncated). [`check_reader`] streams
+//! such a file line by line: it resets one environment per id the way the case prescribes, replays the
+//! recorded actions and compares what comes back. Per environment it fills an [`EnvReport`]: episodes,
+//! episodes reproduced bit for bit, largest observation and reward deviations, the first divergence and the
+//! verdict of the environment's [`Tolerance`].
+//!
+//! Broken input (unreadable file, malformed JSON, step without start, actions out of range, unknown ids) is
+//! a [`ConformanceError`] that names the file and line; a mismatch between our environment and the trace is
+//! not an error but a divergence in the report.
+
+use super::{Env, EnvError, make};
+use serde::Deserialize;
+use std::collections::HashMap;
+use std::fmt;
+use std::io::BufRead;
+use std::path::Path;
+use thiserror::Error;
+
+/// How closely an environment must follow its trace.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Tolerance {
+    /// Largest allowed absolute deviation of any observation component and of the reward.
+    pub abs: f64,
+    /// Fraction of `heuristic` episodes allowed to diverge (`seed` and `set` episodes must all match).
+    pub heuristic_divergence_allowed: f64,
+}
+
+impl Tolerance {
+    /// Classic control is float64 arithmetic in the same order as Gymnasium: 1e-6 on everything, no divergence.
+    pub const CLASSIC_CONTROL: Tolerance = Tolerance {
+        abs: 1e-6,
+        heuristic_divergence_allowed: 0.0,
+    };
+    /// Box2D runs in float32 and long episodes are chaotic: 1e-4, and up to 10% of the long heuristic
+    /// episodes may drift away (conformance README).
+    pub const BOX2D: Tolerance = Tolerance {
+        abs: 1e-4,
+        heuristic_divergence_allowed: 0.1,
+    };
+
+    /// The tolerance that applies to an environment id.
+    pub fn for_env(id: &str) -> Tolerance {
+        if id.starts_with("LunarLander") {
+            Self::BOX2D
+        } else {
+            Self::CLASSIC_CONTROL
+        }
+    }
+}
+
+/// Where and how an environment first left its trace.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Divergence {
+    /// Episode number within this environment's episodes in the file (from 0).
+    pub episode: usize,
+    /// The trace case (`seed`, `set`, `heuristic`) and its seed.
+    pub case: String,
+    pub seed: u64,
+    /// Step of the episode (0 is the reset observation; steps count from 1 as in the trace's `t`).
+    pub step: usize,
+    /// 1-based line of the trace file.
+    pub line: usize,
+    /// What differed.
+    pub what: String,
+}
+
+impl fmt::Display for Divergence {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(
+            f,
+            "episode {} ({} {}), step {} (line {}): {}",
+            self.episode, self.case, self.seed, self.step, self.line, self.what
+        )
+    }
+}
+
+/// Replay result for one environment of one trace file.
+#[derive(Debug, Clone, PartialEq)]
+pub struct EnvReport {
+    pub env: String,
+    pub tolerance: Tolerance,
+    /// Episodes replayed.
+    pub episodes: usize,
+    /// Episodes reproduced bit for bit (every observation, reward, flag and the length).
+    pub episodes_exact: usize,
+    /// Episodes that left the tolerance somewhere (deviation, flags or length), by case.
+    pub diverged_by_case: Vec<(String, usize, usize)>,
+    /// Largest absolute observation deviation over all compared observations.
+    pub max_obs_deviation: f64,
+    /// Largest absolute reward deviation over all compared steps.
+    pub max_reward_deviation: f64,
+    /// Steps compared.
+    pub steps: usize,
+    pub first_divergence: Option<Divergence>,
+}
+
+impl EnvReport {
+    fn new(env: &str) -> Self {
+        Self {
+            env: env.to_string(),
+            tolerance: Tolerance::for_env(env),
+            episodes: 0,
+            episodes_exact: 0,
+            diverged_by_case: Vec::new(),
+            max_obs_deviation: 0.0,
+            max_reward_deviation: 0.0,
+            steps: 0,
+            first_divergence: None,
+        }
+    }
+
+    /// Episodes that diverged, all cases together.
+    pub fn episodes_diverged(&self) -> usize {
+        self.diverged_by_case
+            .iter()
+            .map(|(_, diverged, _)| diverged)
+            .sum()
+    }
+
+    /// The verdict: no `seed`/`set` episode diverged, and the `heuristic` divergences stay within the allowance.
+    pub fn passed(&self) -> bool {
+        self.diverged_by_case
+            .iter()
+            .all(|(case, diverged, episodes)| {
+                if case == "heuristic" {
+                    *diverged as f64
+                        <= self.tolerance.heuristic_divergence_allowed * *episodes as f64
+                } else {
+                    *diverged == 0
+                }
+            })
+    }
+
+    fn case_counts(&mut self, case: &str) -> &mut (String, usize, usize) {
+        let index = match self.diverged_by_case.iter().position(|(c, _, _)| c == case) {
+            Some(index) => index,
+            None => {
+                self.diverged_by_case.push((case.to_string(), 0, 0));
+                self.diverged_by_case.len() - 1
+            }
+        };
+        &mut self.diverged_by_case[index]
+    }
+}
+
+/// Broken trace input (as opposed to an environment that does not match it).
+#[derive(Debug, Error)]
+pub enum ConformanceError {
+    // The underlying errors are part of the message (not `#[source]`), so chains print them once.
+    #[error("cannot read {file}: {error}")]
+    Io { file: String, error: std::io::Error },
+    #[error("{file}:{line}: malformed trace line: {msg}")]
+    Malformed {
+        file: String,
+        line: usize,
+        msg: String,
+    },
+    #[error("{file}:{line}: {error}")]
+    Env {
+        file: String,
+        line: usize,
+        error: EnvError,
+    },
+}
+
+/// One line of a trace file. Unknown fields (e.g. `action_seed`, `state` on steps) are ignored.
+#[derive(Debug, Deserialize)]
+#[serde(tag = "kind", rename_all = "lowercase")]
+enum TraceLine {
+    Meta {},
+    Start {
+        env: String,
+        case: String,
+        seed: u64,
+        n_actions: usize,
+        max_episode_steps: usize,
+        obs: Vec<f64>,
+        state: Option<Vec<f64>>,
+    },
+    Step {
+        env: String,
+        t: usize,
+        action: usize,
+        obs: Vec<f64>,
+        reward: f64,
+        terminated: bool,
+        truncated: bool,
+    },
+}
+
+/// The episode being replayed.
+struct Episode {
+    env: String,
+    case: String,
+    seed: u64,
+    /// Index in this environment's episodes.
+    index: usize,
+    /// Last step number seen (0 after `start`).
+    t: usize,
+    /// Our environment ended (or could not continue) before the trace did.
+    ended: bool,
+    diverged: bool,
+    exact: bool,
+}
+
+/// Replays a trace file. See [`check_reader`].
+pub fn check_file(path: &Path) -> Result<Vec<EnvReport>, ConformanceError> {
+    let file_name = path.display().to_string();
+    let file = std::fs::File::open(path).map_err(|error| ConformanceError::Io {
+        file: file_name.clone(),
+        error,
+    })?;
+    check_reader(std::io::BufReader::new(file), &file_name)
+}
+
+/// Replays a trace streamed from `reader` (`file_name` is used in messages) against the registered
+/// environments; returns one report per environment in order of first appearance.
+pub fn check_reader(
+    reader: impl BufRead,
+    file_name: &str,
+) -> Result<Vec<EnvReport>, ConformanceError> {
+    let mut envs: HashMap<String, Box<dyn Env>> = HashMap::new();
+    let mut reports: Vec<EnvReport> = Vec::new();
+    let mut episode: Option<Episode> = None;
+    let malformed = |line: usize, msg: String| ConformanceError::Malformed {
+        file: file_name.to_string(),
+        line,
+        msg,
+    };
+    let env_error = |line: usize, error: EnvError| ConformanceError::Env {
+        file: file_name.to_string(),
+        line,
+        error,
+    };
+
+    for (index, text) in reader.lines().enumerate() {
+        let line = index + 1;
+        let text = text.map_err(|error| ConformanceError::Io {
+            file: file_name.to_string(),
+            error,
+        })?;
+        if text.trim().is_empty() {
+            continue;
+        }
+        let parsed: TraceLine =
+            serde_json::from_str(&text).map_err(|err| malformed(line, err.to_string()))?;
+        match parsed {
+            TraceLine::Meta {} => {}
+            TraceLine::Start {
+                env: env_id,
+                case,
+                seed,
+                n_actions,
+                max_episode_steps,
+                obs,
+                state,
+            } => {
+                if let Some(done) = episode.take() {
+                    finish_episode(&mut reports, done);
+                }
+                if !envs.contains_key(&env_id) {
+                    let built = make(&env_id).map_err(|err| env_error(line, err))?;
+                    envs.insert(env_id.clone(), built);
+                    reports.push(EnvReport::new(&env_id));
+                }
+                let env = envs.get_mut(&env_id).expect("inserted above");
+                if env.n_actions() != n_actions || env.max_episode_steps() != max_episode_steps {
+                    return Err(malformed(
+                        line,
+                        format!(
+                            "{env_id} has {} actions and a {}-step limit, the trace says {n_actions} and {max_episode_steps}",
+                            env.n_actions(),
+                            env.max_episode_steps()
+                        ),
+                    ));
+                }
+                let first_obs = match case.as_str() {
+                    "seed" | "heuristic" => env.reset(Some(seed)),
+                    "set" => {
+                        let state = state.ok_or_else(|| {
+                            malformed(line, "a `set` start line needs a `state`".into())
+                        })?;
+                        // Gymnasium: reset(seed=0), then the state is overwritten.
+                        env.reset(Some(0));
+                        env.set_state(&state).map_err(|err| env_error(line, err))?
+                    }
+                    other => {
+                        return Err(malformed(
+                            line,
+                            format!("unknown case '{other}' (expected seed, set or heuristic)"),
+                        ));
+                    }
+                };
+                let report = report_for(&mut reports, &env_id);
+                let mut current = Episode {
+                    env: env_id,
+                    case,
+                    seed,
+                    index: report.episodes,
+                    t: 0,
+                    ended: false,
+                    diverged: false,
+                    exact: true,
+                };
+                report.episodes += 1;
+                compare_obs(report, &mut current, line, &first_obs, &obs)
+                    .map_err(|msg| malformed(line, msg))?;
+                episode = Some(current);
+            }
+            TraceLine::Step {
+                env: env_id,
+                t,
+                action,
+                obs,
+                reward,
+                terminated,
+                truncated,
+            } => {
+                let current = episode
+                    .as_mut()
+                    .ok_or_else(|| malformed(line, "step line before any start line".into()))?;
+                if env_id != current.env {
+                    return Err(malformed(
+                        line,
+                        format!("step of {env_id} inside an episode of {}", current.env),
+                    ));
+                }
+                if t != current.t + 1 {
+                    return Err(malformed(
+                        line,
+                        format!("step t={t} follows t={}", current.t),
+                    ));
+                }
+                current.t = t;
+                let env = envs.get_mut(&env_id).expect("created at start");
+                if action >= env.n_actions() {
+                    return Err(env_error(
+                        line,
+                        EnvError::ActionOutOfRange {
+                            env: env.id(),
+                            action,
+                            n_actions: env.n_actions(),
+                        },
+                    ));
+                }
+                let report = report_for(&mut reports, &env_id);
+                if current.ended {
+                    continue;
+                }
+                let step = match env.step(action) {
+                    Ok(step) => step,
+                    Err(err) => return Err(env_error(line, err)),
+                };
+                report.steps += 1;
+                compare_obs(report, current, line, &step.obs, &obs)
+                    .map_err(|msg| malformed(line, msg))?;
+                let reward_deviation = (step.reward - reward).abs();
+                report.max_reward_deviation = report.max_reward_deviation.max(reward_deviation);
+                if step.reward != reward {
+                    current.exact = false;
+                }
+                if reward_deviation > report.tolerance.abs || reward_deviation.is_nan() {
+                    diverge(
+                        report,
+                        current,
+                        line,
+                        format!("reward {} vs {reward}", step.reward),
+                    );
+                }
+                if (step.terminated, step.truncated) != (terminated, truncated) {
+                    current.exact = false;
+                    diverge(
+                        report,
+                        current,
+                        line,
+                        format!(
+                            "terminated/truncated {}/{} vs {terminated}/{truncated}",
+                            step.terminated, step.truncated
+                        ),
+                    );
+                }
+                if (step.terminated || step.truncated) && !(terminated || truncated) {
+                    // Our episode is over, the trace's is not: the rest of it cannot be replayed.
+                    current.ended = true;
+                }
+            }
+        }
+    }
+    if let Some(done) = episode.take() {
+        finish_episode(&mut reports, done);
+    }
+    Ok(reports)
+}
+
+fn report_for<'a>(reports: &'a mut [EnvReport], env: &str) -> &'a mut EnvReport {
+    reports
+        .iter_mut()
+        .find(|report| report.env == env)
+        .expect("report created with the environment")
+}
+
+/// Compares an observation with the trace's; a length mismatch is a malformed trace.
+fn compare_obs(
+    report: &mut EnvReport,
+    episode: &mut Episode,
+    line: usize,
+    ours: &[f32],
+    expected: &[f64],
+) -> Result<(), String> {
+    if ours.len() != expected.len() {
+        return Err(format!(
+            "observation has {} values, {} has {}",
+            expected.len(),
+            report.env,
+            ours.len()
+        ));
+    }
+    let mut worst = 0.0f64;
+    let mut exact = true;
+    for (&mine, &theirs) in ours.iter().zip(expected) {
+        let mine = f64::from(mine);
+        exact &= mine == theirs;
+        let deviation = (mine - theirs).abs();
+        // NaN deviations count as infinitely far.
+        worst = worst.max(if deviation.is_nan() {
+            f64::INFINITY
+        } else {
+            deviation
+        });
+    }
+    report.max_obs_deviation = report.max_obs_deviation.max(worst);
+    if !exact {
+        episode.exact = false;
+    }
+    if worst > report.tolerance.abs {
+        diverge(
+            report,
+            episode,
+            line,
+            format!("observation deviates by {worst:.3e}"),
+        );
+    }
+    Ok(())
+}
+
+fn diverge(report: &mut EnvReport, episode: &mut Episode, line: usize, what: String) {
+    episode.exact = false;
+    if !episode.diverged {
+        episode.diverged = true;
+        if report.first_divergence.is_none() {
+            report.first_divergence = Some(Divergence {
+                episode: episode.index,
+                case: episode.case.clone(),
+                seed: episode.seed,
+                step: episode.t,
+                line,
+                what,
+            });
+        }
+    }
+}
+
+fn finish_episode(reports: &mut [EnvReport], episode: Episode) {
+    let report = report_for(reports, &episode.env);
+    if episode.exact && !episode.ended {
+        report.episodes_exact += 1;
+    }
+    let counts = report.case_counts(&episode.case);
+    counts.2 += 1;
+    if episode.diverged {
+        counts.1 += 1;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn check(text: &str) -> Result<Vec<EnvReport>, ConformanceError> {
+        check_reader(text.as_bytes(), "trace.jsonl")
+    }
+
+    /// Writes a trace of CartPole-v1 from our own environment (so it matches by construction) with the
+    /// given actions; `tamper` may edit each step line's JSON before it is written.
+    fn own_trace(actions: &[usize], tamper: impl Fn(usize, &mut serde_json::Value)) -> String {
+        let mut env = super::super::make("CartPole-v1").unwrap();
+        let obs = env.reset(Some(7));
+        let mut lines = vec![
+            r#"{"kind":"meta"}"#.to_string(),
+            serde_json::json!({"kind":"start","env":"CartPole-v1","case":"seed","seed":7,"action_seed":7,
+                "n_actions":2,"max_episode_steps":500,"obs":obs})
+            .to_string(),
+        ];
+        for (i, &action) in actions.iter().enumerate() {
+            let step = env.step(action).unwrap();
+            let mut value = serde_json::json!({"kind":"step","env":"CartPole-v1","case":"seed","seed":7,
+                "t":i + 1,"action":action,"obs":step.obs,"reward":step.reward,
+                "terminated":step.terminated,"truncated":step.truncated});
+            tamper(i + 1, &mut value);
+            lines.push(value.to_string());
+        }
+        lines.join("\n")
+    }
+
+    #[test]
+    fn own_trace_matches_exactly() {
+        let reports = check(&own_trace(&[0, 1, 1, 0, 1], |_, _| {})).unwrap();
+        assert_eq!(reports.len(), 1);
+        let report = &reports[0];
+        assert_eq!(
+            (report.episodes, report.episodes_exact, report.steps),
+            (1, 1, 5)
+        );
+        assert_eq!(report.max_obs_deviation, 0.0);
+        assert!(report.passed() && report.first_divergence.is_none());
+    }
+
+    #[test]
+    fn perturbed_observation_is_a_divergence_at_its_step() {
+        let trace = own_trace(&[0, 1, 1, 0, 1], |t, value| {
+            if t == 3 {
+                let x = value["obs"][1].as_f64().unwrap();
+                value["obs"][1] = serde_json::json!(x + 1e-3);
+            }
+        });
+        let report = &check(&trace).unwrap()[0];
+        assert!(!report.passed());
+        assert_eq!(report.episodes_exact, 0);
+        let divergence = report.first_divergence.as_ref().unwrap();
+        assert_eq!(
+            (divergence.episode, divergence.step, divergence.line),
+            (0, 3, 5)
+        );
+        assert!((report.max_obs_deviation - 1e-3).abs() < 1e-6);
+    }
+
+    #[test]
+    fn tiny_deviation_within_tolerance_passes_but_is_not_exact() {
+        let trace = own_trace(&[1, 1], |t, value| {
+            if t == 2 {
+                value["reward"] = serde_json::json!(1.0 + 1e-9);
+            }
+        });
+        let report = &check(&trace).unwrap()[0];
+        assert!(report.passed());
+        assert_eq!(report.episodes_exact, 0);
+    }
+
+    #[test]
+    fn wrong_flags_diverge() {
+        let trace = own_trace(&[1, 1], |t, value| {
+            if t == 2 {
+                value["terminated"] = serde_json::json!(true);
+            }
+        });
+        let report = &check(&trace).unwrap()[0];
+        assert!(!report.passed());
+        assert!(
+            report
+                .first_divergence
+                .as_ref()
+                .unwrap()
+                .what
+                .contains("terminated")
+        );
+    }
+
+    #[test]
+    fn malformed_line_names_file_and_line() {
+        let mut trace = own_trace(&[1, 1], |_, _| {});
+        trace.push_str("\n{\"kind\":\"step\", oops}");
+        let err = check(&trace).unwrap_err();
+        assert!(
+            matches!(err, ConformanceError::Malformed { line: 5, .. }),
+            "{err:?}"
+        );
+        assert!(err.to_string().starts_with("trace.jsonl:5:"), "{err}");
+    }
+
+    #[test]
+    fn missing_fields_are_malformed() {
+        let err = check(r#"{"kind":"start","env":"CartPole-v1"}"#).unwrap_err();
+        assert!(
+            matches!(err, ConformanceError::Malformed { line: 1, .. }),
+            "{err}"
+        );
+    }
+
+    #[test]
+    fn unknown_env_id_is_an_error_listing_known_ids() {
+        let trace = r#"{"kind":"meta"}
+{"kind":"start","env":"Pong-v5","case":"seed","seed":0,"n_actions":6,"max_episode_steps":100,"obs":[0.0]}"#;
+        let err = check(trace).unwrap_err();
+        assert!(
+            matches!(
+                &err,
+                ConformanceError::Env {
+                    line: 2,
+                    error: EnvError::UnknownId { .. },
+                    ..
+                }
+            ),
+            "{err:?}"
+        );
+        let message = err.to_string();
+        assert!(
+            message.contains("Pong-v5") && message.contains("CartPole-v1"),
+            "{message}"
+        );
+    }
+
+    #[test]
+    fn action_out_of_range_is_an_error() {
+        let trace = own_trace(&[1, 1], |t, value| {
+            if t == 2 {
+                value["action"] = serde_json::json!(5);
+            }
+        });
+        let err = check(&trace).unwrap_err();
+        assert!(
+            matches!(
+                &err,
+                ConformanceError::Env {
+                    line: 4,
+                    error: EnvError::ActionOutOfRange { action: 5, .. },
+                    ..
+                }
+            ),
+            "{err:?}"
+        );
+    }
+
+    #[test]
+    fn step_before_start_is_malformed() {
+        let trace = r#"{"kind":"step","env":"CartPole-v1","t":1,"action":0,"obs":[0,0,0,0],"reward":1.0,"terminated":false,"truncated":false}"#;
+        assert!(matches!(
+            check(trace),
+            Err(ConformanceError::Malformed { line: 1, .. })
+        ));
+    }
+
+    #[test]
+    fn missing_file_is_an_io_error() {
+        let err = check_file(Path::new("/nonexistent/trace.jsonl")).unwrap_err();
+        assert!(matches!(err, ConformanceError::Io { .. }));
+        assert!(err.to_string().contains("/nonexistent/trace.jsonl"));
+    }
+
+    #[test]
+    fn heuristic_allowance_is_ten_percent() {
+        let mut report = EnvReport::new("LunarLander-v3");
+        report.diverged_by_case = vec![("seed".into(), 0, 5), ("heuristic".into(), 1, 10)];
+        assert!(report.passed());
+        report.diverged_by_case[1].1 = 2;
+        assert!(!report.passed());
+        report.diverged_by_case = vec![("seed".into(), 1, 5), ("heuristic".into(), 0, 10)];
+        assert!(!report.passed());
+    }
+}

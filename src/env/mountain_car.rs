@@ -1,0 +1,138 @@
+//! MountainCar-v0, as Gymnasium 1.x computes it.
+//!
+//! An underpowered car in a valley must rock back and forth to reach the flag at position 0.5. Actions:
+//! 0 accelerate left, 1 coast, 2 accelerate right. One step (float64, Gymnasium's order):
+//! `velocity += (a - 1) * 0.001 + cos(3 * position) * (-0.0025)`, clipped to +-0.07; `position += velocity`,
+//! clipped to [-1.2, 0.6]; at the left wall a negative velocity becomes 0. Terminal when position >= 0.5
+//! and velocity >= 0; reward -1 per step; limit 200 steps. The initial position is one draw of
+//! `uniform(-0.6, -0.4)`, the initial velocity 0 (ENVIRONMENT_NOTES.md, "Classic control").
+
+use super::{Env, EnvError, EnvRng, EpisodeClock, Step, check_state};
+
+const ID: &str = "MountainCar-v0";
+const MIN_POSITION: f64 = -1.2;
+const MAX_POSITION: f64 = 0.6;
+const MAX_SPEED: f64 = 0.07;
+const GOAL_POSITION: f64 = 0.5;
+const GOAL_VELOCITY: f64 = 0.0;
+const FORCE: f64 = 0.001;
+const GRAVITY: f64 = 0.0025;
+
+/// MountainCar-v0 with its 200-step limit.
+#[derive(Debug, Clone)]
+pub struct MountainCar {
+    position: f64,
+    velocity: f64,
+    rng: EnvRng,
+    clock: EpisodeClock,
+}
+
+impl Default for MountainCar {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl MountainCar {
+    pub fn new() -> Self {
+        Self {
+            position: 0.0,
+            velocity: 0.0,
+            rng: EnvRng::default(),
+            clock: EpisodeClock::new(ID, 3, 200),
+        }
+    }
+
+    /// The float64 state `[position, velocity]`.
+    pub fn state(&self) -> [f64; 2] {
+        [self.position, self.velocity]
+    }
+
+    fn observation(&self) -> Vec<f32> {
+        vec![self.position as f32, self.velocity as f32]
+    }
+}
+
+impl Env for MountainCar {
+    fn reset(&mut self, seed: Option<u64>) -> Vec<f32> {
+        self.position = self.rng.reseed(seed).uniform(-0.6, -0.4);
+        self.velocity = 0.0;
+        self.clock.start();
+        self.observation()
+    }
+
+    fn step(&mut self, action: usize) -> Result<Step, EnvError> {
+        self.clock.check_step(action)?;
+        let push = (action as f64 - 1.0) * FORCE;
+        let mut velocity = self.velocity + (push + (3.0 * self.position).cos() * (-GRAVITY));
+        velocity = velocity.clamp(-MAX_SPEED, MAX_SPEED);
+        let position = (self.position + velocity).clamp(MIN_POSITION, MAX_POSITION);
+        // Inelastic collision with the left wall.
+        if position == MIN_POSITION && velocity < 0.0 {
+            velocity = 0.0;
+        }
+        self.position = position;
+        self.velocity = velocity;
+        let terminated = position >= GOAL_POSITION && velocity >= GOAL_VELOCITY;
+        let truncated = self.clock.finish_step(terminated);
+        Ok(Step {
+            obs: self.observation(),
+            reward: -1.0,
+            terminated,
+            truncated,
+        })
+    }
+
+    fn obs_dim(&self) -> usize {
+        2
+    }
+
+    fn n_actions(&self) -> usize {
+        3
+    }
+
+    fn max_episode_steps(&self) -> usize {
+        self.clock.max_episode_steps()
+    }
+
+    fn solve_threshold(&self) -> f64 {
+        -110.0
+    }
+
+    fn id(&self) -> &'static str {
+        ID
+    }
+
+    /// Overwrites `[position, velocity]` (Gymnasium's `env.unwrapped.state = ...`).
+    fn set_state(&mut self, state: &[f64]) -> Result<Vec<f32>, EnvError> {
+        check_state(ID, state, 2)?;
+        self.position = state[0];
+        self.velocity = state[1];
+        self.clock.start();
+        Ok(self.observation())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn left_wall_stops_the_car() {
+        let mut env = MountainCar::new();
+        env.set_state(&[-1.19, -0.05]).unwrap();
+        let step = env.step(0).unwrap();
+        assert_eq!(env.state(), [MIN_POSITION, 0.0]);
+        assert_eq!(step.reward, -1.0);
+        assert!(!step.terminated);
+    }
+
+    #[test]
+    fn reaching_the_flag_terminates() {
+        let mut env = MountainCar::new();
+        env.set_state(&[0.49, 0.07]).unwrap();
+        let step = env.step(2).unwrap();
+        assert!(step.terminated && !step.truncated);
+        assert!(matches!(env.step(1), Err(EnvError::NeedsReset { .. })));
+    }
+}
