@@ -23,7 +23,9 @@ fn play(env: &mut dyn Env, seed: u64, mut policy: impl FnMut(&[f32]) -> usize) -
     let mut total = 0.0;
     let mut length = 0;
     loop {
-        let step = env.step(policy(&obs)).expect("valid action on a running episode");
+        let step = env
+            .step(policy(&obs))
+            .expect("valid action on a running episode");
         total += step.reward;
         length += 1;
         obs = step.obs;
@@ -47,7 +49,11 @@ fn conformance_trace_is_reproduced() {
         report.max_obs_deviation, report.max_reward_deviation, report.first_divergence
     );
     // Every `seed` episode within 1e-4, at most 10% of the `heuristic` episodes off (Tolerance::BOX2D).
-    assert!(report.passed(), "LunarLander left the trace: {:?}", report.first_divergence);
+    assert!(
+        report.passed(),
+        "LunarLander left the trace: {:?}",
+        report.first_divergence
+    );
     let seed_case = report
         .diverged_by_case
         .iter()
@@ -77,7 +83,9 @@ fn heuristic_controller_chooses_the_recorded_actions() {
             .map(|v| v.as_f64().expect("number") as f32)
             .collect();
         if record["kind"] == "step" {
-            let before = previous_obs.as_ref().expect("a step follows a start or a step");
+            let before = previous_obs
+                .as_ref()
+                .expect("a step follows a start or a step");
             let recorded = record["action"].as_u64().expect("action") as usize;
             assert_eq!(
                 heuristic_action(before),
@@ -109,8 +117,14 @@ fn random_policy_matches_gymnasium_statistics() {
     let mean_return = return_sum / episodes as f64;
     let mean_length = length_sum as f64 / episodes as f64;
     println!("random policy: mean return {mean_return:.2}, mean length {mean_length:.2}");
-    assert!((mean_return - -186.2).abs() < 15.0, "mean return {mean_return}");
-    assert!((mean_length - 91.6).abs() < 3.0, "mean length {mean_length}");
+    assert!(
+        (mean_return - -186.2).abs() < 15.0,
+        "mean return {mean_return}"
+    );
+    assert!(
+        (mean_length - 91.6).abs() < 3.0,
+        "mean length {mean_length}"
+    );
 }
 
 #[test]

@@ -163,9 +163,7 @@ impl Scene {
             .map(|i| w / (CHUNKS - 1) as f64 * i as f64)
             .collect();
         let helipad_y = h / 4.0;
-        for k in CHUNKS / 2 - 2..=CHUNKS / 2 + 2 {
-            height[k] = helipad_y;
-        }
+        height[CHUNKS / 2 - 2..=CHUNKS / 2 + 2].fill(helipad_y);
         let smooth_y: Vec<f64> = (0..CHUNKS)
             .map(|i| {
                 let left = if i == 0 {
@@ -529,5 +527,101 @@ pub fn heuristic_action(obs: &[f32]) -> usize {
         1
     } else {
         0
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn step_before_reset_and_bad_actions_are_errors() {
+        let mut env = LunarLander::new("LunarLander-v2");
+        assert!(matches!(env.step(0), Err(EnvError::NeedsReset { .. })));
+        env.reset(Some(0));
+        assert!(matches!(
+            env.step(N_ACTIONS),
+            Err(EnvError::ActionOutOfRange {
+                action: 4,
+                n_actions: 4,
+                ..
+            })
+        ));
+        // A rejected action leaves the episode running.
+        assert!(env.step(0).is_ok());
+    }
+
+    #[test]
+    fn unseeded_reset_continues_the_generator() {
+        // reset(Some(s)) then reset(None) must equal the same sequence on a fresh environment, and the
+        // second episode must differ from the first (the generator moved on, it was not reseeded).
+        let sequence = |env: &mut LunarLander| {
+            let first = env.reset(Some(5));
+            env.step(2).expect("running");
+            let second = env.reset(None);
+            (first, second)
+        };
+        let (first_a, second_a) = sequence(&mut LunarLander::new("LunarLander-v3"));
+        let (first_b, second_b) = sequence(&mut LunarLander::new("LunarLander-v3"));
+        assert_eq!(first_a, first_b);
+        assert_eq!(second_a, second_b);
+        assert_ne!(first_a, second_a);
+    }
+
+    #[test]
+    fn time_limit_truncates_at_1000_steps() {
+        // Find an episode the heuristic hovers through (some seeds reach the limit) and check the flags:
+        // not truncated before step 1000, truncated on it, and no step after it without a reset.
+        let mut env = LunarLander::new("LunarLander-v2");
+        let mut found = false;
+        for seed in 0..200 {
+            let mut obs = env.reset(Some(seed));
+            let mut steps = 0;
+            let last = loop {
+                let step = env.step(heuristic_action(&obs)).expect("running episode");
+                steps += 1;
+                obs = step.obs.clone();
+                if step.terminated || step.truncated {
+                    break step;
+                }
+                assert!(steps < MAX_EPISODE_STEPS, "no truncation at the limit");
+            };
+            if steps == MAX_EPISODE_STEPS {
+                assert!(last.truncated);
+                assert!(matches!(env.step(0), Err(EnvError::NeedsReset { .. })));
+                found = true;
+                break;
+            }
+            assert!(!last.truncated && last.terminated);
+        }
+        assert!(
+            found,
+            "no heuristic episode over seeds 0..200 reached the time limit"
+        );
+    }
+
+    #[test]
+    fn landing_or_crash_ends_with_the_terminal_reward() {
+        // Every terminated episode ends with the +100 (asleep) or -100 (crash, out of view) reward.
+        let mut env = LunarLander::new("LunarLander-v3");
+        for seed in 0..10 {
+            let mut obs = env.reset(Some(seed));
+            loop {
+                let step = env.step(heuristic_action(&obs)).expect("running episode");
+                obs = step.obs;
+                if step.terminated {
+                    assert!(
+                        step.reward == 100.0 || step.reward == -100.0,
+                        "{}",
+                        step.reward
+                    );
+                    break;
+                }
+                assert!(step.reward.abs() < 100.0);
+                if step.truncated {
+                    break;
+                }
+            }
+        }
     }
 }
