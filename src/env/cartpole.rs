@@ -173,6 +173,23 @@ mod tests {
         assert!(matches!(env.step(0), Err(EnvError::NeedsReset { .. })));
     }
 
+    /// An unseeded reset continues the generator of the last seeded one (Gymnasium's `np_random`).
+    /// Python (NumPy 2.4.6): `g = np.random.default_rng(0); g.uniform(-.05, .05, 4);
+    /// g.uniform(-.05, .05, 4).astype(np.float32)`
+    #[test]
+    fn unseeded_reset_continues_the_generator() {
+        let mut env = CartPole::v1();
+        env.reset(Some(0));
+        let second = env.reset(None);
+        let expected: [f32; 4] = [
+            0.031327024102211,
+            0.04127555713057518,
+            0.010663577355444431,
+            0.02294965647161007,
+        ];
+        assert_eq!(second, expected);
+    }
+
     #[test]
     fn bad_actions_and_states_are_errors() {
         let mut env = CartPole::v1();
