@@ -2,13 +2,14 @@
 //!
 //! Gymnasium simulates the lander with pybox2d, a Box2D 2.3 core in float32. This module drives the
 //! same engine (Box2D 2.3.1, bundled by the `wrapped2d` crate) through the same sequence of calls, so
-//! that a seed and an action sequence give Gymnasium's observations and rewards to the last bit on
-//! short episodes (see `../conformance`). The parts:
+//! that a seed and an action sequence give Gymnasium's observations and rewards: bit for bit in flight,
+//! and within a few float32 roundings once the legs touch the ground (the Box2D builds differ in the
+//! last bit of some contact computations; the conformance traces stay within about 1e-5). The parts:
 //!
-//! - [`Scene`]: one Box2D world with the terrain, the lander body and its two legs, built exactly as
+//! - `Scene`: one Box2D world with the terrain, the lander body and its two legs, built exactly as
 //!   Gymnasium's `reset` builds it (body and fixture creation order, float32 conversions of the float64
 //!   Python values, the joint reference angle pybox2d computes implicitly).
-//! - [`ContactDetector`]: the contact listener; a lander contact ends the game, leg contacts are tracked
+//! - `ContactDetector`: the contact listener; a lander contact ends the game, leg contacts are tracked
 //!   by begin/end events exactly as Gymnasium's `ContactDetector` does (not by polling after the step).
 //! - [`LunarLander`]: the [`Env`] implementation: NumPy-exact random draws (terrain, initial push,
 //!   engine dispersion), engine impulses, observation normalisation, reward shaping, the time limit.
