@@ -23,6 +23,10 @@ pub enum EnvCommand {
     /// control must stay within 1e-6 on every observation and reward; LunarLander within 1e-4 on the
     /// seeded episodes, with at most 10% of the long heuristic episodes allowed to drift. Exits with a
     /// non-zero status if any environment fails or a file cannot be read or parsed.
+    ///
+    /// Table columns: episodes replayed; episodes reproduced bit for bit; episodes outside the tolerance;
+    /// steps compared; largest absolute observation and reward deviations; verdict; first divergence
+    /// (episode, case and seed, step, trace line, what differed).
     Check {
         /// Trace files (JSON lines).
         #[arg(required = true, value_name = "FILE")]
@@ -167,8 +171,10 @@ fn rollout(
         .context("--seed plus --episodes overflows the 64-bit seed range")?;
     let mut env: Box<dyn Env> = env::make(env_id)?;
     let mut action_rng = NumpyRng::new(seed);
-    let mut returns = Vec::with_capacity(episodes as usize);
-    let mut lengths = Vec::with_capacity(episodes as usize);
+    // Capacity is only a hint: a huge --episodes must not abort on allocation before the first episode.
+    let capacity = episodes.min(1 << 16) as usize;
+    let mut returns = Vec::with_capacity(capacity);
+    let mut lengths = Vec::with_capacity(capacity);
     for episode in 0..episodes {
         env.reset(Some(seed + episode));
         let mut episode_return = 0.0;
