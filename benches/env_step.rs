@@ -1,4 +1,5 @@
 //! Stepping speed of each environment: random actions, reset at every episode end, reported in steps/s.
+//! For LunarLander the resets (a new Box2D world each) are a noticeable part of the figure, as in training.
 //!
 //! Each iteration runs a fixed batch of steps through the `Env` trait object exactly as the training loop
 //! does (`make(id)`, `step`, `reset` on `terminated || truncated`), so the figure includes the observation
@@ -29,7 +30,12 @@ fn run_steps(env: &mut dyn Env, rng: &mut NumpyRng, episode_seed: &mut u64) -> f
 fn bench_env_step(c: &mut Criterion) {
     let mut group = c.benchmark_group("env_step");
     group.throughput(Throughput::Elements(STEPS_PER_ITERATION));
-    for id in ["CartPole-v1", "Acrobot-v1", "MountainCar-v0"] {
+    for id in [
+        "CartPole-v1",
+        "Acrobot-v1",
+        "MountainCar-v0",
+        "LunarLander-v2",
+    ] {
         let mut env = make(id).expect("registered environment");
         let mut rng = NumpyRng::new(0);
         let mut episode_seed = 0;

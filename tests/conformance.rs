@@ -83,7 +83,6 @@ fn classic_control_traces_conform() {
 
 /// LunarLander-v3: seeded episodes within 1e-4, at most 10% of the heuristic episodes diverging.
 #[test]
-#[ignore = "needs LunarLander"]
 fn lunar_lander_trace_conforms() {
     let file = conformance_dir().join(LUNAR_LANDER_TRACE);
     let reports = check_file(&file).unwrap_or_else(|err| panic!("{err}"));

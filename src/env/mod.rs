@@ -11,10 +11,12 @@ use thiserror::Error;
 pub mod acrobot;
 pub mod cartpole;
 pub mod conformance;
+pub mod lunar_lander;
 pub mod mountain_car;
 
 pub use acrobot::Acrobot;
 pub use cartpole::CartPole;
+pub use lunar_lander::LunarLander;
 pub use mountain_car::MountainCar;
 
 /// What one environment step returns (Gymnasium's 5-tuple without `info`).
@@ -161,12 +163,7 @@ pub fn make(id: &str) -> Result<Box<dyn Env>, EnvError> {
         "CartPole-v0" | "CartPole-v1" => Ok(Box::new(CartPole::new(spec.id))),
         "Acrobot-v1" => Ok(Box::new(Acrobot::new())),
         "MountainCar-v0" => Ok(Box::new(MountainCar::new())),
-        // LunarLander lives in its own module (Box2D); until it is merged the ids are registered
-        // but cannot be built.
-        "LunarLander-v2" | "LunarLander-v3" => Err(EnvError::Unavailable {
-            id: spec.id,
-            reason: "LunarLander is not built yet",
-        }),
+        "LunarLander-v2" | "LunarLander-v3" => Ok(Box::new(LunarLander::new(spec.id))),
         _ => Err(EnvError::UnknownId { id: id.to_string() }),
     }
 }
