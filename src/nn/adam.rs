@@ -5,7 +5,9 @@
 //! over contiguous slices. The loops keep independent lanes (no cross-element reductions except in the
 //! norm, which uses 16 partial sums) so the compiler vectorises them.
 
-use super::{Layout, QNet, Segment};
+use super::{Layout, QNet};
+#[cfg(test)]
+use super::Segment;
 
 /// Gradients of every parameter of a [`QNet`], in the same flat layout.
 #[derive(Clone, Debug)]
