@@ -72,13 +72,23 @@ impl Learner {
             self.noise_online.resample(&mut self.rng);
             self.noise_target.resample(&mut self.rng);
             self.noise_select.resample(&mut self.rng);
-            (Some(&self.noise_online), Some(&self.noise_target), Some(&self.noise_select))
+            (
+                Some(&self.noise_online),
+                Some(&self.noise_target),
+                Some(&self.noise_select),
+            )
         } else {
             (None, None, None)
         };
-        let q_next_online = self.online.forward(&mb.next_obs, batch, noise_select, &mut self.ws_next_online);
-        let q_next_target = self.target.forward(&mb.next_obs, batch, noise_target, &mut self.ws_next_target);
-        let q = self.online.forward(&mb.obs, batch, noise_online, &mut self.ws_obs);
+        let q_next_online =
+            self.online
+                .forward(&mb.next_obs, batch, noise_select, &mut self.ws_next_online);
+        let q_next_target =
+            self.target
+                .forward(&mb.next_obs, batch, noise_target, &mut self.ws_next_target);
+        let q = self
+            .online
+            .forward(&mb.obs, batch, noise_online, &mut self.ws_obs);
         let heads = self.online.heads();
         let mut loss = 0.0;
         self.dq.fill(0.0);
@@ -92,7 +102,8 @@ impl Learner {
                 self.dq[row + mb.actions[b]] = 2.0 * td / batch as f32;
             }
         }
-        self.online.backward(&mut self.ws_obs, &self.dq, &mut self.grads);
+        self.online
+            .backward(&mut self.ws_obs, &self.dq, &mut self.grads);
         clip_grad_norm(&mut self.grads, 10.0);
         self.adam.step(&mut self.online, &self.grads);
         loss
@@ -103,11 +114,17 @@ fn minibatches(batch: usize) -> Vec<Minibatch> {
     let mut rng = Pcg64::seed_from_u64(2);
     (0..N_MINIBATCHES)
         .map(|_| Minibatch {
-            obs: (0..batch * OBS_DIM).map(|_| rng.random_range(-1.0..1.0)).collect(),
-            next_obs: (0..batch * OBS_DIM).map(|_| rng.random_range(-1.0..1.0)).collect(),
+            obs: (0..batch * OBS_DIM)
+                .map(|_| rng.random_range(-1.0..1.0))
+                .collect(),
+            next_obs: (0..batch * OBS_DIM)
+                .map(|_| rng.random_range(-1.0..1.0))
+                .collect(),
             actions: (0..batch).map(|_| rng.random_range(0..N_ACTIONS)).collect(),
             rewards: (0..batch).map(|_| rng.random_range(-1.0..1.0)).collect(),
-            dones: (0..batch).map(|_| if rng.random_bool(0.05) { 1.0 } else { 0.0 }).collect(),
+            dones: (0..batch)
+                .map(|_| if rng.random_bool(0.05) { 1.0 } else { 0.0 })
+                .collect(),
         })
         .collect()
 }
@@ -139,8 +156,9 @@ fn bench_update(c: &mut Criterion) {
 fn bench_single_forward(c: &mut Criterion) {
     let mut group = c.benchmark_group("single_forward");
     let mut rng = Pcg64::seed_from_u64(3);
-    let states: Vec<Vec<f32>> =
-        (0..N_MINIBATCHES).map(|_| (0..OBS_DIM).map(|_| rng.random_range(-1.0..1.0)).collect()).collect();
+    let states: Vec<Vec<f32>> = (0..N_MINIBATCHES)
+        .map(|_| (0..OBS_DIM).map(|_| rng.random_range(-1.0..1.0)).collect())
+        .collect();
     for (name, kind) in KINDS {
         let net = QNet::new(OBS_DIM, N_ACTIONS, kind, &mut rng);
         let mut noise = NoiseSample::new(N_ACTIONS);
