@@ -5,7 +5,10 @@
 //! over contiguous slices. The loops keep independent lanes (no cross-element reductions except in the
 //! norm, which uses 16 partial sums) so the compiler vectorises them.
 
-use super::{Layout, QNet, Segment};
+#[cfg(test)]
+use super::Segment;
+use super::simd::simd_dispatch;
+use super::{Layout, QNet};
 
 /// Gradients of every parameter of a [`QNet`], in the same flat layout.
 #[derive(Clone, Debug)]
@@ -35,6 +38,17 @@ impl Grads {
 
     /// Euclidean norm over all gradients together (as `torch.nn.utils.clip_grad_norm_` computes it).
     pub fn global_norm(&self) -> f32 {
+        simd_dispatch!(self.global_norm_avx2(), self.global_norm_impl())
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    fn global_norm_avx2(&self) -> f32 {
+        self.global_norm_impl()
+    }
+
+    #[inline(always)]
+    fn global_norm_impl(&self) -> f32 {
         let mut partial = [0.0f32; 16];
         let chunks = self.data.chunks_exact(16);
         let tail: f32 = chunks.remainder().iter().map(|g| g * g).sum();
@@ -48,10 +62,24 @@ impl Grads {
 
     /// Multiplies every gradient by `s`.
     pub fn scale(&mut self, s: f32) {
-        for g in self.data.iter_mut() {
-            *g *= s;
-        }
+        simd_dispatch!(
+            scale_avx2(&mut self.data, s),
+            scale_slice(&mut self.data, s)
+        )
     }
+}
+
+#[inline(always)]
+fn scale_slice(values: &mut [f32], s: f32) {
+    for v in values.iter_mut() {
+        *v *= s;
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn scale_avx2(values: &mut [f32], s: f32) {
+    scale_slice(values, s)
 }
 
 /// Rescales `grads` so their global norm is at most `max_norm`, like `torch.nn.utils.clip_grad_norm_`:
@@ -134,20 +162,66 @@ impl Adam {
         let bias_correction2 = 1.0 - (self.beta2 as f64).powf(t);
         let step_size = (self.lr as f64 / bias_correction1) as f32;
         let inv_sqrt_bias_correction2 = (1.0 / bias_correction2.sqrt()) as f32;
-        let (beta1, beta2, eps) = (self.beta1, self.beta2, self.eps);
-        let (one_minus_beta1, one_minus_beta2) = (1.0 - beta1, 1.0 - beta2);
-        for (((p, &g), m), v) in params
-            .iter_mut()
-            .zip(&grads.data)
-            .zip(self.first_moment.iter_mut())
-            .zip(self.second_moment.iter_mut())
-        {
-            *m += one_minus_beta1 * (g - *m);
-            *v = beta2 * *v + one_minus_beta2 * g * g;
-            let denom = v.sqrt() * inv_sqrt_bias_correction2 + eps;
-            *p -= step_size * *m / denom;
-        }
+        let coefficients = AdamCoefficients {
+            beta1_complement: 1.0 - self.beta1,
+            beta2: self.beta2,
+            beta2_complement: 1.0 - self.beta2,
+            step_size,
+            inv_sqrt_bias_correction2,
+            eps: self.eps,
+        };
+        let (m, v) = (&mut self.first_moment, &mut self.second_moment);
+        simd_dispatch!(
+            adam_update_avx2(params, &grads.data, m, v, &coefficients),
+            adam_update(params, &grads.data, m, v, &coefficients)
+        )
     }
+}
+
+/// The per-step scalars of one Adam update.
+struct AdamCoefficients {
+    beta1_complement: f32,
+    beta2: f32,
+    beta2_complement: f32,
+    /// `lr / (1 - beta1^t)`.
+    step_size: f32,
+    /// `1 / sqrt(1 - beta2^t)`.
+    inv_sqrt_bias_correction2: f32,
+    eps: f32,
+}
+
+/// The element-wise Adam update (PyTorch's formula, see [`Adam`]).
+#[inline(always)]
+fn adam_update(
+    params: &mut [f32],
+    grads: &[f32],
+    m: &mut [f32],
+    v: &mut [f32],
+    c: &AdamCoefficients,
+) {
+    for (((p, &g), m), v) in params
+        .iter_mut()
+        .zip(grads)
+        .zip(m.iter_mut())
+        .zip(v.iter_mut())
+    {
+        *m += c.beta1_complement * (g - *m);
+        *v = c.beta2 * *v + c.beta2_complement * g * g;
+        let denom = v.sqrt() * c.inv_sqrt_bias_correction2 + c.eps;
+        *p -= c.step_size * *m / denom;
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn adam_update_avx2(
+    params: &mut [f32],
+    grads: &[f32],
+    m: &mut [f32],
+    v: &mut [f32],
+    c: &AdamCoefficients,
+) {
+    adam_update(params, grads, m, v, c)
 }
 
 #[cfg(test)]

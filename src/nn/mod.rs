@@ -27,6 +27,7 @@ mod adam;
 mod io;
 mod linear;
 mod noisy;
+mod simd;
 #[cfg(test)]
 mod tests;
 
@@ -37,6 +38,8 @@ use rand::Rng;
 pub use adam::{Adam, Grads, clip_grad_norm};
 pub use io::ModelFileError;
 pub use noisy::{NoiseSample, noise_transform};
+
+use simd::simd_dispatch;
 
 use linear::{MatView, add_bias_relu, column_sums, init_linear, matmul, relu_backward};
 
@@ -338,6 +341,33 @@ impl QNet {
         noise: Option<&NoiseSample>,
         ws: &'w mut Workspace,
     ) -> &'w [f32] {
+        simd_dispatch!(
+            self.forward_avx2(x, batch, noise, ws),
+            self.forward_into(x, batch, noise, ws)
+        );
+        ws.q_values()
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    fn forward_avx2(
+        &self,
+        x: &[f32],
+        batch: usize,
+        noise: Option<&NoiseSample>,
+        ws: &mut Workspace,
+    ) {
+        self.forward_into(x, batch, noise, ws)
+    }
+
+    #[inline(always)]
+    fn forward_into(
+        &self,
+        x: &[f32],
+        batch: usize,
+        noise: Option<&NoiseSample>,
+        ws: &mut Workspace,
+    ) {
         let l = &self.layout;
         ws.check_shape(l, batch);
         assert_eq!(
@@ -458,7 +488,6 @@ impl QNet {
                 add_bias(q, &ws.b_eff);
             }
         }
-        &ws.q[..batch * width]
     }
 
     /// Backward pass of the last [`Self::forward`] stored in `ws`, for the loss gradient `dq = dL/dQ` in
@@ -471,6 +500,20 @@ impl QNet {
     /// # Panics
     /// If `ws` holds no forward pass, or `dq`/`grads` do not match the network.
     pub fn backward(&self, ws: &mut Workspace, dq: &[f32], grads: &mut Grads) {
+        simd_dispatch!(
+            self.backward_avx2(ws, dq, grads),
+            self.backward_impl(ws, dq, grads)
+        )
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    fn backward_avx2(&self, ws: &mut Workspace, dq: &[f32], grads: &mut Grads) {
+        self.backward_impl(ws, dq, grads)
+    }
+
+    #[inline(always)]
+    fn backward_impl(&self, ws: &mut Workspace, dq: &[f32], grads: &mut Grads) {
         let l = &self.layout;
         let batch = ws.batch;
         assert!(batch > 0, "backward: the workspace holds no forward pass");
@@ -622,6 +665,32 @@ impl QNet {
         q_out: &mut [f32],
         features: &mut [f32; HIDDEN],
     ) {
+        simd_dispatch!(
+            self.single_avx2(obs, noise, q_out, features),
+            self.single_impl(obs, noise, q_out, features)
+        )
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    fn single_avx2(
+        &self,
+        obs: &[f32],
+        noise: Option<&NoiseSample>,
+        q_out: &mut [f32],
+        features: &mut [f32; HIDDEN],
+    ) {
+        self.single_impl(obs, noise, q_out, features)
+    }
+
+    #[inline(always)]
+    fn single_impl(
+        &self,
+        obs: &[f32],
+        noise: Option<&NoiseSample>,
+        q_out: &mut [f32],
+        features: &mut [f32; HIDDEN],
+    ) {
         let l = &self.layout;
         assert_eq!(
             obs.len(),
@@ -686,7 +755,7 @@ impl QNet {
 }
 
 /// `out = bias + input · W` for one input vector, with `W` stored `[in][out]`: a run of contiguous axpys.
-#[inline]
+#[inline(always)]
 fn dense_single(input: &[f32], weight_t: &[f32], bias: &[f32], out: &mut [f32]) {
     let width = out.len();
     out.copy_from_slice(bias);
@@ -697,7 +766,7 @@ fn dense_single(input: &[f32], weight_t: &[f32], bias: &[f32], out: &mut [f32]) 
     }
 }
 
-#[inline]
+#[inline(always)]
 fn relu_in_place(values: &mut [f32]) {
     for v in values.iter_mut() {
         *v = v.max(0.0);
@@ -705,7 +774,7 @@ fn relu_in_place(values: &mut [f32]) {
 }
 
 /// Dot product with eight independent partial sums, so the compiler can keep it in SIMD registers.
-#[inline]
+#[inline(always)]
 fn dot(a: &[f32], b: &[f32]) -> f32 {
     let mut partial = [0.0f32; 8];
     let (a_chunks, b_chunks) = (a.chunks_exact(8), b.chunks_exact(8));
@@ -724,7 +793,7 @@ fn dot(a: &[f32], b: &[f32]) -> f32 {
 }
 
 /// Adds `bias` to every row of the row-major `rows` (width `bias.len()`).
-#[inline]
+#[inline(always)]
 fn add_bias(rows: &mut [f32], bias: &[f32]) {
     for row in rows.chunks_exact_mut(bias.len()) {
         for (value, b) in row.iter_mut().zip(bias) {

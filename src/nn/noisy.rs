@@ -90,6 +90,7 @@ impl NoiseSample {
 /// `mu_w`, `sigma_w` are `[A][HIDDEN]` (PyTorch layout); the result `w_eff_t` is written transposed,
 /// `[HIDDEN][A]`, because the batch product `h2 · W^T` reads it row by row. `input`/`output` are the noise
 /// factors (all zeros for the mean network).
+#[inline(always)]
 pub(crate) fn effective_weights(
     mu_w: &[f32],
     sigma_w: &[f32],
@@ -116,6 +117,7 @@ pub(crate) fn effective_weights(
 }
 
 /// `dL/dsigma = eps ⊙ dL/dmu` for the weights (`[A][HIDDEN]`) and the bias (`[A]`).
+#[inline(always)]
 pub(crate) fn sigma_gradients(
     grad_mu_w: &[f32],
     grad_mu_b: &[f32],
