@@ -18,6 +18,7 @@
 //! The binary `arld` is a thin command-line layer over this library.
 
 pub mod env;
+pub mod experiment;
 pub mod nn;
 pub mod replay;
 pub mod rng;
