@@ -421,13 +421,85 @@ fn panel_ranges(panel: &Panel) -> (f64, (f64, f64)) {
 const PANEL_WIDTH: u32 = 560;
 const PANEL_HEIGHT: u32 = 420;
 const TITLE_HEIGHT: u32 = 50;
-const LEGEND_HEIGHT: u32 = 56;
+const TITLE_FONT: u32 = 24;
+const LEGEND_FONT: u32 = 17;
+const LEGEND_ROW_HEIGHT: u32 = 32;
+const LEGEND_PADDING: u32 = 12;
+/// Horizontal room around the title and the legend rows.
+const SIDE_ROOM: u32 = 40;
+/// A legend row never grows wider than this; further entries wrap to a new row.
+const MAX_LEGEND_ROW: u32 = 1400;
+const SWATCH: u32 = 36;
+const SWATCH_GAP: u32 = 10;
+const ENTRY_SPACING: u32 = 34;
 
-fn figure_size(figure: &FigureContent) -> ((u32, u32), (usize, usize)) {
+/// One legend entry: its text and its colour, or `None` for the dashed threshold line.
+struct LegendEntry {
+    label: String,
+    color: Option<usize>,
+    width: u32,
+}
+
+/// Where everything goes, measured before drawing so the figure is as wide as its title and legend need.
+struct Layout {
+    size: (u32, u32),
+    grid: (usize, usize),
+    /// Width of the block of panels, centred in the figure.
+    panels_width: u32,
+    /// Legend entries per row.
+    legend_rows: Vec<Vec<LegendEntry>>,
+}
+
+fn text_width(text: &str, size: u32) -> Result<u32> {
+    Ok((FONT_FAMILY, size as f64).into_font().box_size(text).map_err(plot_error)?.0)
+}
+
+fn layout(figure: &FigureContent) -> Result<Layout> {
     let n = figure.panels.len().max(1);
     let cols = n.min(4);
     let rows = n.div_ceil(cols);
-    ((PANEL_WIDTH * cols as u32, PANEL_HEIGHT * rows as u32 + TITLE_HEIGHT + LEGEND_HEIGHT), (rows, cols))
+    let panels_width = PANEL_WIDTH * cols as u32;
+
+    // Every curve label once, in order of appearance, then the threshold line if any panel has one.
+    let mut entries: Vec<LegendEntry> = Vec::new();
+    for curve in figure.panels.iter().flat_map(|p| &p.curves) {
+        if !entries.iter().any(|e| e.label == curve.label) {
+            let width = SWATCH + SWATCH_GAP + text_width(&curve.label, LEGEND_FONT)?;
+            entries.push(LegendEntry { label: curve.label.clone(), color: Some(curve.color), width });
+        }
+    }
+    if figure.panels.iter().any(|p| p.threshold.is_some()) {
+        let label = "solve threshold".to_string();
+        let width = SWATCH + SWATCH_GAP + text_width(&label, LEGEND_FONT)?;
+        entries.push(LegendEntry { label, color: None, width });
+    }
+    let one_row: u32 = entries.iter().map(|e| e.width + ENTRY_SPACING).sum::<u32>().saturating_sub(ENTRY_SPACING);
+    let title_width = text_width(&figure.title, TITLE_FONT)?;
+    let width = panels_width.max(title_width + 2 * SIDE_ROOM).max(one_row.min(MAX_LEGEND_ROW) + 2 * SIDE_ROOM);
+
+    let row_limit = width - 2 * SIDE_ROOM;
+    let mut legend_rows: Vec<Vec<LegendEntry>> = Vec::new();
+    let mut row_width = 0;
+    for entry in entries {
+        let needed = if row_width == 0 { entry.width } else { row_width + ENTRY_SPACING + entry.width };
+        match legend_rows.last_mut() {
+            Some(row) if needed <= row_limit => {
+                row_width = needed;
+                row.push(entry);
+            }
+            _ => {
+                row_width = entry.width;
+                legend_rows.push(vec![entry]);
+            }
+        }
+    }
+    let legend_height = legend_rows.len() as u32 * LEGEND_ROW_HEIGHT + 2 * LEGEND_PADDING;
+    Ok(Layout {
+        size: (width, PANEL_HEIGHT * rows as u32 + TITLE_HEIGHT + legend_height),
+        grid: (rows, cols),
+        panels_width,
+        legend_rows,
+    })
 }
 
 fn plot_error<E: std::fmt::Debug>(err: E) -> anyhow::Error {
@@ -435,17 +507,22 @@ fn plot_error<E: std::fmt::Debug>(err: E) -> anyhow::Error {
 }
 
 /// Draws the whole figure on a drawing area of any backend (bitmap or SVG).
-fn draw_on<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, figure: &FigureContent, grid: (usize, usize)) -> Result<()> {
+fn draw_on<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, figure: &FigureContent, layout: &Layout) -> Result<()> {
     root.fill(&WHITE).map_err(plot_error)?;
-    let (width, height) = root.dim_in_pixel();
+    let (width, height) = layout.size;
     let (title_area, rest) = root.split_vertically(TITLE_HEIGHT);
-    let (plot_area, legend_area) = rest.split_vertically(height - TITLE_HEIGHT - LEGEND_HEIGHT);
-    let title_style = TextStyle::from((FONT_FAMILY, 24).into_font()).pos(Pos::new(HPos::Center, VPos::Center));
+    let legend_height = height - TITLE_HEIGHT - PANEL_HEIGHT * layout.grid.0 as u32;
+    let (plot_area, legend_area) = rest.split_vertically(height - TITLE_HEIGHT - legend_height);
+    let title_style =
+        TextStyle::from((FONT_FAMILY, TITLE_FONT as f64).into_font()).pos(Pos::new(HPos::Center, VPos::Center));
     title_area
         .draw(&Text::new(figure.title.clone(), (width as i32 / 2, TITLE_HEIGHT as i32 / 2), title_style))
         .map_err(plot_error)?;
+    // Panels keep their size; a figure widened for its title or legend centres them.
+    let side = (width - layout.panels_width) / 2;
+    let plot_area = plot_area.margin(0, 0, side, width - layout.panels_width - side);
 
-    for (area, panel) in plot_area.split_evenly(grid).iter().zip(&figure.panels) {
+    for (area, panel) in plot_area.split_evenly(layout.grid).iter().zip(&figure.panels) {
         let (x_max, (y_min, y_max)) = panel_ranges(panel);
         let mut chart = ChartBuilder::on(area)
             .caption(&panel.title, (FONT_FAMILY, 19))
@@ -498,48 +575,38 @@ fn draw_on<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, figure: &FigureCon
                 .map_err(plot_error)?;
         }
     }
-    draw_legend(&legend_area, figure)
+    draw_legend(&legend_area, layout)
 }
 
-/// One legend for the whole figure, centred below the panels: every curve label once, and the threshold line.
-fn draw_legend<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, figure: &FigureContent) -> Result<()> {
-    let mut entries: Vec<(String, usize)> = Vec::new();
-    for curve in figure.panels.iter().flat_map(|p| &p.curves) {
-        if !entries.iter().any(|(label, _)| *label == curve.label) {
-            entries.push((curve.label.clone(), curve.color));
-        }
-    }
-    let has_threshold = figure.panels.iter().any(|p| p.threshold.is_some());
-    let style = TextStyle::from((FONT_FAMILY, 17).into_font()).pos(Pos::new(HPos::Left, VPos::Center));
-    const SWATCH: i32 = 36;
-    const GAP: i32 = 10;
-    const SPACING: i32 = 34;
-    let mut widths = Vec::new();
-    let labels: Vec<String> = entries
-        .iter()
-        .map(|(l, _)| l.clone())
-        .chain(has_threshold.then(|| "solve threshold".to_string()))
-        .collect();
-    for label in &labels {
-        let (w, _) = area.estimate_text_size(label, &style).map_err(plot_error)?;
-        widths.push(SWATCH + GAP + w as i32);
-    }
-    let total: i32 = widths.iter().sum::<i32>() + SPACING * (widths.len() as i32 - 1).max(0);
-    let (width, height) = area.dim_in_pixel();
-    let mut x = ((width as i32 - total) / 2).max(4);
-    let y = height as i32 / 2;
-    for (i, label) in labels.iter().enumerate() {
-        if i < entries.len() {
-            let color = PALETTE[entries[i].1 % PALETTE.len()];
-            area.draw(&Rectangle::new([(x, y - 7), (x + SWATCH, y + 7)], color.mix(0.18).filled()))
+/// One legend for the whole figure below the panels: rows of entries, each row centred.
+fn draw_legend<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, layout: &Layout) -> Result<()> {
+    let style =
+        TextStyle::from((FONT_FAMILY, LEGEND_FONT as f64).into_font()).pos(Pos::new(HPos::Left, VPos::Center));
+    let (width, _) = area.dim_in_pixel();
+    for (row_index, row) in layout.legend_rows.iter().enumerate() {
+        let row_width: u32 =
+            row.iter().map(|e| e.width + ENTRY_SPACING).sum::<u32>().saturating_sub(ENTRY_SPACING);
+        let mut x = (width.saturating_sub(row_width) / 2) as i32;
+        let y = (LEGEND_PADDING + LEGEND_ROW_HEIGHT * row_index as u32 + LEGEND_ROW_HEIGHT / 2) as i32;
+        let swatch = SWATCH as i32;
+        for entry in row {
+            match entry.color {
+                Some(index) => {
+                    let color = PALETTE[index % PALETTE.len()];
+                    area.draw(&Rectangle::new([(x, y - 7), (x + swatch, y + 7)], color.mix(0.18).filled()))
+                        .map_err(plot_error)?;
+                    area.draw(&PathElement::new(vec![(x, y), (x + swatch, y)], color.stroke_width(3)))
+                        .map_err(plot_error)?;
+                }
+                None => {
+                    area.draw(&DashedPathElement::new(vec![(x, y), (x + swatch, y)], 9, 6, BLACK.stroke_width(1)))
+                        .map_err(plot_error)?;
+                }
+            }
+            area.draw(&Text::new(entry.label.clone(), (x + swatch + SWATCH_GAP as i32, y), style.clone()))
                 .map_err(plot_error)?;
-            area.draw(&PathElement::new(vec![(x, y), (x + SWATCH, y)], color.stroke_width(3))).map_err(plot_error)?;
-        } else {
-            area.draw(&DashedPathElement::new(vec![(x, y), (x + SWATCH, y)], 9, 6, BLACK.stroke_width(1)))
-                .map_err(plot_error)?;
+            x += (entry.width + ENTRY_SPACING) as i32;
         }
-        area.draw(&Text::new(label.clone(), (x + SWATCH + GAP, y), style.clone())).map_err(plot_error)?;
-        x += widths[i] + SPACING;
     }
     Ok(())
 }
@@ -548,13 +615,14 @@ fn draw_legend<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, figure: &Figur
 /// renamed into place) and returns the two paths.
 pub fn draw_figure(figure: &FigureContent, out_dir: &Path, name: &str) -> Result<Vec<PathBuf>> {
     ensure_font()?;
-    let (size, grid) = figure_size(figure);
+    let layout = layout(figure)?;
+    let size = layout.size;
     let png_path = out_dir.join(format!("{name}.png"));
     // The bitmap backend picks the encoder from the extension, so the temporary name keeps `.png`.
     let png_tmp = out_dir.join(format!(".{name}.tmp{}.png", std::process::id()));
     {
         let root = BitMapBackend::new(&png_tmp, size).into_drawing_area();
-        draw_on(&root, figure, grid)?;
+        draw_on(&root, figure, &layout)?;
         root.present().map_err(plot_error).with_context(|| format!("cannot write {}", png_tmp.display()))?;
     }
     std::fs::rename(&png_tmp, &png_path).with_context(|| format!("cannot write {}", png_path.display()))?;
@@ -563,7 +631,7 @@ pub fn draw_figure(figure: &FigureContent, out_dir: &Path, name: &str) -> Result
     let mut svg = String::new();
     {
         let root = SVGBackend::with_string(&mut svg, size).into_drawing_area();
-        draw_on(&root, figure, grid)?;
+        draw_on(&root, figure, &layout)?;
         root.present().map_err(plot_error)?;
     }
     write_atomic(&svg_path, svg.as_bytes())?;
