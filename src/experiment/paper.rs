@@ -23,8 +23,18 @@ pub struct PaperTask {
 
 /// The paper's tasks in the column order of its tables.
 pub const PAPER_TASKS: [PaperTask; 4] = [
-    PaperTask { name: "Cart-Pole", gym_id: "CartPole-v0", aliases: &["CartPole-v0"], solve_threshold: 195.0 },
-    PaperTask { name: "Acrobot", gym_id: "Acrobot-v1", aliases: &["Acrobot-v1"], solve_threshold: -100.0 },
+    PaperTask {
+        name: "Cart-Pole",
+        gym_id: "CartPole-v0",
+        aliases: &["CartPole-v0"],
+        solve_threshold: 195.0,
+    },
+    PaperTask {
+        name: "Acrobot",
+        gym_id: "Acrobot-v1",
+        aliases: &["Acrobot-v1"],
+        solve_threshold: -100.0,
+    },
     PaperTask {
         name: "Mountain Car",
         gym_id: "MountainCar-v0",
@@ -41,7 +51,9 @@ pub const PAPER_TASKS: [PaperTask; 4] = [
 
 /// Position of an environment id among [`PAPER_TASKS`] (its table column), if it is one of the paper's tasks.
 pub fn paper_task_index(env_id: &str) -> Option<usize> {
-    PAPER_TASKS.iter().position(|task| task.aliases.contains(&env_id))
+    PAPER_TASKS
+        .iter()
+        .position(|task| task.aliases.contains(&env_id))
 }
 
 /// The six methods in the row order of Table 5 within each network group (lower-case, as in configs).
@@ -55,12 +67,12 @@ pub const TABLE5_NETS: [(&str, &str); 2] = [("bootstrap", "B"), ("noisy", "N")];
 /// the training budget for at least half of the seeds.
 pub const TABLE5_MEDIAN_STEPS: [[[u64; 4]; 6]; 2] = [
     [
-        [8000, 57000, 210000, 260000],  // DQN-B
-        [8000, 45000, 170000, 310000],  // GDQN-B
-        [7500, 31000, 100000, 217500],  // BDQN-B
-        [7000, 25000, 85000, 205000],   // ADQN-B
-        [7500, 38000, 140000, 500000],  // DQfD-B
-        [6000, 49000, 135000, 267500],  // ADQNP-B
+        [8000, 57000, 210000, 260000], // DQN-B
+        [8000, 45000, 170000, 310000], // GDQN-B
+        [7500, 31000, 100000, 217500], // BDQN-B
+        [7000, 25000, 85000, 205000],  // ADQN-B
+        [7500, 38000, 140000, 500000], // DQfD-B
+        [6000, 49000, 135000, 267500], // ADQNP-B
     ],
     [
         [13000, 114000, 190000, 355000], // DQN-N
@@ -145,7 +157,11 @@ pub const T_QUERY_VALUES: [f64; 4] = [0.05, 0.1, 0.3, 0.5];
 
 /// The experts of the paper's expert-quality study on Lunar Lander, as expert specs: the converged expert,
 /// the converged expert taking a random action with probability 0.4, and the snapshot ("weak") expert.
-pub const EXPERT_QUALITY_SPECS: [&str; 3] = ["shipped:perfect", "noisy:0.4:shipped:perfect", "shipped:weak"];
+pub const EXPERT_QUALITY_SPECS: [&str; 3] = [
+    "shipped:perfect",
+    "noisy:0.4:shipped:perfect",
+    "shipped:weak",
+];
 
 /// Methods of the expert-quality study.
 pub const EXPERT_QUALITY_METHODS: [&str; 2] = ["adqn", "dqfd"];
@@ -180,13 +196,20 @@ pub fn paper_grids(seeds: u64) -> Vec<(&'static str, SweepGrid)> {
     };
     let experts = SweepGrid {
         envs: vec![PAPER_TASKS[3].gym_id.to_string()],
-        methods: EXPERT_QUALITY_METHODS.iter().map(|m| m.to_string()).collect(),
+        methods: EXPERT_QUALITY_METHODS
+            .iter()
+            .map(|m| m.to_string())
+            .collect(),
         nets,
         seeds: seed_list,
         experts: EXPERT_QUALITY_SPECS.iter().map(|e| e.to_string()).collect(),
         ..SweepGrid::default()
     };
-    vec![("methods", methods), ("t_query", t_query), ("experts", experts)]
+    vec![
+        ("methods", methods),
+        ("t_query", t_query),
+        ("experts", experts),
+    ]
 }
 
 #[cfg(test)]
@@ -196,8 +219,14 @@ mod tests {
     #[test]
     fn table5_lookup_follows_the_paper_layout() {
         // Spot checks against the LaTeX table (t:step_solve): ADQN-N on Acrobot and DQfD-B on Lunar Lander.
-        assert_eq!(paper_median_steps("Acrobot-v1", "adqn", "noisy"), Some(8000));
-        assert_eq!(paper_median_steps("LunarLander-v3", "dqfd", "bootstrap"), Some(500000));
+        assert_eq!(
+            paper_median_steps("Acrobot-v1", "adqn", "noisy"),
+            Some(8000)
+        );
+        assert_eq!(
+            paper_median_steps("LunarLander-v3", "dqfd", "bootstrap"),
+            Some(500000)
+        );
         assert_eq!(paper_median_steps("CartPole-v1", "dqn", "bootstrap"), None);
         assert_eq!(paper_median_steps("CartPole-v0", "dqn", "plain"), None);
     }
@@ -205,7 +234,10 @@ mod tests {
     #[test]
     fn paper_grids_are_valid_and_sized_as_in_the_paper() {
         let grids = paper_grids(PAPER_SEEDS);
-        let sizes: Vec<usize> = grids.iter().map(|(_, g)| g.specs().unwrap().len()).collect();
+        let sizes: Vec<usize> = grids
+            .iter()
+            .map(|(_, g)| g.specs().unwrap().len())
+            .collect();
         assert_eq!(sizes, vec![4 * 6 * 2 * 20, 4 * 2 * 4 * 20, 2 * 2 * 3 * 20]);
     }
 }

@@ -14,8 +14,8 @@ use super::sweep::{DEFAULT_VARIANT, write_atomic};
 use anyhow::{Context, Result, anyhow};
 use plotters::coord::Shift;
 use plotters::element::DashedPathElement;
-use plotters::style::text_anchor::{HPos, Pos, VPos};
 use plotters::prelude::*;
+use plotters::style::text_anchor::{HPos, Pos, VPos};
 use plotters::style::{FontStyle, register_font};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -93,7 +93,10 @@ pub const PALETTE: [RGBColor; 8] = [
 ];
 
 fn method_color(method: &str) -> usize {
-    TABLE5_METHODS.iter().position(|m| *m == method).unwrap_or(6)
+    TABLE5_METHODS
+        .iter()
+        .position(|m| *m == method)
+        .unwrap_or(6)
 }
 
 /// Median and quartiles over the given values of each x, in x order.
@@ -126,8 +129,10 @@ pub fn median_curve(runs: &[&RunRecord]) -> Vec<Band> {
 /// Queries per evaluation period over training, median over the runs that logged queries: bin k counts the
 /// queries at steps in [k P, (k + 1) P) and is plotted at x = (k + 1) P, where P is the runs' evaluation period.
 pub fn query_timeline(runs: &[&RunRecord]) -> Vec<Band> {
-    let logged: Vec<(&RunRecord, &Vec<u64>)> =
-        runs.iter().filter_map(|r| r.query_steps.as_ref().map(|q| (*r, q))).collect();
+    let logged: Vec<(&RunRecord, &Vec<u64>)> = runs
+        .iter()
+        .filter_map(|r| r.query_steps.as_ref().map(|q| (*r, q)))
+        .collect();
     let Some(period) = logged.iter().map(|(r, _)| r.eval_period).max() else {
         return Vec::new();
     };
@@ -141,7 +146,10 @@ pub fn query_timeline(runs: &[&RunRecord]) -> Vec<Band> {
             counts[bin] += 1.0;
         }
         for (k, count) in counts.into_iter().enumerate() {
-            per_bin.entry((k as u64 + 1) * period).or_default().push(count);
+            per_bin
+                .entry((k as u64 + 1) * period)
+                .or_default()
+                .push(count);
         }
     }
     bands(per_bin)
@@ -152,9 +160,16 @@ fn expert_label(spec: &str) -> String {
     match spec {
         "shipped:perfect" => "perfect expert".to_string(),
         "shipped:weak" => "weak (snapshot) expert".to_string(),
-        other => match other.strip_prefix("noisy:").and_then(|rest| rest.split_once(':')) {
+        other => match other
+            .strip_prefix("noisy:")
+            .and_then(|rest| rest.split_once(':'))
+        {
             Some((p, inner)) if p.parse::<f64>().is_ok() => {
-                format!("{} + {}% random actions", expert_label(inner), (p.parse::<f64>().unwrap_or(0.0) * 100.0).round())
+                format!(
+                    "{} + {}% random actions",
+                    expert_label(inner),
+                    (p.parse::<f64>().unwrap_or(0.0) * 100.0).round()
+                )
             }
             _ => other.to_string(),
         },
@@ -173,20 +188,32 @@ const RETURN_LABEL: &str = "mean test return (20 episodes)";
 const STEPS_LABEL: &str = "environment steps";
 
 /// Panels per environment, one curve per method, for the default-variant runs of `methods` on `net`.
-fn methods_figure(runs: &[RunRecord], net: &str, methods: &[&str], title: String) -> Option<FigureContent> {
+fn methods_figure(
+    runs: &[RunRecord],
+    net: &str,
+    methods: &[&str],
+    title: String,
+) -> Option<FigureContent> {
     let selected: Vec<&RunRecord> = runs
         .iter()
-        .filter(|r| r.net == net && r.variant == DEFAULT_VARIANT && methods.contains(&r.method.as_str()))
+        .filter(|r| {
+            r.net == net && r.variant == DEFAULT_VARIANT && methods.contains(&r.method.as_str())
+        })
         .collect();
     let envs = env_order(selected.iter().map(|r| r.env.as_str()));
     let panels: Vec<Panel> = envs
         .iter()
         .map(|env| {
-            let in_env: Vec<&RunRecord> = selected.iter().copied().filter(|r| &r.env == env).collect();
+            let in_env: Vec<&RunRecord> =
+                selected.iter().copied().filter(|r| &r.env == env).collect();
             let curves = methods
                 .iter()
                 .filter_map(|method| {
-                    let group: Vec<&RunRecord> = in_env.iter().copied().filter(|r| r.method == *method).collect();
+                    let group: Vec<&RunRecord> = in_env
+                        .iter()
+                        .copied()
+                        .filter(|r| r.method == *method)
+                        .collect();
                     (!group.is_empty()).then(|| Curve {
                         label: paper::method_display_name(method),
                         color: method_color(method),
@@ -194,7 +221,11 @@ fn methods_figure(runs: &[RunRecord], net: &str, methods: &[&str], title: String
                     })
                 })
                 .collect();
-            Panel { title: env.clone(), threshold: in_env.first().map(|r| r.solve_threshold), curves }
+            Panel {
+                title: env.clone(),
+                threshold: in_env.first().map(|r| r.solve_threshold),
+                curves,
+            }
         })
         .collect();
     (!panels.is_empty()).then(|| FigureContent {
@@ -219,12 +250,17 @@ fn t_query_figure(runs: &[RunRecord], net: &str) -> Option<FigureContent> {
     let panels: Vec<Panel> = envs
         .iter()
         .map(|env| {
-            let in_env: Vec<&(&RunRecord, f64)> = selected.iter().filter(|(r, _)| &r.env == env).collect();
+            let in_env: Vec<&(&RunRecord, f64)> =
+                selected.iter().filter(|(r, _)| &r.env == env).collect();
             let curves = values
                 .iter()
                 .enumerate()
                 .filter_map(|(i, value)| {
-                    let group: Vec<&RunRecord> = in_env.iter().filter(|(_, t)| t == value).map(|(r, _)| *r).collect();
+                    let group: Vec<&RunRecord> = in_env
+                        .iter()
+                        .filter(|(_, t)| t == value)
+                        .map(|(r, _)| *r)
+                        .collect();
                     (!group.is_empty()).then(|| Curve {
                         label: format!("t_query = {value}"),
                         color: [4, 3, 5, 1, 6, 2, 0, 7][i % PALETTE.len()],
@@ -232,7 +268,11 @@ fn t_query_figure(runs: &[RunRecord], net: &str) -> Option<FigureContent> {
                     })
                 })
                 .collect();
-            Panel { title: env.clone(), threshold: in_env.first().map(|(r, _)| r.solve_threshold), curves }
+            Panel {
+                title: env.clone(),
+                threshold: in_env.first().map(|(r, _)| r.solve_threshold),
+                curves,
+            }
         })
         .collect();
     let (words, suffix) = net_words(net);
@@ -253,18 +293,29 @@ fn expert_figure(runs: &[RunRecord], net: &str) -> Option<FigureContent> {
         .filter(|r| r.variant.starts_with("expert-") && !r.variant.contains('_'))
         .collect();
     // Legend order and colours follow the paper's order of experts; unknown specs come after, alphabetically.
-    let mut experts: Vec<String> =
-        selected.iter().map(|r| r.expert.clone().unwrap_or_else(|| r.variant.clone())).collect();
+    let mut experts: Vec<String> = selected
+        .iter()
+        .map(|r| r.expert.clone().unwrap_or_else(|| r.variant.clone()))
+        .collect();
     experts.sort_by_key(|e| {
-        (paper::EXPERT_QUALITY_SPECS.iter().position(|s| s == e).unwrap_or(usize::MAX), e.clone())
+        (
+            paper::EXPERT_QUALITY_SPECS
+                .iter()
+                .position(|s| s == e)
+                .unwrap_or(usize::MAX),
+            e.clone(),
+        )
     });
     experts.dedup();
     let envs = env_order(selected.iter().map(|r| r.env.as_str()));
     let mut panels = Vec::new();
     for env in &envs {
         for method in ["adqn", "dqfd"] {
-            let in_panel: Vec<&RunRecord> =
-                selected.iter().copied().filter(|r| &r.env == env && r.method == method).collect();
+            let in_panel: Vec<&RunRecord> = selected
+                .iter()
+                .copied()
+                .filter(|r| &r.env == env && r.method == method)
+                .collect();
             if in_panel.is_empty() {
                 continue;
             }
@@ -294,7 +345,9 @@ fn expert_figure(runs: &[RunRecord], net: &str) -> Option<FigureContent> {
     }
     let (words, suffix) = net_words(net);
     (!panels.is_empty()).then(|| FigureContent {
-        title: format!("Effect of the expert's quality on ADQN-{suffix} and DQfD-{suffix} ({words} DQN)"),
+        title: format!(
+            "Effect of the expert's quality on ADQN-{suffix} and DQfD-{suffix} ({words} DQN)"
+        ),
         x_label: STEPS_LABEL.to_string(),
         y_label: RETURN_LABEL.to_string(),
         panels,
@@ -306,7 +359,9 @@ fn query_figure(runs: &[RunRecord], net: &str) -> Option<FigureContent> {
     let methods = ["gdqn", "bdqn", "adqn", "adqnp"];
     let selected: Vec<&RunRecord> = runs
         .iter()
-        .filter(|r| r.net == net && r.variant == DEFAULT_VARIANT && methods.contains(&r.method.as_str()))
+        .filter(|r| {
+            r.net == net && r.variant == DEFAULT_VARIANT && methods.contains(&r.method.as_str())
+        })
         .filter(|r| r.query_steps.is_some())
         .collect();
     let envs = env_order(selected.iter().map(|r| r.env.as_str()));
@@ -316,8 +371,11 @@ fn query_figure(runs: &[RunRecord], net: &str) -> Option<FigureContent> {
             let curves = methods
                 .iter()
                 .filter_map(|method| {
-                    let group: Vec<&RunRecord> =
-                        selected.iter().copied().filter(|r| &r.env == env && r.method == *method).collect();
+                    let group: Vec<&RunRecord> = selected
+                        .iter()
+                        .copied()
+                        .filter(|r| &r.env == env && r.method == *method)
+                        .collect();
                     (!group.is_empty()).then(|| Curve {
                         label: paper::method_display_name(method),
                         color: method_color(method),
@@ -325,7 +383,11 @@ fn query_figure(runs: &[RunRecord], net: &str) -> Option<FigureContent> {
                     })
                 })
                 .collect();
-            Panel { title: env.clone(), threshold: None, curves }
+            Panel {
+                title: env.clone(),
+                threshold: None,
+                curves,
+            }
         })
         .collect();
     let (words, suffix) = net_words(net);
@@ -345,8 +407,16 @@ pub fn paper_figures(runs: &[RunRecord]) -> Vec<PaperFigure> {
     for net in ["bootstrap", "noisy"] {
         let (words, suffix) = net_words(net);
         let mut push = |name: String, content: Option<FigureContent>, missing: String| {
-            let skip_reason = if content.is_some() { String::new() } else { missing };
-            figures.push(PaperFigure { name, content, skip_reason });
+            let skip_reason = if content.is_some() {
+                String::new()
+            } else {
+                missing
+            };
+            figures.push(PaperFigure {
+                name,
+                content,
+                skip_reason,
+            });
         };
         push(
             format!("fig1_methods_{net}"),
@@ -376,12 +446,16 @@ pub fn paper_figures(runs: &[RunRecord]) -> Vec<PaperFigure> {
         push(
             format!("fig4_experts_{net}"),
             expert_figure(runs, net),
-            format!("no complete ADQN or DQfD run of an expert sweep (variant expert-...) with net = {net}"),
+            format!(
+                "no complete ADQN or DQfD run of an expert sweep (variant expert-...) with net = {net}"
+            ),
         );
         push(
             format!("fig5_queries_{net}"),
             query_figure(runs, net),
-            format!("no complete default-variant run of a querying method with a queries.csv and net = {net}"),
+            format!(
+                "no complete default-variant run of a querying method with a queries.csv and net = {net}"
+            ),
         );
     }
     figures.sort_by(|a, b| a.name.cmp(&b.name));
@@ -405,8 +479,13 @@ fn format_steps(value: f64) -> String {
 fn panel_ranges(panel: &Panel) -> (f64, (f64, f64)) {
     let points = panel.curves.iter().flat_map(|c| c.points.iter());
     let x_max = points.clone().map(|p| p.x).fold(0.0, f64::max);
-    let mut y_min = points.clone().map(|p| p.lower_quartile.min(p.median)).fold(f64::INFINITY, f64::min);
-    let mut y_max = points.map(|p| p.upper_quartile.max(p.median)).fold(f64::NEG_INFINITY, f64::max);
+    let mut y_min = points
+        .clone()
+        .map(|p| p.lower_quartile.min(p.median))
+        .fold(f64::INFINITY, f64::min);
+    let mut y_max = points
+        .map(|p| p.upper_quartile.max(p.median))
+        .fold(f64::NEG_INFINITY, f64::max);
     if let Some(t) = panel.threshold {
         y_min = y_min.min(t);
         y_max = y_max.max(t);
@@ -414,8 +493,15 @@ fn panel_ranges(panel: &Panel) -> (f64, (f64, f64)) {
     if !y_min.is_finite() || !y_max.is_finite() {
         (y_min, y_max) = (0.0, 1.0);
     }
-    let pad = if y_max > y_min { 0.05 * (y_max - y_min) } else { 1.0 };
-    (if x_max > 0.0 { x_max } else { 1.0 }, (y_min - pad, y_max + pad))
+    let pad = if y_max > y_min {
+        0.05 * (y_max - y_min)
+    } else {
+        1.0
+    };
+    (
+        if x_max > 0.0 { x_max } else { 1.0 },
+        (y_min - pad, y_max + pad),
+    )
 }
 
 const PANEL_WIDTH: u32 = 560;
@@ -451,7 +537,11 @@ struct Layout {
 }
 
 fn text_width(text: &str, size: u32) -> Result<u32> {
-    Ok((FONT_FAMILY, size as f64).into_font().box_size(text).map_err(plot_error)?.0)
+    Ok((FONT_FAMILY, size as f64)
+        .into_font()
+        .box_size(text)
+        .map_err(plot_error)?
+        .0)
 }
 
 fn layout(figure: &FigureContent) -> Result<Layout> {
@@ -465,23 +555,41 @@ fn layout(figure: &FigureContent) -> Result<Layout> {
     for curve in figure.panels.iter().flat_map(|p| &p.curves) {
         if !entries.iter().any(|e| e.label == curve.label) {
             let width = SWATCH + SWATCH_GAP + text_width(&curve.label, LEGEND_FONT)?;
-            entries.push(LegendEntry { label: curve.label.clone(), color: Some(curve.color), width });
+            entries.push(LegendEntry {
+                label: curve.label.clone(),
+                color: Some(curve.color),
+                width,
+            });
         }
     }
     if figure.panels.iter().any(|p| p.threshold.is_some()) {
         let label = "solve threshold".to_string();
         let width = SWATCH + SWATCH_GAP + text_width(&label, LEGEND_FONT)?;
-        entries.push(LegendEntry { label, color: None, width });
+        entries.push(LegendEntry {
+            label,
+            color: None,
+            width,
+        });
     }
-    let one_row: u32 = entries.iter().map(|e| e.width + ENTRY_SPACING).sum::<u32>().saturating_sub(ENTRY_SPACING);
+    let one_row: u32 = entries
+        .iter()
+        .map(|e| e.width + ENTRY_SPACING)
+        .sum::<u32>()
+        .saturating_sub(ENTRY_SPACING);
     let title_width = text_width(&figure.title, TITLE_FONT)?;
-    let width = panels_width.max(title_width + 2 * SIDE_ROOM).max(one_row.min(MAX_LEGEND_ROW) + 2 * SIDE_ROOM);
+    let width = panels_width
+        .max(title_width + 2 * SIDE_ROOM)
+        .max(one_row.min(MAX_LEGEND_ROW) + 2 * SIDE_ROOM);
 
     let row_limit = width - 2 * SIDE_ROOM;
     let mut legend_rows: Vec<Vec<LegendEntry>> = Vec::new();
     let mut row_width = 0;
     for entry in entries {
-        let needed = if row_width == 0 { entry.width } else { row_width + ENTRY_SPACING + entry.width };
+        let needed = if row_width == 0 {
+            entry.width
+        } else {
+            row_width + ENTRY_SPACING + entry.width
+        };
         match legend_rows.last_mut() {
             Some(row) if needed <= row_limit => {
                 row_width = needed;
@@ -495,7 +603,10 @@ fn layout(figure: &FigureContent) -> Result<Layout> {
     }
     let legend_height = legend_rows.len() as u32 * LEGEND_ROW_HEIGHT + 2 * LEGEND_PADDING;
     Ok(Layout {
-        size: (width, PANEL_HEIGHT * rows as u32 + TITLE_HEIGHT + legend_height),
+        size: (
+            width,
+            PANEL_HEIGHT * rows as u32 + TITLE_HEIGHT + legend_height,
+        ),
         grid: (rows, cols),
         panels_width,
         legend_rows,
@@ -507,22 +618,34 @@ fn plot_error<E: std::fmt::Debug>(err: E) -> anyhow::Error {
 }
 
 /// Draws the whole figure on a drawing area of any backend (bitmap or SVG).
-fn draw_on<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, figure: &FigureContent, layout: &Layout) -> Result<()> {
+fn draw_on<DB: DrawingBackend>(
+    root: &DrawingArea<DB, Shift>,
+    figure: &FigureContent,
+    layout: &Layout,
+) -> Result<()> {
     root.fill(&WHITE).map_err(plot_error)?;
     let (width, height) = layout.size;
     let (title_area, rest) = root.split_vertically(TITLE_HEIGHT);
     let legend_height = height - TITLE_HEIGHT - PANEL_HEIGHT * layout.grid.0 as u32;
     let (plot_area, legend_area) = rest.split_vertically(height - TITLE_HEIGHT - legend_height);
-    let title_style =
-        TextStyle::from((FONT_FAMILY, TITLE_FONT as f64).into_font()).pos(Pos::new(HPos::Center, VPos::Center));
+    let title_style = TextStyle::from((FONT_FAMILY, TITLE_FONT as f64).into_font())
+        .pos(Pos::new(HPos::Center, VPos::Center));
     title_area
-        .draw(&Text::new(figure.title.clone(), (width as i32 / 2, TITLE_HEIGHT as i32 / 2), title_style))
+        .draw(&Text::new(
+            figure.title.clone(),
+            (width as i32 / 2, TITLE_HEIGHT as i32 / 2),
+            title_style,
+        ))
         .map_err(plot_error)?;
     // Panels keep their size; a figure widened for its title or legend centres them.
     let side = (width - layout.panels_width) / 2;
     let plot_area = plot_area.margin(0, 0, side, width - layout.panels_width - side);
 
-    for (area, panel) in plot_area.split_evenly(layout.grid).iter().zip(&figure.panels) {
+    for (area, panel) in plot_area
+        .split_evenly(layout.grid)
+        .iter()
+        .zip(&figure.panels)
+    {
         let (x_max, (y_min, y_max)) = panel_ranges(panel);
         let mut chart = ChartBuilder::on(area)
             .caption(&panel.title, (FONT_FAMILY, 19))
@@ -558,10 +681,18 @@ fn draw_on<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, figure: &FigureCon
                 .chain(curve.points.iter().rev().map(|p| (p.x, p.lower_quartile)))
                 .collect();
             if curve.points.len() > 1 {
-                chart.draw_series(std::iter::once(Polygon::new(band, color.mix(0.18).filled()))).map_err(plot_error)?;
+                chart
+                    .draw_series(std::iter::once(Polygon::new(
+                        band,
+                        color.mix(0.18).filled(),
+                    )))
+                    .map_err(plot_error)?;
             }
             chart
-                .draw_series(LineSeries::new(curve.points.iter().map(|p| (p.x, p.median)), color.stroke_width(2)))
+                .draw_series(LineSeries::new(
+                    curve.points.iter().map(|p| (p.x, p.median)),
+                    color.stroke_width(2),
+                ))
                 .map_err(plot_error)?;
         }
         if let Some(threshold) = panel.threshold {
@@ -580,31 +711,50 @@ fn draw_on<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, figure: &FigureCon
 
 /// One legend for the whole figure below the panels: rows of entries, each row centred.
 fn draw_legend<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, layout: &Layout) -> Result<()> {
-    let style =
-        TextStyle::from((FONT_FAMILY, LEGEND_FONT as f64).into_font()).pos(Pos::new(HPos::Left, VPos::Center));
+    let style = TextStyle::from((FONT_FAMILY, LEGEND_FONT as f64).into_font())
+        .pos(Pos::new(HPos::Left, VPos::Center));
     let (width, _) = area.dim_in_pixel();
     for (row_index, row) in layout.legend_rows.iter().enumerate() {
-        let row_width: u32 =
-            row.iter().map(|e| e.width + ENTRY_SPACING).sum::<u32>().saturating_sub(ENTRY_SPACING);
+        let row_width: u32 = row
+            .iter()
+            .map(|e| e.width + ENTRY_SPACING)
+            .sum::<u32>()
+            .saturating_sub(ENTRY_SPACING);
         let mut x = (width.saturating_sub(row_width) / 2) as i32;
-        let y = (LEGEND_PADDING + LEGEND_ROW_HEIGHT * row_index as u32 + LEGEND_ROW_HEIGHT / 2) as i32;
+        let y =
+            (LEGEND_PADDING + LEGEND_ROW_HEIGHT * row_index as u32 + LEGEND_ROW_HEIGHT / 2) as i32;
         let swatch = SWATCH as i32;
         for entry in row {
             match entry.color {
                 Some(index) => {
                     let color = PALETTE[index % PALETTE.len()];
-                    area.draw(&Rectangle::new([(x, y - 7), (x + swatch, y + 7)], color.mix(0.18).filled()))
-                        .map_err(plot_error)?;
-                    area.draw(&PathElement::new(vec![(x, y), (x + swatch, y)], color.stroke_width(3)))
-                        .map_err(plot_error)?;
+                    area.draw(&Rectangle::new(
+                        [(x, y - 7), (x + swatch, y + 7)],
+                        color.mix(0.18).filled(),
+                    ))
+                    .map_err(plot_error)?;
+                    area.draw(&PathElement::new(
+                        vec![(x, y), (x + swatch, y)],
+                        color.stroke_width(3),
+                    ))
+                    .map_err(plot_error)?;
                 }
                 None => {
-                    area.draw(&DashedPathElement::new(vec![(x, y), (x + swatch, y)], 9, 6, BLACK.stroke_width(1)))
-                        .map_err(plot_error)?;
+                    area.draw(&DashedPathElement::new(
+                        vec![(x, y), (x + swatch, y)],
+                        9,
+                        6,
+                        BLACK.stroke_width(1),
+                    ))
+                    .map_err(plot_error)?;
                 }
             }
-            area.draw(&Text::new(entry.label.clone(), (x + swatch + SWATCH_GAP as i32, y), style.clone()))
-                .map_err(plot_error)?;
+            area.draw(&Text::new(
+                entry.label.clone(),
+                (x + swatch + SWATCH_GAP as i32, y),
+                style.clone(),
+            ))
+            .map_err(plot_error)?;
             x += (entry.width + ENTRY_SPACING) as i32;
         }
     }
@@ -623,9 +773,12 @@ pub fn draw_figure(figure: &FigureContent, out_dir: &Path, name: &str) -> Result
     {
         let root = BitMapBackend::new(&png_tmp, size).into_drawing_area();
         draw_on(&root, figure, &layout)?;
-        root.present().map_err(plot_error).with_context(|| format!("cannot write {}", png_tmp.display()))?;
+        root.present()
+            .map_err(plot_error)
+            .with_context(|| format!("cannot write {}", png_tmp.display()))?;
     }
-    std::fs::rename(&png_tmp, &png_path).with_context(|| format!("cannot write {}", png_path.display()))?;
+    std::fs::rename(&png_tmp, &png_path)
+        .with_context(|| format!("cannot write {}", png_path.display()))?;
 
     let svg_path = out_dir.join(format!("{name}.svg"));
     let mut svg = String::new();
@@ -659,7 +812,13 @@ mod tests {
             eval: means
                 .iter()
                 .enumerate()
-                .map(|(i, &mean)| EvalPoint { step: (i as u64 + 1) * 1000, mean, std: 0.0, min: mean, max: mean })
+                .map(|(i, &mean)| EvalPoint {
+                    step: (i as u64 + 1) * 1000,
+                    mean,
+                    std: 0.0,
+                    min: mean,
+                    max: mean,
+                })
                 .collect(),
             query_steps: queries,
             summary_steps_to_solve: None,
@@ -668,11 +827,23 @@ mod tests {
 
     #[test]
     fn median_curve_takes_per_step_median_and_quartiles_over_seeds() {
-        let runs = [run(0, &[10.0, 100.0], None), run(1, &[30.0, 200.0], None), run(2, &[20.0, 150.0], None)];
+        let runs = [
+            run(0, &[10.0, 100.0], None),
+            run(1, &[30.0, 200.0], None),
+            run(2, &[20.0, 150.0], None),
+        ];
         let refs: Vec<&RunRecord> = runs.iter().collect();
         let curve = median_curve(&refs);
         assert_eq!(curve.len(), 2);
-        assert_eq!((curve[0].x, curve[0].median, curve[0].lower_quartile, curve[0].upper_quartile), (1000.0, 20.0, 15.0, 25.0));
+        assert_eq!(
+            (
+                curve[0].x,
+                curve[0].median,
+                curve[0].lower_quartile,
+                curve[0].upper_quartile
+            ),
+            (1000.0, 20.0, 15.0, 25.0)
+        );
         assert_eq!(curve[1].median, 150.0);
     }
 
@@ -701,7 +872,10 @@ mod tests {
 
     #[test]
     fn expert_labels_are_readable() {
-        assert_eq!(expert_label("noisy:0.4:shipped:perfect"), "perfect expert + 40% random actions");
+        assert_eq!(
+            expert_label("noisy:0.4:shipped:perfect"),
+            "perfect expert + 40% random actions"
+        );
         assert_eq!(expert_label("file:x.safetensors"), "file:x.safetensors");
     }
 }

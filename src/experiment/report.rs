@@ -62,7 +62,10 @@ pub struct RunRecord {
 /// First evaluation step whose mean test return reaches `threshold`, or `train_steps` when none does
 /// (ALGORITHM_NOTES.md section 11: Table 5 prints the full budget, e.g. 500000, for runs that never solve).
 pub fn steps_to_solve(curve: &[EvalPoint], threshold: f64, train_steps: u64) -> u64 {
-    curve.iter().find(|point| point.mean >= threshold).map_or(train_steps, |point| point.step)
+    curve
+        .iter()
+        .find(|point| point.mean >= threshold)
+        .map_or(train_steps, |point| point.step)
 }
 
 /// Median as the paper computes it over seeds: the middle value, or the mean of the two middle values for an
@@ -87,12 +90,14 @@ pub fn quantile(values: &[f64], q: f64) -> Option<f64> {
 }
 
 fn read_summary(path: &Path) -> Result<serde_json::Value> {
-    let text = std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
     serde_json::from_str(&text).with_context(|| format!("{} is not valid JSON", path.display()))
 }
 
 fn read_eval_csv(path: &Path) -> Result<Vec<EvalPoint>> {
-    let mut reader = csv::Reader::from_path(path).with_context(|| format!("cannot read {}", path.display()))?;
+    let mut reader =
+        csv::Reader::from_path(path).with_context(|| format!("cannot read {}", path.display()))?;
     let mut points = Vec::new();
     for (line, row) in reader.deserialize::<EvalPoint>().enumerate() {
         points.push(row.with_context(|| format!("{}: bad row {}", path.display(), line + 1))?);
@@ -103,7 +108,8 @@ fn read_eval_csv(path: &Path) -> Result<Vec<EvalPoint>> {
 
 /// The `step` column of `queries.csv` (other columns may be empty and are not needed here).
 fn read_query_steps(path: &Path) -> Result<Vec<u64>> {
-    let mut reader = csv::Reader::from_path(path).with_context(|| format!("cannot read {}", path.display()))?;
+    let mut reader =
+        csv::Reader::from_path(path).with_context(|| format!("cannot read {}", path.display()))?;
     let column = reader
         .headers()?
         .iter()
@@ -113,14 +119,22 @@ fn read_query_steps(path: &Path) -> Result<Vec<u64>> {
     for (line, record) in reader.records().enumerate() {
         let record = record.with_context(|| format!("{}: bad row {}", path.display(), line + 1))?;
         let value = record.get(column).unwrap_or("");
-        steps.push(value.trim().parse().with_context(|| format!("{}: bad step '{value}'", path.display()))?);
+        steps.push(
+            value
+                .trim()
+                .parse()
+                .with_context(|| format!("{}: bad step '{value}'", path.display()))?,
+        );
     }
     Ok(steps)
 }
 
 /// The variant label from a run's path inside a sweep: the components between `METHOD-NET` and `seedN`.
 fn variant_from_path(relative: &Path, method: &str, net: &str, seed: u64) -> String {
-    let parts: Vec<String> = relative.components().map(|c| c.as_os_str().to_string_lossy().into_owned()).collect();
+    let parts: Vec<String> = relative
+        .components()
+        .map(|c| c.as_os_str().to_string_lossy().into_owned())
+        .collect();
     let method_net = format!("{method}-{net}");
     if parts.last().map(String::as_str) != Some(format!("seed{seed}").as_str()) {
         return DEFAULT_VARIANT.to_string();
@@ -142,23 +156,35 @@ pub fn read_run(dir: &Path, relative: &Path) -> Result<RunRecord> {
             .with_context(|| format!("summary.json has no string `{key}`"))
     };
     let number_field = |key: &str| -> Result<f64> {
-        summary.get(key).and_then(|v| v.as_f64()).with_context(|| format!("summary.json has no number `{key}`"))
+        summary
+            .get(key)
+            .and_then(|v| v.as_f64())
+            .with_context(|| format!("summary.json has no number `{key}`"))
     };
     let env = text_field("env")?;
     let method = text_field("method")?.to_lowercase();
     let net = text_field("net")?.to_lowercase();
-    let seed = summary.get("seed").and_then(|v| v.as_u64()).context("summary.json has no integer `seed`")?;
+    let seed = summary
+        .get("seed")
+        .and_then(|v| v.as_u64())
+        .context("summary.json has no integer `seed`")?;
     let solve_threshold = number_field("solve_threshold")?;
     let train_steps = number_field("train_steps")? as u64;
     let summary_steps_to_solve = summary.get("steps_to_solve").and_then(|v| v.as_u64());
 
     // config.toml is optional for a report: it only adds t_query, the expert and the eval period.
     let config: toml::Table = match std::fs::read_to_string(dir.join("config.toml")) {
-        Ok(text) => toml::from_str(&text).with_context(|| format!("{}/config.toml is not valid TOML", dir.display()))?,
+        Ok(text) => toml::from_str(&text)
+            .with_context(|| format!("{}/config.toml is not valid TOML", dir.display()))?,
         Err(_) => toml::Table::new(),
     };
-    let t_query = config.get("t_query").and_then(|v| v.as_float().or_else(|| v.as_integer().map(|i| i as f64)));
-    let expert = config.get("expert").and_then(|v| v.as_str()).map(str::to_string);
+    let t_query = config
+        .get("t_query")
+        .and_then(|v| v.as_float().or_else(|| v.as_integer().map(|i| i as f64)));
+    let expert = config
+        .get("expert")
+        .and_then(|v| v.as_str())
+        .map(str::to_string);
 
     let eval = read_eval_csv(&dir.join("eval.csv"))?;
     let eval_period = config
@@ -166,10 +192,18 @@ pub fn read_run(dir: &Path, relative: &Path) -> Result<RunRecord> {
         .and_then(|v| v.as_integer())
         .filter(|&p| p > 0)
         .map(|p| p as u64)
-        .or_else(|| eval.windows(2).map(|w| w[1].step.saturating_sub(w[0].step)).find(|&d| d > 0))
+        .or_else(|| {
+            eval.windows(2)
+                .map(|w| w[1].step.saturating_sub(w[0].step))
+                .find(|&d| d > 0)
+        })
         .unwrap_or_else(|| (train_steps / 20).max(1));
     let queries_path = dir.join("queries.csv");
-    let query_steps = if queries_path.is_file() { Some(read_query_steps(&queries_path)?) } else { None };
+    let query_steps = if queries_path.is_file() {
+        Some(read_query_steps(&queries_path)?)
+    } else {
+        None
+    };
     let variant = variant_from_path(relative, &method, &net, seed);
     Ok(RunRecord {
         dir: dir.to_path_buf(),
@@ -203,7 +237,8 @@ pub fn load_runs(root: &Path) -> Result<(Vec<RunRecord>, Vec<String>)> {
             run_dirs.push(dir);
             continue;
         }
-        let entries = std::fs::read_dir(&dir).with_context(|| format!("cannot list {}", dir.display()))?;
+        let entries =
+            std::fs::read_dir(&dir).with_context(|| format!("cannot list {}", dir.display()))?;
         for entry in entries {
             let entry = entry?;
             let hidden = entry.file_name().to_string_lossy().starts_with('.');
@@ -246,15 +281,23 @@ pub struct RunGroup {
 pub fn group_runs(runs: &[RunRecord]) -> Vec<RunGroup> {
     let mut groups: BTreeMap<(&str, &str, &str, &str), Vec<&RunRecord>> = BTreeMap::new();
     for run in runs {
-        groups.entry((&run.env, &run.method, &run.net, &run.variant)).or_default().push(run);
+        groups
+            .entry((&run.env, &run.method, &run.net, &run.variant))
+            .or_default()
+            .push(run);
     }
     groups
         .into_iter()
         .map(|((env, method, net, variant), mut members)| {
             members.sort_by_key(|r| r.seed);
-            let steps: Vec<u64> =
-                members.iter().map(|r| steps_to_solve(&r.eval, r.solve_threshold, r.train_steps)).collect();
-            let solved = members.iter().filter(|r| r.eval.iter().any(|p| p.mean >= r.solve_threshold)).count();
+            let steps: Vec<u64> = members
+                .iter()
+                .map(|r| steps_to_solve(&r.eval, r.solve_threshold, r.train_steps))
+                .collect();
+            let solved = members
+                .iter()
+                .filter(|r| r.eval.iter().any(|p| p.mean >= r.solve_threshold))
+                .count();
             let as_f64: Vec<f64> = steps.iter().map(|&s| s as f64).collect();
             RunGroup {
                 env: env.to_string(),
@@ -273,7 +316,12 @@ pub fn group_runs(runs: &[RunRecord]) -> Vec<RunGroup> {
 /// Environments in table order: the paper's tasks first in its column order, then any others alphabetically.
 pub fn env_order<'a>(envs: impl IntoIterator<Item = &'a str>) -> Vec<String> {
     let mut list: Vec<&str> = envs.into_iter().collect();
-    list.sort_by_key(|env| (paper::paper_task_index(env).unwrap_or(usize::MAX), env.to_string()));
+    list.sort_by_key(|env| {
+        (
+            paper::paper_task_index(env).unwrap_or(usize::MAX),
+            env.to_string(),
+        )
+    });
     list.dedup();
     list.into_iter().map(str::to_string).collect()
 }
@@ -291,14 +339,26 @@ fn format_steps(value: f64) -> String {
 /// Table 5 as Markdown and CSV from the `default`-variant groups: rows DQN..ADQNP for -B then -N, one column
 /// group per environment with our median, the paper's median and the number of seeds.
 pub fn table5(groups: &[RunGroup]) -> Result<(String, String)> {
-    let defaults: Vec<&RunGroup> = groups.iter().filter(|g| g.variant == DEFAULT_VARIANT).collect();
+    let defaults: Vec<&RunGroup> = groups
+        .iter()
+        .filter(|g| g.variant == DEFAULT_VARIANT)
+        .collect();
     let envs = env_order(defaults.iter().map(|g| g.env.as_str()));
     let find = |env: &str, method: &str, net: &str| {
-        defaults.iter().find(|g| g.env == env && g.method == method && g.net == net).copied()
+        defaults
+            .iter()
+            .find(|g| g.env == env && g.method == method && g.net == net)
+            .copied()
     };
     let mut md = String::new();
-    writeln!(md, "Median environment steps to solve over seeds: ours, with the paper's Table 5 value in parentheses")?;
-    writeln!(md, "and the number of seeds (solved/total). A seed that never solves counts as the full training length.")?;
+    writeln!(
+        md,
+        "Median environment steps to solve over seeds: ours, with the paper's Table 5 value in parentheses"
+    )?;
+    writeln!(
+        md,
+        "and the number of seeds (solved/total). A seed that never solves counts as the full training length."
+    )?;
     writeln!(md)?;
     let header: Vec<String> = envs.iter().map(|e| e.to_string()).collect();
     writeln!(md, "| method | {} |", header.join(" | "))?;
@@ -306,7 +366,12 @@ pub fn table5(groups: &[RunGroup]) -> Result<(String, String)> {
     let mut csv_writer = csv::Writer::from_writer(Vec::new());
     let mut csv_header = vec!["method".to_string(), "net".to_string()];
     for env in &envs {
-        csv_header.extend([format!("{env} ours"), format!("{env} paper"), format!("{env} seeds"), format!("{env} solved")]);
+        csv_header.extend([
+            format!("{env} ours"),
+            format!("{env} paper"),
+            format!("{env} seeds"),
+            format!("{env} solved"),
+        ]);
     }
     csv_writer.write_record(&csv_header)?;
     for (net, suffix) in TABLE5_NETS {
@@ -321,12 +386,26 @@ pub fn table5(groups: &[RunGroup]) -> Result<(String, String)> {
                 match ours {
                     Some(g) => {
                         let ours_text = format_steps(g.median_steps_to_solve);
-                        cells.push(format!("{ours_text} ({theirs_text}) {}/{}", g.solved, g.seeds.len()));
-                        csv_row.extend([ours_text, theirs_text, g.seeds.len().to_string(), g.solved.to_string()]);
+                        cells.push(format!(
+                            "{ours_text} ({theirs_text}) {}/{}",
+                            g.solved,
+                            g.seeds.len()
+                        ));
+                        csv_row.extend([
+                            ours_text,
+                            theirs_text,
+                            g.seeds.len().to_string(),
+                            g.solved.to_string(),
+                        ]);
                     }
                     None => {
                         cells.push(format!("- ({theirs_text})"));
-                        csv_row.extend(["".to_string(), theirs_text, "0".to_string(), "0".to_string()]);
+                        csv_row.extend([
+                            "".to_string(),
+                            theirs_text,
+                            "0".to_string(),
+                            "0".to_string(),
+                        ]);
                     }
                 }
             }
@@ -334,13 +413,17 @@ pub fn table5(groups: &[RunGroup]) -> Result<(String, String)> {
             csv_writer.write_record(&csv_row)?;
         }
     }
-    let csv_bytes = csv_writer.into_inner().map_err(|e| anyhow::anyhow!("cannot finish table.csv: {e}"))?;
+    let csv_bytes = csv_writer
+        .into_inner()
+        .map_err(|e| anyhow::anyhow!("cannot finish table.csv: {e}"))?;
     Ok((md, String::from_utf8(csv_bytes)?))
 }
 
 /// Every group (all variants, including nets and methods outside Table 5) as a Markdown table.
 fn all_groups_markdown(groups: &[RunGroup]) -> String {
-    let mut md = String::from("| env | method | net | variant | median steps to solve | solved/seeds |\n|---|---|---|---|---|---|\n");
+    let mut md = String::from(
+        "| env | method | net | variant | median steps to solve | solved/seeds |\n|---|---|---|---|---|---|\n",
+    );
     let order = env_order(groups.iter().map(|g| g.env.as_str()));
     for env in &order {
         for g in groups.iter().filter(|g| &g.env == env) {
@@ -379,8 +462,10 @@ fn sweep_completion_notes(root: &Path) -> Vec<String> {
         if sweep_file.is_file() {
             match SweepGrid::from_toml_file(&sweep_file).and_then(|g| g.specs()) {
                 Ok(specs) => {
-                    let complete =
-                        specs.iter().filter(|s| dir.join(s.dir_name()).join(SUMMARY_FILE).is_file()).count();
+                    let complete = specs
+                        .iter()
+                        .filter(|s| dir.join(s.dir_name()).join(SUMMARY_FILE).is_file())
+                        .count();
                     if complete < specs.len() {
                         notes.push(format!(
                             "sweep {} is incomplete: {complete} of {} runs finished",
@@ -398,7 +483,10 @@ fn sweep_completion_notes(root: &Path) -> Vec<String> {
         if let Ok(entries) = std::fs::read_dir(&dir) {
             let mut subdirs: Vec<PathBuf> = entries
                 .flatten()
-                .filter(|e| e.file_type().is_ok_and(|t| t.is_dir()) && !e.file_name().to_string_lossy().starts_with('.'))
+                .filter(|e| {
+                    e.file_type().is_ok_and(|t| t.is_dir())
+                        && !e.file_name().to_string_lossy().starts_with('.')
+                })
                 .map(|e| e.path())
                 .collect();
             subdirs.sort();
@@ -414,9 +502,13 @@ fn sweep_completion_notes(root: &Path) -> Vec<String> {
 pub fn report(dir: &Path, out_dir: &Path) -> Result<ReportSummary> {
     let (runs, mut notes) = load_runs(dir)?;
     if runs.is_empty() {
-        bail!("no complete run (a directory with {SUMMARY_FILE}) under {}", dir.display());
+        bail!(
+            "no complete run (a directory with {SUMMARY_FILE}) under {}",
+            dir.display()
+        );
     }
-    std::fs::create_dir_all(out_dir).with_context(|| format!("cannot create {}", out_dir.display()))?;
+    std::fs::create_dir_all(out_dir)
+        .with_context(|| format!("cannot create {}", out_dir.display()))?;
     notes.extend(sweep_completion_notes(dir));
     for run in &runs {
         let ours = steps_to_solve(&run.eval, run.solve_threshold, run.train_steps);
@@ -442,11 +534,17 @@ pub fn report(dir: &Path, out_dir: &Path) -> Result<ReportSummary> {
     let mut figure_lines = Vec::new();
     for figure in &figures {
         match &figure.content {
-            None => notes.push(format!("figure {} skipped: {}", figure.name, figure.skip_reason)),
+            None => notes.push(format!(
+                "figure {} skipped: {}",
+                figure.name, figure.skip_reason
+            )),
             Some(content) => {
                 let written = plot::draw_figure(content, out_dir, &figure.name)
                     .with_context(|| format!("cannot draw figure {}", figure.name))?;
-                figure_lines.push(format!("### {}\n\n![{}]({}.png)\n", content.title, figure.name, figure.name));
+                figure_lines.push(format!(
+                    "### {}\n\n![{}]({}.png)\n",
+                    content.title, figure.name, figure.name
+                ));
                 files.extend(written);
             }
         }
@@ -454,20 +552,43 @@ pub fn report(dir: &Path, out_dir: &Path) -> Result<ReportSummary> {
 
     let mut md = String::new();
     writeln!(md, "# Report for {}\n", dir.display())?;
-    writeln!(md, "{} complete runs in {} configurations.\n", runs.len(), groups.len())?;
-    writeln!(md, "## Steps to solve (paper's Table 5 layout)\n\n{table_md}")?;
-    writeln!(md, "## All configurations\n\n{}", all_groups_markdown(&groups))?;
+    writeln!(
+        md,
+        "{} complete runs in {} configurations.\n",
+        runs.len(),
+        groups.len()
+    )?;
+    writeln!(
+        md,
+        "## Steps to solve (paper's Table 5 layout)\n\n{table_md}"
+    )?;
+    writeln!(
+        md,
+        "## All configurations\n\n{}",
+        all_groups_markdown(&groups)
+    )?;
     writeln!(md, "## Expert statistics in the paper\n")?;
-    writeln!(md, "| env | mean ± std | min | avg. steps | target |\n|---|---|---|---|---|")?;
+    writeln!(
+        md,
+        "| env | mean ± std | min | avg. steps | target |\n|---|---|---|---|---|"
+    )?;
     for (task, stats) in PAPER_TASKS.iter().zip(paper::EXPERT_STATS.iter()) {
         writeln!(
             md,
             "| {} | {} ± {} | {} | {} | {} |",
-            task.gym_id, stats.mean_return, stats.std_return, stats.min_return, stats.mean_episode_length, stats.target_score
+            task.gym_id,
+            stats.mean_return,
+            stats.std_return,
+            stats.min_return,
+            stats.mean_episode_length,
+            stats.target_score
         )?;
     }
     writeln!(md, "\n## Figures\n")?;
-    writeln!(md, "Median over seeds with the interquartile range shaded; dashed lines mark the solve threshold.\n")?;
+    writeln!(
+        md,
+        "Median over seeds with the interquartile range shaded; dashed lines mark the solve threshold.\n"
+    )?;
     for line in &figure_lines {
         writeln!(md, "{line}")?;
     }
@@ -480,7 +601,11 @@ pub fn report(dir: &Path, out_dir: &Path) -> Result<ReportSummary> {
     let report_path = out_dir.join("report.md");
     write_atomic(&report_path, md.as_bytes())?;
     files.push(report_path);
-    Ok(ReportSummary { runs: runs.len(), files, notes })
+    Ok(ReportSummary {
+        runs: runs.len(),
+        files,
+        notes,
+    })
 }
 
 #[cfg(test)]
@@ -488,7 +613,16 @@ mod tests {
     use super::*;
 
     fn curve(points: &[(u64, f64)]) -> Vec<EvalPoint> {
-        points.iter().map(|&(step, mean)| EvalPoint { step, mean, std: 0.0, min: mean, max: mean }).collect()
+        points
+            .iter()
+            .map(|&(step, mean)| EvalPoint {
+                step,
+                mean,
+                std: 0.0,
+                min: mean,
+                max: mean,
+            })
+            .collect()
     }
 
     #[test]
@@ -499,7 +633,10 @@ mod tests {
         assert_eq!(steps_to_solve(&never, 195.0, 20_000), 20_000);
         assert_eq!(steps_to_solve(&[], 195.0, 20_000), 20_000);
         // Negative thresholds (Acrobot, MountainCar): "reaches" means >=.
-        assert_eq!(steps_to_solve(&curve(&[(5, -120.0), (10, -100.0)]), -100.0, 50), 10);
+        assert_eq!(
+            steps_to_solve(&curve(&[(5, -120.0), (10, -100.0)]), -100.0, 50),
+            10
+        );
     }
 
     #[test]
@@ -512,7 +649,10 @@ mod tests {
             curve(&[(9000, 196.0)]),
             curve(&[(1000, 10.0), (20000, 190.0)]),
         ];
-        let steps: Vec<f64> = seeds.iter().map(|c| steps_to_solve(c, 195.0, 20000) as f64).collect();
+        let steps: Vec<f64> = seeds
+            .iter()
+            .map(|c| steps_to_solve(c, 195.0, 20000) as f64)
+            .collect();
         assert_eq!(steps, vec![6000.0, 7000.0, 9000.0, 20000.0]);
         assert_eq!(median(&steps), Some(8000.0));
         assert_eq!(median(&steps[..3]), Some(7000.0));

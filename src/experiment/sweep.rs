@@ -55,7 +55,9 @@ pub struct SweepGrid {
 }
 
 /// Keys accepted in the `[sweep]` table (listed in error messages).
-const GRID_KEYS: [&str; 7] = ["envs", "methods", "nets", "seeds", "t_query", "experts", "set"];
+const GRID_KEYS: [&str; 7] = [
+    "envs", "methods", "nets", "seeds", "t_query", "experts", "set",
+];
 
 /// `seeds = 20` (meaning 0..20) or `seeds = [0, 3, 7]`.
 #[derive(Deserialize)]
@@ -65,7 +67,9 @@ enum SeedsValue {
     List(Vec<u64>),
 }
 
-fn deserialize_seeds<'de, D: serde::Deserializer<'de>>(deserializer: D) -> Result<Vec<u64>, D::Error> {
+fn deserialize_seeds<'de, D: serde::Deserializer<'de>>(
+    deserializer: D,
+) -> Result<Vec<u64>, D::Error> {
     match SeedsValue::deserialize(deserializer) {
         Ok(SeedsValue::Count(n)) => Ok((0..n).collect()),
         Ok(SeedsValue::List(list)) => Ok(list),
@@ -86,7 +90,9 @@ struct SweepFile {
 pub fn parse_seeds(text: &str) -> Result<Vec<u64>> {
     let text = text.trim();
     let parse = |s: &str| -> Result<u64> {
-        s.trim().parse::<u64>().with_context(|| format!("'{s}' is not a non-negative integer seed"))
+        s.trim()
+            .parse::<u64>()
+            .with_context(|| format!("'{s}' is not a non-negative integer seed"))
     };
     if let Some((start, end)) = text.split_once("..") {
         let (start, end) = (parse(start)?, parse(end)?);
@@ -105,12 +111,22 @@ pub fn parse_seeds(text: &str) -> Result<Vec<u64>> {
 fn is_path_safe(name: &str) -> bool {
     !name.is_empty()
         && !name.starts_with('.')
-        && name.chars().all(|c| c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.'))
+        && name
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.'))
 }
 
 /// Turns an expert spec into a directory-name fragment: `noisy:0.4:shipped:perfect` -> `noisy-0.4-shipped-perfect`.
 fn expert_dir_fragment(spec: &str) -> String {
-    spec.chars().map(|c| if c.is_ascii_alphanumeric() || matches!(c, '.' | '_') { c } else { '-' }).collect()
+    spec.chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || matches!(c, '.' | '_') {
+                c
+            } else {
+                '-'
+            }
+        })
+        .collect()
 }
 
 impl SweepGrid {
@@ -130,13 +146,16 @@ impl SweepGrid {
 
     /// Reads and validates a sweep file.
     pub fn from_toml_file(path: &Path) -> Result<Self> {
-        let text = std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
+        let text = std::fs::read_to_string(path)
+            .with_context(|| format!("cannot read {}", path.display()))?;
         Self::from_toml_str(&text).with_context(|| format!("in sweep file {}", path.display()))
     }
 
     /// The grid as a sweep file, readable back by [`SweepGrid::from_toml_str`].
     pub fn to_toml_string(&self) -> Result<String> {
-        let file = SweepFile { sweep: self.clone() };
+        let file = SweepFile {
+            sweep: self.clone(),
+        };
         Ok(toml::to_string(&file)?)
     }
 
@@ -144,7 +163,11 @@ impl SweepGrid {
     /// t_query in (0, 1], `set` entries of the form key=value that do not clash with a varied dimension.
     /// Method and network names are case-sensitive lower-case, as in run configs.
     pub fn validate(&self) -> Result<()> {
-        fn check_list<T: PartialEq + std::fmt::Debug>(name: &str, list: &[T], required: bool) -> Result<()> {
+        fn check_list<T: PartialEq + std::fmt::Debug>(
+            name: &str,
+            list: &[T],
+            required: bool,
+        ) -> Result<()> {
             if required && list.is_empty() {
                 bail!("sweep key `{name}` must list at least one value");
             }
@@ -183,12 +206,21 @@ impl SweepGrid {
         }
         for expert in &self.experts {
             if expert.trim().is_empty() || expert.contains('"') || expert.contains('\\') {
-                bail!("expert spec {expert:?} must be non-empty and contain no quotes or backslashes");
+                bail!(
+                    "expert spec {expert:?} must be non-empty and contain no quotes or backslashes"
+                );
             }
         }
-        let fragments: BTreeSet<String> = self.experts.iter().map(|e| expert_dir_fragment(e)).collect();
+        let fragments: BTreeSet<String> = self
+            .experts
+            .iter()
+            .map(|e| expert_dir_fragment(e))
+            .collect();
         if fragments.len() != self.experts.len() {
-            bail!("two expert specs map to the same directory name: {:?}", self.experts);
+            bail!(
+                "two expert specs map to the same directory name: {:?}",
+                self.experts
+            );
         }
         for entry in &self.set {
             let Some((key, _)) = entry.split_once('=') else {
@@ -214,10 +246,16 @@ impl SweepGrid {
     /// Expands the grid into runs, in a fixed order: env, method, net, t_query, expert, seed.
     pub fn specs(&self) -> Result<Vec<RunSpec>> {
         self.validate()?;
-        let t_queries: Vec<Option<f64>> =
-            if self.t_query.is_empty() { vec![None] } else { self.t_query.iter().copied().map(Some).collect() };
-        let experts: Vec<Option<&String>> =
-            if self.experts.is_empty() { vec![None] } else { self.experts.iter().map(Some).collect() };
+        let t_queries: Vec<Option<f64>> = if self.t_query.is_empty() {
+            vec![None]
+        } else {
+            self.t_query.iter().copied().map(Some).collect()
+        };
+        let experts: Vec<Option<&String>> = if self.experts.is_empty() {
+            vec![None]
+        } else {
+            self.experts.iter().map(Some).collect()
+        };
         let mut specs = Vec::new();
         for env in &self.envs {
             for method in &self.methods {
@@ -312,9 +350,18 @@ pub struct SweepOutcome {
 /// Writes a file atomically: a temporary file in the same directory, flushed, then renamed over the target,
 /// so a reader sees either the old content or the new, never a partial file.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
-    let dir = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
-    let name = path.file_name().with_context(|| format!("{} has no file name", path.display()))?;
-    let tmp = dir.join(format!(".{}.tmp{}", name.to_string_lossy(), std::process::id()));
+    let dir = path
+        .parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
+    let name = path
+        .file_name()
+        .with_context(|| format!("{} has no file name", path.display()))?;
+    let tmp = dir.join(format!(
+        ".{}.tmp{}",
+        name.to_string_lossy(),
+        std::process::id()
+    ));
     let write = || -> std::io::Result<()> {
         let mut file = std::fs::File::create(&tmp)?;
         file.write_all(bytes)?;
@@ -330,7 +377,8 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
 /// Records `grid` in `dir/sweep.toml`, runs it with [`run_sweep`] and returns the outcome.
 pub fn run_grid(grid: &SweepGrid, dir: &Path, jobs: usize, run_fn: &RunFn) -> Result<SweepOutcome> {
     let specs = grid.specs()?;
-    std::fs::create_dir_all(dir).with_context(|| format!("cannot create sweep directory {}", dir.display()))?;
+    std::fs::create_dir_all(dir)
+        .with_context(|| format!("cannot create sweep directory {}", dir.display()))?;
     write_atomic(&dir.join(SWEEP_FILE), grid.to_toml_string()?.as_bytes())?;
     run_sweep(&specs, dir, jobs, run_fn)
 }
@@ -340,26 +388,43 @@ pub fn run_grid(grid: &SweepGrid, dir: &Path, jobs: usize, run_fn: &RunFn) -> Re
 /// and run again. A failing (or panicking) run does not stop the others: failures are collected and returned
 /// together as an error after all runs. `results.csv` is rewritten at the end either way.
 /// An overall progress bar (runs done / total, ETA) is drawn only when stderr is a terminal.
-pub fn run_sweep(specs: &[RunSpec], dir: &Path, jobs: usize, run_fn: &RunFn) -> Result<SweepOutcome> {
+pub fn run_sweep(
+    specs: &[RunSpec],
+    dir: &Path,
+    jobs: usize,
+    run_fn: &RunFn,
+) -> Result<SweepOutcome> {
     let names: BTreeSet<PathBuf> = specs.iter().map(RunSpec::dir_name).collect();
     if names.len() != specs.len() {
         bail!("the sweep lists the same run twice (two specs share a directory name)");
     }
-    std::fs::create_dir_all(dir).with_context(|| format!("cannot create sweep directory {}", dir.display()))?;
-    let pending: Vec<&RunSpec> =
-        specs.iter().filter(|spec| !dir.join(spec.dir_name()).join(SUMMARY_FILE).is_file()).collect();
+    std::fs::create_dir_all(dir)
+        .with_context(|| format!("cannot create sweep directory {}", dir.display()))?;
+    let pending: Vec<&RunSpec> = specs
+        .iter()
+        .filter(|spec| !dir.join(spec.dir_name()).join(SUMMARY_FILE).is_file())
+        .collect();
     let already_complete = specs.len() - pending.len();
-    let jobs = if jobs == 0 { std::thread::available_parallelism().map_or(1, |n| n.get()) } else { jobs };
+    let jobs = if jobs == 0 {
+        std::thread::available_parallelism().map_or(1, |n| n.get())
+    } else {
+        jobs
+    };
     let jobs = jobs.min(pending.len()).max(1);
 
     let bar = if std::io::stderr().is_terminal() {
-        ProgressBar::with_draw_target(Some(specs.len() as u64), ProgressDrawTarget::stderr_with_hz(2))
+        ProgressBar::with_draw_target(
+            Some(specs.len() as u64),
+            ProgressDrawTarget::stderr_with_hz(2),
+        )
     } else {
         ProgressBar::hidden()
     };
     bar.set_style(
-        ProgressStyle::with_template("sweep [{elapsed_precise}] {wide_bar} {pos}/{len} runs, ETA {eta} {msg}")
-            .expect("the progress template is valid"),
+        ProgressStyle::with_template(
+            "sweep [{elapsed_precise}] {wide_bar} {pos}/{len} runs, ETA {eta} {msg}",
+        )
+        .expect("the progress template is valid"),
     );
     bar.set_position(already_complete as u64);
     bar.reset_eta();
@@ -372,16 +437,26 @@ pub fn run_sweep(specs: &[RunSpec], dir: &Path, jobs: usize, run_fn: &RunFn) -> 
             scope.spawn(|| {
                 loop {
                     let index = next.fetch_add(1, Ordering::Relaxed);
-                    let Some(spec) = pending.get(index) else { break };
+                    let Some(spec) = pending.get(index) else {
+                        break;
+                    };
                     let run_dir = dir.join(spec.dir_name());
                     match run_one_spec(spec, &run_dir, run_fn) {
                         Ok(()) => {
                             completed.fetch_add(1, Ordering::Relaxed);
                         }
                         Err(err) => {
-                            let failure = RunFailure { run_dir: run_dir.clone(), error: format!("{err:#}") };
-                            bar.suspend(|| eprintln!("run {} failed: {}", run_dir.display(), failure.error));
-                            failures.lock().unwrap_or_else(|e| e.into_inner()).push(failure);
+                            let failure = RunFailure {
+                                run_dir: run_dir.clone(),
+                                error: format!("{err:#}"),
+                            };
+                            bar.suspend(|| {
+                                eprintln!("run {} failed: {}", run_dir.display(), failure.error)
+                            });
+                            failures
+                                .lock()
+                                .unwrap_or_else(|e| e.into_inner())
+                                .push(failure);
                             let failed = failures.lock().unwrap_or_else(|e| e.into_inner()).len();
                             bar.set_message(format!("({failed} failed)"));
                         }
@@ -397,8 +472,10 @@ pub fn run_sweep(specs: &[RunSpec], dir: &Path, jobs: usize, run_fn: &RunFn) -> 
     let mut failures = failures.into_inner().unwrap_or_else(|e| e.into_inner());
     failures.sort_by(|a, b| a.run_dir.cmp(&b.run_dir));
     if !failures.is_empty() {
-        let list: Vec<String> =
-            failures.iter().map(|f| format!("  {}: {}", f.run_dir.display(), f.error)).collect();
+        let list: Vec<String> = failures
+            .iter()
+            .map(|f| format!("  {}: {}", f.run_dir.display(), f.error))
+            .collect();
         let note = match &collected {
             Ok(c) => format!("results of the complete runs are in {}", c.path.display()),
             Err(err) => format!("results.csv could not be written either: {err:#}"),
@@ -423,10 +500,15 @@ pub fn run_sweep(specs: &[RunSpec], dir: &Path, jobs: usize, run_fn: &RunFn) -> 
 /// A panic inside `run_fn` is turned into an error so that one broken run cannot take down the sweep.
 fn run_one_spec(spec: &RunSpec, run_dir: &Path, run_fn: &RunFn) -> Result<()> {
     if run_dir.exists() {
-        std::fs::remove_dir_all(run_dir)
-            .with_context(|| format!("cannot clear incomplete run directory {}", run_dir.display()))?;
+        std::fs::remove_dir_all(run_dir).with_context(|| {
+            format!(
+                "cannot clear incomplete run directory {}",
+                run_dir.display()
+            )
+        })?;
     }
-    std::fs::create_dir_all(run_dir).with_context(|| format!("cannot create {}", run_dir.display()))?;
+    std::fs::create_dir_all(run_dir)
+        .with_context(|| format!("cannot create {}", run_dir.display()))?;
     let outcome = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| run_fn(spec, run_dir)));
     match outcome {
         Ok(result) => result?,
@@ -467,7 +549,12 @@ pub fn collect_results(dir: &Path) -> Result<CollectedResults> {
     let (bytes, rows, duplicates) = results_csv_bytes(&runs)?;
     problems.extend(duplicates);
     write_atomic(&path, &bytes)?;
-    Ok(CollectedResults { path, runs: runs.len(), rows, problems })
+    Ok(CollectedResults {
+        path,
+        runs: runs.len(),
+        rows,
+        problems,
+    })
 }
 
 /// The content of `results.csv` for these runs, the number of data rows, and notes on dropped duplicates.
@@ -476,7 +563,14 @@ pub fn results_csv_bytes(runs: &[RunRecord]) -> Result<(Vec<u8>, usize, Vec<Stri
     let mut rows: Vec<(Key, &super::report::EvalPoint, &Path)> = Vec::new();
     for run in runs {
         for point in &run.eval {
-            let key = (run.env.as_str(), run.method.as_str(), run.net.as_str(), run.variant.as_str(), run.seed, point.step);
+            let key = (
+                run.env.as_str(),
+                run.method.as_str(),
+                run.net.as_str(),
+                run.variant.as_str(),
+                run.seed,
+                point.step,
+            );
             rows.push((key, point, run.dir.as_path()));
         }
     }
@@ -484,12 +578,18 @@ pub fn results_csv_bytes(runs: &[RunRecord]) -> Result<(Vec<u8>, usize, Vec<Stri
     rows.sort_by(|a, b| a.0.cmp(&b.0).then_with(|| a.2.cmp(b.2)));
     let mut notes = Vec::new();
     let mut writer = csv::Writer::from_writer(Vec::new());
-    writer.write_record(["env", "method", "net", "variant", "seed", "step", "mean", "std", "min", "max"])?;
+    writer.write_record([
+        "env", "method", "net", "variant", "seed", "step", "mean", "std", "min", "max",
+    ])?;
     let mut written = 0;
     let mut previous: Option<Key> = None;
     for (key, point, run_dir) in rows {
         if previous == Some(key) {
-            notes.push(format!("duplicate evaluation at step {} in {} left out", key.5, run_dir.display()));
+            notes.push(format!(
+                "duplicate evaluation at step {} in {} left out",
+                key.5,
+                run_dir.display()
+            ));
             continue;
         }
         previous = Some(key);
@@ -508,7 +608,9 @@ pub fn results_csv_bytes(runs: &[RunRecord]) -> Result<(Vec<u8>, usize, Vec<Stri
         ])?;
         written += 1;
     }
-    let bytes = writer.into_inner().map_err(|e| anyhow::anyhow!("cannot finish results.csv: {e}"))?;
+    let bytes = writer
+        .into_inner()
+        .map_err(|e| anyhow::anyhow!("cannot finish results.csv: {e}"))?;
     Ok((bytes, written, notes))
 }
 
@@ -536,14 +638,29 @@ mod tests {
         assert_eq!(names.len(), specs.len());
         assert_eq!(
             specs[0].dir_name(),
-            PathBuf::from("CartPole-v0/adqn-bootstrap/tq0.05_expert-noisy-0.4-shipped-perfect/seed0")
+            PathBuf::from(
+                "CartPole-v0/adqn-bootstrap/tq0.05_expert-noisy-0.4-shipped-perfect/seed0"
+            )
         );
         assert_eq!(
             specs[0].overrides,
-            vec!["eval_episodes=5", "t_query=0.05", "expert=\"noisy:0.4:shipped:perfect\""]
+            vec![
+                "eval_episodes=5",
+                "t_query=0.05",
+                "expert=\"noisy:0.4:shipped:perfect\""
+            ]
         );
-        let plain = SweepGrid { t_query: vec![], experts: vec![], ..grid() }.specs().unwrap();
-        assert_eq!(plain[3].dir_name(), PathBuf::from("CartPole-v0/dqn-bootstrap/seed1"));
+        let plain = SweepGrid {
+            t_query: vec![],
+            experts: vec![],
+            ..grid()
+        }
+        .specs()
+        .unwrap();
+        assert_eq!(
+            plain[3].dir_name(),
+            PathBuf::from("CartPole-v0/dqn-bootstrap/seed1")
+        );
         assert_eq!(plain[3].variant_label(), DEFAULT_VARIANT);
     }
 
@@ -574,6 +691,10 @@ mod tests {
         write_atomic(&path, b"first version, longer").unwrap();
         write_atomic(&path, b"second").unwrap();
         assert_eq!(std::fs::read_to_string(&path).unwrap(), "second");
-        assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1, "no temporary file is left behind");
+        assert_eq!(
+            std::fs::read_dir(dir.path()).unwrap().count(),
+            1,
+            "no temporary file is left behind"
+        );
     }
 }
