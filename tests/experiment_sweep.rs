@@ -389,6 +389,11 @@ fn report_writes_table_with_paper_values_and_figures() {
         table_md.contains("| ADQNP-B | - (6000) | - (49000) |"),
         "{table_md}"
     );
+    // DQN (method index 0) solves first in the design, so it is the bold best of the -B group.
+    assert!(
+        table_md.contains("| DQN-B | **3500** (8000) 3/4 | **3500** (57000) 3/4 |"),
+        "{table_md}"
+    );
 
     // Figures present for what ran, skipped with a note for what did not.
     for name in [
@@ -522,4 +527,40 @@ fn report_skips_damaged_runs_with_a_note() {
     assert!(notes.len() == 1 && notes[0].contains("seed2"), "{notes:?}");
     let curve: Vec<EvalPoint> = runs[0].eval.clone();
     assert_eq!(curve.len(), 10);
+}
+
+#[test]
+fn runs_start_seed_by_seed_and_a_sweep_directory_keeps_its_overrides() {
+    let grid = small_grid();
+    let dir = tempfile::tempdir().unwrap();
+    let order = std::sync::Mutex::new(Vec::new());
+    sweep::run_grid(&grid, dir.path(), 1, &|spec, run_dir| {
+        order.lock().unwrap().push(spec.seed);
+        write_fake_run(spec, run_dir, false)
+    })
+    .unwrap();
+    let order = order.into_inner().unwrap();
+    let mut sorted = order.clone();
+    sorted.sort();
+    assert_eq!(
+        order, sorted,
+        "with one job, all runs of seed 0 come before any run of seed 1, ..."
+    );
+
+    // Extending the sweep with more seeds is fine; changing its overrides is refused.
+    let more_seeds = SweepGrid {
+        seeds: vec![0, 1, 2, 3, 4],
+        ..grid.clone()
+    };
+    let outcome = sweep::run_grid(&more_seeds, dir.path(), 1, &|s, d| {
+        write_fake_run(s, d, false)
+    })
+    .unwrap();
+    assert_eq!((outcome.already_complete, outcome.completed), (24, 6));
+    let changed = SweepGrid {
+        set: vec!["gamma=0.5".into()],
+        ..more_seeds
+    };
+    let error = sweep::run_grid(&changed, dir.path(), 1, &|_, _| unreachable!()).unwrap_err();
+    assert!(format!("{error:#}").contains("gamma=0.5"), "{error:#}");
 }

@@ -359,6 +359,10 @@ pub fn table5(groups: &[RunGroup]) -> Result<(String, String)> {
         md,
         "and the number of seeds (solved/total). A seed that never solves counts as the full training length."
     )?;
+    writeln!(
+        md,
+        "Bold: our best median on that task among the methods of the same network."
+    )?;
     writeln!(md)?;
     let header: Vec<String> = envs.iter().map(|e| e.to_string()).collect();
     writeln!(md, "| method | {} |", header.join(" | "))?;
@@ -375,19 +379,34 @@ pub fn table5(groups: &[RunGroup]) -> Result<(String, String)> {
     }
     csv_writer.write_record(&csv_header)?;
     for (net, suffix) in TABLE5_NETS {
+        // Like the paper, bold the best (smallest) median of each task within a network group.
+        let best: Vec<f64> = envs
+            .iter()
+            .map(|env| {
+                TABLE5_METHODS
+                    .iter()
+                    .filter_map(|method| find(env, method, net).map(|g| g.median_steps_to_solve))
+                    .fold(f64::INFINITY, f64::min)
+            })
+            .collect();
         for method in TABLE5_METHODS {
             let name = format!("{}-{suffix}", paper::method_display_name(method));
             let mut cells = Vec::new();
             let mut csv_row = vec![method.to_string(), net.to_string()];
-            for env in &envs {
+            for (env, best) in envs.iter().zip(&best) {
                 let ours = find(env, method, net);
                 let theirs = paper::paper_median_steps(env, method, net);
                 let theirs_text = theirs.map_or("-".to_string(), |v| v.to_string());
                 match ours {
                     Some(g) => {
                         let ours_text = format_steps(g.median_steps_to_solve);
+                        let shown = if g.median_steps_to_solve == *best {
+                            format!("**{ours_text}**")
+                        } else {
+                            ours_text.clone()
+                        };
                         cells.push(format!(
-                            "{ours_text} ({theirs_text}) {}/{}",
+                            "{shown} ({theirs_text}) {}/{}",
                             g.solved,
                             g.seeds.len()
                         ));

@@ -129,7 +129,50 @@ fn expert_dir_fragment(spec: &str) -> String {
         .collect()
 }
 
+/// Splits command-line list values: each value may itself be comma-separated (`--envs A,B --envs C`).
+fn split_values(values: &[String]) -> Vec<String> {
+    values
+        .iter()
+        .flat_map(|v| v.split(','))
+        .map(str::trim)
+        .filter(|v| !v.is_empty())
+        .map(str::to_string)
+        .collect()
+}
+
 impl SweepGrid {
+    /// Builds and validates a grid from command-line values. List values may be repeated or comma-separated;
+    /// `seeds` is parsed by [`parse_seeds`] (`20`, `3..8` or `0,4,9`); `t_query` values are numbers; `set`
+    /// entries are `key=value` overrides kept whole (they may contain commas).
+    pub fn from_cli_values(
+        envs: &[String],
+        methods: &[String],
+        nets: &[String],
+        seeds: &str,
+        t_query: &[String],
+        experts: &[String],
+        set: &[String],
+    ) -> Result<Self> {
+        let t_query = split_values(t_query)
+            .iter()
+            .map(|t| {
+                t.parse::<f64>()
+                    .with_context(|| format!("t_query value '{t}' is not a number"))
+            })
+            .collect::<Result<Vec<f64>>>()?;
+        let grid = SweepGrid {
+            envs: split_values(envs),
+            methods: split_values(methods),
+            nets: split_values(nets),
+            seeds: parse_seeds(seeds)?,
+            t_query,
+            experts: split_values(experts),
+            set: set.to_vec(),
+        };
+        grid.validate()?;
+        Ok(grid)
+    }
+
     /// Parses a sweep file (`[sweep]` table) and validates it.
     pub fn from_toml_str(text: &str) -> Result<Self> {
         let file: SweepFile = toml::from_str(text).map_err(|err| {
@@ -375,8 +418,23 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
 }
 
 /// Records `grid` in `dir/sweep.toml`, runs it with [`run_sweep`] and returns the outcome.
+///
+/// A directory that already holds a sweep may be resumed or extended (more seeds, environments, ...), but not
+/// with different `set` overrides: its complete runs would silently mix two configurations.
 pub fn run_grid(grid: &SweepGrid, dir: &Path, jobs: usize, run_fn: &RunFn) -> Result<SweepOutcome> {
     let specs = grid.specs()?;
+    let recorded = dir.join(SWEEP_FILE);
+    if recorded.is_file() {
+        let previous = SweepGrid::from_toml_file(&recorded)?;
+        if previous.set != grid.set {
+            bail!(
+                "{} was run with overrides {:?}, not {:?}; use another directory for a sweep with different settings",
+                dir.display(),
+                previous.set,
+                grid.set
+            );
+        }
+    }
     std::fs::create_dir_all(dir)
         .with_context(|| format!("cannot create sweep directory {}", dir.display()))?;
     write_atomic(&dir.join(SWEEP_FILE), grid.to_toml_string()?.as_bytes())?;
@@ -384,7 +442,8 @@ pub fn run_grid(grid: &SweepGrid, dir: &Path, jobs: usize, run_fn: &RunFn) -> Re
 }
 
 /// Runs every spec into `dir/<spec.dir_name()>` on `jobs` threads (each run single-threaded; `jobs` = 0 means
-/// one per available core). Runs whose `summary.json` exists are skipped; a directory without it is cleared
+/// one per available core), seed by seed (all configurations of the first seed, then the next, in the order
+/// seeds first appear in `specs`). Runs whose `summary.json` exists are skipped; a directory without it is cleared
 /// and run again. A failing (or panicking) run does not stop the others: failures are collected and returned
 /// together as an error after all runs. `results.csv` is rewritten at the end either way.
 /// An overall progress bar (runs done / total, ETA) is drawn only when stderr is a terminal.
@@ -400,10 +459,18 @@ pub fn run_sweep(
     }
     std::fs::create_dir_all(dir)
         .with_context(|| format!("cannot create sweep directory {}", dir.display()))?;
-    let pending: Vec<&RunSpec> = specs
+    let mut pending: Vec<&RunSpec> = specs
         .iter()
         .filter(|spec| !dir.join(spec.dir_name()).join(SUMMARY_FILE).is_file())
         .collect();
+    // Seed by seed: every configuration gets its first seeds early, so a partial sweep already reports on all.
+    let mut seed_order: Vec<u64> = Vec::new();
+    for spec in specs {
+        if !seed_order.contains(&spec.seed) {
+            seed_order.push(spec.seed);
+        }
+    }
+    pending.sort_by_key(|spec| seed_order.iter().position(|&s| s == spec.seed));
     let already_complete = specs.len() - pending.len();
     let jobs = if jobs == 0 {
         std::thread::available_parallelism().map_or(1, |n| n.get())
@@ -673,6 +740,24 @@ mod tests {
         )
         .unwrap();
         assert_eq!(counted.seeds, vec![0, 1, 2]);
+    }
+
+    #[test]
+    fn cli_values_accept_repeated_and_comma_separated_lists() {
+        let strings = |v: &[&str]| v.iter().map(|s| s.to_string()).collect::<Vec<_>>();
+        let built = SweepGrid::from_cli_values(
+            &strings(&["CartPole-v0"]),
+            &strings(&["adqn,dqn"]),
+            &strings(&["bootstrap"]),
+            "0..2",
+            &strings(&["0.05", "0.3"]),
+            &strings(&["noisy:0.4:shipped:perfect"]),
+            &strings(&["eval_episodes=5"]),
+        )
+        .unwrap();
+        assert_eq!(built, grid());
+        let bad = SweepGrid::from_cli_values(&[], &[], &[], "2", &[], &[], &[]).unwrap_err();
+        assert!(format!("{bad}").contains("envs"), "{bad}");
     }
 
     #[test]
