@@ -1,5 +1,12 @@
-//! Experiments: running a configured run end to end (expert, demonstrations, training, run directory), and
-//! later sweeps over seeds, steps to solve, tables and figures.
+//! Experiments: running one configured run end to end ([`run_one`]: expert, demonstrations, training, run
+//! directory), sweeps over grids of runs ([`sweep`]), reports with the paper's table and figures ([`report`],
+//! [`plot`]), and the paper's published numbers and experiment grids ([`paper`]). The sweep and report parts treat
+//! a run as a directory of files, so they do not depend on the training code itself.
+
+pub mod paper;
+pub mod plot;
+pub mod report;
+pub mod sweep;
 
 use crate::expert::{self, demos::Demonstrations};
 use crate::train::{self, RunLog, Summary, TrainConfig, derive_seed};

@@ -1,0 +1,785 @@
+//! Sweeps: many training runs over a grid (environments x methods x networks x seeds, plus optional t_query
+//! values and expert specs), run in parallel, resumable, and gathered into one `results.csv`.
+//!
+//! The parts fit as follows:
+//! - [`SweepGrid`] is the grid, built from CLI values or a TOML file (`[sweep]` table); [`SweepGrid::specs`]
+//!   expands it into [`RunSpec`]s, each with a stable, readable directory name ([`RunSpec::dir_name`]).
+//! - [`run_grid`] writes the grid to `sweep.toml` in the sweep directory and calls [`run_sweep`], which runs
+//!   every spec through a caller-supplied run function on `jobs` threads. The sweep knows nothing about
+//!   training: a run is a directory, and it is complete exactly when its `summary.json` exists (the training
+//!   code writes it last, atomically). That makes the sweep resumable: complete runs are skipped, incomplete
+//!   ones are cleared and run again.
+//! - [`collect_results`] reads every complete run under a directory and writes `results.csv`, one row per
+//!   evaluation point.
+
+use super::report::{RunRecord, load_runs};
+use anyhow::{Context, Result, bail};
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeSet;
+use std::io::{IsTerminal, Write};
+use std::path::{Path, PathBuf};
+use std::sync::Mutex;
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+/// Methods a run can use (ALGORITHM_NOTES.md section 9).
+pub const METHODS: [&str; 6] = ["dqn", "dqfd", "gdqn", "bdqn", "adqn", "adqnp"];
+/// Network output stages (ALGORITHM_NOTES.md section 2).
+pub const NETS: [&str; 3] = ["plain", "bootstrap", "noisy"];
+/// Name of the file that records a sweep's grid inside its directory.
+pub const SWEEP_FILE: &str = "sweep.toml";
+/// Name of the file that gathers every evaluation point of a sweep.
+pub const RESULTS_FILE: &str = "results.csv";
+/// The file whose presence marks a run as complete.
+pub const SUMMARY_FILE: &str = "summary.json";
+/// Variant label of a run that varies neither t_query nor the expert.
+pub const DEFAULT_VARIANT: &str = "default";
+
+/// The grid of a sweep. Every combination of `envs x methods x nets x t_query x experts x seeds` is one run;
+/// an empty `t_query` or `experts` list means "not varied" (the training code's per-task default applies).
+/// `set` holds `key=value` overrides applied to every run (same syntax as `arld train --set`).
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SweepGrid {
+    pub envs: Vec<String>,
+    pub methods: Vec<String>,
+    pub nets: Vec<String>,
+    #[serde(deserialize_with = "deserialize_seeds")]
+    pub seeds: Vec<u64>,
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub t_query: Vec<f64>,
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub experts: Vec<String>,
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub set: Vec<String>,
+}
+
+/// Keys accepted in the `[sweep]` table (listed in error messages).
+const GRID_KEYS: [&str; 7] = [
+    "envs", "methods", "nets", "seeds", "t_query", "experts", "set",
+];
+
+/// `seeds = 20` (meaning 0..20) or `seeds = [0, 3, 7]`.
+#[derive(Deserialize)]
+#[serde(untagged)]
+enum SeedsValue {
+    Count(u64),
+    List(Vec<u64>),
+}
+
+fn deserialize_seeds<'de, D: serde::Deserializer<'de>>(
+    deserializer: D,
+) -> Result<Vec<u64>, D::Error> {
+    match SeedsValue::deserialize(deserializer) {
+        Ok(SeedsValue::Count(n)) => Ok((0..n).collect()),
+        Ok(SeedsValue::List(list)) => Ok(list),
+        Err(_) => Err(serde::de::Error::custom(
+            "`seeds` must be a count (seeds = 20 means seeds 0..19) or a list of non-negative integers",
+        )),
+    }
+}
+
+/// The whole sweep file: a single `[sweep]` table.
+#[derive(Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct SweepFile {
+    sweep: SweepGrid,
+}
+
+/// Parses seeds given on a command line: `20` (seeds 0..19), `3..8` (seeds 3..7) or `0,4,9`.
+pub fn parse_seeds(text: &str) -> Result<Vec<u64>> {
+    let text = text.trim();
+    let parse = |s: &str| -> Result<u64> {
+        s.trim()
+            .parse::<u64>()
+            .with_context(|| format!("'{s}' is not a non-negative integer seed"))
+    };
+    if let Some((start, end)) = text.split_once("..") {
+        let (start, end) = (parse(start)?, parse(end)?);
+        if start >= end {
+            bail!("seed range '{text}' is empty (use START..END with START < END)");
+        }
+        Ok((start..end).collect())
+    } else if text.contains(',') {
+        text.split(',').map(parse).collect()
+    } else {
+        Ok((0..parse(text)?).collect())
+    }
+}
+
+/// Characters allowed in names that become directory names.
+fn is_path_safe(name: &str) -> bool {
+    !name.is_empty()
+        && !name.starts_with('.')
+        && name
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.'))
+}
+
+/// Turns an expert spec into a directory-name fragment: `noisy:0.4:shipped:perfect` -> `noisy-0.4-shipped-perfect`.
+fn expert_dir_fragment(spec: &str) -> String {
+    spec.chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || matches!(c, '.' | '_') {
+                c
+            } else {
+                '-'
+            }
+        })
+        .collect()
+}
+
+/// Splits command-line list values: each value may itself be comma-separated (`--envs A,B --envs C`).
+fn split_values(values: &[String]) -> Vec<String> {
+    values
+        .iter()
+        .flat_map(|v| v.split(','))
+        .map(str::trim)
+        .filter(|v| !v.is_empty())
+        .map(str::to_string)
+        .collect()
+}
+
+impl SweepGrid {
+    /// Builds and validates a grid from command-line values. List values may be repeated or comma-separated;
+    /// `seeds` is parsed by [`parse_seeds`] (`20`, `3..8` or `0,4,9`); `t_query` values are numbers; `set`
+    /// entries are `key=value` overrides kept whole (they may contain commas).
+    pub fn from_cli_values(
+        envs: &[String],
+        methods: &[String],
+        nets: &[String],
+        seeds: &str,
+        t_query: &[String],
+        experts: &[String],
+        set: &[String],
+    ) -> Result<Self> {
+        let t_query = split_values(t_query)
+            .iter()
+            .map(|t| {
+                t.parse::<f64>()
+                    .with_context(|| format!("t_query value '{t}' is not a number"))
+            })
+            .collect::<Result<Vec<f64>>>()?;
+        let grid = SweepGrid {
+            envs: split_values(envs),
+            methods: split_values(methods),
+            nets: split_values(nets),
+            seeds: parse_seeds(seeds)?,
+            t_query,
+            experts: split_values(experts),
+            set: set.to_vec(),
+        };
+        grid.validate()?;
+        Ok(grid)
+    }
+
+    /// Parses a sweep file (`[sweep]` table) and validates it.
+    pub fn from_toml_str(text: &str) -> Result<Self> {
+        let file: SweepFile = toml::from_str(text).map_err(|err| {
+            anyhow::anyhow!(
+                "invalid sweep file: {}\nA sweep file holds one [sweep] table with the keys: {} \
+                 (envs, methods, nets and seeds are required)",
+                err.to_string().trim_end(),
+                GRID_KEYS.join(", ")
+            )
+        })?;
+        file.sweep.validate()?;
+        Ok(file.sweep)
+    }
+
+    /// Reads and validates a sweep file.
+    pub fn from_toml_file(path: &Path) -> Result<Self> {
+        let text = std::fs::read_to_string(path)
+            .with_context(|| format!("cannot read {}", path.display()))?;
+        Self::from_toml_str(&text).with_context(|| format!("in sweep file {}", path.display()))
+    }
+
+    /// The grid as a sweep file, readable back by [`SweepGrid::from_toml_str`].
+    pub fn to_toml_string(&self) -> Result<String> {
+        let file = SweepFile {
+            sweep: self.clone(),
+        };
+        Ok(toml::to_string(&file)?)
+    }
+
+    /// Checks the grid: every list non-empty and free of duplicates, known methods and networks,
+    /// t_query in (0, 1], `set` entries of the form key=value that do not clash with a varied dimension.
+    /// Method and network names are case-sensitive lower-case, as in run configs.
+    pub fn validate(&self) -> Result<()> {
+        fn check_list<T: PartialEq + std::fmt::Debug>(
+            name: &str,
+            list: &[T],
+            required: bool,
+        ) -> Result<()> {
+            if required && list.is_empty() {
+                bail!("sweep key `{name}` must list at least one value");
+            }
+            for (i, value) in list.iter().enumerate() {
+                if list[..i].contains(value) {
+                    bail!("sweep key `{name}` lists {value:?} twice");
+                }
+            }
+            Ok(())
+        }
+        check_list("envs", &self.envs, true)?;
+        check_list("methods", &self.methods, true)?;
+        check_list("nets", &self.nets, true)?;
+        check_list("seeds", &self.seeds, true)?;
+        check_list("t_query", &self.t_query, false)?;
+        check_list("experts", &self.experts, false)?;
+        for env in &self.envs {
+            if !is_path_safe(env) {
+                bail!("environment id '{env}' may only contain letters, digits, '-', '_' and '.'");
+            }
+        }
+        for method in &self.methods {
+            if !METHODS.contains(&method.as_str()) {
+                bail!("unknown method '{method}' (valid: {})", METHODS.join(", "));
+            }
+        }
+        for net in &self.nets {
+            if !NETS.contains(&net.as_str()) {
+                bail!("unknown network '{net}' (valid: {})", NETS.join(", "));
+            }
+        }
+        for &t in &self.t_query {
+            if !(t > 0.0 && t <= 1.0) {
+                bail!("t_query {t} is outside (0, 1]: it is a proportion of recent steps");
+            }
+        }
+        for expert in &self.experts {
+            if expert.trim().is_empty() || expert.contains('"') || expert.contains('\\') {
+                bail!(
+                    "expert spec {expert:?} must be non-empty and contain no quotes or backslashes"
+                );
+            }
+        }
+        let fragments: BTreeSet<String> = self
+            .experts
+            .iter()
+            .map(|e| expert_dir_fragment(e))
+            .collect();
+        if fragments.len() != self.experts.len() {
+            bail!(
+                "two expert specs map to the same directory name: {:?}",
+                self.experts
+            );
+        }
+        for entry in &self.set {
+            let Some((key, _)) = entry.split_once('=') else {
+                bail!("override '{entry}' in `set` is not of the form key=value");
+            };
+            let key = key.trim();
+            if key.is_empty() {
+                bail!("override '{entry}' in `set` has an empty key");
+            }
+            let varied = ["env", "method", "net", "seed"]
+                .into_iter()
+                .chain((!self.t_query.is_empty()).then_some("t_query"))
+                .chain((!self.experts.is_empty()).then_some("expert"));
+            for dimension in varied {
+                if key == dimension {
+                    bail!("override '{entry}' in `set` fixes `{key}`, which the grid varies");
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Expands the grid into runs, in a fixed order: env, method, net, t_query, expert, seed.
+    pub fn specs(&self) -> Result<Vec<RunSpec>> {
+        self.validate()?;
+        let t_queries: Vec<Option<f64>> = if self.t_query.is_empty() {
+            vec![None]
+        } else {
+            self.t_query.iter().copied().map(Some).collect()
+        };
+        let experts: Vec<Option<&String>> = if self.experts.is_empty() {
+            vec![None]
+        } else {
+            self.experts.iter().map(Some).collect()
+        };
+        let mut specs = Vec::new();
+        for env in &self.envs {
+            for method in &self.methods {
+                for net in &self.nets {
+                    for t_query in &t_queries {
+                        for expert in &experts {
+                            for &seed in &self.seeds {
+                                let mut overrides = self.set.clone();
+                                let mut variant = Vec::new();
+                                if let Some(t) = t_query {
+                                    overrides.push(format!("t_query={t}"));
+                                    variant.push(format!("tq{t}"));
+                                }
+                                if let Some(spec) = expert {
+                                    overrides.push(format!("expert=\"{spec}\""));
+                                    variant.push(format!("expert-{}", expert_dir_fragment(spec)));
+                                }
+                                specs.push(RunSpec {
+                                    env: env.clone(),
+                                    method: method.clone(),
+                                    net: net.clone(),
+                                    seed,
+                                    overrides,
+                                    variant: (!variant.is_empty()).then(|| variant.join("_")),
+                                });
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        Ok(specs)
+    }
+}
+
+/// One run of a sweep. `overrides` are `key=value` assignments (values are TOML literals, e.g. `t_query=0.05`,
+/// `expert="shipped:weak"`) to apply after the per-task preset of (env, method, net); `variant` names the
+/// varied dimensions beyond env/method/net/seed (e.g. `tq0.05`), or `None` when nothing else varies.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RunSpec {
+    pub env: String,
+    pub method: String,
+    pub net: String,
+    pub seed: u64,
+    pub overrides: Vec<String>,
+    pub variant: Option<String>,
+}
+
+impl RunSpec {
+    /// The run's directory relative to the sweep directory: `ENV/METHOD-NET[/VARIANT]/seedN`, e.g.
+    /// `CartPole-v0/adqn-bootstrap/tq0.05/seed3`. Reports recover the variant from this layout.
+    pub fn dir_name(&self) -> PathBuf {
+        let mut path = PathBuf::from(&self.env);
+        path.push(format!("{}-{}", self.method, self.net));
+        if let Some(variant) = &self.variant {
+            path.push(variant);
+        }
+        path.push(format!("seed{}", self.seed));
+        path
+    }
+
+    /// The variant label used in results and reports (`default` when nothing beyond the basics varies).
+    pub fn variant_label(&self) -> &str {
+        self.variant.as_deref().unwrap_or(DEFAULT_VARIANT)
+    }
+}
+
+/// The signature of a function that performs one run into an (empty, existing) directory and must leave
+/// `summary.json` there when it succeeds.
+pub type RunFn<'a> = dyn Fn(&RunSpec, &Path) -> Result<()> + Sync + 'a;
+
+/// A run that failed: its directory and the error chain.
+#[derive(Debug, Clone)]
+pub struct RunFailure {
+    pub run_dir: PathBuf,
+    pub error: String,
+}
+
+/// What a sweep did.
+#[derive(Debug, Clone, Default)]
+pub struct SweepOutcome {
+    /// Runs in the sweep.
+    pub total: usize,
+    /// Runs already complete before this call (skipped).
+    pub already_complete: usize,
+    /// Runs performed by this call that succeeded.
+    pub completed: usize,
+    /// Path of the `results.csv` written at the end.
+    pub results_csv: PathBuf,
+}
+
+/// Writes a file atomically: a temporary file in the same directory, flushed, then renamed over the target,
+/// so a reader sees either the old content or the new, never a partial file.
+pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
+    let dir = path
+        .parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
+    let name = path
+        .file_name()
+        .with_context(|| format!("{} has no file name", path.display()))?;
+    let tmp = dir.join(format!(
+        ".{}.tmp{}",
+        name.to_string_lossy(),
+        std::process::id()
+    ));
+    let write = || -> std::io::Result<()> {
+        let mut file = std::fs::File::create(&tmp)?;
+        file.write_all(bytes)?;
+        file.sync_all()?;
+        std::fs::rename(&tmp, path)
+    };
+    write().map_err(|err| {
+        let _ = std::fs::remove_file(&tmp);
+        anyhow::Error::new(err).context(format!("cannot write {}", path.display()))
+    })
+}
+
+/// Records `grid` in `dir/sweep.toml`, runs it with [`run_sweep`] and returns the outcome.
+///
+/// A directory that already holds a sweep may be resumed or extended (more seeds, environments, ...), but not
+/// with different `set` overrides: its complete runs would silently mix two configurations.
+pub fn run_grid(grid: &SweepGrid, dir: &Path, jobs: usize, run_fn: &RunFn) -> Result<SweepOutcome> {
+    let specs = grid.specs()?;
+    let recorded = dir.join(SWEEP_FILE);
+    if recorded.is_file() {
+        let previous = SweepGrid::from_toml_file(&recorded)?;
+        if previous.set != grid.set {
+            bail!(
+                "{} was run with overrides {:?}, not {:?}; use another directory for a sweep with different settings",
+                dir.display(),
+                previous.set,
+                grid.set
+            );
+        }
+    }
+    std::fs::create_dir_all(dir)
+        .with_context(|| format!("cannot create sweep directory {}", dir.display()))?;
+    write_atomic(&dir.join(SWEEP_FILE), grid.to_toml_string()?.as_bytes())?;
+    run_sweep(&specs, dir, jobs, run_fn)
+}
+
+/// Runs every spec into `dir/<spec.dir_name()>` on `jobs` threads (each run single-threaded; `jobs` = 0 means
+/// one per available core), seed by seed (all configurations of the first seed, then the next, in the order
+/// seeds first appear in `specs`). Runs whose `summary.json` exists are skipped; a directory without it is cleared
+/// and run again. A failing (or panicking) run does not stop the others: failures are collected and returned
+/// together as an error after all runs. `results.csv` is rewritten at the end either way.
+/// An overall progress bar (runs done / total, ETA) is drawn only when stderr is a terminal.
+pub fn run_sweep(
+    specs: &[RunSpec],
+    dir: &Path,
+    jobs: usize,
+    run_fn: &RunFn,
+) -> Result<SweepOutcome> {
+    let names: BTreeSet<PathBuf> = specs.iter().map(RunSpec::dir_name).collect();
+    if names.len() != specs.len() {
+        bail!("the sweep lists the same run twice (two specs share a directory name)");
+    }
+    std::fs::create_dir_all(dir)
+        .with_context(|| format!("cannot create sweep directory {}", dir.display()))?;
+    let mut pending: Vec<&RunSpec> = specs
+        .iter()
+        .filter(|spec| !dir.join(spec.dir_name()).join(SUMMARY_FILE).is_file())
+        .collect();
+    // Seed by seed: every configuration gets its first seeds early, so a partial sweep already reports on all.
+    let mut seed_order: Vec<u64> = Vec::new();
+    for spec in specs {
+        if !seed_order.contains(&spec.seed) {
+            seed_order.push(spec.seed);
+        }
+    }
+    pending.sort_by_key(|spec| seed_order.iter().position(|&s| s == spec.seed));
+    let already_complete = specs.len() - pending.len();
+    let jobs = if jobs == 0 {
+        std::thread::available_parallelism().map_or(1, |n| n.get())
+    } else {
+        jobs
+    };
+    let jobs = jobs.min(pending.len()).max(1);
+
+    let bar = if std::io::stderr().is_terminal() {
+        ProgressBar::with_draw_target(
+            Some(specs.len() as u64),
+            ProgressDrawTarget::stderr_with_hz(2),
+        )
+    } else {
+        ProgressBar::hidden()
+    };
+    bar.set_style(
+        ProgressStyle::with_template(
+            "sweep [{elapsed_precise}] {wide_bar} {pos}/{len} runs, ETA {eta} {msg}",
+        )
+        .expect("the progress template is valid"),
+    );
+    bar.set_position(already_complete as u64);
+    bar.reset_eta();
+
+    let next = AtomicUsize::new(0);
+    let failures = Mutex::new(Vec::<RunFailure>::new());
+    let completed = AtomicUsize::new(0);
+    std::thread::scope(|scope| {
+        for _ in 0..jobs {
+            scope.spawn(|| {
+                loop {
+                    let index = next.fetch_add(1, Ordering::Relaxed);
+                    let Some(spec) = pending.get(index) else {
+                        break;
+                    };
+                    let run_dir = dir.join(spec.dir_name());
+                    match run_one_spec(spec, &run_dir, run_fn) {
+                        Ok(()) => {
+                            completed.fetch_add(1, Ordering::Relaxed);
+                        }
+                        Err(err) => {
+                            let failure = RunFailure {
+                                run_dir: run_dir.clone(),
+                                error: format!("{err:#}"),
+                            };
+                            bar.suspend(|| {
+                                eprintln!("run {} failed: {}", run_dir.display(), failure.error)
+                            });
+                            failures
+                                .lock()
+                                .unwrap_or_else(|e| e.into_inner())
+                                .push(failure);
+                            let failed = failures.lock().unwrap_or_else(|e| e.into_inner()).len();
+                            bar.set_message(format!("({failed} failed)"));
+                        }
+                    }
+                    bar.inc(1);
+                }
+            });
+        }
+    });
+    bar.finish_and_clear();
+
+    let collected = collect_results(dir);
+    let mut failures = failures.into_inner().unwrap_or_else(|e| e.into_inner());
+    failures.sort_by(|a, b| a.run_dir.cmp(&b.run_dir));
+    if !failures.is_empty() {
+        let list: Vec<String> = failures
+            .iter()
+            .map(|f| format!("  {}: {}", f.run_dir.display(), f.error))
+            .collect();
+        let note = match &collected {
+            Ok(c) => format!("results of the complete runs are in {}", c.path.display()),
+            Err(err) => format!("results.csv could not be written either: {err:#}"),
+        };
+        bail!(
+            "{} of {} runs failed (rerun the same sweep to retry only those; {note}):\n{}",
+            failures.len(),
+            specs.len(),
+            list.join("\n")
+        );
+    }
+    let collected = collected?;
+    Ok(SweepOutcome {
+        total: specs.len(),
+        already_complete,
+        completed: completed.into_inner(),
+        results_csv: collected.path,
+    })
+}
+
+/// Clears an incomplete run directory, performs the run, and checks that it left `summary.json`.
+/// A panic inside `run_fn` is turned into an error so that one broken run cannot take down the sweep.
+fn run_one_spec(spec: &RunSpec, run_dir: &Path, run_fn: &RunFn) -> Result<()> {
+    if run_dir.exists() {
+        std::fs::remove_dir_all(run_dir).with_context(|| {
+            format!(
+                "cannot clear incomplete run directory {}",
+                run_dir.display()
+            )
+        })?;
+    }
+    std::fs::create_dir_all(run_dir)
+        .with_context(|| format!("cannot create {}", run_dir.display()))?;
+    let outcome = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| run_fn(spec, run_dir)));
+    match outcome {
+        Ok(result) => result?,
+        Err(panic) => {
+            let message = panic
+                .downcast_ref::<&str>()
+                .map(|s| s.to_string())
+                .or_else(|| panic.downcast_ref::<String>().cloned())
+                .unwrap_or_else(|| "unknown panic".to_string());
+            bail!("the run panicked: {message}");
+        }
+    }
+    if !run_dir.join(SUMMARY_FILE).is_file() {
+        bail!("the run returned without writing {SUMMARY_FILE}");
+    }
+    Ok(())
+}
+
+/// What [`collect_results`] wrote.
+#[derive(Debug, Clone)]
+pub struct CollectedResults {
+    /// Path of `results.csv`.
+    pub path: PathBuf,
+    /// Complete runs read.
+    pub runs: usize,
+    /// Data rows written.
+    pub rows: usize,
+    /// Runs that could not be read or were duplicates, one line each (they are left out of the file).
+    pub problems: Vec<String>,
+}
+
+/// Reads every complete run under `dir` and writes `dir/results.csv` atomically: one row per evaluation
+/// point, columns `env,method,net,variant,seed,step,mean,std,min,max`, sorted by those keys in that order,
+/// with no duplicate (env, method, net, variant, seed, step).
+pub fn collect_results(dir: &Path) -> Result<CollectedResults> {
+    let (runs, mut problems) = load_runs(dir)?;
+    let path = dir.join(RESULTS_FILE);
+    let (bytes, rows, duplicates) = results_csv_bytes(&runs)?;
+    problems.extend(duplicates);
+    write_atomic(&path, &bytes)?;
+    Ok(CollectedResults {
+        path,
+        runs: runs.len(),
+        rows,
+        problems,
+    })
+}
+
+/// The content of `results.csv` for these runs, the number of data rows, and notes on dropped duplicates.
+pub fn results_csv_bytes(runs: &[RunRecord]) -> Result<(Vec<u8>, usize, Vec<String>)> {
+    type Key<'a> = (&'a str, &'a str, &'a str, &'a str, u64, u64);
+    let mut rows: Vec<(Key, &super::report::EvalPoint, &Path)> = Vec::new();
+    for run in runs {
+        for point in &run.eval {
+            let key = (
+                run.env.as_str(),
+                run.method.as_str(),
+                run.net.as_str(),
+                run.variant.as_str(),
+                run.seed,
+                point.step,
+            );
+            rows.push((key, point, run.dir.as_path()));
+        }
+    }
+    // Stable sort: among equal keys the first run directory in path order wins.
+    rows.sort_by(|a, b| a.0.cmp(&b.0).then_with(|| a.2.cmp(b.2)));
+    let mut notes = Vec::new();
+    let mut writer = csv::Writer::from_writer(Vec::new());
+    writer.write_record([
+        "env", "method", "net", "variant", "seed", "step", "mean", "std", "min", "max",
+    ])?;
+    let mut written = 0;
+    let mut previous: Option<Key> = None;
+    for (key, point, run_dir) in rows {
+        if previous == Some(key) {
+            notes.push(format!(
+                "duplicate evaluation at step {} in {} left out",
+                key.5,
+                run_dir.display()
+            ));
+            continue;
+        }
+        previous = Some(key);
+        let (env, method, net, variant, seed, step) = key;
+        writer.write_record([
+            env.to_string(),
+            method.to_string(),
+            net.to_string(),
+            variant.to_string(),
+            seed.to_string(),
+            step.to_string(),
+            point.mean.to_string(),
+            point.std.to_string(),
+            point.min.to_string(),
+            point.max.to_string(),
+        ])?;
+        written += 1;
+    }
+    let bytes = writer
+        .into_inner()
+        .map_err(|e| anyhow::anyhow!("cannot finish results.csv: {e}"))?;
+    Ok((bytes, written, notes))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn grid() -> SweepGrid {
+        SweepGrid {
+            envs: vec!["CartPole-v0".into()],
+            methods: vec!["adqn".into(), "dqn".into()],
+            nets: vec!["bootstrap".into()],
+            seeds: vec![0, 1],
+            t_query: vec![0.05, 0.3],
+            experts: vec!["noisy:0.4:shipped:perfect".into()],
+            set: vec!["eval_episodes=5".into()],
+        }
+    }
+
+    #[test]
+    fn specs_have_unique_readable_directories_and_carry_overrides() {
+        let specs = grid().specs().unwrap();
+        assert_eq!(specs.len(), 2 * 2 * 2);
+        let names: BTreeSet<PathBuf> = specs.iter().map(RunSpec::dir_name).collect();
+        assert_eq!(names.len(), specs.len());
+        assert_eq!(
+            specs[0].dir_name(),
+            PathBuf::from(
+                "CartPole-v0/adqn-bootstrap/tq0.05_expert-noisy-0.4-shipped-perfect/seed0"
+            )
+        );
+        assert_eq!(
+            specs[0].overrides,
+            vec![
+                "eval_episodes=5",
+                "t_query=0.05",
+                "expert=\"noisy:0.4:shipped:perfect\""
+            ]
+        );
+        let plain = SweepGrid {
+            t_query: vec![],
+            experts: vec![],
+            ..grid()
+        }
+        .specs()
+        .unwrap();
+        assert_eq!(
+            plain[3].dir_name(),
+            PathBuf::from("CartPole-v0/dqn-bootstrap/seed1")
+        );
+        assert_eq!(plain[3].variant_label(), DEFAULT_VARIANT);
+    }
+
+    #[test]
+    fn sweep_file_round_trips_and_accepts_a_seed_count() {
+        let text = grid().to_toml_string().unwrap();
+        assert_eq!(SweepGrid::from_toml_str(&text).unwrap(), grid());
+        let counted = SweepGrid::from_toml_str(
+            "[sweep]\nenvs = [\"Acrobot-v1\"]\nmethods = [\"dqn\"]\nnets = [\"noisy\"]\nseeds = 3\n",
+        )
+        .unwrap();
+        assert_eq!(counted.seeds, vec![0, 1, 2]);
+    }
+
+    #[test]
+    fn cli_values_accept_repeated_and_comma_separated_lists() {
+        let strings = |v: &[&str]| v.iter().map(|s| s.to_string()).collect::<Vec<_>>();
+        let built = SweepGrid::from_cli_values(
+            &strings(&["CartPole-v0"]),
+            &strings(&["adqn,dqn"]),
+            &strings(&["bootstrap"]),
+            "0..2",
+            &strings(&["0.05", "0.3"]),
+            &strings(&["noisy:0.4:shipped:perfect"]),
+            &strings(&["eval_episodes=5"]),
+        )
+        .unwrap();
+        assert_eq!(built, grid());
+        let bad = SweepGrid::from_cli_values(&[], &[], &[], "2", &[], &[], &[]).unwrap_err();
+        assert!(format!("{bad}").contains("envs"), "{bad}");
+    }
+
+    #[test]
+    fn seeds_parse_from_count_range_and_list() {
+        assert_eq!(parse_seeds("3").unwrap(), vec![0, 1, 2]);
+        assert_eq!(parse_seeds("5..8").unwrap(), vec![5, 6, 7]);
+        assert_eq!(parse_seeds("4, 9").unwrap(), vec![4, 9]);
+        assert!(parse_seeds("x").is_err());
+        assert!(parse_seeds("8..5").is_err());
+    }
+
+    #[test]
+    fn atomic_write_replaces_the_whole_file() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("a.txt");
+        write_atomic(&path, b"first version, longer").unwrap();
+        write_atomic(&path, b"second").unwrap();
+        assert_eq!(std::fs::read_to_string(&path).unwrap(), "second");
+        assert_eq!(
+            std::fs::read_dir(dir.path()).unwrap().count(),
+            1,
+            "no temporary file is left behind"
+        );
+    }
+}

@@ -1,0 +1,566 @@
+//! Sweeps and reports end to end with a fake, deterministic run function that writes the run-directory files
+//! the training code writes (config.toml, eval.csv, episodes.csv, queries.csv, summary.json last).
+
+use anyhow::{Result, bail};
+use arld::experiment::report::{self, EvalPoint};
+use arld::experiment::sweep::{self, RunSpec, SweepGrid};
+use std::collections::BTreeSet;
+use std::path::Path;
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+const TRAIN_STEPS: u64 = 10_000;
+const EVAL_PERIOD: u64 = 1_000;
+
+fn threshold(env: &str) -> f64 {
+    match env {
+        "CartPole-v0" => 195.0,
+        "Acrobot-v1" => -100.0,
+        "LunarLander-v2" => 200.0,
+        _ => 0.0,
+    }
+}
+
+fn override_value<'a>(spec: &'a RunSpec, key: &str) -> Option<&'a str> {
+    spec.overrides
+        .iter()
+        .rev()
+        .find_map(|o| o.strip_prefix(key)?.strip_prefix('='))
+}
+
+/// The designed solve step of a fake run: seed 3 never solves; the others solve at (2 + seed + method index)k
+/// steps, later for larger t_query values and some experts, so configurations differ; a designed step past the
+/// end of training means the run never solves.
+fn designed_solve_step(spec: &RunSpec) -> Option<u64> {
+    if spec.seed == 3 {
+        return None;
+    }
+    let method_index = sweep::METHODS
+        .iter()
+        .position(|m| *m == spec.method)
+        .unwrap() as u64;
+    let t_query_shift =
+        override_value(spec, "t_query").map_or(0, |t| (t.parse::<f64>().unwrap() * 10.0) as u64);
+    let expert_shift = override_value(spec, "expert").map_or(0, |e| match e {
+        _ if e.contains("noisy") => 3,
+        _ if e.contains("weak") => 1,
+        _ => 0,
+    });
+    let step = EVAL_PERIOD * (2 + spec.seed + method_index + t_query_shift + expert_shift);
+    (step <= TRAIN_STEPS).then_some(step)
+}
+
+fn fake_mean(spec: &RunSpec, step: u64) -> f64 {
+    let target = threshold(&spec.env);
+    match designed_solve_step(spec) {
+        Some(solve) if step >= solve => target + 5.0 + spec.seed as f64,
+        _ => target - 100.0 + step as f64 / 1000.0 + spec.seed as f64 * 0.25,
+    }
+}
+
+/// Writes a complete fake run, or, with `interrupt`, only the files a killed run would have left.
+fn write_fake_run(spec: &RunSpec, dir: &Path, interrupt: bool) -> Result<()> {
+    let t_query = override_value(spec, "t_query").unwrap_or("0.05");
+    let expert = override_value(spec, "expert").unwrap_or("\"shipped:weak\"");
+    std::fs::write(
+        dir.join("config.toml"),
+        format!(
+            "env = \"{}\"\nmethod = \"{}\"\nnet = \"{}\"\nseed = {}\nt_query = {t_query}\nexpert = {expert}\n\
+             train_steps = {TRAIN_STEPS}\neval_period = {EVAL_PERIOD}\ngamma = 0.9\n",
+            spec.env, spec.method, spec.net, spec.seed
+        ),
+    )?;
+    let mut eval = String::from("step,mean,std,min,max\n");
+    let last = if interrupt {
+        3 * EVAL_PERIOD
+    } else {
+        TRAIN_STEPS
+    };
+    for step in (EVAL_PERIOD..=last).step_by(EVAL_PERIOD as usize) {
+        let mean = fake_mean(spec, step);
+        eval.push_str(&format!(
+            "{step},{mean},1.5,{},{}\n",
+            mean - 3.0,
+            mean + 3.0
+        ));
+    }
+    std::fs::write(dir.join("eval.csv"), eval)?;
+    std::fs::write(
+        dir.join("episodes.csv"),
+        "episode,step,return,length,demo_steps\n1,200,200,200,0\n",
+    )?;
+    let mut queries =
+        String::from("step,episode,uncertainty,threshold,expert_action,agent_action\n");
+    if spec.method != "dqn" && spec.method != "dqfd" {
+        for k in 0..(20 + spec.seed) {
+            // Queries thin out over training; the uncertainty columns may be empty.
+            queries.push_str(&format!("{},{},,,1,0\n", k * k * 20, k / 5));
+        }
+    }
+    std::fs::write(dir.join("queries.csv"), queries)?;
+    if interrupt {
+        bail!("interrupted");
+    }
+    let solve = designed_solve_step(spec);
+    let summary = serde_json::json!({
+        "env": spec.env, "method": spec.method, "net": spec.net, "seed": spec.seed,
+        "steps_to_solve": solve.unwrap_or(TRAIN_STEPS), "solved": solve.is_some(),
+        "solve_threshold": threshold(&spec.env), "train_steps": TRAIN_STEPS,
+        "final_score": fake_mean(spec, TRAIN_STEPS), "demos_pretrain": 0, "queries_used": 20,
+        "episodes": 1, "wall_time_s": 0.1, "steps_per_s": 1e5,
+    });
+    sweep::write_atomic(&dir.join("summary.json"), summary.to_string().as_bytes())
+}
+
+fn small_grid() -> SweepGrid {
+    SweepGrid {
+        envs: vec!["CartPole-v0".into(), "Acrobot-v1".into()],
+        methods: vec!["dqn".into(), "adqn".into(), "dqfd".into()],
+        nets: vec!["bootstrap".into()],
+        seeds: vec![0, 1, 2, 3],
+        ..SweepGrid::default()
+    }
+}
+
+fn data_rows(csv_text: &str) -> Vec<&str> {
+    csv_text.lines().skip(1).collect()
+}
+
+#[test]
+fn an_interrupted_sweep_resumes_to_the_same_results_as_an_uninterrupted_one() {
+    let grid = small_grid();
+    let total = grid.specs().unwrap().len();
+
+    let uninterrupted = tempfile::tempdir().unwrap();
+    let outcome = sweep::run_grid(&grid, uninterrupted.path(), 2, &|spec, dir| {
+        write_fake_run(spec, dir, false)
+    })
+    .unwrap();
+    assert_eq!(
+        (outcome.total, outcome.completed, outcome.already_complete),
+        (total, total, 0)
+    );
+    let expected = std::fs::read_to_string(uninterrupted.path().join(sweep::RESULTS_FILE)).unwrap();
+
+    // First attempt: after 7 runs every further run is "killed", leaving partial files and no summary.json.
+    let resumed = tempfile::tempdir().unwrap();
+    let started = AtomicUsize::new(0);
+    let interrupted = sweep::run_grid(&grid, resumed.path(), 2, &|spec, dir| {
+        let n = started.fetch_add(1, Ordering::SeqCst);
+        write_fake_run(spec, dir, n >= 7)
+    });
+    let message = format!("{:#}", interrupted.unwrap_err());
+    assert!(
+        message.contains(&format!("{} of {total} runs failed", total - 7)),
+        "{message}"
+    );
+    let partial = std::fs::read_to_string(resumed.path().join(sweep::RESULTS_FILE)).unwrap();
+    assert_eq!(
+        data_rows(&partial).len(),
+        7 * 10,
+        "only complete runs are collected"
+    );
+
+    // Second attempt: only the missing runs are performed, and their partial directories are cleared first.
+    let calls = AtomicUsize::new(0);
+    let outcome = sweep::run_grid(&grid, resumed.path(), 2, &|spec, dir| {
+        calls.fetch_add(1, Ordering::SeqCst);
+        assert_eq!(
+            std::fs::read_dir(dir)?.count(),
+            0,
+            "the run directory is empty when a run starts"
+        );
+        write_fake_run(spec, dir, false)
+    })
+    .unwrap();
+    assert_eq!(calls.load(Ordering::SeqCst), total - 7);
+    assert_eq!(
+        (outcome.already_complete, outcome.completed),
+        (7, total - 7)
+    );
+
+    let actual = std::fs::read_to_string(resumed.path().join(sweep::RESULTS_FILE)).unwrap();
+    assert_eq!(actual, expected);
+    let rows = data_rows(&actual);
+    assert_eq!(rows.len(), total * (TRAIN_STEPS / EVAL_PERIOD) as usize);
+    assert_eq!(
+        rows.iter().collect::<BTreeSet<_>>().len(),
+        rows.len(),
+        "no duplicate rows"
+    );
+
+    // Collecting again (e.g. `arld report` after the sweep) rewrites the same file.
+    sweep::collect_results(resumed.path()).unwrap();
+    assert_eq!(
+        std::fs::read_to_string(resumed.path().join(sweep::RESULTS_FILE)).unwrap(),
+        expected
+    );
+    // The recorded grid reads back as the grid that ran.
+    let recorded = SweepGrid::from_toml_file(&resumed.path().join(sweep::SWEEP_FILE)).unwrap();
+    assert_eq!(recorded, grid);
+}
+
+#[test]
+fn results_rows_match_each_runs_eval_csv_in_sorted_order() {
+    let grid = small_grid();
+    let dir = tempfile::tempdir().unwrap();
+    sweep::run_grid(&grid, dir.path(), 1, &|spec, dir| {
+        write_fake_run(spec, dir, false)
+    })
+    .unwrap();
+    let text = std::fs::read_to_string(dir.path().join(sweep::RESULTS_FILE)).unwrap();
+    assert_eq!(
+        text.lines().next().unwrap(),
+        "env,method,net,variant,seed,step,mean,std,min,max"
+    );
+    // Independent expectation: rebuild every row from the design and sort it the same way.
+    let mut expected = Vec::new();
+    for spec in grid.specs().unwrap() {
+        for step in (EVAL_PERIOD..=TRAIN_STEPS).step_by(EVAL_PERIOD as usize) {
+            let mean = fake_mean(&spec, step);
+            let key = (
+                spec.env.clone(),
+                spec.method.clone(),
+                spec.net.clone(),
+                spec.seed,
+                step,
+            );
+            expected.push((
+                key,
+                format!(
+                    "{},{},{},default,{},{step},{mean},1.5,{},{}",
+                    spec.env,
+                    spec.method,
+                    spec.net,
+                    spec.seed,
+                    mean - 3.0,
+                    mean + 3.0
+                ),
+            ));
+        }
+    }
+    expected.sort();
+    let expected: Vec<String> = expected.into_iter().map(|(_, row)| row).collect();
+    assert_eq!(data_rows(&text), expected);
+}
+
+#[test]
+fn failing_and_panicking_runs_are_reported_without_stopping_the_others() {
+    let grid = SweepGrid {
+        envs: vec!["CartPole-v0".into()],
+        ..small_grid()
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let result = sweep::run_grid(&grid, dir.path(), 2, &|spec, dir| {
+        match (spec.method.as_str(), spec.seed) {
+            ("adqn", 1) => panic!("simulated bug"),
+            ("dqn", 2) => Ok(()), // returns without summary.json
+            _ => write_fake_run(spec, dir, false),
+        }
+    });
+    let message = format!("{:#}", result.unwrap_err());
+    assert!(message.contains("2 of 12 runs failed"), "{message}");
+    assert!(
+        message.contains("adqn-bootstrap/seed1") && message.contains("simulated bug"),
+        "{message}"
+    );
+    assert!(
+        message.contains("dqn-bootstrap/seed2") && message.contains("summary.json"),
+        "{message}"
+    );
+    let (runs, _) = report::load_runs(dir.path()).unwrap();
+    assert_eq!(runs.len(), 10);
+}
+
+#[test]
+fn malformed_sweep_files_give_clear_errors() {
+    let error = |text: &str| format!("{:#}", SweepGrid::from_toml_str(text).unwrap_err());
+    let base = "envs = [\"CartPole-v0\"]\nmethods = [\"adqn\"]\nnets = [\"noisy\"]\nseeds = 2\n";
+
+    let unknown = error(&format!("[sweep]\n{base}tquery = [0.1]\n"));
+    assert!(
+        unknown.contains("tquery") && unknown.contains("t_query") && unknown.contains("experts"),
+        "{unknown}"
+    );
+    let outside = error(&format!("[sweeep]\n{base}"));
+    assert!(
+        outside.contains("sweeep") && outside.contains("[sweep]"),
+        "{outside}"
+    );
+    let missing = error("[sweep]\nenvs = [\"CartPole-v0\"]\nmethods = [\"adqn\"]\nseeds = 2\n");
+    assert!(missing.contains("nets"), "{missing}");
+    let method = error(
+        &base
+            .replace("adqn", "adqm")
+            .replace("envs", "[sweep]\nenvs"),
+    );
+    assert!(
+        method.contains("adqm") && method.contains("adqnp"),
+        "{method}"
+    );
+    let seeds = error(&format!(
+        "[sweep]\n{}",
+        base.replace("seeds = 2", "seeds = \"many\"")
+    ));
+    assert!(seeds.contains("seeds"), "{seeds}");
+    let t_query = error(&format!("[sweep]\n{base}t_query = [0.0]\n"));
+    assert!(t_query.contains("t_query"), "{t_query}");
+    let clash = error(&format!(
+        "[sweep]\n{base}t_query = [0.1]\nset = [\"t_query=0.3\"]\n"
+    ));
+    assert!(clash.contains("t_query=0.3"), "{clash}");
+    let syntax = error("[sweep\nenvs = 1");
+    assert!(syntax.contains("invalid sweep file"), "{syntax}");
+}
+
+fn report_fixture(dir: &Path) {
+    // Table 5 and figures 1/2 (bootstrap only), a t_query study and an expert study: each in its own sub-sweep,
+    // as `arld reproduce` lays them out.
+    let methods = SweepGrid {
+        envs: vec!["CartPole-v0".into(), "Acrobot-v1".into()],
+        methods: vec!["dqn".into(), "gdqn".into(), "adqn".into(), "dqfd".into()],
+        nets: vec!["bootstrap".into()],
+        seeds: vec![0, 1, 2, 3],
+        ..SweepGrid::default()
+    };
+    let t_query = SweepGrid {
+        envs: vec!["CartPole-v0".into()],
+        methods: vec!["adqn".into()],
+        nets: vec!["bootstrap".into()],
+        seeds: vec![0, 1, 2],
+        t_query: vec![0.05, 0.1, 0.3, 0.5],
+        ..SweepGrid::default()
+    };
+    let experts = SweepGrid {
+        envs: vec!["LunarLander-v2".into()],
+        methods: vec!["adqn".into(), "dqfd".into()],
+        nets: vec!["bootstrap".into()],
+        seeds: vec![0, 1, 2],
+        experts: vec![
+            "shipped:perfect".into(),
+            "noisy:0.4:shipped:perfect".into(),
+            "shipped:weak".into(),
+        ],
+        ..SweepGrid::default()
+    };
+    let run_fn = |spec: &RunSpec, dir: &Path| write_fake_run(spec, dir, false);
+    sweep::run_grid(&methods, &dir.join("methods"), 2, &run_fn).unwrap();
+    sweep::run_grid(&t_query, &dir.join("t_query"), 2, &run_fn).unwrap();
+    sweep::run_grid(&experts, &dir.join("experts"), 2, &run_fn).unwrap();
+}
+
+#[test]
+fn report_writes_table_with_paper_values_and_figures() {
+    let dir = tempfile::tempdir().unwrap();
+    report_fixture(dir.path());
+    let out = dir.path().join("report");
+    let summary = report::report(dir.path(), &out).unwrap();
+    // To look at the figures: ARLD_TEST_KEEP_REPORT=/some/dir cargo test --test experiment_sweep report_writes
+    if let Ok(keep) = std::env::var("ARLD_TEST_KEEP_REPORT") {
+        std::fs::create_dir_all(&keep).unwrap();
+        for entry in std::fs::read_dir(&out).unwrap() {
+            let entry = entry.unwrap();
+            std::fs::copy(entry.path(), Path::new(&keep).join(entry.file_name())).unwrap();
+        }
+    }
+    assert_eq!(summary.runs, 4 * 2 * 4 + 4 * 3 + 2 * 3 * 3);
+
+    // Median steps to solve of ADQN-B on CartPole: seeds 0..2 solve at (2 + seed + 4)k, seed 3 never (10k):
+    // sorted 6k 7k 8k 10k, median (7k + 8k) / 2.
+    let table_csv = std::fs::read_to_string(out.join("table.csv")).unwrap();
+    let mut reader = csv::Reader::from_reader(table_csv.as_bytes());
+    let headers = reader.headers().unwrap().clone();
+    let column = |name: &str| headers.iter().position(|h| h == name).unwrap();
+    let adqn_b = reader
+        .records()
+        .map(|r| r.unwrap())
+        .find(|r| &r[0] == "adqn" && &r[1] == "bootstrap")
+        .unwrap();
+    assert_eq!(&adqn_b[column("CartPole-v0 ours")], "7500");
+    assert_eq!(&adqn_b[column("CartPole-v0 paper")], "7000");
+    assert_eq!(&adqn_b[column("CartPole-v0 seeds")], "4");
+    assert_eq!(&adqn_b[column("CartPole-v0 solved")], "3");
+    assert_eq!(&adqn_b[column("Acrobot-v1 paper")], "25000");
+    let table_md = std::fs::read_to_string(out.join("table.md")).unwrap();
+    assert!(
+        table_md.contains("| ADQN-B | 7500 (7000) 3/4 |"),
+        "{table_md}"
+    );
+    assert!(
+        table_md.contains("| ADQNP-B | - (6000) | - (49000) |"),
+        "{table_md}"
+    );
+    // DQN (method index 0) solves first in the design, so it is the bold best of the -B group.
+    assert!(
+        table_md.contains("| DQN-B | **3500** (8000) 3/4 | **3500** (57000) 3/4 |"),
+        "{table_md}"
+    );
+
+    // Figures present for what ran, skipped with a note for what did not.
+    for name in [
+        "fig1_methods_bootstrap",
+        "fig2_pretraining_bootstrap",
+        "fig3_t_query_bootstrap",
+        "fig4_experts_bootstrap",
+        "fig5_queries_bootstrap",
+    ] {
+        let png = std::fs::read(out.join(format!("{name}.png"))).unwrap();
+        assert!(
+            png.len() > 10_000 && png.starts_with(b"\x89PNG\r\n\x1a\n"),
+            "{name}.png"
+        );
+        let svg = std::fs::read_to_string(out.join(format!("{name}.svg"))).unwrap();
+        assert!(
+            svg.starts_with("<svg") && svg.contains("environment steps"),
+            "{name}.svg"
+        );
+    }
+    assert!(!out.join("fig1_methods_noisy.png").exists());
+    assert!(
+        summary
+            .notes
+            .iter()
+            .any(|n| n.contains("fig1_methods_noisy skipped")),
+        "{:?}",
+        summary.notes
+    );
+    let report_md = std::fs::read_to_string(out.join("report.md")).unwrap();
+    assert!(
+        report_md.contains("fig3_t_query_bootstrap.png")
+            && report_md.contains("fig4_experts_noisy skipped")
+    );
+    // The t_query variants are told apart in the full list.
+    assert!(
+        report_md.contains("| CartPole-v0 | ADQN | bootstrap | tq0.3 |"),
+        "{report_md}"
+    );
+    // No temporary files are left behind.
+    assert!(
+        std::fs::read_dir(&out).unwrap().all(|e| !e
+            .unwrap()
+            .file_name()
+            .to_string_lossy()
+            .starts_with('.'))
+    );
+}
+
+#[test]
+fn group_medians_follow_the_design_for_every_configuration() {
+    let dir = tempfile::tempdir().unwrap();
+    report_fixture(dir.path());
+    let (runs, notes) = report::load_runs(dir.path()).unwrap();
+    assert!(notes.is_empty(), "{notes:?}");
+    for group in report::group_runs(&runs) {
+        // Rebuild the specs of this group and compute the median by hand from the designed solve steps.
+        let mut steps: Vec<u64> = runs
+            .iter()
+            .filter(|r| {
+                r.env == group.env
+                    && r.method == group.method
+                    && r.net == group.net
+                    && r.variant == group.variant
+            })
+            .map(|r| {
+                let spec = RunSpec {
+                    env: r.env.clone(),
+                    method: r.method.clone(),
+                    net: r.net.clone(),
+                    seed: r.seed,
+                    overrides: [
+                        r.t_query
+                            .filter(|_| r.variant.starts_with("tq"))
+                            .map(|t| format!("t_query={t}")),
+                        r.expert
+                            .clone()
+                            .filter(|_| r.variant.starts_with("expert"))
+                            .map(|e| format!("expert=\"{e}\"")),
+                    ]
+                    .into_iter()
+                    .flatten()
+                    .collect(),
+                    variant: None,
+                };
+                designed_solve_step(&spec).unwrap_or(TRAIN_STEPS)
+            })
+            .collect();
+        steps.sort();
+        let n = steps.len();
+        let expected = if n % 2 == 1 {
+            steps[n / 2] as f64
+        } else {
+            (steps[n / 2 - 1] + steps[n / 2]) as f64 / 2.0
+        };
+        assert_eq!(
+            group.median_steps_to_solve, expected,
+            "{} {} {} {}",
+            group.env, group.method, group.net, group.variant
+        );
+    }
+    // summary.json and eval.csv agree on every fake run, so the report raises no disagreement.
+    let out = dir.path().join("report");
+    let summary = report::report(dir.path(), &out).unwrap();
+    assert!(
+        !summary
+            .notes
+            .iter()
+            .any(|n| n.contains("summary.json says")),
+        "{:?}",
+        summary.notes
+    );
+}
+
+#[test]
+fn report_skips_damaged_runs_with_a_note() {
+    let dir = tempfile::tempdir().unwrap();
+    let grid = SweepGrid {
+        envs: vec!["CartPole-v0".into()],
+        methods: vec!["dqn".into()],
+        ..small_grid()
+    };
+    sweep::run_grid(&grid, dir.path(), 1, &|spec, dir| {
+        write_fake_run(spec, dir, false)
+    })
+    .unwrap();
+    let damaged = dir.path().join("CartPole-v0/dqn-bootstrap/seed2/eval.csv");
+    std::fs::write(&damaged, "step,mean,std,min,max\n1000,oops,1,2,3\n").unwrap();
+    let (runs, notes) = report::load_runs(dir.path()).unwrap();
+    assert_eq!(runs.len(), 3);
+    assert!(notes.len() == 1 && notes[0].contains("seed2"), "{notes:?}");
+    let curve: Vec<EvalPoint> = runs[0].eval.clone();
+    assert_eq!(curve.len(), 10);
+}
+
+#[test]
+fn runs_start_seed_by_seed_and_a_sweep_directory_keeps_its_overrides() {
+    let grid = small_grid();
+    let dir = tempfile::tempdir().unwrap();
+    let order = std::sync::Mutex::new(Vec::new());
+    sweep::run_grid(&grid, dir.path(), 1, &|spec, run_dir| {
+        order.lock().unwrap().push(spec.seed);
+        write_fake_run(spec, run_dir, false)
+    })
+    .unwrap();
+    let order = order.into_inner().unwrap();
+    let mut sorted = order.clone();
+    sorted.sort();
+    assert_eq!(
+        order, sorted,
+        "with one job, all runs of seed 0 come before any run of seed 1, ..."
+    );
+
+    // Extending the sweep with more seeds is fine; changing its overrides is refused.
+    let more_seeds = SweepGrid {
+        seeds: vec![0, 1, 2, 3, 4],
+        ..grid.clone()
+    };
+    let outcome = sweep::run_grid(&more_seeds, dir.path(), 1, &|s, d| {
+        write_fake_run(s, d, false)
+    })
+    .unwrap();
+    assert_eq!((outcome.already_complete, outcome.completed), (24, 6));
+    let changed = SweepGrid {
+        set: vec!["gamma=0.5".into()],
+        ..more_seeds
+    };
+    let error = sweep::run_grid(&changed, dir.path(), 1, &|_, _| unreachable!()).unwrap_err();
+    assert!(format!("{error:#}").contains("gamma=0.5"), "{error:#}");
+}
