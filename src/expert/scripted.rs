@@ -20,7 +20,8 @@ impl ScriptedExpert {
             "CartPole-v1" => ("CartPole-v1", cartpole),
             "MountainCar-v0" => ("MountainCar-v0", mountain_car),
             "Acrobot-v1" => ("Acrobot-v1", acrobot),
-            // LUNAR: scripted lander arrives with the LunarLander environment.
+            "LunarLander-v2" => ("LunarLander-v2", crate::env::lunar_lander::heuristic_action),
+            "LunarLander-v3" => ("LunarLander-v3", crate::env::lunar_lander::heuristic_action),
             other => bail!("no scripted expert for '{other}'"),
         };
         Ok(Self { env, policy })
