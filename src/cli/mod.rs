@@ -2,3 +2,4 @@
 pub mod env_cmd;
 pub mod expert_cmd;
 pub mod train_cmd;
+pub mod experiment_cmd;

@@ -56,3 +56,16 @@ pub fn run_one(cfg: &TrainConfig, out_dir: Option<&Path>, progress: bool) -> Res
     )?;
     Ok(summary)
 }
+
+/// Runs one grid point of a sweep into `dir`: the paper's preset for its task, method and network, the point's
+/// seed, then its overrides (`key=value`, as `arld train --set`).
+pub fn run_spec(spec: &sweep::RunSpec, dir: &Path) -> Result<()> {
+    let method = spec.method.parse::<crate::train::Method>()?;
+    let net = spec.net.parse::<crate::train::NetKind>()?;
+    let mut cfg = TrainConfig::preset(&spec.env, method, net, spec.seed)?;
+    for o in &spec.overrides {
+        cfg.apply_override(o)?;
+    }
+    run_one(&cfg, Some(dir), false)?;
+    Ok(())
+}

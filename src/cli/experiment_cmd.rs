@@ -1,0 +1,167 @@
+//! `arld sweep`, `arld report` and `arld reproduce`: many seeded runs in parallel, and their tables and figures.
+use anyhow::{Result, bail};
+use arld::experiment::paper::paper_grids;
+use arld::experiment::report::report;
+use arld::experiment::run_spec;
+use arld::experiment::sweep::{SweepGrid, run_grid};
+use clap::Args;
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+#[derive(Args)]
+#[command(after_help = "Examples:\n  arld sweep --env CartPole-v0 --method dqn,adqn --net bootstrap,noisy --seeds 5 -o runs/sweep\n  \
+arld sweep --grid grid.toml -o runs/sweep       # [sweep] envs = [...], methods = [...], nets = [...], seeds = 20\n\n\
+A sweep is resumable: finished runs (with summary.json) are skipped, an interrupted run is started again.")]
+pub struct SweepArgs {
+    /// TOML file with a [sweep] table (envs, methods, nets, seeds, t_query, experts, set).
+    #[arg(long, conflicts_with_all = ["env", "method", "net"])]
+    grid: Option<PathBuf>,
+    /// Environments (comma-separated or repeated).
+    #[arg(long)]
+    env: Vec<String>,
+    /// Methods: dqn, dqfd, gdqn, bdqn, adqn, adqnp.
+    #[arg(long)]
+    method: Vec<String>,
+    /// Networks: plain, bootstrap, noisy.
+    #[arg(long, default_value = "bootstrap,noisy")]
+    net: Vec<String>,
+    /// Seeds: a count ("20"), a range ("3..8") or a list ("0,4,9").
+    #[arg(long, default_value = "5")]
+    seeds: String,
+    /// t_query values to sweep (a variant per value).
+    #[arg(long)]
+    t_query: Vec<String>,
+    /// Expert specs to sweep (a variant per spec).
+    #[arg(long)]
+    expert: Vec<String>,
+    /// Config override applied to every run (repeatable).
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    overrides: Vec<String>,
+    /// Parallel runs [default: one per core].
+    #[arg(long, default_value_t = 0)]
+    jobs: usize,
+    /// Sweep directory.
+    #[arg(long, short)]
+    out: PathBuf,
+}
+
+#[derive(Args)]
+pub struct ReportArgs {
+    /// A sweep directory (any directory holding run directories).
+    dir: PathBuf,
+    /// Where tables and figures go [default: DIR/report].
+    #[arg(long, short)]
+    out: Option<PathBuf>,
+}
+
+#[derive(Args)]
+#[command(after_help = "The full protocol is 20 seeds x 6 methods x 2 networks on the four tasks (Table 5, \
+Figures 2-3), plus the t_query sweep (Figure 4) and the expert-quality sweep on LunarLander (Figure 5). --quick runs \
+the methods comparison on CartPole-v0 with 3 seeds. Interrupt it any time: the same command again continues \
+where it stopped.")]
+pub struct ReproduceArgs {
+    /// Only these environments (repeatable) [default: all four tasks].
+    #[arg(long)]
+    env: Vec<String>,
+    /// Seeds per configuration.
+    #[arg(long, default_value_t = 20)]
+    seeds: u64,
+    /// A few minutes on CartPole-v0: the methods comparison with 3 seeds.
+    #[arg(long)]
+    quick: bool,
+    /// Which parts: methods, t_query, experts (repeatable) [default: all].
+    #[arg(long)]
+    part: Vec<String>,
+    /// Parallel runs [default: one per core].
+    #[arg(long, default_value_t = 0)]
+    jobs: usize,
+    /// Output directory.
+    #[arg(long, short, default_value = "runs/reproduce")]
+    out: PathBuf,
+}
+
+pub fn run_sweep(args: SweepArgs) -> Result<ExitCode> {
+    let grid = match &args.grid {
+        Some(path) => SweepGrid::from_toml_file(path)?,
+        None => {
+            if args.env.is_empty() || args.method.is_empty() {
+                bail!("give --grid FILE, or at least --env and --method");
+            }
+            SweepGrid::from_cli_values(
+                &args.env,
+                &args.method,
+                &args.net,
+                &args.seeds,
+                &args.t_query,
+                &args.expert,
+                &args.overrides,
+            )?
+        }
+    };
+    let outcome = run_grid(&grid, &args.out, args.jobs, &run_spec)?;
+    println!(
+        "{} runs ({} already complete, {} run now); results: {}",
+        outcome.total,
+        outcome.already_complete,
+        outcome.completed,
+        outcome.results_csv.display()
+    );
+    Ok(ExitCode::SUCCESS)
+}
+
+pub fn run_report(args: ReportArgs) -> Result<ExitCode> {
+    let out = args.out.unwrap_or_else(|| args.dir.join("report"));
+    print_report(&args.dir, &out)
+}
+
+fn print_report(dir: &std::path::Path, out: &std::path::Path) -> Result<ExitCode> {
+    let summary = report(dir, out)?;
+    for note in &summary.notes {
+        eprintln!("note: {note}");
+    }
+    println!("{} runs; wrote:", summary.runs);
+    for f in &summary.files {
+        println!("  {}", f.display());
+    }
+    let table = out.join("table.md");
+    if let Ok(text) = std::fs::read_to_string(&table) {
+        println!("\n{text}");
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+pub fn run_reproduce(args: ReproduceArgs) -> Result<ExitCode> {
+    let (envs, seeds, parts) = if args.quick {
+        (vec!["CartPole-v0".to_string()], 3, vec!["methods".to_string()])
+    } else {
+        (args.env.clone(), args.seeds, args.part.clone())
+    };
+    for p in &parts {
+        if !matches!(p.as_str(), "methods" | "t_query" | "experts") {
+            bail!("unknown part '{p}'; known parts: methods, t_query, experts");
+        }
+    }
+    for e in &envs {
+        arld::env::make(e)?;
+    }
+    let mut ran_any = false;
+    for (name, mut grid) in paper_grids(seeds) {
+        if !parts.is_empty() && !parts.iter().any(|p| p == name) {
+            continue;
+        }
+        if !envs.is_empty() {
+            grid.envs.retain(|e| envs.contains(e));
+        }
+        if grid.envs.is_empty() {
+            continue;
+        }
+        ran_any = true;
+        eprintln!("== {name}: {} runs", grid.specs()?.len());
+        let outcome = run_grid(&grid, &args.out.join(name), args.jobs, &run_spec)?;
+        eprintln!("   {} complete ({} were already)", outcome.total, outcome.already_complete);
+    }
+    if !ran_any {
+        bail!("nothing to run: no part of the protocol covers {envs:?}");
+    }
+    print_report(&args.out, &args.out.join("report"))
+}
