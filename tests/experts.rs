@@ -10,10 +10,18 @@ use rand::SeedableRng;
 
 #[test]
 fn scripted_experts_solve_their_tasks() {
-    for (env, target) in [("CartPole-v0", 195.0), ("MountainCar-v0", -130.0), ("Acrobot-v1", -100.0)] {
+    for (env, target) in [
+        ("CartPole-v0", 195.0),
+        ("MountainCar-v0", -130.0),
+        ("Acrobot-v1", -100.0),
+    ] {
         let mut e = ScriptedExpert::new(env).unwrap();
         let s = evaluate_expert(&mut e, env, 20, 0).unwrap();
-        assert!(s.mean >= target, "scripted expert on {env}: mean {} below {target}", s.mean);
+        assert!(
+            s.mean >= target,
+            "scripted expert on {env}: mean {} below {target}",
+            s.mean
+        );
     }
 }
 
@@ -23,15 +31,28 @@ fn noisy_wrapper_degrades_a_perfect_expert() {
     let mut noisy = expert::from_spec("noisy:0.4:scripted", "CartPole-v0", 0).unwrap();
     let p = evaluate_expert(perfect.as_mut(), "CartPole-v0", 20, 0).unwrap();
     let n = evaluate_expert(noisy.as_mut(), "CartPole-v0", 20, 0).unwrap();
-    assert!(n.mean < p.mean, "40% random actions should hurt: {} vs {}", n.mean, p.mean);
+    assert!(
+        n.mean < p.mean,
+        "40% random actions should hurt: {} vs {}",
+        n.mean,
+        p.mean
+    );
     assert!(expert::from_spec("noisy:1.5:scripted", "CartPole-v0", 0).is_err());
 }
 
 #[test]
 fn bad_expert_specs_and_checkpoints_give_clear_errors() {
-    let err = |spec: &str, env: &str| format!("{:#}", expert::from_spec(spec, env, 0).err().expect("should fail"));
+    let err = |spec: &str, env: &str| {
+        format!(
+            "{:#}",
+            expert::from_spec(spec, env, 0).err().expect("should fail")
+        )
+    };
     assert!(err("oracle", "CartPole-v0").contains("unknown expert spec"));
-    assert!(err("checkpoint:/no/such/file.safetensors", "CartPole-v0").contains("/no/such/file.safetensors"));
+    assert!(
+        err("checkpoint:/no/such/file.safetensors", "CartPole-v0")
+            .contains("/no/such/file.safetensors")
+    );
     // A CartPole network asked to act on Acrobot: the shapes do not fit.
     let cartpole = expert::shipped_path("CartPole-v0", "weak");
     let e = err(&format!("checkpoint:{}", cartpole.display()), "Acrobot-v1");
@@ -50,7 +71,10 @@ fn demonstrations_round_trip_and_are_checked() {
     let mut e = ScriptedExpert::new("MountainCar-v0").unwrap();
     let demos = Demonstrations::collect("MountainCar-v0", &mut e, 300, 5).unwrap();
     assert_eq!(demos.transitions.len(), 300);
-    assert!(demos.episodes() >= 2, "whole episodes are collected in order");
+    assert!(
+        demos.episodes() >= 2,
+        "whole episodes are collected in order"
+    );
     assert!(demos.transitions[0].episode == 0 && demos.transitions.iter().any(|t| t.terminated));
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("demos.jsonl");
@@ -59,8 +83,14 @@ fn demonstrations_round_trip_and_are_checked() {
     assert_eq!(back.transitions.len(), 300);
     assert_eq!(back.transitions[17].obs, demos.transitions[17].obs);
     // For another environment: refused, naming both.
-    let e = format!("{:#}", Demonstrations::load(&path, Some("CartPole-v0")).unwrap_err());
-    assert!(e.contains("MountainCar-v0") && e.contains("CartPole-v0"), "{e}");
+    let e = format!(
+        "{:#}",
+        Demonstrations::load(&path, Some("CartPole-v0")).unwrap_err()
+    );
+    assert!(
+        e.contains("MountainCar-v0") && e.contains("CartPole-v0"),
+        "{e}"
+    );
     // Truncated: refused.
     let text = std::fs::read_to_string(&path).unwrap();
     let cut: String = text.lines().take(100).map(|l| format!("{l}\n")).collect();
@@ -82,12 +112,31 @@ fn pretraining_agrees_with_the_expert_on_demonstrations() {
     let mut agent = Agent::new(&cfg, 4, 2, 1);
     let mut replay = Replay::new(
         4,
-        &ReplayConfig { capacity: cfg.replay_size, demo_capacity: demos.transitions.len(), ..ReplayConfig::default() },
+        &ReplayConfig {
+            capacity: cfg.replay_size,
+            demo_capacity: demos.transitions.len(),
+            ..ReplayConfig::default()
+        },
     );
     let mut rng = rand_pcg::Pcg64::seed_from_u64(2);
-    pretrain(&cfg, &mut agent, &mut replay, &demos, &mut rng, &mut Batch::default()).unwrap();
-    let agree = demos.transitions.iter().filter(|t| agent.act_greedy(&t.obs) == t.action).count();
+    pretrain(
+        &cfg,
+        &mut agent,
+        &mut replay,
+        &demos,
+        &mut rng,
+        &mut Batch::default(),
+    )
+    .unwrap();
+    let agree = demos
+        .transitions
+        .iter()
+        .filter(|t| agent.act_greedy(&t.obs) == t.action)
+        .count();
     let frac = agree as f64 / demos.transitions.len() as f64;
-    eprintln!("pre-trained agreement with the expert: {:.1}%", 100.0 * frac);
+    eprintln!(
+        "pre-trained agreement with the expert: {:.1}%",
+        100.0 * frac
+    );
     assert!(frac >= 0.9, "agreement {frac}");
 }

@@ -9,9 +9,11 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 #[derive(Args)]
-#[command(after_help = "Examples:\n  arld sweep --env CartPole-v0 --method dqn,adqn --net bootstrap,noisy --seeds 5 -o runs/sweep\n  \
+#[command(
+    after_help = "Examples:\n  arld sweep --env CartPole-v0 --method dqn,adqn --net bootstrap,noisy --seeds 5 -o runs/sweep\n  \
 arld sweep --grid grid.toml -o runs/sweep       # [sweep] envs = [...], methods = [...], nets = [...], seeds = 20\n\n\
-A sweep is resumable: finished runs (with summary.json) are skipped, an interrupted run is started again.")]
+A sweep is resumable: finished runs (with summary.json) are skipped, an interrupted run is started again."
+)]
 pub struct SweepArgs {
     /// TOML file with a [sweep] table (envs, methods, nets, seeds, t_query, experts, set).
     #[arg(long, conflicts_with_all = ["env", "method", "net"])]
@@ -55,10 +57,12 @@ pub struct ReportArgs {
 }
 
 #[derive(Args)]
-#[command(after_help = "The full protocol is 20 seeds x 6 methods x 2 networks on the four tasks (Table 5, \
+#[command(
+    after_help = "The full protocol is 20 seeds x 6 methods x 2 networks on the four tasks (Table 5, \
 Figures 2-3), plus the t_query sweep (Figure 4) and the expert-quality sweep on LunarLander (Figure 5). --quick runs \
 the methods comparison on CartPole-v0 with 3 seeds. Interrupt it any time: the same command again continues \
-where it stopped.")]
+where it stopped."
+)]
 pub struct ReproduceArgs {
     /// Only these environments (repeatable) [default: all four tasks].
     #[arg(long)]
@@ -132,7 +136,11 @@ fn print_report(dir: &std::path::Path, out: &std::path::Path) -> Result<ExitCode
 
 pub fn run_reproduce(args: ReproduceArgs) -> Result<ExitCode> {
     let (envs, seeds, parts) = if args.quick {
-        (vec!["CartPole-v0".to_string()], 3, vec!["methods".to_string()])
+        (
+            vec!["CartPole-v0".to_string()],
+            3,
+            vec!["methods".to_string()],
+        )
     } else {
         (args.env.clone(), args.seeds, args.part.clone())
     };
@@ -158,7 +166,10 @@ pub fn run_reproduce(args: ReproduceArgs) -> Result<ExitCode> {
         ran_any = true;
         eprintln!("== {name}: {} runs", grid.specs()?.len());
         let outcome = run_grid(&grid, &args.out.join(name), args.jobs, &run_spec)?;
-        eprintln!("   {} complete ({} were already)", outcome.total, outcome.already_complete);
+        eprintln!(
+            "   {} complete ({} were already)",
+            outcome.total, outcome.already_complete
+        );
     }
     if !ran_any {
         bail!("nothing to run: no part of the protocol covers {envs:?}");

@@ -269,4 +269,3 @@ pub(crate) fn check_state(env: &'static str, state: &[f64], len: usize) -> Resul
     }
     Ok(())
 }
-

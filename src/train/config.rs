@@ -74,7 +74,9 @@ impl std::str::FromStr for Method {
         Method::ALL
             .into_iter()
             .find(|m| m.name() == s)
-            .with_context(|| format!("unknown method '{s}'; known: dqn, dqfd, gdqn, bdqn, adqn, adqnp"))
+            .with_context(|| {
+                format!("unknown method '{s}'; known: dqn, dqfd, gdqn, bdqn, adqn, adqnp")
+            })
     }
 }
 

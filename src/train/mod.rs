@@ -129,9 +129,17 @@ pub fn train(
 
     // Pre-training on demonstrations only (DQfD, ADQNP; §9).
     if cfg.method.pretrains() {
-        let demos = demos.context("this method pre-trains on demonstrations, but none were given")?;
+        let demos =
+            demos.context("this method pre-trains on demonstrations, but none were given")?;
         log.set_prefix(format!("{} pre-training", cfg.run_name()));
-        pretrain(cfg, &mut agent, &mut replay, demos, &mut replay_rng, &mut batch)?;
+        pretrain(
+            cfg,
+            &mut agent,
+            &mut replay,
+            demos,
+            &mut replay_rng,
+            &mut batch,
+        )?;
     }
 
     let mut queries = QueryController::new(query_rule(cfg)?, cfg.budget, cfg.segment_len)?;
@@ -205,10 +213,10 @@ pub fn train(
             let stats = agent.update(&batch);
             replay.update_priorities(&batch.idx, agent.abs_td(batch.idx.len()));
             updates += 1;
-            if updates % cfg.target_period == 0 {
+            if updates.is_multiple_of(cfg.target_period) {
                 agent.sync_target();
             }
-            if updates % 1000 == 0 {
+            if updates.is_multiple_of(1000) {
                 log.scalar("train/td_loss", step + 1, stats.td_loss)?;
                 log.scalar("train/margin_loss", step + 1, stats.margin_loss)?;
                 log.scalar("train/epsilon", step + 1, epsilon_at(cfg, step) as f32)?;
@@ -227,8 +235,8 @@ pub fn train(
             log.eval(point)?;
             log.progress(step + 1);
         }
-        if cfg.checkpoint_every > 0 && (step + 1) % cfg.checkpoint_every == 0 {
-            if let Some(dir) = log.dir() {
+        if cfg.checkpoint_every > 0 && (step + 1) % cfg.checkpoint_every == 0
+            && let Some(dir) = log.dir() {
                 let dir = dir.join("checkpoints");
                 std::fs::create_dir_all(&dir)?;
                 let meta = weights_metadata(cfg, step + 1);
@@ -237,7 +245,6 @@ pub fn train(
                     &meta,
                 )?;
             }
-        }
     }
 
     let wall = started.elapsed().as_secs_f64();
@@ -292,7 +299,12 @@ pub fn pretrain(
     rng: &mut Pcg64,
     batch: &mut Batch,
 ) -> Result<()> {
-    ensure!(demos.env == cfg.env, "the demonstrations are for {}, not {}", demos.env, cfg.env);
+    ensure!(
+        demos.env == cfg.env,
+        "the demonstrations are for {}, not {}",
+        demos.env,
+        cfg.env
+    );
     for t in &demos.transitions {
         replay.push(&t.obs, t.action, t.reward, &t.next_obs, t.terminal, true)?;
     }
