@@ -754,16 +754,47 @@ impl QNet {
     }
 }
 
-/// `out = bias + input · W` for one input vector, with `W` stored `[in][out]`: a run of contiguous axpys.
+/// `out = bias + input · W` for one input vector, with `W` stored `[in][out]`.
+///
+/// The outputs are computed in blocks of up to 64 columns whose running sums stay in registers for the
+/// whole pass over the inputs: accumulating into `out` in memory instead makes every input a store and a
+/// reload of the same addresses, which stalls badly when `out` straddles cache lines.
 #[inline(always)]
 fn dense_single(input: &[f32], weight_t: &[f32], bias: &[f32], out: &mut [f32]) {
     let width = out.len();
-    out.copy_from_slice(bias);
+    let mut col = 0;
+    while col < width {
+        col += match width - col {
+            64.. => dense_single_block::<64>(input, weight_t, bias, out, col),
+            32.. => dense_single_block::<32>(input, weight_t, bias, out, col),
+            16.. => dense_single_block::<16>(input, weight_t, bias, out, col),
+            8.. => dense_single_block::<8>(input, weight_t, bias, out, col),
+            4.. => dense_single_block::<4>(input, weight_t, bias, out, col),
+            _ => dense_single_block::<1>(input, weight_t, bias, out, col),
+        };
+    }
+}
+
+/// Columns `col..col + N` of [`dense_single`]; returns `N`.
+#[inline(always)]
+fn dense_single_block<const N: usize>(
+    input: &[f32],
+    weight_t: &[f32],
+    bias: &[f32],
+    out: &mut [f32],
+    col: usize,
+) -> usize {
+    let width = out.len();
+    let mut sums = [0.0f32; N];
+    sums.copy_from_slice(&bias[col..col + N]);
     for (&value, row) in input.iter().zip(weight_t.chunks_exact(width)) {
-        for (o, &w) in out.iter_mut().zip(row) {
-            *o += value * w;
+        let weights: &[f32; N] = row[col..col + N].try_into().expect("block inside the row");
+        for (sum, &w) in sums.iter_mut().zip(weights) {
+            *sum += value * w;
         }
     }
+    out[col..col + N].copy_from_slice(&sums);
+    N
 }
 
 #[inline(always)]
@@ -803,12 +834,20 @@ fn add_bias(rows: &mut [f32], bias: &[f32]) {
 }
 
 /// Index of the largest value, the first one on ties (as `numpy.argmax`/`torch.argmax`); 0 if empty.
+/// NaN values are never selected unless the first value is NaN.
+///
+/// Written with selects instead of branches: with a handful of actions the comparisons are
+/// unpredictable, and a mispredicted branch costs more than the whole scan.
+#[inline]
 pub fn argmax(values: &[f32]) -> usize {
-    let mut best = 0;
-    for (i, &v) in values.iter().enumerate() {
-        if v > values[best] {
-            best = i;
-        }
+    let Some(&first) = values.first() else {
+        return 0;
+    };
+    let (mut best, mut best_value) = (0, first);
+    for (i, &v) in values.iter().enumerate().skip(1) {
+        let better = v > best_value;
+        best = if better { i } else { best };
+        best_value = if better { v } else { best_value };
     }
     best
 }
