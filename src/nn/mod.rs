@@ -389,7 +389,6 @@ impl QNet {
             self.tensor(l.fc1_w),
             MatView::row_major(d, HIDDEN),
             1.0,
-            false,
         );
         add_bias_relu(h1, self.tensor(l.fc1_b));
         let h2 = &mut ws.h2[..batch * HIDDEN];
@@ -401,7 +400,6 @@ impl QNet {
             self.tensor(l.fc2_w),
             MatView::row_major(HIDDEN, HIDDEN),
             1.0,
-            false,
         );
         add_bias_relu(h2, self.tensor(l.fc2_b));
 
@@ -416,7 +414,6 @@ impl QNet {
                     self.tensor(l.out_w),
                     MatView::row_major(HIDDEN, a),
                     1.0,
-                    false,
                 );
                 add_bias(q, self.tensor(l.out_b));
             }
@@ -431,7 +428,6 @@ impl QNet {
                     self.tensor(l.out_w),
                     MatView::row_major(HIDDEN, width),
                     1.0,
-                    false,
                 );
                 let bias = self.tensor(l.out_b);
                 for (head, q_head) in q.chunks_exact_mut(batch * a).enumerate().take(heads) {
@@ -465,11 +461,14 @@ impl QNet {
                         ws.noise_out.fill(0.0);
                     }
                 }
+                let layer = noisy::NoisyParams {
+                    mu_w: self.tensor(l.out_w),
+                    sigma_w: self.tensor(l.sigma_w),
+                    mu_b: self.tensor(l.out_b),
+                    sigma_b: self.tensor(l.sigma_b),
+                };
                 noisy::effective_weights(
-                    self.tensor(l.out_w),
-                    self.tensor(l.sigma_w),
-                    self.tensor(l.out_b),
-                    self.tensor(l.sigma_b),
+                    &layer,
                     &ws.noise_in,
                     &ws.noise_out,
                     &mut ws.w_eff_t,
@@ -483,7 +482,6 @@ impl QNet {
                     &ws.w_eff_t,
                     MatView::row_major(HIDDEN, a),
                     1.0,
-                    false,
                 );
                 add_bias(q, &ws.b_eff);
             }
@@ -561,7 +559,6 @@ impl QNet {
                     h2,
                     MatView::row_major(batch, HIDDEN),
                     1.0,
-                    false,
                 );
                 noisy::sigma_gradients(
                     g.out_w,
@@ -579,7 +576,6 @@ impl QNet {
                     &ws.w_eff_t,
                     MatView::row_major(HIDDEN, a).t(),
                     1.0,
-                    false,
                 );
             }
             OutputKind::Plain | OutputKind::Bootstrap { .. } => {
@@ -591,7 +587,6 @@ impl QNet {
                     d_out,
                     MatView::row_major(batch, width),
                     1.0,
-                    false,
                 );
                 // The 1/K trunk scaling of Bootstrapped DQN, folded into the GEMM's scale.
                 let trunk_scale = 1.0 / l.heads() as f32;
@@ -603,7 +598,6 @@ impl QNet {
                     self.tensor(l.out_w),
                     MatView::row_major(HIDDEN, width).t(),
                     trunk_scale,
-                    false,
                 );
             }
         }
@@ -617,7 +611,6 @@ impl QNet {
             d_h2,
             MatView::row_major(batch, HIDDEN),
             1.0,
-            false,
         );
         let d_h1 = &mut ws.d_h1[..batch * HIDDEN];
         matmul(
@@ -628,7 +621,6 @@ impl QNet {
             self.tensor(l.fc2_w),
             MatView::row_major(HIDDEN, HIDDEN).t(),
             1.0,
-            false,
         );
         relu_backward(d_h1, h1);
         column_sums(d_h1, g.fc1_b);
@@ -640,7 +632,6 @@ impl QNet {
             d_h1,
             MatView::row_major(batch, HIDDEN),
             1.0,
-            false,
         );
     }
 
