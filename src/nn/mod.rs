@@ -11,17 +11,21 @@
 //! How the parts fit:
 //! - [`QNet`] holds the parameters only, in one flat `Vec<f32>` (so Adam, clipping and target copies are
 //!   single loops over one slice). Trunk and plain/bootstrap weights are stored transposed, `[in][out]`, so
-//!   the batch product is `x · W` on row-major data and the single-state pass is a run of contiguous
-//!   `axpy`s; the K heads are fused into one `[64][K*A]` matrix so the output stage is one GEMM. The noisy
+//!   the batch product is `x · W` on row-major data (the layout `gemm` runs fastest in all of forward and
+//!   backward) and the single-state pass reads contiguous weight rows; the K heads are fused into one `[64][K*A]` matrix so the output stage is one GEMM. The noisy
 //!   layer keeps PyTorch's `[out][in]` layout (its effective weights are rebuilt every pass anyway, and
 //!   [`QNet::noisy_sigmas`] hands out `sigma_w` as `[A][64]`). Files use PyTorch's layout for every tensor.
 //! - [`Workspace`] holds every buffer a forward/backward pair needs, sized once for a maximum batch, and
 //!   remembers the activations of its last forward for the backward pass.
 //! - [`Grads`], [`clip_grad_norm`] and [`Adam`] (in `adam.rs`) share the parameter layout.
 //! - `linear.rs` wraps `gemm`; `noisy.rs` holds [`NoiseSample`]; `io.rs` reads and writes safetensors.
+//! - `simd.rs` compiles the element-wise loops a second time for AVX2 and picks that copy at run time;
+//!   `gemm` dispatches its own kernels (AVX-512 with the crate's `x86-v4` feature).
 //!
-//! After the workspaces exist, a training update allocates nothing in this module (the `gemm` crate itself
-//! may make small internal allocations for packing).
+//! After the workspaces exist, a training update allocates nothing in this module; the `gemm` crate itself
+//! makes about 20 small allocations per update for its packing buffers (it offers no way to pass them in).
+//! Measured on an AVX-512 Xeon (min of samples, d = 8, A = 4, batch 32): a double-DQN update takes about
+//! 18 us (plain), 25 us (10 heads) and 19 us (noisy); a single-state forward 0.15-0.25 us.
 
 mod adam;
 mod io;
