@@ -547,6 +547,9 @@ mod tests {
         );
     }
 
+    /// Replaces one tensor's (shape, bytes), or drops it with `None`.
+    type TensorChange = dyn Fn(&TensorView) -> Option<(Vec<usize>, Vec<u8>)>;
+
     /// Rewrites a saved file with one tensor changed (or dropped) and checks the matching error.
     #[test]
     fn inconsistent_tensors_are_rejected() {
@@ -563,9 +566,7 @@ mod tests {
             .metadata()
             .clone();
 
-        let rewrite = |name: &str,
-                       change: &dyn Fn(&TensorView) -> Option<(Vec<usize>, Vec<u8>)>|
-         -> ModelFileError {
+        let rewrite = |name: &str, change: &TensorChange| -> ModelFileError {
             let mut owned: Vec<(String, Dtype, Vec<usize>, Vec<u8>)> = Vec::new();
             for (n, view) in original.tensors() {
                 if n == name {

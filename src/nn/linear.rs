@@ -48,7 +48,7 @@ impl MatView {
     }
 }
 
-/// `dst = scale * lhs · rhs`, or `dst += scale * lhs · rhs` when `accumulate`.
+/// `dst = scale * lhs · rhs`.
 ///
 /// Single-threaded (`gemm::Parallelism::None`): one training run owns one core.
 ///
@@ -62,7 +62,6 @@ pub(crate) fn matmul(
     rhs: &[f32],
     rhs_view: MatView,
     scale: f32,
-    accumulate: bool,
 ) {
     assert_eq!(
         lhs_view.cols, rhs_view.rows,
@@ -96,7 +95,7 @@ pub(crate) fn matmul(
             dst.as_mut_ptr(),
             dst_view.col_stride as isize,
             dst_view.row_stride as isize,
-            accumulate,
+            false,
             lhs.as_ptr(),
             lhs_view.col_stride as isize,
             lhs_view.row_stride as isize,
@@ -206,22 +205,9 @@ mod tests {
                 };
                 let expected = naive(&lhs, lv, &rhs, rv);
                 let mut dst = vec![1.0f32; m * n];
-                matmul(
-                    &mut dst,
-                    MatView::row_major(m, n),
-                    &lhs,
-                    lv,
-                    &rhs,
-                    rv,
-                    2.0,
-                    true,
-                );
+                matmul(&mut dst, MatView::row_major(m, n), &lhs, lv, &rhs, rv, 2.0);
                 for (d, e) in dst.iter().zip(&expected) {
-                    assert!(
-                        (*d as f64 - (1.0 + 2.0 * e)).abs() < 1e-5,
-                        "{d} vs {}",
-                        1.0 + 2.0 * e
-                    );
+                    assert!((*d as f64 - 2.0 * e).abs() < 1e-5, "{d} vs {}", 2.0 * e);
                 }
             }
         }
@@ -240,7 +226,6 @@ mod tests {
             &a,
             MatView::row_major(4, 2),
             1.0,
-            false,
         );
     }
 }

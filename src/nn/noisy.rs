@@ -85,22 +85,33 @@ impl NoiseSample {
     }
 }
 
+/// The parameters of the noisy output layer: `mu_w`, `sigma_w` are `[A][HIDDEN]` (PyTorch layout),
+/// `mu_b`, `sigma_b` are `[A]`.
+pub(crate) struct NoisyParams<'a> {
+    pub mu_w: &'a [f32],
+    pub sigma_w: &'a [f32],
+    pub mu_b: &'a [f32],
+    pub sigma_b: &'a [f32],
+}
+
 /// Builds the effective weights `mu + sigma ⊙ eps` of one forward pass.
 ///
-/// `mu_w`, `sigma_w` are `[A][HIDDEN]` (PyTorch layout); the result `w_eff_t` is written transposed,
-/// `[HIDDEN][A]`, because the batch product `h2 · W^T` reads it row by row. `input`/`output` are the noise
-/// factors (all zeros for the mean network).
+/// The result `w_eff_t` is written transposed, `[HIDDEN][A]`, because the batch product `h2 · W^T` reads
+/// it row by row. `input`/`output` are the noise factors (all zeros for the mean network).
 #[inline(always)]
 pub(crate) fn effective_weights(
-    mu_w: &[f32],
-    sigma_w: &[f32],
-    mu_b: &[f32],
-    sigma_b: &[f32],
+    layer: &NoisyParams,
     input: &[f32; HIDDEN],
     output: &[f32],
     w_eff_t: &mut [f32],
     b_eff: &mut [f32],
 ) {
+    let NoisyParams {
+        mu_w,
+        sigma_w,
+        mu_b,
+        sigma_b,
+    } = *layer;
     let n_actions = output.len();
     for (a, (&eps_out, (mu_row, sigma_row))) in output
         .iter()
