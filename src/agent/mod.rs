@@ -336,7 +336,7 @@ pub fn double_dqn_loss(
     let mut margin_loss = 0.0f32;
     let inv_b = 1.0 / b as f32;
     for k in 0..h.heads {
-        for i in 0..b {
+        for (i, abs_td_i) in abs_td.iter_mut().enumerate().take(b) {
             let row = (k * b + i) * a;
             let qs = &h.q[row..row + a];
             let next_a = argmax(&h.qn_online[row..row + a]);
@@ -352,7 +352,7 @@ pub fn double_dqn_loss(
             };
             td_loss += w * l;
             dq[row + act] += w * g;
-            abs_td[i] += delta.abs() / h.heads as f32;
+            *abs_td_i += delta.abs() / h.heads as f32;
             if batch.is_demo[i] && p.lambda > 0.0 {
                 // Large-margin loss (§4): the expert's action must beat every other action by M.
                 let (m, a_max) = margin_term(qs, act, p.margin);
