@@ -235,16 +235,18 @@ pub fn train(
             log.eval(point)?;
             log.progress(step + 1);
         }
-        if cfg.checkpoint_every > 0 && (step + 1) % cfg.checkpoint_every == 0
-            && let Some(dir) = log.dir() {
-                let dir = dir.join("checkpoints");
-                std::fs::create_dir_all(&dir)?;
-                let meta = weights_metadata(cfg, step + 1);
-                agent.network().save(
-                    &dir.join(format!("step_{:08}.safetensors", step + 1)),
-                    &meta,
-                )?;
-            }
+        if cfg.checkpoint_every > 0
+            && (step + 1) % cfg.checkpoint_every == 0
+            && let Some(dir) = log.dir()
+        {
+            let dir = dir.join("checkpoints");
+            std::fs::create_dir_all(&dir)?;
+            let meta = weights_metadata(cfg, step + 1);
+            agent.network().save(
+                &dir.join(format!("step_{:08}.safetensors", step + 1)),
+                &meta,
+            )?;
+        }
     }
 
     let wall = started.elapsed().as_secs_f64();

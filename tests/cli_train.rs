@@ -1,0 +1,257 @@
+//! Bad input to `arld train`, `arld expert`, `arld demo` and `arld sweep`: a clear message naming the problem,
+//! a non-zero exit, no panic, and nothing written.
+
+use std::path::Path;
+use std::process::{Command, Output};
+
+fn arld(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_arld"))
+        .args(args)
+        .output()
+        .expect("runs")
+}
+
+/// Asserts failure with a message containing every needle, without a panic, and returns stderr.
+fn fails_with(args: &[&str], needles: &[&str]) -> String {
+    let out = arld(args);
+    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert!(!out.status.success(), "{args:?} should fail");
+    assert!(!stderr.contains("panicked"), "{args:?} panicked: {stderr}");
+    for n in needles {
+        assert!(stderr.contains(n), "{args:?}: expected '{n}' in: {stderr}");
+    }
+    stderr
+}
+
+#[test]
+fn config_errors_are_reported_before_any_work() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("run");
+    let o = out.to_str().unwrap();
+    fails_with(
+        &[
+            "train",
+            "--env",
+            "CartPole-v0",
+            "--set",
+            "learnin_rate=3",
+            "-o",
+            o,
+        ],
+        &["learnin_rate", "valid keys", "lr"],
+    );
+    fails_with(
+        &[
+            "train",
+            "--env",
+            "CartPole-v0",
+            "--method",
+            "adqn",
+            "--set",
+            "t_query=1.5",
+            "-o",
+            o,
+        ],
+        &["t_query", "[0, 1]"],
+    );
+    fails_with(
+        &[
+            "train",
+            "--env",
+            "CartPole-v0",
+            "--method",
+            "adqn",
+            "--set",
+            "budget=-3",
+            "-o",
+            o,
+        ],
+        &["budget"],
+    );
+    fails_with(
+        &[
+            "train",
+            "--env",
+            "CartPole-v0",
+            "--method",
+            "adqn",
+            "--net",
+            "plain",
+            "-o",
+            o,
+        ],
+        &["plain network"],
+    );
+    fails_with(
+        &["train", "--env", "CartPole-v9", "-o", o],
+        &["CartPole-v9", "known ids", "Acrobot-v1"],
+    );
+    fails_with(
+        &[
+            "train",
+            "--env",
+            "CartPole-v0",
+            "--method",
+            "adqn",
+            "--expert",
+            "oracle",
+            "-o",
+            o,
+        ],
+        &["oracle"],
+    );
+    let bad = dir.path().join("bad.toml");
+    std::fs::write(&bad, "lr = [oops").unwrap();
+    fails_with(
+        &[
+            "train",
+            "--env",
+            "CartPole-v0",
+            "--config",
+            bad.to_str().unwrap(),
+            "-o",
+            o,
+        ],
+        &["bad.toml", "TOML"],
+    );
+    std::fs::write(&bad, "gamma = \"high\"").unwrap();
+    fails_with(
+        &[
+            "train",
+            "--env",
+            "CartPole-v0",
+            "--config",
+            bad.to_str().unwrap(),
+            "-o",
+            o,
+        ],
+        &["gamma"],
+    );
+    assert!(
+        !Path::new(&out).exists(),
+        "a failed start must not leave a run directory"
+    );
+}
+
+#[test]
+fn bad_checkpoints_and_demonstrations_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let cut = dir.path().join("cut.safetensors");
+    std::fs::write(&cut, b"\x10\x00\x00\x00\x00\x00\x00\x00{\"a\":").unwrap();
+    let spec = format!("checkpoint:{}", cut.display());
+    fails_with(
+        &["expert", "eval", "--env", "CartPole-v0", "--expert", &spec],
+        &["cut.safetensors"],
+    );
+    fails_with(
+        &[
+            "expert",
+            "eval",
+            "--env",
+            "CartPole-v0",
+            "--expert",
+            "checkpoint:/missing.safetensors",
+        ],
+        &["/missing"],
+    );
+    // Demonstrations for MountainCar given to a CartPole run.
+    let demos = dir.path().join("mc.jsonl");
+    let d = demos.to_str().unwrap();
+    let ok = arld(&[
+        "demo",
+        "collect",
+        "--env",
+        "MountainCar-v0",
+        "--expert",
+        "scripted",
+        "--transitions",
+        "50",
+        "-o",
+        d,
+    ]);
+    assert!(
+        ok.status.success(),
+        "{}",
+        String::from_utf8_lossy(&ok.stderr)
+    );
+    let out = dir.path().join("run");
+    fails_with(
+        &[
+            "train",
+            "--env",
+            "CartPole-v0",
+            "--method",
+            "dqfd",
+            "--demos",
+            d,
+            "-o",
+            out.to_str().unwrap(),
+        ],
+        &["MountainCar-v0", "CartPole-v0"],
+    );
+}
+
+#[test]
+fn a_short_run_writes_every_result_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("run");
+    let o = out.to_str().unwrap();
+    let args = [
+        "train",
+        "--env",
+        "CartPole-v0",
+        "--method",
+        "adqn",
+        "--net",
+        "noisy",
+        "--expert",
+        "scripted",
+        "--set",
+        "train_steps=2000",
+        "--set",
+        "eval_period=1000",
+        "--set",
+        "eval_episodes=3",
+        "-o",
+        o,
+    ];
+    let res = arld(&args);
+    assert!(
+        res.status.success(),
+        "{}",
+        String::from_utf8_lossy(&res.stderr)
+    );
+    for f in [
+        "config.toml",
+        "eval.csv",
+        "episodes.csv",
+        "queries.csv",
+        "weights.safetensors",
+        "summary.json",
+    ] {
+        assert!(out.join(f).is_file(), "{f} missing");
+    }
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    assert_eq!(summary["train_steps"], 2000);
+    assert!(
+        summary["queries_used"].as_u64().unwrap() > 0
+            && summary["queries_used"].as_u64().unwrap() <= 200
+    );
+    let queries = std::fs::read_to_string(out.join("queries.csv")).unwrap();
+    assert!(queries.lines().count() > 1, "ADQN asked no query");
+    let events = std::fs::read_dir(&out).unwrap().flatten().find(|e| {
+        e.file_name()
+            .to_string_lossy()
+            .starts_with("events.out.tfevents")
+    });
+    let scalars = arld::tboard::read_scalars(&events.expect("event file").path()).unwrap();
+    assert!(scalars.iter().any(|(tag, _, _)| tag == "eval/mean_return"));
+    assert!(scalars.iter().any(|(tag, _, _)| tag == "query/budget_used"));
+    assert!(
+        !std::fs::read_dir(&out)
+            .unwrap()
+            .flatten()
+            .any(|e| e.file_name().to_string_lossy().ends_with(".tmp"))
+    );
+}
