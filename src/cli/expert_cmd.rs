@@ -18,6 +18,10 @@ pub enum ExpertCommand {
         env: String,
         #[arg(long, default_value_t = 0)]
         seed: u64,
+        /// Output stage of the network (the paper's experts are plain prioritized double DQN; bootstrapped
+        /// heads explore deeper, which MountainCar needs).
+        #[arg(long, value_enum, default_value_t = NetKind::Plain)]
+        net: NetKind,
         /// Where the selected experts go [default: experts/<env>].
         #[arg(long)]
         out: Option<PathBuf>,
@@ -110,13 +114,14 @@ pub fn run_expert(cmd: ExpertCommand) -> Result<ExitCode> {
         ExpertCommand::Train {
             env,
             seed,
+            net,
             out,
             run_dir,
             checkpoint_every,
             episodes,
             overrides,
         } => {
-            let mut cfg = TrainConfig::preset(&env, Method::Dqn, NetKind::Plain, seed)?;
+            let mut cfg = TrainConfig::preset(&env, Method::Dqn, net, seed)?;
             for o in &overrides {
                 cfg.apply_override(o)?;
             }
