@@ -129,11 +129,14 @@ pub fn run_expert(cmd: ExpertCommand) -> Result<ExitCode> {
             cfg.validate()?;
             let run_dir = run_dir
                 .unwrap_or_else(|| PathBuf::from("runs").join(format!("expert_{env}_seed{seed}")));
-            let summary = run_one(&cfg, Some(&run_dir), true)?;
-            eprintln!(
-                "trained: final score {:.2}; evaluating checkpoints over {episodes} episodes",
-                summary.final_score
-            );
+            // A finished training run (summary.json written last) is reused: only the selection runs again.
+            if run_dir.join("summary.json").is_file() {
+                eprintln!("reusing the finished training run in {}", run_dir.display());
+            } else {
+                let summary = run_one(&cfg, Some(&run_dir), true)?;
+                eprintln!("trained: final score {:.2}", summary.final_score);
+            }
+            eprintln!("evaluating every checkpoint over {episodes} episodes");
             let candidates = evaluate_checkpoints(&run_dir.join("checkpoints"), &env, episodes)?;
             let (weak, perfect) = select_experts(&candidates, &env)?;
             let out = out.unwrap_or_else(|| expert::shipped_dir().join(&env));

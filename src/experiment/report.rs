@@ -59,6 +59,27 @@ pub struct RunRecord {
     pub summary_steps_to_solve: Option<u64>,
 }
 
+/// Every evaluation point of every run, one row each, sorted by configuration, seed and step:
+/// `env,method,net,variant,seed,step,mean,std,min,max`.
+pub fn evaluations_csv(runs: &[RunRecord]) -> String {
+    let mut rows: Vec<(&RunRecord, &EvalPoint)> = runs
+        .iter()
+        .flat_map(|r| r.eval.iter().map(move |p| (r, p)))
+        .collect();
+    rows.sort_by(|(a, p), (b, q)| {
+        (&a.env, &a.method, &a.net, &a.variant, a.seed, p.step)
+            .cmp(&(&b.env, &b.method, &b.net, &b.variant, b.seed, q.step))
+    });
+    let mut out = String::from("env,method,net,variant,seed,step,mean,std,min,max\n");
+    for (r, p) in rows {
+        out.push_str(&format!(
+            "{},{},{},{},{},{},{},{},{},{}\n",
+            r.env, r.method, r.net, r.variant, r.seed, p.step, p.mean, p.std, p.min, p.max
+        ));
+    }
+    out
+}
+
 /// First evaluation step whose mean test return reaches `threshold`, or `train_steps` when none does
 /// (ALGORITHM_NOTES.md section 11: Table 5 prints the full budget, e.g. 500000, for runs that never solve).
 pub fn steps_to_solve(curve: &[EvalPoint], threshold: f64, train_steps: u64) -> u64 {
@@ -548,6 +569,9 @@ pub fn report(dir: &Path, out_dir: &Path) -> Result<ReportSummary> {
     let table_csv_path = out_dir.join("table.csv");
     write_atomic(&table_csv_path, table_csv.as_bytes())?;
     files.extend([table_md_path, table_csv_path]);
+    let evaluations_path = out_dir.join("evaluations.csv");
+    write_atomic(&evaluations_path, evaluations_csv(&runs).as_bytes())?;
+    files.push(evaluations_path);
 
     let figures = plot::paper_figures(&runs);
     let mut figure_lines = Vec::new();

@@ -1,7 +1,8 @@
 //! The expert pipeline of the paper (§"Experimental setup", ALGORITHM_NOTES.md §10): train prioritized double
 //! DQN, checkpoint it periodically, evaluate every checkpoint over 100 episodes, and select
 //! - the paper's kind of expert ("weak"): it does not solve the task (mean below the solve threshold), its variance
-//!   is low, and it still finishes episodes before the time limit; among those, the one closest to the paper's
+//!   is low, and it still finishes the task before the time limit on average (the paper's LunarLander expert
+//!   averages 785 of 1000 steps, so it often hovers to the limit); among those, the one closest to the paper's
 //!   expert statistics;
 //! - a converged "perfect" expert: the best mean, ties broken by the lower standard deviation.
 
@@ -108,10 +109,11 @@ pub fn select_experts(
         .enumerate()
         .filter(|(_, c)| {
             let s = &c.stats;
-            // (a) not perfect, (b) low variance (no worse than twice the paper's), (c) finishes episodes.
+            // (a) not perfect, (b) low variance (no worse than twice the paper's), (c) finishes episodes
+            // before the limit on average, and at least a quarter of them.
             s.mean < threshold
                 && s.std <= 2.0 * ps.max(scale * 0.1)
-                && (!needs_finish || (s.finished >= 0.9 && s.mean_len < limit))
+                && (!needs_finish || (s.finished >= 0.25 && s.mean_len < limit))
         })
         .min_by(|(_, a), (_, b)| {
             let d = |s: &ExpertStats| {
