@@ -205,7 +205,7 @@ pub fn train(
 
         // 3. Learn: one prioritized double-DQN update per `train_freq` steps, hard target copies.
         if step + 1 >= cfg.learning_starts
-            && (step + 1) % cfg.train_freq == 0
+            && (step + 1).is_multiple_of(cfg.train_freq)
             && replay.len() >= cfg.batch_size
         {
             let beta = cfg.beta0 + (1.0 - cfg.beta0) * (step as f64 / cfg.train_steps as f64);
@@ -230,13 +230,15 @@ pub fn train(
         }
 
         // 4. Evaluate without exploration every `eval_period` steps.
-        if (step + 1) % cfg.eval_period == 0 || step + 1 == cfg.train_steps {
+        if (step + 1).is_multiple_of(cfg.eval_period) || step + 1 == cfg.train_steps {
             let point = evaluate(&mut agent, eval_env.as_mut(), cfg.eval_episodes, step + 1)?;
             log.eval(point)?;
+        }
+        if (step + 1).is_multiple_of(500) {
             log.progress(step + 1);
         }
         if cfg.checkpoint_every > 0
-            && (step + 1) % cfg.checkpoint_every == 0
+            && (step + 1).is_multiple_of(cfg.checkpoint_every)
             && let Some(dir) = log.dir()
         {
             let dir = dir.join("checkpoints");
