@@ -139,6 +139,10 @@ fn bound(x: f64, low: f64, high: f64) -> f64 {
 }
 
 impl Env for Acrobot {
+    fn spec(&self) -> &'static super::EnvSpec {
+        super::spec(ID).expect("Acrobot-v1 is registered")
+    }
+
     fn reset(&mut self, seed: Option<u64>) -> Vec<f32> {
         let rng = self.rng.reseed(seed);
         for value in &mut self.state {
@@ -167,26 +171,6 @@ impl Env for Acrobot {
             terminated,
             truncated,
         })
-    }
-
-    fn obs_dim(&self) -> usize {
-        6
-    }
-
-    fn n_actions(&self) -> usize {
-        3
-    }
-
-    fn max_episode_steps(&self) -> usize {
-        self.clock.max_episode_steps()
-    }
-
-    fn solve_threshold(&self) -> f64 {
-        -100.0
-    }
-
-    fn id(&self) -> &'static str {
-        ID
     }
 
     /// Overwrites `[theta1, theta2, dtheta1, dtheta2]` in float64 (Gymnasium's `env.unwrapped.state = ...`).

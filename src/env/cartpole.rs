@@ -26,8 +26,7 @@ const THETA_THRESHOLD: f64 = 12.0 * 2.0 * std::f64::consts::PI / 360.0;
 /// CartPole with its Gymnasium time limit.
 #[derive(Debug, Clone)]
 pub struct CartPole {
-    id: &'static str,
-    solve_threshold: f64,
+    spec: &'static super::EnvSpec,
     /// `[x, x_dot, theta, theta_dot]` in float64.
     state: [f64; 4],
     rng: EnvRng,
@@ -43,8 +42,7 @@ impl CartPole {
             "CartPole::new called with {id}"
         );
         Self {
-            id: spec.id,
-            solve_threshold: spec.solve_threshold,
+            spec,
             state: [0.0; 4],
             rng: EnvRng::default(),
             clock: EpisodeClock::new(spec.id, 2, spec.max_episode_steps),
@@ -72,6 +70,10 @@ impl CartPole {
 }
 
 impl Env for CartPole {
+    fn spec(&self) -> &'static super::EnvSpec {
+        self.spec
+    }
+
     fn reset(&mut self, seed: Option<u64>) -> Vec<f32> {
         self.rng
             .reseed(seed)
@@ -114,29 +116,9 @@ impl Env for CartPole {
         })
     }
 
-    fn obs_dim(&self) -> usize {
-        4
-    }
-
-    fn n_actions(&self) -> usize {
-        2
-    }
-
-    fn max_episode_steps(&self) -> usize {
-        self.clock.max_episode_steps()
-    }
-
-    fn solve_threshold(&self) -> f64 {
-        self.solve_threshold
-    }
-
-    fn id(&self) -> &'static str {
-        self.id
-    }
-
     /// Overwrites `[x, x_dot, theta, theta_dot]` (Gymnasium's `env.unwrapped.state = ...`).
     fn set_state(&mut self, state: &[f64]) -> Result<Vec<f32>, EnvError> {
-        check_state(self.id, state, 4)?;
+        check_state(self.spec.id, state, 4)?;
         self.state.copy_from_slice(state);
         self.clock.start();
         Ok(self.observation())

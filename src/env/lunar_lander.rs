@@ -62,7 +62,6 @@ const CHUNKS: usize = 11;
 const N_ACTIONS: usize = 4;
 const OBS_DIM: usize = 8;
 const MAX_EPISODE_STEPS: usize = 1000;
-const SOLVE_THRESHOLD: f64 = 200.0;
 
 /// What a Box2D body is, stored as its user data so the contact listener can tell bodies apart.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
@@ -451,6 +450,10 @@ impl LunarLander {
 }
 
 impl Env for LunarLander {
+    fn spec(&self) -> &'static super::EnvSpec {
+        super::spec(self.id).expect("LunarLander ids are registered")
+    }
+
     fn reset(&mut self, seed: Option<u64>) -> Vec<f32> {
         match seed {
             Some(seed) => self.rng = Some(NumpyRng::new(seed)),
@@ -478,26 +481,6 @@ impl Env for LunarLander {
             terminated,
             truncated,
         })
-    }
-
-    fn obs_dim(&self) -> usize {
-        OBS_DIM
-    }
-
-    fn n_actions(&self) -> usize {
-        N_ACTIONS
-    }
-
-    fn max_episode_steps(&self) -> usize {
-        MAX_EPISODE_STEPS
-    }
-
-    fn solve_threshold(&self) -> f64 {
-        SOLVE_THRESHOLD
-    }
-
-    fn id(&self) -> &'static str {
-        self.id
     }
 }
 

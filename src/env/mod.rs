@@ -67,16 +67,28 @@ pub trait Env: Send {
     fn reset(&mut self, seed: Option<u64>) -> Vec<f32>;
     /// Advances one step. Errors on an action out of range or a step without a running episode.
     fn step(&mut self, action: usize) -> Result<Step, EnvError>;
+    /// The registered facts of this environment (id, sizes, time limit, solve threshold).
+    fn spec(&self) -> &'static EnvSpec;
     /// Length of the observation vector.
-    fn obs_dim(&self) -> usize;
+    fn obs_dim(&self) -> usize {
+        self.spec().obs_dim
+    }
     /// Number of discrete actions.
-    fn n_actions(&self) -> usize;
+    fn n_actions(&self) -> usize {
+        self.spec().n_actions
+    }
     /// Gymnasium's `max_episode_steps`.
-    fn max_episode_steps(&self) -> usize;
+    fn max_episode_steps(&self) -> usize {
+        self.spec().max_episode_steps
+    }
     /// Gymnasium's `reward_threshold`: the mean test return that counts as solving the task.
-    fn solve_threshold(&self) -> f64;
+    fn solve_threshold(&self) -> f64 {
+        self.spec().solve_threshold
+    }
     /// Gymnasium id, e.g. `CartPole-v0`.
-    fn id(&self) -> &'static str;
+    fn id(&self) -> &'static str {
+        self.spec().id
+    }
     /// Overwrites the internal float64 state (classic control; used by the `set` conformance case).
     /// Resets the step counter. Environments without such a state return an error.
     fn set_state(&mut self, _state: &[f64]) -> Result<Vec<f32>, EnvError> {

@@ -54,6 +54,10 @@ impl MountainCar {
 }
 
 impl Env for MountainCar {
+    fn spec(&self) -> &'static super::EnvSpec {
+        super::spec(ID).expect("MountainCar-v0 is registered")
+    }
+
     fn reset(&mut self, seed: Option<u64>) -> Vec<f32> {
         self.position = self.rng.reseed(seed).uniform(-0.6, -0.4);
         self.velocity = 0.0;
@@ -81,26 +85,6 @@ impl Env for MountainCar {
             terminated,
             truncated,
         })
-    }
-
-    fn obs_dim(&self) -> usize {
-        2
-    }
-
-    fn n_actions(&self) -> usize {
-        3
-    }
-
-    fn max_episode_steps(&self) -> usize {
-        self.clock.max_episode_steps()
-    }
-
-    fn solve_threshold(&self) -> f64 {
-        -110.0
-    }
-
-    fn id(&self) -> &'static str {
-        ID
     }
 
     /// Overwrites `[position, velocity]` (Gymnasium's `env.unwrapped.state = ...`).
