@@ -60,7 +60,7 @@ pub struct RunRecord {
 }
 
 /// Every evaluation point of every run, one row each, sorted by configuration, seed and step:
-/// `env,method,net,variant,seed,step,mean,std,min,max`.
+/// `env,method,net,variant,seed,step,mean,std,min,max` (returns rounded to 3 decimals to keep the file compact).
 pub fn evaluations_csv(runs: &[RunRecord]) -> String {
     let mut rows: Vec<(&RunRecord, &EvalPoint)> = runs
         .iter()
@@ -73,7 +73,7 @@ pub fn evaluations_csv(runs: &[RunRecord]) -> String {
     let mut out = String::from("env,method,net,variant,seed,step,mean,std,min,max\n");
     for (r, p) in rows {
         out.push_str(&format!(
-            "{},{},{},{},{},{},{},{},{},{}\n",
+            "{},{},{},{},{},{},{:.3},{:.3},{:.3},{:.3}\n",
             r.env, r.method, r.net, r.variant, r.seed, p.step, p.mean, p.std, p.min, p.max
         ));
     }
