@@ -104,9 +104,16 @@ fn demonstrations_round_trip_and_are_checked() {
 }
 
 /// DQfD pre-training alone makes the network imitate the expert on the demonstration states.
+///
+/// The imitation comes from the large-margin loss, so this uses DQfD's own weight λ = 1 and the learning rate
+/// of the other tasks (1e-3): with the paper's CartPole preset (λ = 1e-5, lr 1e-4) the margin term is negligible
+/// and TD-only pre-training leaves the actions the expert never took unconstrained (52% agreement measured, i.e.
+/// chance); with λ = 1 at lr 1e-4 the 10k updates reach 88-90%, with lr 1e-3 98%.
 #[test]
 fn pretraining_agrees_with_the_expert_on_demonstrations() {
-    let cfg = TrainConfig::preset("CartPole-v0", Method::Dqfd, NetKind::Bootstrap, 0).unwrap();
+    let mut cfg = TrainConfig::preset("CartPole-v0", Method::Dqfd, NetKind::Bootstrap, 0).unwrap();
+    cfg.lambda = 1.0;
+    cfg.lr = 1e-3;
     let mut e = expert::from_spec("shipped:weak", "CartPole-v0", 0).unwrap();
     let demos = Demonstrations::collect("CartPole-v0", e.as_mut(), cfg.n_demo, 0).unwrap();
     let mut agent = Agent::new(&cfg, 4, 2, 1);
