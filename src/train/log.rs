@@ -150,9 +150,12 @@ impl RunLog {
             );
             bar.set_style(
                 ProgressStyle::with_template(
-                    "{prefix} [{elapsed_precise}] {wide_bar} {pos}/{len} steps {per_sec} ETA {eta} {msg}",
+                    "{prefix} [{elapsed_precise}] {wide_bar} {pos}/{len} steps {rate} ETA {eta} {msg}",
                 )
-                .expect("valid template"),
+                .expect("valid template")
+                .with_key("rate", |state: &indicatif::ProgressState, w: &mut dyn std::fmt::Write| {
+                    let _ = write!(w, "{:.0} steps/s", state.per_sec());
+                }),
             );
             bar
         } else {
