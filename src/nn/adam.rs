@@ -190,6 +190,9 @@ struct AdamCoefficients {
     eps: f32,
 }
 
+/// Moments below this are set to zero (see [`adam_update`]).
+const FLUSH_BELOW: f32 = 1e-30;
+
 /// The element-wise Adam update (PyTorch's formula, see [`Adam`]).
 #[inline(always)]
 fn adam_update(
@@ -205,8 +208,17 @@ fn adam_update(
         .zip(m.iter_mut())
         .zip(v.iter_mut())
     {
-        *m += c.beta1_complement * (g - *m);
-        *v = c.beta2 * *v + c.beta2_complement * g * g;
+        let m_new = *m + c.beta1_complement * (g - *m);
+        let v_new = c.beta2 * *v + c.beta2_complement * g * g;
+        // Moments of parameters whose gradient stays zero (dead ReLU units) decay geometrically into the
+        // subnormal range, where every operation is ~100x slower; flushing them to zero removes that cost
+        // and changes each update by less than 1e-26.
+        *m = if m_new.abs() < FLUSH_BELOW {
+            0.0
+        } else {
+            m_new
+        };
+        *v = if v_new < FLUSH_BELOW { 0.0 } else { v_new };
         let denom = v.sqrt() * c.inv_sqrt_bias_correction2 + c.eps;
         *p -= c.step_size * *m / denom;
     }
@@ -279,6 +291,28 @@ mod tests {
                 "param {i}: {p} vs reference {r}"
             );
         }
+    }
+
+    /// Moments of parameters whose gradient falls to zero decay to exactly zero, never through the slow
+    /// subnormal range (f32 subnormals are below 1.18e-38).
+    #[test]
+    fn vanishing_moments_are_flushed_to_zero_not_left_subnormal() {
+        let mut rng = rand_pcg::Pcg64::seed_from_u64(5);
+        let mut net = QNet::new(2, 2, OutputKind::Plain, &mut rng);
+        let mut adam = Adam::new(&net, 1e-3);
+        let mut grads = Grads::new(&net);
+        grads.data.iter_mut().for_each(|g| *g = 1e-3);
+        adam.step(&mut net, &grads);
+        grads.data.iter_mut().for_each(|g| *g = 0.0);
+        let mut seen_zero = false;
+        for _ in 0..100_000 {
+            adam.step(&mut net, &grads);
+            for x in adam.first_moment.iter().chain(&adam.second_moment) {
+                assert!(!x.is_subnormal(), "a moment became subnormal: {x:e}");
+            }
+            seen_zero |= adam.second_moment.iter().all(|&v| v == 0.0);
+        }
+        assert!(seen_zero, "the second moments never reached zero");
     }
 
     #[test]
