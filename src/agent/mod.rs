@@ -50,6 +50,7 @@ pub struct Agent {
     margin: f32,
     lambda: f32,
     exact_factorised_var: bool,
+    l2: f32,
 }
 
 /// The network output stage a configuration asks for.
@@ -108,6 +109,7 @@ impl Agent {
             margin: cfg.margin as f32,
             lambda: cfg.lambda as f32,
             exact_factorised_var: cfg.exact_factorised_var,
+            l2: cfg.l2 as f32,
             online,
             target,
             rng,
@@ -225,6 +227,9 @@ impl Agent {
             &self.dq[..heads * b * a],
             &mut self.grads,
         );
+        if self.l2 > 0.0 {
+            add_l2_gradient(self.online.parameters(), &mut self.grads.data, self.l2);
+        }
         let grad_norm = clip_grad_norm(&mut self.grads, self.grad_clip);
         self.adam.step(&mut self.online, &self.grads);
         if noisy {
@@ -296,6 +301,13 @@ pub fn test_policy_action(net: &QNet, q: &mut [f32], obs: &[f32]) -> usize {
         }
     }
     best
+}
+
+/// Adds the gradient of the L2 regulariser `l2 · ‖θ‖²` (DQfD's λ3 term; 0 in the paper) to `grads`.
+pub fn add_l2_gradient(params: &[f32], grads: &mut [f32], l2: f32) {
+    for (g, &p) in grads.iter_mut().zip(params) {
+        *g += 2.0 * l2 * p;
+    }
 }
 
 /// The constants of the loss.
@@ -475,6 +487,23 @@ mod tests {
                     dq[i]
                 );
             }
+        }
+    }
+
+    #[test]
+    fn l2_gradient_matches_finite_differences() {
+        let params = [0.5f32, -1.25, 2.0, 0.0];
+        let l2 = 1e-2;
+        let mut grads = [0.1f32, 0.0, -0.2, 0.3];
+        add_l2_gradient(&params, &mut grads, l2);
+        let reg = |p: &[f32]| l2 as f64 * p.iter().map(|&x| (x as f64).powi(2)).sum::<f64>();
+        for i in 0..params.len() {
+            let (mut plus, mut minus) = (params, params);
+            plus[i] += 1e-3;
+            minus[i] -= 1e-3;
+            let fd = (reg(&plus) - reg(&minus)) / 2e-3;
+            let base = [0.1f32, 0.0, -0.2, 0.3][i] as f64;
+            assert!((grads[i] as f64 - base - fd).abs() < 1e-5, "param {i}");
         }
     }
 

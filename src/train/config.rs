@@ -207,6 +207,8 @@ pub struct TrainConfig {
     pub margin: f64,
     /// Weight λ of the margin loss \[P, per task\].
     pub lambda: f64,
+    /// L2 regularisation weight λ3 on all weights \[P: 0, the paper drops it; DQfD used 1e-5\].
+    pub l2: f64,
     /// Demonstration transitions collected before training (DQfD; ADQNP uses half) \[P, per task\].
     pub n_demo: usize,
     /// Pre-training updates on demonstrations only \[P, per task\].
@@ -376,6 +378,7 @@ impl TrainConfig {
             eps_demo: 1.0,
             margin: 0.8,
             lambda: p.lambda,
+            l2: 0.0,
             n_demo,
             pretrain_steps: if method.pretrains() {
                 p.pretrain_steps
@@ -503,6 +506,11 @@ impl TrainConfig {
         ensure!(
             self.margin >= 0.0 && self.lambda >= 0.0,
             "margin and lambda must be non-negative"
+        );
+        ensure!(
+            self.l2 >= 0.0 && self.l2.is_finite(),
+            "l2 must be non-negative, got {}",
+            self.l2
         );
         ensure!(self.grad_clip > 0.0, "grad_clip must be positive");
         if self.rule == RuleKind::Adaptive && self.net == NetKind::Plain {
