@@ -93,3 +93,27 @@ fn the_same_seed_gives_byte_identical_results() {
         std::fs::read(c.join("episodes.csv")).unwrap()
     );
 }
+
+#[test]
+fn dqfd_with_the_optional_n_step_and_l2_losses_solves_cartpole() {
+    let results: Vec<Summary> = (0..3)
+        .map(|seed| {
+            run(
+                "CartPole-v0",
+                Method::Dqfd,
+                NetKind::Bootstrap,
+                seed,
+                &[
+                    "lambda_n=1",
+                    "n_step=10",
+                    "l2=1e-5",
+                    "expert=\"shipped:weak\"",
+                ],
+            )
+        })
+        .collect();
+    let solved = results.iter().filter(|s| s.solved).count();
+    let steps: Vec<usize> = results.iter().map(|s| s.steps_to_solve).collect();
+    eprintln!("CartPole-v0 dqfd-bootstrap with n-step and L2: solved {solved}/3, steps {steps:?}");
+    assert!(solved >= 2, "only {solved}/3 seeds solved; steps {steps:?}");
+}

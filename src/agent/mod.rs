@@ -21,6 +21,7 @@ use rand_pcg::Pcg64;
 pub struct UpdateStats {
     pub td_loss: f32,
     pub margin_loss: f32,
+    pub nstep_loss: f32,
     pub grad_norm: f32,
 }
 
@@ -35,6 +36,9 @@ pub struct Agent {
     ws_batch: Workspace,
     ws_next_online: Workspace,
     ws_next_target: Workspace,
+    /// Workspaces of the n-step targets (used only when `lambda_n > 0`).
+    ws_nstep_online: Workspace,
+    ws_nstep_target: Workspace,
     /// Independent noise samples for acting, the online Q(s, ·), the double-Q argmax and the target (§5).
     noise_act: NoiseSample,
     noise_online: NoiseSample,
@@ -51,6 +55,7 @@ pub struct Agent {
     lambda: f32,
     exact_factorised_var: bool,
     l2: f32,
+    lambda_n: f32,
 }
 
 /// The network output stage a configuration asks for.
@@ -96,6 +101,8 @@ impl Agent {
             ws_batch: Workspace::new(&online, batch),
             ws_next_online: Workspace::new(&online, batch),
             ws_next_target: Workspace::new(&online, batch),
+            ws_nstep_online: Workspace::new(&online, if cfg.lambda_n > 0.0 { batch } else { 1 }),
+            ws_nstep_target: Workspace::new(&online, if cfg.lambda_n > 0.0 { batch } else { 1 }),
             noise_act,
             noise_online,
             noise_argmax,
@@ -110,6 +117,7 @@ impl Agent {
             lambda: cfg.lambda as f32,
             exact_factorised_var: cfg.exact_factorised_var,
             l2: cfg.l2 as f32,
+            lambda_n: cfg.lambda_n as f32,
             online,
             target,
             rng,
@@ -203,19 +211,38 @@ impl Agent {
             &mut self.ws_next_target,
         );
 
+        let nstep = if self.lambda_n > 0.0 {
+            let qo = self.online.forward(
+                &batch.nstep_next_obs,
+                b,
+                noisy.then_some(&self.noise_argmax),
+                &mut self.ws_nstep_online,
+            );
+            let qt = self.target.forward(
+                &batch.nstep_next_obs,
+                b,
+                noisy.then_some(&self.noise_target),
+                &mut self.ws_nstep_target,
+            );
+            Some((qo, qt))
+        } else {
+            None
+        };
         let losses = LossParams {
             gamma: self.gamma,
             loss: self.loss,
             margin: self.margin,
             lambda: self.lambda,
+            lambda_n: self.lambda_n,
         };
-        let (td_loss, margin_loss) = double_dqn_loss(
+        let (td_loss, margin_loss, nstep_loss) = double_dqn_loss(
             &losses,
             batch,
             Heads {
                 q,
                 qn_online,
                 qn_target,
+                nstep,
                 heads,
                 n_actions: a,
             },
@@ -246,6 +273,7 @@ impl Agent {
         UpdateStats {
             td_loss,
             margin_loss,
+            nstep_loss,
             grad_norm,
         }
     }
@@ -317,6 +345,8 @@ pub struct LossParams {
     pub loss: TdLoss,
     pub margin: f32,
     pub lambda: f32,
+    /// Weight of the n-step TD loss (DQfD's λ1; 0 in the paper).
+    pub lambda_n: f32,
 }
 
 /// Network outputs for a batch, each laid out `[head][batch][action]`: Q(s, ·) under the online network,
@@ -325,6 +355,8 @@ pub struct Heads<'a> {
     pub q: &'a [f32],
     pub qn_online: &'a [f32],
     pub qn_target: &'a [f32],
+    /// Q(s_{t+n}, ·) under the online and the target network, when the n-step loss is on.
+    pub nstep: Option<(&'a [f32], &'a [f32])>,
     pub heads: usize,
     pub n_actions: usize,
 }
@@ -332,21 +364,28 @@ pub struct Heads<'a> {
 /// The loss of one minibatch and its gradient with respect to Q(s, ·) (ALGORITHM_NOTES.md §2, §4):
 /// `L = Σ_k (1/B) Σ_b w_b [ℓ(δ_kb) + λ·demo_b·L_E,kb]`, with double-DQN targets
 /// `y_kb = r_b + γ(1 − d_b) Q⁻_k(s'_b, argmax_a Q_k(s'_b, a))` held constant. Writes `dL/dQ` into `dq` and the
-/// new priorities `mean_k |δ_kb|` into `abs_td`; returns the TD and margin parts of `L`.
+/// new priorities `mean_k |δ_kb|` into `abs_td`; returns the TD, margin and n-step parts of `L` (the n-step
+/// part, `λ1·ℓ(Q(s, a) − R_n − γ^n Q⁻(s_n, argmax Q(s_n)))`, only when `h.nstep` is given).
 pub fn double_dqn_loss(
     p: &LossParams,
     batch: &Batch,
     h: Heads<'_>,
     dq: &mut [f32],
     abs_td: &mut [f32],
-) -> (f32, f32) {
+) -> (f32, f32, f32) {
     let b = batch.actions.len();
     let a = h.n_actions;
     dq.iter_mut().for_each(|g| *g = 0.0);
     abs_td.iter_mut().for_each(|x| *x = 0.0);
     let mut td_loss = 0.0f32;
     let mut margin_loss = 0.0f32;
+    let mut nstep_loss = 0.0f32;
     let inv_b = 1.0 / b as f32;
+    let td = |delta: f32| match p.loss {
+        TdLoss::Mse => (delta * delta, 2.0 * delta),
+        TdLoss::Huber if delta.abs() <= 1.0 => (0.5 * delta * delta, delta),
+        TdLoss::Huber => (delta.abs() - 0.5, delta.signum()),
+    };
     for k in 0..h.heads {
         for (i, abs_td_i) in abs_td.iter_mut().enumerate().take(b) {
             let row = (k * b + i) * a;
@@ -357,13 +396,16 @@ pub fn double_dqn_loss(
             let act = batch.actions[i];
             let delta = qs[act] - y;
             let w = batch.weights[i] * inv_b;
-            let (l, g) = match p.loss {
-                TdLoss::Mse => (delta * delta, 2.0 * delta),
-                TdLoss::Huber if delta.abs() <= 1.0 => (0.5 * delta * delta, delta),
-                TdLoss::Huber => (delta.abs() - 0.5, delta.signum()),
-            };
+            let (l, g) = td(delta);
             td_loss += w * l;
             dq[row + act] += w * g;
+            if let Some((qo, qt)) = h.nstep {
+                let na = argmax(&qo[row..row + a]);
+                let y_n = batch.nstep_rewards[i] + batch.nstep_discounts[i] * qt[row + na];
+                let (l, g) = td(qs[act] - y_n);
+                nstep_loss += w * l;
+                dq[row + act] += p.lambda_n * w * g;
+            }
             *abs_td_i += delta.abs() / h.heads as f32;
             if batch.is_demo[i] && p.lambda > 0.0 {
                 // Large-margin loss (§4): the expert's action must beat every other action by M.
@@ -374,7 +416,7 @@ pub fn double_dqn_loss(
             }
         }
     }
-    (td_loss, margin_loss)
+    (td_loss, margin_loss, nstep_loss)
 }
 
 /// `max_a [q(a) + M·1(a ≠ a_E)] − q(a_E)` and the maximising action.
@@ -426,16 +468,18 @@ mod tests {
     }
 
     /// The analytic dL/dQ of the whole minibatch loss agrees with central finite differences, for both losses,
-    /// several heads, terminal and demonstration samples.
+    /// several heads, terminal and demonstration samples, with and without the n-step term.
     #[test]
     fn loss_gradient_matches_finite_differences() {
         let (heads, b, a) = (3, 4, 3);
-        let batch = batch_of(
+        let mut batch = batch_of(
             vec![0, 2, 1, 2],
             vec![1.0, -0.5, 0.0, 2.0],
             vec![false, true, false, false],
             vec![true, false, true, false],
         );
+        batch.nstep_rewards = vec![2.5, -0.5, 1.0, 3.0];
+        batch.nstep_discounts = vec![0.7, 0.0, 0.5, 0.9];
         let q: Vec<f32> = (0..heads * b * a)
             .map(|i| ((i * 37 % 11) as f32 - 5.0) * 0.3)
             .collect();
@@ -445,12 +489,25 @@ mod tests {
         let qn_target: Vec<f32> = (0..heads * b * a)
             .map(|i| ((i * 13 % 5) as f32 - 2.0) * 0.7)
             .collect();
-        for loss in [TdLoss::Mse, TdLoss::Huber] {
+        let qn_online_n: Vec<f32> = (0..heads * b * a)
+            .map(|i| ((i * 7 % 9) as f32 - 4.0) * 0.4)
+            .collect();
+        let qn_target_n: Vec<f32> = (0..heads * b * a)
+            .map(|i| ((i * 11 % 13) as f32 - 6.0) * 0.2)
+            .collect();
+        for (loss, lambda_n) in [
+            (TdLoss::Mse, 0.0),
+            (TdLoss::Huber, 0.0),
+            (TdLoss::Mse, 0.7),
+            (TdLoss::Huber, 1.0),
+        ] {
+            let nstep = (lambda_n > 0.0).then_some((&qn_online_n[..], &qn_target_n[..]));
             let p = LossParams {
                 gamma: 0.9,
                 loss,
                 margin: 0.8,
                 lambda: 0.5,
+                lambda_n,
             };
             let total = |q: &[f32]| -> f64 {
                 let mut dq = vec![0.0; q.len()];
@@ -459,11 +516,12 @@ mod tests {
                     q,
                     qn_online: &qn_online,
                     qn_target: &qn_target,
+                    nstep,
                     heads,
                     n_actions: a,
                 };
-                let (td, m) = double_dqn_loss(&p, &batch, h, &mut dq, &mut abs_td);
-                td as f64 + p.lambda as f64 * m as f64
+                let (td, m, n) = double_dqn_loss(&p, &batch, h, &mut dq, &mut abs_td);
+                td as f64 + p.lambda as f64 * m as f64 + p.lambda_n as f64 * n as f64
             };
             let mut dq = vec![0.0; q.len()];
             let mut abs_td = vec![0.0; b];
@@ -471,6 +529,7 @@ mod tests {
                 q: &q,
                 qn_online: &qn_online,
                 qn_target: &qn_target,
+                nstep,
                 heads,
                 n_actions: a,
             };
@@ -483,7 +542,7 @@ mod tests {
                 let fd = (total(&plus) - total(&minus)) / (2.0 * eps as f64);
                 assert!(
                     (fd - dq[i] as f64).abs() < 2e-3,
-                    "{loss:?} dq[{i}]: analytic {} vs numeric {fd}",
+                    "{loss:?} lambda_n {lambda_n} dq[{i}]: analytic {} vs numeric {fd}",
                     dq[i]
                 );
             }
@@ -516,6 +575,7 @@ mod tests {
             loss: TdLoss::Mse,
             margin: 0.8,
             lambda: 0.0,
+            lambda_n: 0.0,
         };
         let (q, qn_online, qn_target) = ([3.0f32, 0.0], [0.0f32, 1.0], [10.0f32, 2.0]);
         let (mut dq, mut abs_td) = ([0.0f32; 2], [0.0f32; 1]);
@@ -523,10 +583,11 @@ mod tests {
             q: &q,
             qn_online: &qn_online,
             qn_target: &qn_target,
+            nstep: None,
             heads: 1,
             n_actions: 2,
         };
-        let (td, _) = double_dqn_loss(&p, &batch, h, &mut dq, &mut abs_td);
+        let (td, _, _) = double_dqn_loss(&p, &batch, h, &mut dq, &mut abs_td);
         // y = 1 + 0.5 * 2 = 2; delta = 3 - 2 = 1.
         assert!((td - 1.0).abs() < 1e-6 && (abs_td[0] - 1.0).abs() < 1e-6);
         assert!((dq[0] - 2.0).abs() < 1e-6 && dq[1] == 0.0);

@@ -62,6 +62,8 @@ pub struct ReplayConfig {
     pub eps_agent: f32,
     /// Priority bonus ε for demonstration transitions (1.0, DQfD).
     pub eps_demo: f32,
+    /// Store an n-step return with every transition (DQfD's optional n-step loss; off in the paper).
+    pub n_step: bool,
 }
 
 impl Default for ReplayConfig {
@@ -73,8 +75,18 @@ impl Default for ReplayConfig {
             alpha: 0.6,
             eps_agent: 0.001,
             eps_demo: 1.0,
+            n_step: false,
         }
     }
+}
+
+/// The n-step return of a transition (DQfD): `reward = Σ_{i<k} γ^i r_{t+i}`, the observation `k` steps
+/// later, and `discount = γ^k`, or 0 when the episode terminated within those `k ≤ n` steps.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct NStepReturn<'a> {
+    pub reward: f32,
+    pub next_obs: &'a [f32],
+    pub discount: f32,
 }
 
 impl ReplayConfig {
@@ -120,6 +132,8 @@ pub enum ReplayError {
     },
     #[error("{what} contains a non-finite value (NaN or infinity)")]
     NonFinite { what: &'static str },
+    #[error("this memory stores n-step returns, but the transition came without one")]
+    MissingNStep,
     #[error("invalid replay configuration: {0}")]
     InvalidConfig(String),
 }
@@ -141,6 +155,11 @@ pub struct Batch {
     pub terminal: Vec<bool>,
     /// The sample is a demonstration (the large-margin loss applies, ALGORITHM_NOTES.md §4).
     pub is_demo: Vec<bool>,
+    /// n-step returns (filled only when the memory stores them): reward sum, the observation n steps
+    /// later (`[sample][obs_dim]`), and the discount of its value (0 when the episode ended before).
+    pub nstep_rewards: Vec<f32>,
+    pub nstep_next_obs: Vec<f32>,
+    pub nstep_discounts: Vec<f32>,
 }
 
 impl Batch {
@@ -162,6 +181,9 @@ impl Batch {
         self.next_obs.clear();
         self.terminal.clear();
         self.is_demo.clear();
+        self.nstep_rewards.clear();
+        self.nstep_next_obs.clear();
+        self.nstep_discounts.clear();
     }
 }
 
@@ -187,6 +209,10 @@ pub struct Replay {
     actions: Vec<usize>,
     rewards: Vec<f32>,
     terminal: Vec<bool>,
+    /// n-step returns, allocated only when `cfg.n_step`.
+    nstep_next_obs: Vec<f32>,
+    nstep_rewards: Vec<f32>,
+    nstep_discounts: Vec<f32>,
     /// Raw priority `p = |δ| + ε` of each slot.
     priorities: Vec<f32>,
     /// Masses `p^α` of the demonstration slots (leaf `d` = slot `d`).
@@ -223,6 +249,9 @@ impl Replay {
             actions: vec![0; slots],
             rewards: vec![0.0; slots],
             terminal: vec![false; slots],
+            nstep_next_obs: vec![0.0; if cfg.n_step { slots * obs_dim } else { 0 }],
+            nstep_rewards: vec![0.0; if cfg.n_step { slots } else { 0 }],
+            nstep_discounts: vec![0.0; if cfg.n_step { slots } else { 0 }],
             priorities: vec![0.0; slots],
             demo_tree: SumMinTree::new(cfg.demo_capacity),
             agent_tree: SumMinTree::new(cfg.capacity),
@@ -246,7 +275,30 @@ impl Replay {
         terminal: bool,
         is_demo: bool,
     ) -> Result<(), ReplayError> {
-        for (what, o) in [("obs", obs), ("next_obs", next_obs)] {
+        self.push_with_n_step(obs, action, reward, next_obs, terminal, is_demo, None)
+    }
+
+    /// [`Replay::push`] with the transition's n-step return, kept when the memory stores them.
+    #[allow(clippy::too_many_arguments)]
+    pub fn push_with_n_step(
+        &mut self,
+        obs: &[f32],
+        action: usize,
+        reward: f32,
+        next_obs: &[f32],
+        terminal: bool,
+        is_demo: bool,
+        n_step: Option<NStepReturn<'_>>,
+    ) -> Result<(), ReplayError> {
+        if self.cfg.n_step && n_step.is_none() {
+            return Err(ReplayError::MissingNStep);
+        }
+        let nstep_obs = n_step.map(|n| n.next_obs).unwrap_or(next_obs);
+        for (what, o) in [
+            ("obs", obs),
+            ("next_obs", next_obs),
+            ("n-step next_obs", nstep_obs),
+        ] {
             if o.len() != self.obs_dim {
                 return Err(ReplayError::ObsDimMismatch {
                     what,
@@ -284,6 +336,12 @@ impl Replay {
         self.actions[slot] = action;
         self.rewards[slot] = reward;
         self.terminal[slot] = terminal;
+        if let (true, Some(n)) = (self.cfg.n_step, n_step) {
+            let row = slot * self.obs_dim..(slot + 1) * self.obs_dim;
+            self.nstep_next_obs[row].copy_from_slice(n.next_obs);
+            self.nstep_rewards[slot] = n.reward;
+            self.nstep_discounts[slot] = n.discount;
+        }
         self.set_priority(slot, self.max_priority);
         Ok(())
     }
@@ -501,6 +559,13 @@ impl Replay {
         out.next_obs.extend_from_slice(&self.next_obs[row]);
         out.terminal.push(self.terminal[slot]);
         out.is_demo.push(self.is_demo_slot(slot));
+        if self.cfg.n_step {
+            let row = slot * self.obs_dim..(slot + 1) * self.obs_dim;
+            out.nstep_next_obs
+                .extend_from_slice(&self.nstep_next_obs[row]);
+            out.nstep_rewards.push(self.nstep_rewards[slot]);
+            out.nstep_discounts.push(self.nstep_discounts[slot]);
+        }
     }
 }
 

@@ -207,6 +207,10 @@ pub struct TrainConfig {
     pub margin: f64,
     /// Weight λ of the margin loss \[P, per task\].
     pub lambda: f64,
+    /// Weight λ1 of DQfD's n-step TD loss; 0 turns it off \[P: 0, the paper drops it; DQfD used 1\].
+    pub lambda_n: f64,
+    /// Horizon n of the n-step loss \[DQfD: 10\].
+    pub n_step: usize,
     /// L2 regularisation weight λ3 on all weights \[P: 0, the paper drops it; DQfD used 1e-5\].
     pub l2: f64,
     /// Demonstration transitions collected before training (DQfD; ADQNP uses half) \[P, per task\].
@@ -378,6 +382,8 @@ impl TrainConfig {
             eps_demo: 1.0,
             margin: 0.8,
             lambda: p.lambda,
+            lambda_n: 0.0,
+            n_step: 10,
             l2: 0.0,
             n_demo,
             pretrain_steps: if method.pretrains() {
@@ -513,6 +519,12 @@ impl TrainConfig {
             self.l2
         );
         ensure!(self.grad_clip > 0.0, "grad_clip must be positive");
+        ensure!(
+            self.lambda_n >= 0.0,
+            "lambda_n must be non-negative, got {}",
+            self.lambda_n
+        );
+        ensure!(self.n_step >= 1, "n_step must be at least 1");
         if self.rule == RuleKind::Adaptive && self.net == NetKind::Plain {
             bail!(
                 "the adaptive query rule needs an uncertainty estimate, which a plain network does not have; \

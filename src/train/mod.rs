@@ -4,6 +4,7 @@
 
 pub mod config;
 pub mod log;
+pub mod nstep;
 
 pub use config::{Method, NetKind, RuleKind, TdLoss, TrainConfig};
 pub use log::{EvalPoint, QueryEvent, RunLog, Summary, steps_to_solve};
@@ -15,6 +16,7 @@ use crate::expert::demos::Demonstrations;
 use crate::query::{AdaptiveQuantileRule, QueryController, QueryRule};
 use crate::replay::{Batch, Replay, ReplayConfig};
 use anyhow::{Context, Result, bail, ensure};
+use nstep::{NStepQueue, Transition};
 use rand::SeedableRng;
 use rand_pcg::Pcg64;
 use std::time::Instant;
@@ -123,8 +125,12 @@ pub fn train(
             alpha: cfg.alpha as f32,
             eps_agent: cfg.eps_agent as f32,
             eps_demo: cfg.eps_demo as f32,
+            n_step: cfg.lambda_n > 0.0,
         },
     );
+    // DQfD's optional n-step loss needs each transition's n-step return before it enters replay.
+    let mut nstep_queue =
+        (cfg.lambda_n > 0.0).then(|| NStepQueue::new(cfg.n_step, cfg.gamma as f32));
     let mut batch = Batch::default();
 
     // Pre-training on demonstrations only (DQfD, ADQNP; §9).
@@ -190,7 +196,20 @@ pub fn train(
         // 2. Step the environment; expert transitions are stored as demonstrations (margin loss, bonus priority).
         let s = env.step(action)?;
         let terminal = s.terminated || (s.truncated && cfg.timeout_as_terminal);
-        replay.push(&obs, action, s.reward as f32, &s.obs, terminal, by_expert)?;
+        match &mut nstep_queue {
+            None => replay.push(&obs, action, s.reward as f32, &s.obs, terminal, by_expert)?,
+            Some(queue) => queue.push(
+                Transition {
+                    obs: obs.clone(),
+                    action,
+                    reward: s.reward as f32,
+                    next_obs: s.obs.clone(),
+                    terminal,
+                    is_demo: by_expert,
+                },
+                &mut replay,
+            )?,
+        }
         ep_return += s.reward;
         ep_len += 1;
         obs = s.obs;
@@ -198,6 +217,9 @@ pub fn train(
             log.episode(episode, step + 1, ep_return, ep_len, ep_demo)?;
             episode += 1;
             (ep_return, ep_len, ep_demo) = (0.0, 0, 0);
+            if let Some(queue) = &mut nstep_queue {
+                queue.end_episode(&mut replay)?;
+            }
             obs = env.reset(None);
             agent.begin_episode();
             queries.end_episode();
@@ -309,8 +331,29 @@ pub fn pretrain(
         demos.env,
         cfg.env
     );
-    for t in &demos.transitions {
-        replay.push(&t.obs, t.action, t.reward, &t.next_obs, t.terminal, true)?;
+    let mut queue = (cfg.lambda_n > 0.0).then(|| NStepQueue::new(cfg.n_step, cfg.gamma as f32));
+    for (i, t) in demos.transitions.iter().enumerate() {
+        match &mut queue {
+            None => replay.push(&t.obs, t.action, t.reward, &t.next_obs, t.terminal, true)?,
+            Some(q) => {
+                let transition = Transition {
+                    obs: t.obs.clone(),
+                    action: t.action,
+                    reward: t.reward,
+                    next_obs: t.next_obs.clone(),
+                    terminal: t.terminal,
+                    is_demo: true,
+                };
+                q.push(transition, replay)?;
+                if demos
+                    .transitions
+                    .get(i + 1)
+                    .is_none_or(|next| next.episode != t.episode)
+                {
+                    q.end_episode(replay)?;
+                }
+            }
+        }
     }
     for update in 1..=cfg.pretrain_steps {
         replay.sample_demo_only(cfg.batch_size, cfg.beta0 as f32, rng, batch);
