@@ -148,7 +148,11 @@ pub fn run_expert(cmd: ExpertCommand) -> Result<ExitCode> {
                 match idx {
                     Some(i) => {
                         let c = &candidates[i];
-                        std::fs::copy(&c.path, out.join(format!("{name}.safetensors")))?;
+                        let bytes = std::fs::read(&c.path)?;
+                        arld::train::log::write_atomic(
+                            &out.join(format!("{name}.safetensors")),
+                            &bytes,
+                        )?;
                         println!(
                             "{name}: step {} mean {:.2} ± {:.2} (min {:.1}), {:.1} steps",
                             c.step, c.stats.mean, c.stats.std, c.stats.min, c.stats.mean_len
