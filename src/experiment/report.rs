@@ -20,15 +20,8 @@ use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
-/// One evaluation: the environment step it was taken at and statistics of the test returns.
-#[derive(Debug, Clone, Copy, PartialEq, serde::Deserialize)]
-pub struct EvalPoint {
-    pub step: u64,
-    pub mean: f64,
-    pub std: f64,
-    pub min: f64,
-    pub max: f64,
-}
+/// One evaluation (the same record the training loop writes to `eval.csv`).
+pub use crate::train::log::EvalPoint;
 
 /// Everything a report needs from one complete run directory.
 #[derive(Debug, Clone)]
@@ -83,10 +76,7 @@ pub fn evaluations_csv(runs: &[RunRecord]) -> String {
 /// First evaluation step whose mean test return reaches `threshold`, or `train_steps` when none does
 /// (ALGORITHM_NOTES.md section 11: Table 5 prints the full budget, e.g. 500000, for runs that never solve).
 pub fn steps_to_solve(curve: &[EvalPoint], threshold: f64, train_steps: u64) -> u64 {
-    curve
-        .iter()
-        .find(|point| point.mean >= threshold)
-        .map_or(train_steps, |point| point.step)
+    crate::train::log::steps_to_solve(curve, threshold, train_steps).0
 }
 
 /// Median as the paper computes it over seeds: the middle value, or the mean of the two middle values for an

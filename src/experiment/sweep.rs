@@ -17,7 +17,7 @@ use anyhow::{Context, Result, bail};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeSet;
-use std::io::{IsTerminal, Write};
+use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -390,32 +390,7 @@ pub struct SweepOutcome {
     pub results_csv: PathBuf,
 }
 
-/// Writes a file atomically: a temporary file in the same directory, flushed, then renamed over the target,
-/// so a reader sees either the old content or the new, never a partial file.
-pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
-    let dir = path
-        .parent()
-        .filter(|p| !p.as_os_str().is_empty())
-        .unwrap_or(Path::new("."));
-    let name = path
-        .file_name()
-        .with_context(|| format!("{} has no file name", path.display()))?;
-    let tmp = dir.join(format!(
-        ".{}.tmp{}",
-        name.to_string_lossy(),
-        std::process::id()
-    ));
-    let write = || -> std::io::Result<()> {
-        let mut file = std::fs::File::create(&tmp)?;
-        file.write_all(bytes)?;
-        file.sync_all()?;
-        std::fs::rename(&tmp, path)
-    };
-    write().map_err(|err| {
-        let _ = std::fs::remove_file(&tmp);
-        anyhow::Error::new(err).context(format!("cannot write {}", path.display()))
-    })
-}
+pub use crate::train::log::write_atomic;
 
 /// Records `grid` in `dir/sweep.toml`, runs it with [`run_sweep`] and returns the outcome.
 ///

@@ -14,9 +14,9 @@ use std::io::{BufWriter, IsTerminal, Write};
 use std::path::{Path, PathBuf};
 
 /// One evaluation: `eval_episodes` test episodes without exploration.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct EvalPoint {
-    pub step: usize,
+    pub step: u64,
     pub mean: f64,
     pub std: f64,
     pub min: f64,
@@ -57,24 +57,38 @@ pub struct Summary {
 }
 
 /// First evaluation step whose mean reaches `threshold`, or `train_steps` if none does (ALGORITHM_NOTES.md §11).
-pub fn steps_to_solve(curve: &[EvalPoint], threshold: f64, train_steps: usize) -> (usize, bool) {
+pub fn steps_to_solve(curve: &[EvalPoint], threshold: f64, train_steps: u64) -> (u64, bool) {
     match curve.iter().find(|p| p.mean >= threshold) {
         Some(p) => (p.step, true),
         None => (train_steps, false),
     }
 }
 
-/// Writes `bytes` to `path` through a temporary file and a rename.
+/// Writes `bytes` to `path` through a temporary file (synced, then renamed over `path`), so a reader never
+/// sees a half-written file; the temporary file is removed if anything fails.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
-    let tmp = path.with_extension(format!(
-        "{}.tmp",
-        path.extension()
-            .map(|e| e.to_string_lossy().into_owned())
-            .unwrap_or_default()
+    let dir = path
+        .parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
+    let name = path
+        .file_name()
+        .with_context(|| format!("{} has no file name", path.display()))?;
+    let tmp = dir.join(format!(
+        ".{}.tmp{}",
+        name.to_string_lossy(),
+        std::process::id()
     ));
-    std::fs::write(&tmp, bytes).with_context(|| format!("cannot write {}", tmp.display()))?;
-    std::fs::rename(&tmp, path)
-        .with_context(|| format!("cannot rename {} to {}", tmp.display(), path.display()))
+    let write = || -> std::io::Result<()> {
+        let mut file = std::fs::File::create(&tmp)?;
+        file.write_all(bytes)?;
+        file.sync_all()?;
+        std::fs::rename(&tmp, path)
+    };
+    write().map_err(|err| {
+        let _ = std::fs::remove_file(&tmp);
+        anyhow::Error::new(err).context(format!("cannot write {}", path.display()))
+    })
 }
 
 /// The evaluation curve as CSV text (`step,mean,std,min,max`).
@@ -221,7 +235,7 @@ impl RunLog {
 
     /// Records an evaluation and rewrites `eval.csv`.
     pub fn eval(&mut self, point: EvalPoint) -> Result<()> {
-        self.scalar("eval/mean_return", point.step, point.mean as f32)?;
+        self.scalar("eval/mean_return", point.step as usize, point.mean as f32)?;
         self.progress.set_message(format!("eval {:.1}", point.mean));
         self.curve.push(point);
         if let Some(dir) = &self.dir {
@@ -266,7 +280,7 @@ impl RunLog {
 mod tests {
     use super::*;
 
-    fn point(step: usize, mean: f64) -> EvalPoint {
+    fn point(step: u64, mean: f64) -> EvalPoint {
         EvalPoint {
             step,
             mean,

@@ -76,7 +76,7 @@ pub fn evaluate(
     let min = returns.iter().cloned().fold(f64::INFINITY, f64::min);
     let max = returns.iter().cloned().fold(f64::NEG_INFINITY, f64::max);
     Ok(EvalPoint {
-        step,
+        step: step as u64,
         mean,
         std,
         min,
@@ -275,13 +275,13 @@ pub fn train(
 
     let wall = started.elapsed().as_secs_f64();
     let threshold = env.solve_threshold();
-    let (steps, solved) = steps_to_solve(log.curve(), threshold, cfg.train_steps);
+    let (steps, solved) = steps_to_solve(log.curve(), threshold, cfg.train_steps as u64);
     let summary = Summary {
         env: cfg.env.clone(),
         method: cfg.method.to_string(),
         net: cfg.net.to_string(),
         seed: cfg.seed,
-        steps_to_solve: steps,
+        steps_to_solve: steps as usize,
         solved,
         solve_threshold: threshold,
         train_steps: cfg.train_steps,
