@@ -3,7 +3,7 @@
 
 use std::hint::black_box;
 
-use arld::replay::{Batch, Replay, ReplayConfig};
+use arld::replay::{Batch, Replay, ReplayConfig, Transition};
 use criterion::{Criterion, criterion_group, criterion_main};
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64;
@@ -25,14 +25,14 @@ fn filled_memory(prioritized: bool, rng: &mut Pcg64) -> Replay {
     for i in 0..cfg.demo_capacity + CAPACITY {
         obs.iter_mut().for_each(|x| *x = rng.random());
         replay
-            .push(
-                &obs,
-                i % 4,
-                rng.random(),
-                &obs,
-                i.is_multiple_of(100),
-                i < cfg.demo_capacity,
-            )
+            .push(Transition {
+                obs: &obs,
+                action: i % 4,
+                reward: rng.random(),
+                next_obs: &obs,
+                terminal: i.is_multiple_of(100),
+                is_demo: i < cfg.demo_capacity,
+            })
             .unwrap();
     }
     // Spread the priorities so the tree is not uniform.
@@ -57,7 +57,16 @@ fn bench_replay_step(c: &mut Criterion) {
         c.bench_function(name, |b| {
             b.iter(|| {
                 obs.iter_mut().for_each(|x| *x = rng.random());
-                replay.push(&obs, 1, 0.5, &obs, false, false).unwrap();
+                replay
+                    .push(Transition {
+                        obs: &obs,
+                        action: 1,
+                        reward: 0.5,
+                        next_obs: &obs,
+                        terminal: false,
+                        is_demo: false,
+                    })
+                    .unwrap();
                 replay.sample(BATCH, 0.4, &mut rng, &mut batch);
                 tds.iter_mut().for_each(|t| *t = rng.random::<f32>() * 3.0);
                 replay.update_priorities(&batch.idx, &tds);

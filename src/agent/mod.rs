@@ -185,9 +185,9 @@ impl Agent {
         test_policy_action(&self.online, &mut self.q_act, obs)
     }
 
-    /// One gradient step on a minibatch; returns the statistics and leaves the new priorities
-    /// (mean over heads of |δ|) in [`Agent::abs_td`].
-    pub fn update(&mut self, batch: &Batch) -> UpdateStats {
+    /// One gradient step on a minibatch; returns its statistics and the new priorities of the batch's samples
+    /// (|δ| per sample, mean over heads), to hand to [`crate::replay::Replay::update_priorities`].
+    pub fn update(&mut self, batch: &Batch) -> (UpdateStats, &[f32]) {
         let b = batch.actions.len();
         let a = self.online.n_actions();
         let heads = self.online.heads();
@@ -270,17 +270,13 @@ impl Agent {
                 n.resample(&mut self.rng);
             }
         }
-        UpdateStats {
+        let stats = UpdateStats {
             td_loss,
             margin_loss,
             nstep_loss,
             grad_norm,
-        }
-    }
-
-    /// |δ| per sample of the last update (mean over heads): the new priorities.
-    pub fn abs_td(&self, batch_size: usize) -> &[f32] {
-        &self.abs_td[..batch_size]
+        };
+        (stats, &self.abs_td[..b])
     }
 
     /// Hard copy of the online weights into the target network.

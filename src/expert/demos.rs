@@ -10,14 +10,16 @@
 
 use super::Expert;
 use crate::env;
+use crate::replay::Transition;
 use anyhow::{Context, Result, bail, ensure};
 use serde::{Deserialize, Serialize};
 use std::io::{BufRead, BufReader, Write};
 use std::path::Path;
 
-/// One demonstrated transition.
+/// One line of a demonstration file: a demonstrated step with its episode and how the episode ended there.
+/// Training reads it as a [`Transition`] ([`DemoStep::transition`]).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct DemoTransition {
+pub struct DemoStep {
     pub episode: usize,
     pub obs: Vec<f32>,
     pub action: usize,
@@ -25,9 +27,21 @@ pub struct DemoTransition {
     pub next_obs: Vec<f32>,
     pub terminated: bool,
     pub truncated: bool,
-    /// Bootstrap cut used by training (true termination only).
-    #[serde(skip, default)]
-    pub terminal: bool,
+}
+
+impl DemoStep {
+    /// The step as a demonstration transition; the bootstrap cut is true termination only, so training
+    /// bootstraps through a time limit.
+    pub fn transition(&self) -> Transition<'_> {
+        Transition {
+            obs: &self.obs,
+            action: self.action,
+            reward: self.reward,
+            next_obs: &self.next_obs,
+            terminal: self.terminated,
+            is_demo: true,
+        }
+    }
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -49,7 +63,7 @@ pub struct Demonstrations {
     pub env: String,
     pub expert: String,
     pub seed: u64,
-    pub transitions: Vec<DemoTransition>,
+    pub transitions: Vec<DemoStep>,
 }
 
 impl Demonstrations {
@@ -65,7 +79,7 @@ impl Demonstrations {
                     .act(&obs)
                     .with_context(|| format!("expert {} failed", expert.describe()))?;
                 let s = env.step(action)?;
-                transitions.push(DemoTransition {
+                transitions.push(DemoStep {
                     episode,
                     obs: std::mem::take(&mut obs),
                     action,
@@ -73,7 +87,6 @@ impl Demonstrations {
                     next_obs: s.obs.clone(),
                     terminated: s.terminated,
                     truncated: s.truncated,
-                    terminal: s.terminated,
                 });
                 obs = s.obs;
                 if s.terminated || s.truncated || transitions.len() >= n {
@@ -172,7 +185,7 @@ impl Demonstrations {
                 continue;
             }
             let lineno = i + 2;
-            let mut t: DemoTransition = serde_json::from_str(&line)
+            let t: DemoStep = serde_json::from_str(&line)
                 .with_context(|| format!("{}:{lineno}: malformed transition", path.display()))?;
             ensure!(
                 t.obs.len() == e.obs_dim() && t.next_obs.len() == e.obs_dim(),
@@ -190,7 +203,6 @@ impl Demonstrations {
                 header.env,
                 e.n_actions()
             );
-            t.terminal = t.terminated;
             transitions.push(t);
         }
         if transitions.len() != header.transitions {

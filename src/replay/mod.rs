@@ -34,13 +34,20 @@
 //! ALGORITHM_NOTES.md §9), prioritized among demonstrations: `N` and the weight normaliser are then
 //! taken over the demonstrations only.
 //!
+//! **n-step returns** (DQfD's optional n-step loss, off in the paper): with `n_step > 0` the memory computes each
+//! transition's n-step return itself (see [`nstep`]): a pushed transition waits until its return is known, and
+//! [`Replay::end_episode`] stores the rest of an episode with shortened horizons.
+//!
 //! Storage is a set of flat arrays preallocated for `demo_capacity + capacity` slots
 //! (observations as `[slot][obs_dim]`), and sampling writes into a reusable [`Batch`], so steady
 //! state training allocates nothing here. All randomness comes from the caller's generator.
 
+pub mod nstep;
 pub mod sum_tree;
 
 pub use sum_tree::SumMinTree;
+
+use nstep::NStepQueue;
 
 use rand::Rng;
 use serde::{Deserialize, Serialize};
@@ -62,8 +69,11 @@ pub struct ReplayConfig {
     pub eps_agent: f32,
     /// Priority bonus ε for demonstration transitions (1.0, DQfD).
     pub eps_demo: f32,
-    /// Store an n-step return with every transition (DQfD's optional n-step loss; off in the paper).
-    pub n_step: bool,
+    /// Horizon n of the n-step return stored with every transition; 0: none (DQfD's optional n-step loss; off
+    /// in the paper).
+    pub n_step: usize,
+    /// Discount γ of the n-step returns (unused when `n_step` is 0).
+    pub gamma: f32,
 }
 
 impl Default for ReplayConfig {
@@ -75,18 +85,10 @@ impl Default for ReplayConfig {
             alpha: 0.6,
             eps_agent: 0.001,
             eps_demo: 1.0,
-            n_step: false,
+            n_step: 0,
+            gamma: 0.99,
         }
     }
-}
-
-/// The n-step return of a transition (DQfD): `reward = Σ_{i<k} γ^i r_{t+i}`, the observation `k` steps
-/// later, and `discount = γ^k`, or 0 when the episode terminated within those `k ≤ n` steps.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct NStepReturn<'a> {
-    pub reward: f32,
-    pub next_obs: &'a [f32],
-    pub discount: f32,
 }
 
 impl ReplayConfig {
@@ -132,8 +134,6 @@ pub enum ReplayError {
     },
     #[error("{what} contains a non-finite value (NaN or infinity)")]
     NonFinite { what: &'static str },
-    #[error("this memory stores n-step returns, but the transition came without one")]
-    MissingNStep,
     #[error("invalid replay configuration: {0}")]
     InvalidConfig(String),
 }
@@ -187,9 +187,11 @@ impl Batch {
     }
 }
 
-/// A borrowed view of one stored transition.
+/// One environment transition: what enters the memory ([`Replay::push`]) and what a stored slot holds
+/// ([`Replay::transition`]). `terminal` is the bootstrap cut (true termination, or truncation when so
+/// configured); `is_demo` marks a demonstration (the expert acted).
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct TransitionRef<'a> {
+pub struct Transition<'a> {
     pub obs: &'a [f32],
     pub action: usize,
     pub reward: f32,
@@ -209,7 +211,7 @@ pub struct Replay {
     actions: Vec<usize>,
     rewards: Vec<f32>,
     terminal: Vec<bool>,
-    /// n-step returns, allocated only when `cfg.n_step`.
+    /// n-step returns, allocated only when `cfg.n_step > 0`.
     nstep_next_obs: Vec<f32>,
     nstep_rewards: Vec<f32>,
     nstep_discounts: Vec<f32>,
@@ -225,6 +227,8 @@ pub struct Replay {
     agent_next: usize,
     /// Largest raw priority seen so far; new transitions enter with it.
     max_priority: f32,
+    /// Transitions of the current episode waiting for their n-step return (`cfg.n_step > 0`).
+    nstep: Option<NStepQueue>,
 }
 
 impl Replay {
@@ -241,6 +245,7 @@ impl Replay {
     pub fn try_new(obs_dim: usize, cfg: &ReplayConfig) -> Result<Self, ReplayError> {
         cfg.validate()?;
         let slots = cfg.demo_capacity + cfg.capacity;
+        let n_step = cfg.n_step > 0;
         Ok(Self {
             obs_dim,
             cfg: cfg.clone(),
@@ -249,9 +254,9 @@ impl Replay {
             actions: vec![0; slots],
             rewards: vec![0.0; slots],
             terminal: vec![false; slots],
-            nstep_next_obs: vec![0.0; if cfg.n_step { slots * obs_dim } else { 0 }],
-            nstep_rewards: vec![0.0; if cfg.n_step { slots } else { 0 }],
-            nstep_discounts: vec![0.0; if cfg.n_step { slots } else { 0 }],
+            nstep_next_obs: vec![0.0; if n_step { slots * obs_dim } else { 0 }],
+            nstep_rewards: vec![0.0; if n_step { slots } else { 0 }],
+            nstep_discounts: vec![0.0; if n_step { slots } else { 0 }],
             priorities: vec![0.0; slots],
             demo_tree: SumMinTree::new(cfg.demo_capacity),
             agent_tree: SumMinTree::new(cfg.capacity),
@@ -259,46 +264,38 @@ impl Replay {
             n_agent: 0,
             agent_next: 0,
             max_priority: 1.0,
+            nstep: n_step.then(|| NStepQueue::new(cfg.n_step, cfg.gamma)),
         })
     }
 
-    /// Stores one transition. `terminal` is the bootstrap cut (true termination, or truncation
-    /// when so configured). A demonstration goes to the permanent part; an agent transition to the
-    /// ring, evicting the oldest agent transition when the ring is full. Either enters with the
-    /// current maximum priority.
-    pub fn push(
-        &mut self,
-        obs: &[f32],
-        action: usize,
-        reward: f32,
-        next_obs: &[f32],
-        terminal: bool,
-        is_demo: bool,
-    ) -> Result<(), ReplayError> {
-        self.push_with_n_step(obs, action, reward, next_obs, terminal, is_demo, None)
+    /// Stores one transition. A demonstration goes to the permanent part; an agent transition to the ring,
+    /// evicting the oldest agent transition when the ring is full. Either enters with the current maximum
+    /// priority. With n-step returns, the transition is checked now but stored once its return is known (at
+    /// the latest when its episode ends: a terminal transition, or [`Replay::end_episode`]).
+    pub fn push(&mut self, t: Transition<'_>) -> Result<(), ReplayError> {
+        self.check(&t)?;
+        let Some(mut queue) = self.nstep.take() else {
+            return self.store(t, None);
+        };
+        let result = queue.push(t, |t, n| self.store(t, Some(n)));
+        self.nstep = Some(queue);
+        result
     }
 
-    /// [`Replay::push`] with the transition's n-step return, kept when the memory stores them.
-    #[allow(clippy::too_many_arguments)]
-    pub fn push_with_n_step(
-        &mut self,
-        obs: &[f32],
-        action: usize,
-        reward: f32,
-        next_obs: &[f32],
-        terminal: bool,
-        is_demo: bool,
-        n_step: Option<NStepReturn<'_>>,
-    ) -> Result<(), ReplayError> {
-        if self.cfg.n_step && n_step.is_none() {
-            return Err(ReplayError::MissingNStep);
-        }
-        let nstep_obs = n_step.map(|n| n.next_obs).unwrap_or(next_obs);
-        for (what, o) in [
-            ("obs", obs),
-            ("next_obs", next_obs),
-            ("n-step next_obs", nstep_obs),
-        ] {
+    /// The episode ended (termination or time limit): stores the transitions still waiting for their n-step
+    /// return, with shortened horizons. Nothing to do without n-step returns.
+    pub fn end_episode(&mut self) -> Result<(), ReplayError> {
+        let Some(mut queue) = self.nstep.take() else {
+            return Ok(());
+        };
+        let result = queue.end_episode(|t, n| self.store(t, Some(n)));
+        self.nstep = Some(queue);
+        result
+    }
+
+    /// Rejects a transition that does not fit the memory or holds a non-finite number.
+    fn check(&self, t: &Transition<'_>) -> Result<(), ReplayError> {
+        for (what, o) in [("obs", t.obs), ("next_obs", t.next_obs)] {
             if o.len() != self.obs_dim {
                 return Err(ReplayError::ObsDimMismatch {
                     what,
@@ -310,9 +307,26 @@ impl Replay {
                 return Err(ReplayError::NonFinite { what });
             }
         }
-        if !reward.is_finite() {
+        if !t.reward.is_finite() {
             return Err(ReplayError::NonFinite { what: "reward" });
         }
+        Ok(())
+    }
+
+    /// Writes a checked transition (and its n-step return) into its slot.
+    fn store(
+        &mut self,
+        t: Transition<'_>,
+        n_step: Option<nstep::NStepReturn<'_>>,
+    ) -> Result<(), ReplayError> {
+        let Transition {
+            obs,
+            action,
+            reward,
+            next_obs,
+            terminal,
+            is_demo,
+        } = t;
         let slot = if is_demo {
             if self.n_demo == self.cfg.demo_capacity {
                 return Err(ReplayError::DemoCapacityFull {
@@ -336,7 +350,7 @@ impl Replay {
         self.actions[slot] = action;
         self.rewards[slot] = reward;
         self.terminal[slot] = terminal;
-        if let (true, Some(n)) = (self.cfg.n_step, n_step) {
+        if let Some(n) = n_step {
             let row = slot * self.obs_dim..(slot + 1) * self.obs_dim;
             self.nstep_next_obs[row].copy_from_slice(n.next_obs);
             self.nstep_rewards[slot] = n.reward;
@@ -384,12 +398,12 @@ impl Replay {
     }
 
     /// The transition in `slot`, `None` if the slot holds nothing.
-    pub fn transition(&self, slot: usize) -> Option<TransitionRef<'_>> {
+    pub fn transition(&self, slot: usize) -> Option<Transition<'_>> {
         if !self.is_stored(slot) {
             return None;
         }
         let row = slot * self.obs_dim..(slot + 1) * self.obs_dim;
-        Some(TransitionRef {
+        Some(Transition {
             obs: &self.obs[row.clone()],
             action: self.actions[slot],
             reward: self.rewards[slot],
@@ -559,7 +573,7 @@ impl Replay {
         out.next_obs.extend_from_slice(&self.next_obs[row]);
         out.terminal.push(self.terminal[slot]);
         out.is_demo.push(self.is_demo_slot(slot));
-        if self.cfg.n_step {
+        if self.nstep.is_some() {
             let row = slot * self.obs_dim..(slot + 1) * self.obs_dim;
             out.nstep_next_obs
                 .extend_from_slice(&self.nstep_next_obs[row]);

@@ -23,14 +23,14 @@ fn config(capacity: usize, demo_capacity: usize, prioritized: bool) -> ReplayCon
 
 /// Pushes a transition whose reward and observation encode `tag`, so it can be recognised later.
 fn push_tagged(replay: &mut Replay, tag: f32, is_demo: bool) -> Result<(), ReplayError> {
-    replay.push(
-        &obs_of(tag),
-        tag as usize % 2,
-        tag,
-        &obs_of(tag + 0.5),
-        (tag as usize).is_multiple_of(3),
+    replay.push(Transition {
+        obs: &obs_of(tag),
+        action: tag as usize % 2,
+        reward: tag,
+        next_obs: &obs_of(tag + 0.5),
+        terminal: (tag as usize).is_multiple_of(3),
         is_demo,
-    )
+    })
 }
 
 /// Upper 0.1% point of the chi-square distribution with `df` degrees of freedom, by the
@@ -374,8 +374,16 @@ fn demo_capacity_overflow_is_an_error() {
 fn bad_transitions_are_rejected() {
     let mut replay = Replay::new(OBS_DIM, &config(3, 0, true));
     let good = obs_of(1.0);
+    let t = |obs, reward, next_obs| Transition {
+        obs,
+        action: 0,
+        reward,
+        next_obs,
+        terminal: false,
+        is_demo: false,
+    };
     assert!(matches!(
-        replay.push(&[1.0], 0, 0.0, &good, false, false),
+        replay.push(t(&[1.0], 0.0, &good)),
         Err(ReplayError::ObsDimMismatch {
             what: "obs",
             expected: 3,
@@ -383,11 +391,11 @@ fn bad_transitions_are_rejected() {
         })
     ));
     assert!(matches!(
-        replay.push(&good, 0, 0.0, &[f32::NAN, 0.0, 0.0], false, false),
+        replay.push(t(&good, 0.0, &[f32::NAN, 0.0, 0.0])),
         Err(ReplayError::NonFinite { what: "next_obs" })
     ));
     assert!(matches!(
-        replay.push(&good, 0, f32::INFINITY, &good, false, false),
+        replay.push(t(&good, f32::INFINITY, &good)),
         Err(ReplayError::NonFinite { what: "reward" })
     ));
     assert!(replay.is_empty());

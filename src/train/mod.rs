@@ -4,7 +4,6 @@
 
 pub mod config;
 pub mod log;
-pub mod nstep;
 
 pub use config::{Method, NetKind, RuleKind, TdLoss, TrainConfig};
 pub use log::{EvalPoint, QueryEvent, RunLog, Summary, steps_to_solve};
@@ -14,9 +13,8 @@ use crate::env::{self, Env};
 use crate::expert::Expert;
 use crate::expert::demos::Demonstrations;
 use crate::query::{AdaptiveQuantileRule, QueryController, QueryRule};
-use crate::replay::{Batch, Replay, ReplayConfig};
+use crate::replay::{Batch, Replay, ReplayConfig, Transition};
 use anyhow::{Context, Result, bail, ensure};
-use nstep::{NStepQueue, Transition};
 use rand::SeedableRng;
 use rand_pcg::Pcg64;
 use std::time::Instant;
@@ -125,12 +123,11 @@ pub fn train(
             alpha: cfg.alpha as f32,
             eps_agent: cfg.eps_agent as f32,
             eps_demo: cfg.eps_demo as f32,
-            n_step: cfg.lambda_n > 0.0,
+            // DQfD's optional n-step loss needs each transition's n-step return.
+            n_step: if cfg.lambda_n > 0.0 { cfg.n_step } else { 0 },
+            gamma: cfg.gamma as f32,
         },
     );
-    // DQfD's optional n-step loss needs each transition's n-step return before it enters replay.
-    let mut nstep_queue =
-        (cfg.lambda_n > 0.0).then(|| NStepQueue::new(cfg.n_step, cfg.gamma as f32));
     let mut batch = Batch::default();
 
     // Pre-training on demonstrations only (DQfD, ADQNP; §9).
@@ -196,20 +193,14 @@ pub fn train(
         // 2. Step the environment; expert transitions are stored as demonstrations (margin loss, bonus priority).
         let s = env.step(action)?;
         let terminal = s.terminated || (s.truncated && cfg.timeout_as_terminal);
-        match &mut nstep_queue {
-            None => replay.push(&obs, action, s.reward as f32, &s.obs, terminal, by_expert)?,
-            Some(queue) => queue.push(
-                Transition {
-                    obs: obs.clone(),
-                    action,
-                    reward: s.reward as f32,
-                    next_obs: s.obs.clone(),
-                    terminal,
-                    is_demo: by_expert,
-                },
-                &mut replay,
-            )?,
-        }
+        replay.push(Transition {
+            obs: &obs,
+            action,
+            reward: s.reward as f32,
+            next_obs: &s.obs,
+            terminal,
+            is_demo: by_expert,
+        })?;
         ep_return += s.reward;
         ep_len += 1;
         obs = s.obs;
@@ -217,9 +208,7 @@ pub fn train(
             log.episode(episode, step + 1, ep_return, ep_len, ep_demo)?;
             episode += 1;
             (ep_return, ep_len, ep_demo) = (0.0, 0, 0);
-            if let Some(queue) = &mut nstep_queue {
-                queue.end_episode(&mut replay)?;
-            }
+            replay.end_episode()?;
             obs = env.reset(None);
             agent.begin_episode();
             queries.end_episode();
@@ -232,8 +221,8 @@ pub fn train(
         {
             let beta = cfg.beta0 + (1.0 - cfg.beta0) * (step as f64 / cfg.train_steps as f64);
             replay.sample(cfg.batch_size, beta as f32, &mut replay_rng, &mut batch);
-            let stats = agent.update(&batch);
-            replay.update_priorities(&batch.idx, agent.abs_td(batch.idx.len()));
+            let (stats, priorities) = agent.update(&batch);
+            replay.update_priorities(&batch.idx, priorities);
             updates += 1;
             if updates.is_multiple_of(cfg.target_period) {
                 agent.sync_target();
@@ -331,34 +320,20 @@ pub fn pretrain(
         demos.env,
         cfg.env
     );
-    let mut queue = (cfg.lambda_n > 0.0).then(|| NStepQueue::new(cfg.n_step, cfg.gamma as f32));
     for (i, t) in demos.transitions.iter().enumerate() {
-        match &mut queue {
-            None => replay.push(&t.obs, t.action, t.reward, &t.next_obs, t.terminal, true)?,
-            Some(q) => {
-                let transition = Transition {
-                    obs: t.obs.clone(),
-                    action: t.action,
-                    reward: t.reward,
-                    next_obs: t.next_obs.clone(),
-                    terminal: t.terminal,
-                    is_demo: true,
-                };
-                q.push(transition, replay)?;
-                if demos
-                    .transitions
-                    .get(i + 1)
-                    .is_none_or(|next| next.episode != t.episode)
-                {
-                    q.end_episode(replay)?;
-                }
-            }
+        replay.push(t.transition())?;
+        if demos
+            .transitions
+            .get(i + 1)
+            .is_none_or(|next| next.episode != t.episode)
+        {
+            replay.end_episode()?;
         }
     }
     for update in 1..=cfg.pretrain_steps {
         replay.sample_demo_only(cfg.batch_size, cfg.beta0 as f32, rng, batch);
-        agent.update(batch);
-        replay.update_priorities(&batch.idx, agent.abs_td(batch.idx.len()));
+        let (_, priorities) = agent.update(batch);
+        replay.update_priorities(&batch.idx, priorities);
         if update % cfg.target_period == 0 {
             agent.sync_target();
         }

@@ -1,31 +1,57 @@
 //! n-step returns for DQfD's optional n-step loss (Hester et al.): each transition is stored with
 //! `R = Σ_{i<k} γ^i r_{t+i}`, the observation `k` steps later and the discount `γ^k` of its value, where
 //! `k = n`, or fewer when the episode ends first (0 discount when it terminated). Transitions therefore reach
-//! replay `n − 1` steps late, and all at once at the end of an episode.
+//! the memory `n − 1` steps late, and all at once at the end of an episode. [`super::Replay`] owns the queue.
 
-use crate::replay::{NStepReturn, Replay, ReplayError};
+use super::{ReplayError, Transition};
 use std::collections::VecDeque;
 
-/// One environment transition.
-#[derive(Clone, Debug, PartialEq)]
-pub struct Transition {
-    pub obs: Vec<f32>,
-    pub action: usize,
+/// The n-step return of a transition (DQfD): `reward = Σ_{i<k} γ^i r_{t+i}`, the observation `k` steps
+/// later, and `discount = γ^k`, or 0 when the episode terminated within those `k ≤ n` steps.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct NStepReturn<'a> {
     pub reward: f32,
-    pub next_obs: Vec<f32>,
-    pub terminal: bool,
-    pub is_demo: bool,
+    pub next_obs: &'a [f32],
+    pub discount: f32,
+}
+
+/// A transition waiting for its n-step return: an owned copy of a [`Transition`].
+#[derive(Clone, Debug, PartialEq)]
+struct Pending {
+    obs: Vec<f32>,
+    action: usize,
+    reward: f32,
+    next_obs: Vec<f32>,
+    terminal: bool,
+    is_demo: bool,
+}
+
+impl Pending {
+    fn transition(&self) -> Transition<'_> {
+        Transition {
+            obs: &self.obs,
+            action: self.action,
+            reward: self.reward,
+            next_obs: &self.next_obs,
+            terminal: self.terminal,
+            is_demo: self.is_demo,
+        }
+    }
 }
 
 /// Holds the last `n` transitions of the current episode until their n-step returns are known.
-pub struct NStepQueue {
+#[derive(Clone, Debug)]
+pub(super) struct NStepQueue {
     n: usize,
     gamma: f32,
-    pending: VecDeque<Transition>,
+    pending: VecDeque<Pending>,
 }
 
+/// Where completed transitions go (the memory's slot writer).
+type Store<'s> = dyn FnMut(Transition<'_>, NStepReturn<'_>) -> Result<(), ReplayError> + 's;
+
 impl NStepQueue {
-    pub fn new(n: usize, gamma: f32) -> Self {
+    pub(super) fn new(n: usize, gamma: f32) -> Self {
         Self {
             n: n.max(1),
             gamma,
@@ -35,27 +61,40 @@ impl NStepQueue {
 
     /// Adds a transition and stores every transition whose n-step return is now complete.
     /// A terminal transition completes the whole episode.
-    pub fn push(&mut self, t: Transition, replay: &mut Replay) -> Result<(), ReplayError> {
-        let terminal = t.terminal;
-        self.pending.push_back(t);
-        if terminal {
-            return self.end_episode(replay);
+    pub(super) fn push(
+        &mut self,
+        t: Transition<'_>,
+        mut store: impl FnMut(Transition<'_>, NStepReturn<'_>) -> Result<(), ReplayError>,
+    ) -> Result<(), ReplayError> {
+        self.pending.push_back(Pending {
+            obs: t.obs.to_vec(),
+            action: t.action,
+            reward: t.reward,
+            next_obs: t.next_obs.to_vec(),
+            terminal: t.terminal,
+            is_demo: t.is_demo,
+        });
+        if t.terminal {
+            return self.end_episode(store);
         }
         if self.pending.len() == self.n {
-            self.emit_front(replay)?;
+            self.emit_front(&mut store)?;
         }
         Ok(())
     }
 
     /// The episode ended (termination or time limit): stores the rest with shortened horizons.
-    pub fn end_episode(&mut self, replay: &mut Replay) -> Result<(), ReplayError> {
+    pub(super) fn end_episode(
+        &mut self,
+        mut store: impl FnMut(Transition<'_>, NStepReturn<'_>) -> Result<(), ReplayError>,
+    ) -> Result<(), ReplayError> {
         while !self.pending.is_empty() {
-            self.emit_front(replay)?;
+            self.emit_front(&mut store)?;
         }
         Ok(())
     }
 
-    fn emit_front(&mut self, replay: &mut Replay) -> Result<(), ReplayError> {
+    fn emit_front(&mut self, store: &mut Store<'_>) -> Result<(), ReplayError> {
         let (mut reward, mut scale) = (0.0f32, 1.0f32);
         for t in &self.pending {
             reward += scale * t.reward;
@@ -63,41 +102,33 @@ impl NStepQueue {
         }
         let last = self.pending.back().expect("emit_front on an empty queue");
         let discount = if last.terminal { 0.0 } else { scale };
-        let first = &self.pending[0];
         let n = NStepReturn {
             reward,
             next_obs: &last.next_obs,
             discount,
         };
-        replay.push_with_n_step(
-            &first.obs,
-            first.action,
-            first.reward,
-            &first.next_obs,
-            first.terminal,
-            first.is_demo,
-            Some(n),
-        )?;
+        store(self.pending[0].transition(), n)?;
         self.pending.pop_front();
         Ok(())
     }
 }
-
 #[cfg(test)]
 mod tests {
-    use super::*;
-    use crate::replay::{Batch, ReplayConfig};
+    use crate::replay::{Batch, Replay, ReplayConfig, Transition};
     use rand::SeedableRng;
 
-    fn t(i: usize, terminal: bool) -> Transition {
-        Transition {
-            obs: vec![i as f32],
-            action: 0,
-            reward: (i + 1) as f32,
-            next_obs: vec![(i + 1) as f32],
-            terminal,
-            is_demo: false,
-        }
+    /// Pushes transition `i` of an episode: observation `i`, reward `i + 1`.
+    fn push(replay: &mut Replay, i: usize, terminal: bool) {
+        replay
+            .push(Transition {
+                obs: &[i as f32],
+                action: 0,
+                reward: (i + 1) as f32,
+                next_obs: &[(i + 1) as f32],
+                terminal,
+                is_demo: false,
+            })
+            .unwrap();
     }
 
     /// Stored n-step returns equal a direct sum over the episode, including the shortened ones at its end.
@@ -107,14 +138,14 @@ mod tests {
         let cfg = ReplayConfig {
             capacity: 16,
             prioritized: false,
-            n_step: true,
+            n_step: n,
+            gamma,
             ..ReplayConfig::default()
         };
         let mut replay = Replay::new(1, &cfg);
-        let mut q = NStepQueue::new(n, gamma);
         let len = 5;
         for i in 0..len {
-            q.push(t(i, i + 1 == len), &mut replay).unwrap();
+            push(&mut replay, i, i + 1 == len);
         }
         assert_eq!(replay.len(), len);
         let mut batch = Batch::default();
@@ -145,15 +176,15 @@ mod tests {
         let cfg = ReplayConfig {
             capacity: 16,
             prioritized: false,
-            n_step: true,
+            n_step: 10,
+            gamma: 0.9,
             ..ReplayConfig::default()
         };
         let mut replay = Replay::new(1, &cfg);
-        let mut q = NStepQueue::new(10, 0.9);
-        q.push(t(0, false), &mut replay).unwrap();
-        q.push(t(1, false), &mut replay).unwrap();
+        push(&mut replay, 0, false);
+        push(&mut replay, 1, false);
         assert_eq!(replay.len(), 0, "held back until the return is known");
-        q.end_episode(&mut replay).unwrap();
+        replay.end_episode().unwrap();
         let mut batch = Batch::default();
         replay.sample(8, 1.0, &mut rand_pcg::Pcg64::seed_from_u64(1), &mut batch);
         for k in 0..batch.len() {
@@ -161,9 +192,5 @@ mod tests {
             let expect = if i == 0 { 0.9f32 * 0.9 } else { 0.9 };
             assert!((batch.nstep_discounts[k] - expect).abs() < 1e-6);
         }
-        assert!(
-            replay.push(&[0.0], 0, 0.0, &[1.0], false, false).is_err(),
-            "n-step memory needs returns"
-        );
     }
 }
