@@ -1,7 +1,7 @@
 //! Benchmarks of the Q-network hot path: one double-DQN update (the operation a full reproduction runs
 //! ~300 million times) and one single-state forward pass (run at every environment step to act).
 //!
-//! The update follows ALGORITHM_NOTES.md §2 and §4: online forward on `s'` for the argmax, target forward
+//! The update follows docs/algorithm.md §2 and §4: online forward on `s'` for the argmax, target forward
 //! on `s'`, online forward on `s`, the gradient of the mean squared TD error (summed over heads), backward,
 //! gradient-norm clipping at 10 and an Adam step. Noisy networks draw fresh noise for each of the three
 //! passes. Sizes: `obs_dim = 8`, `A = 4` (LunarLander), batches of 32 and 64.

@@ -1,5 +1,5 @@
 //! Cost of one learner step's worth of replay work on a full 100k memory: push one transition,
-//! sample a prioritized batch of 32, update those 32 priorities (ALGORITHM_NOTES.md §3, batch 32).
+//! sample a prioritized batch of 32, update those 32 priorities (docs/algorithm.md §3, batch 32).
 
 use std::hint::black_box;
 

@@ -1,7 +1,7 @@
 //! NumPy-compatible random numbers: `np.random.Generator(PCG64(SeedSequence(seed)))`, bit for bit.
 //!
 //! Gymnasium seeds every environment with `np.random.default_rng(seed)`; to reproduce its episodes from a seed
-//! we need the same stream of doubles. Three pieces are ported (see ENVIRONMENT_NOTES.md, "Seeding"):
+//! we need the same stream of doubles. Three pieces are ported (see docs/environments.md, "Seeding"):
 //!
 //! 1. [`SeedSequence`]: turns the integer seed into 32-bit words (least significant first), hashes them
 //!    into a 4-word entropy pool and expands the pool into as many output words as asked for

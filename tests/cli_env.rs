@@ -44,7 +44,7 @@ fn write_trace(dir: &Path, name: &str, lines: &[&str]) -> PathBuf {
 fn classic_trace() -> PathBuf {
     let dir = match std::env::var_os("ARLD_CONFORMANCE_DIR") {
         Some(dir) => PathBuf::from(dir),
-        None => PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/conformance"),
+        None => PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/conformance"),
     };
     let path = dir.join("classic_control.jsonl");
     assert!(

@@ -1,6 +1,6 @@
 //! Conformance of the environments with traces recorded from Gymnasium 1.4.0.
 //!
-//! The traces live in `$ARLD_CONFORMANCE_DIR`, or else in `../shared/conformance` next to the crate. A missing
+//! The traces live in `$ARLD_CONFORMANCE_DIR`, or else in the repository's `tests/data/conformance`. A missing
 //! directory fails the tests: without the traces nothing shows that the environments are Gymnasium's.
 //! Classic control and LunarLander are separate tests because LunarLander is a separate module (Box2D).
 
@@ -12,7 +12,7 @@ const LUNAR_LANDER_TRACE: &str = "lunar_lander.jsonl";
 fn conformance_dir() -> PathBuf {
     let dir = match std::env::var_os("ARLD_CONFORMANCE_DIR") {
         Some(dir) => PathBuf::from(dir),
-        None => PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/conformance"),
+        None => PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/conformance"),
     };
     assert!(
         dir.is_dir(),

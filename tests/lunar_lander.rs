@@ -3,22 +3,22 @@
 //!
 //! The trace (`lunar_lander.jsonl`, recorded from Gymnasium 1.4.0 with pybox2d) is the exact reference and
 //! is replayed in full by `tests/conformance.rs`; here it checks the heuristic controller's actions. The
-//! statistical tests compare with figures measured with Gymnasium over the same seeds
-//! (ENVIRONMENT_NOTES.md, "Reference figures") and catch physics that drift on average even where no
-//! trace covers them.
+//! statistical tests compare the returns and lengths of the random and heuristic policies with Gymnasium's own
+//! over the same seeds (`statistics.json`, two-sample Kolmogorov–Smirnov) and catch physics that drift on
+//! average even where no trace covers them (docs/environments.md).
 
-use arld::env::lunar_lander::heuristic_action;
+use arld::env::lunar_lander::{LunarLander, heuristic_action};
 use arld::env::{Env, make};
 use rand::{Rng, SeedableRng};
 use serde_json::Value;
 use std::path::PathBuf;
 
-/// The Gymnasium trace: in `$ARLD_CONFORMANCE_DIR`, or else in `../shared/conformance` next to the crate
+/// The Gymnasium trace: in `$ARLD_CONFORMANCE_DIR`, or else in the repository's `tests/data/conformance`
 /// (the same rule as `tests/conformance.rs`, which replays it in full).
 fn trace_path() -> PathBuf {
     let dir = match std::env::var_os("ARLD_CONFORMANCE_DIR") {
         Some(dir) => PathBuf::from(dir),
-        None => PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/conformance"),
+        None => PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/conformance"),
     };
     dir.join("lunar_lander.jsonl")
 }
@@ -79,30 +79,137 @@ fn heuristic_controller_chooses_the_recorded_actions() {
     assert!(compared > 500, "only {compared} heuristic steps compared");
 }
 
-#[test]
-fn random_policy_matches_gymnasium_statistics() {
-    // Gymnasium (LunarLander-v3, same task as v2), uniform random actions, reset(seed=s) for s in 0..300:
-    // return -186.2 +- 109.5, length 91.6 +- 19.9. The bounds are about 2.4 standard errors of the mean.
-    let mut env = make("LunarLander-v2").expect("LunarLander-v2 is registered");
-    let mut actions = rand_pcg::Pcg64::seed_from_u64(2024);
-    let episodes = 300;
-    let (mut return_sum, mut length_sum) = (0.0, 0usize);
-    for seed in 0..episodes {
-        let (ret, len) = play(env.as_mut(), seed, |_| actions.random_range(0..4));
-        return_sum += ret;
-        length_sum += len;
+/// Gymnasium's own per-seed returns and lengths (`statistics.json`, recorded by `record.py`).
+fn gymnasium_statistics() -> Value {
+    let path = trace_path().with_file_name("statistics.json");
+    let text = std::fs::read_to_string(&path)
+        .unwrap_or_else(|err| panic!("cannot read {}: {err}", path.display()));
+    serde_json::from_str(&text).expect("statistics.json is valid JSON")
+}
+
+fn sample(stats: &Value, policy: &str, field: &str) -> Vec<f64> {
+    stats[policy][field]
+        .as_array()
+        .unwrap_or_else(|| panic!("statistics.json has no {policy}.{field}"))
+        .iter()
+        .map(|v| v.as_f64().expect("number"))
+        .collect()
+}
+
+/// The two-sample Kolmogorov–Smirnov statistic: the largest distance between the empirical CDFs.
+fn ks_statistic(a: &[f64], b: &[f64]) -> f64 {
+    let mut a = a.to_vec();
+    let mut b = b.to_vec();
+    a.sort_by(f64::total_cmp);
+    b.sort_by(f64::total_cmp);
+    let (mut i, mut j, mut d) = (0, 0, 0.0f64);
+    while i < a.len() && j < b.len() {
+        // Step past every copy of the smaller value in both samples, then compare the CDFs there.
+        let x = a[i].min(b[j]);
+        while i < a.len() && a[i] <= x {
+            i += 1;
+        }
+        while j < b.len() && b[j] <= x {
+            j += 1;
+        }
+        d = d.max((i as f64 / a.len() as f64 - j as f64 / b.len() as f64).abs());
     }
-    let mean_return = return_sum / episodes as f64;
-    let mean_length = length_sum as f64 / episodes as f64;
-    println!("random policy: mean return {mean_return:.2}, mean length {mean_length:.2}");
+    d
+}
+
+/// Survival function of Kolmogorov's limiting distribution, Q(x) = 2 Σ (−1)^(k−1) exp(−2k²x²).
+fn kolmogorov_sf(x: f64) -> f64 {
+    if x < 0.2 {
+        return 1.0; // the series converges slowly here and the value is 1 to 1e-9
+    }
+    let sum: f64 = (1..=100)
+        .map(|k| {
+            let k = k as f64;
+            let sign = if k as u64 % 2 == 1 { 1.0 } else { -1.0 };
+            sign * (-2.0 * k * k * x * x).exp()
+        })
+        .sum();
+    (2.0 * sum).clamp(0.0, 1.0)
+}
+
+/// Asymptotic two-sample KS test: (D, p-value), with the effective size n·m/(n+m).
+fn ks_two_sample(a: &[f64], b: &[f64]) -> (f64, f64) {
+    let d = ks_statistic(a, b);
+    let (n, m) = (a.len() as f64, b.len() as f64);
+    (d, kolmogorov_sf((n * m / (n + m)).sqrt() * d))
+}
+
+#[test]
+fn ks_test_agrees_with_scipy() {
+    // scipy.stats.kstwobign.sf at the same points, and ks_2samp's statistic on the same samples.
+    assert!((kolmogorov_sf(0.3) - 0.9999906941986655).abs() < 1e-12);
+    assert!((kolmogorov_sf(2.0) - 0.0006709252557796953).abs() < 1e-12);
+    let a: Vec<f64> = (0..20).map(|i| 0.1 * i as f64).collect();
+    let b: Vec<f64> = (0..25).map(|i| 0.15 * i as f64 + 0.3).collect();
+    let (d, p) = ks_two_sample(&a, &b);
+    assert!((d - 0.56).abs() < 1e-12, "D = {d}");
+    assert!((p - 0.0018813950881696633).abs() < 1e-9, "p = {p}");
+    let a: Vec<f64> = (0..300).map(|i| ((i * 37) % 101) as f64 / 10.0).collect();
+    let b: Vec<f64> = (0..200)
+        .map(|i| ((i * 53) % 97) as f64 / 9.0 - 0.5)
+        .collect();
+    let (d, p) = ks_two_sample(&a, &b);
+    assert!((d - 0.055).abs() < 1e-12, "D = {d}");
+    assert!((p - 0.8609621873640216).abs() < 1e-9, "p = {p}");
+}
+
+/// Returns and lengths of `episodes` episodes from seeds 0.. of `env`, under uniformly random actions drawn
+/// from a generator of our own (Gymnasium's used Python's `random`, so the samples are compared as
+/// distributions) or under the heuristic controller.
+fn lander_sample(env: &mut dyn Env, episodes: u64, random: bool) -> (Vec<f64>, Vec<f64>) {
+    let mut actions = rand_pcg::Pcg64::seed_from_u64(2024);
+    (0..episodes)
+        .map(|seed| {
+            let (ret, len) = if random {
+                play(env, seed, |_| actions.random_range(0..4))
+            } else {
+                play(env, seed, heuristic_action)
+            };
+            (ret, len as f64)
+        })
+        .unzip()
+}
+
+/// The samples of `env` against Gymnasium's: the smallest KS p-value over the four comparisons.
+fn smallest_p_value(env: &mut dyn Env, stats: &Value) -> f64 {
+    let mut smallest = 1.0f64;
+    for (policy, random) in [("random", true), ("heuristic", false)] {
+        let episodes = sample(stats, policy, "returns").len() as u64;
+        let (returns, lengths) = lander_sample(env, episodes, random);
+        for (field, ours) in [("returns", returns), ("lengths", lengths)] {
+            let (d, p) = ks_two_sample(&ours, &sample(stats, policy, field));
+            println!("{policy} {field}: D = {d:.4}, p = {p:.4}");
+            smallest = smallest.min(p);
+        }
+    }
+    smallest
+}
+
+#[test]
+fn lander_statistics_match_gymnasium_ks() {
+    // Returns and lengths of the random (300 seeds) and heuristic (200 seeds) policies against Gymnasium's
+    // own: no two-sample KS test may reject at the 1% level.
+    let stats = gymnasium_statistics();
+    let mut env = make("LunarLander-v2").expect("LunarLander-v2 is registered");
+    let p = smallest_p_value(env.as_mut(), &stats);
     assert!(
-        (mean_return - -186.2).abs() < 15.0,
-        "mean return {mean_return}"
+        p > 0.01,
+        "a KS test rejects Gymnasium's distribution: p = {p}"
     );
-    assert!(
-        (mean_length - 91.6).abs() < 3.0,
-        "mean length {mean_length}"
-    );
+}
+
+#[test]
+fn ks_comparison_notices_wrong_gravity() {
+    // The same comparison with gravity -8 instead of -10 must reject: the test can fail.
+    let stats = gymnasium_statistics();
+    let mut env = LunarLander::with_gravity("LunarLander-v2", -8.0).expect("valid gravity");
+    let p = smallest_p_value(&mut env, &stats);
+    assert!(p < 1e-4, "gravity -8 went unnoticed: p = {p}");
 }
 
 #[test]

@@ -2,7 +2,7 @@
 //! the large-margin loss on demonstrations, Adam) and the test-time policy (majority vote or mean weights).
 //!
 //! One [`Agent`] owns the online and target networks, the optimiser, and every buffer an update needs, so a
-//! steady-state step allocates nothing. Losses follow ALGORITHM_NOTES.md §2–§5:
+//! steady-state step allocates nothing. Losses follow docs/algorithm.md §2–§5:
 //! `L = Σ_k mean_b w_b [ℓ(δ_kb) + λ·demo_b·L_E,kb]` with
 //! `δ_kb = Q_k(s_b, a_b) − (r_b + γ(1 − d_b) Q⁻_k(s'_b, argmax_a Q_k(s'_b, a)))` and
 //! `L_E = max_a [Q(s, a) + M·1(a ≠ a_E)] − Q(s, a_E)`.
@@ -290,7 +290,7 @@ impl Agent {
     }
 }
 
-/// The test-time policy of a network, without exploration (ALGORITHM_NOTES.md §5): a majority vote over the
+/// The test-time policy of a network, without exploration (docs/algorithm.md §5): a majority vote over the
 /// bootstrapped heads with ties broken by the mean Q-value, the noise-free mean weights of a noisy layer, or
 /// plain argmax. Also the policy of a checkpoint expert.
 /// `q` is a buffer of `heads * n_actions` values.
@@ -357,7 +357,7 @@ pub struct Heads<'a> {
     pub n_actions: usize,
 }
 
-/// The loss of one minibatch and its gradient with respect to Q(s, ·) (ALGORITHM_NOTES.md §2, §4):
+/// The loss of one minibatch and its gradient with respect to Q(s, ·) (docs/algorithm.md §2, §4):
 /// `L = Σ_k (1/B) Σ_b w_b [ℓ(δ_kb) + λ·demo_b·L_E,kb]`, with double-DQN targets
 /// `y_kb = r_b + γ(1 − d_b) Q⁻_k(s'_b, argmax_a Q_k(s'_b, a))` held constant. Writes `dL/dQ` into `dq` and the
 /// new priorities `mean_k |δ_kb|` into `abs_td`; returns the TD, margin and n-step parts of `L` (the n-step

@@ -5,7 +5,7 @@
 //! `-cos(th1) - cos(th1 + th2) > 1`. The dynamics are the "book" equations of Sutton & Barto (the RLPy port
 //! Gymnasium uses), integrated by one classical Runge-Kutta-4 step over dt = 0.2 s in float64. Afterwards
 //! the angles are wrapped to [-pi, pi] and the speeds clipped to +-4 pi and +-9 pi. Reward is -1 per step
-//! and 0 on the terminating one; the limit is 500 steps (ENVIRONMENT_NOTES.md, "Classic control").
+//! and 0 on the terminating one; the limit is 500 steps (docs/environments.md, "Classic control").
 //!
 //! Two float32 details of Gymnasium are kept: the state drawn at reset (4 draws of `uniform(-0.1, 0.1)`)
 //! is cast to float32 (after a step it is float64 again), and the observation

@@ -6,7 +6,7 @@
 //! the operations in Gymnasium's order so that every rounding matches. The episode terminates when
 //! |x| > 2.4 or |theta| > 12 degrees; every step, including the terminating one, is worth 1.
 //! v0 and v1 differ only in the time limit (200 vs 500) and the solve threshold (195 vs 475).
-//! The initial state is four draws of `uniform(-0.05, 0.05)` (ENVIRONMENT_NOTES.md, "Classic control").
+//! The initial state is four draws of `uniform(-0.05, 0.05)` (docs/environments.md, "Classic control").
 
 use super::{Env, EnvError, EnvRng, EpisodeClock, Step, check_state, spec};
 

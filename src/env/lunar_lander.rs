@@ -31,6 +31,8 @@ use crate::rng::NumpyRng;
 // Constants of Gymnasium's lunar_lander.py (pixels unless stated; SCALE converts pixels to metres).
 const FPS: f64 = 50.0;
 const SCALE: f64 = 30.0;
+/// Gymnasium's default gravity (m/s², vertical).
+pub const DEFAULT_GRAVITY: f32 = -10.0;
 const MAIN_ENGINE_POWER: f64 = 13.0;
 const SIDE_ENGINE_POWER: f64 = 0.6;
 /// Bound of the random force applied to the lander at the start (newtons).
@@ -146,11 +148,11 @@ struct Scene {
 impl Scene {
     /// Builds the world as Gymnasium's `reset` does, drawing the terrain heights and the initial push
     /// from `rng` in Gymnasium's order (12 heights, then the push's x and y).
-    fn build(rng: &mut NumpyRng) -> Self {
+    fn build(rng: &mut NumpyRng, gravity: f32) -> Self {
         let w = VIEWPORT_W / SCALE;
         let h = VIEWPORT_H / SCALE;
 
-        let mut world = World::new(&b2::Vec2 { x: 0.0, y: -10.0 });
+        let mut world = World::new(&b2::Vec2 { x: 0.0, y: gravity });
         let flags = Arc::new(ContactFlags::default());
         world.set_contact_listener(Box::new(ContactDetector {
             flags: Arc::clone(&flags),
@@ -380,6 +382,8 @@ fn shaping(s: &[f64; OBS_DIM]) -> f64 {
 /// Gymnasium's LunarLander with discrete actions and no wind (`LunarLander-v2` / `LunarLander-v3`).
 pub struct LunarLander {
     id: &'static str,
+    /// Vertical gravity of the world (Gymnasium's `gravity` keyword; -10 in the registered task).
+    gravity: f32,
     rng: Option<NumpyRng>,
     scene: Option<Scene>,
     prev_shaping: f64,
@@ -398,13 +402,28 @@ impl LunarLander {
     /// Creates the environment under the Gymnasium id it answers to (`LunarLander-v2` or `-v3`: the
     /// same task with the same limits). Call [`Env::reset`] before stepping.
     pub fn new(id: &'static str) -> Self {
-        LunarLander {
+        Self::with_gravity(id, DEFAULT_GRAVITY).expect("the default gravity is valid")
+    }
+
+    /// The same task under another gravity, as `gym.make("LunarLander-v3", gravity=g)`; Gymnasium accepts
+    /// -12 < g < 0. Used to show that the statistical tests notice wrong physics.
+    pub fn with_gravity(id: &'static str, gravity: f32) -> Result<Self, EnvError> {
+        if !(gravity > -12.0 && gravity < 0.0) {
+            return Err(EnvError::InvalidParameter {
+                name: "gravity",
+                message: format!(
+                    "must lie strictly between -12 and 0 (Gymnasium's range), got {gravity}"
+                ),
+            });
+        }
+        Ok(LunarLander {
             id,
+            gravity,
             rng: None,
             scene: None,
             prev_shaping: 0.0,
             clock: EpisodeClock::new(id, N_ACTIONS, MAX_EPISODE_STEPS),
-        }
+        })
     }
 
     /// One frame of Gymnasium's `step` without the time limit: engines, physics, observation, reward.
@@ -464,7 +483,7 @@ impl Env for LunarLander {
         let rng = self.rng.as_mut().expect("generator set above");
         // Drop the old world before building the new one (Gymnasium destroys, then creates).
         self.scene = None;
-        self.scene = Some(Scene::build(rng));
+        self.scene = Some(Scene::build(rng, self.gravity));
         self.clock.start();
         // Gymnasium's reset returns the observation of one no-op step (outside the time limit count).
         let (obs, _, _) = self.frame(0, true);

@@ -50,6 +50,8 @@ pub enum EnvError {
     NeedsReset { env: &'static str },
     #[error("{env}: {msg}")]
     BadState { env: &'static str, msg: String },
+    #[error("invalid environment parameter {name}: {message}")]
+    InvalidParameter { name: &'static str, message: String },
     #[error("environment '{id}' is registered but not available in this build: {reason}")]
     Unavailable {
         id: &'static str,

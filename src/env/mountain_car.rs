@@ -5,7 +5,7 @@
 //! `velocity += (a - 1) * 0.001 + cos(3 * position) * (-0.0025)`, clipped to +-0.07; `position += velocity`,
 //! clipped to [-1.2, 0.6]; at the left wall a negative velocity becomes 0. Terminal when position >= 0.5
 //! and velocity >= 0; reward -1 per step; limit 200 steps. The initial position is one draw of
-//! `uniform(-0.6, -0.4)`, the initial velocity 0 (ENVIRONMENT_NOTES.md, "Classic control").
+//! `uniform(-0.6, -0.4)`, the initial velocity 0 (docs/environments.md, "Classic control").
 
 use super::{Env, EnvError, EnvRng, EpisodeClock, Step, check_state};
 

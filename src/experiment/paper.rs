@@ -2,7 +2,7 @@
 //! paper's experiments so one command can reproduce them.
 //!
 //! Sources: Table 5 (median steps to solve over 20 seeds) and the expert statistics table of Chen et al.,
-//! "Active Deep Q-learning with Demonstration" (arXiv 1812.02632), as transcribed in ALGORITHM_NOTES.md
+//! "Active Deep Q-learning with Demonstration" (arXiv 1812.02632), as transcribed in docs/algorithm.md
 //! sections 1, 9, 10 and 11. [`paper_grids`] turns the paper's Section 4 (the method comparison, the t_query
 //! study and the expert-quality study) into [`SweepGrid`]s for [`super::sweep::run_sweep`].
 
@@ -13,7 +13,7 @@ use super::sweep::SweepGrid;
 pub struct PaperTask {
     /// Name as printed in the paper's tables.
     pub name: &'static str,
-    /// Gym id of the version the paper used (ALGORITHM_NOTES.md section 1).
+    /// Gym id of the version the paper used (docs/algorithm.md section 1).
     pub gym_id: &'static str,
     /// Ids that count as the same task (Gymnasium 1.x renamed LunarLander-v2 to -v3 without changing it).
     pub aliases: &'static [&'static str],

@@ -2,7 +2,7 @@
 //!
 //! The parts fit as follows:
 //! - [`median_curve`] and [`query_timeline`] reduce the runs of one configuration to a [`Band`] per step: the
-//!   median over seeds (the paper plots medians, ALGORITHM_NOTES.md section 11) and the interquartile range.
+//!   median over seeds (the paper plots medians, docs/algorithm.md section 11) and the interquartile range.
 //! - [`paper_figures`] selects runs for each figure of the paper's Section 4 and builds a [`FigureContent`]
 //!   (one panel per environment, one line per method or setting), or says why a figure is skipped.
 //! - [`draw_figure`] renders a figure with `plotters` to `NAME.png` and `NAME.svg`. Text is drawn with the

@@ -8,7 +8,7 @@
 //!   `config.toml`, the evaluation curve from `eval.csv`, query steps from `queries.csv`. The variant label
 //!   comes from the sweep's directory layout (`ENV/METHOD-NET/VARIANT/seedN`, see
 //!   [`super::sweep::RunSpec::dir_name`]); a run outside that layout is the `default` variant.
-//! - [`steps_to_solve`] and [`median`] implement the paper's measure (ALGORITHM_NOTES.md section 11); [`group_runs`]
+//! - [`steps_to_solve`] and [`median`] implement the paper's measure (docs/algorithm.md section 11); [`group_runs`]
 //!   applies them per (env, method, net, variant).
 //! - [`report`] writes `table.md`, `table.csv`, the figures of [`super::plot`] and `report.md`.
 
@@ -74,7 +74,7 @@ pub fn evaluations_csv(runs: &[RunRecord]) -> String {
 }
 
 /// First evaluation step whose mean test return reaches `threshold`, or `train_steps` when none does
-/// (ALGORITHM_NOTES.md section 11: Table 5 prints the full budget, e.g. 500000, for runs that never solve).
+/// (docs/algorithm.md section 11: Table 5 prints the full budget, e.g. 500000, for runs that never solve).
 pub fn steps_to_solve(curve: &[EvalPoint], threshold: f64, train_steps: u64) -> u64 {
     crate::train::log::steps_to_solve(curve, threshold, train_steps).0
 }

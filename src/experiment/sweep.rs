@@ -22,9 +22,9 @@ use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
-/// Methods a run can use (ALGORITHM_NOTES.md section 9).
+/// Methods a run can use (docs/algorithm.md section 9).
 pub const METHODS: [&str; 6] = ["dqn", "dqfd", "gdqn", "bdqn", "adqn", "adqnp"];
-/// Network output stages (ALGORITHM_NOTES.md section 2).
+/// Network output stages (docs/algorithm.md section 2).
 pub const NETS: [&str; 3] = ["plain", "bootstrap", "noisy"];
 /// Name of the file that records a sweep's grid inside its directory.
 pub const SWEEP_FILE: &str = "sweep.toml";

@@ -1,4 +1,4 @@
-//! The expert pipeline of the paper (§"Experimental setup", ALGORITHM_NOTES.md §10): train prioritized double
+//! The expert pipeline of the paper (§"Experimental setup", docs/algorithm.md §10): train prioritized double
 //! DQN, checkpoint it periodically, evaluate every checkpoint over 100 episodes, and select
 //! - the paper's kind of expert ("weak"): it does not solve the task (mean below the solve threshold), its variance
 //!   is low, and it still finishes the task before the time limit on average (the paper's LunarLander expert
@@ -26,7 +26,7 @@ pub struct ExpertStats {
     pub finished: f64,
 }
 
-/// The paper's expert statistics (mean, std, min, mean length) for a Gymnasium id (ALGORITHM_NOTES.md §10).
+/// The paper's expert statistics (mean, std, min, mean length) for a Gymnasium id (docs/algorithm.md §10).
 pub fn paper_expert_stats(env_id: &str) -> Option<(f64, f64, f64, f64)> {
     match env_id {
         "CartPole-v0" | "CartPole-v1" => Some((166.77, 39.14, 93.0, 166.8)),

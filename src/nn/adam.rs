@@ -1,4 +1,4 @@
-//! Gradients, gradient-norm clipping and the Adam optimiser (ALGORITHM_NOTES.md §2: Adam, eps 1e-8,
+//! Gradients, gradient-norm clipping and the Adam optimiser (docs/algorithm.md §2: Adam, eps 1e-8,
 //! gradient-norm clip 10).
 //!
 //! [`Grads`] shares the network's flat parameter layout, so clipping and the Adam step are single loops

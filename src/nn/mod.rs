@@ -1,12 +1,12 @@
 //! The Q-network: a fixed-shape MLP `obs_dim -> 64 -> ReLU -> 64 -> ReLU -> output stage`
-//! (ALGORITHM_NOTES.md §2), with forward and backward written by hand on the `gemm` crate.
+//! (docs/algorithm.md §2), with forward and backward written by hand on the `gemm` crate.
 //!
 //! The output stage is one of ([`OutputKind`]):
 //! - `Plain`: one linear layer `64 -> A`;
 //! - `Bootstrap { heads: K }`: K independent linear heads `64 -> A` on the shared trunk; in the backward
 //!   pass the gradient entering the trunk is scaled by `1/K` while the heads get their full gradient
-//!   (ALGORITHM_NOTES.md §4, Osband et al. 2016);
-//! - `Noisy`: a factorised NoisyLinear `64 -> A` (ALGORITHM_NOTES.md §6), the only noisy layer.
+//!   (docs/algorithm.md §4, Osband et al. 2016);
+//! - `Noisy`: a factorised NoisyLinear `64 -> A` (docs/algorithm.md §6), the only noisy layer.
 //!
 //! How the parts fit:
 //! - [`QNet`] holds the parameters only, in one flat `Vec<f32>` (so Adam, clipping and target copies are
@@ -47,7 +47,7 @@ use simd::simd_dispatch;
 
 use linear::{MatView, add_bias_relu, column_sums, init_linear, matmul, relu_backward};
 
-/// Width of both hidden layers (ALGORITHM_NOTES.md §2).
+/// Width of both hidden layers (docs/algorithm.md §2).
 pub const HIDDEN: usize = 64;
 
 /// The output stage of the Q-network.
@@ -203,7 +203,7 @@ impl QNet {
     /// Hidden layers and plain/bootstrap heads use PyTorch's `nn.Linear` default,
     /// `U[-1/sqrt(fan_in), 1/sqrt(fan_in)]` for weights and biases, drawn layer by layer in PyTorch order
     /// (fc1, fc2, then head 0, 1, ...: each head independently, Osband et al.). The noisy layer draws
-    /// `mu ~ U[-1/sqrt(64), 1/sqrt(64)]` and sets `sigma = 0.5/sqrt(64)` (ALGORITHM_NOTES.md §6).
+    /// `mu ~ U[-1/sqrt(64), 1/sqrt(64)]` and sets `sigma = 0.5/sqrt(64)` (docs/algorithm.md §6).
     ///
     /// # Panics
     /// If `obs_dim`, `n_actions` or the number of heads is zero (configurations are validated upstream).
@@ -496,7 +496,7 @@ impl QNet {
     /// forward's output layout. Overwrites `grads`.
     ///
     /// Bootstrapped: each head gets its full gradient, the trunk gets `1/K` of the summed head gradients
-    /// (ALGORITHM_NOTES.md §4). Noisy: the gradients of `mu` and `sigma` under the forward's noise sample
+    /// (docs/algorithm.md §4). Noisy: the gradients of `mu` and `sigma` under the forward's noise sample
     /// (all `sigma` gradients are zero for a forward with noise off).
     ///
     /// # Panics
@@ -649,7 +649,7 @@ impl QNet {
     }
 
     /// [`Self::q_values_single`] that also returns the penultimate activations `phi(s)` (64 values), which
-    /// the noisy predictive-variance uncertainty needs (ALGORITHM_NOTES.md §7).
+    /// the noisy predictive-variance uncertainty needs (docs/algorithm.md §7).
     ///
     /// # Panics
     /// If `obs` or `q_out` has the wrong length, or the noise sample is for another action count.

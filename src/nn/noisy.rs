@@ -1,4 +1,4 @@
-//! Factorised Gaussian noise for the NoisyNet output layer (ALGORITHM_NOTES.md §6, Fortunato et al. 2018).
+//! Factorised Gaussian noise for the NoisyNet output layer (docs/algorithm.md §6, Fortunato et al. 2018).
 //!
 //! The layer computes `y = (mu_w + sigma_w ⊙ eps_w) x + mu_b + sigma_b ⊙ eps_b` with factorised noise
 //! `eps_w[j,i] = f(eps_j) f(eps_i)`, `eps_b[j] = f(eps_j)`, `f(x) = sgn(x) sqrt|x|`, `eps ~ N(0,1)`.
@@ -12,7 +12,7 @@ use rand_distr::StandardNormal;
 
 use super::HIDDEN;
 
-/// `f(x) = sgn(x) sqrt|x|`, the factorised-noise transform of NoisyNet (ALGORITHM_NOTES.md §6).
+/// `f(x) = sgn(x) sqrt|x|`, the factorised-noise transform of NoisyNet (docs/algorithm.md §6).
 #[inline]
 pub fn noise_transform(x: f32) -> f32 {
     x.signum() * x.abs().sqrt()
@@ -163,7 +163,7 @@ mod tests {
         assert_eq!(noise_transform(0.0), 0.0);
     }
 
-    /// E[f(eps)^2] = E|eps| = sqrt(2/pi) (ALGORITHM_NOTES.md §7): checks the draws are transformed
+    /// E[f(eps)^2] = E|eps| = sqrt(2/pi) (docs/algorithm.md §7): checks the draws are transformed
     /// standard normals, not raw ones (whose second moment is 1).
     #[test]
     fn resampled_factors_have_the_factorised_second_moment() {

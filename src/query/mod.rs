@@ -1,6 +1,6 @@
 //! Query machinery of Active DQN: when the learning agent hands control to the expert.
 //!
-//! This is the paper's contribution (Chen et al., section 4 and Algorithm 1; ALGORITHM_NOTES.md sections 7-9).
+//! This is the paper's contribution (Chen et al., section 4 and Algorithm 1; docs/algorithm.md sections 7-9).
 //! At every step where the agent is about to act, the training loop
 //!
 //! 1. asks the [`QueryController`] whether an uncertainty is wanted ([`QueryController::uncertainty_wanted_now`]);

@@ -1,6 +1,6 @@
 //! An order-statistics multiset of `f32`: the balanced search tree "B" of the paper's Algorithm 1.
 //!
-//! The adaptive query rule (ALGORITHM_NOTES.md section 8) needs, at every agent decision, the k-th largest of the
+//! The adaptive query rule (docs/algorithm.md section 8) needs, at every agent decision, the k-th largest of the
 //! last N_r uncertainties, then one insertion and one deletion. The paper keeps them in a balanced binary search
 //! tree for O(log N_r) per step; [`OrderStatistics`] is such a tree:
 //!

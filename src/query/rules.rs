@@ -1,10 +1,10 @@
 //! Query rules and the controller that turns their decisions into expert control under a budget.
 //!
-//! - [`AdaptiveQuantileRule`]: the paper's Algorithm 1 (ALGORITHM_NOTES.md section 8). It keeps the last N_r
+//! - [`AdaptiveQuantileRule`]: the paper's Algorithm 1 (docs/algorithm.md section 8). It keeps the last N_r
 //!   uncertainties in a deque (for eviction order) and an [`OrderStatistics`] tree (for ranks), and queries when
 //!   the current uncertainty exceeds the `floor(|D| * t_query)`-th largest recent one, so that about a fraction
 //!   `t_query` of agent decisions trigger a query whatever the scale of the uncertainty.
-//! - [`QueryRule`]: the four strategies compared in the paper (section 5.1; ALGORITHM_NOTES.md section 9): never
+//! - [`QueryRule`]: the four strategies compared in the paper (section 5.1; docs/algorithm.md section 9): never
 //!   (DQN, DQfD), greedy (GDQN), Bernoulli (BDQN) and adaptive (ADQN, ADQNP).
 //! - [`QueryController`]: owns a rule, the budget and the current segment. The budget counts demonstrated
 //!   *transitions* and is never exceeded; one query hands the expert control for `segment_len` consecutive steps
@@ -75,7 +75,7 @@ impl Decision {
     };
 }
 
-/// The paper's adaptive query rule (Algorithm 1; ALGORITHM_NOTES.md section 8).
+/// The paper's adaptive query rule (Algorithm 1; docs/algorithm.md section 8).
 ///
 /// With D the last `n_r` uncertainties, at each agent decision:
 /// 1. if D is non-empty, `thr = (floor(|D| * t_query))-th largest of D` (0-based, index clamped to `|D| - 1`),
@@ -93,7 +93,7 @@ pub struct AdaptiveQuantileRule {
 }
 
 impl AdaptiveQuantileRule {
-    /// Default window N_r; the paper does not give it (ALGORITHM_NOTES.md section 8, ours).
+    /// Default window N_r; the paper does not give it (docs/algorithm.md section 8, ours).
     pub const DEFAULT_N_R: usize = 1000;
 
     /// A rule over the last `n_r` uncertainties querying about a fraction `t_query` of decisions.
@@ -174,7 +174,7 @@ fn validate_adaptive(n_r: usize, t_query: f64) -> Result<(), QueryError> {
     Ok(())
 }
 
-/// When the agent asks the expert (paper section 5.1; ALGORITHM_NOTES.md section 9).
+/// When the agent asks the expert (paper section 5.1; docs/algorithm.md section 9).
 #[derive(Clone, Debug)]
 pub enum QueryRule {
     /// Never query (DQN, DQfD).
@@ -241,7 +241,7 @@ impl QueryRule {
     }
 }
 
-/// A query rule with its budget and expert-control segments (ALGORITHM_NOTES.md sections 8-9).
+/// A query rule with its budget and expert-control segments (docs/algorithm.md sections 8-9).
 ///
 /// Invariants: `budget_used() <= budget()`; every query grants between 1 and `segment_len` expert steps;
 /// the rule sees only the steps where the agent is about to act.

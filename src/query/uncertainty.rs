@@ -1,4 +1,4 @@
-//! The two uncertainty measures of Active DQN (paper sections 4.3 and 4.4; ALGORITHM_NOTES.md section 7).
+//! The two uncertainty measures of Active DQN (paper sections 4.3 and 4.4; docs/algorithm.md section 7).
 //!
 //! - [`js_divergence`]: disagreement between the K heads of a bootstrapped Q-network. Each head's Q-values are
 //!   turned into a policy by a temperature-1 softmax, and the uncertainty is the generalised Jensen-Shannon
@@ -14,7 +14,7 @@ const STACK_ACTIONS: usize = 32;
 /// Generalised Jensen-Shannon divergence between the softmax policies of `heads` bootstrapped Q-heads.
 ///
 /// `q` holds the Q-values laid out `[head][action]` (length `heads * n_actions`). With
-/// `pi_k = softmax(Q_k)` at temperature 1 (paper section 4.3, no rescaling of Q, ALGORITHM_NOTES.md section 7):
+/// `pi_k = softmax(Q_k)` at temperature 1 (paper section 4.3, no rescaling of Q, docs/algorithm.md section 7):
 ///
 /// `U_D = H(mean_k pi_k) - mean_k H(pi_k)`, natural-log entropies.
 ///
@@ -97,11 +97,11 @@ fn js_divergence_with_buffers(
 ///
 /// `features` is phi(s), the input of the noisy layer (the penultimate activations); `sigma_w_row` is the row
 /// `sigma_w[a, :]` and `sigma_b` the entry `sigma_b[a]` for the action `a` the agent would take (the caller picks
-/// the row; ALGORITHM_NOTES.md section 7).
+/// the row; docs/algorithm.md section 7).
 ///
 /// - Default (`exact_factorised = false`), the paper's form for independent Gaussian weights:
 ///   `Var[Q(s,a)] = sum_i sigma_w[a,i]^2 phi_i^2 + sigma_b[a]^2`.
-/// - `exact_factorised = true`, the exact variance under factorised noise (ALGORITHM_NOTES.md sections 6-7):
+/// - `exact_factorised = true`, the exact variance under factorised noise (docs/algorithm.md sections 6-7):
 ///   the noise term is `f(e_a) (sum_i sigma_w[a,i] f(e_i) phi_i + sigma_b[a])` with `f(x) = sgn(x) sqrt|x|`,
 ///   `E[f(e)] = 0` and `E[f(e)^2] = E|e| = sqrt(2/pi)`; cross terms vanish, so
 ///   `Var = (2/pi) sum_i sigma_w[a,i]^2 phi_i^2 + sqrt(2/pi) sigma_b[a]^2`.

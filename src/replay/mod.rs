@@ -1,7 +1,7 @@
 //! Experience replay: proportional prioritized replay with a permanent demonstration part, or
 //! plain uniform replay.
 //!
-//! The memory has two parts (ALGORITHM_NOTES.md §3, following DQfD):
+//! The memory has two parts (docs/algorithm.md §3, following DQfD):
 //! - a **demonstration part** of at most `demo_capacity` transitions, filled in arrival order and
 //!   never overwritten (pushing more is a [`ReplayError::DemoCapacityFull`] error);
 //! - an **agent part**, a FIFO ring of `capacity` transitions: once full, each new agent transition
@@ -12,7 +12,7 @@
 //! in slot `demo_capacity + r`. A slot names a transition until the ring overwrites it, so
 //! priorities should be updated before the next push (as a learner does: sample, learn, update).
 //!
-//! **Prioritized sampling** (Schaul et al. 2016, proportional variant; ALGORITHM_NOTES.md §3):
+//! **Prioritized sampling** (Schaul et al. 2016, proportional variant; docs/algorithm.md §3):
 //! - priority `p_i = |δ_i| + ε`, with `ε = eps_demo` for demonstrations and `eps_agent` for agent
 //!   transitions (DQfD's demonstration bonus);
 //! - `P(i) = p_i^α / Σ_k p_k^α`; the masses `p_i^α` live in one [`SumMinTree`] per part;
@@ -31,7 +31,7 @@
 //! not maintained.
 //!
 //! [`Replay::sample_demo_only`] draws from the demonstration part alone (DQfD pre-training,
-//! ALGORITHM_NOTES.md §9), prioritized among demonstrations: `N` and the weight normaliser are then
+//! docs/algorithm.md §9), prioritized among demonstrations: `N` and the weight normaliser are then
 //! taken over the demonstrations only.
 //!
 //! **n-step returns** (DQfD's optional n-step loss, off in the paper): with `n_step > 0` the memory computes each
@@ -53,7 +53,7 @@ use rand::Rng;
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
-/// Replay settings (defaults: ALGORITHM_NOTES.md §3 and the CartPole memory size of §9).
+/// Replay settings (defaults: docs/algorithm.md §3 and the CartPole memory size of §9).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct ReplayConfig {
@@ -153,7 +153,7 @@ pub struct Batch {
     pub next_obs: Vec<f32>,
     /// Bootstrap cut: the target must not bootstrap from `next_obs`.
     pub terminal: Vec<bool>,
-    /// The sample is a demonstration (the large-margin loss applies, ALGORITHM_NOTES.md §4).
+    /// The sample is a demonstration (the large-margin loss applies, docs/algorithm.md §4).
     pub is_demo: Vec<bool>,
     /// n-step returns (filled only when the memory stores them): reward sum, the observation n steps
     /// later (`[sample][obs_dim]`), and the discount of its value (0 when the episode ended before).

@@ -1,6 +1,6 @@
 //! A sum-tree paired with a min-tree over a fixed number of non-negative leaf values.
 //!
-//! Proportional prioritized replay (Schaul et al. 2016, ALGORITHM_NOTES.md §3) needs three things
+//! Proportional prioritized replay (Schaul et al. 2016, docs/algorithm.md §3) needs three things
 //! of the sampling masses `p_i^α`, each in O(log n): the total mass (to normalise), the leaf in
 //! which a point `u ∈ [0, total)` of the cumulative mass falls (to sample), and the smallest mass
 //! over the stored transitions (for the largest importance-sampling weight). [`SumMinTree`] keeps

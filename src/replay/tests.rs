@@ -1,5 +1,5 @@
 //! Tests of the replay memory against independent computations of the PER formulas
-//! (ALGORITHM_NOTES.md §3): sampling frequencies by chi-square, IS weights by the textbook formula,
+//! (docs/algorithm.md §3): sampling frequencies by chi-square, IS weights by the textbook formula,
 //! and eviction/priority bookkeeping by direct inspection.
 
 use super::*;

@@ -1,7 +1,7 @@
 //! Every hyperparameter of a run in one struct, with its default and its source.
 //!
 //! A run's configuration is built in layers: [`TrainConfig::preset`] fills in the paper's per-task table and the
-//! method's settings (ALGORITHM_NOTES.md §9), a TOML file may override any field, and `--set key=value` pairs
+//! method's settings (docs/algorithm.md §9), a TOML file may override any field, and `--set key=value` pairs
 //! override last. Unknown keys and ill-typed values are rejected up front with the list of valid keys, and
 //! [`TrainConfig::validate`] checks the values before any work starts.
 
@@ -10,7 +10,7 @@ use serde::{Deserialize, Serialize};
 use std::fmt;
 use std::path::Path;
 
-/// The learning method (ALGORITHM_NOTES.md §9).
+/// The learning method (docs/algorithm.md §9).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize, clap::ValueEnum)]
 #[serde(rename_all = "lowercase")]
 pub enum Method {
@@ -86,7 +86,7 @@ impl fmt::Display for Method {
     }
 }
 
-/// The output stage of the Q-network (ALGORITHM_NOTES.md §2).
+/// The output stage of the Q-network (docs/algorithm.md §2).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize, clap::ValueEnum)]
 #[serde(rename_all = "lowercase")]
 pub enum NetKind {
@@ -126,7 +126,7 @@ impl fmt::Display for NetKind {
     }
 }
 
-/// The TD loss (ALGORITHM_NOTES.md §2: squared error by default, Huber as an option).
+/// The TD loss (docs/algorithm.md §2: squared error by default, Huber as an option).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum TdLoss {
@@ -134,7 +134,7 @@ pub enum TdLoss {
     Huber,
 }
 
-/// How the adaptive/Bernoulli query rule decides (ALGORITHM_NOTES.md §8–9).
+/// How the adaptive/Bernoulli query rule decides (docs/algorithm.md §8–9).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum RuleKind {
@@ -145,7 +145,7 @@ pub enum RuleKind {
 }
 
 /// All hyperparameters of one training run. Field docs give the default and its source tag
-/// (\[P\] paper, \[DQfD\], \[PER\], \[BS\], \[NN\], \[OURS\] as in ALGORITHM_NOTES.md).
+/// (\[P\] paper, \[DQfD\], \[PER\], \[BS\], \[NN\], \[OURS\] as in docs/algorithm.md).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct TrainConfig {
@@ -245,7 +245,7 @@ pub struct TrainConfig {
     pub checkpoint_every: usize,
 }
 
-/// Per-task numbers of the paper's parameter table (ALGORITHM_NOTES.md §9).
+/// Per-task numbers of the paper's parameter table (docs/algorithm.md §9).
 #[derive(Clone, Copy, Debug)]
 pub struct TaskPreset {
     pub gamma: f64,
@@ -334,7 +334,7 @@ pub fn task_preset(env: &str) -> Result<TaskPreset> {
 }
 
 impl TrainConfig {
-    /// The paper's configuration for `method` with `net` on `env` (ALGORITHM_NOTES.md §9).
+    /// The paper's configuration for `method` with `net` on `env` (docs/algorithm.md §9).
     pub fn preset(env: &str, method: Method, net: NetKind, seed: u64) -> Result<Self> {
         let p = task_preset(env)?;
         let t_query = match net {

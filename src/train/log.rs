@@ -56,7 +56,7 @@ pub struct Summary {
     pub steps_per_s: f64,
 }
 
-/// First evaluation step whose mean reaches `threshold`, or `train_steps` if none does (ALGORITHM_NOTES.md §11).
+/// First evaluation step whose mean reaches `threshold`, or `train_steps` if none does (docs/algorithm.md §11).
 pub fn steps_to_solve(curve: &[EvalPoint], threshold: f64, train_steps: u64) -> (u64, bool) {
     match curve.iter().find(|p| p.mean >= threshold) {
         Some(p) => (p.step, true),
