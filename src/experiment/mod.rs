@@ -6,6 +6,7 @@
 pub mod paper;
 pub mod plot;
 pub mod report;
+pub mod stats;
 pub mod sweep;
 
 use crate::expert::{self, demos::Demonstrations};

@@ -14,6 +14,7 @@
 
 use super::paper::{self, PAPER_TASKS, TABLE5_METHODS, TABLE5_NETS};
 use super::plot;
+pub use super::stats::{median, quantile};
 use super::sweep::{DEFAULT_VARIANT, SUMMARY_FILE, SWEEP_FILE, SweepGrid, write_atomic};
 use anyhow::{Context, Result, bail};
 use std::collections::BTreeMap;
@@ -77,27 +78,6 @@ pub fn evaluations_csv(runs: &[RunRecord]) -> String {
 /// (docs/algorithm.md section 11: Table 5 prints the full budget, e.g. 500000, for runs that never solve).
 pub fn steps_to_solve(curve: &[EvalPoint], threshold: f64, train_steps: u64) -> u64 {
     crate::train::log::steps_to_solve(curve, threshold, train_steps).0
-}
-
-/// Median as the paper computes it over seeds: the middle value, or the mean of the two middle values for an
-/// even count. `None` for no values; NaNs are ignored.
-pub fn median(values: &[f64]) -> Option<f64> {
-    quantile(values, 0.5)
-}
-
-/// Quantile `q` in [0, 1] with linear interpolation between order statistics (NumPy's default), which gives
-/// the paper's median at q = 0.5. `None` for no (non-NaN) values.
-pub fn quantile(values: &[f64], q: f64) -> Option<f64> {
-    let mut sorted: Vec<f64> = values.iter().copied().filter(|v| !v.is_nan()).collect();
-    if sorted.is_empty() {
-        return None;
-    }
-    sorted.sort_by(f64::total_cmp);
-    let position = q.clamp(0.0, 1.0) * (sorted.len() - 1) as f64;
-    let below = position.floor() as usize;
-    let above = position.ceil() as usize;
-    let fraction = position - below as f64;
-    Some(sorted[below] + (sorted[above] - sorted[below]) * fraction)
 }
 
 fn read_summary(path: &Path) -> Result<serde_json::Value> {
