@@ -4,6 +4,7 @@
 use anyhow::{Result, bail};
 use arld::experiment::report::{self, EvalPoint};
 use arld::experiment::sweep::{self, RunSpec, SweepGrid};
+use arld::train::{Method, NetKind};
 use std::collections::BTreeSet;
 use std::path::Path;
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -20,13 +21,6 @@ fn threshold(env: &str) -> f64 {
     }
 }
 
-fn override_value<'a>(spec: &'a RunSpec, key: &str) -> Option<&'a str> {
-    spec.overrides
-        .iter()
-        .rev()
-        .find_map(|o| o.strip_prefix(key)?.strip_prefix('='))
-}
-
 /// The designed solve step of a fake run: seed 3 never solves; the others solve at (2 + seed + method index)k
 /// steps, later for larger t_query values and some experts, so configurations differ; a designed step past the
 /// end of training means the run never solves.
@@ -34,13 +28,19 @@ fn designed_solve_step(spec: &RunSpec) -> Option<u64> {
     if spec.seed == 3 {
         return None;
     }
-    let method_index = sweep::METHODS
-        .iter()
-        .position(|m| *m == spec.method)
-        .unwrap() as u64;
-    let t_query_shift =
-        override_value(spec, "t_query").map_or(0, |t| (t.parse::<f64>().unwrap() * 10.0) as u64);
-    let expert_shift = override_value(spec, "expert").map_or(0, |e| match e {
+    let method_index = [
+        Method::Dqn,
+        Method::Dqfd,
+        Method::Gdqn,
+        Method::Bdqn,
+        Method::Adqn,
+        Method::Adqnp,
+    ]
+    .iter()
+    .position(|m| *m == spec.method)
+    .unwrap() as u64;
+    let t_query_shift = spec.t_query.map_or(0, |t| (t * 10.0) as u64);
+    let expert_shift = spec.expert.as_deref().map_or(0, |e| match e {
         _ if e.contains("noisy") => 3,
         _ if e.contains("weak") => 1,
         _ => 0,
@@ -59,8 +59,8 @@ fn fake_mean(spec: &RunSpec, step: u64) -> f64 {
 
 /// Writes a complete fake run, or, with `interrupt`, only the files a killed run would have left.
 fn write_fake_run(spec: &RunSpec, dir: &Path, interrupt: bool) -> Result<()> {
-    let t_query = override_value(spec, "t_query").unwrap_or("0.05");
-    let expert = override_value(spec, "expert").unwrap_or("\"shipped:weak\"");
+    let t_query = spec.t_query.unwrap_or(0.05);
+    let expert = format!("{:?}", spec.expert.as_deref().unwrap_or("shipped:weak"));
     std::fs::write(
         dir.join("config.toml"),
         format!(
@@ -90,7 +90,7 @@ fn write_fake_run(spec: &RunSpec, dir: &Path, interrupt: bool) -> Result<()> {
     )?;
     let mut queries =
         String::from("step,episode,uncertainty,threshold,expert_action,agent_action\n");
-    if spec.method != "dqn" && spec.method != "dqfd" {
+    if spec.method != Method::Dqn && spec.method != Method::Dqfd {
         for k in 0..(20 + spec.seed) {
             // Queries thin out over training; the uncertainty columns may be empty.
             queries.push_str(&format!("{},{},,,1,0\n", k * k * 20, k / 5));
@@ -114,8 +114,8 @@ fn write_fake_run(spec: &RunSpec, dir: &Path, interrupt: bool) -> Result<()> {
 fn small_grid() -> SweepGrid {
     SweepGrid {
         envs: vec!["CartPole-v0".into(), "Acrobot-v1".into()],
-        methods: vec!["dqn".into(), "adqn".into(), "dqfd".into()],
-        nets: vec!["bootstrap".into()],
+        methods: vec![Method::Dqn, Method::Adqn, Method::Dqfd],
+        nets: vec![NetKind::Bootstrap],
         seeds: vec![0, 1, 2, 3],
         ..SweepGrid::default()
     }
@@ -219,8 +219,8 @@ fn results_rows_match_each_runs_eval_csv_in_sorted_order() {
             let mean = fake_mean(&spec, step);
             let key = (
                 spec.env.clone(),
-                spec.method.clone(),
-                spec.net.clone(),
+                spec.method.to_string(),
+                spec.net.to_string(),
                 spec.seed,
                 step,
             );
@@ -251,9 +251,9 @@ fn failing_and_panicking_runs_are_reported_without_stopping_the_others() {
     };
     let dir = tempfile::tempdir().unwrap();
     let result = sweep::run_grid(&grid, dir.path(), 2, &|spec, dir| {
-        match (spec.method.as_str(), spec.seed) {
-            ("adqn", 1) => panic!("simulated bug"),
-            ("dqn", 2) => Ok(()), // returns without summary.json
+        match (spec.method, spec.seed) {
+            (Method::Adqn, 1) => panic!("simulated bug"),
+            (Method::Dqn, 2) => Ok(()), // returns without summary.json
             _ => write_fake_run(spec, dir, false),
         }
     });
@@ -317,23 +317,23 @@ fn report_fixture(dir: &Path) {
     // as `arld reproduce` lays them out.
     let methods = SweepGrid {
         envs: vec!["CartPole-v0".into(), "Acrobot-v1".into()],
-        methods: vec!["dqn".into(), "gdqn".into(), "adqn".into(), "dqfd".into()],
-        nets: vec!["bootstrap".into()],
+        methods: vec![Method::Dqn, Method::Gdqn, Method::Adqn, Method::Dqfd],
+        nets: vec![NetKind::Bootstrap],
         seeds: vec![0, 1, 2, 3],
         ..SweepGrid::default()
     };
     let t_query = SweepGrid {
         envs: vec!["CartPole-v0".into()],
-        methods: vec!["adqn".into()],
-        nets: vec!["bootstrap".into()],
+        methods: vec![Method::Adqn],
+        nets: vec![NetKind::Bootstrap],
         seeds: vec![0, 1, 2],
         t_query: vec![0.05, 0.1, 0.3, 0.5],
         ..SweepGrid::default()
     };
     let experts = SweepGrid {
         envs: vec!["LunarLander-v2".into()],
-        methods: vec!["adqn".into(), "dqfd".into()],
-        nets: vec!["bootstrap".into()],
+        methods: vec![Method::Adqn, Method::Dqfd],
+        nets: vec![NetKind::Bootstrap],
         seeds: vec![0, 1, 2],
         experts: vec![
             "shipped:perfect".into(),
@@ -462,22 +462,12 @@ fn group_medians_follow_the_design_for_every_configuration() {
             .map(|r| {
                 let spec = RunSpec {
                     env: r.env.clone(),
-                    method: r.method.clone(),
-                    net: r.net.clone(),
+                    method: r.method.parse().unwrap(),
+                    net: r.net.parse().unwrap(),
                     seed: r.seed,
-                    overrides: [
-                        r.t_query
-                            .filter(|_| r.variant.starts_with("tq"))
-                            .map(|t| format!("t_query={t}")),
-                        r.expert
-                            .clone()
-                            .filter(|_| r.variant.starts_with("expert"))
-                            .map(|e| format!("expert=\"{e}\"")),
-                    ]
-                    .into_iter()
-                    .flatten()
-                    .collect(),
-                    variant: None,
+                    t_query: r.t_query.filter(|_| r.variant.starts_with("tq")),
+                    expert: r.expert.clone().filter(|_| r.variant.starts_with("expert")),
+                    set: vec![],
                 };
                 designed_solve_step(&spec).unwrap_or(TRAIN_STEPS)
             })
@@ -513,7 +503,7 @@ fn report_skips_damaged_runs_with_a_note() {
     let dir = tempfile::tempdir().unwrap();
     let grid = SweepGrid {
         envs: vec!["CartPole-v0".into()],
-        methods: vec!["dqn".into()],
+        methods: vec![Method::Dqn],
         ..small_grid()
     };
     sweep::run_grid(&grid, dir.path(), 1, &|spec, dir| {

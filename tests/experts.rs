@@ -5,7 +5,7 @@ use arld::expert::demos::Demonstrations;
 use arld::expert::pipeline::evaluate_expert;
 use arld::expert::{self, scripted::ScriptedExpert};
 use arld::replay::{Batch, Replay, ReplayConfig};
-use arld::train::{Method, NetKind, TrainConfig, pretrain};
+use arld::train::{ConfigInput, Method, NetKind, pretrain};
 use rand::SeedableRng;
 
 #[test]
@@ -111,12 +111,13 @@ fn demonstrations_round_trip_and_are_checked() {
 /// chance); with λ = 1 at lr 1e-4 the 10k updates reach 88-90%, with lr 1e-3 98%.
 #[test]
 fn pretraining_agrees_with_the_expert_on_demonstrations() {
-    let mut cfg = TrainConfig::preset("CartPole-v0", Method::Dqfd, NetKind::Bootstrap, 0).unwrap();
-    cfg.lambda = 1.0;
-    cfg.lr = 1e-3;
+    let mut input = ConfigInput::new("CartPole-v0", Method::Dqfd, NetKind::Bootstrap, 0);
+    input.set("lambda", 1.0).unwrap();
+    input.set("lr", 1e-3).unwrap();
+    let cfg = input.resolve().unwrap();
     let mut e = expert::from_spec("shipped:weak", "CartPole-v0", 0).unwrap();
     let demos = Demonstrations::collect("CartPole-v0", e.as_mut(), cfg.n_demo, 0).unwrap();
-    let mut agent = Agent::new(&cfg, 4, 2, 1);
+    let mut agent = Agent::new(&cfg.agent_config(), 4, 2, 1);
     let mut replay = Replay::new(
         4,
         &ReplayConfig {

@@ -4,14 +4,18 @@
 //! criterion: the 20-episode test mean reaches the task's threshold within the training budget.
 
 use arld::experiment::run_one;
-use arld::train::{Method, NetKind, Summary, TrainConfig};
+use arld::train::{ConfigInput, Method, NetKind, Summary, TrainConfig};
+
+fn config(env: &str, method: Method, net: NetKind, seed: u64, overrides: &[&str]) -> TrainConfig {
+    let mut input = ConfigInput::new(env, method, net, seed);
+    for o in overrides {
+        input.apply_override(o).unwrap();
+    }
+    input.resolve().unwrap()
+}
 
 fn run(env: &str, method: Method, net: NetKind, seed: u64, overrides: &[&str]) -> Summary {
-    let mut cfg = TrainConfig::preset(env, method, net, seed).unwrap();
-    for o in overrides {
-        cfg.apply_override(o).unwrap();
-    }
-    run_one(&cfg, None, false).unwrap()
+    run_one(&config(env, method, net, seed, overrides), None, false).unwrap()
 }
 
 /// Runs seeds 0..5 and asserts at least 4 reach the threshold within the preset's training steps.
@@ -70,10 +74,8 @@ fn bootstrapped_dqn_solves_acrobot() {
 #[test]
 fn the_same_seed_gives_byte_identical_results() {
     let dir = tempfile::tempdir().unwrap();
-    let mut cfg = TrainConfig::preset("CartPole-v0", Method::Adqn, NetKind::Noisy, 11).unwrap();
-    cfg.train_steps = 3_000;
-    cfg.eval_period = 500;
-    cfg.expert = "scripted".into();
+    let sets = ["train_steps=3000", "eval_period=500", "expert=\"scripted\""];
+    let cfg = config("CartPole-v0", Method::Adqn, NetKind::Noisy, 11, &sets);
     let a = dir.path().join("a");
     let b = dir.path().join("b");
     run_one(&cfg, Some(&a), false).unwrap();
@@ -85,9 +87,9 @@ fn the_same_seed_gives_byte_identical_results() {
         assert_eq!(x, y, "{file} differs between two runs with the same seed");
     }
     // A different seed gives different numbers (the seed is really used).
-    cfg.seed = 12;
     let c = dir.path().join("c");
-    run_one(&cfg, Some(&c), false).unwrap();
+    let other_seed = config("CartPole-v0", Method::Adqn, NetKind::Noisy, 12, &sets);
+    run_one(&other_seed, Some(&c), false).unwrap();
     assert_ne!(
         std::fs::read(a.join("episodes.csv")).unwrap(),
         std::fs::read(c.join("episodes.csv")).unwrap()

@@ -12,9 +12,43 @@ use crate::nn::{
 };
 use crate::query::{js_divergence, noisy_variance};
 use crate::replay::Batch;
-use crate::train::config::{NetKind, TdLoss, TrainConfig};
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64;
+use serde::{Deserialize, Serialize};
+
+/// The TD loss (docs/algorithm.md §2: squared error by default, Huber as an option).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum TdLoss {
+    Mse,
+    Huber,
+}
+
+/// Everything an [`Agent`] needs to know: its network's output stage and its learning settings. A run builds
+/// it from its configuration (`TrainConfig::agent_config`); an agent can be built and tested without one.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct AgentConfig {
+    /// Plain, K bootstrapped heads, or noisy output.
+    pub output: OutputKind,
+    /// Minibatch size the update buffers are sized for.
+    pub batch_size: usize,
+    /// Adam learning rate.
+    pub lr: f32,
+    /// Discount factor γ.
+    pub gamma: f32,
+    pub loss: TdLoss,
+    /// Global gradient-norm clip.
+    pub grad_clip: f32,
+    /// Large-margin loss margin M and its weight λ.
+    pub margin: f32,
+    pub lambda: f32,
+    /// Weight of DQfD's n-step TD loss (0: off).
+    pub lambda_n: f32,
+    /// L2 regularisation weight.
+    pub l2: f32,
+    /// Exact factorised-noise variance instead of the paper's formula.
+    pub exact_factorised_var: bool,
+}
 
 /// What one gradient update measured (means over the batch, summed over heads).
 #[derive(Clone, Copy, Debug, Default)]
@@ -58,30 +92,16 @@ pub struct Agent {
     lambda_n: f32,
 }
 
-/// The network output stage a configuration asks for.
-pub fn output_kind(net: NetKind, heads: usize) -> OutputKind {
-    match net {
-        NetKind::Plain => OutputKind::Plain,
-        NetKind::Bootstrap => OutputKind::Bootstrap { heads },
-        NetKind::Noisy => OutputKind::Noisy,
-    }
-}
-
 impl Agent {
     /// A freshly initialised agent for an environment with `obs_dim` inputs and `n_actions` actions.
-    pub fn new(cfg: &TrainConfig, obs_dim: usize, n_actions: usize, seed: u64) -> Self {
+    pub fn new(cfg: &AgentConfig, obs_dim: usize, n_actions: usize, seed: u64) -> Self {
         let mut rng = Pcg64::seed_from_u64(seed);
-        let online = QNet::new(
-            obs_dim,
-            n_actions,
-            output_kind(cfg.net, cfg.heads),
-            &mut rng,
-        );
+        let online = QNet::new(obs_dim, n_actions, cfg.output, &mut rng);
         Self::from_network(cfg, online, rng)
     }
 
     /// An agent that starts from given online weights (for example a loaded checkpoint).
-    pub fn from_network(cfg: &TrainConfig, online: QNet, mut rng: Pcg64) -> Self {
+    pub fn from_network(cfg: &AgentConfig, online: QNet, mut rng: Pcg64) -> Self {
         let target = online.clone();
         let n_actions = online.n_actions();
         let batch = cfg.batch_size;
@@ -94,7 +114,7 @@ impl Agent {
             (noise(), noise(), noise(), noise());
         let heads = online.heads();
         Self {
-            adam: Adam::new(&online, cfg.lr as f32),
+            adam: Adam::new(&online, cfg.lr),
             grads: Grads::new(&online),
             q_act: vec![0.0; heads * n_actions],
             phi: [0.0; HIDDEN],
@@ -110,14 +130,14 @@ impl Agent {
             active_head: 0,
             dq: vec![0.0; heads * batch * n_actions],
             abs_td: vec![0.0; batch],
-            gamma: cfg.gamma as f32,
+            gamma: cfg.gamma,
             loss: cfg.loss,
-            grad_clip: cfg.grad_clip as f32,
-            margin: cfg.margin as f32,
-            lambda: cfg.lambda as f32,
+            grad_clip: cfg.grad_clip,
+            margin: cfg.margin,
+            lambda: cfg.lambda,
             exact_factorised_var: cfg.exact_factorised_var,
-            l2: cfg.l2 as f32,
-            lambda_n: cfg.lambda_n as f32,
+            l2: cfg.l2,
+            lambda_n: cfg.lambda_n,
             online,
             target,
             rng,

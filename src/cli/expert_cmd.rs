@@ -4,7 +4,7 @@ use arld::experiment::run_one;
 use arld::expert::demos::Demonstrations;
 use arld::expert::pipeline::{Candidate, evaluate_expert, paper_expert_stats, select_experts};
 use arld::expert::{self, CheckpointExpert, SPEC_HELP};
-use arld::train::{Method, NetKind, TrainConfig};
+use arld::train::{ConfigInput, Method, NetKind};
 use clap::Subcommand;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -121,12 +121,17 @@ pub fn run_expert(cmd: ExpertCommand) -> Result<ExitCode> {
             episodes,
             overrides,
         } => {
-            let mut cfg = TrainConfig::preset(&env, Method::Dqn, net, seed)?;
+            let mut input = ConfigInput::new(&env, Method::Dqn, net, seed);
             for o in &overrides {
-                cfg.apply_override(o)?;
+                input.apply_override(o)?;
             }
-            cfg.checkpoint_every = checkpoint_every.unwrap_or(cfg.eval_period);
-            cfg.validate()?;
+            // Checkpoints at every evaluation unless asked otherwise: the candidates of the selection.
+            let every = match checkpoint_every {
+                Some(every) => every,
+                None => input.resolve()?.eval_period,
+            };
+            input.set("checkpoint_every", every as i64)?;
+            let cfg = input.resolve()?;
             let run_dir = run_dir
                 .unwrap_or_else(|| PathBuf::from("runs").join(format!("expert_{env}_seed{seed}")));
             // A finished training run (summary.json written last) is reused: only the selection runs again.

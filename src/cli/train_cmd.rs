@@ -1,6 +1,6 @@
 //! `arld train`: one training run with the paper's presets, a config file and `--set` overrides.
 use arld::experiment::run_one;
-use arld::train::{Method, NetKind, TrainConfig};
+use arld::train::{ConfigInput, Method, NetKind, TrainConfig};
 use clap::Args;
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -51,21 +51,20 @@ pub struct TrainArgs {
 
 /// Resolves the layered configuration of a `train` invocation.
 pub fn resolve(args: &TrainArgs) -> anyhow::Result<TrainConfig> {
-    let mut cfg = TrainConfig::preset(&args.env, args.method, args.net, args.seed)?;
+    let mut input = ConfigInput::new(&args.env, args.method, args.net, args.seed);
     if let Some(path) = &args.config {
-        cfg.apply_file(path)?;
+        input.apply_file(path)?;
     }
     for o in &args.overrides {
-        cfg.apply_override(o)?;
+        input.apply_override(o)?;
     }
     if let Some(e) = &args.expert {
-        cfg.expert = e.clone();
+        input.set("expert", e.as_str())?;
     }
     if let Some(d) = &args.demos {
-        cfg.demo_file = d.display().to_string();
+        input.set("demo_file", d.display().to_string())?;
     }
-    cfg.validate()?;
-    Ok(cfg)
+    input.resolve()
 }
 
 pub fn run(args: TrainArgs) -> anyhow::Result<ExitCode> {

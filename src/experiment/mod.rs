@@ -17,7 +17,6 @@ use std::path::Path;
 /// Builds the expert and the demonstrations a configuration needs, trains, and writes the run directory
 /// (or keeps everything in memory when `out_dir` is `None`).
 pub fn run_one(cfg: &TrainConfig, out_dir: Option<&Path>, progress: bool) -> Result<Summary> {
-    cfg.validate()?;
     let mut expert = if cfg.method.needs_expert() {
         Some(expert::from_spec(
             &cfg.expert,
@@ -58,15 +57,8 @@ pub fn run_one(cfg: &TrainConfig, out_dir: Option<&Path>, progress: bool) -> Res
     Ok(summary)
 }
 
-/// Runs one grid point of a sweep into `dir`: the paper's preset for its task, method and network, the point's
-/// seed, then its overrides (`key=value`, as `arld train --set`).
+/// Runs one grid point of a sweep into `dir` (its configuration: [`sweep::RunSpec::config`]).
 pub fn run_spec(spec: &sweep::RunSpec, dir: &Path) -> Result<()> {
-    let method = spec.method.parse::<crate::train::Method>()?;
-    let net = spec.net.parse::<crate::train::NetKind>()?;
-    let mut cfg = TrainConfig::preset(&spec.env, method, net, spec.seed)?;
-    for o in &spec.overrides {
-        cfg.apply_override(o)?;
-    }
-    run_one(&cfg, Some(dir), false)?;
+    run_one(&spec.config()?, Some(dir), false)?;
     Ok(())
 }

@@ -7,6 +7,7 @@
 //! study and the expert-quality study) into [`SweepGrid`]s for [`super::sweep::run_sweep`].
 
 use super::sweep::SweepGrid;
+use crate::train::{Method, NetKind};
 
 /// One of the paper's four tasks: its display name, the Gym id the paper used, and the score that marks it solved.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -177,18 +178,23 @@ pub const PAPER_SEEDS: u64 = 20;
 /// Every other setting is left to the per-task presets of the training code.
 pub fn paper_grids(seeds: u64) -> Vec<(&'static str, SweepGrid)> {
     let all_tasks: Vec<String> = PAPER_TASKS.iter().map(|t| t.gym_id.to_string()).collect();
-    let nets: Vec<String> = TABLE5_NETS.iter().map(|(n, _)| n.to_string()).collect();
+    // The tables name methods and networks as configs do; every name parses (a test builds the grids).
+    let method = |m: &str| m.parse::<Method>().expect("a method name");
+    let nets: Vec<NetKind> = TABLE5_NETS
+        .iter()
+        .map(|(n, _)| n.parse().expect("a network name"))
+        .collect();
     let seed_list: Vec<u64> = (0..seeds).collect();
     let methods = SweepGrid {
         envs: all_tasks.clone(),
-        methods: TABLE5_METHODS.iter().map(|m| m.to_string()).collect(),
+        methods: TABLE5_METHODS.iter().map(|m| method(m)).collect(),
         nets: nets.clone(),
         seeds: seed_list.clone(),
         ..SweepGrid::default()
     };
     let t_query = SweepGrid {
         envs: all_tasks,
-        methods: vec!["adqn".to_string()],
+        methods: vec![Method::Adqn],
         nets: nets.clone(),
         seeds: seed_list.clone(),
         t_query: T_QUERY_VALUES.to_vec(),
@@ -196,10 +202,7 @@ pub fn paper_grids(seeds: u64) -> Vec<(&'static str, SweepGrid)> {
     };
     let experts = SweepGrid {
         envs: vec![PAPER_TASKS[3].gym_id.to_string()],
-        methods: EXPERT_QUALITY_METHODS
-            .iter()
-            .map(|m| m.to_string())
-            .collect(),
+        methods: EXPERT_QUALITY_METHODS.iter().map(|m| method(m)).collect(),
         nets,
         seeds: seed_list,
         experts: EXPERT_QUALITY_SPECS.iter().map(|e| e.to_string()).collect(),

@@ -13,6 +13,7 @@
 //!   evaluation point.
 
 use super::report::{RunRecord, load_runs};
+use crate::train::{ConfigInput, Method, NetKind, TrainConfig};
 use anyhow::{Context, Result, bail};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use serde::{Deserialize, Serialize};
@@ -22,10 +23,6 @@ use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
-/// Methods a run can use (docs/algorithm.md section 9).
-pub const METHODS: [&str; 6] = ["dqn", "dqfd", "gdqn", "bdqn", "adqn", "adqnp"];
-/// Network output stages (docs/algorithm.md section 2).
-pub const NETS: [&str; 3] = ["plain", "bootstrap", "noisy"];
 /// Name of the file that records a sweep's grid inside its directory.
 pub const SWEEP_FILE: &str = "sweep.toml";
 /// Name of the file that gathers every evaluation point of a sweep.
@@ -42,8 +39,8 @@ pub const DEFAULT_VARIANT: &str = "default";
 #[serde(deny_unknown_fields)]
 pub struct SweepGrid {
     pub envs: Vec<String>,
-    pub methods: Vec<String>,
-    pub nets: Vec<String>,
+    pub methods: Vec<Method>,
+    pub nets: Vec<NetKind>,
     #[serde(deserialize_with = "deserialize_seeds")]
     pub seeds: Vec<u64>,
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
@@ -160,10 +157,18 @@ impl SweepGrid {
                     .with_context(|| format!("t_query value '{t}' is not a number"))
             })
             .collect::<Result<Vec<f64>>>()?;
+        let methods = split_values(methods)
+            .iter()
+            .map(|m| m.parse::<Method>())
+            .collect::<Result<Vec<_>>>()?;
+        let nets = split_values(nets)
+            .iter()
+            .map(|n| n.parse::<NetKind>())
+            .collect::<Result<Vec<_>>>()?;
         let grid = SweepGrid {
             envs: split_values(envs),
-            methods: split_values(methods),
-            nets: split_values(nets),
+            methods,
+            nets,
             seeds: parse_seeds(seeds)?,
             t_query,
             experts: split_values(experts),
@@ -202,9 +207,9 @@ impl SweepGrid {
         Ok(toml::to_string(&file)?)
     }
 
-    /// Checks the grid: every list non-empty and free of duplicates, known methods and networks,
-    /// t_query in (0, 1], `set` entries of the form key=value that do not clash with a varied dimension.
-    /// Method and network names are case-sensitive lower-case, as in run configs.
+    /// Checks the grid: every list non-empty and free of duplicates, t_query in (0, 1], `set` entries of the
+    /// form key=value that do not clash with a varied dimension, and every run's configuration resolves (known
+    /// environment, values valid for its method): all before any run starts.
     pub fn validate(&self) -> Result<()> {
         fn check_list<T: PartialEq + std::fmt::Debug>(
             name: &str,
@@ -230,16 +235,6 @@ impl SweepGrid {
         for env in &self.envs {
             if !is_path_safe(env) {
                 bail!("environment id '{env}' may only contain letters, digits, '-', '_' and '.'");
-            }
-        }
-        for method in &self.methods {
-            if !METHODS.contains(&method.as_str()) {
-                bail!("unknown method '{method}' (valid: {})", METHODS.join(", "));
-            }
-        }
-        for net in &self.nets {
-            if !NETS.contains(&net.as_str()) {
-                bail!("unknown network '{net}' (valid: {})", NETS.join(", "));
             }
         }
         for &t in &self.t_query {
@@ -283,12 +278,26 @@ impl SweepGrid {
                 }
             }
         }
+        // The seed does not change which values are valid: resolving one seed per configuration suffices.
+        let first_seed = self.seeds[0];
+        for spec in self.expand().iter().filter(|s| s.seed == first_seed) {
+            spec.config().with_context(|| {
+                format!(
+                    "the sweep's run {} is misconfigured",
+                    spec.dir_name().display()
+                )
+            })?;
+        }
         Ok(())
     }
 
     /// Expands the grid into runs, in a fixed order: env, method, net, t_query, expert, seed.
     pub fn specs(&self) -> Result<Vec<RunSpec>> {
         self.validate()?;
+        Ok(self.expand())
+    }
+
+    fn expand(&self) -> Vec<RunSpec> {
         let t_queries: Vec<Option<f64>> = if self.t_query.is_empty() {
             vec![None]
         } else {
@@ -301,28 +310,19 @@ impl SweepGrid {
         };
         let mut specs = Vec::new();
         for env in &self.envs {
-            for method in &self.methods {
-                for net in &self.nets {
-                    for t_query in &t_queries {
+            for &method in &self.methods {
+                for &net in &self.nets {
+                    for &t_query in &t_queries {
                         for expert in &experts {
                             for &seed in &self.seeds {
-                                let mut overrides = self.set.clone();
-                                let mut variant = Vec::new();
-                                if let Some(t) = t_query {
-                                    overrides.push(format!("t_query={t}"));
-                                    variant.push(format!("tq{t}"));
-                                }
-                                if let Some(spec) = expert {
-                                    overrides.push(format!("expert=\"{spec}\""));
-                                    variant.push(format!("expert-{}", expert_dir_fragment(spec)));
-                                }
                                 specs.push(RunSpec {
                                     env: env.clone(),
-                                    method: method.clone(),
-                                    net: net.clone(),
+                                    method,
+                                    net,
                                     seed,
-                                    overrides,
-                                    variant: (!variant.is_empty()).then(|| variant.join("_")),
+                                    t_query,
+                                    expert: expert.cloned(),
+                                    set: self.set.clone(),
                                 });
                             }
                         }
@@ -330,30 +330,64 @@ impl SweepGrid {
                 }
             }
         }
-        Ok(specs)
+        specs
     }
 }
 
-/// One run of a sweep. `overrides` are `key=value` assignments (values are TOML literals, e.g. `t_query=0.05`,
-/// `expert="shipped:weak"`) to apply after the per-task preset of (env, method, net); `variant` names the
-/// varied dimensions beyond env/method/net/seed (e.g. `tq0.05`), or `None` when nothing else varies.
+/// One run of a sweep: the paper's preset for (env, method, net), the grid's `set` overrides (`key=value`, as
+/// `arld train --set`), then the varied t_query and expert, if any.
 #[derive(Debug, Clone, PartialEq)]
 pub struct RunSpec {
     pub env: String,
-    pub method: String,
-    pub net: String,
+    pub method: Method,
+    pub net: NetKind,
     pub seed: u64,
-    pub overrides: Vec<String>,
-    pub variant: Option<String>,
+    pub t_query: Option<f64>,
+    pub expert: Option<String>,
+    pub set: Vec<String>,
 }
 
 impl RunSpec {
+    /// The run's configuration as given.
+    pub fn config_input(&self) -> Result<ConfigInput> {
+        let mut input = ConfigInput::new(&self.env, self.method, self.net, self.seed);
+        for o in &self.set {
+            input.apply_override(o)?;
+        }
+        if let Some(t) = self.t_query {
+            input.set("t_query", t)?;
+        }
+        if let Some(e) = &self.expert {
+            input.set("expert", e.as_str())?;
+        }
+        Ok(input)
+    }
+
+    /// The run's resolved configuration.
+    pub fn config(&self) -> Result<TrainConfig> {
+        self.config_input()?.resolve()
+    }
+
+    /// The varied dimensions beyond env/method/net/seed (e.g. `tq0.05`), or `None` when nothing else varies.
+    pub fn variant(&self) -> Option<String> {
+        let parts: Vec<String> = [
+            self.t_query.map(|t| format!("tq{t}")),
+            self.expert
+                .as_ref()
+                .map(|e| format!("expert-{}", expert_dir_fragment(e))),
+        ]
+        .into_iter()
+        .flatten()
+        .collect();
+        (!parts.is_empty()).then(|| parts.join("_"))
+    }
+
     /// The run's directory relative to the sweep directory: `ENV/METHOD-NET[/VARIANT]/seedN`, e.g.
     /// `CartPole-v0/adqn-bootstrap/tq0.05/seed3`. Reports recover the variant from this layout.
     pub fn dir_name(&self) -> PathBuf {
         let mut path = PathBuf::from(&self.env);
         path.push(format!("{}-{}", self.method, self.net));
-        if let Some(variant) = &self.variant {
+        if let Some(variant) = self.variant() {
             path.push(variant);
         }
         path.push(format!("seed{}", self.seed));
@@ -361,8 +395,9 @@ impl RunSpec {
     }
 
     /// The variant label used in results and reports (`default` when nothing beyond the basics varies).
-    pub fn variant_label(&self) -> &str {
-        self.variant.as_deref().unwrap_or(DEFAULT_VARIANT)
+    pub fn variant_label(&self) -> String {
+        self.variant()
+            .unwrap_or_else(|| DEFAULT_VARIANT.to_string())
     }
 }
 
@@ -663,8 +698,8 @@ mod tests {
     fn grid() -> SweepGrid {
         SweepGrid {
             envs: vec!["CartPole-v0".into()],
-            methods: vec!["adqn".into(), "dqn".into()],
-            nets: vec!["bootstrap".into()],
+            methods: vec![Method::Adqn, Method::Bdqn],
+            nets: vec![NetKind::Bootstrap],
             seeds: vec![0, 1],
             t_query: vec![0.05, 0.3],
             experts: vec!["noisy:0.4:shipped:perfect".into()],
@@ -684,13 +719,10 @@ mod tests {
                 "CartPole-v0/adqn-bootstrap/tq0.05_expert-noisy-0.4-shipped-perfect/seed0"
             )
         );
+        let cfg = specs[0].config().unwrap();
         assert_eq!(
-            specs[0].overrides,
-            vec![
-                "eval_episodes=5",
-                "t_query=0.05",
-                "expert=\"noisy:0.4:shipped:perfect\""
-            ]
+            (cfg.eval_episodes, cfg.t_query, cfg.expert.as_str()),
+            (5, 0.05, "noisy:0.4:shipped:perfect")
         );
         let plain = SweepGrid {
             t_query: vec![],
@@ -701,7 +733,7 @@ mod tests {
         .unwrap();
         assert_eq!(
             plain[3].dir_name(),
-            PathBuf::from("CartPole-v0/dqn-bootstrap/seed1")
+            PathBuf::from("CartPole-v0/bdqn-bootstrap/seed1")
         );
         assert_eq!(plain[3].variant_label(), DEFAULT_VARIANT);
     }
@@ -722,7 +754,7 @@ mod tests {
         let strings = |v: &[&str]| v.iter().map(|s| s.to_string()).collect::<Vec<_>>();
         let built = SweepGrid::from_cli_values(
             &strings(&["CartPole-v0"]),
-            &strings(&["adqn,dqn"]),
+            &strings(&["adqn,bdqn"]),
             &strings(&["bootstrap"]),
             "0..2",
             &strings(&["0.05", "0.3"]),

@@ -98,7 +98,12 @@ impl AdaptiveQuantileRule {
 
     /// A rule over the last `n_r` uncertainties querying about a fraction `t_query` of decisions.
     pub fn new(n_r: usize, t_query: f64) -> Result<Self, QueryError> {
-        validate_adaptive(n_r, t_query)?;
+        if n_r == 0 {
+            return Err(QueryError::EmptyWindow);
+        }
+        if !(0.0..=1.0).contains(&t_query) {
+            return Err(QueryError::TQueryOutOfRange(t_query));
+        }
         Ok(Self {
             n_r,
             t_query,
@@ -164,14 +169,24 @@ impl AdaptiveQuantileRule {
     }
 }
 
-fn validate_adaptive(n_r: usize, t_query: f64) -> Result<(), QueryError> {
-    if n_r == 0 {
-        return Err(QueryError::EmptyWindow);
+/// Query with a fixed probability at each agent decision (BDQN); built only with a probability in [0, 1].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BernoulliRule {
+    p: f64,
+}
+
+impl BernoulliRule {
+    pub fn new(p: f64) -> Result<Self, QueryError> {
+        if !(0.0..=1.0).contains(&p) {
+            return Err(QueryError::ProbabilityOutOfRange(p));
+        }
+        Ok(Self { p })
     }
-    if !(0.0..=1.0).contains(&t_query) {
-        return Err(QueryError::TQueryOutOfRange(t_query));
+
+    /// The query probability.
+    pub fn p(&self) -> f64 {
+        self.p
     }
-    Ok(())
 }
 
 /// When the agent asks the expert (paper section 5.1; docs/algorithm.md section 9).
@@ -182,7 +197,7 @@ pub enum QueryRule {
     /// Query at every decision until the budget is spent (GDQN): the expert drives the first `budget` steps.
     Greedy,
     /// Query with fixed probability `p` at each agent decision (BDQN).
-    Bernoulli { p: f64 },
+    Bernoulli(BernoulliRule),
     /// Uncertainty-ranked adaptive rule (ADQN, ADQNP).
     Adaptive(AdaptiveQuantileRule),
 }
@@ -190,9 +205,7 @@ pub enum QueryRule {
 impl QueryRule {
     /// A validated Bernoulli rule.
     pub fn bernoulli(p: f64) -> Result<Self, QueryError> {
-        let rule = QueryRule::Bernoulli { p };
-        rule.validate()?;
-        Ok(rule)
+        Ok(QueryRule::Bernoulli(BernoulliRule::new(p)?))
     }
 
     /// A validated adaptive rule.
@@ -207,7 +220,7 @@ impl QueryRule {
         match self {
             QueryRule::Never => "never",
             QueryRule::Greedy => "greedy",
-            QueryRule::Bernoulli { .. } => "bernoulli",
+            QueryRule::Bernoulli(_) => "bernoulli",
             QueryRule::Adaptive(_) => "adaptive",
         }
     }
@@ -226,18 +239,6 @@ impl QueryRule {
             return Err(QueryError::NoUncertaintySource { rule: self.name() });
         }
         Ok(())
-    }
-
-    /// Checks the parameters (the variants can be built directly, bypassing the constructors).
-    pub fn validate(&self) -> Result<(), QueryError> {
-        match self {
-            QueryRule::Never | QueryRule::Greedy => Ok(()),
-            QueryRule::Bernoulli { p } if !(0.0..=1.0).contains(p) => {
-                Err(QueryError::ProbabilityOutOfRange(*p))
-            }
-            QueryRule::Bernoulli { .. } => Ok(()),
-            QueryRule::Adaptive(rule) => validate_adaptive(rule.n_r, rule.t_query),
-        }
     }
 }
 
@@ -261,8 +262,8 @@ impl QueryController {
     pub const DEFAULT_SEGMENT_LEN: usize = 5;
 
     /// A controller spending at most `budget` demonstrated transitions, `segment_len` steps per query.
+    /// The rule's own parameters were checked when it was built.
     pub fn new(rule: QueryRule, budget: usize, segment_len: usize) -> Result<Self, QueryError> {
-        rule.validate()?;
         if segment_len == 0 {
             return Err(QueryError::EmptySegment);
         }
@@ -320,8 +321,8 @@ impl QueryController {
                 query: true,
                 ..Decision::NO_QUERY
             },
-            QueryRule::Bernoulli { p } => Decision {
-                query: rng.random_bool(*p),
+            QueryRule::Bernoulli(rule) => Decision {
+                query: rng.random_bool(rule.p),
                 ..Decision::NO_QUERY
             },
             QueryRule::Adaptive(rule) => {
@@ -415,7 +416,7 @@ mod tests {
             QueryError::ProbabilityOutOfRange(1.01)
         );
         assert_eq!(
-            QueryController::new(QueryRule::Bernoulli { p: -0.5 }, 10, 5).unwrap_err(),
+            QueryRule::bernoulli(-0.5).unwrap_err(),
             QueryError::ProbabilityOutOfRange(-0.5)
         );
         assert_eq!(
@@ -559,7 +560,7 @@ mod tests {
         prop_oneof![
             Just(QueryRule::Never),
             Just(QueryRule::Greedy),
-            (0.0f64..=1.0).prop_map(|p| QueryRule::Bernoulli { p }),
+            (0.0f64..=1.0).prop_map(|p| QueryRule::bernoulli(p).unwrap()),
             (1usize..50, 0.0f64..=1.0).prop_map(|(n_r, t)| QueryRule::adaptive(n_r, t).unwrap()),
         ]
     }

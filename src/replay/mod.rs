@@ -92,6 +92,18 @@ impl Default for ReplayConfig {
 }
 
 impl ReplayConfig {
+    /// Bytes the memory allocates up front for observations of length `obs_dim` (every slot's arrays and
+    /// both trees; a tree of `c` leaves has `2 · next_power_of_two(c)` nodes of two `f64`).
+    pub fn memory_bytes(&self, obs_dim: usize) -> f64 {
+        let slots = self.capacity as f64 + self.demo_capacity as f64;
+        let obs_rows = if self.n_step > 0 { 3.0 } else { 2.0 };
+        let per_slot = obs_rows * obs_dim as f64 * 4.0 // obs, next_obs (and the n-step observation)
+            + 8.0 + 4.0 + 1.0 + 4.0 // action, reward, terminal, priority
+            + if self.n_step > 0 { 8.0 } else { 0.0 }; // n-step reward and discount
+        let tree = |c: usize| 2.0 * (c.max(1) as f64).log2().ceil().exp2() * 16.0;
+        slots * per_slot + tree(self.capacity) + tree(self.demo_capacity)
+    }
+
     /// Checks the values a user may have put in a configuration file.
     pub fn validate(&self) -> Result<(), ReplayError> {
         if !(self.alpha.is_finite() && self.alpha >= 0.0) {

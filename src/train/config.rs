@@ -1,10 +1,24 @@
 //! Every hyperparameter of a run in one struct, with its default and its source.
 //!
-//! A run's configuration is built in layers: [`TrainConfig::preset`] fills in the paper's per-task table and the
-//! method's settings (docs/algorithm.md §9), a TOML file may override any field, and `--set key=value` pairs
-//! override last. Unknown keys and ill-typed values are rejected up front with the list of valid keys, and
-//! [`TrainConfig::validate`] checks the values before any work starts.
+//! A run's configuration goes from low level to high level once, before any work:
+//! - [`ConfigInput`] is the configuration *as given*: the run's identity (task, method, network, seed) and the
+//!   values of a TOML file and of `--set key=value` pairs, in order, later ones winning. Unknown keys are
+//!   rejected as they arrive, with the list of valid keys.
+//! - [`ConfigInput::resolve`] turns it into a [`TrainConfig`]: the paper's per-task table and the method's
+//!   settings ([`TrainConfig::preset`], docs/algorithm.md §9), then the given values; a value the method does
+//!   not use (a budget for DQN, pre-training steps for ADQN, a query threshold for GDQN) is an error, and
+//!   [`TrainConfig::validate`], the one place every value is checked, runs last.
+//!
+//! What follows from the method is derived from it, never stored: the query rule ([`TrainConfig::query_rule`];
+//! BDQN's query probability is the task's `t_query`), whether the run pre-trains ([`Method::pretrains`]), and the
+//! demonstration counts of the preset. The agent and the replay memory receive their own parts
+//! ([`TrainConfig::agent_config`], [`TrainConfig::replay_config`]).
 
+use crate::agent::AgentConfig;
+pub use crate::agent::TdLoss;
+use crate::nn::OutputKind;
+use crate::query::{QueryController, QueryError, QueryRule};
+use crate::replay::ReplayConfig;
 use anyhow::{Context, Result, bail, ensure};
 use serde::{Deserialize, Serialize};
 use std::fmt;
@@ -126,26 +140,9 @@ impl fmt::Display for NetKind {
     }
 }
 
-/// The TD loss (docs/algorithm.md §2: squared error by default, Huber as an option).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum TdLoss {
-    Mse,
-    Huber,
-}
-
-/// How the adaptive/Bernoulli query rule decides (docs/algorithm.md §8–9).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum RuleKind {
-    Never,
-    Greedy,
-    Bernoulli,
-    Adaptive,
-}
-
-/// All hyperparameters of one training run. Field docs give the default and its source tag
-/// (\[P\] paper, \[DQfD\], \[PER\], \[BS\], \[NN\], \[OURS\] as in docs/algorithm.md).
+/// All hyperparameters of one training run, resolved and validated ([`ConfigInput::resolve`]). Field docs give
+/// the default and its source tag (\[P\] paper, \[DQfD\], \[PER\], \[BS\], \[NN\], \[OURS\] as in
+/// docs/algorithm.md).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct TrainConfig {
@@ -218,18 +215,15 @@ pub struct TrainConfig {
     /// Pre-training updates on demonstrations only \[P, per task\].
     pub pretrain_steps: usize,
 
-    /// Query rule (set by the method) \[P\].
-    pub rule: RuleKind,
     /// Demonstrated transitions that may be asked for during training \[P, per task\].
     pub budget: usize,
-    /// Fraction of recent steps whose uncertainty may exceed the current one for a query \[P, per task and net\].
+    /// Fraction of recent steps whose uncertainty may exceed the current one for a query (ADQN, ADQNP), and
+    /// BDQN's query probability \[P, per task and net\].
     pub t_query: f64,
     /// Window of recent uncertainties N_r \[OURS: 1000\].
     pub n_r: usize,
     /// Expert steps per query \[P-inf: 5\].
     pub segment_len: usize,
-    /// Query probability of BDQN \[OURS: the task's ADQN t_query\].
-    pub bernoulli_p: f64,
     /// Use the exact factorised-noise variance instead of the paper's formula \[OURS: false\].
     pub exact_factorised_var: bool,
     /// Expert specification (see `arld expert --help`) \[OURS: the shipped weak expert\].
@@ -333,8 +327,169 @@ pub fn task_preset(env: &str) -> Result<TaskPreset> {
     Ok(p)
 }
 
+/// Upper limits of the validated sizes: far beyond any experiment, low enough that a typo cannot ask for more
+/// memory or time than a machine has.
+const MAX_STEPS: usize = 1_000_000_000;
+const MAX_BATCH: usize = 65_536;
+const MAX_HEADS: usize = 256;
+const MAX_N_STEP: usize = 10_000;
+const MAX_WINDOW: usize = 10_000_000;
+const MAX_EVAL_EPISODES: usize = 100_000;
+const MAX_REPLAY_BYTES: f64 = 16.0 * (1u64 << 30) as f64;
+
+fn format_bytes(bytes: f64) -> String {
+    const GIB: f64 = (1u64 << 30) as f64;
+    if bytes >= GIB {
+        format!("{:.1} GiB", bytes / GIB)
+    } else {
+        format!("{:.1} MiB", bytes / (1u64 << 20) as f64)
+    }
+}
+
+/// The keys that name a run rather than tune it: the preset is chosen from them.
+const IDENTITY_KEYS: [&str; 4] = ["env", "method", "net", "seed"];
+
+/// A run's configuration as given (low level): its identity and the values of config files and `--set` pairs
+/// in the order given. [`ConfigInput::resolve`] makes the [`TrainConfig`] from it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ConfigInput {
+    env: String,
+    method: Method,
+    net: NetKind,
+    seed: u64,
+    /// `(key, value, where it was given)`, later entries winning.
+    given: Vec<(String, toml::Value, String)>,
+}
+
+impl ConfigInput {
+    /// A run of `method` with `net` on `env`, before any value is given.
+    pub fn new(env: &str, method: Method, net: NetKind, seed: u64) -> Self {
+        Self {
+            env: env.to_string(),
+            method,
+            net,
+            seed,
+            given: Vec::new(),
+        }
+    }
+
+    /// Takes every key of a TOML file (a run's `config.toml` is one).
+    pub fn apply_file(&mut self, path: &Path) -> Result<()> {
+        let text = std::fs::read_to_string(path)
+            .with_context(|| format!("cannot read config file {}", path.display()))?;
+        let table: toml::Table = toml::from_str(&text)
+            .with_context(|| format!("config file {} is not valid TOML", path.display()))?;
+        let origin = format!("config file {}", path.display());
+        for (key, value) in table {
+            self.set_from(&key, value, &origin)
+                .with_context(|| format!("in {origin}"))?;
+        }
+        Ok(())
+    }
+
+    /// Takes one `key=value` pair; the value is read as a TOML literal, or as a string if it is not one.
+    pub fn apply_override(&mut self, assignment: &str) -> Result<()> {
+        let Some((key, raw)) = assignment.split_once('=') else {
+            bail!("override '{assignment}' is not of the form key=value");
+        };
+        let (key, raw) = (key.trim(), raw.trim());
+        let value = toml::from_str::<toml::Table>(&format!("v = {raw}"))
+            .ok()
+            .and_then(|mut t| t.remove("v"))
+            .unwrap_or_else(|| toml::Value::String(raw.to_string()));
+        self.set_from(key, value, &format!("--set {assignment}"))
+    }
+
+    /// Takes one typed value (a sweep's t_query, a command-line flag).
+    pub fn set(&mut self, key: &str, value: impl Into<toml::Value>) -> Result<()> {
+        self.set_from(key, value.into(), &format!("`{key}`"))
+    }
+
+    fn set_from(&mut self, key: &str, value: toml::Value, origin: &str) -> Result<()> {
+        let shown = value.to_string();
+        let bad = |e: toml::de::Error| {
+            anyhow::anyhow!("bad value {shown} for config key '{key}': {}", e.message())
+        };
+        match key {
+            "env" => self.env = value.try_into().map_err(bad)?,
+            "method" => self.method = value.try_into().map_err(bad)?,
+            "net" => self.net = value.try_into().map_err(bad)?,
+            "seed" => self.seed = value.try_into().map_err(bad)?,
+            _ if TrainConfig::valid_keys().iter().any(|k| k == key) => {
+                self.given
+                    .push((key.to_string(), value, origin.to_string()));
+            }
+            _ => bail!(
+                "unknown config key '{key}'; valid keys: {}",
+                TrainConfig::valid_keys().join(", ")
+            ),
+        }
+        Ok(())
+    }
+
+    /// The resolved, validated configuration: the paper's preset for the task, method and network, then the
+    /// given values in order. A value the method does not use (other than the preset's own) is an error.
+    pub fn resolve(&self) -> Result<TrainConfig> {
+        let preset = TrainConfig::preset(&self.env, self.method, self.net, self.seed)?;
+        let preset_table = TrainConfig::preset_table(&preset);
+        let mut cfg = preset;
+        for (key, value, origin) in &self.given {
+            debug_assert!(!IDENTITY_KEYS.contains(&key.as_str()));
+            let mut table = TrainConfig::preset_table(&cfg);
+            // Integers may be given where floats are expected (`lr=1` means 1.0).
+            let value = match (&table[key], value) {
+                (toml::Value::Float(_), toml::Value::Integer(i)) => toml::Value::Float(*i as f64),
+                (_, v) => v.clone(),
+            };
+            if value != preset_table[key]
+                && let Some(why) = unused_by(key, self.method, self.net)
+            {
+                bail!("{origin}: {why}, so `{key}` cannot be set");
+            }
+            let shown = value.to_string();
+            table.insert(key.clone(), value);
+            cfg = table.try_into().map_err(|e: toml::de::Error| {
+                anyhow::anyhow!(
+                    "{origin}: bad value {shown} for config key '{key}': {}",
+                    e.message()
+                )
+            })?;
+        }
+        cfg.validate()?;
+        Ok(cfg)
+    }
+}
+
+/// Why a key means nothing for this method and network (`None`: it is used). The preset's value of such a key
+/// is inert; giving another value would change nothing, which is always a mistake.
+fn unused_by(key: &str, method: Method, net: NetKind) -> Option<String> {
+    match key {
+        "budget" | "segment_len" if !method.queries() => {
+            Some(format!("{method} does not ask the expert during training"))
+        }
+        "t_query" if !matches!(method, Method::Bdqn | Method::Adqn | Method::Adqnp) => Some(
+            format!("{method} has no query threshold (only bdqn, adqn and adqnp use t_query)"),
+        ),
+        "n_r" if !matches!(method, Method::Adqn | Method::Adqnp) => Some(format!(
+            "{method} keeps no window of uncertainties (only adqn and adqnp do)"
+        )),
+        "n_demo" | "pretrain_steps" | "demo_file" if !method.pretrains() => {
+            Some(format!("{method} does not pre-train on demonstrations"))
+        }
+        "expert" if !method.needs_expert() => Some(format!("{method} never asks an expert")),
+        "heads" if net != NetKind::Bootstrap => {
+            Some(format!("a {net} network has no bootstrapped heads"))
+        }
+        "exact_factorised_var" if net != NetKind::Noisy => {
+            Some(format!("a {net} network has no noisy layer"))
+        }
+        _ => None,
+    }
+}
+
 impl TrainConfig {
-    /// The paper's configuration for `method` with `net` on `env` (docs/algorithm.md §9).
+    /// The paper's configuration for `method` with `net` on `env` (docs/algorithm.md §9), before any value
+    /// given by the user; [`ConfigInput::resolve`] starts from it.
     pub fn preset(env: &str, method: Method, net: NetKind, seed: u64) -> Result<Self> {
         let p = task_preset(env)?;
         let t_query = match net {
@@ -347,12 +502,6 @@ impl TrainConfig {
             Method::Dqfd => (p.n_demo, 0),
             Method::Gdqn | Method::Bdqn | Method::Adqn => (0, p.n_demo),
             Method::Adqnp => (p.n_demo / 2, p.n_demo / 2),
-        };
-        let rule = match method {
-            Method::Dqn | Method::Dqfd => RuleKind::Never,
-            Method::Gdqn => RuleKind::Greedy,
-            Method::Bdqn => RuleKind::Bernoulli,
-            Method::Adqn | Method::Adqnp => RuleKind::Adaptive,
         };
         Ok(Self {
             env: env.to_string(),
@@ -391,12 +540,10 @@ impl TrainConfig {
             } else {
                 0
             },
-            rule,
             budget,
             t_query,
             n_r: 1000,
             segment_len: 5,
-            bernoulli_p: t_query,
             exact_factorised_var: false,
             expert: "shipped:weak".to_string(),
             demo_file: String::new(),
@@ -406,62 +553,19 @@ impl TrainConfig {
         })
     }
 
-    /// Applies a TOML file's keys on top of this configuration.
-    pub fn apply_file(&mut self, path: &Path) -> Result<()> {
-        let text = std::fs::read_to_string(path)
-            .with_context(|| format!("cannot read config file {}", path.display()))?;
-        let table: toml::Table = toml::from_str(&text)
-            .with_context(|| format!("config file {} is not valid TOML", path.display()))?;
-        for (key, value) in table {
-            self.set_value(&key, value)
-                .with_context(|| format!("in config file {}", path.display()))?;
-        }
-        Ok(())
-    }
-
-    /// Applies one `key=value` override; the value is read as a TOML literal, or as a string if it is not one.
-    pub fn apply_override(&mut self, assignment: &str) -> Result<()> {
-        let Some((key, raw)) = assignment.split_once('=') else {
-            bail!("override '{assignment}' is not of the form key=value");
-        };
-        let (key, raw) = (key.trim(), raw.trim());
-        let value = toml::from_str::<toml::Table>(&format!("v = {raw}"))
-            .ok()
-            .and_then(|mut t| t.remove("v"))
-            .unwrap_or_else(|| toml::Value::String(raw.to_string()));
-        self.set_value(key, value)
-    }
-
-    fn set_value(&mut self, key: &str, value: toml::Value) -> Result<()> {
-        let mut table = toml::Table::try_from(&*self).context("serialising the configuration")?;
-        if !table.contains_key(key) {
-            bail!(
-                "unknown config key '{key}'; valid keys: {}",
-                Self::valid_keys().join(", ")
-            );
-        }
-        // Integers may be given where floats are expected (`lr=1` means 1.0).
-        let value = match (&table[key], value) {
-            (toml::Value::Float(_), toml::Value::Integer(i)) => toml::Value::Float(i as f64),
-            (_, v) => v,
-        };
-        let shown = value.to_string();
-        table.insert(key.to_string(), value);
-        *self = table.try_into().map_err(|e: toml::de::Error| {
-            anyhow::anyhow!("bad value {shown} for config key '{key}': {}", e.message())
-        })?;
-        Ok(())
-    }
-
     /// Names of every configuration key.
     pub fn valid_keys() -> Vec<String> {
-        let cfg = Self::preset("CartPole-v0", Method::Dqn, NetKind::Plain, 0)
-            .expect("CartPole preset exists");
-        toml::Table::try_from(&cfg)
-            .expect("config serialises")
-            .keys()
-            .cloned()
-            .collect()
+        Self::preset_table(
+            &Self::preset("CartPole-v0", Method::Dqn, NetKind::Plain, 0)
+                .expect("CartPole preset exists"),
+        )
+        .keys()
+        .cloned()
+        .collect()
+    }
+
+    fn preset_table(cfg: &Self) -> toml::Table {
+        toml::Table::try_from(cfg).expect("config serialises")
     }
 
     /// The configuration as TOML, for the run directory.
@@ -469,9 +573,10 @@ impl TrainConfig {
         toml::to_string_pretty(self).expect("config serialises")
     }
 
-    /// Checks every value before any work starts.
+    /// Checks every value: the one place a run's configuration is validated (called by
+    /// [`ConfigInput::resolve`]). Limits on sizes keep a typo from asking for more memory than a machine has.
     pub fn validate(&self) -> Result<()> {
-        crate::env::make(&self.env).map_err(|e| anyhow::anyhow!("{e}"))?;
+        let env = crate::env::spec(&self.env).map_err(|e| anyhow::anyhow!("{e}"))?;
         let unit = |name: &str, v: f64| -> Result<()> {
             ensure!(
                 (0.0..=1.0).contains(&v),
@@ -479,58 +584,66 @@ impl TrainConfig {
             );
             Ok(())
         };
-        unit("t_query", self.t_query)?;
-        unit("bernoulli_p", self.bernoulli_p)?;
+        let non_negative = |name: &str, v: f64| -> Result<()> {
+            ensure!(
+                v >= 0.0 && v.is_finite(),
+                "{name} must be non-negative and finite, got {v}"
+            );
+            Ok(())
+        };
+        let positive = |name: &str, v: f64| -> Result<()> {
+            ensure!(
+                v > 0.0 && v.is_finite(),
+                "{name} must be positive and finite, got {v}"
+            );
+            Ok(())
+        };
+        let count = |name: &str, v: usize, max: usize| -> Result<()> {
+            ensure!(
+                (1..=max).contains(&v),
+                "{name} must be between 1 and {max}, got {v}"
+            );
+            Ok(())
+        };
+        // Learning.
+        unit("gamma", self.gamma)?;
+        positive("lr", self.lr)?;
+        count("train_steps", self.train_steps, MAX_STEPS)?;
+        count("batch_size", self.batch_size, MAX_BATCH)?;
+        ensure!(
+            self.learning_starts <= MAX_STEPS,
+            "learning_starts must be at most {MAX_STEPS}, got {}",
+            self.learning_starts
+        );
+        count("train_freq", self.train_freq, MAX_STEPS)?;
+        count("target_period", self.target_period, MAX_STEPS)?;
+        count("heads", self.heads, MAX_HEADS)?;
+        positive("grad_clip", self.grad_clip)?;
+        // Exploration.
         unit("eps_start", self.eps_start)?;
         unit("eps_end", self.eps_end)?;
         unit("eps_fraction", self.eps_fraction)?;
-        unit("alpha", self.alpha)?;
+        // Replay: the memory checks its own settings (α, the priority bonuses ε).
+        self.replay_config().validate()?;
         unit("beta0", self.beta0)?;
         ensure!(
-            self.gamma >= 0.0 && self.gamma <= 1.0,
-            "gamma must be in [0, 1], got {}",
-            self.gamma
-        );
-        ensure!(
-            self.lr > 0.0 && self.lr.is_finite(),
-            "lr must be positive, got {}",
-            self.lr
-        );
-        ensure!(self.train_steps > 0, "train_steps must be positive");
-        ensure!(self.batch_size > 0, "batch_size must be positive");
-        ensure!(
             self.replay_size >= self.batch_size,
-            "replay_size must be at least batch_size"
+            "replay_size must be at least batch_size ({}), got {}",
+            self.batch_size,
+            self.replay_size
         );
-        ensure!(self.train_freq > 0, "train_freq must be positive");
-        ensure!(self.target_period > 0, "target_period must be positive");
-        ensure!(self.eval_period > 0, "eval_period must be positive");
-        ensure!(self.eval_episodes > 0, "eval_episodes must be positive");
-        ensure!(self.segment_len > 0, "segment_len must be positive");
-        ensure!(self.n_r > 0, "n_r must be positive");
-        ensure!(self.heads > 0, "heads must be positive");
+        // Losses.
+        non_negative("margin", self.margin)?;
+        non_negative("lambda", self.lambda)?;
+        non_negative("lambda_n", self.lambda_n)?;
+        count("n_step", self.n_step, MAX_N_STEP)?;
+        non_negative("l2", self.l2)?;
+        // Demonstrations and queries.
         ensure!(
-            self.margin >= 0.0 && self.lambda >= 0.0,
-            "margin and lambda must be non-negative"
+            self.pretrain_steps <= MAX_STEPS,
+            "pretrain_steps must be at most {MAX_STEPS}, got {}",
+            self.pretrain_steps
         );
-        ensure!(
-            self.l2 >= 0.0 && self.l2.is_finite(),
-            "l2 must be non-negative, got {}",
-            self.l2
-        );
-        ensure!(self.grad_clip > 0.0, "grad_clip must be positive");
-        ensure!(
-            self.lambda_n >= 0.0,
-            "lambda_n must be non-negative, got {}",
-            self.lambda_n
-        );
-        ensure!(self.n_step >= 1, "n_step must be at least 1");
-        if self.rule == RuleKind::Adaptive && self.net == NetKind::Plain {
-            bail!(
-                "the adaptive query rule needs an uncertainty estimate, which a plain network does not have; \
-                 use --net bootstrap (divergence) or --net noisy (variance)"
-            );
-        }
         if self.method.pretrains() {
             ensure!(
                 self.n_demo > 0 || !self.demo_file.is_empty(),
@@ -538,7 +651,103 @@ impl TrainConfig {
                 self.method
             );
         }
+        count("n_r", self.n_r, MAX_WINDOW)?;
+        // The query rule and its controller own t_query, N_r and the segment length.
+        let rule = self.query_rule()?;
+        rule.check_uncertainty_source(self.net != NetKind::Plain)
+            .map_err(|e| match e {
+                QueryError::NoUncertaintySource { .. } => anyhow::anyhow!(
+                    "{e} (the {} method needs an uncertainty estimate, which a plain network does not have: \
+                     use --net bootstrap (divergence) or --net noisy (variance))",
+                    self.method
+                ),
+                e => e.into(),
+            })?;
+        QueryController::new(rule, self.budget, self.segment_len)?;
+        if self.method.needs_expert() {
+            ensure!(
+                !self.expert.trim().is_empty(),
+                "{} needs an expert: `expert` must not be empty",
+                self.method
+            );
+        }
+        // Evaluation and checkpoints.
+        count("eval_period", self.eval_period, MAX_STEPS)?;
+        count("eval_episodes", self.eval_episodes, MAX_EVAL_EPISODES)?;
+        // Memory: the replay memory is allocated whole at the start.
+        let bytes = self.replay_config().memory_bytes(env.obs_dim);
+
+        ensure!(
+            bytes <= MAX_REPLAY_BYTES,
+            "replay_size {} with {} demonstration slots (n_demo + budget) would need {} of memory for the \
+             replay memory; the limit is {}",
+            self.replay_size,
+            self.replay_config().demo_capacity,
+            format_bytes(bytes),
+            format_bytes(MAX_REPLAY_BYTES)
+        );
+        ensure!(
+            self.replay_size <= MAX_STEPS && self.budget <= MAX_STEPS && self.n_demo <= MAX_STEPS,
+            "replay_size, budget and n_demo must be at most {MAX_STEPS} transitions"
+        );
         Ok(())
+    }
+
+    /// The query rule of the method (§8–9): never (DQN, DQfD), greedy (GDQN), Bernoulli with probability
+    /// `t_query` (BDQN), adaptive with threshold `t_query` over `n_r` steps (ADQN, ADQNP).
+    pub fn query_rule(&self) -> Result<QueryRule, QueryError> {
+        match self.method {
+            Method::Dqn | Method::Dqfd => Ok(QueryRule::Never),
+            Method::Gdqn => Ok(QueryRule::Greedy),
+            Method::Bdqn => QueryRule::bernoulli(self.t_query),
+            Method::Adqn | Method::Adqnp => QueryRule::adaptive(self.n_r, self.t_query),
+        }
+    }
+
+    /// Demonstrations that enter replay before training: the pre-training set.
+    pub fn pretrain_demos(&self) -> usize {
+        if self.method.pretrains() {
+            self.n_demo
+        } else {
+            0
+        }
+    }
+
+    /// The replay memory's part of the configuration; its permanent demonstration part holds the pre-training
+    /// demonstrations and the budget of queried ones.
+    pub fn replay_config(&self) -> ReplayConfig {
+        ReplayConfig {
+            capacity: self.replay_size,
+            demo_capacity: self.pretrain_demos().saturating_add(self.budget),
+            prioritized: self.prioritized,
+            alpha: self.alpha as f32,
+            eps_agent: self.eps_agent as f32,
+            eps_demo: self.eps_demo as f32,
+            // DQfD's optional n-step loss needs each transition's n-step return.
+            n_step: if self.lambda_n > 0.0 { self.n_step } else { 0 },
+            gamma: self.gamma as f32,
+        }
+    }
+
+    /// The agent's part of the configuration.
+    pub fn agent_config(&self) -> AgentConfig {
+        AgentConfig {
+            output: match self.net {
+                NetKind::Plain => OutputKind::Plain,
+                NetKind::Bootstrap => OutputKind::Bootstrap { heads: self.heads },
+                NetKind::Noisy => OutputKind::Noisy,
+            },
+            batch_size: self.batch_size,
+            lr: self.lr as f32,
+            gamma: self.gamma as f32,
+            loss: self.loss,
+            grad_clip: self.grad_clip as f32,
+            margin: self.margin as f32,
+            lambda: self.lambda as f32,
+            lambda_n: self.lambda_n as f32,
+            l2: self.l2 as f32,
+            exact_factorised_var: self.exact_factorised_var,
+        }
     }
 
     /// A short name for the run directory: `CartPole-v0_adqn-bootstrap_seed3`.
@@ -554,6 +763,18 @@ impl TrainConfig {
 mod tests {
     use super::*;
 
+    fn resolve(env: &str, method: Method, net: NetKind, sets: &[&str]) -> Result<TrainConfig> {
+        let mut input = ConfigInput::new(env, method, net, 0);
+        for s in sets {
+            input.apply_override(s)?;
+        }
+        input.resolve()
+    }
+
+    fn error(env: &str, method: Method, net: NetKind, sets: &[&str]) -> String {
+        format!("{:#}", resolve(env, method, net, sets).unwrap_err())
+    }
+
     #[test]
     fn presets_follow_the_paper_table() {
         let c = TrainConfig::preset("Acrobot-v1", Method::Adqnp, NetKind::Noisy, 1).unwrap();
@@ -564,20 +785,45 @@ mod tests {
         assert_eq!((c.n_demo, c.budget, c.pretrain_steps), (50, 50, 10_000));
         assert_eq!(c.t_query, 0.3);
         let c = TrainConfig::preset("CartPole-v0", Method::Adqn, NetKind::Noisy, 1).unwrap();
-        assert_eq!(
-            (c.budget, c.n_demo, c.t_query, c.rule),
-            (200, 0, 0.5, RuleKind::Adaptive)
-        );
+        assert_eq!((c.budget, c.n_demo, c.t_query), (200, 0, 0.5));
+        assert!(matches!(c.query_rule().unwrap(), QueryRule::Adaptive(r) if r.t_query() == 0.5));
+    }
+
+    #[test]
+    fn the_query_rule_follows_the_method_and_bernoulli_p_follows_t_query() {
+        let rule = |m| {
+            resolve("CartPole-v0", m, NetKind::Bootstrap, &[])
+                .unwrap()
+                .query_rule()
+        };
+        assert!(matches!(rule(Method::Dqn).unwrap(), QueryRule::Never));
+        assert!(matches!(rule(Method::Dqfd).unwrap(), QueryRule::Never));
+        assert!(matches!(rule(Method::Gdqn).unwrap(), QueryRule::Greedy));
+        let bdqn = resolve(
+            "CartPole-v0",
+            Method::Bdqn,
+            NetKind::Bootstrap,
+            &["t_query=0.2"],
+        )
+        .unwrap();
+        assert!(matches!(bdqn.query_rule().unwrap(), QueryRule::Bernoulli(r) if r.p() == 0.2));
     }
 
     #[test]
     fn overrides_parse_typed_values() {
-        let mut c = TrainConfig::preset("CartPole-v0", Method::Dqn, NetKind::Plain, 0).unwrap();
-        c.apply_override("lr=0.001").unwrap();
-        c.apply_override("train_steps=5000").unwrap();
-        c.apply_override("prioritized=false").unwrap();
-        c.apply_override("loss=huber").unwrap();
-        c.apply_override("gamma=1").unwrap();
+        let c = resolve(
+            "CartPole-v0",
+            Method::Dqn,
+            NetKind::Plain,
+            &[
+                "lr=0.001",
+                "train_steps=5000",
+                "prioritized=false",
+                "loss=huber",
+                "gamma=1",
+            ],
+        )
+        .unwrap();
         assert_eq!(
             (c.lr, c.train_steps, c.prioritized, c.loss, c.gamma),
             (0.001, 5000, false, TdLoss::Huber, 1.0)
@@ -585,27 +831,196 @@ mod tests {
     }
 
     #[test]
-    fn unknown_key_lists_valid_keys() {
-        let mut c = TrainConfig::preset("CartPole-v0", Method::Dqn, NetKind::Plain, 0).unwrap();
-        let err = format!("{:#}", c.apply_override("learning_rate=0.1").unwrap_err());
-        assert!(err.contains("unknown config key 'learning_rate'"), "{err}");
-        assert!(err.contains("lr") && err.contains("t_query"), "{err}");
+    fn identity_keys_choose_the_preset() {
+        let c = resolve(
+            "CartPole-v0",
+            Method::Dqn,
+            NetKind::Plain,
+            &["method=adqnp", "net=noisy"],
+        )
+        .unwrap();
+        assert_eq!(
+            (c.method, c.net, c.n_demo, c.budget),
+            (Method::Adqnp, NetKind::Noisy, 100, 100)
+        );
+        assert!(matches!(c.query_rule().unwrap(), QueryRule::Adaptive(_)));
     }
 
     #[test]
-    fn bad_values_are_rejected() {
-        let mut c =
-            TrainConfig::preset("CartPole-v0", Method::Adqn, NetKind::Bootstrap, 0).unwrap();
-        let err = format!("{:#}", c.apply_override("train_steps=many").unwrap_err());
-        assert!(err.contains("train_steps"), "{err}");
-        assert!(c.apply_override("budget=-5").is_err());
-        c.apply_override("t_query=1.5").unwrap();
-        let err = format!("{:#}", c.validate().unwrap_err());
-        assert!(err.contains("t_query"), "{err}");
-        let mut c = TrainConfig::preset("CartPole-v0", Method::Adqn, NetKind::Plain, 0).unwrap();
-        c.t_query = 0.1;
-        let err = format!("{:#}", c.validate().unwrap_err());
+    fn unknown_key_lists_valid_keys() {
+        let err = error(
+            "CartPole-v0",
+            Method::Dqn,
+            NetKind::Plain,
+            &["learning_rate=0.1"],
+        );
+        assert!(err.contains("unknown config key 'learning_rate'"), "{err}");
+        assert!(err.contains("lr") && err.contains("t_query"), "{err}");
+        // The query rule and BDQN's probability are derived from the method: not keys.
+        assert!(
+            error(
+                "CartPole-v0",
+                Method::Dqn,
+                NetKind::Bootstrap,
+                &["rule=adaptive"]
+            )
+            .contains("unknown config key 'rule'")
+        );
+        assert!(
+            error(
+                "CartPole-v0",
+                Method::Bdqn,
+                NetKind::Bootstrap,
+                &["bernoulli_p=0.1"]
+            )
+            .contains("unknown config key")
+        );
+    }
+
+    #[test]
+    fn overrides_that_contradict_the_method_are_errors() {
+        for (method, net, set, words) in [
+            (
+                Method::Dqn,
+                NetKind::Bootstrap,
+                "budget=100",
+                "does not ask the expert",
+            ),
+            (
+                Method::Dqfd,
+                NetKind::Bootstrap,
+                "t_query=0.1",
+                "no query threshold",
+            ),
+            (
+                Method::Gdqn,
+                NetKind::Bootstrap,
+                "t_query=0.1",
+                "no query threshold",
+            ),
+            (Method::Bdqn, NetKind::Bootstrap, "n_r=10", "no window"),
+            (
+                Method::Adqn,
+                NetKind::Bootstrap,
+                "pretrain_steps=10",
+                "does not pre-train",
+            ),
+            (
+                Method::Dqn,
+                NetKind::Bootstrap,
+                "expert=\"scripted\"",
+                "never asks an expert",
+            ),
+            (
+                Method::Dqn,
+                NetKind::Noisy,
+                "heads=3",
+                "no bootstrapped heads",
+            ),
+            (
+                Method::Dqn,
+                NetKind::Bootstrap,
+                "exact_factorised_var=true",
+                "no noisy layer",
+            ),
+        ] {
+            let err = error("CartPole-v0", method, net, &[set]);
+            assert!(
+                err.contains(words) && err.contains(set.split('=').next().unwrap()),
+                "{set}: {err}"
+            );
+        }
+        // The preset's own (inert) value is not a contradiction: a run's config.toml can be given back.
+        let dqn = TrainConfig::preset("CartPole-v0", Method::Dqn, NetKind::Bootstrap, 0).unwrap();
+        resolve(
+            "CartPole-v0",
+            Method::Dqn,
+            NetKind::Bootstrap,
+            &[&format!("t_query={}", dqn.t_query)],
+        )
+        .unwrap();
+    }
+
+    #[test]
+    fn bad_values_are_rejected_naming_the_key() {
+        for (set, key) in [
+            ("train_steps=many", "train_steps"),
+            ("budget=-5", "budget"),
+            ("t_query=1.5", "t_query"),
+            ("eps_agent=0", "eps_agent"),
+            ("eps_demo=-1", "eps_demo"),
+            ("eps_demo=nan", "eps_demo"),
+            ("lr=inf", "lr"),
+            ("gamma=1.5", "gamma"),
+            ("n_r=0", "n_r"),
+            ("segment_len=0", "segment_len"),
+            ("eval_episodes=0", "eval_episodes"),
+            ("heads=0", "heads"),
+            ("margin=-1", "margin"),
+        ] {
+            let err = error("CartPole-v0", Method::Adqn, NetKind::Bootstrap, &[set]);
+            assert!(err.contains(key), "{set}: {err}");
+        }
+        let err = error("CartPole-v0", Method::Adqn, NetKind::Plain, &[]);
         assert!(err.contains("plain network"), "{err}");
+    }
+
+    #[test]
+    fn sizes_are_bounded_with_the_memory_they_would_need() {
+        let err = error(
+            "CartPole-v0",
+            Method::Adqn,
+            NetKind::Bootstrap,
+            &["replay_size=10000000000"],
+        );
+        assert!(err.contains("replay_size") && err.contains("GiB"), "{err}");
+        let err = error(
+            "CartPole-v0",
+            Method::Adqn,
+            NetKind::Bootstrap,
+            &["budget=9000000000000000000"],
+        );
+        assert!(err.contains("GiB"), "{err}");
+    }
+
+    #[test]
+    fn every_key_has_a_check_or_cannot_be_wrong() {
+        // Keys whose every value of the right type is valid (booleans, enums, free text checked where used).
+        let free = [
+            "env",
+            "method",
+            "net",
+            "seed",
+            "loss",
+            "timeout_as_terminal",
+            "eps_greedy_on_top",
+            "prioritized",
+            "exact_factorised_var",
+            "demo_file",
+            "checkpoint_every",
+            "learning_starts",
+            "pretrain_steps",
+            "n_demo",
+        ];
+        for key in TrainConfig::valid_keys() {
+            if free.contains(&key.as_str()) {
+                continue;
+            }
+            let preset =
+                TrainConfig::preset("CartPole-v0", Method::Adqn, NetKind::Bootstrap, 0).unwrap();
+            let bad: &[&str] = match &TrainConfig::preset_table(&preset)[&key] {
+                toml::Value::Float(_) => &["-1.0e300", "nan"],
+                // Zero, or a size no machine holds.
+                toml::Value::Integer(_) => &["0", "9000000000000000000"],
+                toml::Value::String(_) => &["\"\""],
+                other => panic!("{key}: unexpected type {other:?}"),
+            };
+            let rejected = bad.iter().any(|v| {
+                let set = format!("{key}={v}");
+                resolve("CartPole-v0", Method::Adqn, NetKind::Bootstrap, &[&set]).is_err()
+            });
+            assert!(rejected, "{key}: every one of {bad:?} was accepted");
+        }
     }
 
     #[test]

@@ -5,16 +5,16 @@
 pub mod config;
 pub mod log;
 
-pub use config::{Method, NetKind, RuleKind, TdLoss, TrainConfig};
+pub use config::{ConfigInput, Method, NetKind, TdLoss, TrainConfig};
 pub use log::{EvalPoint, QueryEvent, RunLog, Summary, steps_to_solve};
 
 use crate::agent::Agent;
 use crate::env::{self, Env};
 use crate::expert::Expert;
 use crate::expert::demos::Demonstrations;
-use crate::query::{AdaptiveQuantileRule, QueryController, QueryRule};
+use crate::query::{QueryController, QueryRule};
 use crate::replay::{Batch, Replay, ReplayConfig, Transition};
-use anyhow::{Context, Result, bail, ensure};
+use anyhow::{Context, Result, ensure};
 use rand::SeedableRng;
 use rand_pcg::Pcg64;
 use std::time::Instant;
@@ -35,16 +35,6 @@ pub fn epsilon_at(cfg: &TrainConfig, step: usize) -> f64 {
     let horizon = (cfg.eps_fraction * cfg.train_steps as f64).max(1.0);
     let frac = (step as f64 / horizon).min(1.0);
     cfg.eps_start + frac * (cfg.eps_end - cfg.eps_start)
-}
-
-/// The query rule a configuration asks for (§8–9).
-pub fn query_rule(cfg: &TrainConfig) -> Result<QueryRule> {
-    Ok(match cfg.rule {
-        RuleKind::Never => QueryRule::Never,
-        RuleKind::Greedy => QueryRule::Greedy,
-        RuleKind::Bernoulli => QueryRule::Bernoulli { p: cfg.bernoulli_p },
-        RuleKind::Adaptive => QueryRule::Adaptive(AdaptiveQuantileRule::new(cfg.n_r, cfg.t_query)?),
-    })
 }
 
 /// Runs the test policy (no exploration) for `episodes` episodes and summarises the returns.
@@ -95,7 +85,6 @@ pub fn train(
     demos: Option<&Demonstrations>,
     log: &mut RunLog,
 ) -> Result<(Summary, Agent)> {
-    cfg.validate()?;
     let started = Instant::now();
     let mut env = env::make(&cfg.env)?;
     let mut eval_env = env::make(&cfg.env)?;
@@ -107,7 +96,12 @@ pub fn train(
     );
 
     // Every generator comes from the run's seed.
-    let mut agent = Agent::new(cfg, obs_dim, n_actions, derive_seed(cfg.seed, 1));
+    let mut agent = Agent::new(
+        &cfg.agent_config(),
+        obs_dim,
+        n_actions,
+        derive_seed(cfg.seed, 1),
+    );
     let mut replay_rng = Pcg64::seed_from_u64(derive_seed(cfg.seed, 2));
     let mut query_rng = Pcg64::seed_from_u64(derive_seed(cfg.seed, 3));
     let env_seed = derive_seed(cfg.seed, 4) >> 32;
@@ -117,15 +111,8 @@ pub fn train(
     let mut replay = Replay::new(
         obs_dim,
         &ReplayConfig {
-            capacity: cfg.replay_size,
             demo_capacity: pretrain_demos + cfg.budget,
-            prioritized: cfg.prioritized,
-            alpha: cfg.alpha as f32,
-            eps_agent: cfg.eps_agent as f32,
-            eps_demo: cfg.eps_demo as f32,
-            // DQfD's optional n-step loss needs each transition's n-step return.
-            n_step: if cfg.lambda_n > 0.0 { cfg.n_step } else { 0 },
-            gamma: cfg.gamma as f32,
+            ..cfg.replay_config()
         },
     );
     let mut batch = Batch::default();
@@ -145,14 +132,7 @@ pub fn train(
         )?;
     }
 
-    let mut queries = QueryController::new(query_rule(cfg)?, cfg.budget, cfg.segment_len)?;
-    let needs_uncertainty = queries.needs_uncertainty();
-    if needs_uncertainty && cfg.net == NetKind::Plain {
-        bail!(
-            "the {:?} query rule needs the uncertainty of a bootstrapped or noisy network",
-            cfg.rule
-        );
-    }
+    let mut queries = QueryController::new(cfg.query_rule()?, cfg.budget, cfg.segment_len)?;
 
     log.set_prefix(cfg.run_name());
     let mut obs = env.reset(Some(env_seed));
