@@ -353,7 +353,8 @@ fn report_writes_table_with_paper_values_and_figures() {
     let dir = tempfile::tempdir().unwrap();
     report_fixture(dir.path());
     let out = dir.path().join("report");
-    let summary = report::report(dir.path(), &out).unwrap();
+    let summary =
+        report::report(dir.path(), &out, arld::experiment::verdict::DEFAULT_SUSTAIN).unwrap();
     // To look at the figures: ARLD_TEST_KEEP_REPORT=/some/dir cargo test --test experiment_sweep report_writes
     if let Ok(keep) = std::env::var("ARLD_TEST_KEEP_REPORT") {
         std::fs::create_dir_all(&keep).unwrap();
@@ -487,7 +488,8 @@ fn group_medians_follow_the_design_for_every_configuration() {
     }
     // summary.json and eval.csv agree on every fake run, so the report raises no disagreement.
     let out = dir.path().join("report");
-    let summary = report::report(dir.path(), &out).unwrap();
+    let summary =
+        report::report(dir.path(), &out, arld::experiment::verdict::DEFAULT_SUSTAIN).unwrap();
     assert!(
         !summary
             .notes

@@ -1,9 +1,10 @@
 //! `arld sweep`, `arld report` and `arld reproduce`: many seeded runs in parallel, and their tables and figures.
-use anyhow::{Result, bail};
+use anyhow::{Context, Result, bail};
 use arld::experiment::paper::paper_grids;
 use arld::experiment::report::report;
 use arld::experiment::run_spec;
 use arld::experiment::sweep::{SweepGrid, run_grid};
+use arld::experiment::verdict;
 use clap::Args;
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -49,11 +50,18 @@ pub struct SweepArgs {
 
 #[derive(Args)]
 pub struct ReportArgs {
-    /// A sweep directory (any directory holding run directories).
+    /// A sweep directory (any directory holding run directories), or with --from-evaluations an
+    /// evaluations.csv written by an earlier report (e.g. results/evaluations.csv).
     dir: PathBuf,
-    /// Where tables and figures go [default: DIR/report].
+    /// Where tables and figures go [default: DIR/report, or the CSV's directory with --from-evaluations].
     #[arg(long, short)]
     out: Option<PathBuf>,
+    /// Evaluations a sustained solve must hold for after reaching the target (the "sustained" reading).
+    #[arg(long, default_value_t = arld::experiment::verdict::DEFAULT_SUSTAIN)]
+    sustain: usize,
+    /// Read DIR as an evaluations.csv and write only the readings and claims tables (no figures).
+    #[arg(long)]
+    from_evaluations: bool,
 }
 
 #[derive(Args)]
@@ -114,12 +122,28 @@ pub fn run_sweep(args: SweepArgs) -> Result<ExitCode> {
 }
 
 pub fn run_report(args: ReportArgs) -> Result<ExitCode> {
+    if args.from_evaluations {
+        let runs = verdict::runs_from_evaluations_csv(&args.dir)?;
+        let out = args.out.unwrap_or_else(|| {
+            args.dir
+                .parent()
+                .map_or_else(|| PathBuf::from("."), std::path::Path::to_path_buf)
+        });
+        std::fs::create_dir_all(&out)
+            .with_context(|| format!("cannot create {}", out.display()))?;
+        let (files, _) = verdict::write_verdict(&runs, &out, args.sustain)?;
+        println!("{} runs; wrote:", runs.len());
+        for f in &files {
+            println!("  {}", f.display());
+        }
+        return Ok(ExitCode::SUCCESS);
+    }
     let out = args.out.unwrap_or_else(|| args.dir.join("report"));
-    print_report(&args.dir, &out)
+    print_report(&args.dir, &out, args.sustain)
 }
 
-fn print_report(dir: &std::path::Path, out: &std::path::Path) -> Result<ExitCode> {
-    let summary = report(dir, out)?;
+fn print_report(dir: &std::path::Path, out: &std::path::Path, sustain: usize) -> Result<ExitCode> {
+    let summary = report(dir, out, sustain)?;
     for note in &summary.notes {
         eprintln!("note: {note}");
     }
@@ -174,5 +198,9 @@ pub fn run_reproduce(args: ReproduceArgs) -> Result<ExitCode> {
     if !ran_any {
         bail!("nothing to run: no part of the protocol covers {envs:?}");
     }
-    print_report(&args.out, &args.out.join("report"))
+    print_report(
+        &args.out,
+        &args.out.join("report"),
+        arld::experiment::verdict::DEFAULT_SUSTAIN,
+    )
 }

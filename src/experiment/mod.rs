@@ -8,6 +8,7 @@ pub mod plot;
 pub mod report;
 pub mod stats;
 pub mod sweep;
+pub mod verdict;
 
 use crate::expert::{self, demos::Demonstrations};
 use crate::train::{self, RunLog, Summary, TrainConfig, derive_seed};

@@ -509,7 +509,7 @@ fn sweep_completion_notes(root: &Path) -> Vec<String> {
 /// Reads every complete run under `dir` and writes into `out_dir`: `table.md` and `table.csv` (Table 5 layout,
 /// ours beside the paper's), the paper's figures as PNG and SVG (see [`plot::paper_figures`]; a figure whose
 /// runs are absent is skipped with a note), and `report.md` linking everything with the notes.
-pub fn report(dir: &Path, out_dir: &Path) -> Result<ReportSummary> {
+pub fn report(dir: &Path, out_dir: &Path, sustain: usize) -> Result<ReportSummary> {
     let (runs, mut notes) = load_runs(dir)?;
     if runs.is_empty() {
         bail!(
@@ -542,6 +542,9 @@ pub fn report(dir: &Path, out_dir: &Path) -> Result<ReportSummary> {
     let evaluations_path = out_dir.join("evaluations.csv");
     write_atomic(&evaluations_path, evaluations_csv(&runs).as_bytes())?;
     files.push(evaluations_path);
+
+    let (verdict_files, verdict_md) = super::verdict::write_verdict(&runs, out_dir, sustain)?;
+    files.extend(verdict_files);
 
     let figures = plot::paper_figures(&runs);
     let mut figure_lines = Vec::new();
@@ -580,6 +583,7 @@ pub fn report(dir: &Path, out_dir: &Path) -> Result<ReportSummary> {
         "## All configurations\n\n{}",
         all_groups_markdown(&groups)
     )?;
+    writeln!(md, "{verdict_md}")?;
     writeln!(md, "## Expert statistics in the paper\n")?;
     writeln!(
         md,

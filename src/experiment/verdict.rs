@@ -1,0 +1,900 @@
+//! The paper's claims, tested on finished runs: the readings table (three readings of steps to solve with
+//! bootstrap intervals and Mann–Whitney p-values against ADQN, and the final score) and the claims table
+//! (each claim of the paper's results section, its evidence in the paper, ours under each reading, and the
+//! verdict with the test that decides it).
+//!
+//! Everything here is computed from [`RunRecord`]s, so the tables regenerate from the run directories or from
+//! `results/evaluations.csv` alone ([`runs_from_evaluations_csv`]). The paper's own numbers come from
+//! [`super::paper`]; nothing is typed in by hand.
+
+use super::paper::{self, PAPER_TASKS, TABLE5_NETS};
+use super::report::{EvalPoint, RunRecord, env_order};
+use super::stats::{
+    bootstrap_median_interval, final_score, mann_whitney, median, median_curve_hit, sustained,
+};
+use crate::train::{Method, NetKind, TrainConfig};
+use anyhow::{Context, Result, bail};
+use std::collections::BTreeMap;
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+/// Evaluations a sustained solve must hold for after the first one, unless told otherwise.
+pub const DEFAULT_SUSTAIN: usize = 3;
+/// Evaluations averaged into the final score.
+pub const FINAL_EVALUATIONS: usize = 10;
+/// Significance level of every decision below.
+pub const ALPHA: f64 = 0.05;
+const BOOTSTRAP_RESAMPLES: usize = 10_000;
+const BOOTSTRAP_SEED: u64 = 0;
+/// The methods the paper compares without pre-training.
+const NO_PRETRAINING: [&str; 4] = ["dqn", "gdqn", "bdqn", "adqn"];
+/// The methods that use demonstrations.
+const WITH_DEMONSTRATIONS: [&str; 5] = ["gdqn", "bdqn", "adqn", "dqfd", "adqnp"];
+
+/// A reading of steps to solve: per-seed values, their median and a bootstrap 95% interval.
+#[derive(Debug, Clone)]
+pub struct Reading {
+    pub per_seed: Vec<f64>,
+    pub median: f64,
+    pub interval: (f64, f64),
+}
+
+impl Reading {
+    fn new(per_seed: Vec<f64>) -> Self {
+        let median = median(&per_seed).unwrap_or(f64::NAN);
+        let interval =
+            bootstrap_median_interval(&per_seed, 0.95, BOOTSTRAP_RESAMPLES, BOOTSTRAP_SEED)
+                .unwrap_or((f64::NAN, f64::NAN));
+        Reading {
+            per_seed,
+            median,
+            interval,
+        }
+    }
+}
+
+/// One configuration (env, method, net, variant) over its seeds.
+#[derive(Debug, Clone)]
+pub struct Cell {
+    pub env: String,
+    pub method: String,
+    pub net: String,
+    pub variant: String,
+    pub seeds: usize,
+    /// Seeds whose curve ever reached the target.
+    pub solved: usize,
+    pub first_hit: Reading,
+    pub sustained: Reading,
+    /// First step at which the median-over-seeds curve reaches the target.
+    pub median_curve: u64,
+    /// Mean of the last [`FINAL_EVALUATIONS`] evaluations, per seed, and their median.
+    pub final_score: Reading,
+}
+
+/// Groups runs per configuration and computes every reading; `k` is the sustained reading's K.
+pub fn cells(runs: &[RunRecord], k: usize) -> Vec<Cell> {
+    let mut groups: BTreeMap<(&str, &str, &str, &str), Vec<&RunRecord>> = BTreeMap::new();
+    for run in runs {
+        groups
+            .entry((&run.env, &run.method, &run.net, &run.variant))
+            .or_default()
+            .push(run);
+    }
+    groups
+        .into_iter()
+        .map(|((env, method, net, variant), mut members)| {
+            members.sort_by_key(|r| r.seed);
+            let reading = |f: &dyn Fn(&RunRecord) -> f64| {
+                Reading::new(members.iter().map(|r| f(r)).collect())
+            };
+            let curves: Vec<Vec<EvalPoint>> = members.iter().map(|r| r.eval.clone()).collect();
+            let first = members[0];
+            Cell {
+                env: env.to_string(),
+                method: method.to_string(),
+                net: net.to_string(),
+                variant: variant.to_string(),
+                seeds: members.len(),
+                solved: members
+                    .iter()
+                    .filter(|r| r.eval.iter().any(|p| p.mean >= r.solve_threshold))
+                    .count(),
+                first_hit: reading(&|r| {
+                    sustained(&r.eval, r.solve_threshold, 0, r.train_steps) as f64
+                }),
+                sustained: reading(&|r| {
+                    sustained(&r.eval, r.solve_threshold, k, r.train_steps) as f64
+                }),
+                median_curve: median_curve_hit(&curves, first.solve_threshold, first.train_steps),
+                final_score: reading(&|r| {
+                    final_score(&r.eval, FINAL_EVALUATIONS).unwrap_or(f64::NAN)
+                }),
+            }
+        })
+        .collect()
+}
+
+fn find<'a>(
+    cells: &'a [Cell],
+    env: &str,
+    method: &str,
+    net: &str,
+    variant: &str,
+) -> Option<&'a Cell> {
+    cells
+        .iter()
+        .find(|c| c.env == env && c.method == method && c.net == net && c.variant == variant)
+}
+
+/// The two-sided Mann–Whitney p-value of two readings' per-seed values (`None` when undefined).
+fn p_value(a: &Reading, b: &Reading) -> Option<f64> {
+    mann_whitney(&a.per_seed, &b.per_seed).map(|(_, p)| p)
+}
+
+fn fmt_num(v: f64) -> String {
+    if v.is_nan() {
+        "-".into()
+    } else if v.fract() == 0.0 && v.abs() < 1e12 {
+        format!("{v:.0}")
+    } else {
+        format!("{v:.1}")
+    }
+}
+
+fn fmt_p(p: Option<f64>) -> String {
+    match p {
+        None => "-".into(),
+        Some(p) if p < 0.001 => "<0.001".into(),
+        Some(p) => format!("{p:.3}"),
+    }
+}
+
+/// The readings table of the `default` variant: one row per (env, net, method), in the paper's order.
+pub fn readings_table(cells: &[Cell], k: usize) -> (String, String) {
+    let mut md = String::new();
+    let mut csv = String::from(
+        "env,method,net,seeds,solved,first_hit_median,first_hit_lo,first_hit_hi,first_hit_p_vs_adqn,\
+         sustained_median,sustained_lo,sustained_hi,sustained_p_vs_adqn,median_curve,final_score_median,\
+         final_score_lo,final_score_hi,final_score_p_vs_adqn,paper_median\n",
+    );
+    let _ = writeln!(
+        md,
+        "Steps to solve under three readings (median over seeds [bootstrap 95% interval], two-sided Mann–Whitney \
+         p against ADQN of the same network): **first hit** (the paper's: first evaluation at the target), \
+         **sustained** (at the target for that evaluation and the next {k}), **median curve** (first step where the \
+         median-over-seeds curve reaches the target); never solving counts as the whole run. **Final score**: the \
+         mean of the last {FINAL_EVALUATIONS} evaluations, median over seeds.\n"
+    );
+    let envs = env_order(cells.iter().map(|c| c.env.as_str()));
+    for env in &envs {
+        let _ = writeln!(md, "\n### {env}\n");
+        let _ = writeln!(
+            md,
+            "| method | seeds (solved) | first hit | p | sustained | p | median curve | final score | p | paper |\n\
+             |---|---|---|---|---|---|---|---|---|---|"
+        );
+        for (net, suffix) in TABLE5_NETS {
+            for method in paper::TABLE5_METHODS {
+                let Some(cell) = find(cells, env, method, net, super::sweep::DEFAULT_VARIANT)
+                else {
+                    continue;
+                };
+                let adqn = find(cells, env, "adqn", net, super::sweep::DEFAULT_VARIANT);
+                let p = |f: fn(&Cell) -> &Reading| {
+                    adqn.filter(|a| a.method != cell.method || cell.method != "adqn")
+                        .filter(|_| method != "adqn")
+                        .and_then(|a| p_value(f(cell), f(a)))
+                };
+                let (p_first, p_sustained, p_final) = (
+                    p(|c| &c.first_hit),
+                    p(|c| &c.sustained),
+                    p(|c| &c.final_score),
+                );
+                let paper_median = paper::paper_median_steps(env, method, net);
+                let show = |r: &Reading| {
+                    format!(
+                        "{} [{}, {}]",
+                        fmt_num(r.median),
+                        fmt_num(r.interval.0),
+                        fmt_num(r.interval.1)
+                    )
+                };
+                let _ = writeln!(
+                    md,
+                    "| {}-{suffix} | {} ({}) | {} | {} | {} | {} | {} | {} | {} | {} |",
+                    paper::method_display_name(method),
+                    cell.seeds,
+                    cell.solved,
+                    show(&cell.first_hit),
+                    fmt_p(p_first),
+                    show(&cell.sustained),
+                    fmt_p(p_sustained),
+                    cell.median_curve,
+                    show(&cell.final_score),
+                    fmt_p(p_final),
+                    paper_median.map_or("-".into(), |v| v.to_string()),
+                );
+                let num = |v: f64| {
+                    if v.is_nan() {
+                        String::new()
+                    } else {
+                        format!("{v}")
+                    }
+                };
+                let pv = |p: Option<f64>| p.map_or(String::new(), |p| format!("{p:.6}"));
+                let _ = writeln!(
+                    csv,
+                    "{env},{method},{net},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
+                    cell.seeds,
+                    cell.solved,
+                    num(cell.first_hit.median),
+                    num(cell.first_hit.interval.0),
+                    num(cell.first_hit.interval.1),
+                    pv(p_first),
+                    num(cell.sustained.median),
+                    num(cell.sustained.interval.0),
+                    num(cell.sustained.interval.1),
+                    pv(p_sustained),
+                    cell.median_curve,
+                    num(cell.final_score.median),
+                    num(cell.final_score.interval.0),
+                    num(cell.final_score.interval.1),
+                    pv(p_final),
+                    paper_median.map_or(String::new(), |v| v.to_string()),
+                );
+            }
+        }
+    }
+    (md, csv)
+}
+
+/// A verdict on one claim.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Verdict {
+    Reproduced,
+    NotReproduced,
+    Inconclusive,
+}
+
+impl Verdict {
+    pub fn label(self) -> &'static str {
+        match self {
+            Verdict::Reproduced => "reproduced",
+            Verdict::NotReproduced => "not reproduced",
+            Verdict::Inconclusive => "inconclusive",
+        }
+    }
+}
+
+/// One row of the claims table.
+#[derive(Debug, Clone)]
+pub struct Claim {
+    pub claim: String,
+    pub paper: String,
+    /// What our runs show, under each reading where readings apply.
+    pub ours: String,
+    pub verdict: Verdict,
+    /// The rule that decided the verdict.
+    pub test: String,
+}
+
+/// Which reading of steps to solve a comparison uses.
+#[derive(Clone, Copy)]
+enum Which {
+    First,
+    Sustained,
+    MedianCurve,
+}
+
+const READINGS: [(Which, &str); 3] = [
+    (Which::First, "first hit"),
+    (Which::Sustained, "sustained"),
+    (Which::MedianCurve, "median curve"),
+];
+
+fn value(cell: &Cell, which: Which) -> f64 {
+    match which {
+        Which::First => cell.first_hit.median,
+        Which::Sustained => cell.sustained.median,
+        Which::MedianCurve => cell.median_curve as f64,
+    }
+}
+
+/// "`a` needs fewer steps than `b`" on one task: (a's median below b's under each reading, and whether b is
+/// significantly faster than a under the paper's first-hit reading).
+fn faster(a: &Cell, b: &Cell) -> ([bool; 3], bool) {
+    let lower = READINGS.map(|(which, _)| value(a, which) < value(b, which));
+    let b_significantly_faster = b.first_hit.median < a.first_hit.median
+        && p_value(&a.first_hit, &b.first_hit).is_some_and(|p| p < ALPHA);
+    (lower, b_significantly_faster)
+}
+
+fn counts_text(counts: [usize; 3], of: usize) -> String {
+    READINGS
+        .iter()
+        .zip(counts)
+        .map(|((_, name), c)| format!("{name} {c}/{of}"))
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+/// "Method `a` beats every method of `others` on `tasks`" as a claim, per network. The paper's count comes from
+/// its Table 5; the verdict: reproduced when `a` has the lowest first-hit median on at least as many of our tasks
+/// as in the paper and no rival is significantly faster anywhere; not reproduced when a rival is significantly
+/// faster on some task; inconclusive otherwise (or with tasks missing).
+fn beats_claim(
+    cells: &[Cell],
+    claim: String,
+    a: &str,
+    others: &[&str],
+    tasks: &[&str],
+    net: &str,
+) -> Claim {
+    let paper_wins = tasks
+        .iter()
+        .filter(|task| {
+            let mine = paper::paper_median_steps(task, a, net);
+            others
+                .iter()
+                .all(|o| matches!((mine, paper::paper_median_steps(task, o, net)), (Some(m), Some(t)) if m < t))
+        })
+        .count();
+    let mut counts = [0usize; 3];
+    let mut missing = Vec::new();
+    let mut beaten = Vec::new();
+    for task in tasks {
+        let ours = find(cells, task, a, net, super::sweep::DEFAULT_VARIANT);
+        let rivals: Option<Vec<&Cell>> = others
+            .iter()
+            .map(|o| find(cells, task, o, net, super::sweep::DEFAULT_VARIANT))
+            .collect();
+        let (Some(ours), Some(rivals)) = (ours, rivals) else {
+            missing.push(*task);
+            continue;
+        };
+        let mut best = [true; 3];
+        for rival in &rivals {
+            let (lower, significantly) = faster(ours, rival);
+            for i in 0..3 {
+                best[i] &= lower[i];
+            }
+            if significantly {
+                beaten.push(format!(
+                    "{} on {task}",
+                    paper::method_display_name(&rival.method)
+                ));
+            }
+        }
+        for i in 0..3 {
+            counts[i] += best[i] as usize;
+        }
+    }
+    let measured = tasks.len() - missing.len();
+    let verdict = if !beaten.is_empty() {
+        Verdict::NotReproduced
+    } else if missing.is_empty() && counts[0] >= paper_wins {
+        Verdict::Reproduced
+    } else {
+        Verdict::Inconclusive
+    };
+    let mut ours = counts_text(counts, measured);
+    if !beaten.is_empty() {
+        let _ = write!(
+            ours,
+            "; significantly faster than {}: {}",
+            paper::method_display_name(a),
+            beaten.join(", ")
+        );
+    }
+    if !missing.is_empty() {
+        let _ = write!(ours, "; no runs for {}", missing.join(", "));
+    }
+    Claim {
+        claim,
+        paper: format!("Table 5: best on {paper_wins}/{} tasks", tasks.len()),
+        ours,
+        verdict,
+        test: format!(
+            "lowest first-hit median on >= {paper_wins} tasks and no rival faster with Mann-Whitney p < {ALPHA}"
+        ),
+    }
+}
+
+fn net_suffix(net: &str) -> &'static str {
+    TABLE5_NETS
+        .iter()
+        .find(|(n, _)| *n == net)
+        .map_or("?", |(_, s)| s)
+}
+
+/// The claims of the paper's results section, tested on `cells`.
+pub fn claims(cells: &[Cell]) -> Vec<Claim> {
+    let all_tasks: Vec<&str> = PAPER_TASKS.iter().map(|t| t.gym_id).collect();
+    let harder = ["Acrobot-v1", "MountainCar-v0", "LunarLander-v2"];
+    let hardest = ["MountainCar-v0", "LunarLander-v2"];
+    let mut out = Vec::new();
+    for (net, _) in TABLE5_NETS {
+        let s = net_suffix(net);
+        out.push(beats_claim(
+            cells,
+            format!(
+                "ADQN-{s} needs the fewest steps among DQN, GDQN, BDQN and ADQN (no pre-training)"
+            ),
+            "adqn",
+            &NO_PRETRAINING[..3],
+            &all_tasks,
+            net,
+        ));
+        out.push(beats_claim(
+            cells,
+            format!("ADQN-{s} is faster than DQfD-{s} except on CartPole"),
+            "adqn",
+            &["dqfd"],
+            &harder,
+            net,
+        ));
+        out.push(beats_claim(
+            cells,
+            format!(
+                "ADQNP-{s} improves over DQfD-{s} on the harder tasks (MountainCar, LunarLander)"
+            ),
+            "adqnp",
+            &["dqfd"],
+            &hardest,
+            net,
+        ));
+    }
+    out.push(end_above_expert(cells));
+    out.push(t_query_insensitive(cells));
+    out.push(expert_robustness(cells));
+    out
+}
+
+/// "Methods with demonstrations end above the expert": each such configuration's final score against the
+/// paper's expert mean. Reproduced when every median final score is above it; not reproduced when some
+/// configuration's whole bootstrap interval lies below it; inconclusive otherwise.
+fn end_above_expert(cells: &[Cell]) -> Claim {
+    let (mut above, mut total, mut below) = (0, 0, Vec::new());
+    for cell in cells.iter().filter(|c| {
+        c.variant == super::sweep::DEFAULT_VARIANT
+            && WITH_DEMONSTRATIONS.contains(&c.method.as_str())
+    }) {
+        let Some(expert) = paper::expert_stats(&cell.env) else {
+            continue;
+        };
+        total += 1;
+        if cell.final_score.median > expert.mean_return {
+            above += 1;
+        }
+        if cell.final_score.interval.1 < expert.mean_return {
+            below.push(format!(
+                "{}-{} on {} ({})",
+                paper::method_display_name(&cell.method),
+                net_suffix(&cell.net),
+                cell.env,
+                fmt_num(cell.final_score.median)
+            ));
+        }
+    }
+    let verdict = if total == 0 {
+        Verdict::Inconclusive
+    } else if !below.is_empty() {
+        Verdict::NotReproduced
+    } else if above == total {
+        Verdict::Reproduced
+    } else {
+        Verdict::Inconclusive
+    };
+    let mut ours = format!("{above}/{total} configurations end above the expert's mean");
+    if !below.is_empty() {
+        let _ = write!(ours, "; clearly below: {}", below.join(", "));
+    }
+    Claim {
+        claim: "Methods with demonstrations end above the expert".into(),
+        paper: "Figures 1-2: the learned policies outperform the imperfect expert".into(),
+        ours,
+        verdict,
+        test: format!(
+            "median of the last {FINAL_EVALUATIONS} evaluations above the paper's expert mean; not reproduced if the \
+             95% bootstrap interval lies below it"
+        ),
+    }
+}
+
+/// Pairs of cells of one (env, method, net) that differ only in their variant, selected by `prefix`.
+fn variants<'a>(
+    cells: &'a [Cell],
+    prefix: &str,
+) -> BTreeMap<(String, String, String), Vec<&'a Cell>> {
+    let mut out: BTreeMap<_, Vec<&Cell>> = BTreeMap::new();
+    for cell in cells.iter().filter(|c| c.variant.starts_with(prefix)) {
+        out.entry((cell.env.clone(), cell.method.clone(), cell.net.clone()))
+            .or_default()
+            .push(cell);
+    }
+    out
+}
+
+/// "ADQN is insensitive to t_query": within each (env, net), every pair of t_query values compared with
+/// Mann–Whitney on first-hit steps, Bonferroni-corrected. Reproduced when no pair differs; not reproduced when one
+/// does; inconclusive without at least two t_query values of five seeds each.
+fn t_query_insensitive(cells: &[Cell]) -> Claim {
+    let (mut pairs, mut differing, mut settings) = (Vec::new(), Vec::new(), 0);
+    for ((env, _, net), group) in variants(cells, "tq") {
+        if group.len() < 2 || group.iter().any(|c| c.seeds < 5) {
+            continue;
+        }
+        settings += 1;
+        let medians: Vec<String> = group
+            .iter()
+            .map(|c| format!("{} {}", c.variant, fmt_num(c.first_hit.median)))
+            .collect();
+        pairs.push(format!(
+            "{env} -{}: {}",
+            net_suffix(&net),
+            medians.join(", ")
+        ));
+        let comparisons = group.len() * (group.len() - 1) / 2;
+        for (i, a) in group.iter().enumerate() {
+            for b in &group[i + 1..] {
+                if let Some(p) = p_value(&a.first_hit, &b.first_hit)
+                    && p * (comparisons as f64) < ALPHA
+                {
+                    differing.push(format!(
+                        "{env} -{}: {} vs {} (p = {p:.4})",
+                        net_suffix(&net),
+                        a.variant,
+                        b.variant
+                    ));
+                }
+            }
+        }
+    }
+    let verdict = match (settings, differing.is_empty()) {
+        (0, _) => Verdict::Inconclusive,
+        (_, false) => Verdict::NotReproduced,
+        (_, true) => Verdict::Reproduced,
+    };
+    let mut ours =
+        format!("{settings} task/network settings with >= 2 t_query values of >= 5 seeds");
+    if !pairs.is_empty() {
+        let _ = write!(ours, " ({})", pairs.join("; "));
+    }
+    if !differing.is_empty() {
+        let _ = write!(ours, "; differing: {}", differing.join("; "));
+    }
+    Claim {
+        claim: "ADQN is insensitive to t_query in {0.05, 0.1, 0.3, 0.5}".into(),
+        paper: "Figure 3: similar curves for every t_query".into(),
+        ours,
+        verdict,
+        test: format!(
+            "no pair of t_query values differs in first-hit steps (Mann-Whitney, Bonferroni, {ALPHA})"
+        ),
+    }
+}
+
+/// "ADQN is robust to a weak but policy-consistent expert while DQfD is not" (LunarLander): per network, the
+/// final score with the weak expert against the perfect one. Reproduced when ADQN is not significantly worse with
+/// the weak expert and DQfD is; not reproduced when ADQN is significantly worse; inconclusive otherwise.
+fn expert_robustness(cells: &[Cell]) -> Claim {
+    let worse = |method: &str, net: &str| -> Option<(f64, f64, Option<f64>)> {
+        let cell = |spec: &str| {
+            find(
+                cells,
+                "LunarLander-v2",
+                method,
+                net,
+                &format!("expert-{spec}"),
+            )
+        };
+        let (weak, perfect) = (cell("shipped-weak")?, cell("shipped-perfect")?);
+        let p = p_value(&weak.final_score, &perfect.final_score);
+        Some((weak.final_score.median, perfect.final_score.median, p))
+    };
+    let significantly_worse = |r: Option<(f64, f64, Option<f64>)>| {
+        r.map(|(weak, perfect, p)| weak < perfect && p.is_some_and(|p| p < ALPHA))
+    };
+    let mut parts = Vec::new();
+    let mut verdicts = Vec::new();
+    for (net, s) in TABLE5_NETS {
+        let (adqn, dqfd) = (worse("adqn", net), worse("dqfd", net));
+        for (name, r) in [("ADQN", adqn), ("DQfD", dqfd)] {
+            if let Some((weak, perfect, p)) = r {
+                parts.push(format!(
+                    "{name}-{s}: final {} with the weak expert vs {} with the perfect one (p = {})",
+                    fmt_num(weak),
+                    fmt_num(perfect),
+                    fmt_p(p)
+                ));
+            }
+        }
+        verdicts.push(
+            match (significantly_worse(adqn), significantly_worse(dqfd)) {
+                (Some(true), _) => Verdict::NotReproduced,
+                (Some(false), Some(true)) => Verdict::Reproduced,
+                _ => Verdict::Inconclusive,
+            },
+        );
+    }
+    let verdict = if verdicts.contains(&Verdict::NotReproduced) {
+        Verdict::NotReproduced
+    } else if verdicts.iter().all(|v| *v == Verdict::Reproduced) {
+        Verdict::Reproduced
+    } else {
+        Verdict::Inconclusive
+    };
+    Claim {
+        claim: "On LunarLander, ADQN is robust to the weak expert while DQfD is not".into(),
+        paper: "Figure 4: DQfD degrades with the weak expert, ADQN much less".into(),
+        ours: if parts.is_empty() {
+            "no expert-quality runs".into()
+        } else {
+            parts.join("; ")
+        },
+        verdict,
+        test: format!(
+            "final score, weak vs perfect expert, one-sided reading of a two-sided Mann-Whitney at {ALPHA}: ADQN not \
+             worse, DQfD worse"
+        ),
+    }
+}
+
+/// The claims as Markdown and CSV.
+pub fn claims_table(claims: &[Claim]) -> (String, String) {
+    let mut md = String::from(
+        "| claim | the paper's evidence | ours | verdict | decided by |\n|---|---|---|---|---|\n",
+    );
+    let mut csv = String::from("claim,paper,ours,verdict,test\n");
+    let quote = |s: &str| format!("\"{}\"", s.replace('"', "\"\""));
+    for c in claims {
+        let _ = writeln!(
+            md,
+            "| {} | {} | {} | **{}** | {} |",
+            c.claim,
+            c.paper,
+            c.ours,
+            c.verdict.label(),
+            c.test
+        );
+        let _ = writeln!(
+            csv,
+            "{},{},{},{},{}",
+            quote(&c.claim),
+            quote(&c.paper),
+            quote(&c.ours),
+            c.verdict.label(),
+            quote(&c.test)
+        );
+    }
+    (md, csv)
+}
+
+/// Writes `readings.md`, `readings.csv`, `claims.md` and `claims.csv` into `out_dir`; returns the files and a
+/// Markdown section with both tables for `report.md`.
+pub fn write_verdict(
+    runs: &[RunRecord],
+    out_dir: &Path,
+    k: usize,
+) -> Result<(Vec<PathBuf>, String)> {
+    let cells = cells(runs, k);
+    let (readings_md, readings_csv) = readings_table(&cells, k);
+    let (claims_md, claims_csv) = claims_table(&claims(&cells));
+    let mut files = Vec::new();
+    for (name, text) in [
+        ("readings.md", &readings_md),
+        ("readings.csv", &readings_csv),
+        ("claims.md", &claims_md),
+        ("claims.csv", &claims_csv),
+    ] {
+        let path = out_dir.join(name);
+        crate::train::log::write_atomic(&path, text.as_bytes())?;
+        files.push(path);
+    }
+    let section = format!(
+        "## The paper's claims\n\n{claims_md}\n## Three readings of steps to solve\n\n{readings_md}"
+    );
+    Ok((files, section))
+}
+
+/// Rebuilds run records from an `evaluations.csv` (as `arld report` writes it: one row per evaluation point).
+/// The target comes from the environment's registration and the training length from the method's preset, so
+/// the committed file alone regenerates every table.
+pub fn runs_from_evaluations_csv(path: &Path) -> Result<Vec<RunRecord>> {
+    let mut reader =
+        csv::Reader::from_path(path).with_context(|| format!("cannot read {}", path.display()))?;
+    let headers = reader.headers()?.clone();
+    let expected = [
+        "env", "method", "net", "variant", "seed", "step", "mean", "std", "min", "max",
+    ];
+    if headers.iter().ne(expected) {
+        bail!(
+            "{}: expected the columns {}",
+            path.display(),
+            expected.join(",")
+        );
+    }
+    let mut runs: BTreeMap<(String, String, String, String, u64), Vec<EvalPoint>> = BTreeMap::new();
+    for (i, row) in reader.records().enumerate() {
+        let row = row.with_context(|| format!("{}: line {}", path.display(), i + 2))?;
+        let number = |k: usize| -> Result<f64> {
+            row[k].parse::<f64>().with_context(|| {
+                format!(
+                    "{}: line {}: {} is not a number",
+                    path.display(),
+                    i + 2,
+                    expected[k]
+                )
+            })
+        };
+        let seed: u64 = row[4]
+            .parse()
+            .with_context(|| format!("{}: line {}: bad seed", path.display(), i + 2))?;
+        let point = EvalPoint {
+            step: row[5]
+                .parse()
+                .with_context(|| format!("{}: line {}: bad step", path.display(), i + 2))?,
+            mean: number(6)?,
+            std: number(7)?,
+            min: number(8)?,
+            max: number(9)?,
+        };
+        runs.entry((
+            row[0].into(),
+            row[1].into(),
+            row[2].into(),
+            row[3].into(),
+            seed,
+        ))
+        .or_default()
+        .push(point);
+    }
+    runs.into_iter()
+        .map(|((env, method, net, variant, seed), mut eval)| {
+            eval.sort_by_key(|p| p.step);
+            let preset = TrainConfig::preset(
+                &env,
+                method.parse::<Method>()?,
+                net.parse::<NetKind>()?,
+                seed,
+            )?;
+            Ok(RunRecord {
+                dir: path.to_path_buf(),
+                solve_threshold: crate::env::spec(&env)?.solve_threshold,
+                train_steps: preset.train_steps as u64,
+                eval_period: preset.eval_period as u64,
+                t_query: None,
+                expert: None,
+                query_steps: None,
+                summary_steps_to_solve: None,
+                env,
+                method,
+                net,
+                seed,
+                variant,
+                eval,
+            })
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn run(env: &str, method: &str, net: &str, seed: u64, means: &[f64]) -> RunRecord {
+        let spec = crate::env::spec(env).unwrap();
+        RunRecord {
+            dir: "x".into(),
+            env: env.into(),
+            method: method.into(),
+            net: net.into(),
+            seed,
+            variant: super::super::sweep::DEFAULT_VARIANT.into(),
+            t_query: None,
+            expert: None,
+            solve_threshold: spec.solve_threshold,
+            train_steps: 20_000,
+            eval_period: 1000,
+            eval: means
+                .iter()
+                .enumerate()
+                .map(|(i, &mean)| EvalPoint {
+                    step: (i as u64 + 1) * 1000,
+                    mean,
+                    std: 0.0,
+                    min: mean,
+                    max: mean,
+                })
+                .collect(),
+            query_steps: None,
+            summary_steps_to_solve: None,
+        }
+    }
+
+    #[test]
+    fn a_clearly_faster_rival_refutes_the_claim() {
+        // On CartPole, DQN solves at 1000 in 8 seeds, ADQN at 5000: DQN is significantly faster.
+        let mut runs = Vec::new();
+        for seed in 0..8 {
+            runs.push(run("CartPole-v0", "dqn", "bootstrap", seed, &[200.0; 10]));
+            runs.push(run(
+                "CartPole-v0",
+                "gdqn",
+                "bootstrap",
+                seed,
+                &[0., 0., 0., 0., 0., 0., 200.0],
+            ));
+            runs.push(run(
+                "CartPole-v0",
+                "bdqn",
+                "bootstrap",
+                seed,
+                &[0., 0., 0., 0., 0., 0., 200.0],
+            ));
+            runs.push(run(
+                "CartPole-v0",
+                "adqn",
+                "bootstrap",
+                seed,
+                &[0., 0., 0., 0., 200.0, 200.0, 200.0, 200.0],
+            ));
+        }
+        let cells = cells(&runs, 3);
+        let claim = beats_claim(
+            &cells,
+            "c".into(),
+            "adqn",
+            &["dqn", "gdqn", "bdqn"],
+            &["CartPole-v0"],
+            "bootstrap",
+        );
+        assert_eq!(claim.verdict, Verdict::NotReproduced, "{claim:?}");
+        assert!(claim.ours.contains("DQN on CartPole-v0"), "{}", claim.ours);
+        // Against GDQN and BDQN alone, ADQN is best on every reading and no rival is faster: reproduced.
+        let claim = beats_claim(
+            &cells,
+            "c".into(),
+            "adqn",
+            &["gdqn", "bdqn"],
+            &["CartPole-v0"],
+            "bootstrap",
+        );
+        assert_eq!(claim.verdict, Verdict::Reproduced, "{claim:?}");
+        assert_eq!(claim.ours, "first hit 1/1, sustained 1/1, median curve 1/1");
+    }
+
+    #[test]
+    fn readings_table_matches_a_direct_computation() {
+        // Two seeds: first hits 1000 and 3000 (median 2000); sustained (K=3) 3000 and never (20000).
+        let runs = vec![
+            run(
+                "CartPole-v0",
+                "adqn",
+                "bootstrap",
+                0,
+                &[195.0, 10.0, 195.0, 195.0, 195.0, 195.0],
+            ),
+            run(
+                "CartPole-v0",
+                "adqn",
+                "bootstrap",
+                1,
+                &[10.0, 10.0, 196.0, 10.0],
+            ),
+        ];
+        let cells = cells(&runs, 3);
+        assert_eq!(cells[0].first_hit.median, 2000.0);
+        assert_eq!(cells[0].sustained.per_seed, vec![3000.0, 20000.0]);
+        // Median curve: step 3000 has medians (195 + 196) / 2 >= 195; step 1000 has (195 + 10) / 2.
+        assert_eq!(cells[0].median_curve, 3000);
+        let (_, csv) = readings_table(&cells, 3);
+        assert!(
+            csv.lines()
+                .nth(1)
+                .unwrap()
+                .starts_with("CartPole-v0,adqn,bootstrap,2,2,2000,"),
+            "{csv}"
+        );
+    }
+}
