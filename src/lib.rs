@@ -13,6 +13,8 @@
 //! - [`expert`]: the [`expert::Expert`] trait and its kinds.
 //! - [`train`]: the training loop of one run, top to bottom.
 //! - [`experiment`]: presets, run directories, sweeps, steps to solve, tables and figures.
+//! - [`paper`]: the paper's tables (tasks, parameters, expert statistics, steps to solve) as data.
+//! - [`files`]: the one atomic file write every saved file goes through.
 //! - [`tboard`]: a minimal TensorBoard event-file writer for scalar curves.
 //!
 //! The binary `arld` is a thin command-line layer over this library.
@@ -21,7 +23,9 @@ pub mod agent;
 pub mod env;
 pub mod experiment;
 pub mod expert;
+pub mod files;
 pub mod nn;
+pub mod paper;
 pub mod query;
 pub mod replay;
 pub mod rng;

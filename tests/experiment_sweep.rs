@@ -2,8 +2,9 @@
 //! the training code writes (config.toml, eval.csv, episodes.csv, queries.csv, summary.json last).
 
 use anyhow::{Result, bail};
-use arld::experiment::report::{self, EvalPoint};
+use arld::experiment::report;
 use arld::experiment::sweep::{self, RunSpec, SweepGrid};
+use arld::train::run_dir::{self, EvalPoint, Summary};
 use arld::train::{Method, NetKind};
 use std::collections::BTreeSet;
 use std::path::Path;
@@ -57,58 +58,73 @@ fn fake_mean(spec: &RunSpec, step: u64) -> f64 {
     }
 }
 
-/// Writes a complete fake run, or, with `interrupt`, only the files a killed run would have left.
+/// Writes a complete fake run through the run-directory module, or, with `interrupt`, only the files a killed run
+/// would have left.
 fn write_fake_run(spec: &RunSpec, dir: &Path, interrupt: bool) -> Result<()> {
     let t_query = spec.t_query.unwrap_or(0.05);
     let expert = format!("{:?}", spec.expert.as_deref().unwrap_or("shipped:weak"));
     std::fs::write(
-        dir.join("config.toml"),
+        dir.join(run_dir::CONFIG_FILE),
         format!(
             "env = \"{}\"\nmethod = \"{}\"\nnet = \"{}\"\nseed = {}\nt_query = {t_query}\nexpert = {expert}\n\
              train_steps = {TRAIN_STEPS}\neval_period = {EVAL_PERIOD}\ngamma = 0.9\n",
             spec.env, spec.method, spec.net, spec.seed
         ),
     )?;
-    let mut eval = String::from("step,mean,std,min,max\n");
     let last = if interrupt {
         3 * EVAL_PERIOD
     } else {
         TRAIN_STEPS
     };
-    for step in (EVAL_PERIOD..=last).step_by(EVAL_PERIOD as usize) {
-        let mean = fake_mean(spec, step);
-        eval.push_str(&format!(
-            "{step},{mean},1.5,{},{}\n",
-            mean - 3.0,
-            mean + 3.0
-        ));
-    }
-    std::fs::write(dir.join("eval.csv"), eval)?;
+    let curve: Vec<EvalPoint> = (EVAL_PERIOD..=last)
+        .step_by(EVAL_PERIOD as usize)
+        .map(|step| {
+            let mean = fake_mean(spec, step);
+            EvalPoint {
+                step,
+                mean,
+                std: 1.5,
+                min: mean - 3.0,
+                max: mean + 3.0,
+            }
+        })
+        .collect();
+    run_dir::write_curve(dir, &curve)?;
     std::fs::write(
-        dir.join("episodes.csv"),
-        "episode,step,return,length,demo_steps\n1,200,200,200,0\n",
+        dir.join(run_dir::EPISODES_FILE),
+        format!("{}1,200,200,200,0\n", run_dir::EPISODES_HEADER),
     )?;
-    let mut queries =
-        String::from("step,episode,uncertainty,threshold,expert_action,agent_action\n");
+    let mut queries = String::from(run_dir::QUERIES_HEADER);
     if spec.method != Method::Dqn && spec.method != Method::Dqfd {
         for k in 0..(20 + spec.seed) {
             // Queries thin out over training; the uncertainty columns may be empty.
             queries.push_str(&format!("{},{},,,1,0\n", k * k * 20, k / 5));
         }
     }
-    std::fs::write(dir.join("queries.csv"), queries)?;
+    std::fs::write(dir.join(run_dir::QUERIES_FILE), queries)?;
     if interrupt {
         bail!("interrupted");
     }
     let solve = designed_solve_step(spec);
-    let summary = serde_json::json!({
-        "env": spec.env, "method": spec.method, "net": spec.net, "seed": spec.seed,
-        "steps_to_solve": solve.unwrap_or(TRAIN_STEPS), "solved": solve.is_some(),
-        "solve_threshold": threshold(&spec.env), "train_steps": TRAIN_STEPS,
-        "final_score": fake_mean(spec, TRAIN_STEPS), "demos_pretrain": 0, "queries_used": 20,
-        "episodes": 1, "wall_time_s": 0.1, "steps_per_s": 1e5,
-    });
-    sweep::write_atomic(&dir.join("summary.json"), summary.to_string().as_bytes())
+    run_dir::write_summary(
+        dir,
+        &Summary {
+            env: spec.env.clone(),
+            method: spec.method,
+            net: spec.net,
+            seed: spec.seed,
+            steps_to_solve: solve.unwrap_or(TRAIN_STEPS) as usize,
+            solved: solve.is_some(),
+            solve_threshold: threshold(&spec.env),
+            train_steps: TRAIN_STEPS as usize,
+            final_score: fake_mean(spec, TRAIN_STEPS),
+            demos_pretrain: 0,
+            queries_used: 20,
+            episodes: 1,
+            wall_time_s: 0.1,
+            steps_per_s: 1e5,
+        },
+    )
 }
 
 fn small_grid() -> SweepGrid {
@@ -267,7 +283,7 @@ fn failing_and_panicking_runs_are_reported_without_stopping_the_others() {
         message.contains("dqn-bootstrap/seed2") && message.contains("summary.json"),
         "{message}"
     );
-    let (runs, _) = report::load_runs(dir.path()).unwrap();
+    let (runs, _) = run_dir::load_runs(dir.path()).unwrap();
     assert_eq!(runs.len(), 10);
 }
 
@@ -448,7 +464,7 @@ fn report_writes_table_with_paper_values_and_figures() {
 fn group_medians_follow_the_design_for_every_configuration() {
     let dir = tempfile::tempdir().unwrap();
     report_fixture(dir.path());
-    let (runs, notes) = report::load_runs(dir.path()).unwrap();
+    let (runs, notes) = run_dir::load_runs(dir.path()).unwrap();
     assert!(notes.is_empty(), "{notes:?}");
     for group in report::group_runs(&runs) {
         // Rebuild the specs of this group and compute the median by hand from the designed solve steps.
@@ -463,8 +479,8 @@ fn group_medians_follow_the_design_for_every_configuration() {
             .map(|r| {
                 let spec = RunSpec {
                     env: r.env.clone(),
-                    method: r.method.parse().unwrap(),
-                    net: r.net.parse().unwrap(),
+                    method: r.method,
+                    net: r.net,
                     seed: r.seed,
                     t_query: r.t_query.filter(|_| r.variant.starts_with("tq")),
                     expert: r.expert.clone().filter(|_| r.variant.starts_with("expert")),
@@ -514,7 +530,7 @@ fn report_skips_damaged_runs_with_a_note() {
     .unwrap();
     let damaged = dir.path().join("CartPole-v0/dqn-bootstrap/seed2/eval.csv");
     std::fs::write(&damaged, "step,mean,std,min,max\n1000,oops,1,2,3\n").unwrap();
-    let (runs, notes) = report::load_runs(dir.path()).unwrap();
+    let (runs, notes) = run_dir::load_runs(dir.path()).unwrap();
     assert_eq!(runs.len(), 3);
     assert!(notes.len() == 1 && notes[0].contains("seed2"), "{notes:?}");
     let curve: Vec<EvalPoint> = runs[0].eval.clone();

@@ -1,6 +1,6 @@
 //! `arld sweep`, `arld report` and `arld reproduce`: many seeded runs in parallel, and their tables and figures.
 use anyhow::{Context, Result, bail};
-use arld::experiment::paper::paper_grids;
+use arld::experiment::protocol::paper_grids;
 use arld::experiment::report::report;
 use arld::experiment::run_spec;
 use arld::experiment::sweep::{SweepGrid, run_grid};

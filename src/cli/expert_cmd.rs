@@ -2,7 +2,7 @@
 use anyhow::{Context, Result};
 use arld::experiment::run_one;
 use arld::expert::demos::Demonstrations;
-use arld::expert::pipeline::{Candidate, evaluate_expert, paper_expert_stats, select_experts};
+use arld::expert::pipeline::{Candidate, evaluate_expert, select_experts};
 use arld::expert::{self, CheckpointExpert, SPEC_HELP};
 use arld::train::{ConfigInput, Method, NetKind};
 use clap::Subcommand;
@@ -103,9 +103,10 @@ pub fn run_expert(cmd: ExpertCommand) -> Result<ExitCode> {
                     "| {env} | {expert} | {:.2} ± {:.2} | {:.1} | {:.1} | {target} |",
                     s.mean, s.std, s.min, s.mean_len
                 );
-                if let Some((m, sd, mn, len)) = paper_expert_stats(&env) {
+                if let Some(p) = arld::paper::expert_stats(&env) {
                     println!(
-                        "| {env} | paper's expert | {m:.2} ± {sd:.2} | {mn:.1} | {len:.1} | {target} |"
+                        "| {env} | paper's expert | {:.2} ± {:.2} | {:.1} | {:.1} | {target} |",
+                        p.mean_return, p.std_return, p.min_return, p.mean_episode_length
                     );
                 }
             }
@@ -135,14 +136,18 @@ pub fn run_expert(cmd: ExpertCommand) -> Result<ExitCode> {
             let run_dir = run_dir
                 .unwrap_or_else(|| PathBuf::from("runs").join(format!("expert_{env}_seed{seed}")));
             // A finished training run (summary.json written last) is reused: only the selection runs again.
-            if run_dir.join("summary.json").is_file() {
+            if arld::train::run_dir::is_complete(&run_dir) {
                 eprintln!("reusing the finished training run in {}", run_dir.display());
             } else {
                 let summary = run_one(&cfg, Some(&run_dir), true)?;
                 eprintln!("trained: final score {:.2}", summary.final_score);
             }
             eprintln!("evaluating every checkpoint over {episodes} episodes");
-            let candidates = evaluate_checkpoints(&run_dir.join("checkpoints"), &env, episodes)?;
+            let candidates = evaluate_checkpoints(
+                &run_dir.join(arld::train::run_dir::CHECKPOINTS_DIR),
+                &env,
+                episodes,
+            )?;
             let (weak, perfect) = select_experts(&candidates, &env)?;
             let out = out.unwrap_or_else(|| expert::shipped_dir().join(&env));
             std::fs::create_dir_all(&out)?;
@@ -154,7 +159,7 @@ pub fn run_expert(cmd: ExpertCommand) -> Result<ExitCode> {
                     Some(i) => {
                         let c = &candidates[i];
                         let bytes = std::fs::read(&c.path)?;
-                        arld::train::log::write_atomic(
+                        arld::files::write_atomic(
                             &out.join(format!("{name}.safetensors")),
                             &bytes,
                         )?;
@@ -169,7 +174,7 @@ pub fn run_expert(cmd: ExpertCommand) -> Result<ExitCode> {
                     }
                 }
             }
-            arld::train::log::write_atomic(
+            arld::files::write_atomic(
                 &out.join("selection.json"),
                 serde_json::to_string_pretty(&selection)?.as_bytes(),
             )?;

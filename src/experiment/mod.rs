@@ -1,10 +1,12 @@
 //! Experiments: running one configured run end to end ([`run_one`]: expert, demonstrations, training, run
-//! directory), sweeps over grids of runs ([`sweep`]), reports with the paper's table and figures ([`report`],
-//! [`plot`]), and the paper's published numbers and experiment grids ([`paper`]). The sweep and report parts treat
-//! a run as a directory of files, so they do not depend on the training code itself.
+//! directory), sweeps over grids of runs ([`sweep`]), the paper's experiment grids ([`protocol`]), statistics
+//! over seeds ([`stats`]), and reports with the paper's table and figures ([`report`], [`plot`]). Sweeps and
+//! reports read runs through [`crate::train::run_dir`], the owner of the run directory's format.
+//!
+//! Within this layer imports go one way: `stats`, `sweep` <- `protocol` <- `plot` <- `report`.
 
-pub mod paper;
 pub mod plot;
+pub mod protocol;
 pub mod report;
 pub mod stats;
 pub mod sweep;

@@ -8,9 +8,11 @@
 //! - [`draw_figure`] renders a figure with `plotters` to `NAME.png` and `NAME.svg`. Text is drawn with the
 //!   DejaVu Sans font embedded in the binary (assets/), so no system font library is needed.
 
-use super::paper::{self, TABLE5_METHODS};
-use super::report::{RunRecord, env_order, quantile};
-use super::sweep::{DEFAULT_VARIANT, write_atomic};
+use super::protocol::{self, env_order};
+use super::stats::quantile;
+use crate::paper::TABLE5_METHODS;
+use crate::train::run_dir::{DEFAULT_VARIANT, RunRecord, write_atomic};
+use crate::train::{Method, NetKind};
 use anyhow::{Context, Result, anyhow};
 use plotters::coord::Shift;
 use plotters::element::DashedPathElement;
@@ -92,10 +94,10 @@ pub const PALETTE: [RGBColor; 8] = [
     RGBColor(0, 0, 0),       // black
 ];
 
-fn method_color(method: &str) -> usize {
+fn method_color(method: Method) -> usize {
     TABLE5_METHODS
         .iter()
-        .position(|m| *m == method)
+        .position(|m| *m == method.name())
         .unwrap_or(6)
 }
 
@@ -176,11 +178,11 @@ fn expert_label(spec: &str) -> String {
     }
 }
 
-fn net_words(net: &str) -> (&'static str, &'static str) {
+fn net_words(net: NetKind) -> (&'static str, &'static str) {
     match net {
-        "bootstrap" => ("bootstrapped", "B"),
-        "noisy" => ("noisy", "N"),
-        _ => ("plain", "P"),
+        NetKind::Bootstrap => ("bootstrapped", "B"),
+        NetKind::Noisy => ("noisy", "N"),
+        NetKind::Plain => ("plain", "P"),
     }
 }
 
@@ -190,15 +192,13 @@ const STEPS_LABEL: &str = "environment steps";
 /// Panels per environment, one curve per method, for the default-variant runs of `methods` on `net`.
 fn methods_figure(
     runs: &[RunRecord],
-    net: &str,
-    methods: &[&str],
+    net: NetKind,
+    methods: &[Method],
     title: String,
 ) -> Option<FigureContent> {
     let selected: Vec<&RunRecord> = runs
         .iter()
-        .filter(|r| {
-            r.net == net && r.variant == DEFAULT_VARIANT && methods.contains(&r.method.as_str())
-        })
+        .filter(|r| r.net == net && r.variant == DEFAULT_VARIANT && methods.contains(&r.method))
         .collect();
     let envs = env_order(selected.iter().map(|r| r.env.as_str()));
     let panels: Vec<Panel> = envs
@@ -215,8 +215,8 @@ fn methods_figure(
                         .filter(|r| r.method == *method)
                         .collect();
                     (!group.is_empty()).then(|| Curve {
-                        label: paper::method_display_name(method),
-                        color: method_color(method),
+                        label: method.paper_name(),
+                        color: method_color(*method),
                         points: median_curve(&group),
                     })
                 })
@@ -237,10 +237,10 @@ fn methods_figure(
 }
 
 /// ADQN runs of the t_query study (variant `tqVALUE`): panels per environment, one curve per value.
-fn t_query_figure(runs: &[RunRecord], net: &str) -> Option<FigureContent> {
+fn t_query_figure(runs: &[RunRecord], net: NetKind) -> Option<FigureContent> {
     let selected: Vec<(&RunRecord, f64)> = runs
         .iter()
-        .filter(|r| r.net == net && r.method == "adqn")
+        .filter(|r| r.net == net && r.method == Method::Adqn)
         .filter_map(|r| Some((r, r.variant.strip_prefix("tq")?.parse::<f64>().ok()?)))
         .collect();
     let mut values: Vec<f64> = selected.iter().map(|(_, t)| *t).collect();
@@ -286,10 +286,10 @@ fn t_query_figure(runs: &[RunRecord], net: &str) -> Option<FigureContent> {
 
 /// ADQN and DQfD runs of the expert-quality study (variant `expert-...`): a panel per (environment, method),
 /// one curve per expert.
-fn expert_figure(runs: &[RunRecord], net: &str) -> Option<FigureContent> {
+fn expert_figure(runs: &[RunRecord], net: NetKind) -> Option<FigureContent> {
     let selected: Vec<&RunRecord> = runs
         .iter()
-        .filter(|r| r.net == net && (r.method == "adqn" || r.method == "dqfd"))
+        .filter(|r| r.net == net && (r.method == Method::Adqn || r.method == Method::Dqfd))
         .filter(|r| r.variant.starts_with("expert-") && !r.variant.contains('_'))
         .collect();
     // Legend order and colours follow the paper's order of experts; unknown specs come after, alphabetically.
@@ -299,7 +299,7 @@ fn expert_figure(runs: &[RunRecord], net: &str) -> Option<FigureContent> {
         .collect();
     experts.sort_by_key(|e| {
         (
-            paper::EXPERT_QUALITY_SPECS
+            protocol::EXPERT_QUALITY_SPECS
                 .iter()
                 .position(|s| s == e)
                 .unwrap_or(usize::MAX),
@@ -310,7 +310,7 @@ fn expert_figure(runs: &[RunRecord], net: &str) -> Option<FigureContent> {
     let envs = env_order(selected.iter().map(|r| r.env.as_str()));
     let mut panels = Vec::new();
     for env in &envs {
-        for method in ["adqn", "dqfd"] {
+        for method in [Method::Adqn, Method::Dqfd] {
             let in_panel: Vec<&RunRecord> = selected
                 .iter()
                 .copied()
@@ -337,7 +337,7 @@ fn expert_figure(runs: &[RunRecord], net: &str) -> Option<FigureContent> {
                 .collect();
             let (_, suffix) = net_words(net);
             panels.push(Panel {
-                title: format!("{env}: {}-{suffix}", paper::method_display_name(method)),
+                title: format!("{env}: {}-{suffix}", method.paper_name()),
                 threshold: in_panel.first().map(|r| r.solve_threshold),
                 curves,
             });
@@ -355,13 +355,11 @@ fn expert_figure(runs: &[RunRecord], net: &str) -> Option<FigureContent> {
 }
 
 /// Queries per evaluation period for the querying methods (default variant), one panel per environment.
-fn query_figure(runs: &[RunRecord], net: &str) -> Option<FigureContent> {
-    let methods = ["gdqn", "bdqn", "adqn", "adqnp"];
+fn query_figure(runs: &[RunRecord], net: NetKind) -> Option<FigureContent> {
+    let methods = [Method::Gdqn, Method::Bdqn, Method::Adqn, Method::Adqnp];
     let selected: Vec<&RunRecord> = runs
         .iter()
-        .filter(|r| {
-            r.net == net && r.variant == DEFAULT_VARIANT && methods.contains(&r.method.as_str())
-        })
+        .filter(|r| r.net == net && r.variant == DEFAULT_VARIANT && methods.contains(&r.method))
         .filter(|r| r.query_steps.is_some())
         .collect();
     let envs = env_order(selected.iter().map(|r| r.env.as_str()));
@@ -377,8 +375,8 @@ fn query_figure(runs: &[RunRecord], net: &str) -> Option<FigureContent> {
                         .filter(|r| &r.env == env && r.method == *method)
                         .collect();
                     (!group.is_empty()).then(|| Curve {
-                        label: paper::method_display_name(method),
-                        color: method_color(method),
+                        label: method.paper_name(),
+                        color: method_color(*method),
                         points: query_timeline(&group),
                     })
                 })
@@ -404,7 +402,7 @@ fn query_figure(runs: &[RunRecord], net: &str) -> Option<FigureContent> {
 /// `fig4_experts_*`, and `fig5_queries_*` (a query timeline, not in the paper).
 pub fn paper_figures(runs: &[RunRecord]) -> Vec<PaperFigure> {
     let mut figures = Vec::new();
-    for net in ["bootstrap", "noisy"] {
+    for net in [NetKind::Bootstrap, NetKind::Noisy] {
         let (words, suffix) = net_words(net);
         let mut push = |name: String, content: Option<FigureContent>, missing: String| {
             let skip_reason = if content.is_some() {
@@ -423,7 +421,7 @@ pub fn paper_figures(runs: &[RunRecord]) -> Vec<PaperFigure> {
             methods_figure(
                 runs,
                 net,
-                &["dqn", "gdqn", "bdqn", "adqn"],
+                &[Method::Dqn, Method::Gdqn, Method::Bdqn, Method::Adqn],
                 format!("Comparison between methods with {words} DQN (-{suffix})"),
             ),
             format!("no complete default-variant run of DQN, GDQN, BDQN or ADQN with net = {net}"),
@@ -433,7 +431,7 @@ pub fn paper_figures(runs: &[RunRecord]) -> Vec<PaperFigure> {
             methods_figure(
                 runs,
                 net,
-                &["dqfd", "adqn", "adqnp"],
+                &[Method::Dqfd, Method::Adqn, Method::Adqnp],
                 format!("ADQN, DQfD and ADQNP based on {words} DQN (-{suffix})"),
             ),
             format!("no complete default-variant run of DQfD, ADQN or ADQNP with net = {net}"),
@@ -794,14 +792,14 @@ pub fn draw_figure(figure: &FigureContent, out_dir: &Path, name: &str) -> Result
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::experiment::report::EvalPoint;
+    use crate::train::run_dir::EvalPoint;
 
     fn run(seed: u64, means: &[f64], queries: Option<Vec<u64>>) -> RunRecord {
         RunRecord {
             dir: PathBuf::from(format!("seed{seed}")),
             env: "CartPole-v0".into(),
-            method: "adqn".into(),
-            net: "bootstrap".into(),
+            method: Method::Adqn,
+            net: NetKind::Bootstrap,
             seed,
             variant: DEFAULT_VARIANT.into(),
             t_query: None,
@@ -812,13 +810,7 @@ mod tests {
             eval: means
                 .iter()
                 .enumerate()
-                .map(|(i, &mean)| EvalPoint {
-                    step: (i as u64 + 1) * 1000,
-                    mean,
-                    std: 0.0,
-                    min: mean,
-                    max: mean,
-                })
+                .map(|(i, &mean)| EvalPoint::constant((i as u64 + 1) * 1000, mean))
                 .collect(),
             query_steps: queries,
             summary_steps_to_solve: None,

@@ -10,11 +10,11 @@
 
 use rand::{Rng, SeedableRng};
 
-use crate::train::log::EvalPoint;
+use crate::train::run_dir::EvalPoint;
 
 /// First evaluation step whose mean reaches `target`, else `train_steps` (the paper's reading).
 pub fn first_hit(curve: &[EvalPoint], target: f64, train_steps: u64) -> u64 {
-    crate::train::log::steps_to_solve(curve, target, train_steps).0
+    crate::train::run_dir::steps_to_solve(curve, target, train_steps).0
 }
 
 /// First evaluation step from which the mean stays at or above `target` for the next `k` evaluations as well.
@@ -147,13 +147,7 @@ mod tests {
         means
             .iter()
             .enumerate()
-            .map(|(i, &mean)| EvalPoint {
-                step: (i as u64 + 1) * 1000,
-                mean,
-                std: 0.0,
-                min: mean,
-                max: mean,
-            })
+            .map(|(i, &mean)| EvalPoint::constant((i as u64 + 1) * 1000, mean))
             .collect()
     }
 
@@ -224,5 +218,13 @@ mod tests {
             Some((5.0, 5.0))
         );
         assert_eq!(bootstrap_median_interval(&[], 0.95, 100, 1), None);
+    }
+
+    #[test]
+    fn quantiles_interpolate_between_order_statistics() {
+        let values = [4.0, 1.0, 3.0, 2.0, 5.0];
+        assert_eq!(quantile(&values, 0.25), Some(2.0));
+        assert_eq!(quantile(&values, 0.75), Some(4.0));
+        assert_eq!(quantile(&[1.0, 2.0], 0.25), Some(1.25));
     }
 }

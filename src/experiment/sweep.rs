@@ -12,7 +12,7 @@
 //! - [`collect_results`] reads every complete run under a directory and writes `results.csv`, one row per
 //!   evaluation point.
 
-use super::report::{RunRecord, load_runs};
+use crate::train::run_dir::{self, DEFAULT_VARIANT, RunRecord, write_atomic};
 use crate::train::{ConfigInput, Method, NetKind, TrainConfig};
 use anyhow::{Context, Result, bail};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
@@ -27,10 +27,6 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 pub const SWEEP_FILE: &str = "sweep.toml";
 /// Name of the file that gathers every evaluation point of a sweep.
 pub const RESULTS_FILE: &str = "results.csv";
-/// The file whose presence marks a run as complete.
-pub const SUMMARY_FILE: &str = "summary.json";
-/// Variant label of a run that varies neither t_query nor the expert.
-pub const DEFAULT_VARIANT: &str = "default";
 
 /// The grid of a sweep. Every combination of `envs x methods x nets x t_query x experts x seeds` is one run;
 /// an empty `t_query` or `experts` list means "not varied" (the training code's per-task default applies).
@@ -385,13 +381,13 @@ impl RunSpec {
     /// The run's directory relative to the sweep directory: `ENV/METHOD-NET[/VARIANT]/seedN`, e.g.
     /// `CartPole-v0/adqn-bootstrap/tq0.05/seed3`. Reports recover the variant from this layout.
     pub fn dir_name(&self) -> PathBuf {
-        let mut path = PathBuf::from(&self.env);
-        path.push(format!("{}-{}", self.method, self.net));
-        if let Some(variant) = self.variant() {
-            path.push(variant);
-        }
-        path.push(format!("seed{}", self.seed));
-        path
+        run_dir::sweep_run_path(
+            &self.env,
+            self.method,
+            self.net,
+            self.variant().as_deref(),
+            self.seed,
+        )
     }
 
     /// The variant label used in results and reports (`default` when nothing beyond the basics varies).
@@ -424,8 +420,6 @@ pub struct SweepOutcome {
     /// Path of the `results.csv` written at the end.
     pub results_csv: PathBuf,
 }
-
-pub use crate::train::log::write_atomic;
 
 /// Records `grid` in `dir/sweep.toml`, runs it with [`run_sweep`] and returns the outcome.
 ///
@@ -471,7 +465,7 @@ pub fn run_sweep(
         .with_context(|| format!("cannot create sweep directory {}", dir.display()))?;
     let mut pending: Vec<&RunSpec> = specs
         .iter()
-        .filter(|spec| !dir.join(spec.dir_name()).join(SUMMARY_FILE).is_file())
+        .filter(|spec| !run_dir::is_complete(&dir.join(spec.dir_name())))
         .collect();
     // Seed by seed: every configuration gets its first seeds early, so a partial sweep already reports on all.
     let mut seed_order: Vec<u64> = Vec::new();
@@ -575,18 +569,13 @@ pub fn run_sweep(
 
 /// Clears an incomplete run directory, performs the run, and checks that it left `summary.json`.
 /// A panic inside `run_fn` is turned into an error so that one broken run cannot take down the sweep.
-fn run_one_spec(spec: &RunSpec, run_dir: &Path, run_fn: &RunFn) -> Result<()> {
-    if run_dir.exists() {
-        std::fs::remove_dir_all(run_dir).with_context(|| {
-            format!(
-                "cannot clear incomplete run directory {}",
-                run_dir.display()
-            )
-        })?;
+fn run_one_spec(spec: &RunSpec, path: &Path, run_fn: &RunFn) -> Result<()> {
+    if path.exists() {
+        std::fs::remove_dir_all(path)
+            .with_context(|| format!("cannot clear incomplete run directory {}", path.display()))?;
     }
-    std::fs::create_dir_all(run_dir)
-        .with_context(|| format!("cannot create {}", run_dir.display()))?;
-    let outcome = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| run_fn(spec, run_dir)));
+    std::fs::create_dir_all(path).with_context(|| format!("cannot create {}", path.display()))?;
+    let outcome = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| run_fn(spec, path)));
     match outcome {
         Ok(result) => result?,
         Err(panic) => {
@@ -598,8 +587,8 @@ fn run_one_spec(spec: &RunSpec, run_dir: &Path, run_fn: &RunFn) -> Result<()> {
             bail!("the run panicked: {message}");
         }
     }
-    if !run_dir.join(SUMMARY_FILE).is_file() {
-        bail!("the run returned without writing {SUMMARY_FILE}");
+    if !run_dir::is_complete(path) {
+        bail!("the run returned without writing {}", run_dir::SUMMARY_FILE);
     }
     Ok(())
 }
@@ -621,7 +610,7 @@ pub struct CollectedResults {
 /// point, columns `env,method,net,variant,seed,step,mean,std,min,max`, sorted by those keys in that order,
 /// with no duplicate (env, method, net, variant, seed, step).
 pub fn collect_results(dir: &Path) -> Result<CollectedResults> {
-    let (runs, mut problems) = load_runs(dir)?;
+    let (runs, mut problems) = run_dir::load_runs(dir)?;
     let path = dir.join(RESULTS_FILE);
     let (bytes, rows, duplicates) = results_csv_bytes(&runs)?;
     problems.extend(duplicates);
@@ -637,13 +626,13 @@ pub fn collect_results(dir: &Path) -> Result<CollectedResults> {
 /// The content of `results.csv` for these runs, the number of data rows, and notes on dropped duplicates.
 pub fn results_csv_bytes(runs: &[RunRecord]) -> Result<(Vec<u8>, usize, Vec<String>)> {
     type Key<'a> = (&'a str, &'a str, &'a str, &'a str, u64, u64);
-    let mut rows: Vec<(Key, &super::report::EvalPoint, &Path)> = Vec::new();
+    let mut rows: Vec<(Key, &run_dir::EvalPoint, &Path)> = Vec::new();
     for run in runs {
         for point in &run.eval {
             let key = (
                 run.env.as_str(),
-                run.method.as_str(),
-                run.net.as_str(),
+                run.method.name(),
+                run.net.name(),
                 run.variant.as_str(),
                 run.seed,
                 point.step,
@@ -774,19 +763,5 @@ mod tests {
         assert_eq!(parse_seeds("4, 9").unwrap(), vec![4, 9]);
         assert!(parse_seeds("x").is_err());
         assert!(parse_seeds("8..5").is_err());
-    }
-
-    #[test]
-    fn atomic_write_replaces_the_whole_file() {
-        let dir = tempfile::tempdir().unwrap();
-        let path = dir.path().join("a.txt");
-        write_atomic(&path, b"first version, longer").unwrap();
-        write_atomic(&path, b"second").unwrap();
-        assert_eq!(std::fs::read_to_string(&path).unwrap(), "second");
-        assert_eq!(
-            std::fs::read_dir(dir.path()).unwrap().count(),
-            1,
-            "no temporary file is left behind"
-        );
     }
 }

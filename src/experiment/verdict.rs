@@ -7,12 +7,13 @@
 //! `results/evaluations.csv` alone ([`runs_from_evaluations_csv`]). The paper's own numbers come from
 //! [`super::paper`]; nothing is typed in by hand.
 
-use super::paper::{self, PAPER_TASKS, TABLE5_NETS};
-use super::report::{EvalPoint, RunRecord, env_order};
+use super::protocol::env_order;
 use super::stats::{
     bootstrap_median_interval, final_score, mann_whitney, median, median_curve_hit, sustained,
 };
-use crate::train::{Method, NetKind, TrainConfig};
+use crate::paper::{self, PAPER_TASKS, TABLE5_NETS};
+use crate::train::TrainConfig;
+use crate::train::run_dir::{DEFAULT_VARIANT, EvalPoint, RunRecord};
 use anyhow::{Context, Result, bail};
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
@@ -76,7 +77,7 @@ pub fn cells(runs: &[RunRecord], k: usize) -> Vec<Cell> {
     let mut groups: BTreeMap<(&str, &str, &str, &str), Vec<&RunRecord>> = BTreeMap::new();
     for run in runs {
         groups
-            .entry((&run.env, &run.method, &run.net, &run.variant))
+            .entry((&run.env, run.method.name(), run.net.name(), &run.variant))
             .or_default()
             .push(run);
     }
@@ -175,11 +176,10 @@ pub fn readings_table(cells: &[Cell], k: usize) -> (String, String) {
         );
         for (net, suffix) in TABLE5_NETS {
             for method in paper::TABLE5_METHODS {
-                let Some(cell) = find(cells, env, method, net, super::sweep::DEFAULT_VARIANT)
-                else {
+                let Some(cell) = find(cells, env, method, net, DEFAULT_VARIANT) else {
                     continue;
                 };
-                let adqn = find(cells, env, "adqn", net, super::sweep::DEFAULT_VARIANT);
+                let adqn = find(cells, env, "adqn", net, DEFAULT_VARIANT);
                 let p = |f: fn(&Cell) -> &Reading| {
                     adqn.filter(|a| a.method != cell.method || cell.method != "adqn")
                         .filter(|_| method != "adqn")
@@ -190,7 +190,7 @@ pub fn readings_table(cells: &[Cell], k: usize) -> (String, String) {
                     p(|c| &c.sustained),
                     p(|c| &c.final_score),
                 );
-                let paper_median = paper::paper_median_steps(env, method, net);
+                let paper_median = paper::median_steps(env, method, net);
                 let show = |r: &Reading| {
                     format!(
                         "{} [{}, {}]",
@@ -333,20 +333,20 @@ fn beats_claim(
     let paper_wins = tasks
         .iter()
         .filter(|task| {
-            let mine = paper::paper_median_steps(task, a, net);
+            let mine = paper::median_steps(task, a, net);
             others
                 .iter()
-                .all(|o| matches!((mine, paper::paper_median_steps(task, o, net)), (Some(m), Some(t)) if m < t))
+                .all(|o| matches!((mine, paper::median_steps(task, o, net)), (Some(m), Some(t)) if m < t))
         })
         .count();
     let mut counts = [0usize; 3];
     let mut missing = Vec::new();
     let mut beaten = Vec::new();
     for task in tasks {
-        let ours = find(cells, task, a, net, super::sweep::DEFAULT_VARIANT);
+        let ours = find(cells, task, a, net, DEFAULT_VARIANT);
         let rivals: Option<Vec<&Cell>> = others
             .iter()
-            .map(|o| find(cells, task, o, net, super::sweep::DEFAULT_VARIANT))
+            .map(|o| find(cells, task, o, net, DEFAULT_VARIANT))
             .collect();
         let (Some(ours), Some(rivals)) = (ours, rivals) else {
             missing.push(*task);
@@ -456,8 +456,7 @@ pub fn claims(cells: &[Cell]) -> Vec<Claim> {
 fn end_above_expert(cells: &[Cell]) -> Claim {
     let (mut above, mut total, mut below) = (0, 0, Vec::new());
     for cell in cells.iter().filter(|c| {
-        c.variant == super::sweep::DEFAULT_VARIANT
-            && WITH_DEMONSTRATIONS.contains(&c.method.as_str())
+        c.variant == DEFAULT_VARIANT && WITH_DEMONSTRATIONS.contains(&c.method.as_str())
     }) {
         let Some(expert) = paper::expert_stats(&cell.env) else {
             continue;
@@ -688,7 +687,7 @@ pub fn write_verdict(
         ("claims.csv", &claims_csv),
     ] {
         let path = out_dir.join(name);
-        crate::train::log::write_atomic(&path, text.as_bytes())?;
+        crate::files::write_atomic(&path, text.as_bytes())?;
         files.push(path);
     }
     let section = format!(
@@ -752,12 +751,7 @@ pub fn runs_from_evaluations_csv(path: &Path) -> Result<Vec<RunRecord>> {
     runs.into_iter()
         .map(|((env, method, net, variant, seed), mut eval)| {
             eval.sort_by_key(|p| p.step);
-            let preset = TrainConfig::preset(
-                &env,
-                method.parse::<Method>()?,
-                net.parse::<NetKind>()?,
-                seed,
-            )?;
+            let preset = TrainConfig::preset(&env, method.parse()?, net.parse()?, seed)?;
             Ok(RunRecord {
                 dir: path.to_path_buf(),
                 solve_threshold: crate::env::spec(&env)?.solve_threshold,
@@ -767,9 +761,9 @@ pub fn runs_from_evaluations_csv(path: &Path) -> Result<Vec<RunRecord>> {
                 expert: None,
                 query_steps: None,
                 summary_steps_to_solve: None,
+                method: method.parse()?,
+                net: net.parse()?,
                 env,
-                method,
-                net,
                 seed,
                 variant,
                 eval,
@@ -787,10 +781,10 @@ mod tests {
         RunRecord {
             dir: "x".into(),
             env: env.into(),
-            method: method.into(),
-            net: net.into(),
+            method: method.parse().unwrap(),
+            net: net.parse().unwrap(),
             seed,
-            variant: super::super::sweep::DEFAULT_VARIANT.into(),
+            variant: DEFAULT_VARIANT.into(),
             t_query: None,
             expert: None,
             solve_threshold: spec.solve_threshold,

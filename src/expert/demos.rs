@@ -13,7 +13,7 @@ use crate::env;
 use crate::replay::Transition;
 use anyhow::{Context, Result, bail, ensure};
 use serde::{Deserialize, Serialize};
-use std::io::{BufRead, BufReader, Write};
+use std::io::{BufRead, BufReader};
 use std::path::Path;
 
 /// One line of a demonstration file: a demonstrated step with its episode and how the episode ended there.
@@ -116,7 +116,7 @@ impl Demonstrations {
         }
     }
 
-    /// Writes the set atomically (temporary file, then rename).
+    /// Writes the set atomically ([`crate::files::write_atomic`]).
     pub fn save(&self, path: &Path) -> Result<()> {
         let e = env::make(&self.env)?;
         let header = Header {
@@ -137,12 +137,7 @@ impl Demonstrations {
             serde_json::to_writer(&mut buf, t)?;
             buf.push(b'\n');
         }
-        let tmp = path.with_extension("jsonl.tmp");
-        let mut f = std::fs::File::create(&tmp)
-            .with_context(|| format!("cannot create {}", tmp.display()))?;
-        f.write_all(&buf)?;
-        f.sync_all()?;
-        std::fs::rename(&tmp, path).with_context(|| format!("cannot write {}", path.display()))?;
+        crate::files::write_atomic(path, &buf)?;
         Ok(())
     }
 

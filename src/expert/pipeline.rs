@@ -26,17 +26,6 @@ pub struct ExpertStats {
     pub finished: f64,
 }
 
-/// The paper's expert statistics (mean, std, min, mean length) for a Gymnasium id (docs/algorithm.md §10).
-pub fn paper_expert_stats(env_id: &str) -> Option<(f64, f64, f64, f64)> {
-    match env_id {
-        "CartPole-v0" | "CartPole-v1" => Some((166.77, 39.14, 93.0, 166.8)),
-        "Acrobot-v1" => Some((-128.25, 66.86, -489.0, 128.0)),
-        "MountainCar-v0" => Some((-134.0, 27.5, -158.0, 134.0)),
-        "LunarLander-v2" | "LunarLander-v3" => Some((155.18, 55.58, -16.6, 785.0)),
-        _ => None,
-    }
-}
-
 /// Runs `episodes` episodes of `expert` on `env_id`; episode i resets with seed `seed + i`.
 pub fn evaluate_expert(
     expert: &mut dyn Expert,
@@ -100,7 +89,8 @@ pub fn select_experts(
         let (x, y) = (&candidates[a].stats, &candidates[b].stats);
         x.mean.total_cmp(&y.mean).then(y.std.total_cmp(&x.std))
     });
-    let (pm, ps, _, _) = paper_expert_stats(env_id).unwrap_or((threshold, 0.0, 0.0, limit));
+    let (pm, ps) = crate::paper::expert_stats(env_id)
+        .map_or((threshold, 0.0), |s| (s.mean_return, s.std_return));
     let scale = pm.abs().max(1.0);
     // CartPole has no goal to reach: surviving to the time limit is success, so (c) does not apply.
     let needs_finish = !env_id.starts_with("CartPole");

@@ -13,7 +13,6 @@
 
 use std::collections::{BTreeMap, HashMap};
 use std::fs;
-use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use safetensors::tensor::TensorView;
@@ -216,31 +215,6 @@ fn kind_name(kind: OutputKind) -> &'static str {
     }
 }
 
-/// Writes `bytes` to `path` atomically: a temporary file in the same directory, synced, then renamed.
-pub(crate) fn write_atomically(path: &Path, bytes: &[u8]) -> Result<(), ModelFileError> {
-    let write_error = |source| ModelFileError::Write {
-        path: path.to_path_buf(),
-        source,
-    };
-    let file_name = path
-        .file_name()
-        .ok_or_else(|| write_error(std::io::Error::other("the path has no file name")))?;
-    let mut temporary_name = std::ffi::OsString::from(".");
-    temporary_name.push(file_name);
-    temporary_name.push(format!(".{}.tmp", std::process::id()));
-    let temporary = path.with_file_name(temporary_name);
-    let result = (|| {
-        let mut file = fs::File::create(&temporary)?;
-        file.write_all(bytes)?;
-        file.sync_all()?;
-        fs::rename(&temporary, path)
-    })();
-    if result.is_err() {
-        let _ = fs::remove_file(&temporary);
-    }
-    result.map_err(write_error)
-}
-
 impl QNet {
     /// Saves the network as safetensors at `path` (atomically), with `metadata` added to the header.
     ///
@@ -277,7 +251,10 @@ impl QNet {
             })
             .collect::<Result<Vec<_>, safetensors::SafeTensorError>>()?;
         let bytes = safetensors::serialize(views, Some(header))?;
-        write_atomically(path, &bytes)?;
+        crate::files::write_atomic(path, &bytes).map_err(|e| ModelFileError::Write {
+            path: e.path,
+            source: e.source,
+        })?;
         Ok(())
     }
 

@@ -1,107 +1,17 @@
-//! Everything a run writes: the run directory (config, evaluation curve, episode and query logs, TensorBoard
-//! events, weights, summary) and the progress bar.
-//!
-//! Small result files are rewritten atomically (temporary file, then rename), so an interrupted run never leaves
-//! a half-written result; the episode and query logs and the event file are append-only streams. A run is
-//! complete exactly when `summary.json` exists: it is written last.
+//! [`RunLog`] receives a run's events as it trains: it fills the run directory (the format is
+//! [`super::run_dir`]'s: config, evaluation curve, episode and query logs, TensorBoard events, summary) and
+//! drives the progress bar.
 
+use super::run_dir::{
+    self, CONFIG_FILE, EPISODES_FILE, EPISODES_HEADER, EvalPoint, QUERIES_FILE, QUERIES_HEADER,
+    QueryEvent, SUMMARY_FILE, Summary, write_atomic,
+};
 use crate::tboard::EventWriter;
 use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
-use serde::{Deserialize, Serialize};
 use std::fs::File;
 use std::io::{BufWriter, IsTerminal, Write};
 use std::path::{Path, PathBuf};
-
-/// One evaluation: `eval_episodes` test episodes without exploration.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-pub struct EvalPoint {
-    pub step: u64,
-    pub mean: f64,
-    pub std: f64,
-    pub min: f64,
-    pub max: f64,
-}
-
-/// One query: the agent handed control to the expert.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct QueryEvent {
-    pub step: usize,
-    pub episode: usize,
-    pub uncertainty: Option<f32>,
-    pub threshold: Option<f32>,
-    pub expert_action: usize,
-    pub agent_action: usize,
-}
-
-/// What a finished run reports (`summary.json`).
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct Summary {
-    pub env: String,
-    pub method: String,
-    pub net: String,
-    pub seed: u64,
-    /// First evaluation step whose mean reaches the solve threshold; `train_steps` if none does.
-    pub steps_to_solve: usize,
-    pub solved: bool,
-    pub solve_threshold: f64,
-    pub train_steps: usize,
-    /// Mean test return of the last evaluation.
-    pub final_score: f64,
-    /// Demonstrated transitions used: before training (pre-training) and asked for during training.
-    pub demos_pretrain: usize,
-    pub queries_used: usize,
-    pub episodes: usize,
-    pub wall_time_s: f64,
-    pub steps_per_s: f64,
-}
-
-/// First evaluation step whose mean reaches `threshold`, or `train_steps` if none does (docs/algorithm.md §11).
-pub fn steps_to_solve(curve: &[EvalPoint], threshold: f64, train_steps: u64) -> (u64, bool) {
-    match curve.iter().find(|p| p.mean >= threshold) {
-        Some(p) => (p.step, true),
-        None => (train_steps, false),
-    }
-}
-
-/// Writes `bytes` to `path` through a temporary file (synced, then renamed over `path`), so a reader never
-/// sees a half-written file; the temporary file is removed if anything fails.
-pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
-    let dir = path
-        .parent()
-        .filter(|p| !p.as_os_str().is_empty())
-        .unwrap_or(Path::new("."));
-    let name = path
-        .file_name()
-        .with_context(|| format!("{} has no file name", path.display()))?;
-    let tmp = dir.join(format!(
-        ".{}.tmp{}",
-        name.to_string_lossy(),
-        std::process::id()
-    ));
-    let write = || -> std::io::Result<()> {
-        let mut file = std::fs::File::create(&tmp)?;
-        file.write_all(bytes)?;
-        file.sync_all()?;
-        std::fs::rename(&tmp, path)
-    };
-    write().map_err(|err| {
-        let _ = std::fs::remove_file(&tmp);
-        anyhow::Error::new(err).context(format!("cannot write {}", path.display()))
-    })
-}
-
-/// The evaluation curve as CSV text (`step,mean,std,min,max`).
-pub fn curve_csv(curve: &[EvalPoint]) -> String {
-    let mut s = String::from("step,mean,std,min,max\n");
-    for p in curve {
-        s.push_str(&format!(
-            "{},{},{},{},{}\n",
-            p.step, p.mean, p.std, p.min, p.max
-        ));
-    }
-    s
-}
 
 /// Receives a run's events; writes them to a run directory when one is given, and drives the progress bar.
 pub struct RunLog {
@@ -131,7 +41,7 @@ impl RunLog {
     pub fn create(dir: &Path, config_toml: &str, total_steps: u64, progress: bool) -> Result<Self> {
         std::fs::create_dir_all(dir)
             .with_context(|| format!("cannot create run directory {}", dir.display()))?;
-        let _ = std::fs::remove_file(dir.join("summary.json"));
+        let _ = std::fs::remove_file(dir.join(SUMMARY_FILE));
         for entry in std::fs::read_dir(dir)?.flatten() {
             if entry
                 .file_name()
@@ -141,7 +51,7 @@ impl RunLog {
                 let _ = std::fs::remove_file(entry.path());
             }
         }
-        write_atomic(&dir.join("config.toml"), config_toml.as_bytes())?;
+        write_atomic(&dir.join(CONFIG_FILE), config_toml.as_bytes())?;
         let open = |name: &str, header: &str| -> Result<BufWriter<File>> {
             let path = dir.join(name);
             let mut f = BufWriter::new(
@@ -150,11 +60,8 @@ impl RunLog {
             f.write_all(header.as_bytes())?;
             Ok(f)
         };
-        let episodes = open("episodes.csv", "episode,step,return,length,demo_steps\n")?;
-        let queries = open(
-            "queries.csv",
-            "step,episode,uncertainty,threshold,expert_action,agent_action\n",
-        )?;
+        let episodes = open(EPISODES_FILE, EPISODES_HEADER)?;
+        let queries = open(QUERIES_FILE, QUERIES_HEADER)?;
         let events =
             EventWriter::create(dir).context("cannot create the TensorBoard event file")?;
         let bar = if progress && std::io::stderr().is_terminal() {
@@ -239,7 +146,7 @@ impl RunLog {
         self.progress.set_message(format!("eval {:.1}", point.mean));
         self.curve.push(point);
         if let Some(dir) = &self.dir {
-            write_atomic(&dir.join("eval.csv"), curve_csv(&self.curve).as_bytes())?;
+            run_dir::write_curve(dir, &self.curve)?;
         }
         if let Some(ev) = &mut self.events {
             ev.flush()?;
@@ -269,42 +176,8 @@ impl RunLog {
             ev.flush()?;
         }
         if let Some(dir) = &self.dir {
-            let json = serde_json::to_string_pretty(summary)?;
-            write_atomic(&dir.join("summary.json"), json.as_bytes())?;
+            run_dir::write_summary(dir, summary)?;
         }
         Ok(())
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    fn point(step: u64, mean: f64) -> EvalPoint {
-        EvalPoint {
-            step,
-            mean,
-            std: 0.0,
-            min: mean,
-            max: mean,
-        }
-    }
-
-    #[test]
-    fn steps_to_solve_takes_first_evaluation_at_threshold() {
-        let curve = vec![
-            point(1000, 50.0),
-            point(2000, 195.0),
-            point(3000, 120.0),
-            point(4000, 200.0),
-        ];
-        assert_eq!(steps_to_solve(&curve, 195.0, 20_000), (2000, true));
-    }
-
-    #[test]
-    fn a_run_that_never_solves_counts_the_full_training_length() {
-        let curve = vec![point(1000, 50.0), point(2000, 194.9)];
-        assert_eq!(steps_to_solve(&curve, 195.0, 20_000), (20_000, false));
-        assert_eq!(steps_to_solve(&[], 195.0, 500), (500, false));
     }
 }

@@ -4,9 +4,11 @@
 
 pub mod config;
 pub mod log;
+pub mod run_dir;
 
 pub use config::{ConfigInput, Method, NetKind, TdLoss, TrainConfig};
-pub use log::{EvalPoint, QueryEvent, RunLog, Summary, steps_to_solve};
+pub use log::RunLog;
+pub use run_dir::{EvalPoint, QueryEvent, Summary, steps_to_solve};
 
 use crate::agent::Agent;
 use crate::env::{self, Env};
@@ -232,13 +234,13 @@ pub fn train(
             && (step + 1).is_multiple_of(cfg.checkpoint_every)
             && let Some(dir) = log.dir()
         {
-            let dir = dir.join("checkpoints");
-            std::fs::create_dir_all(&dir)?;
-            let meta = weights_metadata(cfg, step + 1);
-            agent.network().save(
-                &dir.join(format!("step_{:08}.safetensors", step + 1)),
-                &meta,
-            )?;
+            let path = run_dir::checkpoint_path(dir, step + 1);
+            if let Some(parent) = path.parent() {
+                std::fs::create_dir_all(parent)?;
+            }
+            agent
+                .network()
+                .save(&path, &weights_metadata(cfg, step + 1))?;
         }
     }
 
@@ -247,8 +249,8 @@ pub fn train(
     let (steps, solved) = steps_to_solve(log.curve(), threshold, cfg.train_steps as u64);
     let summary = Summary {
         env: cfg.env.clone(),
-        method: cfg.method.to_string(),
-        net: cfg.net.to_string(),
+        method: cfg.method,
+        net: cfg.net,
         seed: cfg.seed,
         steps_to_solve: steps as usize,
         solved,
@@ -263,7 +265,7 @@ pub fn train(
     };
     if let Some(dir) = log.dir() {
         agent.network().save(
-            &dir.join("weights.safetensors"),
+            &dir.join(run_dir::WEIGHTS_FILE),
             &weights_metadata(cfg, cfg.train_steps),
         )?;
     }

@@ -1,0 +1,424 @@
+//! The run directory: which files a run writes, what each holds, and how they are written and read. Training
+//! ([`super::log::RunLog`]), sweeps, reports and tests all go through here, so the format has one owner.
+//!
+//! A run directory holds `config.toml` (the resolved configuration), `eval.csv` (the evaluation curve:
+//! `step,mean,std,min,max`), `episodes.csv`, `queries.csv`, a TensorBoard event file, `weights.safetensors`,
+//! optional `checkpoints/step_NNNNNNNN.safetensors`, and `summary.json` ([`Summary`]), written last: a run is
+//! complete exactly when it exists ([`is_complete`]). Whole files are written with
+//! [`crate::files::write_atomic`]; the episode and query logs and the event file are append-only streams.
+//!
+//! Inside a sweep, runs live at `ENV/METHOD-NET[/VARIANT]/seedN` ([`sweep_run_path`]); [`load_runs`] finds the
+//! complete runs below a directory and reads each into a [`RunRecord`] for reports.
+
+use super::config::{Method, NetKind};
+pub use crate::files::write_atomic;
+use anyhow::{Context, Result, bail};
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+
+/// The resolved configuration (TOML).
+pub const CONFIG_FILE: &str = "config.toml";
+/// The evaluation curve (CSV).
+pub const EVAL_FILE: &str = "eval.csv";
+/// One row per episode (CSV).
+pub const EPISODES_FILE: &str = "episodes.csv";
+/// One row per query (CSV).
+pub const QUERIES_FILE: &str = "queries.csv";
+/// The summary, written last: its presence marks the run complete.
+pub const SUMMARY_FILE: &str = "summary.json";
+/// The final online weights.
+pub const WEIGHTS_FILE: &str = "weights.safetensors";
+/// Periodic weights (`checkpoint_every`).
+pub const CHECKPOINTS_DIR: &str = "checkpoints";
+/// Header of [`EPISODES_FILE`].
+pub const EPISODES_HEADER: &str = "episode,step,return,length,demo_steps\n";
+/// Header of [`QUERIES_FILE`].
+pub const QUERIES_HEADER: &str = "step,episode,uncertainty,threshold,expert_action,agent_action\n";
+/// Variant label of a run that varies neither t_query nor the expert.
+pub const DEFAULT_VARIANT: &str = "default";
+
+/// Path of the checkpoint written after `step` environment steps.
+pub fn checkpoint_path(dir: &Path, step: usize) -> PathBuf {
+    dir.join(CHECKPOINTS_DIR)
+        .join(format!("step_{step:08}.safetensors"))
+}
+
+/// Whether `dir` holds a complete run (its summary exists).
+pub fn is_complete(dir: &Path) -> bool {
+    dir.join(SUMMARY_FILE).is_file()
+}
+
+/// One evaluation: `eval_episodes` test episodes without exploration.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct EvalPoint {
+    pub step: u64,
+    pub mean: f64,
+    pub std: f64,
+    pub min: f64,
+    pub max: f64,
+}
+
+impl EvalPoint {
+    /// A point whose test episodes all returned `mean` (no spread), for tests and examples.
+    pub fn constant(step: u64, mean: f64) -> Self {
+        Self {
+            step,
+            mean,
+            std: 0.0,
+            min: mean,
+            max: mean,
+        }
+    }
+}
+
+/// One query: the agent handed control to the expert.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct QueryEvent {
+    pub step: usize,
+    pub episode: usize,
+    pub uncertainty: Option<f32>,
+    pub threshold: Option<f32>,
+    pub expert_action: usize,
+    pub agent_action: usize,
+}
+
+/// What a finished run reports (`summary.json`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Summary {
+    pub env: String,
+    pub method: Method,
+    pub net: NetKind,
+    pub seed: u64,
+    /// First evaluation step whose mean reaches the solve threshold; `train_steps` if none does.
+    pub steps_to_solve: usize,
+    pub solved: bool,
+    pub solve_threshold: f64,
+    pub train_steps: usize,
+    /// Mean test return of the last evaluation.
+    pub final_score: f64,
+    /// Demonstrated transitions used: before training (pre-training) and asked for during training.
+    pub demos_pretrain: usize,
+    pub queries_used: usize,
+    pub episodes: usize,
+    pub wall_time_s: f64,
+    pub steps_per_s: f64,
+}
+
+/// First evaluation step whose mean reaches `threshold`, or `train_steps` if none does (docs/algorithm.md §11).
+pub fn steps_to_solve(curve: &[EvalPoint], threshold: f64, train_steps: u64) -> (u64, bool) {
+    match curve.iter().find(|p| p.mean >= threshold) {
+        Some(p) => (p.step, true),
+        None => (train_steps, false),
+    }
+}
+
+/// The evaluation curve as CSV text (`step,mean,std,min,max`).
+pub fn curve_csv(curve: &[EvalPoint]) -> String {
+    let mut s = String::from("step,mean,std,min,max\n");
+    for p in curve {
+        s.push_str(&format!(
+            "{},{},{},{},{}\n",
+            p.step, p.mean, p.std, p.min, p.max
+        ));
+    }
+    s
+}
+
+/// Everything a report needs from one complete run directory.
+#[derive(Debug, Clone)]
+pub struct RunRecord {
+    /// The run directory.
+    pub dir: PathBuf,
+    pub env: String,
+    pub method: Method,
+    pub net: NetKind,
+    pub seed: u64,
+    /// Variant label (`default`, `tq0.05`, `expert-shipped-weak`, ...).
+    pub variant: String,
+    /// The t_query the run used, if its config records one.
+    pub t_query: Option<f64>,
+    /// The expert spec the run used, if its config records one.
+    pub expert: Option<String>,
+    /// Score that counts as solving the task.
+    pub solve_threshold: f64,
+    /// Environment steps of training (a seed that never solves counts as this many).
+    pub train_steps: u64,
+    /// Environment steps between evaluations.
+    pub eval_period: u64,
+    /// Evaluation curve in step order.
+    pub eval: Vec<EvalPoint>,
+    /// Environment step of every query, in log order; `None` when the run has no `queries.csv`.
+    pub query_steps: Option<Vec<u64>>,
+    /// `steps_to_solve` as the training code recorded it in `summary.json`, for cross-checking.
+    pub summary_steps_to_solve: Option<u64>,
+}
+
+/// Reads `summary.json` of a run directory.
+pub fn read_summary(dir: &Path) -> Result<Summary> {
+    let path = dir.join(SUMMARY_FILE);
+    let text = std::fs::read_to_string(&path)
+        .with_context(|| format!("cannot read {}", path.display()))?;
+    serde_json::from_str(&text).with_context(|| format!("{} is not a run summary", path.display()))
+}
+
+/// Writes `summary.json` (last: it marks the run complete).
+pub fn write_summary(dir: &Path, summary: &Summary) -> Result<()> {
+    let json = serde_json::to_string_pretty(summary)?;
+    Ok(write_atomic(&dir.join(SUMMARY_FILE), json.as_bytes())?)
+}
+
+/// Rewrites `eval.csv` with the whole curve so far.
+pub fn write_curve(dir: &Path, curve: &[EvalPoint]) -> Result<()> {
+    Ok(write_atomic(
+        &dir.join(EVAL_FILE),
+        curve_csv(curve).as_bytes(),
+    )?)
+}
+
+/// Reads `eval.csv` of a run directory, in step order.
+pub fn read_curve(dir: &Path) -> Result<Vec<EvalPoint>> {
+    let path = dir.join(EVAL_FILE);
+    let mut reader =
+        csv::Reader::from_path(&path).with_context(|| format!("cannot read {}", path.display()))?;
+    let mut points = Vec::new();
+    for (line, row) in reader.deserialize::<EvalPoint>().enumerate() {
+        points.push(row.with_context(|| format!("{}: bad row {}", path.display(), line + 1))?);
+    }
+    points.sort_by_key(|p| p.step);
+    Ok(points)
+}
+
+/// The `step` column of `queries.csv` (other columns may be empty and are not needed here); `None` when the
+/// run has no query log.
+pub fn read_query_steps(dir: &Path) -> Result<Option<Vec<u64>>> {
+    let path = dir.join(QUERIES_FILE);
+    if !path.is_file() {
+        return Ok(None);
+    }
+    let mut reader =
+        csv::Reader::from_path(&path).with_context(|| format!("cannot read {}", path.display()))?;
+    let column = reader
+        .headers()?
+        .iter()
+        .position(|h| h == "step")
+        .with_context(|| format!("{} has no `step` column", path.display()))?;
+    let mut steps = Vec::new();
+    for (line, record) in reader.records().enumerate() {
+        let record = record.with_context(|| format!("{}: bad row {}", path.display(), line + 1))?;
+        let value = record.get(column).unwrap_or("");
+        steps.push(
+            value
+                .trim()
+                .parse()
+                .with_context(|| format!("{}: bad step '{value}'", path.display()))?,
+        );
+    }
+    Ok(Some(steps))
+}
+
+/// Where a run of a sweep lives below the sweep directory: `ENV/METHOD-NET[/VARIANT]/seedN`, e.g.
+/// `CartPole-v0/adqn-bootstrap/tq0.05/seed3`. [`variant_from_path`] reads the variant back.
+pub fn sweep_run_path(
+    env: &str,
+    method: Method,
+    net: NetKind,
+    variant: Option<&str>,
+    seed: u64,
+) -> PathBuf {
+    let mut path = PathBuf::from(env);
+    path.push(format!("{method}-{net}"));
+    if let Some(variant) = variant {
+        path.push(variant);
+    }
+    path.push(format!("seed{seed}"));
+    path
+}
+
+/// The variant label from a run's path inside a sweep: the components between `METHOD-NET` and `seedN`
+/// ([`DEFAULT_VARIANT`] for a run outside that layout).
+pub fn variant_from_path(relative: &Path, method: Method, net: NetKind, seed: u64) -> String {
+    let parts: Vec<String> = relative
+        .components()
+        .map(|c| c.as_os_str().to_string_lossy().into_owned())
+        .collect();
+    let method_net = format!("{method}-{net}");
+    if parts.last().map(String::as_str) != Some(format!("seed{seed}").as_str()) {
+        return DEFAULT_VARIANT.to_string();
+    }
+    match parts.iter().rposition(|p| *p == method_net) {
+        Some(i) if i + 2 < parts.len() => parts[i + 1..parts.len() - 1].join("/"),
+        _ => DEFAULT_VARIANT.to_string(),
+    }
+}
+
+/// Reads one complete run directory; `relative` is its path below the directory being reported on.
+pub fn read_run(dir: &Path, relative: &Path) -> Result<RunRecord> {
+    let summary = read_summary(dir)?;
+    // config.toml is optional for a report: it only adds t_query, the expert and the eval period. It is read
+    // key by key so that configurations written by earlier versions still load.
+    let config: toml::Table = match std::fs::read_to_string(dir.join(CONFIG_FILE)) {
+        Ok(text) => toml::from_str(&text)
+            .with_context(|| format!("{}/{CONFIG_FILE} is not valid TOML", dir.display()))?,
+        Err(_) => toml::Table::new(),
+    };
+    let t_query = config
+        .get("t_query")
+        .and_then(|v| v.as_float().or_else(|| v.as_integer().map(|i| i as f64)));
+    let expert = config
+        .get("expert")
+        .and_then(|v| v.as_str())
+        .map(str::to_string);
+    let train_steps = summary.train_steps as u64;
+    let eval = read_curve(dir)?;
+    let eval_period = config
+        .get("eval_period")
+        .and_then(|v| v.as_integer())
+        .filter(|&p| p > 0)
+        .map(|p| p as u64)
+        .or_else(|| {
+            eval.windows(2)
+                .map(|w| w[1].step.saturating_sub(w[0].step))
+                .find(|&d| d > 0)
+        })
+        .unwrap_or_else(|| (train_steps / 20).max(1));
+    Ok(RunRecord {
+        dir: dir.to_path_buf(),
+        variant: variant_from_path(relative, summary.method, summary.net, summary.seed),
+        env: summary.env,
+        method: summary.method,
+        net: summary.net,
+        seed: summary.seed,
+        t_query,
+        expert,
+        solve_threshold: summary.solve_threshold,
+        train_steps,
+        eval_period,
+        eval,
+        query_steps: read_query_steps(dir)?,
+        summary_steps_to_solve: Some(summary.steps_to_solve as u64),
+    })
+}
+
+/// Every complete run directory below `root` (a directory holding `summary.json`; hidden directories are
+/// skipped), in path order; `visit` sees every directory walked, before its runs are looked for.
+pub fn find_runs(root: &Path, mut visit: impl FnMut(&Path)) -> Result<Vec<PathBuf>> {
+    if !root.is_dir() {
+        bail!("{} is not a directory", root.display());
+    }
+    let mut run_dirs = Vec::new();
+    let mut stack = vec![root.to_path_buf()];
+    while let Some(dir) = stack.pop() {
+        visit(&dir);
+        if is_complete(&dir) {
+            run_dirs.push(dir);
+            continue;
+        }
+        let entries =
+            std::fs::read_dir(&dir).with_context(|| format!("cannot list {}", dir.display()))?;
+        let mut subdirs = Vec::new();
+        for entry in entries {
+            let entry = entry?;
+            let hidden = entry.file_name().to_string_lossy().starts_with('.');
+            if entry.file_type()?.is_dir() && !hidden {
+                subdirs.push(entry.path());
+            }
+        }
+        subdirs.sort();
+        stack.extend(subdirs.into_iter().rev());
+    }
+    run_dirs.sort();
+    Ok(run_dirs)
+}
+
+/// Finds every complete run below `root` and reads it. Runs that cannot be read are left out and described in
+/// the returned notes, so one damaged run does not hide the others. Runs come back in path order.
+pub fn load_runs(root: &Path) -> Result<(Vec<RunRecord>, Vec<String>)> {
+    let mut runs = Vec::new();
+    let mut notes = Vec::new();
+    for dir in find_runs(root, |_| {})? {
+        let relative = dir.strip_prefix(root).unwrap_or(&dir).to_path_buf();
+        match read_run(&dir, &relative) {
+            Ok(run) => runs.push(run),
+            Err(err) => notes.push(format!("skipped run {}: {err:#}", dir.display())),
+        }
+    }
+    Ok((runs, notes))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn point(step: u64, mean: f64) -> EvalPoint {
+        EvalPoint::constant(step, mean)
+    }
+
+    #[test]
+    fn variant_comes_from_the_sweep_layout() {
+        let v = |p: &str| variant_from_path(Path::new(p), Method::Adqn, NetKind::Noisy, 3);
+        assert_eq!(v("t/CartPole-v0/adqn-noisy/tq0.1/seed3"), "tq0.1");
+        assert_eq!(v("CartPole-v0/adqn-noisy/seed3"), DEFAULT_VARIANT);
+        assert_eq!(v("my-run"), DEFAULT_VARIANT);
+        assert_eq!(v(""), DEFAULT_VARIANT);
+        let path = sweep_run_path(
+            "CartPole-v0",
+            Method::Adqn,
+            NetKind::Noisy,
+            Some("tq0.1"),
+            3,
+        );
+        assert_eq!(v(path.to_str().unwrap()), "tq0.1");
+    }
+
+    #[test]
+    fn summary_and_curve_round_trip_through_a_run_directory() {
+        let dir = tempfile::tempdir().unwrap();
+        let curve = vec![point(1000, 20.5), point(2000, 195.25)];
+        write_curve(dir.path(), &curve).unwrap();
+        assert_eq!(read_curve(dir.path()).unwrap(), curve);
+        assert!(!is_complete(dir.path()));
+        let summary = Summary {
+            env: "CartPole-v0".into(),
+            method: Method::Bdqn,
+            net: NetKind::Noisy,
+            seed: 4,
+            steps_to_solve: 2000,
+            solved: true,
+            solve_threshold: 195.0,
+            train_steps: 3000,
+            final_score: 195.25,
+            demos_pretrain: 0,
+            queries_used: 12,
+            episodes: 30,
+            wall_time_s: 1.5,
+            steps_per_s: 2000.0,
+        };
+        write_summary(dir.path(), &summary).unwrap();
+        assert!(is_complete(dir.path()));
+        assert_eq!(read_summary(dir.path()).unwrap(), summary);
+        let record = read_run(dir.path(), Path::new("CartPole-v0/bdqn-noisy/seed4")).unwrap();
+        assert_eq!(
+            (record.method, record.net, record.eval_period),
+            (Method::Bdqn, NetKind::Noisy, 1000)
+        );
+        assert_eq!(record.query_steps, None);
+    }
+
+    #[test]
+    fn steps_to_solve_takes_first_evaluation_at_threshold() {
+        let curve = vec![
+            point(1000, 50.0),
+            point(2000, 195.0),
+            point(3000, 120.0),
+            point(4000, 200.0),
+        ];
+        assert_eq!(steps_to_solve(&curve, 195.0, 20_000), (2000, true));
+    }
+
+    #[test]
+    fn a_run_that_never_solves_counts_the_full_training_length() {
+        let curve = vec![point(1000, 50.0), point(2000, 194.9)];
+        assert_eq!(steps_to_solve(&curve, 195.0, 20_000), (20_000, false));
+        assert_eq!(steps_to_solve(&[], 195.0, 500), (500, false));
+    }
+}

@@ -1,0 +1,221 @@
+//! The crate's architecture, checked: imports only go down the layers (docs: the module list in `src/lib.rs`)
+//! and no two source files depend on each other, directly or through others.
+//!
+//! Every `crate::…`, `super::…` and `self::…` path in the library's code (comments and `#[cfg(test)]` code
+//! left out) is resolved to the source file it names. Two checks follow: a path from one top-level module to
+//! another must go to a lower layer, and the graph of files must have no cycle (a file's `mod` declarations are
+//! not uses; its `pub use` re-exports are).
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::path::{Path, PathBuf};
+
+/// The layers, bottom first. Modules of one layer may not use each other.
+const LAYERS: [&[&str]; 7] = [
+    &["files", "paper"],
+    &["rng", "nn", "replay", "query"],
+    &["env", "agent"],
+    &["expert"],
+    &["tboard"],
+    &["train"],
+    &["experiment"],
+];
+
+fn layer(module: &str) -> usize {
+    LAYERS
+        .iter()
+        .position(|l| l.contains(&module))
+        .unwrap_or_else(|| panic!("module {module} is in no layer; add it to LAYERS"))
+}
+
+/// Module path of a library source file: `src/train/run_dir.rs` -> [train, run_dir]; `mod.rs` names its folder.
+fn module_path(src: &Path, file: &Path) -> Vec<String> {
+    let relative = file.strip_prefix(src).unwrap().with_extension("");
+    let mut parts: Vec<String> = relative
+        .components()
+        .map(|c| c.as_os_str().to_string_lossy().into_owned())
+        .collect();
+    if parts.last().is_some_and(|p| p == "mod") {
+        parts.pop();
+    }
+    parts
+}
+
+/// The library's code of a file: without comment lines and without `#[cfg(test)]` code (always last here).
+fn code(text: &str) -> String {
+    let body = text.split("#[cfg(test)]").next().unwrap_or("");
+    body.lines()
+        .filter(|l| !l.trim_start().starts_with("//"))
+        .collect::<Vec<_>>()
+        .join("\n")
+}
+
+fn is_ident(c: char) -> bool {
+    c.is_ascii_alphanumeric() || c == '_'
+}
+
+/// Every path that starts at `crate`, `super` or `self`, expanded over `{…}` groups to their first segments,
+/// as (anchor, segments).
+fn paths(code: &str) -> Vec<(String, Vec<String>)> {
+    let chars: Vec<char> = code.chars().collect();
+    let mut out = Vec::new();
+    let mut i = 0;
+    while i < chars.len() {
+        let at_word = i == 0 || !is_ident(chars[i - 1]);
+        let anchor = ["crate::", "super::", "self::"]
+            .into_iter()
+            .find(|a| at_word && chars[i..].iter().take(a.len()).collect::<String>() == *a);
+        let Some(anchor) = anchor else {
+            i += 1;
+            continue;
+        };
+        i += anchor.len();
+        let mut segments = Vec::new();
+        loop {
+            let start = i;
+            while i < chars.len() && is_ident(chars[i]) {
+                i += 1;
+            }
+            if i > start {
+                segments.push(chars[start..i].iter().collect::<String>());
+            }
+            if chars[i..].starts_with(&[':', ':']) {
+                i += 2;
+                if chars.get(i) == Some(&'{') {
+                    // A group: each entry's first segment extends the path.
+                    let close = (i..chars.len())
+                        .find(|&k| chars[k] == '}')
+                        .unwrap_or(chars.len());
+                    let group: String = chars[i + 1..close].iter().collect();
+                    for entry in group.split(',') {
+                        let first: String =
+                            entry.trim().chars().take_while(|&c| is_ident(c)).collect();
+                        let mut s = segments.clone();
+                        if !first.is_empty() && first != "self" {
+                            s.push(first);
+                        }
+                        out.push((anchor.trim_end_matches("::").to_string(), s));
+                    }
+                    i = close;
+                    segments.clear();
+                    break;
+                }
+                continue;
+            }
+            break;
+        }
+        if !segments.is_empty() {
+            out.push((anchor.trim_end_matches("::").to_string(), segments));
+        }
+    }
+    out
+}
+
+#[test]
+fn imports_go_down_the_layers_and_no_file_depends_on_itself() {
+    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
+    let mut files = Vec::new();
+    let mut stack = vec![src.clone()];
+    while let Some(dir) = stack.pop() {
+        for entry in std::fs::read_dir(&dir).unwrap().flatten() {
+            let path = entry.path();
+            if path.is_dir() && path.file_name().is_some_and(|n| n != "cli") {
+                stack.push(path);
+            } else if path.extension().is_some_and(|e| e == "rs")
+                && !matches!(
+                    path.file_name().and_then(|n| n.to_str()),
+                    Some("lib.rs" | "main.rs")
+                )
+            {
+                files.push(path);
+            }
+        }
+    }
+    let modules: BTreeMap<Vec<String>, PathBuf> = files
+        .iter()
+        .map(|f| (module_path(&src, f), f.clone()))
+        .collect();
+    // The longest prefix of `segments` that names a file.
+    let resolve = |segments: &[String]| -> Option<Vec<String>> {
+        (1..=segments.len())
+            .rev()
+            .map(|n| segments[..n].to_vec())
+            .find(|p| modules.contains_key(p))
+    };
+    let mut edges: BTreeMap<Vec<String>, BTreeSet<Vec<String>>> = BTreeMap::new();
+    let mut violations = Vec::new();
+    for (module, file) in &modules {
+        let is_mod_rs = file.file_name().is_some_and(|n| n == "mod.rs");
+        let text = std::fs::read_to_string(file).unwrap();
+        for (anchor, segments) in paths(&code(&text)) {
+            let mut full: Vec<String> = match anchor.as_str() {
+                "crate" => vec![],
+                // `super` of a file is its folder's module; of a folder's mod.rs, the folder's parent.
+                "super" if is_mod_rs => module[..module.len().saturating_sub(1)].to_vec(),
+                "super" => module[..module.len() - 1].to_vec(),
+                _ => module.clone(), // self
+            };
+            full.extend(segments);
+            let Some(target) = resolve(&full) else {
+                continue;
+            };
+            if &target == module {
+                continue;
+            }
+            let (from, to) = (&module[0], &target[0]);
+            if from != to && layer(to) >= layer(from) {
+                violations.push(format!(
+                    "{} uses {} (not a lower layer)",
+                    module.join("::"),
+                    target.join("::")
+                ));
+            }
+            edges.entry(module.clone()).or_default().insert(target);
+        }
+    }
+    assert!(
+        violations.is_empty(),
+        "imports that go up or sideways:\n{}",
+        violations.join("\n")
+    );
+
+    // Cycles: depth-first search over files.
+    fn visit(
+        node: &Vec<String>,
+        edges: &BTreeMap<Vec<String>, BTreeSet<Vec<String>>>,
+        state: &mut BTreeMap<Vec<String>, u8>,
+        path: &mut Vec<Vec<String>>,
+    ) -> Option<Vec<String>> {
+        match state.get(node) {
+            Some(2) => return None,
+            Some(1) => {
+                let start = path.iter().position(|p| p == node).unwrap();
+                let mut cycle: Vec<String> = path[start..].iter().map(|p| p.join("::")).collect();
+                cycle.push(node.join("::"));
+                return Some(cycle);
+            }
+            _ => {}
+        }
+        state.insert(node.clone(), 1);
+        path.push(node.clone());
+        for next in edges.get(node).into_iter().flatten() {
+            if let Some(cycle) = visit(next, edges, state, path) {
+                return Some(cycle);
+            }
+        }
+        path.pop();
+        state.insert(node.clone(), 2);
+        None
+    }
+    let mut state = BTreeMap::new();
+    for module in modules.keys() {
+        if let Some(cycle) = visit(module, &edges, &mut state, &mut Vec::new()) {
+            panic!("import cycle: {}", cycle.join(" -> "));
+        }
+    }
+    // The check sees the crate: the training loop uses the agent, the report uses the sweep.
+    assert!(edges[&vec!["train".to_string()]].contains(&vec!["agent".to_string()]));
+    assert!(
+        edges[&vec!["experiment".to_string(), "report".to_string()]]
+            .contains(&vec!["experiment".to_string(), "sweep".to_string()])
+    );
+}
