@@ -215,6 +215,27 @@ fn kind_name(kind: OutputKind) -> &'static str {
     }
 }
 
+/// Rewrites a safetensors file's header with its `__metadata__` keys in sorted order. `safetensors::serialize`
+/// takes the metadata as a `HashMap`, whose order changes from process to process; sorting makes the same network
+/// give the same bytes. The header is padded with spaces to keep the data 8-byte aligned, as the format requires.
+fn with_sorted_metadata(bytes: Vec<u8>) -> anyhow::Result<Vec<u8>> {
+    #[derive(serde::Serialize, serde::Deserialize)]
+    #[serde(untagged)]
+    enum Entry {
+        Metadata(BTreeMap<String, String>),
+        Tensor(serde_json::Value),
+    }
+    let length = u64::from_le_bytes(bytes[..8].try_into()?) as usize;
+    let header: BTreeMap<String, Entry> = serde_json::from_slice(&bytes[8..8 + length])?;
+    let mut text = serde_json::to_vec(&header)?;
+    text.resize(text.len().next_multiple_of(8), b' ');
+    let mut out = Vec::with_capacity(8 + text.len() + bytes.len() - 8 - length);
+    out.extend_from_slice(&(text.len() as u64).to_le_bytes());
+    out.extend_from_slice(&text);
+    out.extend_from_slice(&bytes[8 + length..]);
+    Ok(out)
+}
+
 impl QNet {
     /// Saves the network as safetensors at `path` (atomically), with `metadata` added to the header.
     ///
@@ -250,7 +271,7 @@ impl QNet {
                 ))
             })
             .collect::<Result<Vec<_>, safetensors::SafeTensorError>>()?;
-        let bytes = safetensors::serialize(views, Some(header))?;
+        let bytes = with_sorted_metadata(safetensors::serialize(views, Some(header))?)?;
         crate::files::write_atomic(path, &bytes).map_err(|e| ModelFileError::Write {
             path: e.path,
             source: e.source,
@@ -383,6 +404,48 @@ fn load_file(path: &Path) -> Result<(QNet, BTreeMap<String, String>), ModelFileE
 mod tests {
     use super::*;
     use rand::SeedableRng;
+
+    #[test]
+    fn same_network_same_bytes_with_metadata_in_sorted_order() {
+        // The metadata reaches safetensors as a HashMap; saved twice (each HashMap with its own random order),
+        // the files must be byte-identical and the header's metadata keys sorted.
+        let dir = tempfile::tempdir().unwrap();
+        let mut rng = rand_pcg::Pcg64::seed_from_u64(5);
+        let net = QNet::new(4, 2, OutputKind::Bootstrap { heads: 3 }, &mut rng);
+        let mut metadata = example_metadata();
+        for i in 0..20 {
+            metadata.insert(format!("key{i}"), i.to_string());
+        }
+        let files: Vec<Vec<u8>> = (0..2)
+            .map(|i| {
+                let path = dir.path().join(format!("n{i}.safetensors"));
+                net.save(&path, &metadata).unwrap();
+                std::fs::read(&path).unwrap()
+            })
+            .collect();
+        assert!(files[0] == files[1], "two saves of one network differ");
+        let text = String::from_utf8_lossy(&files[0][8..800]).to_string();
+        let positions: Vec<usize> = [
+            "env",
+            "heads",
+            "key0",
+            "key1",
+            "kind",
+            "n_actions",
+            "obs_dim",
+            "seed",
+        ]
+        .iter()
+        .map(|k| {
+            text.find(&format!("\"{k}\""))
+                .unwrap_or_else(|| panic!("{k} in {text}"))
+        })
+        .collect();
+        assert!(positions.windows(2).all(|w| w[0] < w[1]), "{text}");
+        let (loaded, back) = QNet::load(&dir.path().join("n0.safetensors")).unwrap();
+        assert_eq!(back, metadata);
+        assert_eq!(loaded.parameters(), net.parameters());
+    }
 
     fn example_metadata() -> BTreeMap<String, String> {
         BTreeMap::from([
