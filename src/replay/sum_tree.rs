@@ -123,15 +123,14 @@ impl SumMinTree {
         // Invariant: the sum at `node` is > 0. Going left when `u < left` keeps it because
         // u >= 0; going right is only done into a positive subtree; otherwise left holds all
         // the mass.
+        // Branch-free: which child is taken is a coin flip weighted by the masses, so a branch would be
+        // mispredicted about every other level.
         while node < self.size {
             let left = self.nodes[2 * node].sum;
             let right = self.nodes[2 * node + 1].sum;
-            if u < left || right <= 0.0 {
-                node *= 2;
-            } else {
-                u -= left;
-                node = 2 * node + 1;
-            }
+            let go_right = !(u < left || right <= 0.0);
+            u = if go_right { u - left } else { u };
+            node = 2 * node + usize::from(go_right);
         }
         node - self.size
     }
