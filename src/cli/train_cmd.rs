@@ -1,5 +1,6 @@
 //! `arld train`: one training run with the paper's presets, a config file and `--set` overrides.
 use arld::experiment::run_one;
+use arld::expert::web::WebOptions;
 use arld::train::{ConfigInput, Method, NetKind, TrainConfig};
 use clap::Args;
 use std::path::PathBuf;
@@ -8,7 +9,8 @@ use std::process::ExitCode;
 #[derive(Args)]
 #[command(
     after_help = "Examples:\n  arld train --env CartPole-v0 --method dqn --net bootstrap --seed 0\n  \
-arld train --env Acrobot-v1 --method adqn --net noisy --set t_query=0.1 --set train_steps=50000\n\n\
+arld train --env Acrobot-v1 --method adqn --net noisy --set t_query=0.1 --set train_steps=50000\n  \
+arld train --env CartPole-v0 --method adqn --expert web     (a person answers in the browser)\n\n\
 Configuration is layered: the paper's preset for the task and method, then --config FILE (TOML with any of the \
 keys), then each --set key=value. `arld train --env ID --method M --print-config` shows every key with its value."
 )]
@@ -32,9 +34,21 @@ pub struct TrainArgs {
     #[arg(long = "set", value_name = "KEY=VALUE")]
     overrides: Vec<String>,
     /// Expert spec (overrides the config's `expert`): shipped:weak, shipped:perfect, checkpoint:PATH, scripted,
-    /// noisy:P:SPEC.
+    /// noisy:P:SPEC, web (a person answers the queries in a browser: the run prints the URL to open).
     #[arg(long)]
     expert: Option<String>,
+    /// Web expert: the address to listen on [default: 127.0.0.1:8765; port 0 picks a free one]. Another
+    /// address than 127.0.0.1 is reachable from other machines (the run warns).
+    #[arg(long, value_name = "IP:PORT")]
+    listen: Option<String>,
+    /// Web expert: answer in real time, the environment advancing N steps per second with the held key (the
+    /// no-op action when none is held) [default: turn-based, one step per key].
+    #[arg(long, value_name = "N")]
+    web_fps: Option<String>,
+    /// Web expert: a question nobody answers within S seconds goes back to the agent, logged as unanswered
+    /// and not charged to the budget [default: the run waits].
+    #[arg(long, value_name = "S")]
+    web_timeout: Option<String>,
     /// Demonstration file for pre-training (DQfD, ADQNP); by default demonstrations are collected from the expert.
     #[arg(long)]
     demos: Option<PathBuf>,
@@ -63,6 +77,25 @@ pub fn resolve(args: &TrainArgs) -> anyhow::Result<TrainConfig> {
     }
     if let Some(d) = &args.demos {
         input.set("demo_file", d.display().to_string())?;
+    }
+    // The web expert's flags complete its spec (`web:listen=...,fps=...,timeout=...`).
+    let web = [
+        ("listen", &args.listen),
+        ("fps", &args.web_fps),
+        ("timeout", &args.web_timeout),
+    ];
+    if web.iter().any(|(_, v)| v.is_some()) {
+        let expert = input.resolve()?.expert;
+        let Some(rest) = expert.strip_prefix("web") else {
+            anyhow::bail!("--listen, --web-fps and --web-timeout need --expert web");
+        };
+        let mut options = rest.trim_start_matches(':').to_string();
+        for (key, value) in web {
+            if let Some(v) = value {
+                options.push_str(&format!(",{key}={v}"));
+            }
+        }
+        input.set("expert", options.parse::<WebOptions>()?.to_spec())?;
     }
     input.resolve()
 }

@@ -19,6 +19,8 @@ use std::f64::consts::PI;
 const ID: &str = "Acrobot-v1";
 const DT: f64 = 0.2;
 const LINK_LENGTH_1: f64 = 1.0;
+/// Only drawn: the dynamics use the second link's centre of mass.
+const LINK_LENGTH_2: f64 = 1.0;
 const LINK_MASS_1: f64 = 1.0;
 const LINK_MASS_2: f64 = 1.0;
 /// Positions of the links' centres of mass.
@@ -170,6 +172,14 @@ impl Env for Acrobot {
             reward: if terminated { 0.0 } else { -1.0 },
             terminated,
             truncated,
+        })
+    }
+
+    fn geometry(&self) -> Option<super::Geometry> {
+        Some(super::Geometry::Acrobot {
+            theta1: self.state[0],
+            theta2: self.state[1],
+            link_lengths: [LINK_LENGTH_1, LINK_LENGTH_2],
         })
     }
 

@@ -116,6 +116,15 @@ impl Env for CartPole {
         })
     }
 
+    fn geometry(&self) -> Option<super::Geometry> {
+        Some(super::Geometry::CartPole {
+            x: self.state[0],
+            theta: self.state[2],
+            x_threshold: X_THRESHOLD,
+            pole_length: 2.0 * HALF_LENGTH,
+        })
+    }
+
     /// Overwrites `[x, x_dot, theta, theta_dot]` (Gymnasium's `env.unwrapped.state = ...`).
     fn set_state(&mut self, state: &[f64]) -> Result<Vec<f32>, EnvError> {
         check_state(self.spec.id, state, 4)?;

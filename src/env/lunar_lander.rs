@@ -140,7 +140,10 @@ fn vec2(x: f64, y: f64) -> b2::Vec2 {
 struct Scene {
     world: World,
     lander: b2::BodyHandle,
+    legs: [b2::BodyHandle; 2],
     flags: Arc<ContactFlags>,
+    /// The moon's surface points `(x, y)` in metres, left to right (drawing only).
+    terrain: Vec<[f64; 2]>,
     /// Height of the helipad (metres, float64 as in Python): the observation's vertical origin.
     helipad_y: f64,
 }
@@ -230,6 +233,7 @@ impl Scene {
             body.apply_force_to_center(&vec2(push_x, push_y), true);
         }
 
+        let mut legs = Vec::with_capacity(2);
         for (leg_index, side) in [-1.0f64, 1.0].into_iter().enumerate() {
             let leg_def = b2::BodyDef {
                 body_type: b2::BodyType::Dynamic,
@@ -238,6 +242,7 @@ impl Scene {
                 ..b2::BodyDef::new()
             };
             let leg = world.create_body_with(&leg_def, BodyRole::Leg(leg_index));
+            legs.push(leg);
             {
                 let shape =
                     b2::PolygonShape::new_box((LEG_W / SCALE) as f32, (LEG_H / SCALE) as f32);
@@ -275,10 +280,17 @@ impl Scene {
             world.create_joint(&joint);
         }
 
+        let terrain = chunk_x
+            .iter()
+            .zip(&smooth_y)
+            .map(|(&x, &y)| [x, y])
+            .collect();
         Scene {
             world,
             lander,
+            legs: [legs[0], legs[1]],
             flags,
+            terrain,
             helipad_y,
         }
     }
@@ -360,6 +372,44 @@ impl Scene {
         ]
     }
 
+    /// The drawable state: hull and legs in world coordinates, terrain, helipad, contacts.
+    fn geometry(&self, engine: usize) -> super::Geometry {
+        let place = |body: b2::BodyHandle, local: &[(f64, f64)]| -> Vec<[f64; 2]> {
+            let b = self.world.body(body);
+            let (p, a) = (*b.position(), b.angle() as f64);
+            let (sin, cos) = a.sin_cos();
+            local
+                .iter()
+                .map(|&(x, y)| {
+                    [
+                        p.x as f64 + cos * x - sin * y,
+                        p.y as f64 + sin * x + cos * y,
+                    ]
+                })
+                .collect()
+        };
+        let hull: Vec<(f64, f64)> = LANDER_POLY
+            .iter()
+            .map(|&(x, y)| (x / SCALE, y / SCALE))
+            .collect();
+        let (w, h) = (LEG_W / SCALE, LEG_H / SCALE);
+        let leg = [(-w, -h), (w, -h), (w, h), (-w, h)];
+        super::Geometry::LunarLander {
+            width: VIEWPORT_W / SCALE,
+            height: VIEWPORT_H / SCALE,
+            terrain: self.terrain.clone(),
+            helipad_x: [
+                self.terrain[CHUNKS / 2 - 1][0],
+                self.terrain[CHUNKS / 2 + 1][0],
+            ],
+            helipad_y: self.helipad_y,
+            hull: place(self.lander, &hull),
+            legs: [place(self.legs[0], &leg), place(self.legs[1], &leg)],
+            leg_contact: [0, 1].map(|i| self.flags.leg_contact[i].load(Ordering::Relaxed)),
+            engine,
+        }
+    }
+
     fn game_over(&self) -> bool {
         self.flags.game_over.load(Ordering::Relaxed)
     }
@@ -387,6 +437,8 @@ pub struct LunarLander {
     rng: Option<NumpyRng>,
     scene: Option<Scene>,
     prev_shaping: f64,
+    /// The last action (drawing only: which engine fired).
+    last_action: usize,
     /// Running flag and time limit.
     clock: EpisodeClock,
 }
@@ -422,6 +474,7 @@ impl LunarLander {
             rng: None,
             scene: None,
             prev_shaping: 0.0,
+            last_action: 0,
             clock: EpisodeClock::new(id, N_ACTIONS, MAX_EPISODE_STEPS),
         })
     }
@@ -485,6 +538,7 @@ impl Env for LunarLander {
         self.scene = None;
         self.scene = Some(Scene::build(rng, self.gravity));
         self.clock.start();
+        self.last_action = 0;
         // Gymnasium's reset returns the observation of one no-op step (outside the time limit count).
         let (obs, _, _) = self.frame(0, true);
         obs
@@ -493,6 +547,7 @@ impl Env for LunarLander {
     fn step(&mut self, action: usize) -> Result<Step, EnvError> {
         self.clock.check_step(action)?;
         let (obs, reward, terminated) = self.frame(action, false);
+        self.last_action = action;
         let truncated = self.clock.finish_step(terminated);
         Ok(Step {
             obs,
@@ -500,6 +555,12 @@ impl Env for LunarLander {
             terminated,
             truncated,
         })
+    }
+
+    fn geometry(&self) -> Option<super::Geometry> {
+        self.scene
+            .as_ref()
+            .map(|scene| scene.geometry(self.last_action))
     }
 }
 

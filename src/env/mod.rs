@@ -99,6 +99,54 @@ pub trait Env: Send {
             msg: "setting the internal state is not supported".into(),
         })
     }
+    /// What a viewer needs to draw the current state (see [`Geometry`]); `None` if the environment has no
+    /// drawing. Reading it never changes the environment.
+    fn geometry(&self) -> Option<Geometry> {
+        None
+    }
+}
+
+/// The drawable state of an environment, in the environment's own units, as a viewer (the web expert's page)
+/// draws it. Points are `[x, y]` with y up.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+#[serde(tag = "kind")]
+pub enum Geometry {
+    /// Cart position `x` (metres, the track spans `±x_threshold`) and pole angle `theta` (radians from
+    /// upright, positive clockwise) of a pole `pole_length` long.
+    CartPole {
+        x: f64,
+        theta: f64,
+        x_threshold: f64,
+        pole_length: f64,
+    },
+    /// Link angles (`theta1` from straight down, `theta2` relative to the first link) and link lengths.
+    Acrobot {
+        theta1: f64,
+        theta2: f64,
+        link_lengths: [f64; 2],
+    },
+    /// The car's position on the hill `hill` (a polyline of `[x, height]`), with the flag at `goal`.
+    MountainCar {
+        position: f64,
+        height: f64,
+        angle: f64,
+        goal: f64,
+        hill: Vec<[f64; 2]>,
+    },
+    /// The world of LunarLander in metres: viewport size, the moon's surface (left to right), the helipad
+    /// between `helipad_x` at `helipad_y`, the hull and leg polygons in world coordinates, which legs touch,
+    /// and which engine fired on the last step (0 none, 1 left, 2 main, 3 right).
+    LunarLander {
+        width: f64,
+        height: f64,
+        terrain: Vec<[f64; 2]>,
+        helipad_x: [f64; 2],
+        helipad_y: f64,
+        hull: Vec<[f64; 2]>,
+        legs: [Vec<[f64; 2]>; 2],
+        leg_contact: [bool; 2],
+        engine: usize,
+    },
 }
 
 /// Static facts about a registered environment.

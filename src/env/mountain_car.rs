@@ -18,6 +18,11 @@ const GOAL_VELOCITY: f64 = 0.0;
 const FORCE: f64 = 0.001;
 const GRAVITY: f64 = 0.0025;
 
+/// Height of the hill at `x` as Gymnasium draws it (the dynamics' gravity term is its slope).
+fn hill_height(x: f64) -> f64 {
+    (3.0 * x).sin() * 0.45 + 0.55
+}
+
 /// MountainCar-v0 with its 200-step limit.
 #[derive(Debug, Clone)]
 pub struct MountainCar {
@@ -84,6 +89,23 @@ impl Env for MountainCar {
             reward: -1.0,
             terminated,
             truncated,
+        })
+    }
+
+    fn geometry(&self) -> Option<super::Geometry> {
+        let hill = (0..=60)
+            .map(|i| {
+                let x = MIN_POSITION + (MAX_POSITION - MIN_POSITION) * f64::from(i) / 60.0;
+                [x, hill_height(x)]
+            })
+            .collect();
+        Some(super::Geometry::MountainCar {
+            position: self.position,
+            height: hill_height(self.position),
+            // The slope of the hill under the car: d/dx of 0.45 sin(3x).
+            angle: (1.35 * (3.0 * self.position).cos()).atan(),
+            goal: GOAL_POSITION,
+            hill,
         })
     }
 

@@ -2,17 +2,22 @@
 //!
 //! The [`Expert`] trait takes an observation and returns an action, or an error: an expert may be slow or
 //! interactive (a person answering in a browser, an external process), so nothing here assumes it answers
-//! instantly or always. Kinds: [`CheckpointExpert`] (a trained network acting greedily), [`NoisyExpert`] (acts at
-//! random with probability p), and [`scripted`] controllers. [`from_spec`] builds one from a short spec;
-//! [`demos`] collects demonstrations from an expert.
+//! instantly or always. During training the loop asks through [`Expert::answer`] with a [`Query`] (the
+//! observation, the environment to draw, the agent's own proposal); the [`Answer`] may be that nobody answered,
+//! and [`Expert::observe`] lets an interactive expert follow the run. Kinds: [`CheckpointExpert`] (a trained
+//! network acting greedily), [`NoisyExpert`] (acts at random with probability p), [`scripted`] controllers and
+//! [`web`] (a person in a browser). [`from_spec`] builds one from a short spec; [`demos`] collects
+//! demonstrations from an expert.
 
 pub mod demos;
 pub mod pipeline;
 pub mod scripted;
+pub mod web;
 
 use crate::agent::test_policy_action;
-use crate::env::EnvSpec;
+use crate::env::{Env, EnvSpec};
 use crate::nn::QNet;
+use crate::query::QueryController;
 use anyhow::{Context, Result, bail, ensure};
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64;
@@ -24,6 +29,63 @@ pub trait Expert: Send {
     fn act(&mut self, obs: &[f32]) -> Result<usize>;
     /// A short human-readable description, e.g. `checkpoint:experts/CartPole-v0/weak.safetensors`.
     fn describe(&self) -> String;
+    /// The kind of expert recorded with each query (`queries.csv`): the description up to its first `:` or
+    /// `(`, e.g. `checkpoint`, `scripted`, `web`.
+    fn kind(&self) -> String {
+        let d = self.describe();
+        d.split([':', '(']).next().unwrap_or_default().to_string()
+    }
+    /// Answers a query of the training loop. Programs answer at once with [`Expert::act`]; an interactive
+    /// expert may show `query.env`, take its time, or give the query back ([`Answer::Unanswered`]).
+    fn answer(&mut self, query: &Query) -> Result<Answer> {
+        Ok(Answer::Action {
+            action: self.act(query.obs)?,
+            response_s: None,
+        })
+    }
+    /// Called by the training loop after every step, so that an interactive expert can show the run as it goes.
+    /// It must be cheap and must not change anything the run depends on.
+    fn observe(&mut self, _progress: &Progress) {}
+}
+
+/// What the training loop asks the expert at one step of a query's segment.
+pub struct Query<'a> {
+    pub obs: &'a [f32],
+    /// The environment in the state `obs` comes from (to draw it; never stepped by the expert).
+    pub env: &'a dyn Env,
+    /// The agent's own proposal, on the step that opens the segment (`None` on the later steps).
+    pub agent_action: Option<usize>,
+    /// Expert steps left in the segment, this one included.
+    pub steps_left: usize,
+}
+
+/// An expert's reply to a [`Query`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Answer {
+    /// The action; an interactive expert also reports how long the answer took (seconds).
+    Action {
+        action: usize,
+        response_s: Option<f64>,
+    },
+    /// Nobody answered in time: the agent acts instead, the step is not charged to the budget and the
+    /// segment ends.
+    Unanswered { waited_s: f64 },
+}
+
+/// Where a run stands after a step, for [`Expert::observe`].
+pub struct Progress<'a> {
+    /// Environment steps done.
+    pub step: usize,
+    pub train_steps: usize,
+    pub episode: usize,
+    /// The environment after the step (reset already if the episode ended).
+    pub env: &'a dyn Env,
+    /// The uncertainty of this step's agent action, when it was computed.
+    pub uncertainty: Option<f32>,
+    /// Budget, segments and the query rule (its adaptive threshold).
+    pub queries: &'a QueryController,
+    /// The latest evaluation: step and mean test return.
+    pub last_eval: Option<(u64, f64)>,
 }
 
 /// A trained Q-network acting with its test-time policy (greedy, majority vote, or mean weights).
@@ -131,7 +193,7 @@ pub fn shipped_path(env_id: &str, quality: &str) -> PathBuf {
 pub const SPEC_HELP: &str = "Expert specs: `shipped:weak` or `shipped:perfect` (the experts in experts/), \
 `checkpoint:PATH` (a safetensors checkpoint acting greedily), `scripted` (a hand-written controller: Gymnasium's \
 heuristic lander, simple controllers for CartPole, MountainCar and Acrobot), `noisy:P:SPEC` (SPEC acting at random \
-with probability P).";
+with probability P), `web[:OPTIONS]` (a person answering in a browser; see `arld train --help`).";
 
 /// Builds an expert from a spec for the environment `env_id`; `seed` seeds any randomness the expert has.
 pub fn from_spec(spec: &str, env_id: &str, seed: u64) -> Result<Box<dyn Expert>> {
@@ -152,6 +214,10 @@ pub fn from_spec(spec: &str, env_id: &str, seed: u64) -> Result<Box<dyn Expert>>
             Ok(Box::new(CheckpointExpert::load(&path, &env_spec)?))
         }
         "scripted" if rest.is_empty() => Ok(Box::new(scripted::ScriptedExpert::new(env_id)?)),
+        "web" => Ok(Box::new(web::WebExpert::start(
+            &rest.parse::<web::WebOptions>()?,
+            env_id,
+        )?)),
         "noisy" => {
             let (p, inner) = rest
                 .split_once(':')

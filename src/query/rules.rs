@@ -360,6 +360,17 @@ impl QueryController {
         self.segment_left = 0;
     }
 
+    /// The expert gave the query back (nobody answered): the segment ends here and the step the expert did not
+    /// answer spends no budget. The query still counts in [`queries`](Self::queries): it was asked.
+    pub fn withdraw(&mut self) {
+        self.segment_left = 0;
+    }
+
+    /// Expert steps left in the running segment (0 while the agent is in control).
+    pub fn segment_left(&self) -> usize {
+        self.segment_left
+    }
+
     /// Total budget, in demonstrated transitions.
     pub fn budget(&self) -> usize {
         self.budget
@@ -624,6 +635,23 @@ mod tests {
                 prop_assert_eq!(expert_steps, budget.min(total_steps));
             }
         }
+    }
+
+    #[test]
+    fn a_withdrawn_query_spends_no_budget() {
+        let mut rng = Pcg64::seed_from_u64(0);
+        let mut controller = QueryController::new(QueryRule::Greedy, 10, 5).unwrap();
+        assert!(controller.decide(None, &mut rng).query);
+        assert_eq!(controller.segment_left(), 5);
+        controller.withdraw();
+        assert!(!controller.expert_in_control());
+        assert_eq!((controller.budget_used(), controller.queries()), (0, 1));
+        // Withdrawn mid-segment: the steps already taken stay charged.
+        assert!(controller.decide(None, &mut rng).query);
+        controller.record_expert_step();
+        controller.record_expert_step();
+        controller.withdraw();
+        assert_eq!((controller.budget_used(), controller.budget_left()), (2, 8));
     }
 
     #[test]

@@ -118,17 +118,7 @@ impl RunLog {
 
     pub fn query(&mut self, q: &QueryEvent) -> Result<()> {
         if let Some(f) = &mut self.queries {
-            let opt = |v: Option<f32>| v.map(|x| x.to_string()).unwrap_or_default();
-            writeln!(
-                f,
-                "{},{},{},{},{},{}",
-                q.step,
-                q.episode,
-                opt(q.uncertainty),
-                opt(q.threshold),
-                q.expert_action,
-                q.agent_action
-            )?;
+            f.write_all(q.csv_row().as_bytes())?;
         }
         Ok(())
     }

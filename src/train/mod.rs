@@ -12,8 +12,8 @@ pub use run_dir::{EvalPoint, QueryEvent, Summary, steps_to_solve};
 
 use crate::agent::Agent;
 use crate::env::{self, Env};
-use crate::expert::Expert;
 use crate::expert::demos::Demonstrations;
+use crate::expert::{Answer, Expert, Progress, Query};
 use crate::query::{QueryController, QueryRule};
 use crate::replay::{Batch, Replay, ReplayConfig, Transition};
 use anyhow::{Context, Result, ensure};
@@ -79,8 +79,9 @@ pub fn evaluate(
 /// `expert` is asked during training by the querying methods; `demos` are the demonstrations that DQfD and ADQNP
 /// pre-train on. The loop, in order: pre-training on demonstrations (DQfD, ADQNP); then for every environment
 /// step: the agent proposes an action (and its uncertainty), the query rule decides whether the expert acts
-/// instead (5-step segments, under the budget), the transition goes to replay (as a demonstration when the
-/// expert acted), one prioritized double-DQN update, the target copy, and periodic evaluation.
+/// instead (5-step segments, under the budget; a query nobody answers goes back to the agent at no cost), the
+/// transition goes to replay (as a demonstration when the expert acted), one prioritized double-DQN update, the
+/// target copy, and periodic evaluation. The expert observes every step (an interactive one shows the run).
 pub fn train(
     cfg: &TrainConfig,
     mut expert: Option<&mut dyn Expert>,
@@ -143,25 +144,49 @@ pub fn train(
     let mut updates = 0usize;
     for step in 0..cfg.train_steps {
         // 1. Who acts: the agent, or the expert when a query is running or the rule asks for one now.
+        let mut step_uncertainty = None;
         let action = if queries.expert_in_control() {
-            expert_action(&mut expert, &obs)?
+            match ask_expert(&mut expert, &obs, env.as_ref(), None, &queries)? {
+                Answer::Action { action, .. } => action,
+                // Nobody answered mid-segment: the agent takes the rest of it back.
+                Answer::Unanswered { .. } => {
+                    queries.withdraw();
+                    agent.act(&obs, epsilon_at(cfg, step), false).0
+                }
+            }
         } else {
             let want_uncertainty = queries.uncertainty_wanted_now();
             let (agent_action, uncertainty) =
                 agent.act(&obs, epsilon_at(cfg, step), want_uncertainty);
+            step_uncertainty = uncertainty;
             let decision = queries.decide(uncertainty, &mut query_rng);
             if decision.query {
-                let expert_action = expert_action(&mut expert, &obs)?;
-                let threshold = decision.threshold;
+                let answer = ask_expert(
+                    &mut expert,
+                    &obs,
+                    env.as_ref(),
+                    Some(agent_action),
+                    &queries,
+                )?;
+                let (expert_action, response_s) = match answer {
+                    Answer::Action { action, response_s } => (Some(action), response_s),
+                    Answer::Unanswered { waited_s } => {
+                        queries.withdraw();
+                        (None, Some(waited_s))
+                    }
+                };
                 log.query(&QueryEvent {
                     step,
                     episode,
                     uncertainty,
-                    threshold,
+                    threshold: decision.threshold,
                     expert_action,
                     agent_action,
+                    expert: expert.as_deref().map(|e| e.kind()).unwrap_or_default(),
+                    response_s,
+                    answered: expert_action.is_some(),
                 })?;
-                expert_action
+                expert_action.unwrap_or(agent_action)
             } else {
                 agent_action
             }
@@ -226,6 +251,17 @@ pub fn train(
         if (step + 1).is_multiple_of(cfg.eval_period) || step + 1 == cfg.train_steps {
             let point = evaluate(&mut agent, eval_env.as_mut(), cfg.eval_episodes, step + 1)?;
             log.eval(point)?;
+        }
+        if let Some(expert) = expert.as_deref_mut() {
+            expert.observe(&Progress {
+                step: step + 1,
+                train_steps: cfg.train_steps,
+                episode,
+                env: env.as_ref(),
+                uncertainty: step_uncertainty,
+                queries: &queries,
+                last_eval: log.curve().last().map(|p| (p.step, p.mean)),
+            });
         }
         if (step + 1).is_multiple_of(500) {
             log.progress(step + 1);
@@ -324,11 +360,35 @@ pub fn pretrain(
     Ok(())
 }
 
-fn expert_action(expert: &mut Option<&mut dyn Expert>, obs: &[f32]) -> Result<usize> {
+/// Asks the expert for the action at `obs` (one step of a segment; `agent_action` on the step that opens it) and
+/// checks that the answer is an action of the environment.
+fn ask_expert(
+    expert: &mut Option<&mut dyn Expert>,
+    obs: &[f32],
+    env: &dyn Env,
+    agent_action: Option<usize>,
+    queries: &QueryController,
+) -> Result<Answer> {
     let expert = expert
         .as_deref_mut()
         .context("the query rule asked for the expert, but none was given")?;
-    expert
-        .act(obs)
-        .with_context(|| format!("the expert ({}) failed to answer", expert.describe()))
+    let query = Query {
+        obs,
+        env,
+        agent_action,
+        steps_left: queries.segment_left(),
+    };
+    let answer = expert
+        .answer(&query)
+        .with_context(|| format!("the expert ({}) failed to answer", expert.describe()))?;
+    if let Answer::Action { action, .. } = answer {
+        ensure!(
+            action < env.n_actions(),
+            "the expert ({}) answered action {action}, but {} has {} actions",
+            expert.describe(),
+            env.id(),
+            env.n_actions()
+        );
+    }
+    Ok(answer)
 }

@@ -33,7 +33,8 @@ pub const CHECKPOINTS_DIR: &str = "checkpoints";
 /// Header of [`EPISODES_FILE`].
 pub const EPISODES_HEADER: &str = "episode,step,return,length,demo_steps\n";
 /// Header of [`QUERIES_FILE`].
-pub const QUERIES_HEADER: &str = "step,episode,uncertainty,threshold,expert_action,agent_action\n";
+pub const QUERIES_HEADER: &str =
+    "step,episode,uncertainty,threshold,expert_action,agent_action,expert,response_s,answered\n";
 /// Variant label of a run that varies neither t_query nor the expert.
 pub const DEFAULT_VARIANT: &str = "default";
 
@@ -71,15 +72,51 @@ impl EvalPoint {
     }
 }
 
-/// One query: the agent handed control to the expert.
+/// One query: the agent asked the expert to take over (a row of [`QUERIES_FILE`]).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct QueryEvent {
     pub step: usize,
     pub episode: usize,
     pub uncertainty: Option<f32>,
     pub threshold: Option<f32>,
-    pub expert_action: usize,
+    /// The expert's action; `None` when nobody answered (the agent's action was taken).
+    pub expert_action: Option<usize>,
     pub agent_action: usize,
+    /// Who was asked: the expert's kind (`checkpoint`, `scripted`, `web`, ...).
+    pub expert: String,
+    /// Seconds the expert took to answer, for experts that measure it (a person); `None` for programs, whose
+    /// answers are instant (and would make the file depend on the machine's speed).
+    pub response_s: Option<f64>,
+    /// Whether the expert answered (`false`: the query went back to the agent and cost no budget).
+    pub answered: bool,
+}
+
+impl QueryEvent {
+    /// The event as a line of [`QUERIES_FILE`] (columns of [`QUERIES_HEADER`]; `None` is an empty field).
+    pub fn csv_row(&self) -> String {
+        let opt = |v: Option<String>| v.unwrap_or_default();
+        format!(
+            "{},{},{},{},{},{},{},{},{}\n",
+            self.step,
+            self.episode,
+            opt(self.uncertainty.map(|x| x.to_string())),
+            opt(self.threshold.map(|x| x.to_string())),
+            opt(self.expert_action.map(|x| x.to_string())),
+            self.agent_action,
+            csv_field(&self.expert),
+            opt(self.response_s.map(|x| format!("{x:.3}"))),
+            self.answered
+        )
+    }
+}
+
+/// `s` as one CSV field: quoted (inner quotes doubled) when it holds a comma, quote or line break.
+fn csv_field(s: &str) -> String {
+    if s.contains([',', '"', '\n', '\r']) {
+        format!("\"{}\"", s.replace('"', "\"\""))
+    } else {
+        s.to_string()
+    }
 }
 
 /// What a finished run reports (`summary.json`).

@@ -1,0 +1,302 @@
+// The web expert's page: draws the environment from the geometry the server sends, shows the run's status and
+// charts, and answers the agent's questions with the keyboard (arrows or WASD) or the buttons.
+"use strict";
+
+const token = new URLSearchParams(location.search).get("token") || "";
+// Everything the page knows, readable from the console (and by automated tests).
+const arld = (window.arld = {
+  hello: null, controller: null, status: null, frame: null, prompt: null,
+  uncertainty: [], curve: [], ended: null, errors: [], connected: false,
+});
+let socket = null;
+let answered = null; // id of the prompt this tab already answered
+let held = null; // the action whose key or button is held down (real time)
+const $ = (id) => document.getElementById(id);
+
+function send(msg) {
+  if (socket && socket.readyState === WebSocket.OPEN) socket.send(JSON.stringify(msg));
+}
+const controls = () => arld.hello && arld.controller === arld.hello.client;
+
+function connect() {
+  const scheme = location.protocol === "https:" ? "wss" : "ws";
+  socket = new WebSocket(`${scheme}://${location.host}/ws?token=${encodeURIComponent(token)}`);
+  socket.onopen = () => { arld.connected = true; banner(null); };
+  socket.onmessage = (ev) => receive(JSON.parse(ev.data));
+  socket.onclose = () => {
+    arld.connected = false;
+    if (arld.ended) return;
+    banner("Connection lost; reconnecting…");
+    setTimeout(connect, 1000);
+  };
+}
+
+function receive(m) {
+  switch (m.type) {
+    case "hello": arld.hello = m; setup(); break;
+    case "roles": arld.controller = m.controller; showRole(); break;
+    case "status": arld.status = m; showStatus(); break;
+    case "frame": arld.frame = m; draw(); break;
+    case "eval": arld.curve.push([m.step, m.mean]); drawCurve(); break;
+    case "history": arld.uncertainty = m.uncertainty.slice(); arld.curve = m.curve.slice(); drawCharts(); break;
+    case "prompt": arld.prompt = m.prompt; showPrompt(); break;
+    case "error": arld.errors.push(m.message); banner(m.message, 3000); break;
+    case "end": arld.ended = m.message; arld.prompt = null; showPrompt(); banner(m.message); break;
+  }
+}
+
+let bannerTimer = null;
+function banner(text, ms) {
+  const b = $("banner");
+  clearTimeout(bannerTimer);
+  b.hidden = !text;
+  b.textContent = text || "";
+  if (text && ms) bannerTimer = setTimeout(() => (b.hidden = true), ms);
+}
+
+function setup() {
+  const h = arld.hello;
+  $("env-name").textContent = h.env;
+  $("mode").textContent = h.fps ? `real time, ${h.fps} steps/s` : "turn-based: one step per key";
+  if (h.timeout) $("mode").textContent += `, questions wait ${h.timeout} s`;
+  const box = $("buttons");
+  box.textContent = "";
+  h.actions.forEach((a, i) => {
+    const b = document.createElement("button");
+    b.textContent = `${a.label} [${a.keys.map(keyName).join(" / ")}]`;
+    b.dataset.action = i;
+    b.addEventListener("click", () => { if (!h.fps) press(i); });
+    b.addEventListener("pointerdown", () => { if (h.fps) { hold(i); press(i); } });
+    b.addEventListener("pointerup", () => { if (h.fps) release(i); });
+    b.addEventListener("pointerleave", () => { if (h.fps) release(i); });
+    box.appendChild(b);
+  });
+  $("keys-help").textContent = h.fps
+    ? `Hold a key to act; with no key held the environment takes "${h.actions[h.noop].label}".`
+    : "Each key (or button) takes one step.";
+  showRole();
+  showPrompt();
+}
+
+const keyName = (k) => ({ ArrowLeft: "←", ArrowRight: "→", ArrowUp: "↑", ArrowDown: "↓" })[k] || k.toUpperCase();
+
+function showRole() {
+  if (!arld.hello) return;
+  const r = $("role");
+  r.textContent = controls() ? "you answer" : "watching (another tab answers)";
+  r.className = "badge " + (controls() ? "control" : "watch");
+  $("take-control").hidden = controls();
+}
+$("take-control").addEventListener("click", () => send({ type: "control" }));
+
+function fmt(x, d = 3) { return x === null || x === undefined ? "–" : Number(x).toFixed(d); }
+
+function showStatus() {
+  const s = arld.status;
+  $("s-step").textContent = `${s.step} / ${s.train_steps}`;
+  $("s-episode").textContent = s.episode;
+  $("s-budget").textContent = `${s.budget_used} / ${s.budget}`;
+  $("s-left").textContent = s.budget - s.budget_used;
+  $("s-queries").textContent = s.queries;
+  $("s-eval").textContent = s.last_eval ? `${fmt(s.last_eval[1], 1)} (step ${s.last_eval[0]})` : "–";
+  if (s.uncertainty !== null) {
+    arld.uncertainty.push([s.step, s.uncertainty, s.threshold]);
+    if (arld.uncertainty.length > 300) arld.uncertainty.shift();
+  }
+  drawUncertainty();
+}
+
+function showPrompt() {
+  const p = arld.prompt, h = arld.hello, box = $("prompt");
+  if (!h) return;
+  let text;
+  if (arld.ended) { text = "The run is over."; box.className = "idle"; }
+  else if (!p) { text = "Training runs. When the agent is unsure it asks you here."; box.className = "idle"; }
+  else if (p.agent_action !== null) {
+    text = `The agent asks: what would you do? It would "${h.actions[p.agent_action].label}". ` +
+      `You act for ${p.steps_left} step${p.steps_left > 1 ? "s" : ""}.`;
+    box.className = "asking";
+  } else {
+    text = `Your turn: ${p.steps_left} step${p.steps_left > 1 ? "s" : ""} left in this segment.`;
+    box.className = p.waits ? "asking" : "running";
+  }
+  if (p && !controls()) text += " (Another tab answers.)";
+  $("prompt-text").textContent = text;
+  document.querySelectorAll("#buttons button").forEach((b) => {
+    b.disabled = !p || !controls() || arld.ended !== null;
+    b.classList.toggle("proposed", !!p && p.agent_action === Number(b.dataset.action));
+    b.classList.toggle("held", held === Number(b.dataset.action));
+  });
+  $("obs").textContent = p ? "observation: " + p.obs.map((v) => v.toFixed(3)).join("  ") : "";
+}
+
+// Answers the open prompt with `action` (once per prompt).
+function press(action) {
+  const p = arld.prompt;
+  if (!p || !p.waits || !controls() || answered === p.id) return;
+  answered = p.id;
+  send({ type: "key", id: p.id, action });
+}
+function hold(action) { held = action; send({ type: "hold", action }); showPrompt(); }
+function release(action) { if (held === action) { held = null; send({ type: "hold", action: null }); showPrompt(); } }
+
+function actionOfKey(key) {
+  if (!arld.hello) return null;
+  const k = key.length === 1 ? key.toLowerCase() : key;
+  const i = arld.hello.actions.findIndex((a) => a.keys.includes(k));
+  return i < 0 ? null : i;
+}
+document.addEventListener("keydown", (e) => {
+  const a = actionOfKey(e.key);
+  if (a === null) return;
+  e.preventDefault();
+  if (arld.hello.fps) { if (held !== a) hold(a); press(a); } else press(a);
+});
+document.addEventListener("keyup", (e) => {
+  const a = actionOfKey(e.key);
+  if (a !== null && arld.hello.fps) release(a);
+});
+window.addEventListener("blur", () => { if (held !== null) release(held); });
+
+// ---- drawing the environment ------------------------------------------------------------------------------
+const cv = $("env"), ctx = cv.getContext("2d");
+
+function draw() {
+  const g = arld.frame && arld.frame.geometry;
+  ctx.setTransform(1, 0, 0, 1, 0, 0);
+  ctx.fillStyle = "#ffffff";
+  ctx.fillRect(0, 0, cv.width, cv.height);
+  if (!g) return;
+  ({ CartPole: drawCartPole, Acrobot: drawAcrobot, MountainCar: drawMountainCar, LunarLander: drawLander })[g.kind](g);
+}
+
+// A world-to-canvas map: `scale` pixels per unit, world point (ox, oy) at canvas (px, py), y up.
+function view(scale, ox, oy, px, py) {
+  return { s: scale, x: (x) => px + (x - ox) * scale, y: (y) => py - (y - oy) * scale };
+}
+function poly(v, pts, fill, stroke) {
+  ctx.beginPath();
+  pts.forEach(([x, y], i) => (i ? ctx.lineTo(v.x(x), v.y(y)) : ctx.moveTo(v.x(x), v.y(y))));
+  ctx.closePath();
+  if (fill) { ctx.fillStyle = fill; ctx.fill(); }
+  if (stroke) { ctx.strokeStyle = stroke; ctx.lineWidth = 1.5; ctx.stroke(); }
+}
+
+function drawCartPole(g) {
+  const W = cv.width, world = 2 * g.x_threshold * 1.1;
+  const v = view(W / world, 0, 0, W / 2, 280);
+  ctx.strokeStyle = "#111827"; ctx.lineWidth = 2;
+  ctx.beginPath(); ctx.moveTo(v.x(-g.x_threshold), v.y(0)); ctx.lineTo(v.x(g.x_threshold), v.y(0)); ctx.stroke();
+  for (const e of [-g.x_threshold, g.x_threshold]) {
+    ctx.fillStyle = "#dc2626"; ctx.fillRect(v.x(e) - 2, v.y(0) - 12, 4, 24);
+  }
+  const cw = 0.4, ch = 0.24, axle = ch * 0.25;
+  poly(v, [[g.x - cw / 2, 0], [g.x + cw / 2, 0], [g.x + cw / 2, ch], [g.x - cw / 2, ch]], "#1f2937");
+  const bx = g.x, by = ch - axle, L = g.pole_length, pw = 0.04;
+  const dx = Math.sin(g.theta), dy = Math.cos(g.theta), nx = dy * pw, ny = -dx * pw;
+  poly(v, [[bx - nx, by - ny], [bx + nx, by + ny], [bx + nx + dx * L, by + ny + dy * L], [bx - nx + dx * L, by - ny + dy * L]], "#ca9862", "#8b5a2b");
+  ctx.fillStyle = "#818cd8"; ctx.beginPath(); ctx.arc(v.x(bx), v.y(by), 5, 0, 2 * Math.PI); ctx.fill();
+}
+
+function drawAcrobot(g) {
+  const [l1, l2] = g.link_lengths, bound = l1 + l2 + 0.2;
+  const v = view(Math.min(cv.width, cv.height) / (2 * bound), 0, 0, cv.width / 2, cv.height / 2);
+  ctx.strokeStyle = "#111827"; ctx.lineWidth = 1; ctx.setLineDash([6, 4]);
+  ctx.beginPath(); ctx.moveTo(v.x(-bound), v.y(1)); ctx.lineTo(v.x(bound), v.y(1)); ctx.stroke();
+  ctx.setLineDash([]);
+  const p1 = [l1 * Math.sin(g.theta1), -l1 * Math.cos(g.theta1)];
+  const p2 = [p1[0] + l2 * Math.sin(g.theta1 + g.theta2), p1[1] - l2 * Math.cos(g.theta1 + g.theta2)];
+  ctx.lineCap = "round"; ctx.lineWidth = 0.2 * v.s; ctx.strokeStyle = "#0e7490";
+  ctx.beginPath(); ctx.moveTo(v.x(0), v.y(0)); ctx.lineTo(v.x(p1[0]), v.y(p1[1])); ctx.lineTo(v.x(p2[0]), v.y(p2[1])); ctx.stroke();
+  ctx.fillStyle = "#eab308";
+  for (const [x, y] of [[0, 0], p1]) { ctx.beginPath(); ctx.arc(v.x(x), v.y(y), 0.1 * v.s, 0, 2 * Math.PI); ctx.fill(); }
+}
+
+function drawMountainCar(g) {
+  const xs = g.hill.map((p) => p[0]), lo = Math.min(...xs), hi = Math.max(...xs);
+  const v = view(cv.width / (hi - lo), lo, 0, 0, cv.height - 20);
+  poly(v, [...g.hill, [hi, -0.1], [lo, -0.1]], "#e5e7eb", null);
+  ctx.strokeStyle = "#111827"; ctx.lineWidth = 2; ctx.beginPath();
+  g.hill.forEach(([x, y], i) => (i ? ctx.lineTo(v.x(x), v.y(y)) : ctx.moveTo(v.x(x), v.y(y)))); ctx.stroke();
+  const fy = 0.45 * Math.sin(3 * g.goal) + 0.55;
+  ctx.beginPath(); ctx.moveTo(v.x(g.goal), v.y(fy)); ctx.lineTo(v.x(g.goal), v.y(fy) - 50); ctx.stroke();
+  poly(v, [[g.goal, fy + 50 / v.s], [g.goal, fy + 35 / v.s], [g.goal + 25 / v.s, fy + 42 / v.s]], "#eab308");
+  ctx.save();
+  ctx.translate(v.x(g.position), v.y(g.height)); ctx.rotate(-g.angle);
+  ctx.fillStyle = "#1f2937"; ctx.fillRect(-20, -22, 40, 16);
+  ctx.fillStyle = "#6b7280";
+  for (const wx of [-12, 12]) { ctx.beginPath(); ctx.arc(wx, -5, 5, 0, 2 * Math.PI); ctx.fill(); }
+  ctx.restore();
+}
+
+function drawLander(g) {
+  // Gymnasium's viewport, with 1.5 m of sky above it: the lander starts at its top edge.
+  const scale = Math.min(cv.width / g.width, cv.height / (g.height + 1.5));
+  const v = view(scale, g.width / 2, 0, cv.width / 2, cv.height);
+  ctx.fillStyle = "#0b1020"; ctx.fillRect(0, 0, cv.width, cv.height);
+  poly(v, [[0, 0], ...g.terrain, [g.width, g.terrain[g.terrain.length - 1][1]], [g.width, 0]], "#d1d5db", "#9ca3af");
+  for (const x of g.helipad_x) {
+    ctx.strokeStyle = "#f9fafb"; ctx.lineWidth = 1.5;
+    ctx.beginPath(); ctx.moveTo(v.x(x), v.y(g.helipad_y)); ctx.lineTo(v.x(x), v.y(g.helipad_y + 50 / 30)); ctx.stroke();
+    poly(v, [[x, g.helipad_y + 50 / 30], [x, g.helipad_y + 40 / 30], [x + 25 / 30, g.helipad_y + 45 / 30]], "#eab308");
+  }
+  const hull = g.hull, cx = hull.reduce((a, p) => a + p[0], 0) / hull.length, cy = hull.reduce((a, p) => a + p[1], 0) / hull.length;
+  // The hull's frame: "up" from the bottom edge (points 2-3) to the top edge (points 0, 5); "right" along the bottom.
+  const right = norm([hull[3][0] - hull[2][0], hull[3][1] - hull[2][1]]), up = [-right[1], right[0]];
+  const flame = (at, dir, len) => {
+    const side = [-dir[1] * 0.12, dir[0] * 0.12];
+    poly(v, [[at[0] + side[0], at[1] + side[1]], [at[0] - side[0], at[1] - side[1]], [at[0] + dir[0] * len, at[1] + dir[1] * len]], "#f97316", "#fde047");
+  };
+  const local = (x, y) => [cx + right[0] * x + up[0] * y, cy + right[1] * x + up[1] * y];
+  if (g.engine === 2) flame(local(0, -0.45), [-up[0], -up[1]], 0.9);
+  if (g.engine === 1) flame(local(0.6, 0.25), right, 0.5);
+  if (g.engine === 3) flame(local(-0.6, 0.25), [-right[0], -right[1]], 0.5);
+  g.legs.forEach((leg, i) => poly(v, leg, g.leg_contact[i] ? "#22c55e" : "#7c3aed", "#4c1d95"));
+  poly(v, hull, "#8b5cf6", "#4c1d95");
+}
+function norm([x, y]) { const n = Math.hypot(x, y) || 1; return [x / n, y / n]; }
+
+// ---- charts -----------------------------------------------------------------------------------------------
+function chart(canvas, series, opts) {
+  const c = canvas.getContext("2d"), W = canvas.width, H = canvas.height, pad = 6;
+  c.fillStyle = "#ffffff"; c.fillRect(0, 0, W, H);
+  const pts = series.flatMap((s) => s.points).filter((p) => p[1] !== null && isFinite(p[1]));
+  if (!pts.length) { c.fillStyle = "#9ca3af"; c.fillText(opts.empty, 10, H / 2); return; }
+  let [x0, x1] = opts.xrange || [Math.min(...pts.map((p) => p[0])), Math.max(...pts.map((p) => p[0]))];
+  let y0 = Math.min(...pts.map((p) => p[1])), y1 = Math.max(...pts.map((p) => p[1]));
+  if (opts.zero) y0 = Math.min(0, y0);
+  if (x1 <= x0) x1 = x0 + 1;
+  if (y1 <= y0) { y1 += 1; y0 -= 1; }
+  const X = (x) => pad + ((x - x0) / (x1 - x0)) * (W - 2 * pad), Y = (y) => H - pad - ((y - y0) / (y1 - y0)) * (H - 2 * pad);
+  for (const s of series) {
+    c.strokeStyle = s.color; c.lineWidth = 1.5; c.setLineDash(s.dash || []); c.beginPath();
+    let started = false;
+    for (const [x, y] of s.points) {
+      if (y === null || !isFinite(y)) { started = false; continue; }
+      started ? c.lineTo(X(x), Y(y)) : c.moveTo(X(x), Y(y));
+      started = true;
+    }
+    c.stroke();
+  }
+  c.setLineDash([]); c.fillStyle = "#6b7280"; c.font = "10px system-ui";
+  const label = (y) => (Math.abs(y) >= 100 || y === 0 ? y.toFixed(0) : y.toPrecision(3));
+  c.fillText(label(y1), pad + 2, pad + 8); c.fillText(label(y0), pad + 2, H - pad - 2);
+}
+function drawUncertainty() {
+  const u = arld.uncertainty;
+  chart($("uchart"), [
+    { color: "#2563eb", points: u.map((p) => [p[0], p[1]]) },
+    { color: "#dc2626", points: u.map((p) => [p[0], p[2]]) },
+  ], { empty: "no uncertainty yet" });
+}
+function drawCurve() {
+  const h = arld.hello, s = arld.status, c = arld.curve;
+  const range = [0, s ? s.train_steps : Math.max(1, ...c.map((p) => p[0]))];
+  const series = [{ color: "#16a34a", points: c }];
+  if (h && c.length) series.push({ color: "#dc2626", dash: [4, 3], points: [[range[0], h.solve_threshold], [range[1], h.solve_threshold]] });
+  chart($("curve"), series, { empty: "no evaluation yet", xrange: range });
+}
+function drawCharts() { drawUncertainty(); drawCurve(); }
+
+drawCharts();
+connect();

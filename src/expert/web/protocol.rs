@@ -1,0 +1,221 @@
+//! The messages between the server and the page, as JSON objects with a `type` field.
+//!
+//! Server to page: `hello` (once per connection: the environment, its actions and keys, the answering mode, the
+//! tab's id), `roles` (which tab controls), `status` (step, episode, budget, uncertainty and threshold), `frame`
+//! (the environment's [`Geometry`] and observation), `eval` (a point of the test-return curve), `history` (the
+//! recent uncertainty samples and the curve, for a tab that joins late), `prompt` (the agent asks; `null` when no
+//! question is open), `error` (a message was rejected) and `end` (the run is over).
+//!
+//! Page to server: `key` (answer prompt `id` with `action`), `hold` (real time: the action held down, or `null`),
+//! `control` (this tab takes control). Anything else, or an action out of range, gets an `error` frame and
+//! changes nothing.
+
+use crate::env::Geometry;
+use serde::{Deserialize, Serialize};
+
+/// One action as the page shows it: what it does and the keys that give it.
+#[derive(Clone, Debug, Serialize)]
+pub struct ActionKeys {
+    pub label: &'static str,
+    /// `KeyboardEvent.key` values (lower case for letters).
+    pub keys: &'static [&'static str],
+}
+
+/// The actions of an environment with their keys (arrows and WASD), and the action taken in real time when no
+/// key is held.
+pub fn action_keys(env_id: &str) -> Option<(Vec<ActionKeys>, usize)> {
+    let a = |label, keys| ActionKeys { label, keys };
+    const LEFT: &[&str] = &["ArrowLeft", "a"];
+    const RIGHT: &[&str] = &["ArrowRight", "d"];
+    const DOWN: &[&str] = &["ArrowDown", "s"];
+    const UP: &[&str] = &["ArrowUp", "w"];
+    Some(match env_id {
+        // CartPole has no action that does nothing; as in Gymnasium's `play`, action 0 stands in for it.
+        "CartPole-v0" | "CartPole-v1" => (vec![a("push left", LEFT), a("push right", RIGHT)], 0),
+        "Acrobot-v1" => (
+            vec![
+                a("torque -1", LEFT),
+                a("no torque", DOWN),
+                a("torque +1", RIGHT),
+            ],
+            1,
+        ),
+        "MountainCar-v0" => (
+            vec![
+                a("push left", LEFT),
+                a("coast", DOWN),
+                a("push right", RIGHT),
+            ],
+            1,
+        ),
+        "LunarLander-v2" | "LunarLander-v3" => (
+            vec![
+                a("do nothing", DOWN),
+                a("fire left engine", LEFT),
+                a("fire main engine", UP),
+                a("fire right engine", RIGHT),
+            ],
+            0,
+        ),
+        _ => return None,
+    })
+}
+
+/// Sent once to each tab when it connects.
+#[derive(Clone, Debug, Serialize)]
+pub struct Hello {
+    pub env: String,
+    pub actions: Vec<ActionKeys>,
+    pub noop: usize,
+    /// Real-time steps per second; `None`: turn-based (one step per key).
+    pub fps: Option<f64>,
+    /// Seconds a question stays open; `None`: the run waits.
+    pub timeout: Option<f64>,
+    pub solve_threshold: f64,
+    /// This tab's id (compare with [`ServerMsg::Roles`]).
+    pub client: u64,
+}
+
+/// Where the run stands.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct Status {
+    pub step: usize,
+    pub train_steps: usize,
+    pub episode: usize,
+    pub budget: usize,
+    pub budget_used: usize,
+    pub queries: usize,
+    pub uncertainty: Option<f32>,
+    pub threshold: Option<f32>,
+    /// The last test return and its step.
+    pub last_eval: Option<(u64, f64)>,
+}
+
+/// An open question to the person.
+#[derive(Clone, Debug, Serialize)]
+pub struct Prompt {
+    pub id: u64,
+    /// The agent's own proposal (on the step that opens a segment).
+    pub agent_action: Option<usize>,
+    /// Expert steps left in the segment, this one included.
+    pub steps_left: usize,
+    /// Whether the run waits for a key (turn-based, or the first step in real time).
+    pub waits: bool,
+    pub obs: Vec<f32>,
+}
+
+/// Everything the server sends.
+#[derive(Clone, Debug, Serialize)]
+#[serde(tag = "type", rename_all = "lowercase")]
+pub enum ServerMsg<'a> {
+    Hello(&'a Hello),
+    Roles {
+        controller: Option<u64>,
+    },
+    Status(&'a Status),
+    Frame {
+        geometry: Option<&'a Geometry>,
+        obs: &'a [f32],
+    },
+    Eval {
+        step: u64,
+        mean: f64,
+    },
+    History {
+        /// `[step, uncertainty, threshold or null]`.
+        uncertainty: &'a [(usize, f32, Option<f32>)],
+        curve: &'a [(u64, f64)],
+    },
+    Prompt {
+        prompt: Option<&'a Prompt>,
+    },
+    Error {
+        message: String,
+    },
+    End {
+        message: String,
+    },
+}
+
+impl ServerMsg<'_> {
+    pub fn to_json(&self) -> String {
+        serde_json::to_string(self).expect("server messages serialise")
+    }
+}
+
+/// Everything a page may send.
+#[derive(Clone, Debug, PartialEq, Deserialize)]
+#[serde(tag = "type", rename_all = "lowercase", deny_unknown_fields)]
+pub enum ClientMsg {
+    Key { id: u64, action: usize },
+    Hold { action: Option<usize> },
+    Control,
+}
+
+impl ClientMsg {
+    /// Parses and checks a page's message against the number of actions.
+    pub fn parse(text: &str, n_actions: usize) -> Result<Self, String> {
+        let msg: ClientMsg =
+            serde_json::from_str(text).map_err(|e| format!("malformed message: {e}"))?;
+        let action = match &msg {
+            ClientMsg::Key { action, .. } => Some(*action),
+            ClientMsg::Hold { action } => *action,
+            ClientMsg::Control => None,
+        };
+        if let Some(a) = action
+            && a >= n_actions
+        {
+            return Err(format!(
+                "action {a} is out of range: the environment has {n_actions} actions (0..{n_actions})"
+            ));
+        }
+        Ok(msg)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn page_messages_are_checked() {
+        assert_eq!(
+            ClientMsg::parse(r#"{"type":"key","id":3,"action":1}"#, 2),
+            Ok(ClientMsg::Key { id: 3, action: 1 })
+        );
+        assert_eq!(
+            ClientMsg::parse(r#"{"type":"hold","action":null}"#, 2),
+            Ok(ClientMsg::Hold { action: None })
+        );
+        assert_eq!(
+            ClientMsg::parse(r#"{"type":"control"}"#, 2),
+            Ok(ClientMsg::Control)
+        );
+        for bad in [
+            r#"{"type":"key","id":3,"action":2}"#,
+            r#"{"type":"key","id":3,"action":-1}"#,
+            r#"{"type":"key","id":3}"#,
+            r#"{"type":"hold","action":7}"#,
+            r#"{"type":"quit"}"#,
+            r#"{"type":"key","id":1,"action":0,"extra":1}"#,
+            "not json",
+            "",
+        ] {
+            assert!(ClientMsg::parse(bad, 2).is_err(), "{bad} accepted");
+        }
+    }
+
+    #[test]
+    fn every_builtin_environment_has_keys_for_each_action() {
+        for spec in crate::env::SPECS {
+            let (actions, noop) = action_keys(spec.id).expect("keys for a built-in environment");
+            assert_eq!(actions.len(), spec.n_actions, "{}", spec.id);
+            assert!(noop < spec.n_actions);
+            let mut keys: Vec<_> = actions.iter().flat_map(|a| a.keys).collect();
+            let n = keys.len();
+            keys.sort();
+            keys.dedup();
+            assert_eq!(keys.len(), n, "{}: a key gives two actions", spec.id);
+        }
+    }
+}

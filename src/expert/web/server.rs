@@ -1,0 +1,361 @@
+//! The web server of the web expert: an axum application on its own tokio runtime thread.
+//!
+//! It serves only the embedded page (`/`, `/app.js`, `/style.css`) and one WebSocket (`/ws`), all behind the
+//! access token (`?token=...`, 403 without it). The training thread and the server share a [`Board`]: the latest
+//! status, frame and prompt and the history, so that a tab that connects (or reloads) late sees everything at
+//! once; every change is also broadcast to the open tabs. One tab controls (the first one, or the one that took
+//! control); its keys go to the training thread over a channel, the others watch.
+
+use super::protocol::{ClientMsg, Hello, ServerMsg};
+use axum::Router;
+use axum::extract::ws::{Message, WebSocket, WebSocketUpgrade};
+use axum::extract::{Request, State};
+use axum::http::{StatusCode, header};
+use axum::middleware::{self, Next};
+use axum::response::{IntoResponse, Response};
+use axum::routing::get;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Mutex, mpsc};
+use tokio::sync::{broadcast, oneshot};
+
+const INDEX_HTML: &str = include_str!("page/index.html");
+const APP_JS: &str = include_str!("page/app.js");
+const STYLE_CSS: &str = include_str!("page/style.css");
+
+/// Uncertainty samples kept for the live chart.
+pub const UNCERTAINTY_HISTORY: usize = 300;
+/// The longest message a page may send (bytes); its messages are a few dozen bytes.
+const MAX_CLIENT_MESSAGE: usize = 1024;
+
+/// A key from the controlling tab: the answer `action` to prompt `id`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct KeyInput {
+    pub id: u64,
+    pub action: usize,
+}
+
+/// What the training thread last published, for tabs that connect later.
+#[derive(Default)]
+pub struct Board {
+    pub status: Option<String>,
+    pub frame: Option<String>,
+    pub prompt: Option<String>,
+    pub uncertainty: Vec<(usize, f32, Option<f32>)>,
+    pub curve: Vec<(u64, f64)>,
+    pub end: Option<String>,
+    /// Open tabs, oldest first.
+    clients: Vec<u64>,
+    controller: Option<u64>,
+    /// The action held down in the controlling tab (real time).
+    pub held: Option<usize>,
+}
+
+impl Board {
+    /// The messages that bring a new tab up to date.
+    fn snapshot(&self, hello: &str) -> Vec<String> {
+        let mut msgs = vec![
+            hello.to_string(),
+            ServerMsg::Roles {
+                controller: self.controller,
+            }
+            .to_json(),
+            ServerMsg::History {
+                uncertainty: &self.uncertainty,
+                curve: &self.curve,
+            }
+            .to_json(),
+        ];
+        msgs.extend(
+            [&self.status, &self.frame, &self.prompt, &self.end]
+                .into_iter()
+                .flatten()
+                .cloned(),
+        );
+        if self.prompt.is_none() {
+            msgs.push(ServerMsg::Prompt { prompt: None }.to_json());
+        }
+        msgs
+    }
+
+    fn roles(&self) -> String {
+        ServerMsg::Roles {
+            controller: self.controller,
+        }
+        .to_json()
+    }
+
+    pub fn open_tabs(&self) -> usize {
+        self.clients.len()
+    }
+}
+
+/// State shared by the training thread and the server.
+pub struct Shared {
+    token: String,
+    n_actions: usize,
+    hello: Hello,
+    pub board: Mutex<Board>,
+    updates: broadcast::Sender<Arc<str>>,
+    keys: Mutex<mpsc::Sender<KeyInput>>,
+    next_client: AtomicU64,
+}
+
+impl Shared {
+    pub fn new(
+        token: String,
+        hello: Hello,
+        n_actions: usize,
+        keys: mpsc::Sender<KeyInput>,
+    ) -> Self {
+        Self {
+            token,
+            n_actions,
+            hello,
+            board: Mutex::new(Board::default()),
+            updates: broadcast::channel(256).0,
+            keys: Mutex::new(keys),
+            next_client: AtomicU64::new(1),
+        }
+    }
+
+    fn board(&self) -> std::sync::MutexGuard<'_, Board> {
+        // A panic while holding the lock leaves plain data behind; keep serving it.
+        self.board.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    /// Changes the board and broadcasts `msg` under one lock, so a tab never misses or reorders an update.
+    pub fn publish(&self, msg: String, update: impl FnOnce(&mut Board, &String)) {
+        let mut board = self.board();
+        update(&mut board, &msg);
+        let _ = self.updates.send(Arc::from(msg));
+    }
+
+    /// Adds an uncertainty sample to the history (no broadcast: the status message carries it).
+    pub fn push_uncertainty(&self, sample: (usize, f32, Option<f32>)) {
+        let mut board = self.board();
+        if board.uncertainty.len() >= UNCERTAINTY_HISTORY {
+            board.uncertainty.remove(0);
+        }
+        board.uncertainty.push(sample);
+    }
+
+    pub fn held(&self) -> Option<usize> {
+        self.board().held
+    }
+
+    pub fn open_tabs(&self) -> usize {
+        self.board().open_tabs()
+    }
+
+    fn token_ok(&self, query: Option<&str>) -> bool {
+        query.is_some_and(|q| {
+            q.split('&').any(|kv| {
+                kv.strip_prefix("token=")
+                    .is_some_and(|t| constant_time_eq(t.as_bytes(), self.token.as_bytes()))
+            })
+        })
+    }
+}
+
+/// Compares without stopping at the first difference (the time taken does not reveal the token's prefix).
+fn constant_time_eq(a: &[u8], b: &[u8]) -> bool {
+    a.len() == b.len() && a.iter().zip(b).fold(0u8, |acc, (x, y)| acc | (x ^ y)) == 0
+}
+
+/// Serves on `listener` until `stop` fires, on a runtime thread of its own.
+pub fn spawn(
+    listener: std::net::TcpListener,
+    shared: Arc<Shared>,
+    stop: oneshot::Receiver<()>,
+) -> anyhow::Result<std::thread::JoinHandle<()>> {
+    listener.set_nonblocking(true)?;
+    let runtime = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()?;
+    let handle = std::thread::Builder::new()
+        .name("arld-web".into())
+        .spawn(move || {
+            runtime.block_on(async move {
+                let listener = match tokio::net::TcpListener::from_std(listener) {
+                    Ok(l) => l,
+                    Err(err) => {
+                        eprintln!("error: the web expert's server cannot start: {err}");
+                        return;
+                    }
+                };
+                let app = router(shared);
+                tokio::select! {
+                    result = axum::serve(listener, app) => {
+                        if let Err(err) = result {
+                            eprintln!("error: the web expert's server stopped: {err}");
+                        }
+                    }
+                    _ = stop => {}
+                }
+            });
+            // Dropping the runtime here ends every connection still open.
+        })?;
+    Ok(handle)
+}
+
+fn router(shared: Arc<Shared>) -> Router {
+    Router::new()
+        .route("/", get(index))
+        .route(
+            "/app.js",
+            get(|| async { asset("text/javascript", APP_JS) }),
+        )
+        .route("/style.css", get(|| async { asset("text/css", STYLE_CSS) }))
+        .route("/ws", get(websocket))
+        .fallback(|| async { (StatusCode::NOT_FOUND, "not found\n") })
+        .layer(middleware::from_fn_with_state(
+            shared.clone(),
+            require_token,
+        ))
+        .with_state(shared)
+}
+
+/// Every request, whatever its path, needs the token.
+async fn require_token(State(shared): State<Arc<Shared>>, req: Request, next: Next) -> Response {
+    if !shared.token_ok(req.uri().query()) {
+        return (
+            StatusCode::FORBIDDEN,
+            "forbidden: open the URL with the token that arld printed\n",
+        )
+            .into_response();
+    }
+    next.run(req).await
+}
+
+fn asset(content_type: &'static str, body: &'static str) -> Response {
+    (
+        [
+            (header::CONTENT_TYPE, content_type),
+            (header::CACHE_CONTROL, "no-store"),
+            (header::X_CONTENT_TYPE_OPTIONS, "nosniff"),
+        ],
+        body,
+    )
+        .into_response()
+}
+
+async fn index(State(shared): State<Arc<Shared>>) -> Response {
+    (
+        [
+            (header::CONTENT_TYPE, "text/html; charset=utf-8"),
+            (header::CACHE_CONTROL, "no-store"),
+            (header::X_FRAME_OPTIONS, "DENY"),
+            (header::REFERRER_POLICY, "no-referrer"),
+        ],
+        INDEX_HTML.replace("__TOKEN__", &shared.token),
+    )
+        .into_response()
+}
+
+async fn websocket(State(shared): State<Arc<Shared>>, ws: WebSocketUpgrade) -> Response {
+    ws.max_message_size(MAX_CLIENT_MESSAGE)
+        .on_upgrade(move |socket| tab(socket, shared))
+}
+
+/// One open tab: catch it up, then forward updates to it and its keys to the training thread.
+async fn tab(mut socket: WebSocket, shared: Arc<Shared>) {
+    let id = shared.next_client.fetch_add(1, Ordering::Relaxed);
+    let hello = ServerMsg::Hello(&Hello {
+        client: id,
+        ..shared.hello.clone()
+    })
+    .to_json();
+    let (mut updates, snapshot) = {
+        let mut board = shared.board();
+        board.clients.push(id);
+        if board.controller.is_none() {
+            board.controller = Some(id);
+            let _ = shared.updates.send(Arc::from(board.roles()));
+        }
+        (shared.updates.subscribe(), board.snapshot(&hello))
+    };
+    let mut open = true;
+    for msg in snapshot {
+        if socket.send(Message::Text(msg.into())).await.is_err() {
+            open = false;
+            break;
+        }
+    }
+    while open {
+        tokio::select! {
+            update = updates.recv() => match update {
+                Ok(msg) => {
+                    let end = msg.starts_with(r#"{"type":"end""#);
+                    open = socket.send(Message::Text(msg.as_ref().into())).await.is_ok() && !end;
+                }
+                // The tab fell behind: send it the whole picture again.
+                Err(broadcast::error::RecvError::Lagged(_)) => {
+                    let snapshot = shared.board().snapshot(&hello);
+                    for msg in snapshot {
+                        if socket.send(Message::Text(msg.into())).await.is_err() {
+                            open = false;
+                            break;
+                        }
+                    }
+                }
+                Err(broadcast::error::RecvError::Closed) => open = false,
+            },
+            incoming = socket.recv() => match incoming {
+                Some(Ok(Message::Text(text))) => {
+                    if let Err(message) = handle(&shared, id, text.as_str()) {
+                        let frame = ServerMsg::Error { message }.to_json();
+                        open = socket.send(Message::Text(frame.into())).await.is_ok();
+                    }
+                }
+                Some(Ok(Message::Binary(_))) => {
+                    let message = "binary messages are not understood; send JSON text".to_string();
+                    let frame = ServerMsg::Error { message }.to_json();
+                    open = socket.send(Message::Text(frame.into())).await.is_ok();
+                }
+                Some(Ok(Message::Ping(_) | Message::Pong(_))) => {}
+                Some(Ok(Message::Close(_)) | Err(_)) | None => open = false,
+            },
+        }
+    }
+    let _ = socket.send(Message::Close(None)).await;
+    let mut board = shared.board();
+    board.clients.retain(|&c| c != id);
+    if board.controller == Some(id) {
+        board.controller = board.clients.first().copied();
+        board.held = None;
+        let _ = shared.updates.send(Arc::from(board.roles()));
+    }
+}
+
+/// Applies one message of tab `id`; an error is the message of the error frame sent back.
+fn handle(shared: &Shared, id: u64, text: &str) -> Result<(), String> {
+    let msg = ClientMsg::parse(text, shared.n_actions)?;
+    let mut board = shared.board();
+    let controls = board.controller == Some(id);
+    match msg {
+        ClientMsg::Control => {
+            if !controls {
+                board.controller = Some(id);
+                board.held = None;
+                let _ = shared.updates.send(Arc::from(board.roles()));
+            }
+            Ok(())
+        }
+        _ if !controls => {
+            Err("this tab is watching: another tab controls the run (take control first)".into())
+        }
+        ClientMsg::Hold { action } => {
+            board.held = action;
+            Ok(())
+        }
+        ClientMsg::Key { id, action } => {
+            drop(board);
+            shared
+                .keys
+                .lock()
+                .unwrap_or_else(|e| e.into_inner())
+                .send(KeyInput { id, action })
+                .map_err(|_| "the run is over".to_string())
+        }
+    }
+}

@@ -1,0 +1,185 @@
+// A scripted person for arld's web expert: opens the page in headless Chromium (Playwright), answers the agent's
+// questions by pressing keys with a simple controller that reads the state the page received, saves screenshots
+// (training, asking, mid-segment) and checks that the drawing is not blank and that requests without the token
+// are refused. Usage:
+//   node person.mjs --url URL --shots DIR [--skip N] [--realtime]
+// Prints one JSON line: {"answers": [actions answered to opening questions, in order], "skipped": N, ...}.
+import { chromium } from "playwright-core";
+import http from "node:http";
+import fs from "node:fs";
+import path from "node:path";
+
+const args = Object.fromEntries(
+  process.argv.slice(2).reduce((acc, a, i, all) => {
+    if (a.startsWith("--")) acc.push([a.slice(2), all[i + 1] && !all[i + 1].startsWith("--") ? all[i + 1] : true]);
+    return acc;
+  }, []),
+);
+const url = new URL(args.url);
+const shots = args.shots;
+const skip = Number(args.skip || 0);
+const realtime = !!args.realtime;
+fs.mkdirSync(shots, { recursive: true });
+const fail = (msg) => { console.error(`person: ${msg}`); process.exit(1); };
+
+// ---- the person's controllers: the state in, an action out ----------------------------------------------
+function lander(s) {
+  const angleTarg = Math.max(-0.4, Math.min(0.4, s[0] * 0.5 + s[2]));
+  const hoverTarg = 0.55 * Math.abs(s[0]);
+  let angleTodo = (angleTarg - s[4]) * 0.5 - s[5];
+  let hoverTodo = (hoverTarg - s[1]) * 0.5 - s[3] * 0.5;
+  if (s[6] || s[7]) { angleTodo = 0; hoverTodo = -s[3] * 0.5; }
+  if (hoverTodo > Math.abs(angleTodo) && hoverTodo > 0.05) return 2;
+  if (angleTodo < -0.05) return 3;
+  if (angleTodo > 0.05) return 1;
+  return 0;
+}
+const policies = {
+  "CartPole-v0": (s) => (0.1 * s[0] + 0.5 * s[1] + 10 * s[2] + 2 * s[3] > 0 ? 1 : 0),
+  "CartPole-v1": (s) => (0.1 * s[0] + 0.5 * s[1] + 10 * s[2] + 2 * s[3] > 0 ? 1 : 0),
+  "Acrobot-v1": (s) => (s[4] > 0 ? 0 : 2),
+  "MountainCar-v0": (s) => (s[1] >= 0 ? 2 : 0),
+  "LunarLander-v2": lander,
+  "LunarLander-v3": lander,
+};
+
+// ---- requests without the token are refused ----------------------------------------------------------------
+function status(pathAndQuery, headers = {}) {
+  return new Promise((resolve, reject) => {
+    const req = http.get({ host: url.hostname, port: url.port, path: pathAndQuery, headers }, (res) => {
+      res.resume();
+      resolve(res.statusCode);
+    });
+    req.on("upgrade", (res, socket) => { socket.destroy(); resolve(res.statusCode); });
+    req.on("error", reject);
+  });
+}
+const upgrade = { Connection: "Upgrade", Upgrade: "websocket", "Sec-WebSocket-Version": "13", "Sec-WebSocket-Key": "dGhlIHNhbXBsZSBub25jZQ==" };
+const refused = {
+  page: await status("/"),
+  script: await status("/app.js"),
+  wrongToken: await status("/?token=0000"),
+  websocket: await status("/ws", upgrade),
+  other: await status("/../../etc/passwd"),
+};
+for (const [what, code] of Object.entries(refused)) if (code !== 403) fail(`a request without the token (${what}) got ${code}, not 403`);
+if ((await status(`/ws?token=${url.searchParams.get("token")}`, upgrade)) !== 101) fail("the WebSocket with the token was not accepted");
+
+// ---- the browser ------------------------------------------------------------------------------------------
+const userDataDir = fs.mkdtempSync(path.join(shots, ".chromium-"));
+// A fresh profile each time (Playwright passes it as --user-data-dir).
+const browser = await chromium.launchPersistentContext(userDataDir, {
+  executablePath: process.env.CHROMIUM || "/usr/bin/chromium",
+  headless: true,
+  args: ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run", "--disable-background-networking",
+    "--disable-component-update", "--disable-sync"],
+  viewport: { width: 1000, height: 720 },
+});
+const page = browser.pages()[0] || (await browser.newPage());
+const pageErrors = [];
+page.on("pageerror", (e) => pageErrors.push(String(e)));
+await page.goto(url.href);
+await page.waitForFunction(() => window.arld && arld.hello && arld.controller === arld.hello.client, null, { timeout: 30000 });
+const hello = await page.evaluate(() => arld.hello);
+const policy = policies[hello.env] || fail(`no controller for ${hello.env}`);
+const keyOf = (a) => hello.actions[a].keys[0];
+
+// A second tab watches: its keys are refused, malformed messages get error frames, and the run goes on.
+const watcher = await page.evaluate(async () => {
+  const ws = new WebSocket(`ws://${location.host}/ws${location.search}`);
+  const errors = [];
+  ws.onmessage = (e) => { const m = JSON.parse(e.data); if (m.type === "error") errors.push(m.message); };
+  await new Promise((r) => (ws.onopen = r));
+  for (const bad of ['{"type":"key","id":1,"action":0}', "nonsense", '{"type":"hold","action":99}', '{"type":"launch"}'])
+    ws.send(bad);
+  await new Promise((r) => setTimeout(r, 300));
+  ws.close();
+  return errors;
+});
+if (watcher.length !== 4) fail(`the watching tab got ${watcher.length} error frames for 4 bad messages: ${JSON.stringify(watcher)}`);
+
+async function blankCheck(name) {
+  const d = await page.evaluate(() => {
+    const c = document.getElementById("env");
+    const px = c.getContext("2d").getImageData(0, 0, c.width, c.height).data;
+    const bg = [px[0], px[1], px[2]];
+    const colours = new Set();
+    let differ = 0;
+    for (let i = 0; i < px.length; i += 4) {
+      if (Math.abs(px[i] - bg[0]) + Math.abs(px[i + 1] - bg[1]) + Math.abs(px[i + 2] - bg[2]) > 30) differ++;
+      if (colours.size < 64) colours.add((px[i] << 16) | (px[i + 1] << 8) | px[i + 2]);
+    }
+    return { share: differ / (px.length / 4), colours: colours.size };
+  });
+  if (d.share < 0.005 || d.colours < 3) fail(`the drawing is blank at "${name}" (${(d.share * 100).toFixed(2)}% drawn, ${d.colours} colours)`);
+  return d;
+}
+const taken = {};
+async function shot(name) {
+  if (taken[name]) return;
+  const drawn = await blankCheck(name);
+  await page.screenshot({ path: path.join(shots, `${name}.png`) });
+  taken[name] = drawn;
+}
+
+// ---- answering ------------------------------------------------------------------------------------------
+const answers = [];
+let skipped = 0, steps = 0, lastId = 0, held = null;
+const state = () => page.evaluate(() => ({ prompt: arld.prompt, status: arld.status, ended: arld.ended }));
+async function holdKey(a) {
+  if (held === a) return;
+  if (held !== null) await page.keyboard.up(keyOf(held));
+  held = a;
+  if (a !== null) await page.keyboard.down(keyOf(a));
+}
+
+for (;;) {
+  if (!realtime) {
+    await page.waitForFunction((last) => arld.ended || (arld.prompt && arld.prompt.waits && arld.prompt.id > last) ||
+      (!arld.prompt && arld.status && arld.status.step > 0), lastId, { timeout: 0, polling: 5 });
+  } else {
+    await page.waitForTimeout(5);
+  }
+  const s = await state();
+  if (s.ended) break;
+  const p = s.prompt;
+  if (!p) {
+    if (s.status && s.status.step > 0) await shot("training");
+    if (realtime) await holdKey(null);
+    else await page.waitForFunction(() => arld.ended || arld.prompt, null, { timeout: 0, polling: 5 });
+    continue;
+  }
+  if (p.agent_action !== null && p.waits) {
+    if (p.id <= lastId) continue;
+    lastId = p.id;
+    if (skipped < skip) {
+      // Nobody answers this one: it must go back to the agent.
+      skipped++;
+      await page.waitForFunction((id) => arld.ended || !arld.prompt || arld.prompt.id !== id, p.id, { timeout: 0, polling: 20 });
+      continue;
+    }
+    await shot("asking");
+    const a = policy(p.obs);
+    answers.push(a);
+    steps++;
+    if (realtime) {
+      // A fresh key press opens the segment; then the key stays held (none for the no-op action).
+      await holdKey(null);
+      if (a === hello.noop) await page.keyboard.press(keyOf(a));
+      else await holdKey(a);
+    }
+    else await page.keyboard.press(keyOf(a));
+    continue;
+  }
+  // Later steps of a segment.
+  if (p.steps_left <= 3) await shot("mid-segment");
+  const a = policy(p.obs);
+  if (realtime) await holdKey(a === hello.noop ? null : a);
+  else if (p.waits && p.id > lastId) { lastId = p.id; steps++; await page.keyboard.press(keyOf(a)); }
+}
+await holdKey(null);
+await browser.close();
+fs.rmSync(userDataDir, { recursive: true, force: true });
+if (pageErrors.length) fail(`the page threw: ${pageErrors.join("; ")}`);
+for (const name of ["training", "asking", "mid-segment"]) if (!taken[name]) fail(`no "${name}" screenshot: the run never showed that state`);
+console.log(JSON.stringify({ env: hello.env, answers, skipped, steps, refused, watcherErrors: watcher, drawn: taken }));

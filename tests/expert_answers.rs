@@ -1,0 +1,125 @@
+//! How the training loop treats an expert's answers: a question nobody answers goes back to the agent, is logged
+//! as unanswered in queries.csv and costs no budget; answered questions record the expert's kind and response
+//! time; an action out of range is an error, not a panic.
+
+use anyhow::Result;
+use arld::expert::{Answer, Expert, Query};
+use arld::train::{ConfigInput, Method, NetKind, RunLog, TrainConfig, train};
+
+/// Leaves every other opening question unanswered and answers everything else with action 1.
+struct Flaky {
+    openings: usize,
+    answer: usize,
+}
+
+impl Expert for Flaky {
+    fn act(&mut self, _obs: &[f32]) -> Result<usize> {
+        Ok(self.answer)
+    }
+    fn describe(&self) -> String {
+        "flaky:test".into()
+    }
+    fn answer(&mut self, query: &Query) -> Result<Answer> {
+        if query.agent_action.is_some() {
+            self.openings += 1;
+            if self.openings % 2 == 1 {
+                return Ok(Answer::Unanswered { waited_s: 1.5 });
+            }
+        }
+        Ok(Answer::Action {
+            action: self.answer,
+            response_s: Some(0.25),
+        })
+    }
+}
+
+fn config(budget: usize) -> TrainConfig {
+    let mut input = ConfigInput::new("CartPole-v0", Method::Gdqn, NetKind::Bootstrap, 3);
+    for o in [
+        format!("budget={budget}"),
+        "train_steps=300".into(),
+        "learning_starts=100".into(),
+        "eval_period=300".into(),
+        "eval_episodes=1".into(),
+    ] {
+        input.apply_override(&o).unwrap();
+    }
+    input.resolve().unwrap()
+}
+
+#[test]
+fn unanswered_questions_cost_no_budget_and_are_logged() {
+    let dir = tempfile::tempdir().unwrap();
+    let cfg = config(20);
+    let mut log = RunLog::create(dir.path(), &cfg.to_toml(), 300, false).unwrap();
+    let mut expert = Flaky {
+        openings: 0,
+        answer: 1,
+    };
+    let (summary, _) = train(&cfg, Some(&mut expert), None, &mut log).unwrap();
+    // Greedy queries ask until the budget is spent: 4 answered segments of 5 steps, each after a question that
+    // went back to the agent (segments are cut by episode ends, so there may be more).
+    assert_eq!(summary.queries_used, 20);
+    let text = std::fs::read_to_string(dir.path().join("queries.csv")).unwrap();
+    let mut lines = text.lines();
+    assert_eq!(
+        lines.next().unwrap(),
+        "step,episode,uncertainty,threshold,expert_action,agent_action,expert,response_s,answered"
+    );
+    let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
+    assert_eq!(rows.len(), expert.openings);
+    for (i, row) in rows.iter().enumerate() {
+        assert_eq!(row[6], "flaky");
+        if i % 2 == 0 {
+            assert_eq!((row[4], row[7], row[8]), ("", "1.500", "false"), "row {i}");
+        } else {
+            assert_eq!((row[4], row[7], row[8]), ("1", "0.250", "true"), "row {i}");
+        }
+    }
+    // The step after an unanswered question asks again (greedy): the agent acted on the question's step.
+    let step = |r: &Vec<&str>| r[0].parse::<usize>().unwrap();
+    assert_eq!(step(&rows[1]), step(&rows[0]) + 1);
+    // Demonstrated steps in the episode log add up to the budget spent.
+    let episodes = std::fs::read_to_string(dir.path().join("episodes.csv")).unwrap();
+    let demo_steps: usize = episodes
+        .lines()
+        .skip(1)
+        .map(|l| l.rsplit(',').next().unwrap().parse::<usize>().unwrap())
+        .sum();
+    assert!(demo_steps <= 20);
+}
+
+#[test]
+fn an_answer_out_of_range_is_an_error() {
+    let cfg = config(10);
+    let mut log = RunLog::in_memory();
+    let mut expert = Flaky {
+        openings: 1,
+        answer: 7,
+    };
+    let err = train(&cfg, Some(&mut expert), None, &mut log)
+        .err()
+        .expect("an out-of-range answer must fail the run");
+    assert!(format!("{err:#}").contains("action 7"), "{err:#}");
+}
+
+#[test]
+fn program_experts_report_their_kind_and_no_response_time() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut cfg = config(10);
+    cfg.expert = "scripted".into();
+    let mut log = RunLog::create(dir.path(), &cfg.to_toml(), 300, false).unwrap();
+    let mut expert = arld::expert::from_spec("scripted", "CartPole-v0", 0).unwrap();
+    train(&cfg, Some(expert.as_mut()), None, &mut log).unwrap();
+    let text = std::fs::read_to_string(dir.path().join("queries.csv")).unwrap();
+    for line in text.lines().skip(1) {
+        let row: Vec<&str> = line.split(',').collect();
+        assert_eq!((row[6], row[7], row[8]), ("scripted", "", "true"));
+    }
+    assert_eq!(
+        arld::expert::from_spec("noisy:0.5:scripted", "CartPole-v0", 0)
+            .unwrap()
+            .kind(),
+        "noisy"
+    );
+}
