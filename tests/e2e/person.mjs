@@ -2,7 +2,8 @@
 // questions by pressing keys with a simple controller that reads the state the page received, saves screenshots
 // (training, asking, mid-segment) and checks that the drawing is not blank and that requests without the token
 // are refused. Usage:
-//   node person.mjs --url URL --shots DIR [--skip N] [--realtime]
+//   node person.mjs --url URL --shots DIR [--skip N] [--realtime] [--after STEP]
+// (--after: take the screenshots only once the run has passed STEP, e.g. to show a learning curve.)
 // Prints one JSON line: {"answers": [actions answered to opening questions, in order], "skipped": N, ...}.
 import { chromium } from "playwright-core";
 import http from "node:http";
@@ -19,6 +20,7 @@ const url = new URL(args.url);
 const shots = args.shots;
 const skip = Number(args.skip || 0);
 const realtime = !!args.realtime;
+const after = Number(args.after || 0);
 fs.mkdirSync(shots, { recursive: true });
 const fail = (msg) => { console.error(`person: ${msg}`); process.exit(1); };
 
@@ -117,6 +119,7 @@ async function blankCheck(name) {
 const taken = {};
 async function shot(name) {
   if (taken[name]) return;
+  if (after && (await page.evaluate(() => (arld.status ? arld.status.step : 0))) < after) return;
   const drawn = await blankCheck(name);
   await page.screenshot({ path: path.join(shots, `${name}.png`) });
   taken[name] = drawn;
@@ -146,7 +149,8 @@ for (;;) {
   if (!p) {
     if (s.status && s.status.step > 0) await shot("training");
     if (realtime) await holdKey(null);
-    else await page.waitForFunction(() => arld.ended || arld.prompt, null, { timeout: 0, polling: 5 });
+    else await page.waitForFunction((a) => arld.ended || arld.prompt || (arld.status && arld.status.step >= a),
+      taken.training ? Infinity : after, { timeout: 0, polling: 5 });
     continue;
   }
   if (p.agent_action !== null && p.waits) {

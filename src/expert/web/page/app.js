@@ -234,7 +234,9 @@ function drawLander(g) {
   const scale = Math.min(cv.width / g.width, cv.height / (g.height + 1.5));
   const v = view(scale, g.width / 2, 0, cv.width / 2, cv.height);
   ctx.fillStyle = "#0b1020"; ctx.fillRect(0, 0, cv.width, cv.height);
-  poly(v, [[0, 0], ...g.terrain, [g.width, g.terrain[g.terrain.length - 1][1]], [g.width, 0]], "#d1d5db", "#9ca3af");
+  // The surface, continued flat to the canvas' edges.
+  const t = g.terrain, edge = g.width;
+  poly(v, [[-edge, 0], [-edge, t[0][1]], ...t, [2 * edge, t[t.length - 1][1]], [2 * edge, 0]], "#d1d5db", "#9ca3af");
   for (const x of g.helipad_x) {
     ctx.strokeStyle = "#f9fafb"; ctx.lineWidth = 1.5;
     ctx.beginPath(); ctx.moveTo(v.x(x), v.y(g.helipad_y)); ctx.lineTo(v.x(x), v.y(g.helipad_y + 50 / 30)); ctx.stroke();
