@@ -98,7 +98,18 @@ fn write_fake_run(spec: &RunSpec, dir: &Path, interrupt: bool) -> Result<()> {
     if spec.method != Method::Dqn && spec.method != Method::Dqfd {
         for k in 0..(20 + spec.seed) {
             // Queries thin out over training; the uncertainty columns may be empty.
-            queries.push_str(&format!("{},{},,,1,0\n", k * k * 20, k / 5));
+            let event = run_dir::QueryEvent {
+                step: (k * k * 20) as usize,
+                episode: (k / 5) as usize,
+                uncertainty: None,
+                threshold: None,
+                expert_action: Some(1),
+                agent_action: 0,
+                expert: "checkpoint".into(),
+                response_s: None,
+                answered: true,
+            };
+            queries.push_str(&event.csv_row());
         }
     }
     std::fs::write(dir.join(run_dir::QUERIES_FILE), queries)?;
