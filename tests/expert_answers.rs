@@ -123,3 +123,15 @@ fn program_experts_report_their_kind_and_no_response_time() {
         "noisy"
     );
 }
+
+#[test]
+fn pre_training_from_a_web_expert_is_refused_up_front() {
+    let mut input = ConfigInput::new("CartPole-v0", Method::Adqnp, NetKind::Bootstrap, 0);
+    input.set("expert", "web").unwrap();
+    let err = input
+        .resolve()
+        .expect_err("a person cannot give demonstrations before training");
+    assert!(format!("{err:#}").contains("--demos"), "{err:#}");
+    input.set("demo_file", "demos.jsonl").unwrap();
+    assert!(input.resolve().is_ok());
+}

@@ -125,6 +125,9 @@ fn run_with_person(env: &str, web_args: &[&str], sets: &[&str], person_args: &[&
             .expect("the person's report"),
     )
     .unwrap();
+    if person_args.contains(&"--reload") {
+        assert_eq!(report["reloaded"], true);
+    }
     for name in ["training", "asking", "mid-segment"] {
         assert!(shots.join(format!("{name}.png")).is_file(), "{name}.png");
     }
@@ -168,12 +171,13 @@ fn summary(run: &Path) -> serde_json::Value {
 fn a_scripted_person_answers_in_headless_chromium() {
     check_prerequisites();
 
-    // CartPole-v0, turn-based; the first question is left to time out.
+    // CartPole-v0, turn-based; the first question is left to time out; a second tab watches and the answering
+    // tab reloads while the run goes on.
     let cart = run_with_person(
         "CartPole-v0",
         &["--web-timeout", "3"],
         &["train_steps=2500", "budget=30", "eval_period=500"],
-        &["--skip", "1"],
+        &["--skip", "1", "--reload"],
     );
     let rows = queries(&cart.run);
     assert!(rows.iter().all(|r| r.expert == "web"));

@@ -195,6 +195,12 @@ pub const SPEC_HELP: &str = "Expert specs: `shipped:weak` or `shipped:perfect` (
 heuristic lander, simple controllers for CartPole, MountainCar and Acrobot), `noisy:P:SPEC` (SPEC acting at random \
 with probability P), `web[:OPTIONS]` (a person answering in a browser; see `arld train --help`).";
 
+/// Whether the expert of `spec` can give demonstrations outside a run (collected before training): every kind
+/// but the web expert, which answers a running training loop's queries only.
+pub fn demonstrates(spec: &str) -> bool {
+    spec.split(':').next() != Some("web")
+}
+
 /// Builds an expert from a spec for the environment `env_id`; `seed` seeds any randomness the expert has.
 pub fn from_spec(spec: &str, env_id: &str, seed: u64) -> Result<Box<dyn Expert>> {
     let env_spec = *crate::env::spec(env_id)?;

@@ -640,6 +640,16 @@ impl TrainConfig {
                 self.method
             );
         }
+        if self.method.pretrains() && self.demo_file.is_empty() {
+            ensure!(
+                crate::expert::demonstrates(&self.expert),
+                "{} pre-trains on demonstrations collected from the expert before training, which the expert \
+                 `{}` cannot give (it answers queries during training only): give them with --demos FILE \
+                 (`demo_file`)",
+                self.method,
+                self.expert
+            );
+        }
         // Evaluation and checkpoints.
         count("eval_period", self.eval_period, MAX_STEPS)?;
         count("eval_episodes", self.eval_episodes, MAX_EVAL_EPISODES)?;

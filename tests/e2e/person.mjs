@@ -2,7 +2,8 @@
 // questions by pressing keys with a simple controller that reads the state the page received, saves screenshots
 // (training, asking, mid-segment) and checks that the drawing is not blank and that requests without the token
 // are refused. Usage:
-//   node person.mjs --url URL --shots DIR [--skip N] [--realtime] [--after STEP]
+//   node person.mjs --url URL --shots DIR [--skip N] [--realtime] [--after STEP] [--reload]
+// (--reload: open a second, watching tab, and reload the answering tab once while training runs.)
 // (--after: take the screenshots only once the run has passed STEP, e.g. to show a learning curve.)
 // Prints one JSON line: {"answers": [actions answered to opening questions, in order], "skipped": N, ...}.
 import { chromium } from "playwright-core";
@@ -21,6 +22,7 @@ const shots = args.shots;
 const skip = Number(args.skip || 0);
 const realtime = !!args.realtime;
 const after = Number(args.after || 0);
+const reload = !!args.reload;
 fs.mkdirSync(shots, { recursive: true });
 const fail = (msg) => { console.error(`person: ${msg}`); process.exit(1); };
 
@@ -80,8 +82,10 @@ const browser = await chromium.launchPersistentContext(userDataDir, {
 const page = browser.pages()[0] || (await browser.newPage());
 const pageErrors = [];
 page.on("pageerror", (e) => pageErrors.push(String(e)));
+const controlling = () =>
+  page.waitForFunction(() => window.arld && arld.hello && arld.controller === arld.hello.client, null, { timeout: 30000 });
 await page.goto(url.href);
-await page.waitForFunction(() => window.arld && arld.hello && arld.controller === arld.hello.client, null, { timeout: 30000 });
+await controlling();
 const hello = await page.evaluate(() => arld.hello);
 const policy = policies[hello.env] || fail(`no controller for ${hello.env}`);
 const keyOf = (a) => hello.actions[a].keys[0];
@@ -127,7 +131,7 @@ async function shot(name) {
 
 // ---- answering ------------------------------------------------------------------------------------------
 const answers = [];
-let skipped = 0, steps = 0, lastId = 0, held = null;
+let skipped = 0, steps = 0, lastId = 0, held = null, reloaded = false, watching = null;
 const state = () => page.evaluate(() => ({ prompt: arld.prompt, status: arld.status, ended: arld.ended }));
 async function holdKey(a) {
   if (held === a) return;
@@ -148,6 +152,21 @@ for (;;) {
   const p = s.prompt;
   if (!p) {
     if (s.status && s.status.step > 0) await shot("training");
+    if (reload && taken.training && !reloaded) {
+      // A second tab watches; the answering tab reloads and must get control back, the run going on.
+      reloaded = true;
+      watching = await browser.newPage();
+      await watching.goto(url.href);
+      await watching.waitForFunction(() => window.arld && arld.hello && arld.controller !== null &&
+        arld.controller !== arld.hello.client && document.getElementById("role").textContent.includes("watching"));
+      await page.reload();
+      await page.waitForFunction(() => window.arld && arld.hello, null, { timeout: 30000 });
+      // Control went to the watching tab when this one closed; take it back with the button.
+      await page.click("#take-control");
+      await controlling();
+      await page.waitForFunction(() => arld.status !== null);
+      continue;
+    }
     if (realtime) await holdKey(null);
     else await page.waitForFunction((a) => arld.ended || arld.prompt || (arld.status && arld.status.step >= a),
       taken.training ? Infinity : after, { timeout: 0, polling: 5 });
@@ -182,8 +201,12 @@ for (;;) {
   else if (p.waits && p.id > lastId) { lastId = p.id; steps++; await page.keyboard.press(keyOf(a)); }
 }
 await holdKey(null);
+if (reload) {
+  if (!reloaded) fail("the run ended before the page could be reloaded");
+  if (!(await watching.evaluate(() => arld.ended))) fail("the watching tab did not see the end of the run");
+}
 await browser.close();
 fs.rmSync(userDataDir, { recursive: true, force: true });
 if (pageErrors.length) fail(`the page threw: ${pageErrors.join("; ")}`);
 for (const name of ["training", "asking", "mid-segment"]) if (!taken[name]) fail(`no "${name}" screenshot: the run never showed that state`);
-console.log(JSON.stringify({ env: hello.env, answers, skipped, steps, refused, watcherErrors: watcher, drawn: taken }));
+console.log(JSON.stringify({ env: hello.env, answers, skipped, steps, reloaded, refused, watcherErrors: watcher, drawn: taken }));
