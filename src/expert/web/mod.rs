@@ -263,9 +263,13 @@ impl Expert for WebExpert {
         match realtime {
             None => self.wait_for_key(id),
             Some(fps) => {
-                let next = self.last_tick + Duration::from_secs_f64(1.0 / fps);
+                let period = Duration::from_secs_f64(1.0 / fps);
+                let next = self.last_tick + period;
                 std::thread::sleep(next.saturating_duration_since(Instant::now()));
-                self.last_tick = next.max(Instant::now() - Duration::from_secs_f64(1.0 / fps));
+                // Keep the rate, but do not race to catch up after a slow step.
+                self.last_tick = Instant::now()
+                    .checked_sub(period)
+                    .map_or(next, |late| next.max(late));
                 Ok(Answer::Action {
                     action: self.shared.held().unwrap_or(self.noop),
                     response_s: None,
