@@ -27,7 +27,7 @@ enum Command {
         cmd: cli::expert_cmd::ExpertCommand,
     },
     /// Run a grid of runs (environments x methods x networks x seeds) in parallel; resumable.
-    Sweep(cli::experiment_cmd::SweepArgs),
+    Sweep(Box<cli::experiment_cmd::SweepArgs>),
     /// Tables (median steps to solve next to the paper's) and figures from a directory of runs.
     Report(cli::experiment_cmd::ReportArgs),
     /// The paper's experimental protocol, sweep plus report, with one command (--quick: a few minutes).
@@ -46,7 +46,7 @@ fn main() -> std::process::ExitCode {
         Command::Train(args) => cli::train_cmd::run(args),
         Command::Expert { cmd } => cli::expert_cmd::run_expert(cmd),
         Command::Demo { cmd } => cli::expert_cmd::run_demo(cmd),
-        Command::Sweep(args) => cli::experiment_cmd::run_sweep(args),
+        Command::Sweep(args) => cli::experiment_cmd::run_sweep(*args),
         Command::Report(args) => cli::experiment_cmd::run_report(args),
         Command::Reproduce(args) => cli::experiment_cmd::run_reproduce(args),
     };

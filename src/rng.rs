@@ -167,6 +167,28 @@ impl NumpyRng {
         rng
     }
 
+    /// The whole generator state as words (state, increment, 32-bit buffer), for snapshots.
+    pub fn to_words(&self) -> [u64; 6] {
+        let split = |x: u128| [(x >> 64) as u64, x as u64];
+        let [s0, s1] = split(self.state);
+        let [i0, i1] = split(self.increment);
+        let (has, buf) = match self.buffered_u32 {
+            Some(b) => (1, u64::from(b)),
+            None => (0, 0),
+        };
+        [s0, s1, i0, i1, has, buf]
+    }
+
+    /// The generator [`NumpyRng::to_words`] described.
+    pub fn from_words(w: [u64; 6]) -> Self {
+        let join = |hi: u64, lo: u64| (u128::from(hi) << 64) | u128::from(lo);
+        Self {
+            state: join(w[0], w[1]),
+            increment: join(w[2], w[3]),
+            buffered_u32: (w[4] != 0).then_some(w[5] as u32),
+        }
+    }
+
     /// The 128-bit LCG state and increment (as NumPy's `bit_generator.state` reports them).
     pub fn pcg_state(&self) -> (u128, u128) {
         (self.state, self.increment)

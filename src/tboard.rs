@@ -7,7 +7,7 @@
 //! masked CRC-32C of the payload.
 
 use std::fs::File;
-use std::io::{BufWriter, Write};
+use std::io::{BufWriter, Seek, Write};
 use std::path::{Path, PathBuf};
 use std::time::{SystemTime, UNIX_EPOCH};
 
@@ -34,6 +34,25 @@ impl EventWriter {
         put_bytes_field(&mut event, 3, b"brain.Event:2");
         writer.write_record(&event)?;
         Ok(writer)
+    }
+
+    /// Continues the event file at `path` from byte `len` (what was written before a snapshot); anything after
+    /// it is cut off.
+    pub fn reopen(path: &Path, len: u64) -> std::io::Result<Self> {
+        let file = std::fs::OpenOptions::new().write(true).open(path)?;
+        file.set_len(len)?;
+        let mut out = BufWriter::new(file);
+        out.seek(std::io::SeekFrom::Start(len))?;
+        Ok(Self {
+            out,
+            path: path.to_path_buf(),
+        })
+    }
+
+    /// Bytes written so far (after a flush).
+    pub fn position(&mut self) -> std::io::Result<u64> {
+        self.out.flush()?;
+        self.out.get_mut().stream_position()
     }
 
     /// Path of the event file.

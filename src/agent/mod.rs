@@ -144,6 +144,47 @@ impl Agent {
         }
     }
 
+    /// Writes everything that changes while the agent learns and acts (online and target weights, Adam's
+    /// moments and step, the generator, the active head, the noise samples) into `state` under `prefix`.
+    /// Scratch buffers are left out: every use overwrites them.
+    pub fn save_state(&self, prefix: &str, state: &mut crate::state::StateDict) {
+        self.online.save_state(&format!("{prefix}.online"), state);
+        self.target.save_state(&format!("{prefix}.target"), state);
+        self.adam.save_state(&format!("{prefix}.adam"), state);
+        state.put_value(&format!("{prefix}.rng"), &self.rng);
+        state.put_value(&format!("{prefix}.active_head"), &self.active_head);
+        for (name, noise) in [
+            ("act", &self.noise_act),
+            ("online", &self.noise_online),
+            ("argmax", &self.noise_argmax),
+            ("target", &self.noise_target),
+        ] {
+            noise.save_state(&format!("{prefix}.noise_{name}"), state);
+        }
+    }
+
+    /// Reads what [`Agent::save_state`] wrote into an agent built with the same configuration.
+    pub fn load_state(
+        &mut self,
+        prefix: &str,
+        state: &crate::state::StateDict,
+    ) -> Result<(), crate::state::StateError> {
+        self.online.load_state(&format!("{prefix}.online"), state)?;
+        self.target.load_state(&format!("{prefix}.target"), state)?;
+        self.adam.load_state(&format!("{prefix}.adam"), state)?;
+        self.rng = state.value(&format!("{prefix}.rng"))?;
+        self.active_head = state.value(&format!("{prefix}.active_head"))?;
+        for (name, noise) in [
+            ("act", &mut self.noise_act),
+            ("online", &mut self.noise_online),
+            ("argmax", &mut self.noise_argmax),
+            ("target", &mut self.noise_target),
+        ] {
+            noise.load_state(&format!("{prefix}.noise_{name}"), state)?;
+        }
+        Ok(())
+    }
+
     /// The online network.
     pub fn network(&self) -> &QNet {
         &self.online

@@ -3,7 +3,8 @@ use anyhow::{Context, Result, bail};
 use arld::experiment::protocol::paper_grids;
 use arld::experiment::report::report;
 use arld::experiment::run_spec;
-use arld::experiment::sweep::{SweepGrid, run_grid};
+use arld::experiment::slurm::{self, SlurmOptions};
+use arld::experiment::sweep::{RunState, Shard, SweepGrid, run_grid, run_grid_shard, sweep_status};
 use arld::experiment::verdict;
 use clap::Args;
 use std::path::PathBuf;
@@ -13,7 +14,10 @@ use std::process::ExitCode;
 #[command(
     after_help = "Examples:\n  arld sweep --env CartPole-v0 --method dqn,adqn --net bootstrap,noisy --seeds 5 -o runs/sweep\n  \
 arld sweep --grid grid.toml -o runs/sweep       # [sweep] envs = [...], methods = [...], nets = [...], seeds = 20\n\n\
-A sweep is resumable: finished runs (with summary.json) are skipped, an interrupted run is started again."
+A sweep is resumable: finished runs (with summary.json) are skipped, an interrupted run is started again.\n\n\
+On a Slurm cluster, --slurm submits the sweep as a job array (one task per shard of runs; requeueable) instead of \
+running it here:\n  arld sweep --env CartPole-v0 --method dqn,adqn --seeds 20 -o runs/sweep --slurm --partition cpu --time 4:00:00\n  \
+arld sweep --status runs/sweep                   # runs done, running, failed and pending, and on which node"
 )]
 pub struct SweepArgs {
     /// TOML file with a [sweep] table (envs, methods, nets, seeds, t_query, experts, set).
@@ -44,8 +48,35 @@ pub struct SweepArgs {
     #[arg(long, default_value_t = 0)]
     jobs: usize,
     /// Sweep directory.
-    #[arg(long, short)]
-    out: PathBuf,
+    #[arg(long, short, required_unless_present = "status")]
+    out: Option<PathBuf>,
+    /// Run only shard I of N of the sweep's runs (0 <= I < N; runs dealt round-robin), e.g. --shard 3/8.
+    #[arg(long, value_name = "I/N")]
+    shard: Option<Shard>,
+    /// Show which runs of the sweep in DIR are done, running, failed or pending, and where; runs nothing.
+    #[arg(long, value_name = "DIR", conflicts_with_all = ["grid", "env", "method", "out", "shard", "slurm"])]
+    status: Option<PathBuf>,
+    /// Submit the sweep to Slurm as a job array instead of running it here.
+    #[arg(long, conflicts_with = "shard")]
+    slurm: bool,
+    /// Slurm partition [default: the cluster's default].
+    #[arg(long, requires = "slurm")]
+    partition: Option<String>,
+    /// Time limit of one array task, in Slurm's format (e.g. 4:00:00) [default: the partition's].
+    #[arg(long, requires = "slurm")]
+    time: Option<String>,
+    /// Array tasks running at once [default: no limit].
+    #[arg(long, requires = "slurm")]
+    array_parallelism: Option<usize>,
+    /// Array tasks [default: one per run]; each runs its share of the runs, --jobs at a time.
+    #[arg(long, requires = "slurm")]
+    shards: Option<usize>,
+    /// Seconds before the time limit at which runs snapshot and the task requeues itself.
+    #[arg(long, requires = "slurm", default_value_t = 300)]
+    signal_lead: u64,
+    /// With --slurm: write and print the job script, but do not submit it.
+    #[arg(long, requires = "slurm")]
+    dry_run: bool,
 }
 
 #[derive(Args)]
@@ -93,6 +124,13 @@ pub struct ReproduceArgs {
 }
 
 pub fn run_sweep(args: SweepArgs) -> Result<ExitCode> {
+    if let Some(dir) = &args.status {
+        return print_status(dir);
+    }
+    let out = args
+        .out
+        .clone()
+        .expect("clap requires --out without --status");
     let grid = match &args.grid {
         Some(path) => SweepGrid::from_toml_file(path)?,
         None => {
@@ -110,13 +148,84 @@ pub fn run_sweep(args: SweepArgs) -> Result<ExitCode> {
             )?
         }
     };
-    let outcome = run_grid(&grid, &args.out, args.jobs, &run_spec)?;
+    if args.slurm {
+        return submit_slurm(&args, &grid, &out);
+    }
+    let outcome = run_grid_shard(&grid, &out, args.jobs, args.shard, &run_spec)?;
     println!(
         "{} runs ({} already complete, {} run now); results: {}",
         outcome.total,
         outcome.already_complete,
         outcome.completed,
         outcome.results_csv.display()
+    );
+    Ok(ExitCode::SUCCESS)
+}
+
+fn submit_slurm(args: &SweepArgs, grid: &SweepGrid, out: &std::path::Path) -> Result<ExitCode> {
+    let runs = grid.specs()?.len();
+    let opts = SlurmOptions {
+        partition: args.partition.clone(),
+        time: args.time.clone(),
+        array_parallelism: args.array_parallelism,
+        shards: args.shards.unwrap_or(runs).min(runs),
+        cpus_per_task: args.jobs.max(1),
+        signal_lead_s: args.signal_lead,
+    };
+    let arld = std::env::current_exe()?;
+    let script = slurm::job_script(out, &arld, &opts)?;
+    if args.dry_run {
+        print!("{script}");
+        return Ok(ExitCode::SUCCESS);
+    }
+    arld::experiment::sweep::prepare_sweep_dir(grid, out)?;
+    std::fs::create_dir_all(out.join("slurm"))?;
+    let path = out.join("slurm").join("job.sh");
+    arld::files::write_atomic(&path, script.as_bytes())?;
+    let job = slurm::submit(&path)?;
+    println!(
+        "submitted job array {job}: {runs} runs in {} tasks (script {})
+         follow it with:  squeue -j {job}    arld sweep --status {}
+         task output:     {}/slurm/{job}_<task>.out
+         when it is done: arld report {}",
+        opts.shards,
+        path.display(),
+        out.display(),
+        out.display(),
+        out.display()
+    );
+    Ok(ExitCode::SUCCESS)
+}
+
+fn print_status(dir: &std::path::Path) -> Result<ExitCode> {
+    let runs = sweep_status(dir)?;
+    let (mut done, mut running, mut failed, mut interrupted, mut pending) = (0, 0, 0, 0, 0);
+    for (spec, state) in &runs {
+        let name = spec.dir_name();
+        match state {
+            RunState::Done => done += 1,
+            RunState::Running { host, slurm_job } => {
+                running += 1;
+                let job = slurm_job
+                    .as_ref()
+                    .map(|j| format!(" (Slurm job {j})"))
+                    .unwrap_or_default();
+                println!("running      {} on {host}{job}", name.display());
+            }
+            RunState::Failed { host, error } => {
+                failed += 1;
+                println!("failed       {} on {host}: {error}", name.display());
+            }
+            RunState::Interrupted { host } => {
+                interrupted += 1;
+                println!("interrupted  {} (last on {host})", name.display());
+            }
+            RunState::Pending => pending += 1,
+        }
+    }
+    println!(
+        "{} runs: {done} done, {running} running, {failed} failed, {interrupted} interrupted, {pending} pending",
+        runs.len()
     );
     Ok(ExitCode::SUCCESS)
 }

@@ -141,6 +141,14 @@ fn bound(x: f64, low: f64, high: f64) -> f64 {
 }
 
 impl Env for Acrobot {
+    fn generator(&self) -> Option<crate::rng::NumpyRng> {
+        self.rng.get()
+    }
+
+    fn set_generator(&mut self, rng: Option<crate::rng::NumpyRng>) {
+        self.rng.set(rng);
+    }
+
     fn spec(&self) -> &'static super::EnvSpec {
         super::spec(ID).expect("Acrobot-v1 is registered")
     }

@@ -70,6 +70,14 @@ impl CartPole {
 }
 
 impl Env for CartPole {
+    fn generator(&self) -> Option<crate::rng::NumpyRng> {
+        self.rng.get()
+    }
+
+    fn set_generator(&mut self, rng: Option<crate::rng::NumpyRng>) {
+        self.rng.set(rng);
+    }
+
     fn spec(&self) -> &'static super::EnvSpec {
         self.spec
     }

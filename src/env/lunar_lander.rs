@@ -522,6 +522,14 @@ impl LunarLander {
 }
 
 impl Env for LunarLander {
+    fn generator(&self) -> Option<NumpyRng> {
+        self.rng.clone()
+    }
+
+    fn set_generator(&mut self, rng: Option<NumpyRng>) {
+        self.rng = rng;
+    }
+
     fn spec(&self) -> &'static super::EnvSpec {
         super::spec(self.id).expect("LunarLander ids are registered")
     }

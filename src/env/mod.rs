@@ -91,6 +91,13 @@ pub trait Env: Send {
     fn id(&self) -> &'static str {
         self.spec().id
     }
+    /// The generator the next unseeded reset draws from (`None` before the first reset). With
+    /// [`Env::set_generator`] it lets a run put an environment back where it was: restore the generator that
+    /// the episode's reset drew from, reset, and replay the episode's actions (our environments are
+    /// deterministic given both).
+    fn generator(&self) -> Option<NumpyRng>;
+    /// Replaces the generator (see [`Env::generator`]).
+    fn set_generator(&mut self, rng: Option<NumpyRng>);
     /// Overwrites the internal float64 state (classic control; used by the `set` conformance case).
     /// Resets the step counter. Environments without such a state return an error.
     fn set_state(&mut self, _state: &[f64]) -> Result<Vec<f32>, EnvError> {
@@ -240,6 +247,16 @@ pub struct EnvRng {
 }
 
 impl EnvRng {
+    /// The current generator (see [`Env::generator`]).
+    pub fn get(&self) -> Option<NumpyRng> {
+        self.rng.clone()
+    }
+
+    /// Replaces the current generator.
+    pub fn set(&mut self, rng: Option<NumpyRng>) {
+        self.rng = rng;
+    }
+
     /// Applies the reset seed and returns the generator to draw the initial state from.
     pub fn reseed(&mut self, seed: Option<u64>) -> &mut NumpyRng {
         match seed {

@@ -59,6 +59,14 @@ impl MountainCar {
 }
 
 impl Env for MountainCar {
+    fn generator(&self) -> Option<crate::rng::NumpyRng> {
+        self.rng.get()
+    }
+
+    fn set_generator(&mut self, rng: Option<crate::rng::NumpyRng>) {
+        self.rng.set(rng);
+    }
+
     fn spec(&self) -> &'static super::EnvSpec {
         super::spec(ID).expect("MountainCar-v0 is registered")
     }

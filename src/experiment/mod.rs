@@ -1,24 +1,28 @@
 //! Experiments: running one configured run end to end ([`run_one`]: expert, demonstrations, training, run
-//! directory), sweeps over grids of runs ([`sweep`]), the paper's experiment grids ([`protocol`]), statistics
-//! over seeds ([`stats`]), and reports with the paper's table and figures ([`report`], [`plot`]). Sweeps and
-//! reports read runs through [`crate::train::run_dir`], the owner of the run directory's format.
+//! directory), sweeps over grids of runs ([`sweep`]) and their submission to Slurm as job arrays ([`slurm`]),
+//! the paper's experiment grids ([`protocol`]), statistics over seeds ([`stats`]), and reports with the paper's
+//! table and figures ([`report`], [`plot`]). Sweeps and reports read runs through [`crate::train::run_dir`], the
+//! owner of the run directory's format.
 //!
-//! Within this layer imports go one way: `stats`, `sweep` <- `protocol` <- `plot` <- `report`.
+//! Within this layer imports go one way: `stats`, `sweep` <- `protocol` <- `plot` <- `report`; `slurm` <- the CLI.
 
 pub mod plot;
 pub mod protocol;
 pub mod report;
+pub mod slurm;
 pub mod stats;
 pub mod sweep;
 pub mod verdict;
 
 use crate::expert::{self, demos::Demonstrations};
-use crate::train::{self, RunLog, Summary, TrainConfig, derive_seed};
+use crate::train::{self, Checkpointer, RunLog, Summary, TrainConfig, derive_seed};
 use anyhow::{Context, Result};
 use std::path::Path;
 
 /// Builds the expert and the demonstrations a configuration needs, trains, and writes the run directory
-/// (or keeps everything in memory when `out_dir` is `None`).
+/// (or keeps everything in memory when `out_dir` is `None`). A run directory holding a snapshot of an
+/// interrupted run of `cfg` is continued from it; while the run goes on it snapshots itself every
+/// `cfg.snapshot_every` steps and when asked to stop ([`crate::interrupt`]).
 pub fn run_one(cfg: &TrainConfig, out_dir: Option<&Path>, progress: bool) -> Result<Summary> {
     let mut expert = if cfg.method.needs_expert() {
         Some(expert::from_spec(
@@ -47,15 +51,31 @@ pub fn run_one(cfg: &TrainConfig, out_dir: Option<&Path>, progress: bool) -> Res
     } else {
         None
     };
-    let mut log = match out_dir {
-        Some(dir) => RunLog::create(dir, &cfg.to_toml(), cfg.train_steps as u64, progress)?,
-        None => RunLog::in_memory(),
+    let expert = expert.as_mut().map(|e| &mut **e as &mut dyn expert::Expert);
+    let Some(dir) = out_dir else {
+        let (summary, _agent) =
+            train::train(cfg, expert, demos.as_ref(), &mut RunLog::in_memory())?;
+        return Ok(summary);
     };
-    let (summary, _agent) = train::train(
+    // A run directory with a snapshot continues from it (refused if it belongs to another configuration).
+    let mut checkpointer = Checkpointer::new(dir, cfg);
+    let snapshot = checkpointer.load()?;
+    let mut log = match &snapshot {
+        Some(state) => RunLog::resume(
+            dir,
+            &train::resume_position(state)?,
+            cfg.train_steps as u64,
+            progress,
+        )?,
+        None => RunLog::create(dir, &cfg.to_toml(), cfg.train_steps as u64, progress)?,
+    };
+    let (summary, _agent) = train::train_resumable(
         cfg,
-        expert.as_mut().map(|e| &mut **e as &mut dyn expert::Expert),
+        expert,
         demos.as_ref(),
         &mut log,
+        &mut checkpointer,
+        snapshot.as_ref(),
     )?;
     Ok(summary)
 }

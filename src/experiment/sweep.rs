@@ -426,7 +426,38 @@ pub struct SweepOutcome {
 /// A directory that already holds a sweep may be resumed or extended (more seeds, environments, ...), but not
 /// with different `set` overrides: its complete runs would silently mix two configurations.
 pub fn run_grid(grid: &SweepGrid, dir: &Path, jobs: usize, run_fn: &RunFn) -> Result<SweepOutcome> {
-    let specs = grid.specs()?;
+    run_grid_shard(grid, dir, jobs, None, run_fn)
+}
+
+/// [`run_grid`] for one shard of the grid's runs (all of them when `shard` is `None`). Several shards may run
+/// at once on different machines sharing the directory (a Slurm job array): each writes `results.csv` only when
+/// it finds every run of the whole sweep complete, so the last shard to finish writes the full file.
+pub fn run_grid_shard(
+    grid: &SweepGrid,
+    dir: &Path,
+    jobs: usize,
+    shard: Option<Shard>,
+    run_fn: &RunFn,
+) -> Result<SweepOutcome> {
+    let all_specs = grid.specs()?;
+    prepare_sweep_dir(grid, dir)?;
+    let Some(shard) = shard else {
+        return run_sweep(&all_specs, dir, jobs, run_fn);
+    };
+    let specs = shard.select(&all_specs);
+    let mut outcome = run_sweep_inner(&specs, dir, jobs, run_fn, false)?;
+    let all_complete = all_specs
+        .iter()
+        .all(|spec| run_dir::is_complete(&dir.join(spec.dir_name())));
+    if all_complete {
+        outcome.results_csv = collect_results(dir)?.path;
+    }
+    Ok(outcome)
+}
+
+/// Creates the sweep directory and records the grid in its `sweep.toml`, refusing a directory that holds a
+/// sweep with other `set` overrides.
+pub fn prepare_sweep_dir(grid: &SweepGrid, dir: &Path) -> Result<()> {
     let recorded = dir.join(SWEEP_FILE);
     if recorded.is_file() {
         let previous = SweepGrid::from_toml_file(&recorded)?;
@@ -442,7 +473,48 @@ pub fn run_grid(grid: &SweepGrid, dir: &Path, jobs: usize, run_fn: &RunFn) -> Re
     std::fs::create_dir_all(dir)
         .with_context(|| format!("cannot create sweep directory {}", dir.display()))?;
     write_atomic(&dir.join(SWEEP_FILE), grid.to_toml_string()?.as_bytes())?;
-    run_sweep(&specs, dir, jobs, run_fn)
+    Ok(())
+}
+
+/// One part of a sweep's runs: `index` of `count` (`arld sweep --shard 2/8`). Runs are dealt round-robin in the
+/// grid's order, so every shard gets a similar mix of environments and methods.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Shard {
+    pub index: usize,
+    pub count: usize,
+}
+
+impl Shard {
+    /// The runs of this shard.
+    pub fn select(&self, specs: &[RunSpec]) -> Vec<RunSpec> {
+        specs
+            .iter()
+            .enumerate()
+            .filter(|(i, _)| i % self.count == self.index)
+            .map(|(_, spec)| spec.clone())
+            .collect()
+    }
+}
+
+impl std::str::FromStr for Shard {
+    type Err = anyhow::Error;
+
+    /// `I/N` with `0 <= I < N`.
+    fn from_str(text: &str) -> Result<Self> {
+        let (index, count) = text
+            .split_once('/')
+            .with_context(|| format!("shard '{text}' is not of the form I/N (e.g. 0/4)"))?;
+        let parse = |s: &str, what: &str| -> Result<usize> {
+            s.trim().parse::<usize>().with_context(|| {
+                format!("shard '{text}': {what} '{s}' is not a non-negative integer")
+            })
+        };
+        let (index, count) = (parse(index, "index")?, parse(count, "count")?);
+        if count == 0 || index >= count {
+            bail!("shard '{text}' must satisfy 0 <= I < N (shards are numbered from 0)");
+        }
+        Ok(Shard { index, count })
+    }
 }
 
 /// Runs every spec into `dir/<spec.dir_name()>` on `jobs` threads (each run single-threaded; `jobs` = 0 means
@@ -456,6 +528,16 @@ pub fn run_sweep(
     dir: &Path,
     jobs: usize,
     run_fn: &RunFn,
+) -> Result<SweepOutcome> {
+    run_sweep_inner(specs, dir, jobs, run_fn, true)
+}
+
+fn run_sweep_inner(
+    specs: &[RunSpec],
+    dir: &Path,
+    jobs: usize,
+    run_fn: &RunFn,
+    collect: bool,
 ) -> Result<SweepOutcome> {
     let names: BTreeSet<PathBuf> = specs.iter().map(RunSpec::dir_name).collect();
     if names.len() != specs.len() {
@@ -507,12 +589,16 @@ pub fn run_sweep(
         for _ in 0..jobs {
             scope.spawn(|| {
                 loop {
+                    // Asked to stop: the runs in progress snapshot themselves; no new run starts.
+                    if crate::interrupt::requested() {
+                        break;
+                    }
                     let index = next.fetch_add(1, Ordering::Relaxed);
                     let Some(spec) = pending.get(index) else {
                         break;
                     };
                     let run_dir = dir.join(spec.dir_name());
-                    match run_one_spec(spec, &run_dir, run_fn) {
+                    match run_one_spec(spec, &run_dir, &status_path(dir, spec), run_fn) {
                         Ok(()) => {
                             completed.fetch_add(1, Ordering::Relaxed);
                         }
@@ -539,7 +625,11 @@ pub fn run_sweep(
     });
     bar.finish_and_clear();
 
-    let collected = collect_results(dir);
+    let collected = if collect {
+        collect_results(dir).map(|c| c.path)
+    } else {
+        Ok(dir.join(RESULTS_FILE))
+    };
     let mut failures = failures.into_inner().unwrap_or_else(|e| e.into_inner());
     failures.sort_by(|a, b| a.run_dir.cmp(&b.run_dir));
     if !failures.is_empty() {
@@ -548,7 +638,7 @@ pub fn run_sweep(
             .map(|f| format!("  {}: {}", f.run_dir.display(), f.error))
             .collect();
         let note = match &collected {
-            Ok(c) => format!("results of the complete runs are in {}", c.path.display()),
+            Ok(path) => format!("results of the complete runs are in {}", path.display()),
             Err(err) => format!("results.csv could not be written either: {err:#}"),
         };
         bail!(
@@ -563,34 +653,209 @@ pub fn run_sweep(
         total: specs.len(),
         already_complete,
         completed: completed.into_inner(),
-        results_csv: collected.path,
+        results_csv: collected,
     })
 }
 
 /// Clears an incomplete run directory, performs the run, and checks that it left `summary.json`.
 /// A panic inside `run_fn` is turned into an error so that one broken run cannot take down the sweep.
-fn run_one_spec(spec: &RunSpec, path: &Path, run_fn: &RunFn) -> Result<()> {
-    if path.exists() {
+fn run_one_spec(spec: &RunSpec, path: &Path, status: &Path, run_fn: &RunFn) -> Result<()> {
+    // An interrupted run with a snapshot continues from it; any other incomplete run starts again.
+    let has_snapshot = path.join(crate::train::snapshot::SNAPSHOT_FILE).is_file();
+    if path.exists() && !has_snapshot {
         std::fs::remove_dir_all(path)
             .with_context(|| format!("cannot clear incomplete run directory {}", path.display()))?;
     }
     std::fs::create_dir_all(path).with_context(|| format!("cannot create {}", path.display()))?;
-    let outcome = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| run_fn(spec, path)));
-    match outcome {
-        Ok(result) => result?,
-        Err(panic) => {
-            let message = panic
-                .downcast_ref::<&str>()
-                .map(|s| s.to_string())
-                .or_else(|| panic.downcast_ref::<String>().cloned())
-                .unwrap_or_else(|| "unknown panic".to_string());
-            bail!("the run panicked: {message}");
+    RunStatus::running().write(status)?;
+    let result = (|| {
+        let outcome = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| run_fn(spec, path)));
+        match outcome {
+            Ok(result) => result?,
+            Err(panic) => {
+                let message = panic
+                    .downcast_ref::<&str>()
+                    .map(|s| s.to_string())
+                    .or_else(|| panic.downcast_ref::<String>().cloned())
+                    .unwrap_or_else(|| "unknown panic".to_string());
+                bail!("the run panicked: {message}");
+            }
+        }
+        if !run_dir::is_complete(path) {
+            bail!("the run returned without writing {}", run_dir::SUMMARY_FILE);
+        }
+        Ok(())
+    })();
+    let interrupted = result
+        .as_ref()
+        .is_err_and(|e| e.chain().any(|c| c.is::<crate::interrupt::Interrupted>()));
+    let outcome = match &result {
+        Ok(()) => RunStatus::finished("done", None),
+        Err(_) if interrupted => RunStatus::finished("interrupted", None),
+        Err(err) => RunStatus::finished("failed", Some(format!("{err:#}"))),
+    };
+    // The status file is informative only (`arld sweep --status`): failing to write it must not hide the
+    // run's own outcome.
+    let _ = outcome.write(status);
+    result
+}
+
+/// The folder of a sweep directory that says, for each run, which machine and process runs it (or ran it, and
+/// how it ended): `.status/<run directory>.json`. It stays outside the run directories, which hold only what
+/// the run itself writes.
+pub const STATUS_DIR: &str = ".status";
+
+/// Where the status of `spec`'s run in the sweep directory `dir` is kept.
+pub fn status_path(dir: &Path, spec: &RunSpec) -> PathBuf {
+    let mut path = dir.join(STATUS_DIR).join(spec.dir_name());
+    let name = format!(
+        "{}.json",
+        path.file_name()
+            .map_or(String::new(), |n| n.to_string_lossy().into_owned())
+    );
+    path.set_file_name(name);
+    path
+}
+
+/// Contents of [`STATUS_FILE`].
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RunStatus {
+    /// `running`, `done` or `failed`.
+    pub state: String,
+    pub host: String,
+    pub pid: u32,
+    /// Seconds since the Unix epoch of the last change.
+    pub since_unix: u64,
+    /// The Slurm job that runs it (`JOBID_TASK`), if any.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub slurm_job: Option<String>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub error: Option<String>,
+}
+
+impl RunStatus {
+    fn running() -> Self {
+        Self::finished("running", None)
+    }
+
+    fn finished(state: &str, error: Option<String>) -> Self {
+        let slurm_job = match (
+            std::env::var("SLURM_ARRAY_JOB_ID"),
+            std::env::var("SLURM_ARRAY_TASK_ID"),
+            std::env::var("SLURM_JOB_ID"),
+        ) {
+            (Ok(array), Ok(task), _) => Some(format!("{array}_{task}")),
+            (_, _, Ok(job)) => Some(job),
+            _ => None,
+        };
+        RunStatus {
+            state: state.to_string(),
+            host: host_name(),
+            pid: std::process::id(),
+            since_unix: std::time::SystemTime::now()
+                .duration_since(std::time::UNIX_EPOCH)
+                .map_or(0, |d| d.as_secs()),
+            slurm_job,
+            error,
         }
     }
-    if !run_dir::is_complete(path) {
-        bail!("the run returned without writing {}", run_dir::SUMMARY_FILE);
+
+    fn write(&self, path: &Path) -> Result<()> {
+        if let Some(parent) = path.parent() {
+            std::fs::create_dir_all(parent)
+                .with_context(|| format!("cannot create {}", parent.display()))?;
+        }
+        write_atomic(path, serde_json::to_string_pretty(self)?.as_bytes())?;
+        Ok(())
     }
-    Ok(())
+
+    /// Reads a status file, if there is a readable one.
+    pub fn read(path: &Path) -> Option<Self> {
+        let text = std::fs::read_to_string(path).ok()?;
+        serde_json::from_str(&text).ok()
+    }
+}
+
+/// This machine's short host name (as Slurm's node names are).
+pub fn host_name() -> String {
+    std::fs::read_to_string("/proc/sys/kernel/hostname")
+        .ok()
+        .or_else(|| std::env::var("HOSTNAME").ok())
+        .map(|h| h.trim().split('.').next().unwrap_or("").to_string())
+        .filter(|h| !h.is_empty())
+        .unwrap_or_else(|| "unknown".to_string())
+}
+
+/// Where one run of a sweep stands.
+#[derive(Debug, Clone, PartialEq)]
+pub enum RunState {
+    /// `summary.json` exists.
+    Done,
+    /// A process says it runs it (on `host`, in Slurm job `slurm_job` if any).
+    Running {
+        host: String,
+        slurm_job: Option<String>,
+    },
+    /// The run failed with this error (it is retried when the sweep runs again).
+    Failed { host: String, error: String },
+    /// Started but its process is gone (killed or its node lost); the sweep continues it when run again.
+    Interrupted { host: String },
+    /// Not started.
+    Pending,
+}
+
+/// The state of every run of the sweep in `dir` (from its `sweep.toml`), in the grid's order.
+pub fn sweep_status(dir: &Path) -> Result<Vec<(RunSpec, RunState)>> {
+    let file = dir.join(SWEEP_FILE);
+    if !file.is_file() {
+        bail!(
+            "{} is not a sweep directory: it has no {SWEEP_FILE}",
+            dir.display()
+        );
+    }
+    let grid = SweepGrid::from_toml_file(&file)?;
+    let this_host = host_name();
+    Ok(grid
+        .specs()?
+        .into_iter()
+        .map(|spec| {
+            let path = dir.join(spec.dir_name());
+            let state = if run_dir::is_complete(&path) {
+                RunState::Done
+            } else {
+                match RunStatus::read(&status_path(dir, &spec)) {
+                    None => {
+                        if path.exists() {
+                            RunState::Interrupted {
+                                host: "unknown".to_string(),
+                            }
+                        } else {
+                            RunState::Pending
+                        }
+                    }
+                    Some(status) if status.state == "failed" => RunState::Failed {
+                        host: status.host,
+                        error: status.error.unwrap_or_default(),
+                    },
+                    Some(status) => {
+                        // On this machine a dead process can be told apart from a live one; elsewhere the
+                        // status file is taken at its word.
+                        let gone = status.host == this_host
+                            && !Path::new(&format!("/proc/{}", status.pid)).exists();
+                        if gone || status.state != "running" {
+                            RunState::Interrupted { host: status.host }
+                        } else {
+                            RunState::Running {
+                                host: status.host,
+                                slurm_job: status.slurm_job,
+                            }
+                        }
+                    }
+                }
+            };
+            (spec, state)
+        })
+        .collect())
 }
 
 /// What [`collect_results`] wrote.

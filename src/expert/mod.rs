@@ -46,6 +46,19 @@ pub trait Expert: Send {
     /// Called by the training loop after every step, so that an interactive expert can show the run as it goes.
     /// It must be cheap and must not change anything the run depends on.
     fn observe(&mut self, _progress: &Progress) {}
+    /// The state that changes as the expert answers (a generator), as text for a run's snapshot; `None` for
+    /// an expert whose answers depend only on the observation.
+    fn state(&self) -> Option<String> {
+        None
+    }
+    /// Puts back what [`Expert::state`] returned.
+    fn restore(&mut self, state: &str) -> Result<()> {
+        anyhow::bail!(
+            "the snapshot holds a state for the expert ({} bytes), but {} keeps none",
+            state.len(),
+            self.describe()
+        )
+    }
 }
 
 /// What the training loop asks the expert at one step of a query's segment.
@@ -167,6 +180,19 @@ impl Expert for NoisyExpert {
     }
     fn describe(&self) -> String {
         format!("noisy:{}:{}", self.p, self.inner.describe())
+    }
+    fn state(&self) -> Option<String> {
+        let inner = self.inner.state();
+        Some(serde_json::to_string(&(&self.rng, inner)).expect("a generator serialises"))
+    }
+    fn restore(&mut self, state: &str) -> Result<()> {
+        let (rng, inner): (Pcg64, Option<String>) = serde_json::from_str(state)
+            .map_err(|e| anyhow::anyhow!("the snapshot's expert state is damaged: {e}"))?;
+        self.rng = rng;
+        if let Some(inner) = inner {
+            self.inner.restore(&inner)?;
+        }
+        Ok(())
     }
 }
 

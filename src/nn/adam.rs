@@ -113,6 +113,24 @@ impl Adam {
     pub const BETA2: f32 = 0.999;
     pub const EPS: f32 = 1e-8;
 
+    /// Writes the step count and both moments into `state` under `prefix`.
+    pub fn save_state(&self, prefix: &str, state: &mut crate::state::StateDict) {
+        state.put_value(&format!("{prefix}.step"), &self.step);
+        state.put_f32(&format!("{prefix}.m"), &self.first_moment);
+        state.put_f32(&format!("{prefix}.v"), &self.second_moment);
+    }
+
+    /// Reads what [`Adam::save_state`] wrote.
+    pub fn load_state(
+        &mut self,
+        prefix: &str,
+        state: &crate::state::StateDict,
+    ) -> Result<(), crate::state::StateError> {
+        self.step = state.value(&format!("{prefix}.step"))?;
+        state.f32s_into(&format!("{prefix}.m"), &mut self.first_moment)?;
+        state.f32s_into(&format!("{prefix}.v"), &mut self.second_moment)
+    }
+
     /// An optimiser for `net`'s parameters with learning rate `lr` and zero moments.
     pub fn new(net: &QNet, lr: f32) -> Self {
         Self {

@@ -52,6 +52,22 @@ impl NoiseSample {
         }
     }
 
+    /// Writes the factors into `state` under `prefix`.
+    pub fn save_state(&self, prefix: &str, state: &mut crate::state::StateDict) {
+        state.put_f32(&format!("{prefix}.input"), &self.input_factors);
+        state.put_f32(&format!("{prefix}.output"), &self.output_factors);
+    }
+
+    /// Reads what [`NoiseSample::save_state`] wrote.
+    pub fn load_state(
+        &mut self,
+        prefix: &str,
+        state: &crate::state::StateDict,
+    ) -> Result<(), crate::state::StateError> {
+        state.f32s_into(&format!("{prefix}.input"), &mut self.input_factors)?;
+        state.f32s_into(&format!("{prefix}.output"), &mut self.output_factors)
+    }
+
     /// Number of outputs (actions) this sample is for.
     pub fn n_actions(&self) -> usize {
         self.output_factors.len()

@@ -16,8 +16,8 @@ pub struct NStepReturn<'a> {
 }
 
 /// A transition waiting for its n-step return: an owned copy of a [`Transition`].
-#[derive(Clone, Debug, PartialEq)]
-struct Pending {
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub(super) struct Pending {
     obs: Vec<f32>,
     action: usize,
     reward: f32,
@@ -57,6 +57,16 @@ impl NStepQueue {
             gamma,
             pending: VecDeque::with_capacity(n.max(1)),
         }
+    }
+
+    /// The transitions waiting for their n-step return (for snapshots).
+    pub(super) fn pending(&self) -> Vec<&Pending> {
+        self.pending.iter().collect()
+    }
+
+    /// Replaces the waiting transitions (from a snapshot).
+    pub(super) fn set_pending(&mut self, pending: Vec<Pending>) {
+        self.pending = pending.into();
     }
 
     /// Adds a transition and stores every transition whose n-step return is now complete.

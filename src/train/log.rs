@@ -9,9 +9,21 @@ use super::run_dir::{
 use crate::tboard::EventWriter;
 use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use serde::{Deserialize, Serialize};
 use std::fs::File;
-use std::io::{BufWriter, IsTerminal, Write};
+use std::io::{BufWriter, IsTerminal, Seek, Write};
 use std::path::{Path, PathBuf};
+
+/// Where a run's logs stood when a snapshot was taken: byte lengths of the streams, the event file's name,
+/// and the evaluation curve.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct LogPosition {
+    pub episodes: u64,
+    pub queries: u64,
+    pub events_file: String,
+    pub events: u64,
+    pub curve: Vec<EvalPoint>,
+}
 
 /// Receives a run's events; writes them to a run directory when one is given, and drives the progress bar.
 pub struct RunLog {
@@ -39,6 +51,29 @@ impl RunLog {
     /// A log writing into `dir` (created if needed; an earlier incomplete run there is overwritten).
     /// `progress` shows a bar with steps/s and ETA when standard error is a terminal.
     pub fn create(dir: &Path, config_toml: &str, total_steps: u64, progress: bool) -> Result<Self> {
+        Self::create_with(dir, Some(config_toml), total_steps, progress)
+    }
+
+    /// [`RunLog::create`]; with `config_toml` `None`, the files of the run in `dir` are left for
+    /// [`RunLog::resume`] to reopen.
+    fn create_with(
+        dir: &Path,
+        config_toml: Option<&str>,
+        total_steps: u64,
+        progress: bool,
+    ) -> Result<Self> {
+        let bar = progress_bar(total_steps, progress);
+        let Some(config_toml) = config_toml else {
+            let _ = std::fs::remove_file(dir.join(SUMMARY_FILE));
+            return Ok(Self {
+                dir: Some(dir.to_path_buf()),
+                curve: Vec::new(),
+                episodes: None,
+                queries: None,
+                events: None,
+                progress: bar,
+            });
+        };
         std::fs::create_dir_all(dir)
             .with_context(|| format!("cannot create run directory {}", dir.display()))?;
         let _ = std::fs::remove_file(dir.join(SUMMARY_FILE));
@@ -64,24 +99,6 @@ impl RunLog {
         let queries = open(QUERIES_FILE, QUERIES_HEADER)?;
         let events =
             EventWriter::create(dir).context("cannot create the TensorBoard event file")?;
-        let bar = if progress && std::io::stderr().is_terminal() {
-            let bar = ProgressBar::with_draw_target(
-                Some(total_steps),
-                ProgressDrawTarget::stderr_with_hz(4),
-            );
-            bar.set_style(
-                ProgressStyle::with_template(
-                    "{prefix} [{elapsed_precise}] {wide_bar} {pos}/{len} steps {rate} ETA {eta} {msg}",
-                )
-                .expect("valid template")
-                .with_key("rate", |state: &indicatif::ProgressState, w: &mut dyn std::fmt::Write| {
-                    let _ = write!(w, "{:.0} steps/s", state.per_sec());
-                }),
-            );
-            bar
-        } else {
-            ProgressBar::hidden()
-        };
         Ok(Self {
             dir: Some(dir.to_path_buf()),
             curve: Vec::new(),
@@ -90,6 +107,78 @@ impl RunLog {
             events: Some(events),
             progress: bar,
         })
+    }
+
+    /// Where the run's logs stand: flushes the streams and returns their lengths and the evaluation curve, so
+    /// that [`RunLog::resume`] can put them back exactly there.
+    pub fn position(&mut self) -> Result<LogPosition> {
+        let len = |f: &mut Option<BufWriter<File>>| -> Result<u64> {
+            Ok(match f {
+                Some(f) => {
+                    f.flush()?;
+                    f.get_mut().stream_position()?
+                }
+                None => 0,
+            })
+        };
+        let episodes = len(&mut self.episodes)?;
+        let queries = len(&mut self.queries)?;
+        let (events_file, events) = match &mut self.events {
+            Some(ev) => (
+                ev.path()
+                    .file_name()
+                    .map(|n| n.to_string_lossy().into_owned())
+                    .unwrap_or_default(),
+                ev.position()?,
+            ),
+            None => (String::new(), 0),
+        };
+        Ok(LogPosition {
+            episodes,
+            queries,
+            events_file,
+            events,
+            curve: self.curve.clone(),
+        })
+    }
+
+    /// A log that continues the one in `dir` from `position` (written by [`RunLog::position`] into a
+    /// snapshot): the episode and query logs and the event file are cut back to their lengths then, and
+    /// `eval.csv` is rewritten from the curve then. Whatever the interrupted run wrote after its snapshot is gone.
+    pub fn resume(
+        dir: &Path,
+        position: &LogPosition,
+        total_steps: u64,
+        progress: bool,
+    ) -> Result<Self> {
+        let mut log = Self::create_with(dir, None, total_steps, progress)?;
+        let reopen = |name: &str, len: u64| -> Result<BufWriter<File>> {
+            let path = dir.join(name);
+            let file = std::fs::OpenOptions::new()
+                .write(true)
+                .open(&path)
+                .with_context(|| format!("cannot reopen {} to continue the run", path.display()))?;
+            let actual = file.metadata()?.len();
+            anyhow::ensure!(
+                actual >= len,
+                "{} is shorter ({actual} bytes) than when the snapshot was written ({len} bytes)",
+                path.display()
+            );
+            file.set_len(len)?;
+            let mut f = BufWriter::new(file);
+            f.seek(std::io::SeekFrom::Start(len))?;
+            Ok(f)
+        };
+        log.episodes = Some(reopen(EPISODES_FILE, position.episodes)?);
+        log.queries = Some(reopen(QUERIES_FILE, position.queries)?);
+        let events = dir.join(&position.events_file);
+        log.events = Some(
+            EventWriter::reopen(&events, position.events)
+                .with_context(|| format!("cannot reopen {}", events.display()))?,
+        );
+        log.curve = position.curve.clone();
+        run_dir::write_curve(dir, &log.curve)?;
+        Ok(log)
     }
 
     /// Sets the label shown before the progress bar.
@@ -169,5 +258,28 @@ impl RunLog {
             run_dir::write_summary(dir, summary)?;
         }
         Ok(())
+    }
+}
+
+/// The run's progress bar (steps/s and ETA), drawn only when asked for and standard error is a terminal.
+fn progress_bar(total_steps: u64, progress: bool) -> ProgressBar {
+    if progress && std::io::stderr().is_terminal() {
+        let bar =
+            ProgressBar::with_draw_target(Some(total_steps), ProgressDrawTarget::stderr_with_hz(4));
+        bar.set_style(
+            ProgressStyle::with_template(
+                "{prefix} [{elapsed_precise}] {wide_bar} {pos}/{len} steps {rate} ETA {eta} {msg}",
+            )
+            .expect("valid template")
+            .with_key(
+                "rate",
+                |state: &indicatif::ProgressState, w: &mut dyn std::fmt::Write| {
+                    let _ = write!(w, "{:.0} steps/s", state.per_sec());
+                },
+            ),
+        );
+        bar
+    } else {
+        ProgressBar::hidden()
     }
 }

@@ -5,10 +5,12 @@
 pub mod config;
 pub mod log;
 pub mod run_dir;
+pub mod snapshot;
 
 pub use config::{ConfigInput, Method, NetKind, TdLoss, TrainConfig};
-pub use log::RunLog;
+pub use log::{LogPosition, RunLog};
 pub use run_dir::{EvalPoint, QueryEvent, Summary, steps_to_solve};
+pub use snapshot::Checkpointer;
 
 use crate::agent::Agent;
 use crate::env::{self, Env};
@@ -16,6 +18,7 @@ use crate::expert::demos::Demonstrations;
 use crate::expert::{Answer, Expert, Progress, Query};
 use crate::query::{QueryController, QueryRule};
 use crate::replay::{Batch, Replay, ReplayConfig, Transition};
+use crate::state::StateDict;
 use anyhow::{Context, Result, ensure};
 use rand::SeedableRng;
 use rand_pcg::Pcg64;
@@ -84,9 +87,96 @@ pub fn evaluate(
 /// target copy, and periodic evaluation. The expert observes every step (an interactive one shows the run).
 pub fn train(
     cfg: &TrainConfig,
+    expert: Option<&mut dyn Expert>,
+    demos: Option<&Demonstrations>,
+    log: &mut RunLog,
+) -> Result<(Summary, Agent)> {
+    train_run(cfg, expert, demos, log, None)
+}
+
+/// [`train`] with snapshots: every `cfg.snapshot_every` steps (and pre-training updates), and when a stop is
+/// requested ([`crate::interrupt`]: SIGTERM/SIGINT), the whole state of the run goes to `checkpointer`'s run
+/// directory; then a stop request ends the run with an [`crate::interrupt::Interrupted`] error. When the
+/// directory holds a snapshot, the run continues from it, to the same results as an uninterrupted run. `log`
+/// must then come from [`RunLog::resume`] at the snapshot's log position ([`resume_position`]).
+pub fn train_resumable(
+    cfg: &TrainConfig,
+    expert: Option<&mut dyn Expert>,
+    demos: Option<&Demonstrations>,
+    log: &mut RunLog,
+    checkpointer: &mut Checkpointer,
+    resume_from: Option<&StateDict>,
+) -> Result<(Summary, Agent)> {
+    train_run(cfg, expert, demos, log, Some((checkpointer, resume_from)))
+}
+
+/// The log position recorded in a snapshot.
+pub fn resume_position(state: &StateDict) -> Result<log::LogPosition> {
+    Ok(state.value("log")?)
+}
+
+/// Where the loop stands; with the agent, replay, query controller and generators, the whole run.
+#[derive(Clone, Debug, Default, serde::Serialize, serde::Deserialize)]
+struct LoopState {
+    /// Pre-training updates done (all of them once training on the environment has begun).
+    pretrain_done: usize,
+    /// Whether the environment phase has begun.
+    training: bool,
+    /// Environment steps done.
+    step: usize,
+    episode: usize,
+    ep_return: f64,
+    ep_len: usize,
+    ep_demo: usize,
+    updates: usize,
+    /// The actions of the episode in progress, and the environment's generator before the reset that began
+    /// it (words of [`crate::rng::NumpyRng`]; `None` for the first episode, which resets with the run's seed).
+    ep_actions: Vec<usize>,
+    ep_generator: Option<[u64; 6]>,
+}
+
+/// Everything a snapshot gathers, borrowed from the loop.
+struct RunParts<'a> {
+    agent: &'a Agent,
+    replay: &'a Replay,
+    queries: &'a QueryController,
+    replay_rng: &'a Pcg64,
+    query_rng: &'a Pcg64,
+    eval_env: &'a dyn Env,
+    expert_state: Option<String>,
+    obs: &'a [f32],
+}
+
+fn snapshot(
+    checkpointer: &mut Checkpointer,
+    st: &LoopState,
+    parts: RunParts<'_>,
+    log: &mut RunLog,
+) -> Result<()> {
+    let mut state = StateDict::default();
+    parts.agent.save_state("agent", &mut state);
+    parts.replay.save_state("replay", &mut state);
+    parts.queries.save_state("query", &mut state);
+    state.put_value("rng.replay", parts.replay_rng);
+    state.put_value("rng.query", parts.query_rng);
+    state.put_value(
+        "rng.eval_env",
+        &parts.eval_env.generator().map(|g| g.to_words()),
+    );
+    state.put_value("expert", &parts.expert_state);
+    state.put_value("loop", st);
+    state.put_f32("obs", parts.obs);
+    state.put_value("log", &log.position()?);
+    let phase = if st.training { "train" } else { "pretrain" };
+    checkpointer.save(&state, st.step, phase)
+}
+
+fn train_run(
+    cfg: &TrainConfig,
     mut expert: Option<&mut dyn Expert>,
     demos: Option<&Demonstrations>,
     log: &mut RunLog,
+    mut snapshots: Option<(&mut Checkpointer, Option<&StateDict>)>,
 ) -> Result<(Summary, Agent)> {
     let started = Instant::now();
     let mut env = env::make(&cfg.env)?;
@@ -119,30 +209,98 @@ pub fn train(
         },
     );
     let mut batch = Batch::default();
+    let mut queries = QueryController::new(cfg.query_rule()?, cfg.budget, cfg.segment_len)?;
+    let mut st = LoopState::default();
+    let mut obs = Vec::new();
+
+    // Continue from a snapshot: every part back where it was.
+    let resume_from = snapshots.as_ref().and_then(|(_, s)| *s);
+    if let Some(state) = resume_from {
+        agent.load_state("agent", state)?;
+        replay.load_state("replay", state)?;
+        queries.load_state("query", state)?;
+        replay_rng = state.value("rng.replay")?;
+        query_rng = state.value("rng.query")?;
+        let eval_gen: Option<[u64; 6]> = state.value("rng.eval_env")?;
+        eval_env.set_generator(eval_gen.map(crate::rng::NumpyRng::from_words));
+        let expert_state: Option<String> = state.value("expert")?;
+        if let (Some(e), Some(saved)) = (expert.as_deref_mut(), expert_state) {
+            e.restore(&saved)?;
+        }
+        st = state.value("loop")?;
+        if st.training {
+            // The environment: the generator its episode's reset drew from, the reset, the actions taken.
+            obs = match st.ep_generator {
+                None => env.reset(Some(env_seed)),
+                Some(words) => {
+                    env.set_generator(Some(crate::rng::NumpyRng::from_words(words)));
+                    env.reset(None)
+                }
+            };
+            for &a in &st.ep_actions {
+                obs = env.step(a)?.obs;
+            }
+            ensure!(
+                obs == state.f32s("obs")?,
+                "replaying the episode in progress did not reach the snapshot's observation"
+            );
+        }
+    }
 
     // Pre-training on demonstrations only (DQfD, ADQNP; §9).
-    if cfg.method.pretrains() {
+    if cfg.method.pretrains() && !st.training {
         let demos =
             demos.context("this method pre-trains on demonstrations, but none were given")?;
         log.set_prefix(format!("{} pre-training", cfg.run_name()));
-        pretrain(
-            cfg,
-            &mut agent,
-            &mut replay,
-            demos,
-            &mut replay_rng,
-            &mut batch,
-        )?;
+        if resume_from.is_none() {
+            push_demos(cfg, &mut replay, demos)?;
+        }
+        while st.pretrain_done < cfg.pretrain_steps {
+            pretrain_update(
+                cfg,
+                &mut agent,
+                &mut replay,
+                &mut replay_rng,
+                &mut batch,
+                st.pretrain_done + 1,
+            );
+            st.pretrain_done += 1;
+            if let Some((ck, _)) = snapshots.as_mut() {
+                let stop = crate::interrupt::requested();
+                if stop || ck.due(st.pretrain_done) {
+                    let parts = RunParts {
+                        agent: &agent,
+                        replay: &replay,
+                        queries: &queries,
+                        replay_rng: &replay_rng,
+                        query_rng: &query_rng,
+                        eval_env: eval_env.as_ref(),
+                        expert_state: expert.as_deref().and_then(|e| e.state()),
+                        obs: &obs,
+                    };
+                    snapshot(ck, &st, parts, log)?;
+                }
+                if stop {
+                    return Err(crate::interrupt::Interrupted(format!(
+                        "stopped after {} pre-training updates; snapshot in {}",
+                        st.pretrain_done,
+                        ck.path().display()
+                    ))
+                    .into());
+                }
+            }
+        }
+        agent.sync_target();
     }
 
-    let mut queries = QueryController::new(cfg.query_rule()?, cfg.budget, cfg.segment_len)?;
-
     log.set_prefix(cfg.run_name());
-    let mut obs = env.reset(Some(env_seed));
-    agent.begin_episode();
-    let (mut episode, mut ep_return, mut ep_len, mut ep_demo) = (0usize, 0.0f64, 0usize, 0usize);
-    let mut updates = 0usize;
-    for step in 0..cfg.train_steps {
+    if !st.training {
+        st.training = true;
+        obs = env.reset(Some(env_seed));
+        agent.begin_episode();
+    }
+    while st.step < cfg.train_steps {
+        let step = st.step;
         // 1. Who acts: the agent, or the expert when a query is running or the rule asks for one now.
         let mut step_uncertainty = None;
         let action = if queries.expert_in_control() {
@@ -177,7 +335,7 @@ pub fn train(
                 };
                 log.query(&QueryEvent {
                     step,
-                    episode,
+                    episode: st.episode,
                     uncertainty,
                     threshold: decision.threshold,
                     expert_action,
@@ -194,11 +352,12 @@ pub fn train(
         let by_expert = queries.expert_in_control();
         if by_expert {
             queries.record_expert_step();
-            ep_demo += 1;
+            st.ep_demo += 1;
         }
 
         // 2. Step the environment; expert transitions are stored as demonstrations (margin loss, bonus priority).
         let s = env.step(action)?;
+        st.ep_actions.push(action);
         let terminal = s.terminated || (s.truncated && cfg.timeout_as_terminal);
         replay.push(Transition {
             obs: &obs,
@@ -208,14 +367,16 @@ pub fn train(
             terminal,
             is_demo: by_expert,
         })?;
-        ep_return += s.reward;
-        ep_len += 1;
+        st.ep_return += s.reward;
+        st.ep_len += 1;
         obs = s.obs;
         if s.terminated || s.truncated {
-            log.episode(episode, step + 1, ep_return, ep_len, ep_demo)?;
-            episode += 1;
-            (ep_return, ep_len, ep_demo) = (0.0, 0, 0);
+            log.episode(st.episode, step + 1, st.ep_return, st.ep_len, st.ep_demo)?;
+            st.episode += 1;
+            (st.ep_return, st.ep_len, st.ep_demo) = (0.0, 0, 0);
             replay.end_episode()?;
+            st.ep_actions.clear();
+            st.ep_generator = env.generator().map(|g| g.to_words());
             obs = env.reset(None);
             agent.begin_episode();
             queries.end_episode();
@@ -230,11 +391,11 @@ pub fn train(
             replay.sample(cfg.batch_size, beta as f32, &mut replay_rng, &mut batch);
             let (stats, priorities) = agent.update(&batch);
             replay.update_priorities(&batch.idx, priorities);
-            updates += 1;
-            if updates.is_multiple_of(cfg.target_period) {
+            st.updates += 1;
+            if st.updates.is_multiple_of(cfg.target_period) {
                 agent.sync_target();
             }
-            if updates.is_multiple_of(1000) {
+            if st.updates.is_multiple_of(1000) {
                 log.scalar("train/td_loss", step + 1, stats.td_loss)?;
                 log.scalar("train/margin_loss", step + 1, stats.margin_loss)?;
                 log.scalar("train/epsilon", step + 1, epsilon_at(cfg, step) as f32)?;
@@ -256,7 +417,7 @@ pub fn train(
             expert.observe(&Progress {
                 step: step + 1,
                 train_steps: cfg.train_steps,
-                episode,
+                episode: st.episode,
                 env: env.as_ref(),
                 uncertainty: step_uncertainty,
                 queries: &queries,
@@ -278,6 +439,36 @@ pub fn train(
                 .network()
                 .save(&path, &weights_metadata(cfg, step + 1))?;
         }
+        st.step += 1;
+
+        // 5. Snapshot the whole run when due or asked to stop (not after the last step: the results follow).
+        if let Some((ck, _)) = snapshots.as_mut()
+            && st.step < cfg.train_steps
+        {
+            let stop = crate::interrupt::requested();
+            if stop || ck.due(st.step) {
+                let parts = RunParts {
+                    agent: &agent,
+                    replay: &replay,
+                    queries: &queries,
+                    replay_rng: &replay_rng,
+                    query_rng: &query_rng,
+                    eval_env: eval_env.as_ref(),
+                    expert_state: expert.as_deref().and_then(|e| e.state()),
+                    obs: &obs,
+                };
+                snapshot(ck, &st, parts, log)?;
+            }
+            if stop {
+                return Err(crate::interrupt::Interrupted(format!(
+                    "stopped at step {} of {}; snapshot in {}",
+                    st.step,
+                    cfg.train_steps,
+                    ck.path().display()
+                ))
+                .into());
+            }
+        }
     }
 
     let wall = started.elapsed().as_secs_f64();
@@ -295,7 +486,7 @@ pub fn train(
         final_score: log.curve().last().map(|p| p.mean).unwrap_or(f64::NAN),
         demos_pretrain: pretrain_demos,
         queries_used: queries.budget_used(),
-        episodes: episode,
+        episodes: st.episode,
         wall_time_s: wall,
         steps_per_s: cfg.train_steps as f64 / wall.max(1e-9),
     };
@@ -306,6 +497,9 @@ pub fn train(
         )?;
     }
     log.finish(&summary)?;
+    if let Some((ck, _)) = snapshots.as_mut() {
+        ck.remove()?;
+    }
     Ok((summary, agent))
 }
 
@@ -332,6 +526,16 @@ pub fn pretrain(
     rng: &mut Pcg64,
     batch: &mut Batch,
 ) -> Result<()> {
+    push_demos(cfg, replay, demos)?;
+    for update in 1..=cfg.pretrain_steps {
+        pretrain_update(cfg, agent, replay, rng, batch, update);
+    }
+    agent.sync_target();
+    Ok(())
+}
+
+/// The demonstrations enter replay permanently, episode by episode.
+fn push_demos(cfg: &TrainConfig, replay: &mut Replay, demos: &Demonstrations) -> Result<()> {
     ensure!(
         demos.env == cfg.env,
         "the demonstrations are for {}, not {}",
@@ -348,16 +552,24 @@ pub fn pretrain(
             replay.end_episode()?;
         }
     }
-    for update in 1..=cfg.pretrain_steps {
-        replay.sample_demo_only(cfg.batch_size, cfg.beta0 as f32, rng, batch);
-        let (_, priorities) = agent.update(batch);
-        replay.update_priorities(&batch.idx, priorities);
-        if update % cfg.target_period == 0 {
-            agent.sync_target();
-        }
-    }
-    agent.sync_target();
     Ok(())
+}
+
+/// Pre-training update number `update` (from 1): demonstrations only, prioritized among them.
+fn pretrain_update(
+    cfg: &TrainConfig,
+    agent: &mut Agent,
+    replay: &mut Replay,
+    rng: &mut Pcg64,
+    batch: &mut Batch,
+    update: usize,
+) {
+    replay.sample_demo_only(cfg.batch_size, cfg.beta0 as f32, rng, batch);
+    let (_, priorities) = agent.update(batch);
+    replay.update_priorities(&batch.idx, priorities);
+    if update.is_multiple_of(cfg.target_period) {
+        agent.sync_target();
+    }
 }
 
 /// Asks the expert for the action at `obs` (one step of a segment; `agent_action` on the step that opens it) and

@@ -1,0 +1,171 @@
+//! The state of a component as named raw arrays and small JSON values: what a run's snapshot is made of
+//! (`train::snapshot` gathers one [`StateDict`] from every part of a run and writes it to disk).
+//!
+//! Components at every layer fill and read a `StateDict` through `save_state` / `load_state` methods under a
+//! prefix of their own (`agent.`, `replay.`, ...), so a snapshot knows nothing about their insides. Arrays stay
+//! raw little-endian numbers (they become safetensors tensors); small values (counters, generator states) are
+//! JSON. Reading checks every name, type and length: a damaged or foreign snapshot is an error, never a panic.
+
+use serde::Serialize;
+use serde::de::DeserializeOwned;
+use std::collections::BTreeMap;
+
+/// One array: its element type and its little-endian bytes.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Array {
+    F32(Vec<f32>),
+    F64(Vec<f64>),
+    U64(Vec<u64>),
+    U8(Vec<u8>),
+}
+
+impl Array {
+    pub fn type_name(&self) -> &'static str {
+        match self {
+            Array::F32(_) => "f32",
+            Array::F64(_) => "f64",
+            Array::U64(_) => "u64",
+            Array::U8(_) => "u8",
+        }
+    }
+
+    /// Number of elements.
+    pub fn len(&self) -> usize {
+        match self {
+            Array::F32(v) => v.len(),
+            Array::F64(v) => v.len(),
+            Array::U64(v) => v.len(),
+            Array::U8(v) => v.len(),
+        }
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+}
+
+/// A missing, mistyped or misshapen entry.
+#[derive(Debug, thiserror::Error)]
+pub enum StateError {
+    #[error("the snapshot has no `{0}`")]
+    Missing(String),
+    #[error("`{name}` in the snapshot is {found}, expected {expected}")]
+    Type {
+        name: String,
+        found: &'static str,
+        expected: &'static str,
+    },
+    #[error("`{name}` in the snapshot has {found} elements, expected {expected}")]
+    Length {
+        name: String,
+        found: usize,
+        expected: usize,
+    },
+    #[error("`{name}` in the snapshot cannot be read: {msg}")]
+    Value { name: String, msg: String },
+}
+
+/// Named arrays and JSON values.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct StateDict {
+    pub arrays: BTreeMap<String, Array>,
+    pub values: BTreeMap<String, serde_json::Value>,
+}
+
+macro_rules! typed_access {
+    ($put:ident, $get:ident, $get_into:ident, $variant:ident, $t:ty, $name:literal) => {
+        pub fn $put(&mut self, name: &str, data: &[$t]) {
+            self.arrays
+                .insert(name.to_string(), Array::$variant(data.to_vec()));
+        }
+
+        pub fn $get(&self, name: &str) -> Result<&[$t], StateError> {
+            match self.arrays.get(name) {
+                None => Err(StateError::Missing(name.to_string())),
+                Some(Array::$variant(v)) => Ok(v),
+                Some(other) => Err(StateError::Type {
+                    name: name.to_string(),
+                    found: other.type_name(),
+                    expected: $name,
+                }),
+            }
+        }
+
+        /// Copies the array into `out`, which must have its length.
+        pub fn $get_into(&self, name: &str, out: &mut [$t]) -> Result<(), StateError> {
+            let data = self.$get(name)?;
+            if data.len() != out.len() {
+                return Err(StateError::Length {
+                    name: name.to_string(),
+                    found: data.len(),
+                    expected: out.len(),
+                });
+            }
+            out.copy_from_slice(data);
+            Ok(())
+        }
+    };
+}
+
+impl StateDict {
+    typed_access!(put_f32, f32s, f32s_into, F32, f32, "f32");
+    typed_access!(put_f64, f64s, f64s_into, F64, f64, "f64");
+    typed_access!(put_u64, u64s, u64s_into, U64, u64, "u64");
+    typed_access!(put_u8, u8s, u8s_into, U8, u8, "u8");
+
+    /// Stores a small value as JSON.
+    pub fn put_value<T: Serialize>(&mut self, name: &str, value: &T) {
+        let json = serde_json::to_value(value).expect("state values serialise to JSON");
+        self.values.insert(name.to_string(), json);
+    }
+
+    /// Reads a small value back.
+    pub fn value<T: DeserializeOwned>(&self, name: &str) -> Result<T, StateError> {
+        let json = self
+            .values
+            .get(name)
+            .ok_or_else(|| StateError::Missing(name.to_string()))?;
+        serde_json::from_value(json.clone()).map_err(|e| StateError::Value {
+            name: name.to_string(),
+            msg: e.to_string(),
+        })
+    }
+
+    /// Total bytes of the arrays.
+    pub fn array_bytes(&self) -> usize {
+        self.arrays
+            .values()
+            .map(|a| {
+                a.len()
+                    * match a {
+                        Array::F32(_) => 4,
+                        Array::F64(_) | Array::U64(_) => 8,
+                        Array::U8(_) => 1,
+                    }
+            })
+            .sum()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn entries_round_trip_and_mismatches_are_named() {
+        let mut s = StateDict::default();
+        s.put_f32("a.w", &[1.0, -2.5]);
+        s.put_value("a.step", &7u64);
+        assert_eq!(s.f32s("a.w").unwrap(), &[1.0, -2.5]);
+        assert_eq!(s.value::<u64>("a.step").unwrap(), 7);
+        let mut three = [0.0f32; 3];
+        let err = s.f32s_into("a.w", &mut three).unwrap_err();
+        assert!(
+            err.to_string().contains("has 2 elements, expected 3"),
+            "{err}"
+        );
+        assert!(s.u64s("a.w").unwrap_err().to_string().contains("is f32"));
+        assert!(s.f32s("b").unwrap_err().to_string().contains("no `b`"));
+        assert_eq!(s.array_bytes(), 8);
+    }
+}
