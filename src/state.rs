@@ -131,6 +131,22 @@ impl StateDict {
         })
     }
 
+    /// Stores a value that holds 128-bit integers (generator states), as JSON text: a JSON value tree cannot
+    /// hold them, JSON text can.
+    pub fn put_text<T: Serialize>(&mut self, name: &str, value: &T) {
+        let text = serde_json::to_string(value).expect("state values serialise to JSON");
+        self.put_value(name, &text);
+    }
+
+    /// Reads what [`StateDict::put_text`] stored.
+    pub fn text<T: DeserializeOwned>(&self, name: &str) -> Result<T, StateError> {
+        let text: String = self.value(name)?;
+        serde_json::from_str(&text).map_err(|e| StateError::Value {
+            name: name.to_string(),
+            msg: e.to_string(),
+        })
+    }
+
     /// Total bytes of the arrays.
     pub fn array_bytes(&self) -> usize {
         self.arrays

@@ -151,7 +151,7 @@ impl Agent {
         self.online.save_state(&format!("{prefix}.online"), state);
         self.target.save_state(&format!("{prefix}.target"), state);
         self.adam.save_state(&format!("{prefix}.adam"), state);
-        state.put_value(&format!("{prefix}.rng"), &self.rng);
+        state.put_text(&format!("{prefix}.rng"), &self.rng);
         state.put_value(&format!("{prefix}.active_head"), &self.active_head);
         for (name, noise) in [
             ("act", &self.noise_act),
@@ -172,7 +172,7 @@ impl Agent {
         self.online.load_state(&format!("{prefix}.online"), state)?;
         self.target.load_state(&format!("{prefix}.target"), state)?;
         self.adam.load_state(&format!("{prefix}.adam"), state)?;
-        self.rng = state.value(&format!("{prefix}.rng"))?;
+        self.rng = state.text(&format!("{prefix}.rng"))?;
         self.active_head = state.value(&format!("{prefix}.active_head"))?;
         for (name, noise) in [
             ("act", &mut self.noise_act),

@@ -14,7 +14,8 @@ use std::process::ExitCode;
 #[command(
     after_help = "Examples:\n  arld sweep --env CartPole-v0 --method dqn,adqn --net bootstrap,noisy --seeds 5 -o runs/sweep\n  \
 arld sweep --grid grid.toml -o runs/sweep       # [sweep] envs = [...], methods = [...], nets = [...], seeds = 20\n\n\
-A sweep is resumable: finished runs (with summary.json) are skipped, an interrupted run is started again.\n\n\
+A sweep is resumable: finished runs (with summary.json) are skipped, an interrupted run continues from its snapshot \
+(Ctrl-C or SIGTERM makes the runs in progress write one and stop; exit code 75).\n\n\
 On a Slurm cluster, --slurm submits the sweep as a job array (one task per shard of runs; requeueable) instead of \
 running it here:\n  arld sweep --env CartPole-v0 --method dqn,adqn --seeds 20 -o runs/sweep --slurm --partition cpu --time 4:00:00\n  \
 arld sweep --status runs/sweep                   # runs done, running, failed and pending, and on which node"
@@ -151,7 +152,17 @@ pub fn run_sweep(args: SweepArgs) -> Result<ExitCode> {
     if args.slurm {
         return submit_slurm(&args, &grid, &out);
     }
-    let outcome = run_grid_shard(&grid, &out, args.jobs, args.shard, &run_spec)?;
+    arld::interrupt::install()?;
+    let outcome = match run_grid_shard(&grid, &out, args.jobs, args.shard, &run_spec) {
+        Ok(outcome) => outcome,
+        Err(err) if arld::interrupt::requested() => {
+            eprintln!(
+                "stopped: the runs in progress wrote snapshots; the same command continues them\n{err:#}"
+            );
+            return Ok(ExitCode::from(slurm::EXIT_INTERRUPTED));
+        }
+        Err(err) => return Err(err),
+    };
     println!(
         "{} runs ({} already complete, {} run now); results: {}",
         outcome.total,

@@ -12,12 +12,14 @@ use std::process::ExitCode;
 arld train --env Acrobot-v1 --method adqn --net noisy --set t_query=0.1 --set train_steps=50000\n  \
 arld train --env CartPole-v0 --method adqn --expert web     (a person answers in the browser)\n\n\
 Configuration is layered: the paper's preset for the task and method, then --config FILE (TOML with any of the \
-keys), then each --set key=value. `arld train --env ID --method M --print-config` shows every key with its value."
+keys), then each --set key=value. `arld train --env ID --method M --print-config` shows every key with its value.\n\n\
+A run snapshots itself every `snapshot_every` steps and when stopped (Ctrl-C, SIGTERM); `arld train --resume RUN_DIR` \
+continues it to the results an uninterrupted run gives."
 )]
 pub struct TrainArgs {
     /// Gymnasium id: CartPole-v0, CartPole-v1, Acrobot-v1, MountainCar-v0, LunarLander-v2, LunarLander-v3.
-    #[arg(long)]
-    env: String,
+    #[arg(long, required_unless_present = "resume")]
+    env: Option<String>,
     /// Learning method.
     #[arg(long, value_enum, default_value_t = Method::Dqn)]
     method: Method,
@@ -58,6 +60,9 @@ pub struct TrainArgs {
     /// Print the resolved configuration as TOML and exit.
     #[arg(long)]
     print_config: bool,
+    /// Continue the interrupted run in RUN_DIR from its snapshot, with the configuration it was started with.
+    #[arg(long, value_name = "RUN_DIR", conflicts_with_all = ["env", "config", "overrides", "expert", "demos", "out", "print_config"])]
+    resume: Option<PathBuf>,
     /// Hide the progress bar.
     #[arg(long)]
     quiet: bool,
@@ -65,7 +70,24 @@ pub struct TrainArgs {
 
 /// Resolves the layered configuration of a `train` invocation.
 pub fn resolve(args: &TrainArgs) -> anyhow::Result<TrainConfig> {
-    let mut input = ConfigInput::new(&args.env, args.method, args.net, args.seed);
+    if let Some(dir) = &args.resume {
+        // The run's own config.toml names its environment, method, network and seed.
+        let config = dir.join(arld::train::run_dir::CONFIG_FILE);
+        anyhow::ensure!(
+            dir.join(arld::train::snapshot::SNAPSHOT_FILE).is_file(),
+            "{} holds no snapshot to resume from (a finished run has none; an unfinished one has one once it \
+             has run snapshot_every steps or was stopped with Ctrl-C/SIGTERM)",
+            dir.display()
+        );
+        let mut input = ConfigInput::new("CartPole-v0", Method::Dqn, NetKind::Bootstrap, 0);
+        input.apply_file(&config)?;
+        return input.resolve();
+    }
+    let env = args
+        .env
+        .as_deref()
+        .expect("clap requires --env without --resume");
+    let mut input = ConfigInput::new(env, args.method, args.net, args.seed);
     if let Some(path) = &args.config {
         input.apply_file(path)?;
     }
@@ -107,10 +129,22 @@ pub fn run(args: TrainArgs) -> anyhow::Result<ExitCode> {
         return Ok(ExitCode::SUCCESS);
     }
     let dir = args
-        .out
+        .resume
         .clone()
+        .or_else(|| args.out.clone())
         .unwrap_or_else(|| PathBuf::from("runs").join(cfg.run_name()));
-    let s = run_one(&cfg, Some(&dir), !args.quiet)?;
+    arld::interrupt::install()?;
+    let s = match run_one(&cfg, Some(&dir), !args.quiet) {
+        Ok(s) => s,
+        Err(err) if arld::interrupt::requested() => {
+            eprintln!(
+                "{err:#}\ncontinue with: arld train --resume {}",
+                dir.display()
+            );
+            return Ok(ExitCode::from(arld::experiment::slurm::EXIT_INTERRUPTED));
+        }
+        Err(err) => return Err(err),
+    };
     println!(
         "{}: steps to solve {}{}, final score {:.2}, queries {}, {:.0} steps/s, {:.1} s -> {}",
         cfg.run_name(),

@@ -157,8 +157,8 @@ fn snapshot(
     parts.agent.save_state("agent", &mut state);
     parts.replay.save_state("replay", &mut state);
     parts.queries.save_state("query", &mut state);
-    state.put_value("rng.replay", parts.replay_rng);
-    state.put_value("rng.query", parts.query_rng);
+    state.put_text("rng.replay", parts.replay_rng);
+    state.put_text("rng.query", parts.query_rng);
     state.put_value(
         "rng.eval_env",
         &parts.eval_env.generator().map(|g| g.to_words()),
@@ -167,8 +167,16 @@ fn snapshot(
     state.put_value("loop", st);
     state.put_f32("obs", parts.obs);
     state.put_value("log", &log.position()?);
-    let phase = if st.training { "train" } else { "pretrain" };
-    checkpointer.save(&state, st.step, phase)
+    let position = serde_json::json!({
+        "phase": if st.training { "train" } else { "pretrain" },
+        "pretrain_updates": st.pretrain_done,
+        "step": st.step,
+        "episode": st.episode,
+        "episode_step": st.ep_len,
+        "expert_in_control": parts.queries.expert_in_control(),
+        "budget_used": parts.queries.budget_used(),
+    });
+    checkpointer.save(&state, position)
 }
 
 fn train_run(
@@ -219,8 +227,8 @@ fn train_run(
         agent.load_state("agent", state)?;
         replay.load_state("replay", state)?;
         queries.load_state("query", state)?;
-        replay_rng = state.value("rng.replay")?;
-        query_rng = state.value("rng.query")?;
+        replay_rng = state.text("rng.replay")?;
+        query_rng = state.text("rng.query")?;
         let eval_gen: Option<[u64; 6]> = state.value("rng.eval_env")?;
         eval_env.set_generator(eval_gen.map(crate::rng::NumpyRng::from_words));
         let expert_state: Option<String> = state.value("expert")?;

@@ -60,7 +60,8 @@ impl Checkpointer {
     }
 
     /// Writes `state` atomically (the previous snapshot stays whole until the new one replaces it).
-    pub fn save(&mut self, state: &StateDict, step: usize, phase: &str) -> Result<()> {
+    /// `position` says where the run is, for people and scripts (`snapshot.json`).
+    pub fn save(&mut self, state: &StateDict, position: serde_json::Value) -> Result<()> {
         let started = Instant::now();
         let values = serde_json::to_string(&state.values)?;
         let mut meta = HashMap::new();
@@ -93,8 +94,7 @@ impl Checkpointer {
             "format": FORMAT_VERSION,
             "arld": env!("CARGO_PKG_VERSION"),
             "config_hash": format!("{:016x}", fnv1a(self.config_toml.as_bytes())),
-            "phase": phase,
-            "step": step,
+            "position": position,
             "bytes": bytes.len(),
         });
         crate::files::write_atomic(
@@ -240,7 +240,7 @@ mod tests {
         state.put_u8("d", &[0, 1]);
         state.put_value("e", &(3usize, "x"));
         let mut ck = Checkpointer::new(dir.path(), &config(0));
-        ck.save(&state, 10, "train").unwrap();
+        ck.save(&state, serde_json::json!({"step": 10})).unwrap();
         assert_eq!(ck.load().unwrap().unwrap(), state);
         let other = Checkpointer::new(dir.path(), &config(1));
         let err = format!("{:#}", other.load().unwrap_err());

@@ -1,0 +1,310 @@
+//! Runs that survive SIGKILL: a run is killed at several moments (mid-pre-training, mid-episode, while the expert
+//! drives a query segment, and at seeded random delays), continued each time with `arld train --resume`, and its
+//! outputs compared byte for byte with an uninterrupted run of the same configuration (summary: all but the wall
+//! time and steps/s; weights: every tensor and the metadata).
+
+use std::path::Path;
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+const ARLD: &str = env!("CARGO_BIN_EXE_arld");
+
+fn train_args(args: &[&str], out: &Path) -> Vec<String> {
+    let mut v: Vec<String> = ["train", "--quiet"].iter().map(|s| s.to_string()).collect();
+    v.extend(args.iter().map(|s| s.to_string()));
+    v.push("-o".into());
+    v.push(out.display().to_string());
+    v
+}
+
+fn finish(child: Child) {
+    let out = child.wait_with_output().expect("wait for arld");
+    assert!(
+        out.status.success(),
+        "arld failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+fn spawn(args: &[String]) -> Child {
+    Command::new(ARLD)
+        .args(args)
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("start arld")
+}
+
+/// What `snapshot.json` says about where the run was.
+fn snapshot_position(dir: &Path) -> Option<serde_json::Value> {
+    let text = std::fs::read_to_string(dir.join("snapshot.json")).ok()?;
+    let info: serde_json::Value = serde_json::from_str(&text).ok()?;
+    Some(info["position"].clone())
+}
+
+/// A moment to kill at: when the latest snapshot matches, or after a delay.
+enum Moment {
+    When(&'static str, fn(&serde_json::Value) -> bool),
+    After(Duration),
+}
+
+/// Starts (or resumes) the run and SIGKILLs it at `moment`; returns what the last snapshot said, or `None` if
+/// the run finished first.
+fn kill_at(start: &[String], dir: &Path, moment: &Moment) -> Option<serde_json::Value> {
+    let args = if dir.join("snapshot.safetensors").is_file() {
+        vec![
+            "train".to_string(),
+            "--quiet".to_string(),
+            "--resume".to_string(),
+            dir.display().to_string(),
+        ]
+    } else {
+        start.to_vec()
+    };
+    let before = snapshot_position(dir);
+    let mut child = spawn(&args);
+    let started = Instant::now();
+    loop {
+        if let Ok(Some(status)) = child.try_wait() {
+            assert!(status.success(), "arld failed before it could be killed");
+            return None;
+        }
+        let due = match moment {
+            Moment::After(d) => started.elapsed() >= *d,
+            Moment::When(_, matches) => snapshot_position(dir)
+                .filter(|p| Some(p) != before.as_ref())
+                .is_some_and(|p| matches(&p)),
+        };
+        if due {
+            child.kill().expect("SIGKILL arld");
+            let _ = child.wait();
+            return snapshot_position(dir);
+        }
+        assert!(
+            started.elapsed() < Duration::from_secs(300),
+            "the run neither finished nor reached the moment to kill"
+        );
+        std::thread::sleep(Duration::from_millis(2));
+    }
+}
+
+fn summary_without_time(dir: &Path) -> serde_json::Value {
+    let text = std::fs::read_to_string(dir.join("summary.json")).expect("summary.json");
+    let mut v: serde_json::Value = serde_json::from_str(&text).unwrap();
+    let map = v.as_object_mut().unwrap();
+    map.remove("wall_time_s");
+    map.remove("steps_per_s");
+    v
+}
+
+type Weights = (
+    Vec<(String, Vec<u8>)>,
+    std::collections::BTreeMap<String, String>,
+);
+
+/// Weights compared tensor by tensor and metadata by key (the header's key order is not fixed).
+fn weights(dir: &Path) -> Weights {
+    let bytes = std::fs::read(dir.join("weights.safetensors")).unwrap();
+    let (_, meta) = safetensors::SafeTensors::read_metadata(&bytes).unwrap();
+    let file = safetensors::SafeTensors::deserialize(&bytes).unwrap();
+    let mut tensors: Vec<(String, Vec<u8>)> = file
+        .tensors()
+        .into_iter()
+        .map(|(n, v)| (n, v.data().to_vec()))
+        .collect();
+    tensors.sort();
+    let meta = meta
+        .metadata()
+        .clone()
+        .unwrap_or_default()
+        .into_iter()
+        .collect();
+    (tensors, meta)
+}
+
+/// Kills the run at each moment, resumes it to the end, and compares with an uninterrupted run.
+fn survives(args: &[&str], moments: &[Moment]) -> Vec<String> {
+    let work = tempfile::tempdir().unwrap();
+    let full = work.path().join("full");
+    finish(spawn(&train_args(args, &full)));
+    let cut = work.path().join("cut");
+    let start = train_args(args, &cut);
+    let mut hits = Vec::new();
+    for moment in moments {
+        match kill_at(&start, &cut, moment) {
+            Some(position) => hits.push(match moment {
+                Moment::When(what, _) => format!("{what}: {position}"),
+                Moment::After(d) => format!("after {d:?}: {position}"),
+            }),
+            None => hits.push("finished before the kill".to_string()),
+        }
+    }
+    // Resume to the end.
+    let args_end = if cut.join("snapshot.safetensors").is_file() {
+        vec![
+            "train".to_string(),
+            "--quiet".to_string(),
+            "--resume".to_string(),
+            cut.display().to_string(),
+        ]
+    } else {
+        start.clone()
+    };
+    if !cut.join("summary.json").is_file() {
+        finish(spawn(&args_end));
+    }
+    for name in ["eval.csv", "episodes.csv", "queries.csv"] {
+        let a = std::fs::read(full.join(name)).unwrap();
+        let b = std::fs::read(cut.join(name)).unwrap();
+        assert!(a == b, "{name} differs after kills at {hits:#?}");
+    }
+    assert_eq!(
+        summary_without_time(&full),
+        summary_without_time(&cut),
+        "{hits:#?}"
+    );
+    assert!(
+        weights(&full) == weights(&cut),
+        "weights differ after kills at {hits:#?}"
+    );
+    assert!(
+        !cut.join("snapshot.safetensors").exists(),
+        "a finished run keeps no snapshot"
+    );
+    hits
+}
+
+fn in_pretraining(p: &serde_json::Value) -> bool {
+    p["phase"] == "pretrain"
+}
+fn mid_episode(p: &serde_json::Value) -> bool {
+    p["phase"] == "train" && p["episode_step"].as_u64().unwrap_or(0) > 0
+}
+fn mid_segment(p: &serde_json::Value) -> bool {
+    p["expert_in_control"] == true
+}
+
+/// Seeded delays: the "random moments" are the same on every run of the test.
+fn delays(seed: u64, n: usize, max_ms: u64) -> Vec<Moment> {
+    let mut x = seed;
+    (0..n)
+        .map(|_| {
+            x = x
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            Moment::After(Duration::from_millis(20 + (x >> 33) % max_ms))
+        })
+        .collect()
+}
+
+#[test]
+fn a_cartpole_dqfd_noisy_run_killed_five_times_ends_byte_identical() {
+    let mut moments = vec![
+        Moment::When("mid-pre-training", in_pretraining),
+        Moment::When("mid-episode", mid_episode),
+    ];
+    moments.extend(delays(7, 4, 400));
+    let hits = survives(
+        &[
+            "--env",
+            "CartPole-v0",
+            "--method",
+            "dqfd",
+            "--net",
+            "noisy",
+            "--seed",
+            "1",
+            "--set",
+            "train_steps=4000",
+            "--set",
+            "pretrain_steps=1500",
+            "--set",
+            "eval_period=1000",
+            "--set",
+            "eval_episodes=3",
+            "--set",
+            "snapshot_every=97",
+        ],
+        &moments,
+    );
+    assert!(hits[0].contains("\"pretrain\""), "{hits:#?}");
+    assert!(hits[1].contains("\"train\""), "{hits:#?}");
+    eprintln!("CartPole-v0 DQfD-N kills: {hits:#?}");
+}
+
+#[test]
+fn a_lunarlander_adqn_bootstrap_run_killed_five_times_ends_byte_identical() {
+    let mut moments = vec![
+        Moment::When("mid-query-segment", mid_segment),
+        Moment::When("mid-episode", mid_episode),
+    ];
+    moments.extend(delays(11, 4, 600));
+    let hits = survives(
+        &[
+            "--env",
+            "LunarLander-v2",
+            "--method",
+            "adqn",
+            "--net",
+            "bootstrap",
+            "--seed",
+            "2",
+            "--set",
+            "train_steps=4000",
+            "--set",
+            "learning_starts=500",
+            "--set",
+            "eval_period=2000",
+            "--set",
+            "eval_episodes=2",
+            "--set",
+            "snapshot_every=89",
+        ],
+        &moments,
+    );
+    assert!(hits[0].contains("\"expert_in_control\":true"), "{hits:#?}");
+    eprintln!("LunarLander-v2 ADQN-B kills: {hits:#?}");
+}
+
+#[test]
+fn a_snapshot_of_another_configuration_is_refused() {
+    let work = tempfile::tempdir().unwrap();
+    let dir = work.path().join("run");
+    let args = train_args(
+        &[
+            "--env",
+            "CartPole-v0",
+            "--method",
+            "dqn",
+            "--set",
+            "train_steps=3000",
+            "--set",
+            "snapshot_every=100",
+        ],
+        &dir,
+    );
+    let pos = kill_at(&args, &dir, &Moment::When("mid-episode", mid_episode));
+    assert!(pos.is_some(), "the run finished before it could be killed");
+    // The run's configuration changed under the snapshot: resuming must refuse and say why.
+    let config = dir.join("config.toml");
+    let text = std::fs::read_to_string(&config).unwrap();
+    std::fs::write(&config, text.replace("seed = 0", "seed = 5")).unwrap();
+    let out = Command::new(ARLD)
+        .args(["train", "--quiet", "--resume"])
+        .arg(&dir)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(
+        err.contains("another configuration") && err.contains("seed = 0"),
+        "{err}"
+    );
+    let out = Command::new(ARLD)
+        .args(["train", "--resume"])
+        .arg(work.path())
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("holds no snapshot"));
+}
