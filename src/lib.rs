@@ -11,10 +11,12 @@
 //! - [`agent`]: acting (exploration, head sampling, noise), the learner (losses, target network), evaluation.
 //! - [`query`]: uncertainty measures, query rules and budget accounting.
 //! - [`expert`]: the [`expert::Expert`] trait and its kinds.
-//! - [`train`]: the training loop of one run, top to bottom.
-//! - [`experiment`]: presets, run directories, sweeps, steps to solve, tables and figures.
+//! - [`train`]: the training loop of one run, top to bottom, and its full-state snapshots.
+//! - [`experiment`]: presets, run directories, sweeps (local and on Slurm), steps to solve, tables and figures.
 //! - [`paper`]: the paper's tables (tasks, parameters, expert statistics, steps to solve) as data.
 //! - [`files`]: the one atomic file write every saved file goes through.
+//! - [`state`]: a component's state as named raw arrays and small values (what snapshots are made of).
+//! - [`interrupt`]: SIGTERM/SIGINT as a stop request that the training loop polls.
 //! - [`tboard`]: a minimal TensorBoard event-file writer for scalar curves.
 //!
 //! The binary `arld` is a thin command-line layer over this library.

@@ -11,7 +11,7 @@ use std::path::{Path, PathBuf};
 
 /// The layers, bottom first. Modules of one layer may not use each other.
 const LAYERS: [&[&str]; 7] = [
-    &["files", "paper"],
+    &["files", "paper", "state", "interrupt"],
     &["rng", "nn", "replay", "query"],
     &["env", "agent"],
     &["expert"],

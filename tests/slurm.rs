@@ -9,6 +9,9 @@ use std::time::{Duration, Instant};
 
 const ARLD: &str = env!("CARGO_BIN_EXE_arld");
 
+/// One cluster at a time: the tests' clusters share the node name and ports.
+static ONE_CLUSTER: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
 fn run(cmd: &mut Command) -> Output {
     let shown = format!("{cmd:?}");
     cmd.output().unwrap_or_else(|e| {
@@ -24,10 +27,12 @@ fn text(out: &[u8]) -> String {
 struct Cluster {
     dir: tempfile::TempDir,
     conf: PathBuf,
+    _one_at_a_time: std::sync::MutexGuard<'static, ()>,
 }
 
 impl Cluster {
     fn start() -> Cluster {
+        let guard = ONE_CLUSTER.lock().unwrap_or_else(|e| e.into_inner());
         let host = text(&run(Command::new("hostname").arg("-s")).stdout)
             .trim()
             .to_string();
@@ -76,7 +81,11 @@ impl Cluster {
             ),
         )
         .unwrap();
-        let cluster = Cluster { dir, conf };
+        let cluster = Cluster {
+            dir,
+            conf,
+            _one_at_a_time: guard,
+        };
         let out = run(Command::new("slurmctld")
             .arg("-c")
             .arg("-f")
@@ -154,12 +163,22 @@ impl Cluster {
 
 impl Drop for Cluster {
     fn drop(&mut self) {
+        let mut pids = Vec::new();
         for pid_file in ["slurmd.pid", "slurmctld.pid"] {
             if let Ok(pid) = std::fs::read_to_string(self.dir.path().join(pid_file)) {
                 let _ = Command::new("kill").arg(pid.trim()).status();
+                pids.push(pid.trim().to_string());
             }
         }
-        std::thread::sleep(Duration::from_millis(500));
+        // Wait for the daemons to exit, so the next cluster can take the ports.
+        let started = Instant::now();
+        while pids
+            .iter()
+            .any(|p| Path::new(&format!("/proc/{p}")).exists())
+            && started.elapsed() < Duration::from_secs(20)
+        {
+            std::thread::sleep(Duration::from_millis(100));
+        }
     }
 }
 
@@ -278,4 +297,103 @@ fn an_array_sweep_on_slurm_gives_the_results_of_a_local_sweep() {
     );
     // Every array task ran on the cluster's node.
     assert_eq!(outputs.matches("== ").count(), 6, "{outputs}");
+}
+
+#[test]
+fn a_requeued_job_continues_its_runs_from_their_snapshots() {
+    let cluster = Cluster::start();
+    let work = tempfile::tempdir().unwrap();
+    // Longer runs with frequent snapshots, so the job is requeued while a run is half done.
+    let args = |out: &Path| {
+        let mut a = sweep_args(out);
+        let i = a.iter().position(|s| s == "train_steps=3000").unwrap();
+        a[i] = "train_steps=12000".to_string();
+        a.extend(["--set".to_string(), "snapshot_every=500".to_string()]);
+        let i = a.iter().position(|s| s == "--seeds").unwrap();
+        a[i + 1] = "1".to_string();
+        a
+    };
+    let local = work.path().join("local");
+    let out = run(Command::new(ARLD).args(args(&local)).args(["--jobs", "2"]));
+    assert!(
+        out.status.success(),
+        "local sweep failed: {}",
+        text(&out.stderr)
+    );
+
+    let remote = work.path().join("slurm");
+    let out = run(cluster
+        .cmd(ARLD)
+        .args(args(&remote))
+        .args(["--slurm", "--time", "20:00"]));
+    assert!(
+        out.status.success(),
+        "submission failed: {}",
+        text(&out.stderr)
+    );
+    let said = text(&out.stdout);
+    let job = said
+        .split_whitespace()
+        .nth(3)
+        .map(|j| j.trim_end_matches(':').to_string())
+        .unwrap_or_else(|| panic!("no job id in {said:?}"));
+
+    // Wait until a run of task 0 has written a snapshot, then requeue that task while it runs.
+    let run_dir = remote.join("CartPole-v0/dqn-bootstrap/seed0");
+    let started = Instant::now();
+    while !run_dir.join("snapshot.json").is_file() {
+        assert!(
+            !run_dir.join("summary.json").is_file(),
+            "the run finished before it could be requeued"
+        );
+        assert!(
+            started.elapsed() < Duration::from_secs(300),
+            "no snapshot appeared in {}{}",
+            run_dir.display(),
+            cluster.logs()
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let task = format!("{job}_0");
+    let out = run(cluster.cmd("scontrol").args(["requeue", &task]));
+    assert!(
+        out.status.success(),
+        "scontrol requeue failed: {}",
+        text(&out.stderr)
+    );
+    // Slurm holds a requeued job back for a while (BeginTime); let it start again at once.
+    let started = Instant::now();
+    loop {
+        let out = run(cluster.cmd("scontrol").args([
+            "update",
+            &format!("JobId={task}"),
+            "StartTime=now",
+        ]));
+        if out.status.success() || started.elapsed() > Duration::from_secs(60) {
+            break;
+        }
+        std::thread::sleep(Duration::from_millis(500));
+    }
+    cluster.wait_for(&job, Duration::from_secs(600));
+
+    let log =
+        std::fs::read_to_string(remote.join(format!("slurm/{job}_0.out"))).unwrap_or_default();
+    assert!(
+        log.contains("attempt 1"),
+        "the task did not run a second time:\n{log}"
+    );
+    assert!(
+        log.contains("seed0: continuing from its snapshot"),
+        "the requeued task did not continue the run from its snapshot:\n{log}"
+    );
+    let local_csv = text(&std::fs::read(local.join("results.csv")).unwrap());
+    let remote_csv = text(
+        &std::fs::read(remote.join("results.csv")).unwrap_or_else(|e| {
+            panic!("no results.csv from the Slurm sweep ({e}); task 0 output:\n{log}")
+        }),
+    );
+    assert_eq!(
+        remote_csv, local_csv,
+        "results changed by the requeue; task 0 output:\n{log}"
+    );
 }

@@ -60,6 +60,9 @@ pub fn run_one(cfg: &TrainConfig, out_dir: Option<&Path>, progress: bool) -> Res
     // A run directory with a snapshot continues from it (refused if it belongs to another configuration).
     let mut checkpointer = Checkpointer::new(dir, cfg);
     let snapshot = checkpointer.load()?;
+    if snapshot.is_some() {
+        eprintln!("{}: continuing from its snapshot", dir.display());
+    }
     let mut log = match &snapshot {
         Some(state) => RunLog::resume(
             dir,
