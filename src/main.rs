@@ -41,6 +41,11 @@ enum Command {
 
 fn main() -> std::process::ExitCode {
     let cli = Cli::parse();
+    // The instruction-set cap is read once per process; a bad value is reported here, before any work.
+    if let Err(err) = arld::nn::SimdLevel::from_env() {
+        eprintln!("error: {err}");
+        return std::process::ExitCode::FAILURE;
+    }
     let result = match cli.command {
         Command::Env { cmd } => cli::env_cmd::run(cmd),
         Command::Train(args) => cli::train_cmd::run(args),

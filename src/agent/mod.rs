@@ -357,11 +357,29 @@ impl Agent {
 /// `q` is a buffer of `heads * n_actions` values.
 pub fn test_policy_action(net: &QNet, q: &mut [f32], obs: &[f32]) -> usize {
     let a = net.n_actions();
-    let heads = net.heads();
     net.q_values_single(obs, None, q);
-    if heads == 1 {
-        return argmax(&q[..a]);
+    vote(net.heads(), |k| &q[k * a..(k + 1) * a])
+}
+
+/// [`test_policy_action`] for `actions.len()` states at once (`obs` row-major), with one batched forward in
+/// `ws` (built for `net`, for at least that many rows). The forward computes every row exactly as the single
+/// state's forward does, so the actions are the same as [`test_policy_action`]'s one by one.
+pub fn test_policy_actions(net: &QNet, ws: &mut Workspace, obs: &[f32], actions: &mut [usize]) {
+    let (n, a) = (actions.len(), net.n_actions());
+    let q = net.forward(obs, n, None, ws);
+    for (row, action) in actions.iter_mut().enumerate() {
+        *action = vote(net.heads(), |k| {
+            &q[(k * n + row) * a..(k * n + row + 1) * a]
+        });
     }
+}
+
+/// The majority vote of [`test_policy_action`] over `heads` rows of Q-values (`head(k)` is head k's row).
+fn vote<'q>(heads: usize, head: impl Fn(usize) -> &'q [f32]) -> usize {
+    if heads == 1 {
+        return argmax(head(0));
+    }
+    let a = head(0).len();
     const MAX_ACTIONS: usize = 32;
     assert!(
         a <= MAX_ACTIONS,
@@ -370,7 +388,7 @@ pub fn test_policy_action(net: &QNet, q: &mut [f32], obs: &[f32]) -> usize {
     let mut votes = [0u32; MAX_ACTIONS];
     let mut mean = [0f32; MAX_ACTIONS];
     for k in 0..heads {
-        let row = &q[k * a..(k + 1) * a];
+        let row = head(k);
         votes[argmax(row)] += 1;
         for (m, v) in mean.iter_mut().zip(row) {
             *m += v;

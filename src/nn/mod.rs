@@ -1,5 +1,5 @@
 //! The Q-network: a fixed-shape MLP `obs_dim -> 64 -> ReLU -> 64 -> ReLU -> output stage`
-//! (docs/algorithm.md §2), with forward and backward written by hand on the `gemm` crate.
+//! (docs/algorithm.md §2), with forward and backward written by hand on the matrix kernels of `kernels.rs`.
 //!
 //! The output stage is one of ([`OutputKind`]):
 //! - `Plain`: one linear layer `64 -> A`;
@@ -11,24 +11,25 @@
 //! How the parts fit:
 //! - [`QNet`] holds the parameters only, in one flat `Vec<f32>` (so Adam, clipping and target copies are
 //!   single loops over one slice). Trunk and plain/bootstrap weights are stored transposed, `[in][out]`, so
-//!   the batch product is `x · W` on row-major data (the layout `gemm` runs fastest in all of forward and
-//!   backward) and the single-state pass reads contiguous weight rows; the K heads are fused into one `[64][K*A]` matrix so the output stage is one GEMM. The noisy
+//!   the batch product is `x · W` with `W`'s rows contiguous (the kernels vectorise across output columns);
+//!   the K heads are fused into one `[64][K*A]` matrix so the output stage is one product. The noisy
 //!   layer keeps PyTorch's `[out][in]` layout (its effective weights are rebuilt every pass anyway, and
 //!   [`QNet::noisy_sigmas`] hands out `sigma_w` as `[A][64]`). Files use PyTorch's layout for every tensor.
 //! - [`Workspace`] holds every buffer a forward/backward pair needs, sized once for a maximum batch, and
 //!   remembers the activations of its last forward for the backward pass.
 //! - [`Grads`], [`clip_grad_norm`] and [`Adam`] (in `adam.rs`) share the parameter layout.
-//! - `linear.rs` wraps `gemm`; `noisy.rs` holds [`NoiseSample`]; `io.rs` reads and writes safetensors.
-//! - `simd.rs` compiles the element-wise loops a second time for AVX2 and picks that copy at run time;
-//!   `gemm` dispatches its own kernels (AVX-512 with the crate's `x86-v4` feature).
+//! - `kernels.rs` holds the matrix product: one fixed chain of fused multiply-adds per output, so every
+//!   instruction set gives the same bytes and a batch row equals the single-state result;
+//!   `linear.rs` the element-wise passes and the initialisation; `noisy.rs` [`NoiseSample`]; `io.rs`
+//!   reads and writes safetensors.
+//! - `simd.rs` chooses the [`SimdLevel`] (the CPU's best, capped by `ARLD_SIMD`); forward, backward and the
+//!   single-state pass run in a twin compiled for that level (`at_simd_level!`).
 //!
-//! After the workspaces exist, a training update allocates nothing in this module; the `gemm` crate itself
-//! makes about 20 small allocations per update for its packing buffers (it offers no way to pass them in).
-//! Measured on an AVX-512 Xeon (min of samples, d = 8, A = 4, batch 32): a double-DQN update takes about
-//! 18 us (plain), 25 us (10 heads) and 19 us (noisy); a single-state forward 0.15-0.25 us.
+//! After the workspaces exist, a training update allocates nothing.
 
 mod adam;
 mod io;
+mod kernels;
 mod linear;
 mod noisy;
 mod simd;
@@ -42,10 +43,45 @@ use rand::Rng;
 pub use adam::{Adam, Grads, clip_grad_norm};
 pub use io::ModelFileError;
 pub use noisy::{NoiseSample, noise_transform};
+pub use simd::{SimdCapError, SimdLevel, simd_level};
 
-use simd::simd_dispatch;
+use kernels::{Lanes, Strided, product, transpose};
+use linear::{MatView, column_sums, init_linear, relu_backward};
+use simd::scalar_has_fma;
 
-use linear::{MatView, add_bias_relu, column_sums, init_linear, matmul, relu_backward};
+/// `at_simd_level!(net, method(arg: Type, ...))`: calls `net.method::<L>(args)` with the [`Lanes`] of the
+/// process's [`SimdLevel`], from a twin compiled for that instruction set (so the `#[inline(always)]`
+/// kernels inside are compiled for it too).
+macro_rules! at_simd_level {
+    ($net:expr, $method:ident($($arg:ident: $ty:ty),*)) => {{
+        #[cfg(target_arch = "x86_64")]
+        #[target_feature(enable = "avx512f,avx2,fma")]
+        fn avx512(net: &QNet, $($arg: $ty),*) {
+            net.$method::<kernels::Avx512>($($arg),*)
+        }
+        #[cfg(target_arch = "x86_64")]
+        #[target_feature(enable = "avx2,fma")]
+        fn avx2(net: &QNet, $($arg: $ty),*) {
+            net.$method::<kernels::Avx2>($($arg),*)
+        }
+        #[cfg(target_arch = "x86_64")]
+        #[target_feature(enable = "fma")]
+        fn scalar_fma(net: &QNet, $($arg: $ty),*) {
+            net.$method::<kernels::Scalar>($($arg),*)
+        }
+        match simd_level() {
+            // SAFETY (all three): a level is only selected when the CPU has its features
+            // (`SimdLevel::detected`, `scalar_has_fma`).
+            #[cfg(target_arch = "x86_64")]
+            SimdLevel::Avx512 => unsafe { avx512($net, $($arg),*) },
+            #[cfg(target_arch = "x86_64")]
+            SimdLevel::Avx2 => unsafe { avx2($net, $($arg),*) },
+            #[cfg(target_arch = "x86_64")]
+            _ if scalar_has_fma() => unsafe { scalar_fma($net, $($arg),*) },
+            _ => $net.$method::<kernels::Scalar>($($arg),*),
+        }
+    }};
+}
 
 /// Width of both hidden layers (docs/algorithm.md §2).
 pub const HIDDEN: usize = 64;
@@ -348,6 +384,7 @@ impl QNet {
     ///
     /// `noise`: for a noisy network, `Some(sample)` evaluates it under that noise and `None` with the mean
     /// weights (noise off); ignored by the other kinds. The activations are kept in `ws` for [`Self::backward`].
+    /// Each row is computed exactly as [`Self::q_values_single`] computes that state alone.
     ///
     /// # Panics
     /// If `ws` was built for another shape, `batch` exceeds its capacity, `x` has the wrong length, or the
@@ -359,27 +396,12 @@ impl QNet {
         noise: Option<&NoiseSample>,
         ws: &'w mut Workspace,
     ) -> &'w [f32] {
-        simd_dispatch!(
-            self.forward_avx2(x, batch, noise, ws),
-            self.forward_into(x, batch, noise, ws)
-        );
+        at_simd_level!(self, forward_into(x: &[f32], batch: usize, noise: Option<&NoiseSample>, ws: &mut Workspace));
         ws.q_values()
     }
 
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2")]
-    fn forward_avx2(
-        &self,
-        x: &[f32],
-        batch: usize,
-        noise: Option<&NoiseSample>,
-        ws: &mut Workspace,
-    ) {
-        self.forward_into(x, batch, noise, ws)
-    }
-
     #[inline(always)]
-    fn forward_into(
+    fn forward_into<S: Lanes>(
         &self,
         x: &[f32],
         batch: usize,
@@ -399,67 +421,38 @@ impl QNet {
         let x_copy = &mut ws.x[..batch * d];
         x_copy.copy_from_slice(x);
         let h1 = &mut ws.h1[..batch * HIDDEN];
-        matmul(
+        product::<S>(
             h1,
-            MatView::row_major(batch, HIDDEN),
-            x_copy,
-            MatView::row_major(batch, d),
+            Strided::row_major(x_copy, batch, d),
             self.tensor(l.fc1_w),
-            MatView::row_major(d, HIDDEN),
-            1.0,
+            Some(self.tensor(l.fc1_b)),
         );
-        add_bias_relu(h1, self.tensor(l.fc1_b));
+        relu_in_place(h1);
         let h2 = &mut ws.h2[..batch * HIDDEN];
-        matmul(
+        product::<S>(
             h2,
-            MatView::row_major(batch, HIDDEN),
-            h1,
-            MatView::row_major(batch, HIDDEN),
+            Strided::row_major(h1, batch, HIDDEN),
             self.tensor(l.fc2_w),
-            MatView::row_major(HIDDEN, HIDDEN),
-            1.0,
+            Some(self.tensor(l.fc2_b)),
         );
-        add_bias_relu(h2, self.tensor(l.fc2_b));
+        relu_in_place(h2);
+        let h2 = Strided::row_major(h2, batch, HIDDEN);
 
         let q = &mut ws.q[..batch * width];
         match l.kind {
             OutputKind::Plain => {
-                matmul(
-                    q,
-                    MatView::row_major(batch, a),
-                    h2,
-                    MatView::row_major(batch, HIDDEN),
-                    self.tensor(l.out_w),
-                    MatView::row_major(HIDDEN, a),
-                    1.0,
-                );
-                add_bias(q, self.tensor(l.out_b));
+                product::<S>(q, h2, self.tensor(l.out_w), Some(self.tensor(l.out_b)));
             }
             OutputKind::Bootstrap { heads } => {
-                // One fused GEMM [batch][K*A], then reorder to [head][batch][action] adding the bias.
+                // One fused product [batch][K*A], then reorder to [head][batch][action].
                 let fused = &mut ws.fused[..batch * width];
-                matmul(
-                    fused,
-                    MatView::row_major(batch, width),
-                    h2,
-                    MatView::row_major(batch, HIDDEN),
-                    self.tensor(l.out_w),
-                    MatView::row_major(HIDDEN, width),
-                    1.0,
-                );
-                let bias = self.tensor(l.out_b);
+                product::<S>(fused, h2, self.tensor(l.out_w), Some(self.tensor(l.out_b)));
                 for (head, q_head) in q.chunks_exact_mut(batch * a).enumerate().take(heads) {
                     let columns = head * a..(head + 1) * a;
                     for (q_row, fused_row) in
                         q_head.chunks_exact_mut(a).zip(fused.chunks_exact(width))
                     {
-                        for ((qv, f), b) in q_row
-                            .iter_mut()
-                            .zip(&fused_row[columns.clone()])
-                            .zip(&bias[columns.clone()])
-                        {
-                            *qv = f + b;
-                        }
+                        q_row.copy_from_slice(&fused_row[columns.clone()]);
                     }
                 }
             }
@@ -489,19 +482,11 @@ impl QNet {
                     &layer,
                     &ws.noise_in,
                     &ws.noise_out,
-                    &mut ws.w_eff_t,
+                    &mut ws.w_eff,
                     &mut ws.b_eff,
                 );
-                matmul(
-                    q,
-                    MatView::row_major(batch, a),
-                    h2,
-                    MatView::row_major(batch, HIDDEN),
-                    &ws.w_eff_t,
-                    MatView::row_major(HIDDEN, a),
-                    1.0,
-                );
-                add_bias(q, &ws.b_eff);
+                transpose(&ws.w_eff, a, HIDDEN, &mut ws.w_eff_t);
+                product::<S>(q, h2, &ws.w_eff_t, Some(&ws.b_eff));
             }
         }
     }
@@ -516,20 +501,11 @@ impl QNet {
     /// # Panics
     /// If `ws` holds no forward pass, or `dq`/`grads` do not match the network.
     pub fn backward(&self, ws: &mut Workspace, dq: &[f32], grads: &mut Grads) {
-        simd_dispatch!(
-            self.backward_avx2(ws, dq, grads),
-            self.backward_impl(ws, dq, grads)
-        )
-    }
-
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2")]
-    fn backward_avx2(&self, ws: &mut Workspace, dq: &[f32], grads: &mut Grads) {
-        self.backward_impl(ws, dq, grads)
+        at_simd_level!(self, backward_impl(ws: &mut Workspace, dq: &[f32], grads: &mut Grads));
     }
 
     #[inline(always)]
-    fn backward_impl(&self, ws: &mut Workspace, dq: &[f32], grads: &mut Grads) {
+    fn backward_impl<S: Lanes>(&self, ws: &mut Workspace, dq: &[f32], grads: &mut Grads) {
         let l = &self.layout;
         let batch = ws.batch;
         assert!(batch > 0, "backward: the workspace holds no forward pass");
@@ -546,7 +522,7 @@ impl QNet {
         );
         let g = TensorsMut::split(l, &mut grads.data);
 
-        // dL/d(output GEMM result) in the GEMM's [batch][width] layout.
+        // dL/d(output product) in the product's [batch][width] layout.
         let d_out: &[f32] = match l.kind {
             OutputKind::Bootstrap { heads } => {
                 let d_fused = &mut ws.d_fused[..batch * width];
@@ -565,19 +541,12 @@ impl QNet {
         let h1 = &ws.h1[..batch * HIDDEN];
         let h2 = &ws.h2[..batch * HIDDEN];
         let d_h2 = &mut ws.d_h2[..batch * HIDDEN];
+        let w_t = &mut ws.w_t;
         column_sums(d_out, g.out_b);
         match l.kind {
             OutputKind::Noisy => {
                 // dL/dW_eff as [A][64] = d_out^T · h2; it is also dL/dmu_w.
-                matmul(
-                    g.out_w,
-                    MatView::row_major(a, HIDDEN),
-                    d_out,
-                    MatView::row_major(batch, a).t(),
-                    h2,
-                    MatView::row_major(batch, HIDDEN),
-                    1.0,
-                );
+                product::<S>(g.out_w, Strided::transposed(d_out, batch, a), h2, None);
                 noisy::sigma_gradients(
                     g.out_w,
                     g.out_b,
@@ -586,77 +555,37 @@ impl QNet {
                     g.sigma_w,
                     g.sigma_b,
                 );
-                matmul(
-                    d_h2,
-                    MatView::row_major(batch, HIDDEN),
-                    d_out,
-                    MatView::row_major(batch, a),
-                    &ws.w_eff_t,
-                    MatView::row_major(HIDDEN, a).t(),
-                    1.0,
-                );
+                product::<S>(d_h2, Strided::row_major(d_out, batch, a), &ws.w_eff, None);
             }
             OutputKind::Plain | OutputKind::Bootstrap { .. } => {
-                matmul(
-                    g.out_w,
-                    MatView::row_major(HIDDEN, width),
-                    h2,
-                    MatView::row_major(batch, HIDDEN).t(),
-                    d_out,
-                    MatView::row_major(batch, width),
-                    1.0,
-                );
-                // The 1/K trunk scaling of Bootstrapped DQN, folded into the GEMM's scale.
-                let trunk_scale = 1.0 / l.heads() as f32;
-                matmul(
-                    d_h2,
-                    MatView::row_major(batch, HIDDEN),
-                    d_out,
-                    MatView::row_major(batch, width),
-                    self.tensor(l.out_w),
-                    MatView::row_major(HIDDEN, width).t(),
-                    trunk_scale,
-                );
+                product::<S>(g.out_w, Strided::transposed(h2, batch, HIDDEN), d_out, None);
+                transpose(self.tensor(l.out_w), HIDDEN, width, w_t);
+                product::<S>(d_h2, Strided::row_major(d_out, batch, width), w_t, None);
+                // The 1/K trunk scaling of Bootstrapped DQN.
+                if l.heads() > 1 {
+                    let trunk_scale = 1.0 / l.heads() as f32;
+                    d_h2.iter_mut().for_each(|v| *v *= trunk_scale);
+                }
             }
         }
         relu_backward(d_h2, h2);
         column_sums(d_h2, g.fc2_b);
-        matmul(
-            g.fc2_w,
-            MatView::row_major(HIDDEN, HIDDEN),
-            h1,
-            MatView::row_major(batch, HIDDEN).t(),
-            d_h2,
-            MatView::row_major(batch, HIDDEN),
-            1.0,
-        );
+        product::<S>(g.fc2_w, Strided::transposed(h1, batch, HIDDEN), d_h2, None);
         let d_h1 = &mut ws.d_h1[..batch * HIDDEN];
-        matmul(
-            d_h1,
-            MatView::row_major(batch, HIDDEN),
-            d_h2,
-            MatView::row_major(batch, HIDDEN),
-            self.tensor(l.fc2_w),
-            MatView::row_major(HIDDEN, HIDDEN).t(),
-            1.0,
-        );
+        transpose(self.tensor(l.fc2_w), HIDDEN, HIDDEN, w_t);
+        product::<S>(d_h1, Strided::row_major(d_h2, batch, HIDDEN), w_t, None);
         relu_backward(d_h1, h1);
         column_sums(d_h1, g.fc1_b);
-        matmul(
+        product::<S>(
             g.fc1_w,
-            MatView::row_major(d, HIDDEN),
-            &ws.x[..batch * d],
-            MatView::row_major(batch, d).t(),
+            Strided::transposed(&ws.x[..batch * d], batch, d),
             d_h1,
-            MatView::row_major(batch, HIDDEN),
-            1.0,
+            None,
         );
     }
 
-    /// Q-values of one state, `[head][action]` (length `heads * n_actions`), for acting.
-    ///
-    /// Hand-written loops rather than `gemm`: at batch 1 the call overhead of a GEMM dominates.
-    /// `noise` as in [`Self::forward`].
+    /// Q-values of one state, `[head][action]` (length `heads * n_actions`), for acting: the same numbers
+    /// as that state's row of a batched [`Self::forward`]. `noise` as in [`Self::forward`].
     pub fn q_values_single(&self, obs: &[f32], noise: Option<&NoiseSample>, q_out: &mut [f32]) {
         let mut features = [0.0f32; HIDDEN];
         self.q_values_single_with_features(obs, noise, q_out, &mut features);
@@ -674,26 +603,11 @@ impl QNet {
         q_out: &mut [f32],
         features: &mut [f32; HIDDEN],
     ) {
-        simd_dispatch!(
-            self.single_avx2(obs, noise, q_out, features),
-            self.single_impl(obs, noise, q_out, features)
-        )
-    }
-
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2")]
-    fn single_avx2(
-        &self,
-        obs: &[f32],
-        noise: Option<&NoiseSample>,
-        q_out: &mut [f32],
-        features: &mut [f32; HIDDEN],
-    ) {
-        self.single_impl(obs, noise, q_out, features)
+        at_simd_level!(self, single_impl(obs: &[f32], noise: Option<&NoiseSample>, q_out: &mut [f32], features: &mut [f32; HIDDEN]));
     }
 
     #[inline(always)]
-    fn single_impl(
+    fn single_impl<S: Lanes>(
         &self,
         obs: &[f32],
         noise: Option<&NoiseSample>,
@@ -712,133 +626,70 @@ impl QNet {
             "q_values_single: q_out must hold heads * n_actions values"
         );
         let mut h1 = [0.0f32; HIDDEN];
-        dense_single(obs, self.tensor(l.fc1_w), self.tensor(l.fc1_b), &mut h1);
+        product::<S>(
+            &mut h1,
+            Strided::row_major(obs, 1, l.obs_dim),
+            self.tensor(l.fc1_w),
+            Some(self.tensor(l.fc1_b)),
+        );
         relu_in_place(&mut h1);
-        dense_single(&h1, self.tensor(l.fc2_w), self.tensor(l.fc2_b), features);
+        product::<S>(
+            features,
+            Strided::row_major(&h1, 1, HIDDEN),
+            self.tensor(l.fc2_w),
+            Some(self.tensor(l.fc2_b)),
+        );
         relu_in_place(features);
         match l.kind {
             OutputKind::Plain | OutputKind::Bootstrap { .. } => {
                 // With batch 1, [head][batch][action] is the fused [K*A] order.
-                dense_single(features, self.tensor(l.out_w), self.tensor(l.out_b), q_out);
+                product::<S>(
+                    q_out,
+                    Strided::row_major(features, 1, HIDDEN),
+                    self.tensor(l.out_w),
+                    Some(self.tensor(l.out_b)),
+                );
             }
             OutputKind::Noisy => {
-                let (mu_w, sigma_w) = (self.tensor(l.out_w), self.tensor(l.sigma_w));
-                let (mu_b, sigma_b) = (self.tensor(l.out_b), self.tensor(l.sigma_b));
-                match noise {
-                    None => {
-                        for (action, q) in q_out.iter_mut().enumerate() {
-                            let mu_row = &mu_w[action * HIDDEN..(action + 1) * HIDDEN];
-                            *q = mu_b[action] + dot(mu_row, features);
-                        }
-                    }
+                let zero_in = [0.0f32; HIDDEN];
+                let (eps_in, eps_out) = match noise {
                     Some(sample) => {
                         assert_eq!(
                             sample.n_actions(),
                             l.n_actions,
                             "q_values_single: wrong noise sample"
                         );
-                        // (mu + sigma ⊙ f_out f_in^T) phi = mu phi + f_out ⊙ (sigma (f_in ⊙ phi)).
-                        let mut noisy_features = [0.0f32; HIDDEN];
-                        for ((nf, &f), &eps) in noisy_features
-                            .iter_mut()
-                            .zip(features.iter())
-                            .zip(sample.input_factors())
-                        {
-                            *nf = f * eps;
-                        }
-                        let eps_out = sample.output_factors();
-                        for (action, q) in q_out.iter_mut().enumerate() {
-                            let rows = action * HIDDEN..(action + 1) * HIDDEN;
-                            let mean = dot(&mu_w[rows.clone()], features);
-                            let noise_term = dot(&sigma_w[rows], &noisy_features);
-                            *q = mu_b[action]
-                                + sigma_b[action] * eps_out[action]
-                                + mean
-                                + eps_out[action] * noise_term;
-                        }
+                        (sample.input_factors(), Some(sample.output_factors()))
                     }
+                    None => (&zero_in, None),
+                };
+                let (mu_w, sigma_w) = (self.tensor(l.out_w), self.tensor(l.sigma_w));
+                let (mu_b, sigma_b) = (self.tensor(l.out_b), self.tensor(l.sigma_b));
+                // The batched forward's chain, with the effective weights built on the fly
+                // (noisy::effective_weights: w = mu + sigma * (eps_out * eps_in), b = mu + sigma * eps_out).
+                for (action, q) in q_out.iter_mut().enumerate() {
+                    let e_out = eps_out.map_or(0.0, |e| e[action]);
+                    let rows = action * HIDDEN..(action + 1) * HIDDEN;
+                    let mut acc = mu_b[action] + sigma_b[action] * e_out;
+                    for (((&f, &mu), &sigma), &e_in) in features
+                        .iter()
+                        .zip(&mu_w[rows.clone()])
+                        .zip(&sigma_w[rows])
+                        .zip(eps_in)
+                    {
+                        acc = f.mul_add(mu + sigma * (e_out * e_in), acc);
+                    }
+                    *q = acc;
                 }
             }
         }
     }
 }
 
-/// `out = bias + input · W` for one input vector, with `W` stored `[in][out]`.
-///
-/// The outputs are computed in blocks of up to 64 columns whose running sums stay in registers for the
-/// whole pass over the inputs: accumulating into `out` in memory instead makes every input a store and a
-/// reload of the same addresses, which stalls badly when `out` straddles cache lines.
-#[inline(always)]
-fn dense_single(input: &[f32], weight_t: &[f32], bias: &[f32], out: &mut [f32]) {
-    let width = out.len();
-    let mut col = 0;
-    while col < width {
-        col += match width - col {
-            64.. => dense_single_block::<64>(input, weight_t, bias, out, col),
-            32.. => dense_single_block::<32>(input, weight_t, bias, out, col),
-            16.. => dense_single_block::<16>(input, weight_t, bias, out, col),
-            8.. => dense_single_block::<8>(input, weight_t, bias, out, col),
-            4.. => dense_single_block::<4>(input, weight_t, bias, out, col),
-            _ => dense_single_block::<1>(input, weight_t, bias, out, col),
-        };
-    }
-}
-
-/// Columns `col..col + N` of [`dense_single`]; returns `N`.
-#[inline(always)]
-fn dense_single_block<const N: usize>(
-    input: &[f32],
-    weight_t: &[f32],
-    bias: &[f32],
-    out: &mut [f32],
-    col: usize,
-) -> usize {
-    let width = out.len();
-    let mut sums = [0.0f32; N];
-    sums.copy_from_slice(&bias[col..col + N]);
-    for (&value, row) in input.iter().zip(weight_t.chunks_exact(width)) {
-        let weights: &[f32; N] = row[col..col + N].try_into().expect("block inside the row");
-        for (sum, &w) in sums.iter_mut().zip(weights) {
-            *sum += value * w;
-        }
-    }
-    out[col..col + N].copy_from_slice(&sums);
-    N
-}
-
 #[inline(always)]
 fn relu_in_place(values: &mut [f32]) {
     for v in values.iter_mut() {
         *v = v.max(0.0);
-    }
-}
-
-/// Dot product with eight independent partial sums, so the compiler can keep it in SIMD registers.
-#[inline(always)]
-fn dot(a: &[f32], b: &[f32]) -> f32 {
-    let mut partial = [0.0f32; 8];
-    let (a_chunks, b_chunks) = (a.chunks_exact(8), b.chunks_exact(8));
-    let tail: f32 = a_chunks
-        .remainder()
-        .iter()
-        .zip(b_chunks.remainder())
-        .map(|(x, y)| x * y)
-        .sum();
-    for (ca, cb) in a_chunks.zip(b_chunks) {
-        for lane in 0..8 {
-            partial[lane] += ca[lane] * cb[lane];
-        }
-    }
-    partial.iter().sum::<f32>() + tail
-}
-
-/// Adds `bias` to every row of the row-major `rows` (width `bias.len()`).
-#[inline(always)]
-fn add_bias(rows: &mut [f32], bias: &[f32]) {
-    for row in rows.chunks_exact_mut(bias.len()) {
-        for (value, b) in row.iter_mut().zip(bias) {
-            *value += b;
-        }
     }
 }
 
@@ -877,14 +728,18 @@ pub struct Workspace {
     /// Output GEMM result `[batch][K*A]` before reordering (bootstrap only).
     fused: Vec<f32>,
     q: Vec<f32>,
-    /// Noise factors and effective output weights `[64][A]`/bias of the last noisy forward.
+    /// Noise factors and effective output weights (`[A][64]` and transposed `[64][A]`) and bias of the
+    /// last noisy forward.
     noise_in: [f32; HIDDEN],
     noise_out: Vec<f32>,
+    w_eff: Vec<f32>,
     w_eff_t: Vec<f32>,
     b_eff: Vec<f32>,
     d_fused: Vec<f32>,
     d_h2: Vec<f32>,
     d_h1: Vec<f32>,
+    /// A transposed weight matrix for the input gradient of a layer (`[out][64]`, the widest layer).
+    w_t: Vec<f32>,
 }
 
 impl Workspace {
@@ -906,11 +761,13 @@ impl Workspace {
             q: vec![0.0; max_batch * l.out_width],
             noise_in: [0.0; HIDDEN],
             noise_out: vec![0.0; noisy_len(l.n_actions)],
+            w_eff: vec![0.0; noisy_len(HIDDEN * l.n_actions)],
             w_eff_t: vec![0.0; noisy_len(HIDDEN * l.n_actions)],
             b_eff: vec![0.0; noisy_len(l.n_actions)],
             d_fused: vec![0.0; bootstrap_len(max_batch * l.out_width)],
             d_h2: vec![0.0; max_batch * HIDDEN],
             d_h1: vec![0.0; max_batch * HIDDEN],
+            w_t: vec![0.0; HIDDEN * l.out_width.max(HIDDEN)],
         }
     }
 

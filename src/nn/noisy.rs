@@ -112,14 +112,14 @@ pub(crate) struct NoisyParams<'a> {
 
 /// Builds the effective weights `mu + sigma ⊙ eps` of one forward pass.
 ///
-/// The result `w_eff_t` is written transposed, `[HIDDEN][A]`, because the batch product `h2 · W^T` reads
-/// it row by row. `input`/`output` are the noise factors (all zeros for the mean network).
+/// The result `w_eff` is `[A][HIDDEN]` like `mu_w`. `input`/`output` are the noise factors (all zeros for
+/// the mean network).
 #[inline(always)]
 pub(crate) fn effective_weights(
     layer: &NoisyParams,
     input: &[f32; HIDDEN],
     output: &[f32],
-    w_eff_t: &mut [f32],
+    w_eff: &mut [f32],
     b_eff: &mut [f32],
 ) {
     let NoisyParams {
@@ -128,14 +128,14 @@ pub(crate) fn effective_weights(
         mu_b,
         sigma_b,
     } = *layer;
-    let n_actions = output.len();
-    for (a, (&eps_out, (mu_row, sigma_row))) in output
+    for ((&eps_out, w_row), (mu_row, sigma_row)) in output
         .iter()
+        .zip(w_eff.chunks_exact_mut(HIDDEN))
         .zip(mu_w.chunks_exact(HIDDEN).zip(sigma_w.chunks_exact(HIDDEN)))
-        .enumerate()
     {
-        for i in 0..HIDDEN {
-            w_eff_t[i * n_actions + a] = mu_row[i] + sigma_row[i] * (eps_out * input[i]);
+        for (((w, &mu), &sigma), &eps_in) in w_row.iter_mut().zip(mu_row).zip(sigma_row).zip(input)
+        {
+            *w = mu + sigma * (eps_out * eps_in);
         }
     }
     for (((b, &mu), &sigma), &eps) in b_eff.iter_mut().zip(mu_b).zip(sigma_b).zip(output) {

@@ -12,10 +12,11 @@ pub use log::{LogPosition, RunLog};
 pub use run_dir::{EvalPoint, QueryEvent, Summary, steps_to_solve};
 pub use snapshot::Checkpointer;
 
-use crate::agent::Agent;
+use crate::agent::{Agent, test_policy_actions};
 use crate::env::{self, Env};
 use crate::expert::demos::Demonstrations;
 use crate::expert::{Answer, Expert, Progress, Query};
+use crate::nn::{QNet, Workspace};
 use crate::query::{QueryController, QueryRule};
 use crate::replay::{Batch, Replay, ReplayConfig, Transition};
 use crate::state::StateDict;
@@ -42,39 +43,85 @@ pub fn epsilon_at(cfg: &TrainConfig, step: usize) -> f64 {
     cfg.eps_start + frac * (cfg.eps_end - cfg.eps_start)
 }
 
-/// Runs the test policy (no exploration) for `episodes` episodes and summarises the returns.
-pub fn evaluate(
-    agent: &mut Agent,
-    env: &mut dyn Env,
-    episodes: usize,
-    step: usize,
-) -> Result<EvalPoint> {
-    let mut returns = Vec::with_capacity(episodes);
-    for _ in 0..episodes {
-        let mut obs = env.reset(None);
-        let mut ret = 0.0;
-        loop {
-            let s = env.step(agent.act_greedy(&obs))?;
-            ret += s.reward;
-            obs = s.obs;
-            if s.terminated || s.truncated {
-                break;
-            }
-        }
-        returns.push(ret);
+/// The test episodes of every evaluation (no exploration), run in lockstep: one environment per episode,
+/// all stepped together with one batched forward per step for the environments still running.
+///
+/// Environment `i` is seeded once with `seed + i` and then continues its own generator from one evaluation
+/// to the next. The batched forward computes each row exactly as a single-state forward would
+/// ([`crate::agent::test_policy_actions`]), so lockstep changes the cost, not the actions.
+pub struct Evaluator {
+    envs: Vec<Box<dyn Env>>,
+    ws: Workspace,
+    returns: Vec<f64>,
+    /// Indices of the environments whose episode is still running, and their observations (row-major).
+    running: Vec<usize>,
+    obs: Vec<f32>,
+    actions: Vec<usize>,
+}
+
+impl Evaluator {
+    /// `episodes` environments `env_id` seeded `seed, seed + 1, ...`, for networks shaped like `net`.
+    pub fn new(env_id: &str, episodes: usize, seed: u64, net: &QNet) -> Result<Self> {
+        let envs = (0..episodes)
+            .map(|i| {
+                let mut env = env::make(env_id)?;
+                env.reset(Some(seed + i as u64));
+                Ok(env)
+            })
+            .collect::<Result<Vec<_>>>()?;
+        Ok(Self {
+            envs,
+            ws: Workspace::new(net, episodes),
+            returns: Vec::with_capacity(episodes),
+            running: Vec::with_capacity(episodes),
+            obs: Vec::with_capacity(episodes * net.obs_dim()),
+            actions: Vec::with_capacity(episodes),
+        })
     }
-    let n = returns.len() as f64;
-    let mean = returns.iter().sum::<f64>() / n;
-    let std = (returns.iter().map(|r| (r - mean).powi(2)).sum::<f64>() / n).sqrt();
-    let min = returns.iter().cloned().fold(f64::INFINITY, f64::min);
-    let max = returns.iter().cloned().fold(f64::NEG_INFINITY, f64::max);
-    Ok(EvalPoint {
-        step: step as u64,
-        mean,
-        std,
-        min,
-        max,
-    })
+
+    /// One episode per environment under `net`'s test policy; the returns' summary at training step `step`.
+    pub fn evaluate(&mut self, net: &QNet, step: usize) -> Result<EvalPoint> {
+        self.returns.clear();
+        self.running.clear();
+        self.obs.clear();
+        for (i, env) in self.envs.iter_mut().enumerate() {
+            self.obs.extend_from_slice(&env.reset(None));
+            self.running.push(i);
+            self.returns.push(0.0);
+        }
+        let d = net.obs_dim();
+        while !self.running.is_empty() {
+            self.actions.resize(self.running.len(), 0);
+            test_policy_actions(net, &mut self.ws, &self.obs, &mut self.actions);
+            // Step every running environment; compact the finished ones out, keeping the order.
+            let mut kept = 0;
+            for row in 0..self.running.len() {
+                let i = self.running[row];
+                let s = self.envs[i].step(self.actions[row])?;
+                self.returns[i] += s.reward;
+                if !(s.terminated || s.truncated) {
+                    self.running[kept] = i;
+                    self.obs[kept * d..(kept + 1) * d].copy_from_slice(&s.obs);
+                    kept += 1;
+                }
+            }
+            self.running.truncate(kept);
+            self.obs.truncate(kept * d);
+        }
+        let returns = &self.returns;
+        let n = returns.len() as f64;
+        let mean = returns.iter().sum::<f64>() / n;
+        let std = (returns.iter().map(|r| (r - mean).powi(2)).sum::<f64>() / n).sqrt();
+        let min = returns.iter().cloned().fold(f64::INFINITY, f64::min);
+        let max = returns.iter().cloned().fold(f64::NEG_INFINITY, f64::max);
+        Ok(EvalPoint {
+            step: step as u64,
+            mean,
+            std,
+            min,
+            max,
+        })
+    }
 }
 
 /// Trains one agent as `cfg` says and returns its summary and the trained agent.
@@ -188,7 +235,6 @@ fn train_run(
 ) -> Result<(Summary, Agent)> {
     let started = Instant::now();
     let mut env = env::make(&cfg.env)?;
-    let mut eval_env = env::make(&cfg.env)?;
     let (obs_dim, n_actions) = (env.obs_dim(), env.n_actions());
     ensure!(
         !cfg.method.queries() || expert.is_some(),
@@ -206,7 +252,12 @@ fn train_run(
     let mut replay_rng = Pcg64::seed_from_u64(derive_seed(cfg.seed, 2));
     let mut query_rng = Pcg64::seed_from_u64(derive_seed(cfg.seed, 3));
     let env_seed = derive_seed(cfg.seed, 4) >> 32;
-    eval_env.reset(Some(derive_seed(cfg.seed, 5) >> 32));
+    let mut evaluator = Evaluator::new(
+        &cfg.env,
+        cfg.eval_episodes,
+        derive_seed(cfg.seed, 5) >> 32,
+        agent.network(),
+    )?;
 
     let pretrain_demos = demos.map(|d| d.transitions.len()).unwrap_or(0);
     let mut replay = Replay::new(
@@ -418,7 +469,7 @@ fn train_run(
 
         // 4. Evaluate without exploration every `eval_period` steps.
         if (step + 1).is_multiple_of(cfg.eval_period) || step + 1 == cfg.train_steps {
-            let point = evaluate(&mut agent, eval_env.as_mut(), cfg.eval_episodes, step + 1)?;
+            let point = evaluator.evaluate(agent.network(), step + 1)?;
             log.eval(point)?;
         }
         if let Some(expert) = expert.as_deref_mut() {

@@ -1,0 +1,380 @@
+//! The matrix product of the network, with one fixed floating-point order on every instruction set.
+//!
+//! [`product`] computes `dst[r][c] = init[c] + Σ_k a(r, k) · b[k][c]` as one chain of fused multiply-adds
+//! per output element, `acc = fma(a(r, k), b[k][c], acc)` for `k = 0, 1, …` in order, starting from the
+//! bias (or zero). Vectors only ever run across output columns `c`, never along `k`, so the lane width
+//! changes how many elements are computed at once but not how any one of them is computed: the scalar,
+//! AVX2 and AVX-512 paths ([`Lanes`]) give the same bytes, and a row's result does not depend on the
+//! other rows of the batch (a single-state forward equals the same row of a batched one).
+//!
+//! `b` is always row-major with contiguous columns; `a` is any strided view (so `Xᵀ · dY` reads `X` in
+//! place). A product with `bᵀ` (the input gradient `dY · Wᵀ`) first writes `Wᵀ` with [`transpose`].
+//!
+//! Outputs are computed in register blocks of `R` rows by `C` vectors whose accumulators stay in
+//! registers over the whole `k` loop; the leftover columns (fewer than a vector) run one lane at a time
+//! with `f32::mul_add`, which rounds exactly like a vector lane.
+
+#[cfg(target_arch = "x86_64")]
+use std::arch::x86_64::*;
+
+/// A vector of `WIDTH` f32 lanes and the four operations the kernel needs.
+///
+/// # Safety
+/// The implementations for vector types must only be called inside functions compiled with the matching
+/// target features, and `load`/`store` need `WIDTH` readable/writable floats at the pointer.
+pub(crate) trait Lanes {
+    const WIDTH: usize;
+    type V: Copy;
+    unsafe fn splat(x: f32) -> Self::V;
+    unsafe fn load(p: *const f32) -> Self::V;
+    unsafe fn store(p: *mut f32, v: Self::V);
+    /// `a * b + c` with one rounding.
+    unsafe fn fma(a: Self::V, b: Self::V, c: Self::V) -> Self::V;
+}
+
+/// One lane at a time.
+pub(crate) struct Scalar;
+
+impl Lanes for Scalar {
+    const WIDTH: usize = 1;
+    type V = f32;
+    #[inline(always)]
+    unsafe fn splat(x: f32) -> f32 {
+        x
+    }
+    #[inline(always)]
+    unsafe fn load(p: *const f32) -> f32 {
+        // SAFETY: the caller guarantees one readable float.
+        unsafe { *p }
+    }
+    #[inline(always)]
+    unsafe fn store(p: *mut f32, v: f32) {
+        // SAFETY: the caller guarantees one writable float.
+        unsafe { *p = v }
+    }
+    #[inline(always)]
+    unsafe fn fma(a: f32, b: f32, c: f32) -> f32 {
+        a.mul_add(b, c)
+    }
+}
+
+/// 8 lanes (AVX2 + FMA).
+#[cfg(target_arch = "x86_64")]
+pub(crate) struct Avx2;
+
+#[cfg(target_arch = "x86_64")]
+impl Lanes for Avx2 {
+    const WIDTH: usize = 8;
+    type V = __m256;
+    #[inline(always)]
+    unsafe fn splat(x: f32) -> __m256 {
+        unsafe { _mm256_set1_ps(x) }
+    }
+    #[inline(always)]
+    unsafe fn load(p: *const f32) -> __m256 {
+        unsafe { _mm256_loadu_ps(p) }
+    }
+    #[inline(always)]
+    unsafe fn store(p: *mut f32, v: __m256) {
+        unsafe { _mm256_storeu_ps(p, v) }
+    }
+    #[inline(always)]
+    unsafe fn fma(a: __m256, b: __m256, c: __m256) -> __m256 {
+        unsafe { _mm256_fmadd_ps(a, b, c) }
+    }
+}
+
+/// 16 lanes (AVX-512F).
+#[cfg(target_arch = "x86_64")]
+pub(crate) struct Avx512;
+
+#[cfg(target_arch = "x86_64")]
+impl Lanes for Avx512 {
+    const WIDTH: usize = 16;
+    type V = __m512;
+    #[inline(always)]
+    unsafe fn splat(x: f32) -> __m512 {
+        unsafe { _mm512_set1_ps(x) }
+    }
+    #[inline(always)]
+    unsafe fn load(p: *const f32) -> __m512 {
+        unsafe { _mm512_loadu_ps(p) }
+    }
+    #[inline(always)]
+    unsafe fn store(p: *mut f32, v: __m512) {
+        unsafe { _mm512_storeu_ps(p, v) }
+    }
+    #[inline(always)]
+    unsafe fn fma(a: __m512, b: __m512, c: __m512) -> __m512 {
+        unsafe { _mm512_fmadd_ps(a, b, c) }
+    }
+}
+
+/// A strided `rows x cols` left operand: element `(r, k)` at `r * row_stride + k * col_stride`.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Strided<'a> {
+    pub data: &'a [f32],
+    pub rows: usize,
+    pub cols: usize,
+    pub row_stride: usize,
+    pub col_stride: usize,
+}
+
+impl<'a> Strided<'a> {
+    /// A dense row-major matrix.
+    pub fn row_major(data: &'a [f32], rows: usize, cols: usize) -> Self {
+        Self {
+            data,
+            rows,
+            cols,
+            row_stride: cols,
+            col_stride: 1,
+        }
+    }
+
+    /// The transpose of the row-major `rows x cols` matrix in `data` (a `cols x rows` view).
+    pub fn transposed(data: &'a [f32], rows: usize, cols: usize) -> Self {
+        Self {
+            data,
+            rows: cols,
+            cols: rows,
+            row_stride: 1,
+            col_stride: cols,
+        }
+    }
+}
+
+/// `dst[r][c] = init[c] + Σ_k a(r, k) · b[k][c]` (see the module docs for the order), with `dst` row-major
+/// `a.rows x n`, `b` row-major `a.cols x n`, and `init` the bias row (length `n`) or `None` for zero.
+///
+/// # Panics
+/// If a slice is shorter than its shape needs (programming errors, never input errors).
+#[inline(always)]
+pub(crate) fn product<S: Lanes>(dst: &mut [f32], a: Strided, b: &[f32], init: Option<&[f32]>) {
+    let (m, k) = (a.rows, a.cols);
+    let n = dst.len().checked_div(m).unwrap_or(0);
+    assert_eq!(dst.len(), m * n, "product: destination is not rows x n");
+    assert!(b.len() >= k * n, "product: right operand too short");
+    if let Some(bias) = init {
+        assert_eq!(bias.len(), n, "product: bias length is not n");
+    }
+    if m == 0 || n == 0 {
+        return;
+    }
+    assert!(
+        (m - 1) * a.row_stride + k.saturating_sub(1) * a.col_stride < a.data.len() || k == 0,
+        "product: left view exceeds its slice"
+    );
+    let p = Operands {
+        dst: dst.as_mut_ptr(),
+        n,
+        a: a.data.as_ptr(),
+        a_rs: a.row_stride,
+        a_cs: a.col_stride,
+        b: b.as_ptr(),
+        init: init.map(|bias| bias.as_ptr()),
+        k,
+    };
+    // SAFETY: every block below stays inside rows 0..m and columns 0..n, which the asserts above showed
+    // to lie inside the slices; `dst` is borrowed mutably, so it aliases nothing.
+    unsafe {
+        let full = n / S::WIDTH * S::WIDTH;
+        let mut col = 0;
+        const C: usize = 4;
+        while col + C * S::WIDTH <= full {
+            rows_blocked::<S, C>(&p, m, col);
+            col += C * S::WIDTH;
+        }
+        while col + S::WIDTH <= full {
+            rows_blocked::<S, 1>(&p, m, col);
+            col += S::WIDTH;
+        }
+        while col < n {
+            rows_blocked::<Scalar, 1>(&p, m, col);
+            col += 1;
+        }
+    }
+}
+
+/// Raw operands of [`product`], checked by it.
+struct Operands {
+    dst: *mut f32,
+    n: usize,
+    a: *const f32,
+    a_rs: usize,
+    a_cs: usize,
+    b: *const f32,
+    init: Option<*const f32>,
+    k: usize,
+}
+
+/// Columns `col..col + C * WIDTH` of all `m` rows, four rows at a time.
+#[inline(always)]
+unsafe fn rows_blocked<S: Lanes, const C: usize>(p: &Operands, m: usize, col: usize) {
+    let mut row = 0;
+    // SAFETY: forwarded from `product`.
+    unsafe {
+        while row + 4 <= m {
+            block::<S, 4, C>(p, row, col);
+            row += 4;
+        }
+        while row < m {
+            block::<S, 1, C>(p, row, col);
+            row += 1;
+        }
+    }
+}
+
+/// Rows `row..row + R`, columns `col..col + C * WIDTH`: `R x C` accumulators over the whole `k` loop.
+#[inline(always)]
+unsafe fn block<S: Lanes, const R: usize, const C: usize>(p: &Operands, row: usize, col: usize) {
+    // SAFETY: forwarded from `product` (every pointer offset is inside the checked shapes).
+    unsafe {
+        let start = match p.init {
+            Some(bias) => {
+                let mut v = [S::splat(0.0); C];
+                for (c, v) in v.iter_mut().enumerate() {
+                    *v = S::load(bias.add(col + c * S::WIDTH));
+                }
+                v
+            }
+            None => [S::splat(0.0); C],
+        };
+        let mut acc = [start; R];
+        let mut a_ptr = p.a.add(row * p.a_rs);
+        let mut b_ptr = p.b.add(col);
+        for _ in 0..p.k {
+            let mut bv = [S::splat(0.0); C];
+            for (c, v) in bv.iter_mut().enumerate() {
+                *v = S::load(b_ptr.add(c * S::WIDTH));
+            }
+            for (r, acc_row) in acc.iter_mut().enumerate() {
+                let av = S::splat(*a_ptr.add(r * p.a_rs));
+                for (acc, &bv) in acc_row.iter_mut().zip(&bv) {
+                    *acc = S::fma(av, bv, *acc);
+                }
+            }
+            a_ptr = a_ptr.add(p.a_cs);
+            b_ptr = b_ptr.add(p.n);
+        }
+        for (r, acc_row) in acc.iter().enumerate() {
+            let out = p.dst.add((row + r) * p.n + col);
+            for (c, &v) in acc_row.iter().enumerate() {
+                S::store(out.add(c * S::WIDTH), v);
+            }
+        }
+    }
+}
+
+/// Writes the transpose of the row-major `rows x cols` matrix `src` into `dst` (`cols x rows`).
+#[inline(always)]
+pub(crate) fn transpose(src: &[f32], rows: usize, cols: usize, dst: &mut [f32]) {
+    assert!(src.len() >= rows * cols && dst.len() >= rows * cols);
+    for (r, src_row) in src.chunks_exact(cols).take(rows).enumerate() {
+        for (c, &v) in src_row.iter().enumerate() {
+            dst[c * rows + r] = v;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::nn::SimdLevel;
+
+    fn reference(a: Strided, b: &[f32], n: usize, init: Option<&[f32]>) -> Vec<f32> {
+        let mut out = vec![0.0f32; a.rows * n];
+        for r in 0..a.rows {
+            for c in 0..n {
+                let mut acc = init.map_or(0.0, |bias| bias[c]);
+                for k in 0..a.cols {
+                    acc = a.data[r * a.row_stride + k * a.col_stride].mul_add(b[k * n + c], acc);
+                }
+                out[r * n + c] = acc;
+            }
+        }
+        out
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    fn product_avx2(dst: &mut [f32], a: Strided, b: &[f32], init: Option<&[f32]>) {
+        product::<Avx2>(dst, a, b, init)
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx512f,avx2,fma")]
+    fn product_avx512(dst: &mut [f32], a: Strided, b: &[f32], init: Option<&[f32]>) {
+        product::<Avx512>(dst, a, b, init)
+    }
+
+    /// Every available path equals the one-element-at-a-time FMA chain bit for bit, for shapes with
+    /// leftover rows and columns, strided (transposed) left operands, with and without a bias; and the
+    /// result agrees with an f64 product to rounding.
+    #[test]
+    fn every_level_computes_the_same_fma_chain_bit_for_bit() {
+        let detected = SimdLevel::detected();
+        for (m, k, n) in [
+            (1, 3, 64),
+            (5, 64, 64),
+            (7, 13, 40),
+            (32, 64, 4),
+            (3, 5, 17),
+            (9, 2, 1),
+        ] {
+            let a_data: Vec<f32> = (0..m * k)
+                .map(|i| ((i * 37 % 101) as f32 - 50.0) * 0.013)
+                .collect();
+            let b: Vec<f32> = (0..k * n)
+                .map(|i| ((i * 53 % 97) as f32 - 48.0) * 0.021)
+                .collect();
+            let bias: Vec<f32> = (0..n).map(|i| i as f32 * 0.1 - 1.0).collect();
+            for transposed in [false, true] {
+                let a = if transposed {
+                    Strided::transposed(&a_data, k, m)
+                } else {
+                    Strided::row_major(&a_data, m, k)
+                };
+                for init in [None, Some(&bias[..])] {
+                    let expected = reference(a, &b, n, init);
+                    let mut out = vec![f32::NAN; m * n];
+                    product::<Scalar>(&mut out, a, &b, init);
+                    assert_eq!(out, expected, "scalar {m}x{k}x{n}");
+                    #[cfg(target_arch = "x86_64")]
+                    {
+                        if detected >= SimdLevel::Avx2 {
+                            out.fill(f32::NAN);
+                            // SAFETY: the CPU has AVX2 and FMA.
+                            unsafe { product_avx2(&mut out, a, &b, init) };
+                            assert_eq!(out, expected, "avx2 {m}x{k}x{n}");
+                        }
+                        if detected >= SimdLevel::Avx512 {
+                            out.fill(f32::NAN);
+                            // SAFETY: the CPU has AVX-512F.
+                            unsafe { product_avx512(&mut out, a, &b, init) };
+                            assert_eq!(out, expected, "avx512 {m}x{k}x{n}");
+                        }
+                    }
+                    for r in 0..m {
+                        for c in 0..n {
+                            let mut exact = init.map_or(0.0, |bias| bias[c] as f64);
+                            for kk in 0..k {
+                                exact += a.data[r * a.row_stride + kk * a.col_stride] as f64
+                                    * b[kk * n + c] as f64;
+                            }
+                            assert!((expected[r * n + c] as f64 - exact).abs() < 1e-4);
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn transpose_moves_every_element() {
+        let src: Vec<f32> = (0..6).map(|i| i as f32).collect();
+        let mut dst = vec![0.0; 6];
+        transpose(&src, 2, 3, &mut dst);
+        assert_eq!(dst, [0.0, 3.0, 1.0, 4.0, 2.0, 5.0]);
+    }
+}
