@@ -79,6 +79,28 @@ impl Evaluator {
         })
     }
 
+    /// The state of every test environment's generator (for a run's snapshot).
+    pub fn generators(&self) -> Vec<Option<[u64; 6]>> {
+        self.envs
+            .iter()
+            .map(|env| env.generator().map(|g| g.to_words()))
+            .collect()
+    }
+
+    /// Puts back the generators [`Self::generators`] returned.
+    pub fn set_generators(&mut self, generators: &[Option<[u64; 6]>]) -> Result<()> {
+        ensure!(
+            generators.len() == self.envs.len(),
+            "the snapshot has {} test environments, the run {}",
+            generators.len(),
+            self.envs.len()
+        );
+        for (env, words) in self.envs.iter_mut().zip(generators) {
+            env.set_generator(words.map(crate::rng::NumpyRng::from_words));
+        }
+        Ok(())
+    }
+
     /// One episode per environment under `net`'s test policy; the returns' summary at training step `step`.
     pub fn evaluate(&mut self, net: &QNet, step: usize) -> Result<EvalPoint> {
         self.returns.clear();
@@ -189,7 +211,7 @@ struct RunParts<'a> {
     queries: &'a QueryController,
     replay_rng: &'a Pcg64,
     query_rng: &'a Pcg64,
-    eval_env: &'a dyn Env,
+    evaluator: &'a Evaluator,
     expert_state: Option<String>,
     obs: &'a [f32],
 }
@@ -206,10 +228,7 @@ fn snapshot(
     parts.queries.save_state("query", &mut state);
     state.put_text("rng.replay", parts.replay_rng);
     state.put_text("rng.query", parts.query_rng);
-    state.put_value(
-        "rng.eval_env",
-        &parts.eval_env.generator().map(|g| g.to_words()),
-    );
+    state.put_value("rng.eval_envs", &parts.evaluator.generators());
     state.put_value("expert", &parts.expert_state);
     state.put_value("loop", st);
     state.put_f32("obs", parts.obs);
@@ -280,8 +299,8 @@ fn train_run(
         queries.load_state("query", state)?;
         replay_rng = state.text("rng.replay")?;
         query_rng = state.text("rng.query")?;
-        let eval_gen: Option<[u64; 6]> = state.value("rng.eval_env")?;
-        eval_env.set_generator(eval_gen.map(crate::rng::NumpyRng::from_words));
+        let eval_generators: Vec<Option<[u64; 6]>> = state.value("rng.eval_envs")?;
+        evaluator.set_generators(&eval_generators)?;
         let expert_state: Option<String> = state.value("expert")?;
         if let (Some(e), Some(saved)) = (expert.as_deref_mut(), expert_state) {
             e.restore(&saved)?;
@@ -333,7 +352,7 @@ fn train_run(
                         queries: &queries,
                         replay_rng: &replay_rng,
                         query_rng: &query_rng,
-                        eval_env: eval_env.as_ref(),
+                        evaluator: &evaluator,
                         expert_state: expert.as_deref().and_then(|e| e.state()),
                         obs: &obs,
                     };
@@ -512,7 +531,7 @@ fn train_run(
                     queries: &queries,
                     replay_rng: &replay_rng,
                     query_rng: &query_rng,
-                    eval_env: eval_env.as_ref(),
+                    evaluator: &evaluator,
                     expert_state: expert.as_deref().and_then(|e| e.state()),
                     obs: &obs,
                 };
