@@ -20,7 +20,6 @@ use crate::train::run_dir::{
 };
 use crate::train::{Method, NetKind};
 use anyhow::{Context, Result, bail};
-use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
@@ -79,18 +78,11 @@ pub struct RunGroup {
 
 /// Groups runs per (env, method, net, variant) and computes their steps to solve.
 pub fn group_runs(runs: &[RunRecord]) -> Vec<RunGroup> {
-    // Keyed by names: groups come out in the order their names sort.
-    let mut groups: BTreeMap<(&str, &str, &str, &str), Vec<&RunRecord>> = BTreeMap::new();
-    for run in runs {
-        groups
-            .entry((&run.env, run.method.name(), run.net.name(), &run.variant))
-            .or_default()
-            .push(run);
-    }
-    groups
+    run_dir::configurations(runs)
         .into_iter()
-        .map(|((env, _, _, variant), mut members)| {
-            members.sort_by_key(|r| r.seed);
+        .map(|members| {
+            let first = members[0];
+            let (env, variant) = (&first.env, &first.variant);
             let (method, net) = (members[0].method, members[0].net);
             let steps: Vec<u64> = members
                 .iter()

@@ -74,27 +74,19 @@ pub struct Cell {
 
 /// Groups runs per configuration and computes every reading; `k` is the sustained reading's K.
 pub fn cells(runs: &[RunRecord], k: usize) -> Vec<Cell> {
-    let mut groups: BTreeMap<(&str, &str, &str, &str), Vec<&RunRecord>> = BTreeMap::new();
-    for run in runs {
-        groups
-            .entry((&run.env, run.method.name(), run.net.name(), &run.variant))
-            .or_default()
-            .push(run);
-    }
-    groups
+    crate::train::run_dir::configurations(runs)
         .into_iter()
-        .map(|((env, method, net, variant), mut members)| {
-            members.sort_by_key(|r| r.seed);
+        .map(|members| {
             let reading = |f: &dyn Fn(&RunRecord) -> f64| {
                 Reading::new(members.iter().map(|r| f(r)).collect())
             };
             let curves: Vec<Vec<EvalPoint>> = members.iter().map(|r| r.eval.clone()).collect();
             let first = members[0];
             Cell {
-                env: env.to_string(),
-                method: method.to_string(),
-                net: net.to_string(),
-                variant: variant.to_string(),
+                env: first.env.clone(),
+                method: first.method.name().to_string(),
+                net: first.net.name().to_string(),
+                variant: first.variant.clone(),
                 seeds: members.len(),
                 solved: members
                     .iter()

@@ -382,6 +382,26 @@ pub fn load_runs(root: &Path) -> Result<(Vec<RunRecord>, Vec<String>)> {
     Ok((runs, notes))
 }
 
+/// Runs grouped per configuration (env, method, net, variant), in the order the names sort, each group's runs in
+/// seed order: the one grouping reports and verdicts share.
+pub fn configurations(runs: &[RunRecord]) -> Vec<Vec<&RunRecord>> {
+    let mut groups: std::collections::BTreeMap<(&str, &str, &str, &str), Vec<&RunRecord>> =
+        std::collections::BTreeMap::new();
+    for run in runs {
+        groups
+            .entry((&run.env, run.method.name(), run.net.name(), &run.variant))
+            .or_default()
+            .push(run);
+    }
+    groups
+        .into_values()
+        .map(|mut members| {
+            members.sort_by_key(|r| r.seed);
+            members
+        })
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
