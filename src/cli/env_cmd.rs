@@ -148,14 +148,6 @@ fn check(files: &[PathBuf]) -> anyhow::Result<ExitCode> {
     })
 }
 
-/// Mean and population standard deviation.
-fn mean_std(values: &[f64]) -> (f64, f64) {
-    let n = values.len() as f64;
-    let mean = values.iter().sum::<f64>() / n;
-    let variance = values.iter().map(|v| (v - mean) * (v - mean)).sum::<f64>() / n;
-    (mean, variance.sqrt())
-}
-
 fn rollout(
     env_id: &str,
     policy: RolloutPolicy,
@@ -171,30 +163,20 @@ fn rollout(
         .context("--seed plus --episodes overflows the 64-bit seed range")?;
     let mut env: Box<dyn Env> = env::make(env_id)?;
     let mut action_rng = NumpyRng::new(seed);
-    // Capacity is only a hint: a huge --episodes must not abort on allocation before the first episode.
-    let capacity = episodes.min(1 << 16) as usize;
-    let mut returns = Vec::with_capacity(capacity);
-    let mut lengths = Vec::with_capacity(capacity);
-    for episode in 0..episodes {
-        env.reset(Some(seed + episode));
-        let mut episode_return = 0.0;
-        let mut length = 0usize;
-        loop {
-            let action = match policy {
-                RolloutPolicy::Random => action_rng.random_range(0..env.n_actions()),
-            };
-            let step = env.step(action)?;
-            episode_return += step.reward;
-            length += 1;
-            if step.terminated || step.truncated {
-                break;
-            }
-        }
-        returns.push(episode_return);
-        lengths.push(length as f64);
-    }
-    let (return_mean, return_std) = mean_std(&returns);
-    let (length_mean, length_std) = mean_std(&lengths);
+    let n_actions = env.n_actions();
+    let episodes_played = env::rollouts(
+        env.as_mut(),
+        usize::try_from(episodes).context("--episodes is too large")?,
+        |i| Some(seed + i as u64),
+        |_| {
+            Ok::<_, anyhow::Error>(match policy {
+                RolloutPolicy::Random => action_rng.random_range(0..n_actions),
+            })
+        },
+    )?;
+    let (return_mean, return_std, _, _) = env::return_stats(&episodes_played);
+    let lengths: Vec<f64> = episodes_played.iter().map(|e| e.length as f64).collect();
+    let (length_mean, length_std, _, _) = env::mean_std_min_max(&lengths);
     let policy_name = match policy {
         RolloutPolicy::Random => "random",
     };

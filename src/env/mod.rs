@@ -13,11 +13,13 @@ pub mod cartpole;
 pub mod conformance;
 pub mod lunar_lander;
 pub mod mountain_car;
+pub mod rollout;
 
 pub use acrobot::Acrobot;
 pub use cartpole::CartPole;
 pub use lunar_lander::LunarLander;
 pub use mountain_car::MountainCar;
+pub use rollout::{Episode, mean_std_min_max, return_stats, rollouts};
 
 /// What one environment step returns (Gymnasium's 5-tuple without `info`).
 #[derive(Debug, Clone, PartialEq)]

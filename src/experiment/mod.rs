@@ -15,7 +15,7 @@ pub mod sweep;
 pub mod verdict;
 
 use crate::expert::{self, demos::Demonstrations};
-use crate::train::{self, Checkpointer, RunLog, Summary, TrainConfig, derive_seed};
+use crate::train::{self, Checkpointer, RunLog, SeedPurpose, Summary, TrainConfig, seed_for};
 use anyhow::{Context, Result};
 use std::path::Path;
 
@@ -28,7 +28,7 @@ pub fn run_one(cfg: &TrainConfig, out_dir: Option<&Path>, progress: bool) -> Res
         Some(expert::from_spec(
             &cfg.expert,
             &cfg.env,
-            derive_seed(cfg.seed, 6),
+            seed_for(cfg.seed, SeedPurpose::Expert),
         )?)
     } else {
         None
@@ -38,7 +38,12 @@ pub fn run_one(cfg: &TrainConfig, out_dir: Option<&Path>, progress: bool) -> Res
             let e = expert
                 .as_deref_mut()
                 .context("pre-training needs an expert")?;
-            Demonstrations::collect(&cfg.env, e, cfg.n_demo, derive_seed(cfg.seed, 7) >> 33)?
+            Demonstrations::collect(
+                &cfg.env,
+                e,
+                cfg.n_demo,
+                seed_for(cfg.seed, SeedPurpose::Demonstrations),
+            )?
         } else {
             Demonstrations::load(Path::new(&cfg.demo_file), Some(&cfg.env))?.truncated_to(
                 if cfg.n_demo > 0 {

@@ -34,37 +34,22 @@ pub fn evaluate_expert(
     seed: u64,
 ) -> Result<ExpertStats> {
     let mut env = env::make(env_id)?;
-    let mut returns = Vec::with_capacity(episodes);
-    let mut lengths = Vec::with_capacity(episodes);
-    let mut finished = 0usize;
-    for i in 0..episodes {
-        let mut obs = env.reset(Some(seed + i as u64));
-        let (mut ret, mut len) = (0.0, 0usize);
-        loop {
-            let s = env.step(expert.act(&obs)?)?;
-            ret += s.reward;
-            len += 1;
-            obs = s.obs;
-            if s.terminated {
-                finished += 1;
-            }
-            if s.terminated || s.truncated {
-                break;
-            }
-        }
-        returns.push(ret);
-        lengths.push(len as f64);
-    }
+    let played = env::rollouts(
+        env.as_mut(),
+        episodes,
+        |i| Some(seed + i as u64),
+        |obs| expert.act(obs),
+    )?;
+    let (mean, std, min, max) = env::return_stats(&played);
     let n = episodes as f64;
-    let mean = returns.iter().sum::<f64>() / n;
     Ok(ExpertStats {
         episodes,
         mean,
-        std: (returns.iter().map(|r| (r - mean).powi(2)).sum::<f64>() / n).sqrt(),
-        min: returns.iter().cloned().fold(f64::INFINITY, f64::min),
-        max: returns.iter().cloned().fold(f64::NEG_INFINITY, f64::max),
-        mean_len: lengths.iter().sum::<f64>() / n,
-        finished: finished as f64 / n,
+        std,
+        min,
+        max,
+        mean_len: played.iter().map(|e| e.length as f64).sum::<f64>() / n,
+        finished: played.iter().filter(|e| e.terminated).count() as f64 / n,
     })
 }
 

@@ -229,7 +229,7 @@ fn adam_update(
         let m_new = *m + c.beta1_complement * (g - *m);
         let v_new = c.beta2 * *v + c.beta2_complement * g * g;
         // Moments of parameters whose gradient stays zero (dead ReLU units) decay geometrically into the
-        // subnormal range, where every operation is ~100x slower; flushing them to zero removes that cost
+        // subnormal range, where arithmetic is far slower; flushing them to zero removes that cost
         // and changes each update by less than 1e-26.
         *m = if m_new.abs() < FLUSH_BELOW {
             0.0

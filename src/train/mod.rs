@@ -5,11 +5,13 @@
 pub mod config;
 pub mod log;
 pub mod run_dir;
+pub mod seeds;
 pub mod snapshot;
 
 pub use config::{ConfigInput, Method, NetKind, TdLoss, TrainConfig};
 pub use log::{LogPosition, RunLog};
 pub use run_dir::{EvalPoint, QueryEvent, Summary, steps_to_solve};
+pub use seeds::{SeedPurpose, seed_for};
 pub use snapshot::Checkpointer;
 
 use crate::agent::{Agent, test_policy_actions};
@@ -24,14 +26,6 @@ use anyhow::{Context, Result, ensure};
 use rand::SeedableRng;
 use rand_pcg::Pcg64;
 use std::time::Instant;
-
-/// Independent generator seeds derived from the run's seed (SplitMix64 finaliser over a per-purpose tag).
-pub fn derive_seed(seed: u64, tag: u64) -> u64 {
-    let mut z = seed.wrapping_add(tag.wrapping_mul(0x9E37_79B9_7F4A_7C15));
-    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    z ^ (z >> 31)
-}
 
 /// ε-greedy schedule: linear from `eps_start` to `eps_end` over `eps_fraction` of training (§5).
 pub fn epsilon_at(cfg: &TrainConfig, step: usize) -> f64 {
@@ -266,15 +260,15 @@ fn train_run(
         &cfg.agent_config(),
         obs_dim,
         n_actions,
-        derive_seed(cfg.seed, 1),
+        seed_for(cfg.seed, SeedPurpose::Agent),
     );
-    let mut replay_rng = Pcg64::seed_from_u64(derive_seed(cfg.seed, 2));
-    let mut query_rng = Pcg64::seed_from_u64(derive_seed(cfg.seed, 3));
-    let env_seed = derive_seed(cfg.seed, 4) >> 32;
+    let mut replay_rng = Pcg64::seed_from_u64(seed_for(cfg.seed, SeedPurpose::Replay));
+    let mut query_rng = Pcg64::seed_from_u64(seed_for(cfg.seed, SeedPurpose::Query));
+    let env_seed = seed_for(cfg.seed, SeedPurpose::TrainEnv);
     let mut evaluator = Evaluator::new(
         &cfg.env,
         cfg.eval_episodes,
-        derive_seed(cfg.seed, 5) >> 32,
+        seed_for(cfg.seed, SeedPurpose::EvalEnv),
         agent.network(),
     )?;
 
