@@ -119,9 +119,12 @@ pub struct ReproduceArgs {
     /// Parallel runs [default: one per core].
     #[arg(long, default_value_t = 0)]
     jobs: usize,
-    /// Output directory.
+    /// Output directory: every part's runs go into one tree, `ENV/METHOD-NET[/VARIANT]/seedN`.
     #[arg(long, short, default_value = "runs/reproduce")]
     out: PathBuf,
+    /// Where the report goes [default: OUT/report].
+    #[arg(long, value_name = "DIR")]
+    report: Option<PathBuf>,
 }
 
 pub fn run_sweep(args: SweepArgs) -> Result<ExitCode> {
@@ -309,7 +312,7 @@ pub fn run_reproduce(args: ReproduceArgs) -> Result<ExitCode> {
         }
         ran_any = true;
         eprintln!("== {name}: {} runs", grid.specs()?.len());
-        let outcome = run_grid(&grid, &args.out.join(name), args.jobs, &run_spec)?;
+        let outcome = run_grid(&grid, &args.out, args.jobs, &run_spec)?;
         eprintln!(
             "   {} complete ({} were already)",
             outcome.total, outcome.already_complete
@@ -318,9 +321,10 @@ pub fn run_reproduce(args: ReproduceArgs) -> Result<ExitCode> {
     if !ran_any {
         bail!("nothing to run: no part of the protocol covers {envs:?}");
     }
+    let report_dir = args.report.unwrap_or_else(|| args.out.join("report"));
     print_report(
         &args.out,
-        &args.out.join("report"),
+        &report_dir,
         arld::experiment::verdict::DEFAULT_SUSTAIN,
     )
 }
