@@ -2,7 +2,10 @@
 //! 10 bootstrapped heads), and what snapshotting every 10k steps costs a run: the measured time of a real
 //! LunarLander run with `snapshot_every = 10000`, against the same run without snapshots.
 //!
-//! `cargo bench --bench snapshot` (plain timing, no criterion: each measurement is seconds long).
+//! `cargo bench --bench snapshot` (plain timing, no criterion: each measurement is seconds long). The runs
+//! with and without snapshots alternate, `ARLD_BENCH_REPS` pairs (default 5) of `ARLD_BENCH_STEPS` steps
+//! (default 60000); medians are reported. A snapshot is written in two parts: what the run waits for (the
+//! arrays into the operating system's cache) and the sync and rename a background thread does meanwhile.
 
 use arld::agent::Agent;
 use arld::env;
@@ -65,16 +68,20 @@ fn full_replay_snapshot() -> f64 {
     }
     let dir = tempfile::tempdir().unwrap();
     let mut ck = Checkpointer::new(dir.path(), &cfg);
-    let reps = 5;
-    let started = Instant::now();
+    let reps = 11;
+    let (mut blocking, mut durable) = (Vec::new(), Vec::new());
     for _ in 0..reps {
+        // As in a run: the previous snapshot is durable long before the next one (10k steps later).
+        ck.wait().unwrap();
+        let started = Instant::now();
         let mut state = StateDict::default();
         agent.save_state("agent", &mut state);
         replay.save_state("replay", &mut state);
         ck.save(&state, serde_json::json!({})).unwrap();
+        blocking.push(started.elapsed().as_secs_f64());
+        ck.wait().unwrap();
+        durable.push(started.elapsed().as_secs_f64());
     }
-    let save_s = started.elapsed().as_secs_f64() / reps as f64;
-    let started = Instant::now();
     let mut restored = Replay::new(
         obs_dim,
         &ReplayConfig {
@@ -82,46 +89,75 @@ fn full_replay_snapshot() -> f64 {
             ..cfg.replay_config()
         },
     );
+    let mut load = Vec::new();
     for _ in 0..reps {
+        let started = Instant::now();
         let state = ck.load().unwrap().unwrap();
         restored.load_state("replay", &state).unwrap();
+        load.push(started.elapsed().as_secs_f64());
     }
-    let load_s = started.elapsed().as_secs_f64() / reps as f64;
+    let save_s = median(&mut blocking);
     println!(
-        "snapshot, LunarLander-v2 ADQN-B, replay full ({} agent + {} demonstration transitions): {:.2} MB, \
-         save {:.1} ms, load {:.1} ms",
+        "snapshot, LunarLander-v2 ADQN-B, replay full ({} agent + {} demonstration transitions): {:.2} MB; \
+         medians of {reps}: the run waits {:.2} ms, durable (synced, renamed) after {:.1} ms, load {:.1} ms",
         replay.n_agent(),
         replay.n_demo(),
         ck.last_bytes as f64 / 1e6,
         save_s * 1e3,
-        load_s * 1e3
+        median(&mut durable) * 1e3,
+        median(&mut load) * 1e3
     );
     save_s
 }
 
-fn snapshot_every_10k_slowdown(full_save_s: f64) {
-    let steps = 60_000;
-    let mut times = Vec::new();
-    for every in [0usize, 10_000] {
-        let cfg = config(steps, every);
-        let dir = tempfile::tempdir().unwrap();
-        let started = Instant::now();
-        run_one(&cfg, Some(&dir.path().join("run")), false).unwrap();
-        times.push(started.elapsed().as_secs_f64());
+fn median(values: &mut [f64]) -> f64 {
+    values.sort_by(f64::total_cmp);
+    let n = values.len();
+    if n % 2 == 1 {
+        values[n / 2]
+    } else {
+        (values[n / 2 - 1] + values[n / 2]) / 2.0
     }
+}
+
+fn env_number(name: &str, default: usize) -> usize {
+    std::env::var(name)
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(default)
+}
+
+fn snapshot_every_10k_slowdown(full_save_s: f64) {
+    let steps = env_number("ARLD_BENCH_STEPS", 60_000);
+    let reps = env_number("ARLD_BENCH_REPS", 5);
+    let (mut without, mut with, mut ratios) = (Vec::new(), Vec::new(), Vec::new());
+    for _ in 0..reps {
+        let mut pair = Vec::new();
+        for every in [0usize, 10_000] {
+            let cfg = config(steps, every);
+            let dir = tempfile::tempdir().unwrap();
+            let summary = run_one(&cfg, Some(&dir.path().join("run")), false).unwrap();
+            pair.push(summary.steps_per_s);
+        }
+        without.push(pair[0]);
+        with.push(pair[1]);
+        ratios.push(pair[0] / pair[1] - 1.0);
+    }
+    let (a, b) = (median(&mut without), median(&mut with));
     println!(
-        "LunarLander-v2 ADQN-B, {steps} steps: {:.2} s without snapshots, {:.2} s with snapshot_every=10000 \
-         ({} snapshots): {:+.2}%",
-        times[0],
-        times[1],
-        steps / 10_000 - 1,
-        100.0 * (times[1] / times[0] - 1.0)
+        "LunarLander-v2 ADQN-B, {steps} steps, medians of {reps} alternating pairs: {a:.0} steps/s without \
+         snapshots, {b:.0} steps/s with snapshot_every=10000 ({} snapshots): {:+.2}% time (median of the \
+         pairs' slowdowns {:+.2}%)",
+        (steps - 1) / 10_000,
+        100.0 * (a / b - 1.0),
+        100.0 * median(&mut ratios)
     );
-    // The same with less timing noise: a snapshot with a full replay costs at most `full_save_s`; the run does
-    // 10k steps between two of them.
-    let per_10k = times[0] * 10_000.0 / steps as f64;
+    // With less timing noise: a run waits `full_save_s` for a snapshot with a full replay (the most any
+    // snapshot costs), once per 10k steps.
+    let per_10k = 10_000.0 / a;
     println!(
-        "one full-replay snapshot per 10k steps: {:.1} ms per {:.2} s of training = {:.2}% of run time",
+        "one full-replay snapshot per 10k steps: the run waits {:.2} ms per {:.2} s of training = {:.2}% of run \
+         time",
         full_save_s * 1e3,
         per_10k,
         100.0 * full_save_s / per_10k

@@ -4,7 +4,8 @@
 //! project writes whole (weights, run summaries and curves, demonstrations, sweep records, reports) goes
 //! through it.
 
-use std::io::Write;
+use std::fs::File;
+use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
 
@@ -19,35 +20,142 @@ pub struct WriteError {
 /// Writes `bytes` to `path` through a temporary file in the same directory (synced, then renamed over
 /// `path`); the temporary file is removed if anything fails.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), WriteError> {
-    // Distinct temporary names for concurrent writers in one process (sweep threads) and across processes.
-    static COUNTER: AtomicU64 = AtomicU64::new(0);
-    let error = |source| WriteError {
-        path: path.to_path_buf(),
-        source,
+    let mut file = AtomicFile::create(path)?;
+    file.write_all(bytes).map_err(|e| file.error(e))?;
+    file.commit()
+}
+
+/// A file written in pieces in place of another, atomically: the bytes go to a temporary file beside the
+/// target, and [`AtomicFile::commit`] syncs it and renames it over the target. Until then the target keeps its
+/// old content; dropped without a commit (an error, a panic), the temporary file is removed.
+pub struct AtomicFile {
+    path: PathBuf,
+    tmp: PathBuf,
+    file: Option<BufWriter<File>>,
+    committed: bool,
+}
+
+impl AtomicFile {
+    /// Starts writing the file that will replace `path`.
+    pub fn create(path: &Path) -> Result<Self, WriteError> {
+        // Distinct temporary names for concurrent writers in one process (sweep threads) and across processes.
+        static COUNTER: AtomicU64 = AtomicU64::new(0);
+        let error = |source| WriteError {
+            path: path.to_path_buf(),
+            source,
+        };
+        let name = path
+            .file_name()
+            .ok_or_else(|| error(std::io::Error::other("the path has no file name")))?;
+        let dir = path
+            .parent()
+            .filter(|p| !p.as_os_str().is_empty())
+            .unwrap_or(Path::new("."));
+        let tmp = dir.join(format!(
+            "{TEMP_PREFIX}{}.tmp{}-{}",
+            name.to_string_lossy(),
+            std::process::id(),
+            COUNTER.fetch_add(1, Ordering::Relaxed)
+        ));
+        let file = File::create(&tmp).map_err(error)?;
+        Ok(Self {
+            path: path.to_path_buf(),
+            tmp,
+            file: Some(BufWriter::new(file)),
+            committed: false,
+        })
+    }
+
+    /// The error of a failed write to this file, naming the target.
+    pub fn error(&self, source: std::io::Error) -> WriteError {
+        WriteError {
+            path: self.path.clone(),
+            source,
+        }
+    }
+
+    /// Writes what is buffered to the temporary file (into the operating system's cache: a process killed from
+    /// now on leaves the whole content there, though still under the temporary name).
+    pub fn flush_buffer(&mut self) -> Result<(), WriteError> {
+        let result = self.writer().flush();
+        result.map_err(|e| self.error(e))
+    }
+
+    /// Makes the new content the target's: flushes, syncs the temporary file to the disk, then renames it over
+    /// the target, so that even a machine that loses power after the rename finds the whole new content.
+    pub fn commit(mut self) -> Result<(), WriteError> {
+        let writer = self
+            .file
+            .take()
+            .expect("an uncommitted file has its writer");
+        let done = writer
+            .into_inner()
+            .map_err(|e| e.into_error())
+            .and_then(|file| file.sync_all())
+            .and_then(|()| std::fs::rename(&self.tmp, &self.path));
+        self.committed = done.is_ok();
+        done.map_err(|e| self.error(e))
+    }
+
+    fn writer(&mut self) -> &mut BufWriter<File> {
+        self.file
+            .as_mut()
+            .expect("an uncommitted file has its writer")
+    }
+}
+
+impl Write for AtomicFile {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        self.writer().write(buf)
+    }
+
+    fn write_all(&mut self, buf: &[u8]) -> std::io::Result<()> {
+        self.writer().write_all(buf)
+    }
+
+    fn flush(&mut self) -> std::io::Result<()> {
+        self.writer().flush()
+    }
+}
+
+impl Drop for AtomicFile {
+    fn drop(&mut self) {
+        if !self.committed {
+            let _ = std::fs::remove_file(&self.tmp);
+        }
+    }
+}
+
+/// Every temporary file's name begins with this (then the target's name), so that what a killed process left
+/// behind can be recognised ([`remove_leftovers`]).
+const TEMP_PREFIX: &str = ".";
+
+/// Removes the temporary files that writers of `path` killed before their commit left beside it (nothing if
+/// its directory does not exist).
+pub fn remove_leftovers(path: &Path) -> std::io::Result<()> {
+    let (Some(dir), Some(name)) = (path.parent(), path.file_name()) else {
+        return Ok(());
     };
-    let name = path
-        .file_name()
-        .ok_or_else(|| error(std::io::Error::other("the path has no file name")))?;
-    let dir = path
-        .parent()
-        .filter(|p| !p.as_os_str().is_empty())
-        .unwrap_or(Path::new("."));
-    let tmp = dir.join(format!(
-        ".{}.tmp{}-{}",
-        name.to_string_lossy(),
-        std::process::id(),
-        COUNTER.fetch_add(1, Ordering::Relaxed)
-    ));
-    let write = || -> std::io::Result<()> {
-        let mut file = std::fs::File::create(&tmp)?;
-        file.write_all(bytes)?;
-        file.sync_all()?;
-        std::fs::rename(&tmp, path)
+    let dir = if dir.as_os_str().is_empty() {
+        Path::new(".")
+    } else {
+        dir
     };
-    write().map_err(|source| {
-        let _ = std::fs::remove_file(&tmp);
-        error(source)
-    })
+    let prefix = format!("{TEMP_PREFIX}{}.tmp", name.to_string_lossy());
+    let entries = match std::fs::read_dir(dir) {
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(()),
+        entries => entries?,
+    };
+    for entry in entries {
+        let entry = entry?;
+        if entry.file_name().to_string_lossy().starts_with(&prefix) {
+            match std::fs::remove_file(entry.path()) {
+                Err(e) if e.kind() != std::io::ErrorKind::NotFound => return Err(e),
+                _ => {}
+            }
+        }
+    }
+    Ok(())
 }
 
 #[cfg(test)]
@@ -67,5 +175,35 @@ mod tests {
         let err = write_atomic(&missing, b"x").unwrap_err();
         assert!(err.to_string().contains("b.txt"), "{err}");
         assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1);
+    }
+
+    #[test]
+    fn an_uncommitted_file_leaves_the_target_alone_and_leftovers_are_found() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("s.bin");
+        write_atomic(&path, b"old").unwrap();
+        let mut file = AtomicFile::create(&path).unwrap();
+        file.write_all(b"new, in pieces").unwrap();
+        file.flush_buffer().unwrap();
+        assert_eq!(std::fs::read(&path).unwrap(), b"old");
+        drop(file);
+        assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1);
+        // What a killed writer leaves: its temporary file (forgotten here, as a killed process would).
+        let mut killed = AtomicFile::create(&path).unwrap();
+        killed.write_all(b"half").unwrap();
+        killed.flush_buffer().unwrap();
+        std::mem::forget(killed);
+        std::fs::write(dir.path().join("other.bin"), b"x").unwrap();
+        std::fs::write(dir.path().join(".s.bin.other"), b"x").unwrap();
+        assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 4);
+        remove_leftovers(&path).unwrap();
+        let mut left: Vec<String> = std::fs::read_dir(dir.path())
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        left.sort();
+        assert_eq!(left, [".s.bin.other", "other.bin", "s.bin"]);
+        assert_eq!(std::fs::read(&path).unwrap(), b"old");
+        remove_leftovers(&dir.path().join("missing/s.bin")).unwrap();
     }
 }

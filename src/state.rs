@@ -3,23 +3,25 @@
 //!
 //! Components at every layer fill and read a `StateDict` through `save_state` / `load_state` methods under a
 //! prefix of their own (`agent.`, `replay.`, ...), so a snapshot knows nothing about their insides. Arrays stay
-//! raw little-endian numbers (they become safetensors tensors); small values (counters, generator states) are
-//! JSON. Reading checks every name, type and length: a damaged or foreign snapshot is an error, never a panic.
+//! raw numbers (they become little-endian safetensors tensors), borrowed from the component while a snapshot
+//! is written, so that writing one copies nothing; small values (counters, generator states) are JSON. Reading
+//! checks every name, type and length: a damaged or foreign snapshot is an error, never a panic.
 
 use serde::Serialize;
 use serde::de::DeserializeOwned;
+use std::borrow::Cow;
 use std::collections::BTreeMap;
 
-/// One array: its element type and its little-endian bytes.
+/// One array: its element type and its numbers, borrowed from a component (saving) or owned (read back).
 #[derive(Debug, Clone, PartialEq)]
-pub enum Array {
-    F32(Vec<f32>),
-    F64(Vec<f64>),
-    U64(Vec<u64>),
-    U8(Vec<u8>),
+pub enum Array<'a> {
+    F32(Cow<'a, [f32]>),
+    F64(Cow<'a, [f64]>),
+    U64(Cow<'a, [u64]>),
+    U8(Cow<'a, [u8]>),
 }
 
-impl Array {
+impl Array<'_> {
     pub fn type_name(&self) -> &'static str {
         match self {
             Array::F32(_) => "f32",
@@ -41,6 +43,15 @@ impl Array {
 
     pub fn is_empty(&self) -> bool {
         self.len() == 0
+    }
+
+    /// Bytes of one element.
+    pub fn element_bytes(&self) -> usize {
+        match self {
+            Array::F32(_) => 4,
+            Array::F64(_) | Array::U64(_) => 8,
+            Array::U8(_) => 1,
+        }
     }
 }
 
@@ -65,24 +76,26 @@ pub enum StateError {
     Value { name: String, msg: String },
 }
 
-/// Named arrays and JSON values.
+/// Named arrays and JSON values; `'a` is the life of the components whose arrays it borrows.
 #[derive(Debug, Clone, Default, PartialEq)]
-pub struct StateDict {
-    pub arrays: BTreeMap<String, Array>,
+pub struct StateDict<'a> {
+    pub arrays: BTreeMap<String, Array<'a>>,
     pub values: BTreeMap<String, serde_json::Value>,
 }
 
 macro_rules! typed_access {
     ($put:ident, $get:ident, $get_into:ident, $variant:ident, $t:ty, $name:literal) => {
-        pub fn $put(&mut self, name: &str, data: &[$t]) {
+        /// Stores an array: borrowed (`&[_]`, no copy) or owned (`Vec<_>`, e.g. numbers converted for the
+        /// snapshot).
+        pub fn $put(&mut self, name: &str, data: impl Into<Cow<'a, [$t]>>) {
             self.arrays
-                .insert(name.to_string(), Array::$variant(data.to_vec()));
+                .insert(name.to_string(), Array::$variant(data.into()));
         }
 
         pub fn $get(&self, name: &str) -> Result<&[$t], StateError> {
             match self.arrays.get(name) {
                 None => Err(StateError::Missing(name.to_string())),
-                Some(Array::$variant(v)) => Ok(v),
+                Some(Array::$variant(v)) => Ok(v.as_ref()),
                 Some(other) => Err(StateError::Type {
                     name: name.to_string(),
                     found: other.type_name(),
@@ -107,7 +120,7 @@ macro_rules! typed_access {
     };
 }
 
-impl StateDict {
+impl<'a> StateDict<'a> {
     typed_access!(put_f32, f32s, f32s_into, F32, f32, "f32");
     typed_access!(put_f64, f64s, f64s_into, F64, f64, "f64");
     typed_access!(put_u64, u64s, u64s_into, U64, u64, "u64");
@@ -151,14 +164,7 @@ impl StateDict {
     pub fn array_bytes(&self) -> usize {
         self.arrays
             .values()
-            .map(|a| {
-                a.len()
-                    * match a {
-                        Array::F32(_) => 4,
-                        Array::F64(_) | Array::U64(_) => 8,
-                        Array::U8(_) => 1,
-                    }
-            })
+            .map(|a| a.len() * a.element_bytes())
             .sum()
     }
 }
@@ -170,7 +176,7 @@ mod tests {
     #[test]
     fn entries_round_trip_and_mismatches_are_named() {
         let mut s = StateDict::default();
-        s.put_f32("a.w", &[1.0, -2.5]);
+        s.put_f32("a.w", &[1.0, -2.5][..]);
         s.put_value("a.step", &7u64);
         assert_eq!(s.f32s("a.w").unwrap(), &[1.0, -2.5]);
         assert_eq!(s.value::<u64>("a.step").unwrap(), 7);

@@ -147,7 +147,7 @@ impl Agent {
     /// Writes everything that changes while the agent learns and acts (online and target weights, Adam's
     /// moments and step, the generator, the active head, the noise samples) into `state` under `prefix`.
     /// Scratch buffers are left out: every use overwrites them.
-    pub fn save_state(&self, prefix: &str, state: &mut crate::state::StateDict) {
+    pub fn save_state<'a>(&'a self, prefix: &str, state: &mut crate::state::StateDict<'a>) {
         self.online.save_state(&format!("{prefix}.online"), state);
         self.target.save_state(&format!("{prefix}.target"), state);
         self.adam.save_state(&format!("{prefix}.adam"), state);
@@ -167,7 +167,7 @@ impl Agent {
     pub fn load_state(
         &mut self,
         prefix: &str,
-        state: &crate::state::StateDict,
+        state: &crate::state::StateDict<'_>,
     ) -> Result<(), crate::state::StateError> {
         self.online.load_state(&format!("{prefix}.online"), state)?;
         self.target.load_state(&format!("{prefix}.target"), state)?;

@@ -114,7 +114,7 @@ impl Adam {
     pub const EPS: f32 = 1e-8;
 
     /// Writes the step count and both moments into `state` under `prefix`.
-    pub fn save_state(&self, prefix: &str, state: &mut crate::state::StateDict) {
+    pub fn save_state<'a>(&'a self, prefix: &str, state: &mut crate::state::StateDict<'a>) {
         state.put_value(&format!("{prefix}.step"), &self.step);
         state.put_f32(&format!("{prefix}.m"), &self.first_moment);
         state.put_f32(&format!("{prefix}.v"), &self.second_moment);
@@ -124,7 +124,7 @@ impl Adam {
     pub fn load_state(
         &mut self,
         prefix: &str,
-        state: &crate::state::StateDict,
+        state: &crate::state::StateDict<'_>,
     ) -> Result<(), crate::state::StateError> {
         self.step = state.value(&format!("{prefix}.step"))?;
         state.f32s_into(&format!("{prefix}.m"), &mut self.first_moment)?;

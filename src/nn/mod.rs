@@ -344,15 +344,15 @@ impl QNet {
     }
 
     /// Writes the parameters into `state` as `{prefix}.params`.
-    pub fn save_state(&self, prefix: &str, state: &mut crate::state::StateDict) {
-        state.put_f32(&format!("{prefix}.params"), &self.params);
+    pub fn save_state<'a>(&'a self, prefix: &str, state: &mut crate::state::StateDict<'a>) {
+        state.put_f32(&format!("{prefix}.params"), &self.params[..]);
     }
 
     /// Reads the parameters [`QNet::save_state`] wrote (the shapes must match this network's).
     pub fn load_state(
         &mut self,
         prefix: &str,
-        state: &crate::state::StateDict,
+        state: &crate::state::StateDict<'_>,
     ) -> Result<(), crate::state::StateError> {
         state.f32s_into(&format!("{prefix}.params"), &mut self.params)
     }

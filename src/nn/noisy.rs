@@ -53,7 +53,7 @@ impl NoiseSample {
     }
 
     /// Writes the factors into `state` under `prefix`.
-    pub fn save_state(&self, prefix: &str, state: &mut crate::state::StateDict) {
+    pub fn save_state<'a>(&'a self, prefix: &str, state: &mut crate::state::StateDict<'a>) {
         state.put_f32(&format!("{prefix}.input"), &self.input_factors);
         state.put_f32(&format!("{prefix}.output"), &self.output_factors);
     }
@@ -62,7 +62,7 @@ impl NoiseSample {
     pub fn load_state(
         &mut self,
         prefix: &str,
-        state: &crate::state::StateDict,
+        state: &crate::state::StateDict<'_>,
     ) -> Result<(), crate::state::StateError> {
         state.f32s_into(&format!("{prefix}.input"), &mut self.input_factors)?;
         state.f32s_into(&format!("{prefix}.output"), &mut self.output_factors)

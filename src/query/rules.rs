@@ -280,14 +280,14 @@ impl QueryController {
     /// Writes the controller's position into `state` under `prefix`: budget used, segment in progress,
     /// queries, and the adaptive rule's window. The rule's ranking tree is not written: its answers depend only
     /// on the values in the window, so it is rebuilt from them.
-    pub fn save_state(&self, prefix: &str, state: &mut crate::state::StateDict) {
+    pub fn save_state<'a>(&'a self, prefix: &str, state: &mut crate::state::StateDict<'a>) {
         state.put_value(
             &format!("{prefix}.counters"),
             &[self.budget_used, self.segment_left, self.queries],
         );
         if let QueryRule::Adaptive(rule) = &self.rule {
             let window: Vec<f32> = rule.recent.iter().copied().collect();
-            state.put_f32(&format!("{prefix}.window"), &window);
+            state.put_f32(&format!("{prefix}.window"), window);
         }
     }
 
@@ -295,7 +295,7 @@ impl QueryController {
     pub fn load_state(
         &mut self,
         prefix: &str,
-        state: &crate::state::StateDict,
+        state: &crate::state::StateDict<'_>,
     ) -> Result<(), crate::state::StateError> {
         let [budget_used, segment_left, queries]: [usize; 3] =
             state.value(&format!("{prefix}.counters"))?;

@@ -283,15 +283,15 @@ impl Replay {
     /// Writes the memory's contents into `state` under `prefix`: every slot's arrays, the priorities, the
     /// counters and the n-step queue. The sum/min trees are not written: their inner nodes are recomputed from
     /// the leaves on every change, so rebuilding them from the priorities gives the same trees bit for bit.
-    pub fn save_state(&self, prefix: &str, state: &mut crate::state::StateDict) {
+    pub fn save_state<'a>(&'a self, prefix: &str, state: &mut crate::state::StateDict<'a>) {
         let name = |n: &str| format!("{prefix}.{n}");
         state.put_f32(&name("obs"), &self.obs);
         state.put_f32(&name("next_obs"), &self.next_obs);
         let actions: Vec<u64> = self.actions.iter().map(|&a| a as u64).collect();
-        state.put_u64(&name("actions"), &actions);
+        state.put_u64(&name("actions"), actions);
         state.put_f32(&name("rewards"), &self.rewards);
         let terminal: Vec<u8> = self.terminal.iter().map(|&t| u8::from(t)).collect();
-        state.put_u8(&name("terminal"), &terminal);
+        state.put_u8(&name("terminal"), terminal);
         state.put_f32(&name("nstep_next_obs"), &self.nstep_next_obs);
         state.put_f32(&name("nstep_rewards"), &self.nstep_rewards);
         state.put_f32(&name("nstep_discounts"), &self.nstep_discounts);
@@ -310,7 +310,7 @@ impl Replay {
     pub fn load_state(
         &mut self,
         prefix: &str,
-        state: &crate::state::StateDict,
+        state: &crate::state::StateDict<'_>,
     ) -> Result<(), crate::state::StateError> {
         use crate::state::StateError;
         let name = |n: &str| format!("{prefix}.{n}");

@@ -210,11 +210,13 @@ struct RunParts<'a> {
     obs: &'a [f32],
 }
 
+/// Writes a snapshot of the run; when the run stops after it (`stopping`), waits until it is on disk.
 fn snapshot(
     checkpointer: &mut Checkpointer,
     st: &LoopState,
     parts: RunParts<'_>,
     log: &mut RunLog,
+    stopping: bool,
 ) -> Result<()> {
     let mut state = StateDict::default();
     parts.agent.save_state("agent", &mut state);
@@ -236,7 +238,11 @@ fn snapshot(
         "expert_in_control": parts.queries.expert_in_control(),
         "budget_used": parts.queries.budget_used(),
     });
-    checkpointer.save(&state, position)
+    checkpointer.save(&state, position)?;
+    if stopping {
+        checkpointer.wait()?;
+    }
+    Ok(())
 }
 
 fn train_run(
@@ -350,7 +356,7 @@ fn train_run(
                         expert_state: expert.as_deref().and_then(|e| e.state()),
                         obs: &obs,
                     };
-                    snapshot(ck, &st, parts, log)?;
+                    snapshot(ck, &st, parts, log, stop)?;
                 }
                 if stop {
                     return Err(crate::interrupt::Interrupted(format!(
@@ -529,7 +535,7 @@ fn train_run(
                     expert_state: expert.as_deref().and_then(|e| e.state()),
                     obs: &obs,
                 };
-                snapshot(ck, &st, parts, log)?;
+                snapshot(ck, &st, parts, log, stop)?;
             }
             if stop {
                 return Err(crate::interrupt::Interrupted(format!(

@@ -12,9 +12,8 @@
 use super::TrainConfig;
 use crate::state::{Array, StateDict};
 use anyhow::{Context, Result, bail};
-use safetensors::tensor::TensorView;
 use safetensors::{Dtype, SafeTensors};
-use std::collections::HashMap;
+use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -31,6 +30,8 @@ pub struct Checkpointer {
     /// Snapshot every this many units of work (environment steps; pre-training updates); 0: only on request.
     every: usize,
     config_toml: String,
+    /// The thread making the last snapshot durable (see [`Checkpointer::save`]).
+    pending: Option<std::thread::JoinHandle<Result<()>>>,
     /// Time spent writing snapshots, and how many were written (for the benchmark and the summary's notes).
     pub spent_s: f64,
     pub written: usize,
@@ -44,6 +45,7 @@ impl Checkpointer {
             dir: dir.to_path_buf(),
             every: cfg.snapshot_every,
             config_toml: cfg.to_toml(),
+            pending: None,
             spent_s: 0.0,
             written: 0,
             last_bytes: 0,
@@ -61,56 +63,75 @@ impl Checkpointer {
 
     /// Writes `state` atomically (the previous snapshot stays whole until the new one replaces it).
     /// `position` says where the run is, for people and scripts (`snapshot.json`).
-    pub fn save(&mut self, state: &StateDict, position: serde_json::Value) -> Result<()> {
+    ///
+    /// The arrays go straight from the components into the file (no copy of them is made), and the file is
+    /// made durable in the background: `save` returns once every byte is in the operating system's cache
+    /// under a temporary name; a thread then syncs it to the disk and renames it over the previous snapshot
+    /// (then writes `snapshot.json`). The rename comes only after the sync, so at every moment the snapshot
+    /// file is a whole snapshot, the new one or the one before, even if the machine loses power; a process
+    /// killed before the rename leaves the previous snapshot, from which the run resumes to the same results
+    /// (it redoes more steps). The next `save`, [`Checkpointer::wait`], [`Checkpointer::remove`] and dropping
+    /// the checkpointer wait for that thread.
+    pub fn save(&mut self, state: &StateDict<'_>, position: serde_json::Value) -> Result<()> {
         let started = Instant::now();
+        self.wait()?;
         let values = serde_json::to_string(&state.values)?;
-        let mut meta = HashMap::new();
-        meta.insert("format".to_string(), FORMAT_VERSION.to_string());
-        meta.insert("arld".to_string(), env!("CARGO_PKG_VERSION").to_string());
-        meta.insert("config".to_string(), self.config_toml.clone());
-        meta.insert("values".to_string(), values);
-        let buffers: Vec<(&String, Dtype, Vec<u8>, usize)> = state
-            .arrays
-            .iter()
-            .map(|(name, array)| {
-                let (dtype, bytes) = match array {
-                    Array::F32(v) => (Dtype::F32, v.iter().flat_map(|x| x.to_le_bytes()).collect()),
-                    Array::F64(v) => (Dtype::F64, v.iter().flat_map(|x| x.to_le_bytes()).collect()),
-                    Array::U64(v) => (Dtype::U64, v.iter().flat_map(|x| x.to_le_bytes()).collect()),
-                    Array::U8(v) => (Dtype::U8, v.clone()),
-                };
-                (name, dtype, bytes, array.len())
-            })
-            .collect();
-        let views = buffers
-            .iter()
-            .map(|(name, dtype, bytes, len)| {
-                Ok(((*name).clone(), TensorView::new(*dtype, vec![*len], bytes)?))
-            })
-            .collect::<Result<Vec<_>, safetensors::SafeTensorError>>()?;
-        let bytes = safetensors::serialize(views, Some(meta))?;
-        crate::files::write_atomic(&self.path(), &bytes)?;
+        let metadata = [
+            ("format", FORMAT_VERSION.to_string()),
+            ("arld", env!("CARGO_PKG_VERSION").to_string()),
+            ("config", self.config_toml.clone()),
+            ("values", values),
+        ];
+        let mut file = crate::files::AtomicFile::create(&self.path())?;
+        let bytes = encode(&mut file, state, &metadata).map_err(|e| file.error(e))?;
+        file.flush_buffer()?;
         let info = serde_json::json!({
             "format": FORMAT_VERSION,
             "arld": env!("CARGO_PKG_VERSION"),
             "config_hash": format!("{:016x}", fnv1a(self.config_toml.as_bytes())),
             "position": position,
-            "bytes": bytes.len(),
+            "bytes": bytes,
         });
-        crate::files::write_atomic(
-            &self.dir.join(SNAPSHOT_INFO_FILE),
-            serde_json::to_string_pretty(&info)?.as_bytes(),
-        )?;
+        let info = serde_json::to_string_pretty(&info)?;
+        let info_path = self.dir.join(SNAPSHOT_INFO_FILE);
+        let commit = move || -> Result<()> {
+            file.commit()?;
+            crate::files::write_atomic(&info_path, info.as_bytes())?;
+            Ok(())
+        };
+        let thread = std::thread::Builder::new()
+            .name("snapshot".into())
+            .spawn(commit)
+            .context("cannot start the thread that writes the snapshot")?;
+        self.pending = Some(thread);
         self.spent_s += started.elapsed().as_secs_f64();
         self.written += 1;
-        self.last_bytes = bytes.len();
+        self.last_bytes = bytes as usize;
         Ok(())
+    }
+
+    /// Waits until the last snapshot [`Checkpointer::save`] wrote is synced and in place; its error if
+    /// that failed.
+    pub fn wait(&mut self) -> Result<()> {
+        match self.pending.take() {
+            None => Ok(()),
+            Some(thread) => thread
+                .join()
+                .map_err(|_| anyhow::anyhow!("the thread writing the snapshot panicked"))?
+                .context("cannot write the snapshot"),
+        }
     }
 
     /// The run directory's snapshot, if there is one; an error if it is damaged or belongs to another
     /// configuration or version.
-    pub fn load(&self) -> Result<Option<StateDict>> {
+    pub fn load(&mut self) -> Result<Option<StateDict<'static>>> {
+        self.wait()?;
         let path = self.path();
+        // A process killed while it wrote a snapshot leaves its temporary file; the snapshot itself is whole.
+        for file in [SNAPSHOT_FILE, SNAPSHOT_INFO_FILE] {
+            crate::files::remove_leftovers(&self.dir.join(file))
+                .with_context(|| format!("cannot tidy {}", self.dir.display()))?;
+        }
         if !path.is_file() {
             return Ok(None);
         }
@@ -122,7 +143,8 @@ impl Checkpointer {
     }
 
     /// Removes the snapshot (the run finished: its results are the state worth keeping).
-    pub fn remove(&self) -> Result<()> {
+    pub fn remove(&mut self) -> Result<()> {
+        self.wait()?;
         for name in [SNAPSHOT_FILE, SNAPSHOT_INFO_FILE] {
             match std::fs::remove_file(self.dir.join(name)) {
                 Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
@@ -135,6 +157,79 @@ impl Checkpointer {
     }
 }
 
+impl Drop for Checkpointer {
+    /// A run that ends with an error still leaves its last snapshot whole and in place.
+    fn drop(&mut self) {
+        let _ = self.wait();
+    }
+}
+
+/// Writes `state` as a safetensors file: the header (every array's type, length and place; `metadata` under
+/// `__metadata__`), padded with spaces to a multiple of 8 bytes, then every array's little-endian bytes in
+/// the order of their names. Returns the bytes written.
+fn encode(
+    out: &mut impl Write,
+    state: &StateDict<'_>,
+    metadata: &[(&str, String)],
+) -> std::io::Result<u64> {
+    let mut header = serde_json::Map::new();
+    header.insert(
+        "__metadata__".to_string(),
+        metadata
+            .iter()
+            .map(|(k, v)| (k.to_string(), serde_json::Value::from(v.as_str())))
+            .collect::<serde_json::Map<_, _>>()
+            .into(),
+    );
+    let mut offset = 0;
+    for (name, array) in &state.arrays {
+        let end = offset + array.len() * array.element_bytes();
+        let dtype = match array {
+            Array::F32(_) => "F32",
+            Array::F64(_) => "F64",
+            Array::U64(_) => "U64",
+            Array::U8(_) => "U8",
+        };
+        header.insert(
+            name.clone(),
+            serde_json::json!({"dtype": dtype, "shape": [array.len()], "data_offsets": [offset, end]}),
+        );
+        offset = end;
+    }
+    let mut header = serde_json::to_vec(&header).map_err(std::io::Error::other)?;
+    header.resize(header.len().next_multiple_of(8), b' ');
+    out.write_all(&(header.len() as u64).to_le_bytes())?;
+    out.write_all(&header)?;
+    // Numbers go out through one small buffer, converted to little-endian on the way.
+    let mut buffer = vec![0u8; 1 << 16];
+    for array in state.arrays.values() {
+        match array {
+            Array::F32(v) => write_le(out, v, f32::to_le_bytes, &mut buffer)?,
+            Array::F64(v) => write_le(out, v, f64::to_le_bytes, &mut buffer)?,
+            Array::U64(v) => write_le(out, v, u64::to_le_bytes, &mut buffer)?,
+            Array::U8(v) => out.write_all(v)?,
+        }
+    }
+    Ok(8 + header.len() as u64 + offset as u64)
+}
+
+/// Writes `data`'s numbers as little-endian bytes, `buffer.len()` bytes at a time.
+fn write_le<T: Copy, const N: usize>(
+    out: &mut impl Write,
+    data: &[T],
+    to_le: fn(T) -> [u8; N],
+    buffer: &mut [u8],
+) -> std::io::Result<()> {
+    for part in data.chunks(buffer.len() / N) {
+        let bytes = &mut buffer[..part.len() * N];
+        for (slot, &x) in bytes.chunks_exact_mut(N).zip(part) {
+            slot.copy_from_slice(&to_le(x));
+        }
+        out.write_all(bytes)?;
+    }
+    Ok(())
+}
+
 /// FNV-1a, 64 bits: the configuration's fingerprint shown in `snapshot.json`.
 fn fnv1a(bytes: &[u8]) -> u64 {
     bytes.iter().fold(0xcbf2_9ce4_8422_2325, |h, &b| {
@@ -143,7 +238,7 @@ fn fnv1a(bytes: &[u8]) -> u64 {
 }
 
 /// Reads a snapshot file's bytes, checking format, version and configuration.
-fn decode(bytes: &[u8], config_toml: &str) -> Result<StateDict> {
+fn decode(bytes: &[u8], config_toml: &str) -> Result<StateDict<'static>> {
     let (_, header) =
         SafeTensors::read_metadata(bytes).context("the file is not a readable safetensors file")?;
     let meta = header.metadata().clone().unwrap_or_default();
@@ -194,22 +289,10 @@ fn decode(bytes: &[u8], config_toml: &str) -> Result<StateDict> {
     for (name, view) in file.tensors() {
         let data = view.data();
         let array = match view.dtype() {
-            Dtype::F32 => Array::F32(
-                data.chunks_exact(4)
-                    .map(|c| f32::from_le_bytes(c.try_into().expect("4 bytes")))
-                    .collect(),
-            ),
-            Dtype::F64 => Array::F64(
-                data.chunks_exact(8)
-                    .map(|c| f64::from_le_bytes(c.try_into().expect("8 bytes")))
-                    .collect(),
-            ),
-            Dtype::U64 => Array::U64(
-                data.chunks_exact(8)
-                    .map(|c| u64::from_le_bytes(c.try_into().expect("8 bytes")))
-                    .collect(),
-            ),
-            Dtype::U8 => Array::U8(data.to_vec()),
+            Dtype::F32 => Array::F32(read_le(data, f32::from_le_bytes).into()),
+            Dtype::F64 => Array::F64(read_le(data, f64::from_le_bytes).into()),
+            Dtype::U64 => Array::U64(read_le(data, u64::from_le_bytes).into()),
+            Dtype::U8 => Array::U8(data.to_vec().into()),
             other => {
                 bail!("the snapshot's array `{name}` has type {other:?}, which arld never writes")
             }
@@ -217,6 +300,14 @@ fn decode(bytes: &[u8], config_toml: &str) -> Result<StateDict> {
         state.arrays.insert(name, array);
     }
     Ok(state)
+}
+
+/// The numbers of little-endian `bytes` (whose length safetensors checked against the array's type).
+fn read_le<T, const N: usize>(bytes: &[u8], from_le: fn([u8; N]) -> T) -> Vec<T> {
+    bytes
+        .chunks_exact(N)
+        .map(|c| from_le(c.try_into().expect("chunks of N bytes")))
+        .collect()
 }
 
 #[cfg(test)]
@@ -234,15 +325,34 @@ mod tests {
     fn a_snapshot_round_trips_and_another_configuration_is_refused() {
         let dir = tempfile::tempdir().unwrap();
         let mut state = StateDict::default();
-        state.put_f32("a", &[1.5, -0.0, f32::MIN_POSITIVE]);
-        state.put_f64("b", &[]);
-        state.put_u64("c", &[u64::MAX]);
-        state.put_u8("d", &[0, 1]);
+        state.put_f32("a", &[1.5, -0.0, f32::MIN_POSITIVE][..]);
+        state.put_f64("b", &[][..]);
+        state.put_u64("c", vec![u64::MAX]);
+        state.put_u8("d", &[0, 1][..]);
         state.put_value("e", &(3usize, "x"));
+        // Longer than the writer's 64 KiB buffer, so it goes out in several pieces.
+        let long: Vec<f64> = (0..20_000).map(|i| f64::from(i) * 0.37 - 11.0).collect();
+        state.put_f64("f", &long);
         let mut ck = Checkpointer::new(dir.path(), &config(0));
         ck.save(&state, serde_json::json!({"step": 10})).unwrap();
+        ck.wait().unwrap();
+        // The file is a safetensors file as the safetensors crate reads it, each array's bytes little-endian.
+        let bytes = std::fs::read(ck.path()).unwrap();
+        assert_eq!(ck.last_bytes, bytes.len());
+        let header_len = u64::from_le_bytes(bytes[..8].try_into().unwrap());
+        assert_eq!(header_len % 8, 0);
+        let file = SafeTensors::deserialize(&bytes).unwrap();
+        let f = file.tensor("f").unwrap();
+        assert_eq!((f.dtype(), f.shape()), (Dtype::F64, &[20_000][..]));
+        let expected: Vec<u8> = long.iter().flat_map(|x| x.to_le_bytes()).collect();
+        assert_eq!(f.data(), &expected[..]);
+        assert_eq!(file.tensor("c").unwrap().data(), &[0xff; 8]);
+        // A temporary file a killed writer left is removed when the snapshot is read.
+        let leftover = dir.path().join(".snapshot.safetensors.tmp999-0");
+        std::fs::write(&leftover, b"half a snapshot").unwrap();
         assert_eq!(ck.load().unwrap().unwrap(), state);
-        let other = Checkpointer::new(dir.path(), &config(1));
+        assert!(!leftover.exists());
+        let mut other = Checkpointer::new(dir.path(), &config(1));
         let err = format!("{:#}", other.load().unwrap_err());
         assert!(
             err.contains("another configuration")
