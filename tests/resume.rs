@@ -300,6 +300,33 @@ fn a_snapshot_of_another_configuration_is_refused() {
         err.contains("another configuration") && err.contains("seed = 0"),
         "{err}"
     );
+    std::fs::write(&config, &text).unwrap();
+    // A snapshot another arld version (or snapshot format) wrote: refused, naming both versions.
+    let snapshot = dir.join("snapshot.safetensors");
+    let original = std::fs::read(&snapshot).unwrap();
+    for (key, value, expected) in [
+        ("arld", "0.0.1", "written by arld 0.0.1, this is arld"),
+        ("format", "0", "format version 0, this arld reads version"),
+    ] {
+        std::fs::write(&snapshot, with_metadata(&original, key, value)).unwrap();
+        let out = Command::new(ARLD)
+            .args(["train", "--quiet", "--resume"])
+            .arg(&dir)
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{err}");
+        assert!(err.contains(expected), "{err}");
+    }
+    // The snapshot as written, with its configuration, still continues.
+    std::fs::write(&snapshot, &original).unwrap();
+    finish(spawn(&[
+        "train".to_string(),
+        "--quiet".to_string(),
+        "--resume".to_string(),
+        dir.display().to_string(),
+    ]));
+    assert!(dir.join("summary.json").is_file());
     let out = Command::new(ARLD)
         .args(["train", "--resume"])
         .arg(work.path())
@@ -307,4 +334,21 @@ fn a_snapshot_of_another_configuration_is_refused() {
         .unwrap();
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("holds no snapshot"));
+}
+
+/// A safetensors file's bytes with one `__metadata__` entry changed (the header rewritten, the data kept).
+fn with_metadata(file: &[u8], key: &str, value: &str) -> Vec<u8> {
+    let n = u64::from_le_bytes(file[..8].try_into().unwrap()) as usize;
+    let mut header: serde_json::Value = serde_json::from_slice(&file[8..8 + n]).unwrap();
+    assert!(
+        header["__metadata__"].get(key).is_some(),
+        "no {key} in the header"
+    );
+    header["__metadata__"][key] = value.into();
+    let mut text = serde_json::to_vec(&header).unwrap();
+    text.resize(text.len().next_multiple_of(8), b' ');
+    let mut out = (text.len() as u64).to_le_bytes().to_vec();
+    out.extend_from_slice(&text);
+    out.extend_from_slice(&file[8 + n..]);
+    out
 }
