@@ -288,18 +288,46 @@ impl QNet {
     }
 }
 
+/// The largest model file read: far above any network of this crate (a 10-head LunarLander network is ~25 kB).
+pub const MAX_MODEL_FILE_BYTES: u64 = 256 << 20;
+/// The largest observation size and action count a model file may declare.
+const MAX_DIM: usize = 1 << 16;
+/// The largest number of bootstrap heads a model file may declare.
+const MAX_HEADS: usize = 1024;
+
 fn load_file(path: &Path) -> Result<(QNet, BTreeMap<String, String>), ModelFileError> {
-    let path_buf = || path.to_path_buf();
-    let bytes = fs::read(path).map_err(|source| ModelFileError::Read {
-        path: path_buf(),
+    let read_error = |source| ModelFileError::Read {
+        path: path.to_path_buf(),
         source,
-    })?;
+    };
+    let meta = fs::metadata(path).map_err(read_error)?;
+    if !meta.is_file() {
+        return Err(read_error(std::io::Error::other("not a regular file")));
+    }
+    if meta.len() > MAX_MODEL_FILE_BYTES {
+        return Err(read_error(std::io::Error::other(format!(
+            "{} bytes is larger than any model file ({} MiB at most)",
+            meta.len(),
+            MAX_MODEL_FILE_BYTES >> 20
+        ))));
+    }
+    let bytes = fs::read(path).map_err(read_error)?;
+    parse_model(path, &bytes)
+}
+
+/// Parses the bytes of a model file (`path` only names it in errors). Every size the header declares is
+/// bounded and checked against the bytes actually present before anything is allocated.
+pub fn parse_model(
+    path: &Path,
+    bytes: &[u8],
+) -> Result<(QNet, BTreeMap<String, String>), ModelFileError> {
+    let path_buf = || path.to_path_buf();
     let corrupt = |source| ModelFileError::Corrupt {
         path: path_buf(),
         source,
     };
-    let (_, header) = SafeTensors::read_metadata(&bytes).map_err(corrupt)?;
-    let file = SafeTensors::deserialize(&bytes).map_err(corrupt)?;
+    let (_, header) = SafeTensors::read_metadata(bytes).map_err(corrupt)?;
+    let file = SafeTensors::deserialize(bytes).map_err(corrupt)?;
     let mut metadata: BTreeMap<String, String> = header
         .metadata()
         .clone()
@@ -328,9 +356,19 @@ fn load_file(path: &Path) -> Result<(QNet, BTreeMap<String, String>), ModelFileE
             format!("must be a positive integer, found '{text}'"),
         )),
     };
-    let heads = positive("heads", &heads_text)?;
-    let obs_dim = positive("obs_dim", &obs_dim_text)?;
-    let n_actions = positive("n_actions", &n_actions_text)?;
+    let bounded = |key: &str, text: &str, max: usize| {
+        let value = positive(key, text)?;
+        if value > max {
+            return Err(metadata_error(
+                key,
+                format!("is {value}, more than the largest supported ({max})"),
+            ));
+        }
+        Ok(value)
+    };
+    let heads = bounded("heads", &heads_text, MAX_HEADS)?;
+    let obs_dim = bounded("obs_dim", &obs_dim_text, MAX_DIM)?;
+    let n_actions = bounded("n_actions", &n_actions_text, MAX_DIM)?;
     let kind = match kind_text.as_str() {
         "plain" => OutputKind::Plain,
         "bootstrap" => OutputKind::Bootstrap { heads },
@@ -349,6 +387,19 @@ fn load_file(path: &Path) -> Result<(QNet, BTreeMap<String, String>), ModelFileE
         ));
     }
 
+    // Parameters the declared sizes need, against the data the file really holds (before allocating them).
+    let needed = (obs_dim * HIDDEN + HIDDEN * HIDDEN + 2 * HIDDEN)
+        + heads * n_actions * (HIDDEN + 1) * if kind == OutputKind::Noisy { 2 } else { 1 };
+    if needed.saturating_mul(4) > bytes.len() {
+        return Err(metadata_error(
+            "n_actions",
+            format!(
+                "with obs_dim {obs_dim} and {heads} head(s) the network has {needed} parameters, more than the \
+                 file's {} bytes can hold",
+                bytes.len()
+            ),
+        ));
+    }
     let layout = Layout::new(obs_dim, n_actions, kind);
     let expected = file_tensors(&layout);
     for name in file.names() {
@@ -668,6 +719,38 @@ mod tests {
         assert!(matches!(
             error.downcast_ref::<ModelFileError>(),
             Some(ModelFileError::ReservedKey { .. })
+        ));
+    }
+
+    #[test]
+    fn declared_sizes_beyond_the_file_are_refused_before_allocating() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut rng = rand_pcg::Pcg64::seed_from_u64(15);
+        let path = dir.path().join("x.safetensors");
+        QNet::new(2, 2, OutputKind::Plain, &mut rng)
+            .save(&path, &BTreeMap::new())
+            .unwrap();
+        let bytes = fs::read(&path).unwrap();
+        let header_len = u64::from_le_bytes(bytes[..8].try_into().unwrap()) as usize;
+        let text = std::str::from_utf8(&bytes[8..8 + header_len]).unwrap();
+        for (from, to) in [
+            ("\"n_actions\":\"2\"", "\"n_actions\":\"60000\""),
+            ("\"obs_dim\":\"2\"", "\"obs_dim\":\"99999999999\""),
+            ("\"heads\":\"1\"", "\"heads\":\"18446744073709551615\""),
+        ] {
+            assert!(text.contains(from), "{text}");
+            let mut header = text.replace(from, to);
+            let pad = (8 - header.len() % 8) % 8;
+            header.push_str(&" ".repeat(pad));
+            let mut out = (header.len() as u64).to_le_bytes().to_vec();
+            out.extend_from_slice(header.as_bytes());
+            out.extend_from_slice(&bytes[8 + header_len..]);
+            let error = parse_model(&path, &out).unwrap_err();
+            assert!(matches!(error, ModelFileError::Metadata { .. }), "{error}");
+        }
+        assert!(matches!(
+            load_file(dir.path()).unwrap_err(),
+            ModelFileError::Read { .. }
         ));
     }
 }
