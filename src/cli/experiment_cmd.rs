@@ -166,6 +166,9 @@ pub fn run_sweep(args: SweepArgs) -> Result<ExitCode> {
         }
         Err(err) => return Err(err),
     };
+    for (path, problem) in &outcome.damaged {
+        println!("damaged and run again: {} ({problem})", path.display());
+    }
     println!(
         "{} runs ({} already complete, {} run now); results: {}",
         outcome.total,

@@ -4,8 +4,9 @@
 //! table and figures ([`report`], [`plot`]). Sweeps and reports read runs through [`crate::train::run_dir`], the
 //! owner of the run directory's format.
 //!
-//! Within this layer imports go one way: `stats`, `sweep` <- `protocol` <- `plot` <- `report`; `slurm` <- the CLI.
+//! Within this layer imports go one way: `dir_lock` <- `sweep`; `stats`, `sweep` <- `protocol` <- `plot` <- `report`; `slurm` <- the CLI.
 
+pub mod dir_lock;
 pub mod plot;
 pub mod protocol;
 pub mod report;

@@ -419,6 +419,9 @@ pub struct SweepOutcome {
     pub completed: usize,
     /// Path of the `results.csv` written at the end.
     pub results_csv: PathBuf,
+    /// Runs that had a summary but were damaged (a file missing or unreadable), with what was wrong: they
+    /// were run again.
+    pub damaged: Vec<(PathBuf, String)>,
 }
 
 /// Records `grid` in `dir/sweep.toml`, runs it with [`run_sweep`] and returns the outcome.
@@ -440,6 +443,14 @@ pub fn run_grid_shard(
     run_fn: &RunFn,
 ) -> Result<SweepOutcome> {
     let all_specs = grid.specs()?;
+    std::fs::create_dir_all(dir)
+        .with_context(|| format!("cannot create sweep directory {}", dir.display()))?;
+    // One process per directory (per shard of it: the shards of a Slurm array share the directory).
+    let lock_name = shard.map_or_else(
+        || LOCK_FILE.to_string(),
+        |s| format!("{LOCK_FILE}-shard-{}-of-{}", s.index, s.count),
+    );
+    let _lock = super::dir_lock::DirLock::acquire(dir, &lock_name)?;
     prepare_sweep_dir(grid, dir)?;
     let Some(shard) = shard else {
         return run_sweep(&all_specs, dir, jobs, run_fn);
@@ -454,6 +465,9 @@ pub fn run_grid_shard(
     }
     Ok(outcome)
 }
+
+/// The lock file of a sweep directory (see [`super::dir_lock`]); a shard's is `.lock-shard-I-of-N`.
+pub const LOCK_FILE: &str = ".lock";
 
 /// Creates the sweep directory and records the grid in its `sweep.toml`, refusing a directory that holds a
 /// sweep with other `set` overrides.
@@ -545,9 +559,27 @@ fn run_sweep_inner(
     }
     std::fs::create_dir_all(dir)
         .with_context(|| format!("cannot create sweep directory {}", dir.display()))?;
+    // A run with a summary whose files are damaged is run again, and said so (never silently left out).
+    let mut damaged = Vec::new();
     let mut pending: Vec<&RunSpec> = specs
         .iter()
-        .filter(|spec| !run_dir::is_complete(&dir.join(spec.dir_name())))
+        .filter(|spec| {
+            let path = dir.join(spec.dir_name());
+            if !run_dir::is_complete(&path) {
+                return true;
+            }
+            match run_dir::check_complete(&path) {
+                Ok(()) => false,
+                Err(err) => {
+                    eprintln!(
+                        "run {} is damaged ({err:#}); running it again",
+                        path.display()
+                    );
+                    damaged.push((path, format!("{err:#}")));
+                    true
+                }
+            }
+        })
         .collect();
     // Seed by seed: every configuration gets its first seeds early, so a partial sweep already reports on all.
     let mut seed_order: Vec<u64> = Vec::new();
@@ -654,6 +686,7 @@ fn run_sweep_inner(
         already_complete,
         completed: completed.into_inner(),
         results_csv: collected,
+        damaged,
     })
 }
 
@@ -684,6 +717,7 @@ fn run_one_spec(spec: &RunSpec, path: &Path, status: &Path, run_fn: &RunFn) -> R
         if !run_dir::is_complete(path) {
             bail!("the run returned without writing {}", run_dir::SUMMARY_FILE);
         }
+        run_dir::check_complete(path).context("the run's files are not whole")?;
         Ok(())
     })();
     let interrupted = result
@@ -776,15 +810,7 @@ impl RunStatus {
     }
 }
 
-/// This machine's short host name (as Slurm's node names are).
-pub fn host_name() -> String {
-    std::fs::read_to_string("/proc/sys/kernel/hostname")
-        .ok()
-        .or_else(|| std::env::var("HOSTNAME").ok())
-        .map(|h| h.trim().split('.').next().unwrap_or("").to_string())
-        .filter(|h| !h.is_empty())
-        .unwrap_or_else(|| "unknown".to_string())
-}
+pub use super::dir_lock::host_name;
 
 /// Where one run of a sweep stands.
 #[derive(Debug, Clone, PartialEq)]

@@ -190,6 +190,38 @@ pub struct RunRecord {
     pub summary_steps_to_solve: Option<u64>,
 }
 
+/// Whether the complete run in `dir` is whole: its summary, configuration and evaluation curve are present and
+/// parse (its query log too, when there is one), and the curve ends at the run's last step with the summary's
+/// final score (a curve cut short does not). An error says what is missing or damaged. Sweeps run again any run that fails this.
+pub fn check_complete(dir: &Path) -> Result<()> {
+    if !is_complete(dir) {
+        bail!("it has no {SUMMARY_FILE}");
+    }
+    for file in [CONFIG_FILE, EVAL_FILE] {
+        if !dir.join(file).is_file() {
+            bail!("it has {SUMMARY_FILE} but no {file}");
+        }
+    }
+    let run = read_run(dir, Path::new(""))?;
+    let summary = read_summary(dir)?;
+    match run.eval.iter().max_by_key(|p| p.step) {
+        None => bail!("{EVAL_FILE} has no evaluation"),
+        // Training always evaluates after its last step.
+        Some(last) if last.step != summary.train_steps as u64 => bail!(
+            "{EVAL_FILE} ends at step {}, before the run's last step {} (a truncated curve)",
+            last.step,
+            summary.train_steps
+        ),
+        Some(last) if last.mean.to_bits() != summary.final_score.to_bits() => bail!(
+            "{EVAL_FILE} ends at step {} with mean {}, but {SUMMARY_FILE} has final score {} (a truncated curve)",
+            last.step,
+            last.mean,
+            summary.final_score
+        ),
+        Some(_) => Ok(()),
+    }
+}
+
 /// Reads `summary.json` of a run directory.
 pub fn read_summary(dir: &Path) -> Result<Summary> {
     let path = dir.join(SUMMARY_FILE);

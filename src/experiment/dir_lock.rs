@@ -1,0 +1,174 @@
+//! The lock of a sweep directory: one `arld sweep` (or one shard of it) works in a directory at a time. The lock
+//! is a file naming its holder (pid, host, start time), created atomically (written aside, then hard-linked into
+//! place, which fails if it exists) and removed when the holder ends. A lock whose holder is gone (a process of
+//! this host that no longer exists, e.g. after SIGKILL) is stale: it is taken over with a warning. A lock held
+//! from another host cannot be checked from here and is never taken over.
+
+use anyhow::{Context, Result, bail};
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+
+/// Who holds a lock (the lock file's contents).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Holder {
+    pub pid: u32,
+    pub host: String,
+    /// Seconds since the Unix epoch when the lock was taken.
+    pub since_unix: u64,
+}
+
+impl Holder {
+    fn this_process() -> Self {
+        Holder {
+            pid: std::process::id(),
+            host: host_name(),
+            since_unix: std::time::SystemTime::now()
+                .duration_since(std::time::UNIX_EPOCH)
+                .map_or(0, |d| d.as_secs()),
+        }
+    }
+
+    /// Whether the holder is known to be gone: a process of this host that no longer exists.
+    fn is_gone(&self) -> bool {
+        self.host == host_name()
+            && self.pid != std::process::id()
+            && !Path::new(&format!("/proc/{}", self.pid)).exists()
+    }
+}
+
+/// A held lock; dropping it releases it.
+#[derive(Debug)]
+pub struct DirLock {
+    path: PathBuf,
+}
+
+impl DirLock {
+    /// Takes the lock file `name` in `dir` (which must exist), taking over a stale one with a warning on stderr.
+    /// Refuses, naming the holder, when a live process (or one on another host) holds it.
+    pub fn acquire(dir: &Path, name: &str) -> Result<Self> {
+        let path = dir.join(name);
+        let me = Holder::this_process();
+        let temp = dir.join(format!("{name}.{}.tmp", me.pid));
+        std::fs::write(&temp, serde_json::to_string(&me)?)
+            .with_context(|| format!("cannot write the lock file {}", temp.display()))?;
+        let result = Self::link(&temp, &path);
+        let _ = std::fs::remove_file(&temp);
+        result
+    }
+
+    fn link(temp: &Path, path: &Path) -> Result<Self> {
+        // Two attempts: the second after removing a stale lock.
+        for _ in 0..2 {
+            match std::fs::hard_link(temp, path) {
+                Ok(()) => {
+                    return Ok(DirLock {
+                        path: path.to_path_buf(),
+                    });
+                }
+                Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {}
+                Err(e) => {
+                    return Err(e).with_context(|| {
+                        format!("cannot create the lock file {}", path.display())
+                    });
+                }
+            }
+            let text = std::fs::read_to_string(path).unwrap_or_default();
+            let holder: Option<Holder> = serde_json::from_str(&text).ok();
+            match holder {
+                Some(holder) if holder.is_gone() => {
+                    eprintln!(
+                        "warning: {} was left by process {} on {}, which no longer runs; taking it over",
+                        path.display(),
+                        holder.pid,
+                        holder.host
+                    );
+                    std::fs::remove_file(path).with_context(|| {
+                        format!("cannot remove the stale lock file {}", path.display())
+                    })?;
+                }
+                Some(holder) => bail!(
+                    "{} is in use by another sweep: process {} on host {} holds {} (since Unix time {}); \
+                     wait for it to finish, or remove the lock file if that process is gone",
+                    path.parent().unwrap_or(path).display(),
+                    holder.pid,
+                    holder.host,
+                    path.display(),
+                    holder.since_unix
+                ),
+                None => bail!(
+                    "{} holds no readable holder (pid, host); if no sweep runs in {}, remove it",
+                    path.display(),
+                    path.parent().unwrap_or(path).display()
+                ),
+            }
+        }
+        bail!(
+            "cannot take the lock {}: another process keeps taking it",
+            path.display()
+        )
+    }
+}
+
+impl Drop for DirLock {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_file(&self.path);
+    }
+}
+
+/// This machine's short host name (as Slurm's node names are).
+pub fn host_name() -> String {
+    std::fs::read_to_string("/proc/sys/kernel/hostname")
+        .ok()
+        .or_else(|| std::env::var("HOSTNAME").ok())
+        .map(|h| h.trim().split('.').next().unwrap_or("").to_string())
+        .filter(|h| !h.is_empty())
+        .unwrap_or_else(|| "unknown".to_string())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_held_lock_is_refused_and_a_stale_one_taken_over() {
+        let dir = tempfile::tempdir().unwrap();
+        let lock = DirLock::acquire(dir.path(), ".lock").unwrap();
+        // This process holds it: a second acquisition is refused and names this pid.
+        let err = format!("{:#}", DirLock::acquire(dir.path(), ".lock").unwrap_err());
+        assert!(
+            err.contains(&format!("process {}", std::process::id())),
+            "{err}"
+        );
+        drop(lock);
+        assert!(!dir.path().join(".lock").exists());
+        // A lock of a process that does not exist on this host (pid beyond the kernel's maximum) is stale.
+        let stale = Holder {
+            pid: u32::MAX,
+            host: host_name(),
+            since_unix: 0,
+        };
+        std::fs::write(
+            dir.path().join(".lock"),
+            serde_json::to_string(&stale).unwrap(),
+        )
+        .unwrap();
+        let lock = DirLock::acquire(dir.path(), ".lock").unwrap();
+        let holder: Holder =
+            serde_json::from_str(&std::fs::read_to_string(dir.path().join(".lock")).unwrap())
+                .unwrap();
+        assert_eq!(holder.pid, std::process::id());
+        drop(lock);
+        // Another host's lock is never taken over.
+        let remote = Holder {
+            host: "some-other-host".into(),
+            ..stale
+        };
+        std::fs::write(
+            dir.path().join(".lock"),
+            serde_json::to_string(&remote).unwrap(),
+        )
+        .unwrap();
+        let err = format!("{:#}", DirLock::acquire(dir.path(), ".lock").unwrap_err());
+        assert!(err.contains("some-other-host"), "{err}");
+    }
+}
