@@ -255,3 +255,87 @@ fn a_short_run_writes_every_result_file() {
             .any(|e| e.file_name().to_string_lossy().ends_with(".tmp"))
     );
 }
+
+/// A short ADQN run with the expert in another process (`examples/expert.py` through `cmd:`): it completes, and
+/// the experts that crash, hang, babble or answer out of range each stop the run with a message naming the
+/// expert, a non-zero exit and no summary (the run stays incomplete).
+#[test]
+fn expert_process_runs_and_its_failures_are_clear() {
+    let dir = tempfile::tempdir().unwrap();
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/expert.py");
+    let good = format!("cmd:python3 {}", script.display());
+    let run = |expert: &str, name: &str, extra: &[&str]| {
+        let out = dir.path().join(name);
+        let mut args = vec![
+            "train",
+            "--env",
+            "CartPole-v0",
+            "--method",
+            "adqn",
+            "--quiet",
+            "--expert",
+            expert,
+            "--set",
+            "train_steps=1500",
+            "--set",
+            "eval_period=500",
+            "--set",
+            "eval_episodes=2",
+            "--set",
+            "learning_starts=100",
+            "-o",
+            out.to_str().unwrap(),
+        ];
+        args.extend_from_slice(extra);
+        (arld(&args), out)
+    };
+    let (ok, out) = run(&good, "good", &[]);
+    assert!(
+        ok.status.success(),
+        "{}",
+        String::from_utf8_lossy(&ok.stderr)
+    );
+    let queries = std::fs::read_to_string(out.join("queries.csv")).unwrap();
+    assert!(
+        queries.lines().count() > 1,
+        "the process expert was never asked"
+    );
+    assert!(out.join("summary.json").exists());
+
+    let cases: [(&str, &[&str], &[&str]); 4] = [
+        (
+            "cmd:sh -c 'read h; read q; echo dying >&2; exit 3'",
+            &[],
+            &["closed its output", "dying", "exit status: 3"],
+        ),
+        (
+            "cmd:sleep 60",
+            &["--set", "expert_timeout=0.5"],
+            &["did not answer within 0.5 s"],
+        ),
+        (
+            "cmd:sh -c 'while read l; do echo hello there; done'",
+            &[],
+            &["\"hello there\"", "{\"action\": 1}"],
+        ),
+        (
+            "cmd:sh -c 'while read l; do echo {\\\"action\\\":7}; done'",
+            &[],
+            &["answered action 7", "2 actions"],
+        ),
+    ];
+    for (i, (expert, extra, needles)) in cases.into_iter().enumerate() {
+        let (o, out) = run(expert, &format!("bad{i}"), extra);
+        let stderr = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success(), "{expert} should fail");
+        assert!(!stderr.contains("panicked"), "{expert} panicked: {stderr}");
+        assert!(stderr.contains("expert process"), "{expert}: {stderr}");
+        for n in needles {
+            assert!(stderr.contains(n), "{expert}: expected '{n}' in: {stderr}");
+        }
+        assert!(
+            !out.join("summary.json").exists(),
+            "{expert}: the run must stay incomplete"
+        );
+    }
+}

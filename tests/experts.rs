@@ -27,8 +27,8 @@ fn scripted_experts_solve_their_tasks() {
 
 #[test]
 fn noisy_wrapper_degrades_a_perfect_expert() {
-    let mut perfect = expert::from_spec("scripted", "CartPole-v0", 0).unwrap();
-    let mut noisy = expert::from_spec("noisy:0.4:scripted", "CartPole-v0", 0).unwrap();
+    let mut perfect = expert::from_spec("scripted", "CartPole-v0", 0, 30.0).unwrap();
+    let mut noisy = expert::from_spec("noisy:0.4:scripted", "CartPole-v0", 0, 30.0).unwrap();
     let p = evaluate_expert(perfect.as_mut(), "CartPole-v0", 20, 0).unwrap();
     let n = evaluate_expert(noisy.as_mut(), "CartPole-v0", 20, 0).unwrap();
     assert!(
@@ -37,7 +37,7 @@ fn noisy_wrapper_degrades_a_perfect_expert() {
         n.mean,
         p.mean
     );
-    assert!(expert::from_spec("noisy:1.5:scripted", "CartPole-v0", 0).is_err());
+    assert!(expert::from_spec("noisy:1.5:scripted", "CartPole-v0", 0, 30.0).is_err());
 }
 
 #[test]
@@ -45,7 +45,9 @@ fn bad_expert_specs_and_checkpoints_give_clear_errors() {
     let err = |spec: &str, env: &str| {
         format!(
             "{:#}",
-            expert::from_spec(spec, env, 0).err().expect("should fail")
+            expert::from_spec(spec, env, 0, 30.0)
+                .err()
+                .expect("should fail")
         )
     };
     assert!(err("oracle", "CartPole-v0").contains("unknown expert spec"));
@@ -115,7 +117,7 @@ fn pretraining_agrees_with_the_expert_on_demonstrations() {
     input.set("lambda", 1.0).unwrap();
     input.set("lr", 1e-3).unwrap();
     let cfg = input.resolve().unwrap();
-    let mut e = expert::from_spec("shipped:weak", "CartPole-v0", 0).unwrap();
+    let mut e = expert::from_spec("shipped:weak", "CartPole-v0", 0, 30.0).unwrap();
     let demos = Demonstrations::collect("CartPole-v0", e.as_mut(), cfg.n_demo, 0).unwrap();
     let mut agent = Agent::new(&cfg.agent_config(), 4, 2, 1);
     let mut replay = Replay::new(

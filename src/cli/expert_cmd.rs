@@ -46,6 +46,9 @@ pub enum ExpertCommand {
         /// Expert spec.
         #[arg(long)]
         expert: String,
+        /// Seconds an expert process (`cmd:...`) may take to answer.
+        #[arg(long, default_value_t = expert::process::DEFAULT_TIMEOUT_S)]
+        expert_timeout: f64,
         #[arg(long, default_value_t = 100)]
         episodes: usize,
         /// Episode i resets with seed SEED + i.
@@ -67,6 +70,9 @@ pub enum DemoCommand {
         /// Expert spec.
         #[arg(long)]
         expert: String,
+        /// Seconds an expert process (`cmd:...`) may take to answer.
+        #[arg(long, default_value_t = expert::process::DEFAULT_TIMEOUT_S)]
+        expert_timeout: f64,
         /// Number of transitions.
         #[arg(long)]
         transitions: usize,
@@ -84,11 +90,12 @@ pub fn run_expert(cmd: ExpertCommand) -> Result<ExitCode> {
         ExpertCommand::Eval {
             env,
             expert,
+            expert_timeout,
             episodes,
             seed,
             json,
         } => {
-            let mut e = expert::from_spec(&expert, &env, seed)?;
+            let mut e = expert::from_spec(&expert, &env, seed, expert_timeout)?;
             let s = evaluate_expert(e.as_mut(), &env, episodes, seed)?;
             let target = arld::env::make(&env)?.solve_threshold();
             if json {
@@ -212,11 +219,12 @@ pub fn run_demo(cmd: DemoCommand) -> Result<ExitCode> {
         DemoCommand::Collect {
             env,
             expert,
+            expert_timeout,
             transitions,
             seed,
             out,
         } => {
-            let mut e = expert::from_spec(&expert, &env, seed)?;
+            let mut e = expert::from_spec(&expert, &env, seed, expert_timeout)?;
             let demos = Demonstrations::collect(&env, e.as_mut(), transitions, seed)?;
             demos.save(&out)?;
             let ret: f32 = demos.transitions.iter().map(|t| t.reward).sum();

@@ -30,6 +30,7 @@ pub fn run_one(cfg: &TrainConfig, out_dir: Option<&Path>, progress: bool) -> Res
             &cfg.expert,
             &cfg.env,
             seed_for(cfg.seed, SeedPurpose::Expert),
+            cfg.expert_timeout,
         )?)
     } else {
         None

@@ -5,12 +5,13 @@
 //! instantly or always. During training the loop asks through [`Expert::answer`] with a [`Query`] (the
 //! observation, the environment to draw, the agent's own proposal); the [`Answer`] may be that nobody answered,
 //! and [`Expert::observe`] lets an interactive expert follow the run. Kinds: [`CheckpointExpert`] (a trained
-//! network acting greedily), [`NoisyExpert`] (acts at random with probability p), [`scripted`] controllers and
-//! [`web`] (a person in a browser). [`from_spec`] builds one from a short spec; [`demos`] collects
-//! demonstrations from an expert.
+//! network acting greedily), [`NoisyExpert`] (acts at random with probability p), [`scripted`] controllers,
+//! [`web`] (a person in a browser) and [`process::ProcessExpert`] (another program speaking JSON lines).
+//! [`from_spec`] builds one from a short spec; [`demos`] collects demonstrations from an expert.
 
 pub mod demos;
 pub mod pipeline;
+pub mod process;
 pub mod scripted;
 pub mod web;
 
@@ -219,7 +220,9 @@ pub fn shipped_path(env_id: &str, quality: &str) -> PathBuf {
 pub const SPEC_HELP: &str = "Expert specs: `shipped:weak` or `shipped:perfect` (the experts in experts/), \
 `checkpoint:PATH` (a safetensors checkpoint acting greedily), `scripted` (a hand-written controller: Gymnasium's \
 heuristic lander, simple controllers for CartPole, MountainCar and Acrobot), `noisy:P:SPEC` (SPEC acting at random \
-with probability P), `web[:OPTIONS]` (a person answering in a browser; see `arld train --help`).";
+with probability P), `web[:OPTIONS]` (a person answering in a browser; see `arld train --help`), `cmd:COMMAND` (a \
+program in any language speaking JSON lines on stdin/stdout, e.g. cmd:\"python examples/expert.py\"; the protocol \
+is in src/expert/process.rs and the README).";
 
 /// Whether the expert of `spec` can give demonstrations outside a run (collected before training): every kind
 /// but the web expert, which answers a running training loop's queries only.
@@ -227,8 +230,9 @@ pub fn demonstrates(spec: &str) -> bool {
     spec.split(':').next() != Some("web")
 }
 
-/// Builds an expert from a spec for the environment `env_id`; `seed` seeds any randomness the expert has.
-pub fn from_spec(spec: &str, env_id: &str, seed: u64) -> Result<Box<dyn Expert>> {
+/// Builds an expert from a spec for the environment `env_id`; `seed` seeds any randomness the expert has and
+/// `timeout_s` bounds an expert process's answer.
+pub fn from_spec(spec: &str, env_id: &str, seed: u64, timeout_s: f64) -> Result<Box<dyn Expert>> {
     let env_spec = *crate::env::spec(env_id)?;
     let (kind, rest) = spec.split_once(':').unwrap_or((spec, ""));
     match kind {
@@ -245,6 +249,9 @@ pub fn from_spec(spec: &str, env_id: &str, seed: u64) -> Result<Box<dyn Expert>>
             );
             Ok(Box::new(CheckpointExpert::load(&path, &env_spec)?))
         }
+        "cmd" => Ok(Box::new(process::ProcessExpert::spawn(
+            rest, &env_spec, timeout_s,
+        )?)),
         "scripted" if rest.is_empty() => Ok(Box::new(scripted::ScriptedExpert::new(env_id)?)),
         "web" => Ok(Box::new(web::WebExpert::start(
             &rest.parse::<web::WebOptions>()?,
@@ -257,7 +264,7 @@ pub fn from_spec(spec: &str, env_id: &str, seed: u64) -> Result<Box<dyn Expert>>
             let p: f64 = p
                 .parse()
                 .with_context(|| format!("bad probability '{p}' in expert spec '{spec}'"))?;
-            let inner = from_spec(inner, env_id, seed.wrapping_add(1))?;
+            let inner = from_spec(inner, env_id, seed.wrapping_add(1), timeout_s)?;
             Ok(Box::new(NoisyExpert::new(
                 inner,
                 p,

@@ -233,6 +233,9 @@ pub struct TrainConfig {
     pub exact_factorised_var: bool,
     /// Expert specification (see `arld expert --help`) \[OURS: the shipped weak expert\].
     pub expert: String,
+    /// Seconds an expert may take to answer one query; an expert process (`cmd:...`) slower than this is stopped
+    /// and the run fails \[OURS: 30\].
+    pub expert_timeout: f64,
     /// Demonstration file for pre-training; empty: collect from the expert at the start of the run.
     pub demo_file: String,
 
@@ -451,7 +454,9 @@ fn unused_by(key: &str, method: Method, net: NetKind) -> Option<String> {
         "n_demo" | "pretrain_steps" | "demo_file" if !method.pretrains() => {
             Some(format!("{method} does not pre-train on demonstrations"))
         }
-        "expert" if !method.needs_expert() => Some(format!("{method} never asks an expert")),
+        "expert" | "expert_timeout" if !method.needs_expert() => {
+            Some(format!("{method} never asks an expert"))
+        }
         "heads" if net != NetKind::Bootstrap => {
             Some(format!("a {net} network has no bootstrapped heads"))
         }
@@ -521,6 +526,7 @@ impl TrainConfig {
             segment_len: 5,
             exact_factorised_var: false,
             expert: "shipped:weak".to_string(),
+            expert_timeout: crate::expert::process::DEFAULT_TIMEOUT_S,
             demo_file: String::new(),
             eval_period: schedule.eval_period,
             eval_episodes: 20,
@@ -657,6 +663,11 @@ impl TrainConfig {
                 self.expert
             );
         }
+        ensure!(
+            self.expert_timeout.is_finite() && self.expert_timeout > 0.0,
+            "expert_timeout must be a positive number of seconds, got {}",
+            self.expert_timeout
+        );
         // Evaluation and checkpoints.
         count("eval_period", self.eval_period, MAX_STEPS)?;
         count("eval_episodes", self.eval_episodes, MAX_EVAL_EPISODES)?;

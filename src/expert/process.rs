@@ -1,0 +1,280 @@
+//! An expert in another process, in any language: [`ProcessExpert`] starts a command and speaks JSON lines with
+//! it over its standard input and output (`--expert cmd:"python my_expert.py"`).
+//!
+//! The protocol (version 1), one JSON object per line, UTF-8:
+//! - arld -> expert, once at start: `{"type": "hello", "protocol": 1, "env": "CartPole-v0",
+//!   "observation_space": {"type": "box", "shape": [4]}, "action_space": {"type": "discrete", "n": 2}}`.
+//!   No answer is expected.
+//! - arld -> expert, per query: `{"type": "query", "obs": [0.01, -0.02, 0.03, 0.04]}`.
+//! - expert -> arld, per query: `{"action": 1}` (an integer in `0..n`).
+//!
+//! At the end arld closes the expert's standard input (end of file); an expert should then exit. Anything the
+//! expert writes to standard error is kept (the last lines) and shown if it fails. A crash, an answer slower than
+//! the timeout, a line that is not such an object, or an action out of range is an error naming the expert: the
+//! run stops there and, lacking its summary, stays incomplete. `examples/expert.py` is a complete expert.
+
+use super::Expert;
+use crate::env::EnvSpec;
+use anyhow::{Context, Result, anyhow, bail};
+use std::collections::VecDeque;
+use std::io::{BufRead, BufReader, Write};
+use std::process::{Child, ChildStdin, Command, Stdio};
+use std::sync::mpsc::{Receiver, RecvTimeoutError, channel};
+use std::sync::{Arc, Mutex};
+use std::thread::JoinHandle;
+use std::time::Duration;
+
+/// How long an expert process may take to answer one query unless configured otherwise.
+pub const DEFAULT_TIMEOUT_S: f64 = 30.0;
+
+/// Lines of the expert's standard error kept for error messages.
+const STDERR_LINES: usize = 20;
+
+/// An external expert process speaking the JSON-lines protocol of this module.
+pub struct ProcessExpert {
+    command: String,
+    child: Child,
+    stdin: Option<ChildStdin>,
+    lines: Receiver<std::io::Result<String>>,
+    stderr: Arc<Mutex<VecDeque<String>>>,
+    stderr_thread: Option<JoinHandle<()>>,
+    timeout: Duration,
+    n_actions: usize,
+}
+
+impl ProcessExpert {
+    /// Starts `command` (run by `sh -c`, so quoting works as in a shell) and sends it the hello for `env`.
+    /// `timeout_s` bounds the wait for each answer.
+    pub fn spawn(command: &str, env: &EnvSpec, timeout_s: f64) -> Result<Self> {
+        if !(timeout_s.is_finite() && timeout_s > 0.0) {
+            bail!("the expert timeout must be a positive number of seconds, got {timeout_s}");
+        }
+        if command.trim().is_empty() {
+            bail!("expert spec `cmd:` needs a command, e.g. cmd:\"python my_expert.py\"");
+        }
+        let mut child = Command::new("sh")
+            .arg("-c")
+            .arg(format!("exec {command}"))
+            .stdin(Stdio::piped())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .with_context(|| format!("cannot start expert process `{command}`"))?;
+        let stdout = child.stdout.take().expect("stdout is piped");
+        let stderr_pipe = child.stderr.take().expect("stderr is piped");
+        // Reader threads: the answer is awaited with a timeout, and a chatty stderr never blocks the expert.
+        let (tx, lines) = channel();
+        std::thread::spawn(move || {
+            for line in BufReader::new(stdout).lines() {
+                let stop = line.is_err();
+                if tx.send(line).is_err() || stop {
+                    break;
+                }
+            }
+        });
+        let stderr = Arc::new(Mutex::new(VecDeque::new()));
+        let kept = Arc::clone(&stderr);
+        let stderr_thread = std::thread::spawn(move || {
+            for line in BufReader::new(stderr_pipe).lines() {
+                let Ok(line) = line else { break };
+                let mut kept = kept.lock().unwrap_or_else(|e| e.into_inner());
+                if kept.len() == STDERR_LINES {
+                    kept.pop_front();
+                }
+                kept.push_back(line);
+            }
+        });
+        let mut expert = Self {
+            command: command.to_string(),
+            stdin: child.stdin.take(),
+            child,
+            lines,
+            stderr,
+            stderr_thread: Some(stderr_thread),
+            timeout: Duration::from_secs_f64(timeout_s),
+            n_actions: env.n_actions,
+        };
+        let hello = serde_json::json!({
+            "type": "hello",
+            "protocol": 1,
+            "env": env.id,
+            "observation_space": {"type": "box", "shape": [env.obs_dim]},
+            "action_space": {"type": "discrete", "n": env.n_actions},
+        });
+        expert.send(&hello)?;
+        Ok(expert)
+    }
+
+    fn send(&mut self, message: &serde_json::Value) -> Result<()> {
+        let stdin = self.stdin.as_mut().context("stdin closed")?;
+        let written = writeln!(stdin, "{message}").and_then(|()| stdin.flush());
+        if let Err(e) = written {
+            return Err(self.failure(&format!("could not be written to ({e})")));
+        }
+        Ok(())
+    }
+
+    /// An error naming the expert, with its exit status (if it ended) and the last lines of its stderr.
+    fn failure(&mut self, what: &str) -> anyhow::Error {
+        let status = match self.child.try_wait() {
+            Ok(Some(status)) => format!("; it exited with {status}"),
+            _ => String::new(),
+        };
+        // A process that ended has closed its stderr: wait for the reader so the last lines are all there.
+        if !status.is_empty()
+            && let Some(t) = self.stderr_thread.take()
+        {
+            let _ = t.join();
+        }
+        let kept = self.stderr.lock().unwrap_or_else(|e| e.into_inner());
+        let tail = if kept.is_empty() {
+            String::new()
+        } else {
+            let lines: Vec<&str> = kept.iter().map(String::as_str).collect();
+            format!("\nits last lines on stderr:\n  {}", lines.join("\n  "))
+        };
+        anyhow!("expert process `{}` {what}{status}{tail}", self.command)
+    }
+
+    fn read_answer(&mut self) -> Result<usize> {
+        let line = match self.lines.recv_timeout(self.timeout) {
+            Ok(Ok(line)) => line,
+            Ok(Err(e)) => return Err(self.failure(&format!("could not be read from ({e})"))),
+            Err(RecvTimeoutError::Disconnected) => {
+                // Give a crashing process a moment to be reaped so its exit status can be shown.
+                let _ = self.child.wait_timeout_ms(500);
+                return Err(self.failure("closed its output without answering the query"));
+            }
+            Err(RecvTimeoutError::Timeout) => {
+                let _ = self.child.kill();
+                return Err(self.failure(&format!(
+                    "did not answer within {} s (the expert timeout); it was stopped",
+                    self.timeout.as_secs_f64()
+                )));
+            }
+        };
+        let action = serde_json::from_str::<serde_json::Value>(&line)
+            .ok()
+            .and_then(|v| v.get("action").and_then(serde_json::Value::as_u64));
+        let Some(action) = action else {
+            let shown: String = line.chars().take(200).collect();
+            return Err(self.failure(&format!(
+                "answered {shown:?}, which is not a line like {{\"action\": 1}} (a JSON object with a \
+                 non-negative integer action)"
+            )));
+        };
+        if action >= self.n_actions as u64 {
+            return Err(self.failure(&format!(
+                "answered action {action}, but the environment has {} actions (0..{})",
+                self.n_actions, self.n_actions
+            )));
+        }
+        Ok(action as usize)
+    }
+}
+
+/// Waiting for a child with a bound (std has no timed wait).
+trait WaitTimeout {
+    fn wait_timeout_ms(&mut self, ms: u64) -> std::io::Result<()>;
+}
+
+impl WaitTimeout for Child {
+    fn wait_timeout_ms(&mut self, ms: u64) -> std::io::Result<()> {
+        for _ in 0..ms / 10 {
+            if self.try_wait()?.is_some() {
+                break;
+            }
+            std::thread::sleep(Duration::from_millis(10));
+        }
+        Ok(())
+    }
+}
+
+impl Expert for ProcessExpert {
+    fn act(&mut self, obs: &[f32]) -> Result<usize> {
+        self.send(&serde_json::json!({"type": "query", "obs": obs}))?;
+        self.read_answer()
+    }
+    fn describe(&self) -> String {
+        format!("cmd:{}", self.command)
+    }
+}
+
+impl Drop for ProcessExpert {
+    /// Closes the expert's input (its signal to exit), gives it a moment, then stops it.
+    fn drop(&mut self) {
+        drop(self.stdin.take());
+        let _ = self.child.wait_timeout_ms(1000);
+        if let Ok(None) = self.child.try_wait() {
+            let _ = self.child.kill();
+        }
+        let _ = self.child.wait();
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn spec() -> &'static EnvSpec {
+        crate::env::spec("CartPole-v0").unwrap()
+    }
+
+    fn expert(script: &str, timeout: f64) -> Result<ProcessExpert> {
+        ProcessExpert::spawn(script, spec(), timeout)
+    }
+
+    #[test]
+    fn answers_are_read_and_hello_is_sent() {
+        // A shell expert: checks the hello, then answers 1 when the first observation value is positive.
+        let script = r#"sh -c 'read hello; case "$hello" in *'"'"'"env":"CartPole-v0"'"'"'*) ;; *) exit 3;; esac;
+            while read q; do case "$q" in *'"'"'"obs":[-'"'"'*) echo "{\"action\": 0}";; *) echo "{\"action\": 1}";; esac; done'"#;
+        let mut e = expert(script, 10.0).unwrap();
+        assert_eq!(e.act(&[0.5, 0.0, 0.0, 0.0]).unwrap(), 1);
+        assert_eq!(e.act(&[-0.5, 0.0, 0.0, 0.0]).unwrap(), 0);
+        assert!(e.describe().starts_with("cmd:"));
+    }
+
+    #[test]
+    fn crash_is_an_error_with_status_and_stderr() {
+        let mut e = expert("sh -c 'read h; read q; echo boom >&2; exit 4'", 10.0).unwrap();
+        let msg = format!("{:#}", e.act(&[0.0; 4]).unwrap_err());
+        assert!(msg.contains("closed its output"), "{msg}");
+        assert!(msg.contains("boom"), "{msg}");
+        assert!(msg.contains("exit status: 4"), "{msg}");
+    }
+
+    #[test]
+    fn hang_times_out() {
+        let mut e = expert("sleep 30", 0.3).unwrap();
+        let msg = format!("{:#}", e.act(&[0.0; 4]).unwrap_err());
+        assert!(msg.contains("did not answer within 0.3 s"), "{msg}");
+    }
+
+    #[test]
+    fn garbage_and_out_of_range_are_errors() {
+        let mut e = expert("sh -c 'while read l; do echo not json; done'", 10.0).unwrap();
+        let msg = format!("{:#}", e.act(&[0.0; 4]).unwrap_err());
+        assert!(msg.contains("\"not json\""), "{msg}");
+        let mut e = expert(
+            "sh -c 'read h; while read l; do echo \"{\\\"action\\\": 7}\"; done'",
+            10.0,
+        )
+        .unwrap();
+        let msg = format!("{:#}", e.act(&[0.0; 4]).unwrap_err());
+        assert!(msg.contains("answered action 7"), "{msg}");
+        assert!(msg.contains("2 actions"), "{msg}");
+    }
+
+    #[test]
+    fn missing_program_and_bad_timeout_are_errors() {
+        // Either the hello already fails to be written or the first query finds the process gone.
+        let msg = match expert("/nonexistent/expert-program", 10.0) {
+            Err(e) => format!("{e:#}"),
+            Ok(mut e) => format!("{:#}", e.act(&[0.0; 4]).unwrap_err()),
+        };
+        assert!(msg.contains("/nonexistent/expert-program"), "{msg}");
+        assert!(expert("true", 0.0).is_err());
+        assert!(expert("  ", 1.0).is_err());
+    }
+}
