@@ -109,7 +109,7 @@ fn program_experts_report_their_kind_and_no_response_time() {
     let mut cfg = config(10);
     cfg.expert = "scripted".into();
     let mut log = RunLog::create(dir.path(), &cfg.to_toml(), 300, false).unwrap();
-    let mut expert = arld::expert::from_spec("scripted", "CartPole-v0", 0).unwrap();
+    let mut expert = arld::expert::from_spec("scripted", "CartPole-v0", 0, 30.0).unwrap();
     train(&cfg, Some(expert.as_mut()), None, &mut log).unwrap();
     let text = std::fs::read_to_string(dir.path().join("queries.csv")).unwrap();
     for line in text.lines().skip(1) {
@@ -117,7 +117,7 @@ fn program_experts_report_their_kind_and_no_response_time() {
         assert_eq!((row[6], row[7], row[8]), ("scripted", "", "true"));
     }
     assert_eq!(
-        arld::expert::from_spec("noisy:0.5:scripted", "CartPole-v0", 0)
+        arld::expert::from_spec("noisy:0.5:scripted", "CartPole-v0", 0, 30.0)
             .unwrap()
             .kind(),
         "noisy"

@@ -54,6 +54,10 @@ pub enum EnvError {
     BadState { env: &'static str, msg: String },
     #[error("invalid environment parameter {name}: {message}")]
     InvalidParameter { name: &'static str, message: String },
+    #[error("{env}: {msg}")]
+    External { env: String, msg: String },
+    #[error("cannot register environment '{id}': {msg}")]
+    Register { id: String, msg: String },
     #[error("environment '{id}' is registered but not available in this build: {reason}")]
     Unavailable {
         id: &'static str,
@@ -219,12 +223,95 @@ pub fn known_ids() -> Vec<&'static str> {
     SPECS.iter().map(|spec| spec.id).collect()
 }
 
-/// The static facts of a registered environment, or `UnknownId`.
+/// The static facts of a built-in or [`register`]ed environment, or `UnknownId`.
 pub fn spec(id: &str) -> Result<&'static EnvSpec, EnvError> {
     SPECS
         .iter()
         .find(|spec| spec.id == id)
+        .or_else(|| external_specs().iter().copied().find(|spec| spec.id == id))
         .ok_or_else(|| EnvError::UnknownId { id: id.to_string() })
+}
+
+/// The specs of environments implemented outside the library (e.g. Gymnasium environments from Python),
+/// registered at run time. Each distinct spec is allocated once for the life of the process.
+fn external_specs() -> std::sync::MutexGuard<'static, Vec<&'static EnvSpec>> {
+    static EXTERNAL: std::sync::Mutex<Vec<&'static EnvSpec>> = std::sync::Mutex::new(Vec::new());
+    EXTERNAL.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+/// Registers an environment implemented outside the library so that configurations can name it and an
+/// [`Env`] implementation can return its spec. `reward_threshold: None` means the task has no solve threshold
+/// (then no run counts as solved). The id of a built-in environment is accepted only with the built-in facts;
+/// registering an id again with other facts is an error.
+pub fn register(
+    id: &str,
+    obs_dim: usize,
+    n_actions: usize,
+    max_episode_steps: usize,
+    reward_threshold: Option<f64>,
+) -> Result<&'static EnvSpec, EnvError> {
+    let bad = |msg: String| EnvError::Register {
+        id: id.to_string(),
+        msg,
+    };
+    if id.trim().is_empty() {
+        return Err(bad("the id is empty".into()));
+    }
+    if obs_dim == 0 || n_actions == 0 || max_episode_steps == 0 {
+        return Err(bad(format!(
+            "observation size ({obs_dim}), number of actions ({n_actions}) and time limit \
+             ({max_episode_steps}) must all be positive"
+        )));
+    }
+    let solve_threshold = match reward_threshold {
+        Some(t) if t.is_nan() => return Err(bad("the reward threshold is NaN".into())),
+        Some(t) => t,
+        None => f64::INFINITY,
+    };
+    let same = |s: &EnvSpec| {
+        (s.obs_dim, s.n_actions, s.max_episode_steps) == (obs_dim, n_actions, max_episode_steps)
+            && (s.solve_threshold == solve_threshold)
+    };
+    let describe = |s: &EnvSpec| {
+        format!(
+            "{} observation values, {} actions, time limit {}, threshold {}",
+            s.obs_dim, s.n_actions, s.max_episode_steps, s.solve_threshold
+        )
+    };
+    let given = format!(
+        "{obs_dim} observation values, {n_actions} actions, time limit {max_episode_steps}, threshold \
+         {solve_threshold}"
+    );
+    if let Some(builtin) = SPECS.iter().find(|s| s.id == id) {
+        return if same(builtin) {
+            Ok(builtin)
+        } else {
+            Err(bad(format!(
+                "the built-in {id} has {}, this one {given}; register it under another id",
+                describe(builtin)
+            )))
+        };
+    }
+    let mut external = external_specs();
+    if let Some(known) = external.iter().find(|s| s.id == id) {
+        return if same(known) {
+            Ok(known)
+        } else {
+            Err(bad(format!(
+                "it was registered before with {}, now with {given}",
+                describe(known)
+            )))
+        };
+    }
+    let spec: &'static EnvSpec = Box::leak(Box::new(EnvSpec {
+        id: Box::leak(id.to_string().into_boxed_str()),
+        obs_dim,
+        n_actions,
+        max_episode_steps,
+        solve_threshold,
+    }));
+    external.push(spec);
+    Ok(spec)
 }
 
 /// Builds an environment by Gymnasium id.

@@ -9,7 +9,7 @@
 //! until `N` transitions are gathered (the last episode is cut at `N`).
 
 use super::Expert;
-use crate::env;
+use crate::env::{self, Env};
 use crate::replay::Transition;
 use anyhow::{Context, Result, bail, ensure};
 use serde::{Deserialize, Serialize};
@@ -70,6 +70,16 @@ impl Demonstrations {
     /// Collects `n` transitions from `expert` on `env_id` in whole episodes; episode i resets with seed `seed + i`.
     pub fn collect(env_id: &str, expert: &mut dyn Expert, n: usize, seed: u64) -> Result<Self> {
         let mut env = env::make(env_id)?;
+        Self::collect_in(env.as_mut(), expert, n, seed)
+    }
+
+    /// [`Demonstrations::collect`] in a given environment.
+    pub fn collect_in(
+        env: &mut dyn Env,
+        expert: &mut dyn Expert,
+        n: usize,
+        seed: u64,
+    ) -> Result<Self> {
         let mut transitions = Vec::with_capacity(n);
         let mut episode = 0usize;
         while transitions.len() < n {
@@ -96,9 +106,87 @@ impl Demonstrations {
             episode += 1;
         }
         Ok(Self {
-            env: env_id.to_string(),
+            env: env.id().to_string(),
             expert: expert.describe(),
             seed,
+            transitions,
+        })
+    }
+
+    /// Demonstrations given as columns, one entry per transition in episode order (an episode ends at a
+    /// terminated or truncated transition). Checks lengths, sizes and actions against `env_id`.
+    #[allow(clippy::too_many_arguments)]
+    pub fn from_arrays(
+        env_id: &str,
+        obs: Vec<Vec<f32>>,
+        actions: Vec<usize>,
+        rewards: Vec<f32>,
+        next_obs: Vec<Vec<f32>>,
+        terminated: Vec<bool>,
+        truncated: Vec<bool>,
+    ) -> Result<Self> {
+        let spec = env::spec(env_id)?;
+        let n = actions.len();
+        ensure!(
+            [
+                obs.len(),
+                rewards.len(),
+                next_obs.len(),
+                terminated.len(),
+                truncated.len()
+            ]
+            .iter()
+            .all(|&len| len == n),
+            "demonstration arrays differ in length: obs {}, actions {n}, rewards {}, next_obs {}, terminated {}, \
+             truncated {}",
+            obs.len(),
+            rewards.len(),
+            next_obs.len(),
+            terminated.len(),
+            truncated.len()
+        );
+        let mut transitions = Vec::with_capacity(n);
+        let mut episode = 0;
+        for (i, (((((obs, action), reward), next_obs), terminated), truncated)) in obs
+            .into_iter()
+            .zip(actions)
+            .zip(rewards)
+            .zip(next_obs)
+            .zip(terminated)
+            .zip(truncated)
+            .enumerate()
+        {
+            ensure!(
+                obs.len() == spec.obs_dim && next_obs.len() == spec.obs_dim,
+                "demonstration {i}: observations of {} values expected for {env_id}",
+                spec.obs_dim
+            );
+            ensure!(
+                action < spec.n_actions,
+                "demonstration {i}: action {action} is out of range for {env_id} ({} actions)",
+                spec.n_actions
+            );
+            ensure!(
+                reward.is_finite(),
+                "demonstration {i}: reward {reward} is not finite"
+            );
+            transitions.push(DemoStep {
+                episode,
+                obs,
+                action,
+                reward,
+                next_obs,
+                terminated,
+                truncated,
+            });
+            if terminated || truncated {
+                episode += 1;
+            }
+        }
+        Ok(Self {
+            env: env_id.to_string(),
+            expert: "given".to_string(),
+            seed: 0,
             transitions,
         })
     }

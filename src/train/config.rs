@@ -262,7 +262,29 @@ struct TaskSchedule {
     target_period: usize,
 }
 
-/// The paper's parameters and our schedule for a Gymnasium id (CartPole-v1 reuses the CartPole-v0 row).
+/// General defaults for an environment registered at run time ([`crate::env::register`]), e.g. a Gymnasium
+/// environment from Python: the paper's Acrobot-like settings with a 1000-step evaluation period \[OURS\].
+const EXTERNAL_TASK: (crate::paper::TaskParameters, TaskSchedule) = (
+    crate::paper::TaskParameters {
+        gamma: 0.99,
+        lr: 1e-4,
+        train_steps: 100_000,
+        n_demo: 200,
+        replay_size: 100_000,
+        pretrain_steps: 10_000,
+        lambda: 1.0,
+        t_query_bootstrap: 0.1,
+        t_query_noisy: 0.3,
+    },
+    TaskSchedule {
+        eval_period: 1_000,
+        learning_starts: 1_000,
+        target_period: 1_000,
+    },
+);
+
+/// The paper's parameters and our schedule for a Gymnasium id (CartPole-v1 reuses the CartPole-v0 row); an
+/// environment registered at run time gets [`EXTERNAL_TASK`].
 fn task_preset(env: &str) -> Result<(&'static crate::paper::TaskParameters, TaskSchedule)> {
     let row = if env == "CartPole-v1" {
         "CartPole-v0"
@@ -277,7 +299,12 @@ fn task_preset(env: &str) -> Result<(&'static crate::paper::TaskParameters, Task
             }
         )
     };
-    let paper = crate::paper::task_parameters(row).ok_or_else(unknown)?;
+    let Some(paper) = crate::paper::task_parameters(row) else {
+        return match crate::env::spec(env) {
+            Ok(_) => Ok((&EXTERNAL_TASK.0, EXTERNAL_TASK.1)),
+            Err(_) => Err(unknown()),
+        };
+    };
     let schedule = match row {
         "CartPole-v0" => TaskSchedule {
             eval_period: 1_000,

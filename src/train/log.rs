@@ -33,6 +33,8 @@ pub struct RunLog {
     queries: Option<BufWriter<File>>,
     events: Option<EventWriter>,
     progress: ProgressBar,
+    /// Every query of the run, also kept in memory (a run asks at most its budget, a few thousand).
+    query_events: Vec<QueryEvent>,
 }
 
 impl RunLog {
@@ -45,6 +47,15 @@ impl RunLog {
             queries: None,
             events: None,
             progress: ProgressBar::hidden(),
+            query_events: Vec::new(),
+        }
+    }
+
+    /// A log in memory with a progress bar (when `progress` and standard error is a terminal).
+    pub fn in_memory_with_progress(total_steps: u64, progress: bool) -> Self {
+        Self {
+            progress: progress_bar(total_steps, progress),
+            ..Self::in_memory()
         }
     }
 
@@ -72,6 +83,7 @@ impl RunLog {
                 queries: None,
                 events: None,
                 progress: bar,
+                query_events: Vec::new(),
             });
         };
         std::fs::create_dir_all(dir)
@@ -106,6 +118,7 @@ impl RunLog {
             queries: Some(queries),
             events: Some(events),
             progress: bar,
+            query_events: Vec::new(),
         })
     }
 
@@ -206,6 +219,7 @@ impl RunLog {
     }
 
     pub fn query(&mut self, q: &QueryEvent) -> Result<()> {
+        self.query_events.push(q.clone());
         if let Some(f) = &mut self.queries {
             f.write_all(q.csv_row().as_bytes())?;
         }
@@ -233,6 +247,12 @@ impl RunLog {
         Ok(())
     }
 
+    /// Every query so far.
+    pub fn query_events(&self) -> &[QueryEvent] {
+        &self.query_events
+    }
+
+    /// The evaluation curve so far.
     pub fn curve(&self) -> &[EvalPoint] {
         &self.curve
     }

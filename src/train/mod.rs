@@ -54,15 +54,14 @@ pub struct Evaluator {
 }
 
 impl Evaluator {
-    /// `episodes` environments `env_id` seeded `seed, seed + 1, ...`, for networks shaped like `net`.
-    pub fn new(env_id: &str, episodes: usize, seed: u64, net: &QNet) -> Result<Self> {
-        let envs = (0..episodes)
-            .map(|i| {
-                let mut env = env::make(env_id)?;
-                env.reset(Some(seed + i as u64));
-                Ok(env)
-            })
-            .collect::<Result<Vec<_>>>()?;
+    /// One test episode per environment of `envs`, environment `i` seeded `seed + i`, for networks shaped like
+    /// `net`.
+    pub fn new(mut envs: Vec<Box<dyn Env>>, seed: u64, net: &QNet) -> Result<Self> {
+        ensure!(!envs.is_empty(), "evaluation needs at least one test environment");
+        for (i, env) in envs.iter_mut().enumerate() {
+            env.reset(Some(seed + i as u64));
+        }
+        let episodes = envs.len();
         Ok(Self {
             envs,
             ws: Workspace::new(net, episodes),
@@ -154,7 +153,41 @@ pub fn train(
     demos: Option<&Demonstrations>,
     log: &mut RunLog,
 ) -> Result<(Summary, Agent)> {
-    train_run(cfg, expert, demos, log, None)
+    let mut env = env::make(&cfg.env)?;
+    train_run(cfg, env.as_mut(), test_envs(cfg)?, expert, demos, log, None)
+}
+
+/// The configuration's environment once per test episode, for the lockstep [`Evaluator`].
+fn test_envs(cfg: &TrainConfig) -> Result<Vec<Box<dyn Env>>> {
+    (0..cfg.eval_episodes).map(|_| Ok(env::make(&cfg.env)?)).collect()
+}
+
+/// [`train`] in given environments: `env` for training, `test_envs` (one per test episode, `eval_episodes` of
+/// them, stepped in lockstep) for evaluation. All must
+/// be the configuration's environment; any [`Env`] implementation works, e.g. one stepping a Gymnasium
+/// environment in Python.
+pub fn train_in(
+    cfg: &TrainConfig,
+    env: &mut dyn Env,
+    test_envs: Vec<Box<dyn Env>>,
+    expert: Option<&mut dyn Expert>,
+    demos: Option<&Demonstrations>,
+    log: &mut RunLog,
+) -> Result<(Summary, Agent)> {
+    ensure!(
+        env.id() == cfg.env && test_envs.iter().all(|e| e.id() == cfg.env),
+        "the environments ({}, and the test environments {:?}) are not the configuration's {}",
+        env.id(),
+        test_envs.iter().map(|e| e.id()).collect::<Vec<_>>(),
+        cfg.env
+    );
+    ensure!(
+        test_envs.len() == cfg.eval_episodes,
+        "{} test environments for {} test episodes (eval_episodes): give one per episode",
+        test_envs.len(),
+        cfg.eval_episodes
+    );
+    train_run(cfg, env, test_envs, expert, demos, log, None)
 }
 
 /// [`train`] with snapshots: every `cfg.snapshot_every` steps (and pre-training updates), and when a stop is
@@ -170,7 +203,16 @@ pub fn train_resumable(
     checkpointer: &mut Checkpointer,
     resume_from: Option<&StateDict>,
 ) -> Result<(Summary, Agent)> {
-    train_run(cfg, expert, demos, log, Some((checkpointer, resume_from)))
+    let mut env = env::make(&cfg.env)?;
+    train_run(
+        cfg,
+        env.as_mut(),
+        test_envs(cfg)?,
+        expert,
+        demos,
+        log,
+        Some((checkpointer, resume_from)),
+    )
 }
 
 /// The log position recorded in a snapshot.
@@ -247,13 +289,14 @@ fn snapshot(
 
 fn train_run(
     cfg: &TrainConfig,
+    env: &mut dyn Env,
+    test_envs: Vec<Box<dyn Env>>,
     mut expert: Option<&mut dyn Expert>,
     demos: Option<&Demonstrations>,
     log: &mut RunLog,
     mut snapshots: Option<(&mut Checkpointer, Option<&StateDict>)>,
 ) -> Result<(Summary, Agent)> {
     let started = Instant::now();
-    let mut env = env::make(&cfg.env)?;
     let (obs_dim, n_actions) = (env.obs_dim(), env.n_actions());
     ensure!(
         !cfg.method.queries() || expert.is_some(),
@@ -272,8 +315,7 @@ fn train_run(
     let mut query_rng = Pcg64::seed_from_u64(seed_for(cfg.seed, SeedPurpose::Query));
     let env_seed = seed_for(cfg.seed, SeedPurpose::TrainEnv);
     let mut evaluator = Evaluator::new(
-        &cfg.env,
-        cfg.eval_episodes,
+        test_envs,
         seed_for(cfg.seed, SeedPurpose::EvalEnv),
         agent.network(),
     )?;
@@ -382,7 +424,7 @@ fn train_run(
         // 1. Who acts: the agent, or the expert when a query is running or the rule asks for one now.
         let mut step_uncertainty = None;
         let action = if queries.expert_in_control() {
-            match ask_expert(&mut expert, &obs, env.as_ref(), None, &queries)? {
+            match ask_expert(&mut expert, &obs, &*env, None, &queries)? {
                 Answer::Action { action, .. } => action,
                 // Nobody answered mid-segment: the agent takes the rest of it back.
                 Answer::Unanswered { .. } => {
@@ -397,13 +439,7 @@ fn train_run(
             step_uncertainty = uncertainty;
             let decision = queries.decide(uncertainty, &mut query_rng);
             if decision.query {
-                let answer = ask_expert(
-                    &mut expert,
-                    &obs,
-                    env.as_ref(),
-                    Some(agent_action),
-                    &queries,
-                )?;
+                let answer = ask_expert(&mut expert, &obs, &*env, Some(agent_action), &queries)?;
                 let (expert_action, response_s) = match answer {
                     Answer::Action { action, response_s } => (Some(action), response_s),
                     Answer::Unanswered { waited_s } => {
@@ -496,7 +532,7 @@ fn train_run(
                 step: step + 1,
                 train_steps: cfg.train_steps,
                 episode: st.episode,
-                env: env.as_ref(),
+                env: &*env,
                 uncertainty: step_uncertainty,
                 queries: &queries,
                 last_eval: log.curve().last().map(|p| (p.step, p.mean)),
