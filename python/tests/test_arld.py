@@ -58,8 +58,8 @@ def test_gymnasium_cartpole_through_python_equals_the_builtin(method, net):
 def test_a_trained_stable_baselines3_model_is_an_expert():
     from stable_baselines3 import DQN
 
-    sb3 = DQN("MlpPolicy", "CartPole-v1", learning_starts=200, train_freq=1, seed=0, verbose=0)
-    sb3.learn(total_timesteps=1500)
+    sb3 = DQN("MlpPolicy", "CartPole-v1", learning_starts=200, train_freq=4, seed=0, verbose=0)
+    sb3.learn(total_timesteps=1000)
     answers = []
     real_predict = sb3.predict
 
