@@ -12,6 +12,7 @@
 use arld::env::{self, Env, EnvError, EnvSpec, Step};
 use arld::expert::{self, Expert, demos::Demonstrations};
 use arld::nn::QNet;
+use arld::rng::NumpyRng;
 use arld::train::{self, ConfigInput, RunLog, SeedPurpose, TrainConfig, seed_for};
 use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
@@ -131,6 +132,13 @@ impl Env for PyEnv {
     fn spec(&self) -> &'static EnvSpec {
         self.spec
     }
+
+    /// A Python environment keeps its generator to itself: runs from Python take no snapshots.
+    fn generator(&self) -> Option<NumpyRng> {
+        None
+    }
+
+    fn set_generator(&mut self, _rng: Option<NumpyRng>) {}
 }
 
 /// A built-in environment that lets Ctrl-C through at every step.
@@ -154,6 +162,12 @@ impl Env for Interruptible {
     }
     fn spec(&self) -> &'static EnvSpec {
         self.inner.spec()
+    }
+    fn generator(&self) -> Option<NumpyRng> {
+        self.inner.generator()
+    }
+    fn set_generator(&mut self, rng: Option<NumpyRng>) {
+        self.inner.set_generator(rng)
     }
 }
 

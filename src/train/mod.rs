@@ -57,7 +57,10 @@ impl Evaluator {
     /// One test episode per environment of `envs`, environment `i` seeded `seed + i`, for networks shaped like
     /// `net`.
     pub fn new(mut envs: Vec<Box<dyn Env>>, seed: u64, net: &QNet) -> Result<Self> {
-        ensure!(!envs.is_empty(), "evaluation needs at least one test environment");
+        ensure!(
+            !envs.is_empty(),
+            "evaluation needs at least one test environment"
+        );
         for (i, env) in envs.iter_mut().enumerate() {
             env.reset(Some(seed + i as u64));
         }
@@ -159,7 +162,9 @@ pub fn train(
 
 /// The configuration's environment once per test episode, for the lockstep [`Evaluator`].
 fn test_envs(cfg: &TrainConfig) -> Result<Vec<Box<dyn Env>>> {
-    (0..cfg.eval_episodes).map(|_| Ok(env::make(&cfg.env)?)).collect()
+    (0..cfg.eval_episodes)
+        .map(|_| Ok(env::make(&cfg.env)?))
+        .collect()
 }
 
 /// [`train`] in given environments: `env` for training, `test_envs` (one per test episode, `eval_episodes` of
