@@ -37,6 +37,14 @@ impl MatView {
     }
 }
 
+/// ReLU in place.
+#[inline(always)]
+pub(crate) fn relu_in_place(values: &mut [f32]) {
+    for v in values.iter_mut() {
+        *v = v.max(0.0);
+    }
+}
+
 /// ReLU backward in place: zero the gradient wherever the layer's output was not positive.
 ///
 /// `activations` holds the post-ReLU outputs, so `a > 0` is exactly "the unit was active".

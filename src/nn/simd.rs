@@ -11,7 +11,8 @@
 //! The crate is compiled for the baseline x86-64 target (SSE2), so the auto-vectorised element-wise loops
 //! (bias + ReLU, ReLU backward, bias gradients, Adam, clipping) would use 4-lane vectors. Each hot entry
 //! point therefore has a twin compiled with `#[target_feature(enable = "avx2")]` that calls the same
-//! `#[inline(always)]` body; [`simd_dispatch!`] picks the twin when the level is AVX2 or above. (Passing a
+//! `#[inline(always)]` body; [`simd_dispatch!`] picks the twin when the level is AVX2 or above; the network's
+//! passes go through `at_simd_level!`, which has one twin per level. (Passing a
 //! closure to one generic AVX2 function does not work reliably: LLVM may keep a large closure out of line,
 //! and it is then compiled for the baseline.)
 
@@ -130,6 +131,42 @@ macro_rules! simd_dispatch {
 }
 
 pub(crate) use simd_dispatch;
+
+/// `at_simd_level!(net, method(arg: Type, ...))`: calls `net.method::<L>(args)` with the `Lanes` (`kernels.rs`) of
+/// the process's [`SimdLevel`], from a twin compiled for that instruction set (so the `#[inline(always)]`
+/// kernels inside are compiled for it too).
+macro_rules! at_simd_level {
+    ($net:expr, $method:ident($($arg:ident: $ty:ty),*)) => {{
+        #[cfg(target_arch = "x86_64")]
+        #[target_feature(enable = "avx512f,avx2,fma")]
+        fn avx512(net: &$crate::nn::QNet, $($arg: $ty),*) {
+            net.$method::<$crate::nn::kernels::Avx512>($($arg),*)
+        }
+        #[cfg(target_arch = "x86_64")]
+        #[target_feature(enable = "avx2,fma")]
+        fn avx2(net: &$crate::nn::QNet, $($arg: $ty),*) {
+            net.$method::<$crate::nn::kernels::Avx2>($($arg),*)
+        }
+        #[cfg(target_arch = "x86_64")]
+        #[target_feature(enable = "fma")]
+        fn scalar_fma(net: &$crate::nn::QNet, $($arg: $ty),*) {
+            net.$method::<$crate::nn::kernels::Scalar>($($arg),*)
+        }
+        match $crate::nn::simd_level() {
+            // SAFETY (all three): a level is only selected when the CPU has its features
+            // (`SimdLevel::detected`, `scalar_has_fma`).
+            #[cfg(target_arch = "x86_64")]
+            $crate::nn::SimdLevel::Avx512 => unsafe { avx512($net, $($arg),*) },
+            #[cfg(target_arch = "x86_64")]
+            $crate::nn::SimdLevel::Avx2 => unsafe { avx2($net, $($arg),*) },
+            #[cfg(target_arch = "x86_64")]
+            _ if $crate::nn::simd::scalar_has_fma() => unsafe { scalar_fma($net, $($arg),*) },
+            _ => $net.$method::<$crate::nn::kernels::Scalar>($($arg),*),
+        }
+    }};
+}
+
+pub(crate) use at_simd_level;
 
 #[cfg(test)]
 mod tests {

@@ -7,6 +7,7 @@
 use candle_core::{Device, Tensor, Var};
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64;
+use std::ops::Range;
 
 use super::*;
 
