@@ -496,6 +496,7 @@ fn group_medians_follow_the_design_for_every_configuration() {
                     t_query: r.t_query.filter(|_| r.variant.starts_with("tq")),
                     expert: r.expert.clone().filter(|_| r.variant.starts_with("expert")),
                     set: vec![],
+                    vary: None,
                 };
                 designed_solve_step(&spec).unwrap_or(TRAIN_STEPS)
             })

@@ -1,6 +1,6 @@
 //! `arld sweep`, `arld report` and `arld reproduce`: many seeded runs in parallel, and their tables and figures.
 use anyhow::{Context, Result, bail};
-use arld::experiment::protocol::paper_grids;
+use arld::experiment::protocol::{paper_grids, part_names};
 use arld::experiment::report::report;
 use arld::experiment::run_spec;
 use arld::experiment::slurm::{self, SlurmOptions};
@@ -21,7 +21,7 @@ running it here:\n  arld sweep --env CartPole-v0 --method dqn,adqn --seeds 20 -o
 arld sweep --status runs/sweep                   # runs done, running, failed and pending, and on which node"
 )]
 pub struct SweepArgs {
-    /// TOML file with a [sweep] table (envs, methods, nets, seeds, t_query, experts, set).
+    /// TOML file with a [sweep] table (envs, methods, nets, seeds, t_query, experts, set, vary).
     #[arg(long, conflicts_with_all = ["env", "method", "net"])]
     grid: Option<PathBuf>,
     /// Environments (comma-separated or repeated).
@@ -45,6 +45,9 @@ pub struct SweepArgs {
     /// Config override applied to every run (repeatable).
     #[arg(long = "set", value_name = "KEY=VALUE")]
     overrides: Vec<String>,
+    /// A variant per override (repeatable), e.g. --vary n_r=100 --vary n_r=10000; runs go to `.../n_r-100/seedN`.
+    #[arg(long, value_name = "KEY=VALUE")]
+    vary: Vec<String>,
     /// Parallel runs [default: one per core].
     #[arg(long, default_value_t = 0)]
     jobs: usize,
@@ -99,7 +102,8 @@ pub struct ReportArgs {
 #[derive(Args)]
 #[command(
     after_help = "The full protocol is 20 seeds x 6 methods x 2 networks on the four tasks (Table 5, \
-Figures 2-3), plus the t_query sweep (Figure 4) and the expert-quality sweep on LunarLander (Figure 5). --quick runs \
+Figures 2-3), plus the t_query sweep (Figure 4) and the expert-quality sweep on LunarLander (Figure 5); beyond the \
+paper, the N_r study and the ablations of the open choices (parts n_r and ablations). --quick runs \
 the methods comparison on CartPole-v0 with 3 seeds. Interrupt it any time: the same command again continues \
 where it stopped."
 )]
@@ -113,7 +117,7 @@ pub struct ReproduceArgs {
     /// A few minutes on CartPole-v0: the methods comparison with 3 seeds.
     #[arg(long)]
     quick: bool,
-    /// Which parts: methods, t_query, experts (repeatable) [default: all].
+    /// Which parts: methods, t_query, experts, n_r, ablations (repeatable) [default: all].
     #[arg(long)]
     part: Vec<String>,
     /// Parallel runs [default: one per core].
@@ -149,6 +153,7 @@ pub fn run_sweep(args: SweepArgs) -> Result<ExitCode> {
                 &args.t_query,
                 &args.expert,
                 &args.overrides,
+                &args.vary,
             )?
         }
     };
@@ -294,9 +299,10 @@ pub fn run_reproduce(args: ReproduceArgs) -> Result<ExitCode> {
     } else {
         (args.env.clone(), args.seeds, args.part.clone())
     };
+    let known = part_names();
     for p in &parts {
-        if !matches!(p.as_str(), "methods" | "t_query" | "experts") {
-            bail!("unknown part '{p}'; known parts: methods, t_query, experts");
+        if !known.contains(&p.as_str()) {
+            bail!("unknown part '{p}'; known parts: {}", known.join(", "));
         }
     }
     for e in &envs {

@@ -1,6 +1,7 @@
 //! The paper's experimental protocol (Section 4: the method comparison, the t_query study and the
-//! expert-quality study) as sweep grids, so one command can reproduce it ([`paper_grids`]); and the order in
-//! which reports list environments. The paper's numbers themselves are in [`crate::paper`].
+//! expert-quality study) and our studies of what it leaves open (the window N_r, the ablations of
+//! docs/algorithm.md section 13) as sweep grids, so one command can reproduce them ([`paper_grids`]); and the
+//! order in which reports list environments. The paper's numbers themselves are in [`crate::paper`].
 
 use super::sweep::SweepGrid;
 use crate::paper::{TABLE5_METHODS, TABLE5_NETS, task_index};
@@ -28,15 +29,42 @@ pub const EXPERT_QUALITY_SPECS: [&str; 3] = [
 /// Methods of the expert-quality study.
 pub const EXPERT_QUALITY_METHODS: [&str; 2] = ["adqn", "dqfd"];
 
+/// The N_r study: ADQN's window of recent uncertainties, beside the default 1000 of the methods part.
+pub const N_R_VARIANTS: [&str; 2] = ["n_r=100", "n_r=10000"];
+
+/// The ablations of the open choices, each a variant of the methods part's runs (docs/algorithm.md section 13),
+/// with the methods each applies to: (a) time limits as terminal, (d) epsilon annealed over the whole run,
+/// for every method; (b) queries only from `learning_starts` on, (c) the budget counted in queries, for the
+/// querying methods.
+pub const ABLATIONS: [(&str, &[&str]); 2] = [
+    (
+        "timeout_as_terminal=true,eps_fraction=1",
+        &["dqn", "bdqn", "adqn"],
+    ),
+    (
+        "queries_from_learning_starts=true,budget_unit=queries",
+        &["bdqn", "adqn"],
+    ),
+];
+
+/// (e) CartPole-v0's target period: the notes' 500 instead of our tuned 250.
+pub const CARTPOLE_TARGET_ABLATION: &str = "target_period=500";
+
+/// The task of the N_r study and of the ablations (a)-(d).
+pub const STUDY_TASK: &str = "Acrobot-v1";
+
 /// Number of seeds the paper used per configuration.
 pub const PAPER_SEEDS: u64 = 20;
 
 /// The paper's experiments as sweeps, each with the name of the sub-directory it should run in:
 /// - `methods`: the four tasks x six methods x bootstrapped and noisy nets (Table 5; Figures 1 and 2);
 /// - `t_query`: ADQN on the four tasks x both nets x t_query in {0.05, 0.1, 0.3, 0.5} (Figure 3);
-/// - `experts`: ADQN and DQfD on Lunar Lander x both nets x three experts (Figure 4).
+/// - `experts`: ADQN and DQfD on Lunar Lander x both nets x three experts (Figure 4);
+/// - `n_r`: ADQN on Acrobot x both nets x N_r in {100, 10000} (1000 is the methods part's);
+/// - `ablations`: [`ABLATIONS`] on Acrobot and [`CARTPOLE_TARGET_ABLATION`] on CartPole, for DQN, BDQN and ADQN
+///   x both nets (the methods part's runs are the baseline).
 ///
-/// Every other setting is left to the per-task presets of the training code.
+/// Every other setting is left to the per-task presets of the training code. A part may have several grids.
 pub fn paper_grids(seeds: u64) -> Vec<(&'static str, SweepGrid)> {
     let all_tasks: Vec<String> = crate::paper::PAPER_TASKS
         .iter()
@@ -67,16 +95,52 @@ pub fn paper_grids(seeds: u64) -> Vec<(&'static str, SweepGrid)> {
     let experts = SweepGrid {
         envs: vec![crate::paper::PAPER_TASKS[3].gym_id.to_string()],
         methods: EXPERT_QUALITY_METHODS.iter().map(|m| method(m)).collect(),
-        nets,
-        seeds: seed_list,
+        nets: nets.clone(),
+        seeds: seed_list.clone(),
         experts: EXPERT_QUALITY_SPECS.iter().map(|e| e.to_string()).collect(),
         ..SweepGrid::default()
     };
-    vec![
+    let n_r = SweepGrid {
+        envs: vec![STUDY_TASK.to_string()],
+        methods: vec![Method::Adqn],
+        nets: nets.clone(),
+        seeds: seed_list.clone(),
+        vary: N_R_VARIANTS.iter().map(|v| v.to_string()).collect(),
+        ..SweepGrid::default()
+    };
+    let mut grids = vec![
         ("methods", methods),
         ("t_query", t_query),
         ("experts", experts),
-    ]
+        ("n_r", n_r),
+    ];
+    let ablation = |env: &str, vary: &str, methods: &[&str]| SweepGrid {
+        envs: vec![env.to_string()],
+        methods: methods.iter().map(|m| method(m)).collect(),
+        nets: nets.clone(),
+        seeds: seed_list.clone(),
+        vary: vary.split(',').map(str::to_string).collect(),
+        ..SweepGrid::default()
+    };
+    for (vary, methods) in ABLATIONS {
+        grids.push(("ablations", ablation(STUDY_TASK, vary, methods)));
+    }
+    grids.push((
+        "ablations",
+        ablation(
+            crate::paper::PAPER_TASKS[0].gym_id,
+            CARTPOLE_TARGET_ABLATION,
+            &["dqn", "bdqn", "adqn"],
+        ),
+    ));
+    grids
+}
+
+/// The names of the parts of [`paper_grids`], in order.
+pub fn part_names() -> Vec<&'static str> {
+    let mut names: Vec<&str> = paper_grids(1).into_iter().map(|(name, _)| name).collect();
+    names.dedup();
+    names
 }
 
 #[cfg(test)]
@@ -90,6 +154,22 @@ mod tests {
             .iter()
             .map(|(_, g)| g.specs().unwrap().len())
             .collect();
-        assert_eq!(sizes, vec![4 * 6 * 2 * 20, 4 * 2 * 4 * 20, 2 * 2 * 3 * 20]);
+        assert_eq!(
+            sizes,
+            vec![
+                4 * 6 * 2 * 20,
+                4 * 2 * 4 * 20,
+                2 * 2 * 3 * 20,
+                2 * 2 * 20,
+                3 * 2 * 2 * 20,
+                2 * 2 * 2 * 20,
+                3 * 2 * 20
+            ]
+        );
+        assert_eq!(
+            part_names(),
+            ["methods", "t_query", "experts", "n_r", "ablations"]
+        );
+        assert_eq!(crate::paper::PAPER_TASKS[0].gym_id, "CartPole-v0");
     }
 }

@@ -45,11 +45,15 @@ pub struct SweepGrid {
     pub experts: Vec<String>,
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub set: Vec<String>,
+    /// Variants by override: each `key=value` entry is one variant of every run (e.g. `n_r=100`, or an
+    /// ablation such as `timeout_as_terminal=true`), named `key-value` in the run's path.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub vary: Vec<String>,
 }
 
 /// Keys accepted in the `[sweep]` table (listed in error messages).
-const GRID_KEYS: [&str; 7] = [
-    "envs", "methods", "nets", "seeds", "t_query", "experts", "set",
+const GRID_KEYS: [&str; 8] = [
+    "envs", "methods", "nets", "seeds", "t_query", "experts", "set", "vary",
 ];
 
 /// `seeds = 20` (meaning 0..20) or `seeds = [0, 3, 7]`.
@@ -109,8 +113,9 @@ fn is_path_safe(name: &str) -> bool {
             .all(|c| c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.'))
 }
 
-/// Turns an expert spec into a directory-name fragment: `noisy:0.4:shipped:perfect` -> `noisy-0.4-shipped-perfect`.
-fn expert_dir_fragment(spec: &str) -> String {
+/// Turns an expert spec into a directory-name fragment: `noisy:0.4:shipped:perfect` -> `noisy-0.4-shipped-perfect`;
+/// likewise a `vary` override: `n_r=100` -> `n_r-100`.
+fn dir_fragment(spec: &str) -> String {
     spec.chars()
         .map(|c| {
             if c.is_ascii_alphanumeric() || matches!(c, '.' | '_') {
@@ -135,8 +140,9 @@ fn split_values(values: &[String]) -> Vec<String> {
 
 impl SweepGrid {
     /// Builds and validates a grid from command-line values. List values may be repeated or comma-separated;
-    /// `seeds` is parsed by [`parse_seeds`] (`20`, `3..8` or `0,4,9`); `t_query` values are numbers; `set`
-    /// entries are `key=value` overrides kept whole (they may contain commas).
+    /// `seeds` is parsed by [`parse_seeds`] (`20`, `3..8` or `0,4,9`); `t_query` values are numbers; `set` and
+    /// `vary` entries are `key=value` overrides kept whole (they may contain commas).
+    #[allow(clippy::too_many_arguments)]
     pub fn from_cli_values(
         envs: &[String],
         methods: &[String],
@@ -145,6 +151,7 @@ impl SweepGrid {
         t_query: &[String],
         experts: &[String],
         set: &[String],
+        vary: &[String],
     ) -> Result<Self> {
         let t_query = split_values(t_query)
             .iter()
@@ -169,6 +176,7 @@ impl SweepGrid {
             t_query,
             experts: split_values(experts),
             set: set.to_vec(),
+            vary: vary.to_vec(),
         };
         grid.validate()?;
         Ok(grid)
@@ -228,6 +236,7 @@ impl SweepGrid {
         check_list("seeds", &self.seeds, true)?;
         check_list("t_query", &self.t_query, false)?;
         check_list("experts", &self.experts, false)?;
+        check_list("vary", &self.vary, false)?;
         for env in &self.envs {
             if !is_path_safe(env) {
                 bail!("environment id '{env}' may only contain letters, digits, '-', '_' and '.'");
@@ -245,25 +254,50 @@ impl SweepGrid {
                 );
             }
         }
-        let fragments: BTreeSet<String> = self
-            .experts
-            .iter()
-            .map(|e| expert_dir_fragment(e))
-            .collect();
+        let fragments: BTreeSet<String> = self.experts.iter().map(|e| dir_fragment(e)).collect();
         if fragments.len() != self.experts.len() {
             bail!(
                 "two expert specs map to the same directory name: {:?}",
                 self.experts
             );
         }
-        for entry in &self.set {
+        let override_key = |entry: &str, list: &str| -> Result<String> {
             let Some((key, _)) = entry.split_once('=') else {
-                bail!("override '{entry}' in `set` is not of the form key=value");
+                bail!("override '{entry}' in `{list}` is not of the form key=value");
             };
             let key = key.trim();
             if key.is_empty() {
-                bail!("override '{entry}' in `set` has an empty key");
+                bail!("override '{entry}' in `{list}` has an empty key");
             }
+            Ok(key.to_string())
+        };
+        let vary_keys = self
+            .vary
+            .iter()
+            .map(|entry| override_key(entry, "vary"))
+            .collect::<Result<BTreeSet<String>>>()?;
+        for entry in &self.vary {
+            let key = override_key(entry, "vary")?;
+            let dedicated = ["env", "method", "net", "seed", "t_query", "expert"];
+            if dedicated.contains(&key.as_str()) {
+                bail!(
+                    "`vary` entry '{entry}' varies `{key}`, which has its own sweep key (envs, methods, nets, \
+                     seeds, t_query, experts)"
+                );
+            }
+            if !is_path_safe(&dir_fragment(entry)) {
+                bail!("`vary` entry '{entry}' cannot name a directory");
+            }
+        }
+        let fragments: BTreeSet<String> = self.vary.iter().map(|e| dir_fragment(e)).collect();
+        if fragments.len() != self.vary.len() {
+            bail!(
+                "two `vary` entries map to the same directory name: {:?}",
+                self.vary
+            );
+        }
+        for entry in &self.set {
+            let key = override_key(entry, "set")?;
             let varied = ["env", "method", "net", "seed"]
                 .into_iter()
                 .chain((!self.t_query.is_empty()).then_some("t_query"))
@@ -272,6 +306,9 @@ impl SweepGrid {
                 if key == dimension {
                     bail!("override '{entry}' in `set` fixes `{key}`, which the grid varies");
                 }
+            }
+            if vary_keys.contains(&key) {
+                bail!("override '{entry}' in `set` fixes `{key}`, which `vary` varies");
             }
         }
         // The seed does not change which values are valid: resolving one seed per configuration suffices.
@@ -287,7 +324,7 @@ impl SweepGrid {
         Ok(())
     }
 
-    /// Expands the grid into runs, in a fixed order: env, method, net, t_query, expert, seed.
+    /// Expands the grid into runs, in a fixed order: env, method, net, t_query, expert, vary, seed.
     pub fn specs(&self) -> Result<Vec<RunSpec>> {
         self.validate()?;
         Ok(self.expand())
@@ -304,22 +341,30 @@ impl SweepGrid {
         } else {
             self.experts.iter().map(Some).collect()
         };
+        let varies: Vec<Option<&String>> = if self.vary.is_empty() {
+            vec![None]
+        } else {
+            self.vary.iter().map(Some).collect()
+        };
         let mut specs = Vec::new();
         for env in &self.envs {
             for &method in &self.methods {
                 for &net in &self.nets {
                     for &t_query in &t_queries {
                         for expert in &experts {
-                            for &seed in &self.seeds {
-                                specs.push(RunSpec {
-                                    env: env.clone(),
-                                    method,
-                                    net,
-                                    seed,
-                                    t_query,
-                                    expert: expert.cloned(),
-                                    set: self.set.clone(),
-                                });
+                            for vary in &varies {
+                                for &seed in &self.seeds {
+                                    specs.push(RunSpec {
+                                        env: env.clone(),
+                                        method,
+                                        net,
+                                        seed,
+                                        t_query,
+                                        expert: expert.cloned(),
+                                        set: self.set.clone(),
+                                        vary: vary.cloned(),
+                                    });
+                                }
                             }
                         }
                     }
@@ -331,7 +376,7 @@ impl SweepGrid {
 }
 
 /// One run of a sweep: the paper's preset for (env, method, net), the grid's `set` overrides (`key=value`, as
-/// `arld train --set`), then the varied t_query and expert, if any.
+/// `arld train --set`) and its `vary` override, then the varied t_query and expert, if any.
 #[derive(Debug, Clone, PartialEq)]
 pub struct RunSpec {
     pub env: String,
@@ -341,13 +386,15 @@ pub struct RunSpec {
     pub t_query: Option<f64>,
     pub expert: Option<String>,
     pub set: Vec<String>,
+    /// The grid's `vary` override of this run, if any (`key=value`).
+    pub vary: Option<String>,
 }
 
 impl RunSpec {
     /// The run's configuration as given.
     pub fn config_input(&self) -> Result<ConfigInput> {
         let mut input = ConfigInput::new(&self.env, self.method, self.net, self.seed);
-        for o in &self.set {
+        for o in self.set.iter().chain(&self.vary) {
             input.apply_override(o)?;
         }
         if let Some(t) = self.t_query {
@@ -370,7 +417,8 @@ impl RunSpec {
             self.t_query.map(|t| format!("tq{t}")),
             self.expert
                 .as_ref()
-                .map(|e| format!("expert-{}", expert_dir_fragment(e))),
+                .map(|e| format!("expert-{}", dir_fragment(e))),
+            self.vary.as_deref().map(dir_fragment),
         ]
         .into_iter()
         .flatten()
@@ -984,6 +1032,50 @@ mod tests {
             t_query: vec![0.05, 0.3],
             experts: vec!["noisy:0.4:shipped:perfect".into()],
             set: vec!["eval_episodes=5".into()],
+            vary: vec![],
+        }
+    }
+
+    #[test]
+    fn vary_makes_one_variant_per_override_and_refuses_clashes() {
+        let varied = SweepGrid {
+            t_query: vec![],
+            experts: vec![],
+            methods: vec![Method::Adqn],
+            vary: vec!["n_r=100".into(), "n_r=10000".into()],
+            ..grid()
+        };
+        let specs = varied.specs().unwrap();
+        assert_eq!(specs.len(), 2 * 2);
+        assert_eq!(
+            specs[2].dir_name(),
+            PathBuf::from("CartPole-v0/adqn-bootstrap/n_r-10000/seed0")
+        );
+        assert_eq!(specs[2].variant_label(), "n_r-10000");
+        assert_eq!(specs[2].config().unwrap().n_r, 10_000);
+        // The variant survives the sweep file (Slurm tasks read it back).
+        let text = varied.to_toml_string().unwrap();
+        assert_eq!(SweepGrid::from_toml_str(&text).unwrap(), varied);
+        for (vary, set, expected) in [
+            ("t_query=0.2", "", "has its own sweep key"),
+            ("n_r=100", "n_r=50", "which `vary` varies"),
+            ("n_r", "", "not of the form key=value"),
+            ("budget=5", "", "cannot be set"),
+        ] {
+            let grid = SweepGrid {
+                methods: vec![Method::Dqn],
+                t_query: vec![],
+                experts: vec![],
+                vary: vec![vary.into()],
+                set: [set]
+                    .into_iter()
+                    .filter(|s| !s.is_empty())
+                    .map(String::from)
+                    .collect(),
+                ..grid()
+            };
+            let err = format!("{:#}", grid.validate().unwrap_err());
+            assert!(err.contains(expected), "{vary} / {set}: {err}");
         }
     }
 
@@ -1040,10 +1132,11 @@ mod tests {
             &strings(&["0.05", "0.3"]),
             &strings(&["noisy:0.4:shipped:perfect"]),
             &strings(&["eval_episodes=5"]),
+            &[],
         )
         .unwrap();
         assert_eq!(built, grid());
-        let bad = SweepGrid::from_cli_values(&[], &[], &[], "2", &[], &[], &[]).unwrap_err();
+        let bad = SweepGrid::from_cli_values(&[], &[], &[], "2", &[], &[], &[], &[]).unwrap_err();
         assert!(format!("{bad}").contains("envs"), "{bad}");
     }
 

@@ -23,5 +23,7 @@ pub mod rules;
 pub mod uncertainty;
 
 pub use order_stats::OrderStatistics;
-pub use rules::{AdaptiveQuantileRule, Decision, QueryController, QueryError, QueryRule};
+pub use rules::{
+    AdaptiveQuantileRule, BudgetUnit, Decision, QueryController, QueryError, QueryRule,
+};
 pub use uncertainty::{js_divergence, noisy_variance};

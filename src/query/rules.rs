@@ -1,13 +1,13 @@
 //! Query rules and the controller that turns their decisions into expert control under a budget.
 //!
-//! - [`AdaptiveQuantileRule`]: the paper's Algorithm 1 (docs/algorithm.md section 8). It keeps the last N_r
+//! - [`AdaptiveQuantileRule`]: the paper's Algorithm 1 (docs/algorithm.md sections 8 and 13). It keeps the last N_r
 //!   uncertainties in a deque (for eviction order) and an [`OrderStatistics`] tree (for ranks), and queries when
 //!   the current uncertainty exceeds the `floor(|D| * t_query)`-th largest recent one, so that about a fraction
 //!   `t_query` of agent decisions trigger a query whatever the scale of the uncertainty.
 //! - [`QueryRule`]: the four strategies compared in the paper (section 5.1; docs/algorithm.md section 9): never
 //!   (DQN, DQfD), greedy (GDQN), Bernoulli (BDQN) and adaptive (ADQN, ADQNP).
 //! - [`QueryController`]: owns a rule, the budget and the current segment. The budget counts demonstrated
-//!   *transitions* and is never exceeded; one query hands the expert control for `segment_len` consecutive steps
+//!   *transitions* (or, as an ablation, queries: [`BudgetUnit`]) and is never exceeded; one query hands the expert control for `segment_len` consecutive steps
 //!   (the paper's "five consecutive expert demonstrations"), cut short by the end of the episode or of the budget.
 //!   The rule is only consulted when the agent is about to act, never during expert control.
 //!
@@ -75,7 +75,7 @@ impl Decision {
     };
 }
 
-/// The paper's adaptive query rule (Algorithm 1; docs/algorithm.md section 8).
+/// The paper's adaptive query rule (Algorithm 1; docs/algorithm.md sections 8 and 13).
 ///
 /// With D the last `n_r` uncertainties, at each agent decision:
 /// 1. if D is non-empty, `thr = (floor(|D| * t_query))-th largest of D` (0-based, index clamped to `|D| - 1`),
@@ -242,14 +242,40 @@ impl QueryRule {
     }
 }
 
+/// What the budget counts. The paper's budget is in demonstrated transitions; counting queries (each one a whole
+/// segment of up to `segment_len` transitions, however few of them the episode leaves) is an ablation of that
+/// reading (docs/algorithm.md sections 8 and 13).
+#[derive(
+    Clone, Copy, Debug, Default, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize,
+)]
+#[serde(rename_all = "lowercase")]
+pub enum BudgetUnit {
+    /// One unit per demonstrated transition; the last segment is cut at the budget.
+    #[default]
+    Transitions,
+    /// One unit per query, however many transitions its segment demonstrates.
+    Queries,
+}
+
+impl BudgetUnit {
+    /// The most demonstrated transitions a budget of `budget` units can bring, with `segment_len` steps per query.
+    pub fn max_transitions(self, budget: usize, segment_len: usize) -> usize {
+        match self {
+            BudgetUnit::Transitions => budget,
+            BudgetUnit::Queries => budget.saturating_mul(segment_len),
+        }
+    }
+}
+
 /// A query rule with its budget and expert-control segments (docs/algorithm.md sections 8-9).
 ///
-/// Invariants: `budget_used() <= budget()`; every query grants between 1 and `segment_len` expert steps;
+/// Invariants: `budget_spent() <= budget()`; every query grants between 1 and `segment_len` expert steps;
 /// the rule sees only the steps where the agent is about to act.
 #[derive(Clone, Debug)]
 pub struct QueryController {
     rule: QueryRule,
     budget: usize,
+    unit: BudgetUnit,
     budget_used: usize,
     segment_len: usize,
     /// Expert steps left in the current segment; the expert is in control while this is positive.
@@ -270,11 +296,17 @@ impl QueryController {
         Ok(Self {
             rule,
             budget,
+            unit: BudgetUnit::Transitions,
             budget_used: 0,
             segment_len,
             segment_left: 0,
             queries: 0,
         })
+    }
+
+    /// The same controller with its budget counted in `unit` (the default counts transitions).
+    pub fn counting(self, unit: BudgetUnit) -> Self {
+        Self { unit, ..self }
     }
 
     /// Writes the controller's position into `state` under `prefix`: budget used, segment in progress,
@@ -370,7 +402,10 @@ impl QueryController {
             return rule_decision;
         }
         self.queries += 1;
-        self.segment_left = self.segment_len.min(self.budget_left());
+        self.segment_left = match self.unit {
+            BudgetUnit::Transitions => self.segment_len.min(self.budget_left()),
+            BudgetUnit::Queries => self.segment_len,
+        };
         Decision {
             expert_steps: self.segment_left,
             ..rule_decision
@@ -406,9 +441,14 @@ impl QueryController {
         self.segment_left
     }
 
-    /// Total budget, in demonstrated transitions.
+    /// Total budget, in its unit ([`BudgetUnit`]).
     pub fn budget(&self) -> usize {
         self.budget
+    }
+
+    /// What the budget counts.
+    pub fn unit(&self) -> BudgetUnit {
+        self.unit
     }
 
     /// Demonstrated transitions so far.
@@ -416,9 +456,18 @@ impl QueryController {
         self.budget_used
     }
 
-    /// Demonstrated transitions not yet spent (the remaining steps of a running segment are included).
+    /// Budget spent, in its unit: demonstrated transitions, or queries asked (a query nobody answered included).
+    pub fn budget_spent(&self) -> usize {
+        match self.unit {
+            BudgetUnit::Transitions => self.budget_used,
+            BudgetUnit::Queries => self.queries,
+        }
+    }
+
+    /// Budget not yet spent, in its unit (counting transitions, the remaining steps of a running segment are
+    /// included).
     pub fn budget_left(&self) -> usize {
-        self.budget - self.budget_used
+        self.budget - self.budget_spent()
     }
 
     /// Number of queries made so far.
@@ -714,6 +763,40 @@ mod tests {
         assert!(!controller.expert_in_control());
         assert!(!controller.decide(None, &mut rng).query);
         assert_eq!(controller.queries(), 2);
+    }
+
+    #[test]
+    fn a_budget_in_queries_grants_whole_segments_and_counts_queries_cut_short() {
+        // Greedy with a budget of 3 queries of 5 steps over episodes of 7, 2 and 30 steps.
+        let mut controller = QueryController::new(QueryRule::Greedy, 3, 5)
+            .unwrap()
+            .counting(BudgetUnit::Queries);
+        let mut rng = Pcg64::seed_from_u64(4);
+        let episodes = simulate(&mut controller, &[7, 2, 30], &mut rng);
+        let expert_steps: Vec<usize> = episodes
+            .iter()
+            .map(|e| e.iter().filter(|a| **a != Actor::Agent).count())
+            .collect();
+        // Episode 0: query 1 (steps 0-4), query 2 (steps 5-6, cut by the end); episode 1: query 3 (both steps);
+        // then the budget of 3 queries is spent and the 30-step episode is the agent's.
+        assert_eq!(expert_steps, vec![7, 2, 0]);
+        assert_eq!(controller.queries(), 3);
+        assert_eq!(
+            (controller.budget_spent(), controller.budget_left()),
+            (3, 0)
+        );
+        assert_eq!(controller.budget_used(), 9);
+        assert!(
+            controller.budget_used() <= BudgetUnit::Queries.max_transitions(3, 5),
+            "the replay's demonstration part is sized by max_transitions"
+        );
+        // Counting transitions, the same budget of 3 would have given 3 transitions only.
+        let mut by_transitions = QueryController::new(QueryRule::Greedy, 3, 5).unwrap();
+        simulate(&mut by_transitions, &[7, 2, 30], &mut rng);
+        assert_eq!(
+            (by_transitions.budget_used(), by_transitions.queries()),
+            (3, 1)
+        );
     }
 
     #[test]

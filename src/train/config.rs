@@ -17,7 +17,7 @@
 use crate::agent::AgentConfig;
 pub use crate::agent::TdLoss;
 use crate::nn::OutputKind;
-use crate::query::{QueryController, QueryError, QueryRule};
+use crate::query::{BudgetUnit, QueryController, QueryError, QueryRule};
 use crate::replay::ReplayConfig;
 use anyhow::{Context, Result, bail, ensure};
 use serde::{Deserialize, Serialize};
@@ -220,8 +220,18 @@ pub struct TrainConfig {
     /// Pre-training updates on demonstrations only \[P, per task\].
     pub pretrain_steps: usize,
 
-    /// Demonstrated transitions that may be asked for during training \[P, per task\].
+    /// Demonstrated transitions that may be asked for during training \[P, per task\] (queries instead when
+    /// `budget_unit = "queries"`).
     pub budget: usize,
+    /// What `budget` counts: `transitions` (the paper's reading) or `queries` (each a segment of up to
+    /// `segment_len` transitions; an ablation) \[OURS: transitions\].
+    #[serde(default)]
+    pub budget_unit: BudgetUnit,
+    /// Ask the expert only from `learning_starts` on, when the network has started learning (an ablation; the
+    /// paper's rule asks from the first step, when the uncertainty is that of the untrained network)
+    /// \[OURS: false\].
+    #[serde(default)]
+    pub queries_from_learning_starts: bool,
     /// Fraction of recent steps whose uncertainty may exceed the current one for a query (ADQN, ADQNP), and
     /// BDQN's query probability \[P, per task and net\].
     pub t_query: f64,
@@ -469,7 +479,9 @@ impl ConfigInput {
 /// is inert; giving another value would change nothing, which is always a mistake.
 fn unused_by(key: &str, method: Method, net: NetKind) -> Option<String> {
     match key {
-        "budget" | "segment_len" if !method.queries() => {
+        "budget" | "budget_unit" | "segment_len" | "queries_from_learning_starts"
+            if !method.queries() =>
+        {
             Some(format!("{method} does not ask the expert during training"))
         }
         "t_query" if !matches!(method, Method::Bdqn | Method::Adqn | Method::Adqnp) => Some(
@@ -548,6 +560,8 @@ impl TrainConfig {
                 0
             },
             budget,
+            budget_unit: BudgetUnit::Transitions,
+            queries_from_learning_starts: false,
             t_query,
             n_r: 1000,
             segment_len: 5,
@@ -672,7 +686,7 @@ impl TrainConfig {
                 ),
                 e => e.into(),
             })?;
-        QueryController::new(rule, self.budget, self.segment_len)?;
+        self.query_controller()?;
         if self.method.needs_expert() {
             ensure!(
                 !self.expert.trim().is_empty(),
@@ -728,6 +742,21 @@ impl TrainConfig {
         }
     }
 
+    /// The query rule under the run's budget and segment length.
+    pub fn query_controller(&self) -> Result<QueryController, QueryError> {
+        Ok(
+            QueryController::new(self.query_rule()?, self.budget, self.segment_len)?
+                .counting(self.budget_unit),
+        )
+    }
+
+    /// The most demonstrated transitions queries can bring during training (the budget, converted when it counts
+    /// queries).
+    pub fn query_transitions(&self) -> usize {
+        self.budget_unit
+            .max_transitions(self.budget, self.segment_len)
+    }
+
     /// Demonstrations that enter replay before training: the pre-training set.
     pub fn pretrain_demos(&self) -> usize {
         if self.method.pretrains() {
@@ -742,7 +771,9 @@ impl TrainConfig {
     pub fn replay_config(&self) -> ReplayConfig {
         ReplayConfig {
             capacity: self.replay_size,
-            demo_capacity: self.pretrain_demos().saturating_add(self.budget),
+            demo_capacity: self
+                .pretrain_demos()
+                .saturating_add(self.query_transitions()),
             prioritized: self.prioritized,
             alpha: self.alpha as f32,
             eps_agent: self.eps_agent as f32,
@@ -1017,6 +1048,7 @@ mod tests {
             "seed",
             "loss",
             "timeout_as_terminal",
+            "queries_from_learning_starts",
             "eps_greedy_on_top",
             "prioritized",
             "exact_factorised_var",

@@ -329,12 +329,12 @@ fn train_run(
     let mut replay = Replay::new(
         obs_dim,
         &ReplayConfig {
-            demo_capacity: pretrain_demos + cfg.budget,
+            demo_capacity: pretrain_demos + cfg.query_transitions(),
             ..cfg.replay_config()
         },
     );
     let mut batch = Batch::default();
-    let mut queries = QueryController::new(cfg.query_rule()?, cfg.budget, cfg.segment_len)?;
+    let mut queries = cfg.query_controller()?;
     let mut st = LoopState::default();
     let mut obs = Vec::new();
 
@@ -426,6 +426,7 @@ fn train_run(
     }
     while st.step < cfg.train_steps {
         let step = st.step;
+        let learning = step + 1 >= cfg.learning_starts;
         // 1. Who acts: the agent, or the expert when a query is running or the rule asks for one now.
         let mut step_uncertainty = None;
         let action = if queries.expert_in_control() {
@@ -437,6 +438,9 @@ fn train_run(
                     agent.act(&obs, epsilon_at(cfg, step), false).0
                 }
             }
+        } else if cfg.queries_from_learning_starts && !learning {
+            // Ablation: no queries before the first update; the rule does not see these steps.
+            agent.act(&obs, epsilon_at(cfg, step), false).0
         } else {
             let want_uncertainty = queries.uncertainty_wanted_now();
             let (agent_action, uncertainty) =
@@ -502,10 +506,7 @@ fn train_run(
         }
 
         // 3. Learn: one prioritized double-DQN update per `train_freq` steps, hard target copies.
-        if step + 1 >= cfg.learning_starts
-            && (step + 1).is_multiple_of(cfg.train_freq)
-            && replay.len() >= cfg.batch_size
-        {
+        if learning && (step + 1).is_multiple_of(cfg.train_freq) && replay.len() >= cfg.batch_size {
             let beta = cfg.beta0 + (1.0 - cfg.beta0) * (step as f64 / cfg.train_steps as f64);
             replay.sample(cfg.batch_size, beta as f32, &mut replay_rng, &mut batch);
             let (stats, priorities) = agent.update(&batch);

@@ -310,7 +310,7 @@ impl Expert for WebExpert {
             train_steps: p.train_steps,
             episode: p.episode,
             budget: p.queries.budget(),
-            budget_used: p.queries.budget_used(),
+            budget_used: p.queries.budget_spent(),
             queries: p.queries.queries(),
             uncertainty: p.uncertainty,
             threshold,

@@ -82,6 +82,7 @@ pub struct Status {
     pub step: usize,
     pub train_steps: usize,
     pub episode: usize,
+    /// The budget and what is spent of it, in the budget's unit (transitions unless the run counts queries).
     pub budget: usize,
     pub budget_used: usize,
     pub queries: usize,
