@@ -1,12 +1,15 @@
 //! Experiments: running one configured run end to end ([`run_one`]: expert, demonstrations, training, run
 //! directory), sweeps over grids of runs ([`sweep`]) and their submission to Slurm as job arrays ([`slurm`]),
 //! the paper's experiment grids ([`protocol`]), statistics over seeds ([`stats`]), and reports with the paper's
-//! table and figures ([`report`], [`plot`]). Sweeps and reports read runs through [`crate::train::run_dir`], the
-//! owner of the run directory's format.
+//! table and figures ([`report`]; which figures and what they show in [`figures`], how one is drawn in
+//! [`plot`]). Sweeps and reports read runs through [`crate::train::run_dir`], the owner of the run
+//! directory's format.
 //!
-//! Within this layer imports go one way: `dir_lock` <- `sweep`; `stats`, `sweep` <- `protocol` <- `plot` <- `report`; `slurm` <- the CLI.
+//! Within this layer imports go one way: `dir_lock` <- `sweep`; `stats`, `sweep` <- `protocol`;
+//! `protocol`, `plot` <- `figures`; `figures`, `plot` <- `report`; `slurm` <- the CLI.
 
 pub mod dir_lock;
+pub mod figures;
 pub mod plot;
 pub mod protocol;
 pub mod report;

@@ -7,13 +7,13 @@
 //! - [`group_runs`] applies the paper's measure per (env, method, net, variant): the first evaluation that reaches
 //!   the threshold ([`stats::first_hit`]), and the median over seeds ([`stats::median`]; docs/algorithm.md
 //!   section 11).
-//! - [`report`] writes `table.md`, `table.csv`, `evaluations.csv`, the figures of [`super::plot`] and
+//! - [`report`] writes `table.md`, `table.csv`, `evaluations.csv`, the figures of [`super::figures`] and
 //!   `report.md`.
 
-use super::plot;
 use super::protocol::env_order;
 use super::stats::{self, median};
 use super::sweep::{SWEEP_FILE, SweepGrid};
+use super::{figures, plot};
 use crate::paper::{self, PAPER_TASKS, TABLE5_METHODS, TABLE5_NETS};
 use crate::train::run_dir::{
     self, DEFAULT_VARIANT, EvalPoint, RunRecord, SUMMARY_FILE, load_runs, write_atomic,
@@ -282,7 +282,7 @@ fn sweep_completion_notes(root: &Path) -> Result<Vec<String>> {
 }
 
 /// Reads every complete run under `dir` and writes into `out_dir`: `table.md` and `table.csv` (Table 5 layout,
-/// ours beside the paper's), the paper's figures as PNG and SVG (see [`plot::paper_figures`]; a figure whose
+/// ours beside the paper's), the paper's figures as PNG and SVG (see [`figures::paper_figures`]; a figure whose
 /// runs are absent is skipped with a note), and `report.md` linking everything with the notes.
 pub fn report(dir: &Path, out_dir: &Path, sustain: usize) -> Result<ReportSummary> {
     let (runs, mut notes) = load_runs(dir)?;
@@ -321,7 +321,7 @@ pub fn report(dir: &Path, out_dir: &Path, sustain: usize) -> Result<ReportSummar
     let (verdict_files, verdict_md) = super::verdict::write_verdict(&runs, out_dir, sustain)?;
     files.extend(verdict_files);
 
-    let figures = plot::paper_figures(&runs);
+    let figures = figures::paper_figures(&runs);
     let mut figure_lines = Vec::new();
     for figure in &figures {
         match &figure.content {

@@ -1,0 +1,464 @@
+//! The paper's figures: which figures a report draws and what goes into them, built from run records.
+//!
+//! - [`median_curve`] and [`query_timeline`] reduce the runs of one configuration to a [`Band`] per step: the
+//!   median over seeds (the paper plots medians, docs/algorithm.md section 11) and the interquartile range.
+//! - [`paper_figures`] selects runs for each figure of the paper's Section 4 and builds a [`FigureContent`]
+//!   (one panel per environment, one line per method or setting), or says why a figure is skipped;
+//!   [`super::plot`] draws it.
+
+use super::plot::{Band, Curve, FigureContent, PALETTE, Panel};
+use super::protocol::{self, env_order};
+use super::stats::quantile;
+use crate::paper::TABLE5_METHODS;
+use crate::train::run_dir::{DEFAULT_VARIANT, RunRecord};
+use crate::train::{Method, NetKind};
+use std::collections::BTreeMap;
+
+#[derive(Debug, Clone)]
+pub struct PaperFigure {
+    pub name: String,
+    pub content: Option<FigureContent>,
+    pub skip_reason: String,
+}
+
+/// A method's colour: its index in [`TABLE5_METHODS`], so a method keeps its colour across figures.
+fn method_color(method: Method) -> usize {
+    TABLE5_METHODS
+        .iter()
+        .position(|m| *m == method.name())
+        .unwrap_or(6)
+}
+
+/// Median and quartiles over the given values of each x, in x order.
+fn bands(per_x: BTreeMap<u64, Vec<f64>>) -> Vec<Band> {
+    per_x
+        .into_iter()
+        .filter_map(|(x, values)| {
+            Some(Band {
+                x: x as f64,
+                median: quantile(&values, 0.5)?,
+                lower_quartile: quantile(&values, 0.25)?,
+                upper_quartile: quantile(&values, 0.75)?,
+            })
+        })
+        .collect()
+}
+
+/// Median learning curve over runs (seeds): at each evaluation step, the median and quartiles of the seeds'
+/// mean test returns. A step only some seeds reached is summarised over those seeds.
+pub fn median_curve(runs: &[&RunRecord]) -> Vec<Band> {
+    let mut per_step: BTreeMap<u64, Vec<f64>> = BTreeMap::new();
+    for run in runs {
+        for point in &run.eval {
+            per_step.entry(point.step).or_default().push(point.mean);
+        }
+    }
+    bands(per_step)
+}
+
+/// Queries per evaluation period over training, median over the runs that logged queries: bin k counts the
+/// queries at steps in [k P, (k + 1) P) and is plotted at x = (k + 1) P, where P is the runs' evaluation period.
+pub fn query_timeline(runs: &[&RunRecord]) -> Vec<Band> {
+    let logged: Vec<(&RunRecord, &Vec<u64>)> = runs
+        .iter()
+        .filter_map(|r| r.query_steps.as_ref().map(|q| (*r, q)))
+        .collect();
+    let Some(period) = logged.iter().map(|(r, _)| r.eval_period).max() else {
+        return Vec::new();
+    };
+    let steps = logged.iter().map(|(r, _)| r.train_steps).max().unwrap_or(0);
+    let bins = steps.div_ceil(period).max(1) as usize;
+    let mut per_bin: BTreeMap<u64, Vec<f64>> = BTreeMap::new();
+    for (_, queries) in &logged {
+        let mut counts = vec![0.0; bins];
+        for &step in queries.iter() {
+            let bin = ((step / period) as usize).min(bins - 1);
+            counts[bin] += 1.0;
+        }
+        for (k, count) in counts.into_iter().enumerate() {
+            per_bin
+                .entry((k as u64 + 1) * period)
+                .or_default()
+                .push(count);
+        }
+    }
+    bands(per_bin)
+}
+
+/// Readable legend text for an expert spec of the expert-quality study.
+fn expert_label(spec: &str) -> String {
+    match spec {
+        "shipped:perfect" => "perfect expert".to_string(),
+        "shipped:weak" => "weak (snapshot) expert".to_string(),
+        other => match other
+            .strip_prefix("noisy:")
+            .and_then(|rest| rest.split_once(':'))
+        {
+            Some((p, inner)) if p.parse::<f64>().is_ok() => {
+                format!(
+                    "{} + {}% random actions",
+                    expert_label(inner),
+                    (p.parse::<f64>().unwrap_or(0.0) * 100.0).round()
+                )
+            }
+            _ => other.to_string(),
+        },
+    }
+}
+
+fn net_words(net: NetKind) -> (&'static str, &'static str) {
+    match net {
+        NetKind::Bootstrap => ("bootstrapped", "B"),
+        NetKind::Noisy => ("noisy", "N"),
+        NetKind::Plain => ("plain", "P"),
+    }
+}
+
+const RETURN_LABEL: &str = "mean test return (20 episodes)";
+const STEPS_LABEL: &str = "environment steps";
+
+/// Panels per environment, one curve per method, for the default-variant runs of `methods` on `net`.
+fn methods_figure(
+    runs: &[RunRecord],
+    net: NetKind,
+    methods: &[Method],
+    title: String,
+) -> Option<FigureContent> {
+    let selected: Vec<&RunRecord> = runs
+        .iter()
+        .filter(|r| r.net == net && r.variant == DEFAULT_VARIANT && methods.contains(&r.method))
+        .collect();
+    let envs = env_order(selected.iter().map(|r| r.env.as_str()));
+    let panels: Vec<Panel> = envs
+        .iter()
+        .map(|env| {
+            let in_env: Vec<&RunRecord> =
+                selected.iter().copied().filter(|r| &r.env == env).collect();
+            let curves = methods
+                .iter()
+                .filter_map(|method| {
+                    let group: Vec<&RunRecord> = in_env
+                        .iter()
+                        .copied()
+                        .filter(|r| r.method == *method)
+                        .collect();
+                    (!group.is_empty()).then(|| Curve {
+                        label: method.paper_name(),
+                        color: method_color(*method),
+                        points: median_curve(&group),
+                    })
+                })
+                .collect();
+            Panel {
+                title: env.clone(),
+                threshold: in_env.first().map(|r| r.solve_threshold),
+                curves,
+            }
+        })
+        .collect();
+    (!panels.is_empty()).then(|| FigureContent {
+        title,
+        x_label: STEPS_LABEL.to_string(),
+        y_label: RETURN_LABEL.to_string(),
+        panels,
+    })
+}
+
+/// ADQN runs of the t_query study (variant `tqVALUE`): panels per environment, one curve per value.
+fn t_query_figure(runs: &[RunRecord], net: NetKind) -> Option<FigureContent> {
+    let selected: Vec<(&RunRecord, f64)> = runs
+        .iter()
+        .filter(|r| r.net == net && r.method == Method::Adqn)
+        .filter_map(|r| Some((r, r.variant.strip_prefix("tq")?.parse::<f64>().ok()?)))
+        .collect();
+    let mut values: Vec<f64> = selected.iter().map(|(_, t)| *t).collect();
+    values.sort_by(f64::total_cmp);
+    values.dedup();
+    let envs = env_order(selected.iter().map(|(r, _)| r.env.as_str()));
+    let panels: Vec<Panel> = envs
+        .iter()
+        .map(|env| {
+            let in_env: Vec<&(&RunRecord, f64)> =
+                selected.iter().filter(|(r, _)| &r.env == env).collect();
+            let curves = values
+                .iter()
+                .enumerate()
+                .filter_map(|(i, value)| {
+                    let group: Vec<&RunRecord> = in_env
+                        .iter()
+                        .filter(|(_, t)| t == value)
+                        .map(|(r, _)| *r)
+                        .collect();
+                    (!group.is_empty()).then(|| Curve {
+                        label: format!("t_query = {value}"),
+                        color: [4, 3, 5, 1, 6, 2, 0, 7][i % PALETTE.len()],
+                        points: median_curve(&group),
+                    })
+                })
+                .collect();
+            Panel {
+                title: env.clone(),
+                threshold: in_env.first().map(|(r, _)| r.solve_threshold),
+                curves,
+            }
+        })
+        .collect();
+    let (words, suffix) = net_words(net);
+    (!panels.is_empty()).then(|| FigureContent {
+        title: format!("ADQN-{suffix} with t_query in {{0.05, 0.1, 0.3, 0.5}} ({words} DQN)"),
+        x_label: STEPS_LABEL.to_string(),
+        y_label: RETURN_LABEL.to_string(),
+        panels,
+    })
+}
+
+/// ADQN and DQfD runs of the expert-quality study (variant `expert-...`): a panel per (environment, method),
+/// one curve per expert.
+fn expert_figure(runs: &[RunRecord], net: NetKind) -> Option<FigureContent> {
+    let selected: Vec<&RunRecord> = runs
+        .iter()
+        .filter(|r| r.net == net && (r.method == Method::Adqn || r.method == Method::Dqfd))
+        .filter(|r| r.variant.starts_with("expert-") && !r.variant.contains('_'))
+        .collect();
+    // Legend order and colours follow the paper's order of experts; unknown specs come after, alphabetically.
+    let mut experts: Vec<String> = selected
+        .iter()
+        .map(|r| r.expert.clone().unwrap_or_else(|| r.variant.clone()))
+        .collect();
+    experts.sort_by_key(|e| {
+        (
+            protocol::EXPERT_QUALITY_SPECS
+                .iter()
+                .position(|s| s == e)
+                .unwrap_or(usize::MAX),
+            e.clone(),
+        )
+    });
+    experts.dedup();
+    let envs = env_order(selected.iter().map(|r| r.env.as_str()));
+    let mut panels = Vec::new();
+    for env in &envs {
+        for method in [Method::Adqn, Method::Dqfd] {
+            let in_panel: Vec<&RunRecord> = selected
+                .iter()
+                .copied()
+                .filter(|r| &r.env == env && r.method == method)
+                .collect();
+            if in_panel.is_empty() {
+                continue;
+            }
+            let curves = experts
+                .iter()
+                .enumerate()
+                .filter_map(|(i, expert)| {
+                    let group: Vec<&RunRecord> = in_panel
+                        .iter()
+                        .copied()
+                        .filter(|r| r.expert.as_ref().unwrap_or(&r.variant) == expert)
+                        .collect();
+                    (!group.is_empty()).then(|| Curve {
+                        label: expert_label(expert),
+                        color: [4, 1, 3, 5, 6, 2, 0, 7][i % PALETTE.len()],
+                        points: median_curve(&group),
+                    })
+                })
+                .collect();
+            let (_, suffix) = net_words(net);
+            panels.push(Panel {
+                title: format!("{env}: {}-{suffix}", method.paper_name()),
+                threshold: in_panel.first().map(|r| r.solve_threshold),
+                curves,
+            });
+        }
+    }
+    let (words, suffix) = net_words(net);
+    (!panels.is_empty()).then(|| FigureContent {
+        title: format!(
+            "Effect of the expert's quality on ADQN-{suffix} and DQfD-{suffix} ({words} DQN)"
+        ),
+        x_label: STEPS_LABEL.to_string(),
+        y_label: RETURN_LABEL.to_string(),
+        panels,
+    })
+}
+
+/// Queries per evaluation period for the querying methods (default variant), one panel per environment.
+fn query_figure(runs: &[RunRecord], net: NetKind) -> Option<FigureContent> {
+    let methods = [Method::Gdqn, Method::Bdqn, Method::Adqn, Method::Adqnp];
+    let selected: Vec<&RunRecord> = runs
+        .iter()
+        .filter(|r| r.net == net && r.variant == DEFAULT_VARIANT && methods.contains(&r.method))
+        .filter(|r| r.query_steps.is_some())
+        .collect();
+    let envs = env_order(selected.iter().map(|r| r.env.as_str()));
+    let panels: Vec<Panel> = envs
+        .iter()
+        .map(|env| {
+            let curves = methods
+                .iter()
+                .filter_map(|method| {
+                    let group: Vec<&RunRecord> = selected
+                        .iter()
+                        .copied()
+                        .filter(|r| &r.env == env && r.method == *method)
+                        .collect();
+                    (!group.is_empty()).then(|| Curve {
+                        label: method.paper_name(),
+                        color: method_color(*method),
+                        points: query_timeline(&group),
+                    })
+                })
+                .collect();
+            Panel {
+                title: env.clone(),
+                threshold: None,
+                curves,
+            }
+        })
+        .collect();
+    let (words, suffix) = net_words(net);
+    (!panels.is_empty()).then(|| FigureContent {
+        title: format!("When the agent asks: queries over training (-{suffix}, {words} DQN)"),
+        x_label: STEPS_LABEL.to_string(),
+        y_label: "queries per evaluation period".to_string(),
+        panels,
+    })
+}
+
+/// The paper's figures built from `runs`, in the paper's order, each for bootstrapped and noisy nets:
+/// `fig1_methods_*` (DQN, GDQN, BDQN, ADQN), `fig2_pretraining_*` (DQfD, ADQN, ADQNP), `fig3_t_query_*`,
+/// `fig4_experts_*`, and `fig5_queries_*` (a query timeline, not in the paper).
+pub fn paper_figures(runs: &[RunRecord]) -> Vec<PaperFigure> {
+    let mut figures = Vec::new();
+    for net in [NetKind::Bootstrap, NetKind::Noisy] {
+        let (words, suffix) = net_words(net);
+        let mut push = |name: String, content: Option<FigureContent>, missing: String| {
+            let skip_reason = if content.is_some() {
+                String::new()
+            } else {
+                missing
+            };
+            figures.push(PaperFigure {
+                name,
+                content,
+                skip_reason,
+            });
+        };
+        push(
+            format!("fig1_methods_{net}"),
+            methods_figure(
+                runs,
+                net,
+                &[Method::Dqn, Method::Gdqn, Method::Bdqn, Method::Adqn],
+                format!("Comparison between methods with {words} DQN (-{suffix})"),
+            ),
+            format!("no complete default-variant run of DQN, GDQN, BDQN or ADQN with net = {net}"),
+        );
+        push(
+            format!("fig2_pretraining_{net}"),
+            methods_figure(
+                runs,
+                net,
+                &[Method::Dqfd, Method::Adqn, Method::Adqnp],
+                format!("ADQN, DQfD and ADQNP based on {words} DQN (-{suffix})"),
+            ),
+            format!("no complete default-variant run of DQfD, ADQN or ADQNP with net = {net}"),
+        );
+        push(
+            format!("fig3_t_query_{net}"),
+            t_query_figure(runs, net),
+            format!("no complete ADQN run of a t_query sweep (variant tqVALUE) with net = {net}"),
+        );
+        push(
+            format!("fig4_experts_{net}"),
+            expert_figure(runs, net),
+            format!(
+                "no complete ADQN or DQfD run of an expert sweep (variant expert-...) with net = {net}"
+            ),
+        );
+        push(
+            format!("fig5_queries_{net}"),
+            query_figure(runs, net),
+            format!(
+                "no complete default-variant run of a querying method with a queries.csv and net = {net}"
+            ),
+        );
+    }
+    figures.sort_by(|a, b| a.name.cmp(&b.name));
+    figures
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::train::run_dir::EvalPoint;
+    use std::path::PathBuf;
+
+    fn run(seed: u64, means: &[f64], queries: Option<Vec<u64>>) -> RunRecord {
+        RunRecord {
+            dir: PathBuf::from(format!("seed{seed}")),
+            env: "CartPole-v0".into(),
+            method: Method::Adqn,
+            net: NetKind::Bootstrap,
+            seed,
+            variant: DEFAULT_VARIANT.into(),
+            t_query: None,
+            expert: None,
+            solve_threshold: 195.0,
+            train_steps: 3000,
+            eval_period: 1000,
+            eval: means
+                .iter()
+                .enumerate()
+                .map(|(i, &mean)| EvalPoint::constant((i as u64 + 1) * 1000, mean))
+                .collect(),
+            query_steps: queries,
+            summary_steps_to_solve: None,
+        }
+    }
+
+    #[test]
+    fn median_curve_takes_per_step_median_and_quartiles_over_seeds() {
+        let runs = [
+            run(0, &[10.0, 100.0], None),
+            run(1, &[30.0, 200.0], None),
+            run(2, &[20.0, 150.0], None),
+        ];
+        let refs: Vec<&RunRecord> = runs.iter().collect();
+        let curve = median_curve(&refs);
+        assert_eq!(curve.len(), 2);
+        assert_eq!(
+            (
+                curve[0].x,
+                curve[0].median,
+                curve[0].lower_quartile,
+                curve[0].upper_quartile
+            ),
+            (1000.0, 20.0, 15.0, 25.0)
+        );
+        assert_eq!(curve[1].median, 150.0);
+    }
+
+    #[test]
+    fn query_timeline_counts_queries_per_evaluation_period() {
+        let runs = [
+            run(0, &[], Some(vec![0, 5, 999, 1000, 2999])),
+            run(1, &[], Some(vec![10, 20, 30])),
+            run(2, &[], None),
+        ];
+        let refs: Vec<&RunRecord> = runs.iter().collect();
+        let timeline = query_timeline(&refs);
+        let medians: Vec<(f64, f64)> = timeline.iter().map(|b| (b.x, b.median)).collect();
+        // Seed 0 bins: [3, 1, 1]; seed 1: [3, 0, 0]; seed 2 logged nothing and is left out.
+        assert_eq!(medians, vec![(1000.0, 3.0), (2000.0, 0.5), (3000.0, 0.5)]);
+    }
+
+    #[test]
+    fn expert_labels_are_readable() {
+        assert_eq!(
+            expert_label("noisy:0.4:shipped:perfect"),
+            "perfect expert + 40% random actions"
+        );
+        assert_eq!(expert_label("file:x.safetensors"), "file:x.safetensors");
+    }
+}
