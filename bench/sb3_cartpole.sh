@@ -2,18 +2,29 @@
 # arld against Stable-Baselines3 DQN, side by side in one run, on SB3's DQN configuration:
 # CartPole-v1, a 64-64 network, batch 32, one gradient update per environment step, uniform replay.
 # Both are single-threaded (torch.set_num_threads(1); one arld run uses one core) and train the same number of
-# steps with no evaluation in between. Prints both speeds and their ratio, and writes bench/out/sb3_cartpole.json.
+# steps with no evaluation in between. Prints both speeds and their ratio, by wall clock and by CPU time (the
+# steadier figure on a loaded machine), and writes bench/out/sb3_cartpole.json.
 #
-# Usage: bench/sb3_cartpole.sh [STEPS]      (default 20000; SB3 needs about 30 s per 20k steps on one core)
-# SB3 (with CPU-only torch and Gymnasium) is installed into bench/.venv on the first run.
+# Usage: [VENV=DIR] bench/sb3_cartpole.sh [STEPS]      (default 20000; SB3 needs about 30 s per 20k steps on one core)
+# SB3 runs in the virtual environment VENV if given (it must already have torch, gymnasium and stable-baselines3,
+# e.g. the checkout's .venv made by .ci/run); otherwise the checkout's .venv if it has them; otherwise SB3 (with
+# torch and Gymnasium) is installed into bench/.venv on the first run.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 steps="${1:-20000}"
 out=bench/out
 mkdir -p "$out"
 
-venv=bench/.venv
-if [ ! -x "$venv/bin/python" ] || ! "$venv/bin/python" -c "import stable_baselines3" 2>/dev/null; then
+has_sb3() { [ -x "$1/bin/python" ] && "$1/bin/python" -c "import torch, gymnasium, stable_baselines3" 2>/dev/null; }
+if [ -n "${VENV:-}" ]; then
+  venv="$VENV"
+  has_sb3 "$venv" || { echo "VENV=$venv: no python there with torch, gymnasium and stable_baselines3" >&2; exit 1; }
+elif has_sb3 .venv; then
+  venv=.venv
+else
+  venv=bench/.venv
+fi
+if ! has_sb3 "$venv"; then
   echo "== installing Stable-Baselines3 into $venv (CPU-only torch)"
   python3 -m venv "$venv"
   "$venv/bin/pip" install --quiet --upgrade pip
@@ -26,34 +37,51 @@ fi
 cargo build --release --quiet
 echo "== arld: CartPole-v1, dqn, plain 64-64, batch 32, train_freq 1, uniform replay, $steps steps"
 rm -rf "$out/arld_cartpole"
-./target/release/arld train --env CartPole-v1 --method dqn --net plain --seed 0 --quiet \
-  --set train_steps="$steps" --set batch_size=32 --set train_freq=1 --set prioritized=false \
-  --set learning_starts=100 --set replay_size=1000000 --set target_period=10000 \
-  --set eval_period="$steps" --set eval_episodes=1 -o "$out/arld_cartpole" >/dev/null
+# CPU seconds of the arld process (user + system) besides the run's own wall-clock steps/s: on a loaded machine the
+# CPU-time rate is the steadier figure.
+arld_cpu=$(python3 - "$steps" "$out/arld_cartpole" <<'PY'
+import resource, subprocess, sys
+steps, out = sys.argv[1], sys.argv[2]
+subprocess.run(["./target/release/arld", "train", "--env", "CartPole-v1", "--method", "dqn", "--net", "plain",
+                "--seed", "0", "--quiet", "--set", f"train_steps={steps}", "--set", "batch_size=32",
+                "--set", "train_freq=1", "--set", "prioritized=false", "--set", "learning_starts=100",
+                "--set", "replay_size=1000000", "--set", "target_period=10000", "--set", f"eval_period={steps}",
+                "--set", "eval_episodes=1", "-o", out], check=True, stdout=subprocess.DEVNULL)
+usage = resource.getrusage(resource.RUSAGE_CHILDREN)
+print(usage.ru_utime + usage.ru_stime)
+PY
+)
 arld_sps=$(python3 -c "import json,sys; print(json.load(open(sys.argv[1]))['steps_per_s'])" "$out/arld_cartpole/summary.json")
 
-echo "== Stable-Baselines3 DQN: the same configuration, $steps steps"
-sb3_sps=$("$venv/bin/python" - "$steps" <<'PY'
+echo "== Stable-Baselines3 DQN ($venv): the same configuration, $steps steps"
+read -r sb3_sps sb3_cpu < <("$venv/bin/python" - "$steps" <<'PY'
 import sys, time
 import torch
 torch.set_num_threads(1)
 import gymnasium as gym
+import stable_baselines3
 from stable_baselines3 import DQN
+print(f"torch {torch.__version__}, gymnasium {gym.__version__}, stable-baselines3 {stable_baselines3.__version__}",
+      file=sys.stderr)
 steps = int(sys.argv[1])
 model = DQN("MlpPolicy", gym.make("CartPole-v1"), policy_kwargs=dict(net_arch=[64, 64]),
             batch_size=32, train_freq=1, gradient_steps=1, learning_starts=100,
             buffer_size=1_000_000, target_update_interval=10_000, seed=0, device="cpu", verbose=0)
-start = time.perf_counter()
+start, cpu_start = time.perf_counter(), time.process_time()
 model.learn(total_timesteps=steps)
-print(steps / (time.perf_counter() - start))
+print(steps / (time.perf_counter() - start), time.process_time() - cpu_start)
 PY
 )
-python3 - "$arld_sps" "$sb3_sps" "$steps" "$out/sb3_cartpole.json" <<'PY'
+python3 - "$arld_sps" "$sb3_sps" "$arld_cpu" "$sb3_cpu" "$steps" "$out/sb3_cartpole.json" <<'PY'
 import json, os, sys
-arld, sb3, steps, path = float(sys.argv[1]), float(sys.argv[2]), int(sys.argv[3]), sys.argv[4]
+arld, sb3, arld_cpu, sb3_cpu = map(float, sys.argv[1:5])
+steps, path = int(sys.argv[5]), sys.argv[6]
 load = os.getloadavg()[0]
-print(f"arld {arld:,.0f} steps/s, Stable-Baselines3 {sb3:,.0f} steps/s: {arld / sb3:.1f}x "
-      f"({steps} steps each, load average {load:.2f} on {os.cpu_count()} cores)")
+print(f"wall clock: arld {arld:,.0f} steps/s, Stable-Baselines3 {sb3:,.0f} steps/s: {arld / sb3:.1f}x")
+print(f"CPU time:   arld {steps / arld_cpu:,.0f} steps/s, Stable-Baselines3 {steps / sb3_cpu:,.0f} steps/s: "
+      f"{sb3_cpu / arld_cpu:.1f}x")
+print(f"({steps} steps each, load average {load:.2f} on {os.cpu_count()} cores)")
 json.dump({"steps": steps, "arld_steps_per_s": arld, "sb3_steps_per_s": sb3, "ratio": arld / sb3,
+           "arld_cpu_s": arld_cpu, "sb3_cpu_s": sb3_cpu, "cpu_ratio": sb3_cpu / arld_cpu,
            "load_average": load}, open(path, "w"), indent=2)
 PY
