@@ -2,8 +2,8 @@
 //! For LunarLander the resets (a new Box2D world each) are a noticeable part of the figure, as in training.
 //!
 //! Each iteration runs a fixed batch of steps through the `Env` trait object exactly as the training loop
-//! does (`make(id)`, `step`, `reset` on `terminated || truncated`), so the figure includes the observation
-//! allocation and the time-limit bookkeeping.
+//! does (`make(id)`, `step_into` one reused observation buffer, `reset_into` on `terminated || truncated`), so
+//! the figure includes the time-limit bookkeeping.
 
 use arld::env::{Env, make};
 use arld::rng::NumpyRng;
@@ -13,15 +13,22 @@ use std::hint::black_box;
 
 const STEPS_PER_ITERATION: u64 = 10_000;
 
-fn run_steps(env: &mut dyn Env, rng: &mut NumpyRng, episode_seed: &mut u64) -> f64 {
+fn run_steps(
+    env: &mut dyn Env,
+    obs: &mut [f32],
+    rng: &mut NumpyRng,
+    episode_seed: &mut u64,
+) -> f64 {
     let mut total_reward = 0.0;
     for _ in 0..STEPS_PER_ITERATION {
         let action = rng.random_range(0..env.n_actions());
-        let step = env.step(action).expect("valid action in a running episode");
+        let step = env
+            .step_into(action, obs)
+            .expect("valid action in a running episode");
         total_reward += step.reward;
         if step.terminated || step.truncated {
             *episode_seed += 1;
-            env.reset(Some(*episode_seed));
+            env.reset_into(Some(*episode_seed), obs);
         }
     }
     total_reward
@@ -39,9 +46,16 @@ fn bench_env_step(c: &mut Criterion) {
         let mut env = make(id).expect("registered environment");
         let mut rng = NumpyRng::new(0);
         let mut episode_seed = 0;
-        env.reset(Some(episode_seed));
+        let mut obs = env.reset(Some(episode_seed));
         group.bench_function(id, |b| {
-            b.iter(|| black_box(run_steps(env.as_mut(), &mut rng, &mut episode_seed)))
+            b.iter(|| {
+                black_box(run_steps(
+                    env.as_mut(),
+                    &mut obs,
+                    &mut rng,
+                    &mut episode_seed,
+                ))
+            })
         });
     }
     group.finish();

@@ -9,7 +9,7 @@
 //! context; `train` then raises the original exception with that context added as a note. Ctrl-C is noticed at
 //! every environment step (`check_signals`), so it interrupts training as a `KeyboardInterrupt`.
 
-use arld::env::{self, Env, EnvError, EnvSpec, Step};
+use arld::env::{self, Env, EnvError, EnvSpec, Outcome};
 use arld::expert::{self, Expert, demos::Demonstrations};
 use arld::nn::QNet;
 use arld::rng::NumpyRng;
@@ -89,7 +89,7 @@ impl PyEnv {
 }
 
 impl Env for PyEnv {
-    fn reset(&mut self, seed: Option<u64>) -> Vec<f32> {
+    fn reset_into(&mut self, seed: Option<u64>, obs: &mut [f32]) {
         let result = Python::attach(|py| {
             self.obj
                 .call_method1(py, "reset", (seed,))
@@ -98,18 +98,18 @@ impl Env for PyEnv {
         })
         .and_then(|obs| self.checked_obs(obs));
         match result {
-            Ok(obs) => {
+            Ok(first) => {
                 self.reset_failed = None;
-                obs
+                obs.copy_from_slice(&first);
             }
             Err(msg) => {
                 self.reset_failed = Some(format!("reset failed: {msg}"));
-                vec![0.0; self.spec.obs_dim]
+                obs.fill(0.0);
             }
         }
     }
 
-    fn step(&mut self, action: usize) -> Result<Step, EnvError> {
+    fn step_into(&mut self, action: usize, obs: &mut [f32]) -> Result<Outcome, EnvError> {
         if let Some(msg) = &self.reset_failed {
             return Err(self.error(msg.clone()));
         }
@@ -118,11 +118,11 @@ impl Env for PyEnv {
             let out = self.obj.call_method1(py, "step", (action,))?;
             out.extract::<(Vec<f32>, f64, bool, bool)>(py)
         });
-        let (obs, reward, terminated, truncated) =
+        let (next, reward, terminated, truncated) =
             result.map_err(|e| self.error(self.errors.keep(e)))?;
-        let obs = self.checked_obs(obs).map_err(|m| self.error(m))?;
-        Ok(Step {
-            obs,
+        let next = self.checked_obs(next).map_err(|m| self.error(m))?;
+        obs.copy_from_slice(&next);
+        Ok(Outcome {
             reward,
             terminated,
             truncated,
@@ -148,17 +148,17 @@ struct Interruptible {
 }
 
 impl Env for Interruptible {
-    fn reset(&mut self, seed: Option<u64>) -> Vec<f32> {
-        self.inner.reset(seed)
+    fn reset_into(&mut self, seed: Option<u64>, obs: &mut [f32]) {
+        self.inner.reset_into(seed, obs)
     }
-    fn step(&mut self, action: usize) -> Result<Step, EnvError> {
+    fn step_into(&mut self, action: usize, obs: &mut [f32]) -> Result<Outcome, EnvError> {
         if let Err(e) = Python::attach(|py| py.check_signals()) {
             return Err(EnvError::External {
                 env: self.inner.id().to_string(),
                 msg: self.errors.keep(e),
             });
         }
-        self.inner.step(action)
+        self.inner.step_into(action, obs)
     }
     fn spec(&self) -> &'static EnvSpec {
         self.inner.spec()

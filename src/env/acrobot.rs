@@ -13,7 +13,7 @@
 //! functions of the float32 reset state in float32 (NumPy's own float32 `cos`/`sin`); here they are evaluated
 //! in float64 and rounded, which agrees except in about one case in a thousand, by one float32 ulp.
 
-use super::{Env, EnvError, EnvRng, EpisodeClock, Step, check_state};
+use super::{Env, EnvError, EnvRng, EpisodeClock, Outcome, check_state};
 use std::f64::consts::PI;
 
 const ID: &str = "Acrobot-v1";
@@ -62,9 +62,9 @@ impl Acrobot {
         self.state
     }
 
-    fn observation(&self) -> Vec<f32> {
+    fn observation(&self) -> [f32; 6] {
         let [theta1, theta2, dtheta1, dtheta2] = self.state;
-        vec![
+        [
             theta1.cos() as f32,
             theta1.sin() as f32,
             theta2.cos() as f32,
@@ -153,17 +153,17 @@ impl Env for Acrobot {
         super::spec(ID).expect("Acrobot-v1 is registered")
     }
 
-    fn reset(&mut self, seed: Option<u64>) -> Vec<f32> {
+    fn reset_into(&mut self, seed: Option<u64>, obs: &mut [f32]) {
         let rng = self.rng.reseed(seed);
         for value in &mut self.state {
             // Gymnasium stores the drawn state as float32.
             *value = f64::from(rng.uniform(-0.1, 0.1) as f32);
         }
         self.clock.start();
-        self.observation()
+        obs.copy_from_slice(&self.observation());
     }
 
-    fn step(&mut self, action: usize) -> Result<Step, EnvError> {
+    fn step_into(&mut self, action: usize, obs: &mut [f32]) -> Result<Outcome, EnvError> {
         self.clock.check_step(action)?;
         let next = rk4_step(self.state, TORQUES[action]);
         self.state = [
@@ -175,8 +175,8 @@ impl Env for Acrobot {
         let [theta1, theta2, _, _] = self.state;
         let terminated = -theta1.cos() - (theta2 + theta1).cos() > 1.0;
         let truncated = self.clock.finish_step(terminated);
-        Ok(Step {
-            obs: self.observation(),
+        obs.copy_from_slice(&self.observation());
+        Ok(Outcome {
             reward: if terminated { 0.0 } else { -1.0 },
             terminated,
             truncated,
@@ -196,7 +196,7 @@ impl Env for Acrobot {
         check_state(ID, state, 4)?;
         self.state.copy_from_slice(state);
         self.clock.start();
-        Ok(self.observation())
+        Ok(self.observation().to_vec())
     }
 }
 

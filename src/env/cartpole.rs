@@ -8,7 +8,7 @@
 //! v0 and v1 differ only in the time limit (200 vs 500) and the solve threshold (195 vs 475).
 //! The initial state is four draws of `uniform(-0.05, 0.05)` (docs/environments.md, "Classic control").
 
-use super::{Env, EnvError, EnvRng, EpisodeClock, Step, check_state, spec};
+use super::{Env, EnvError, EnvRng, EpisodeClock, Outcome, check_state, spec};
 
 const GRAVITY: f64 = 9.8;
 const MASS_CART: f64 = 1.0;
@@ -64,8 +64,8 @@ impl CartPole {
         self.state
     }
 
-    fn observation(&self) -> Vec<f32> {
-        self.state.iter().map(|&value| value as f32).collect()
+    fn observation(&self) -> [f32; 4] {
+        self.state.map(|value| value as f32)
     }
 }
 
@@ -82,15 +82,15 @@ impl Env for CartPole {
         self.spec
     }
 
-    fn reset(&mut self, seed: Option<u64>) -> Vec<f32> {
+    fn reset_into(&mut self, seed: Option<u64>, obs: &mut [f32]) {
         self.rng
             .reseed(seed)
             .uniform_fill(-0.05, 0.05, &mut self.state);
         self.clock.start();
-        self.observation()
+        obs.copy_from_slice(&self.observation());
     }
 
-    fn step(&mut self, action: usize) -> Result<Step, EnvError> {
+    fn step_into(&mut self, action: usize, obs: &mut [f32]) -> Result<Outcome, EnvError> {
         self.clock.check_step(action)?;
         let [x, x_dot, theta, theta_dot] = self.state;
         let force = if action == 1 { FORCE_MAG } else { -FORCE_MAG };
@@ -116,8 +116,8 @@ impl Env for CartPole {
             || theta < -THETA_THRESHOLD
             || theta > THETA_THRESHOLD;
         let truncated = self.clock.finish_step(terminated);
-        Ok(Step {
-            obs: self.observation(),
+        obs.copy_from_slice(&self.observation());
+        Ok(Outcome {
             reward: 1.0,
             terminated,
             truncated,
@@ -138,7 +138,7 @@ impl Env for CartPole {
         check_state(self.spec.id, state, 4)?;
         self.state.copy_from_slice(state);
         self.clock.start();
-        Ok(self.observation())
+        Ok(self.observation().to_vec())
     }
 }
 

@@ -25,7 +25,7 @@ use wrapped2d::b2;
 use wrapped2d::dynamics::world::callbacks::ContactAccess;
 use wrapped2d::user_data::{UserData, UserDataTypes};
 
-use super::{Env, EnvError, EpisodeClock, Step};
+use super::{Env, EnvError, EpisodeClock, Outcome};
 use crate::rng::NumpyRng;
 
 // Constants of Gymnasium's lunar_lander.py (pixels unless stated; SCALE converts pixels to metres).
@@ -480,7 +480,7 @@ impl LunarLander {
     }
 
     /// One frame of Gymnasium's `step` without the time limit: engines, physics, observation, reward.
-    fn frame(&mut self, action: usize, first: bool) -> (Vec<f32>, f64, bool) {
+    fn frame(&mut self, action: usize, first: bool) -> ([f32; OBS_DIM], f64, bool) {
         let rng = self
             .rng
             .as_mut()
@@ -516,8 +516,7 @@ impl LunarLander {
             terminated = true;
             reward = 100.0;
         }
-        let obs = state.iter().map(|&v| v as f32).collect();
-        (obs, reward, terminated)
+        (state.map(|v| v as f32), reward, terminated)
     }
 }
 
@@ -534,7 +533,7 @@ impl Env for LunarLander {
         super::spec(self.id).expect("LunarLander ids are registered")
     }
 
-    fn reset(&mut self, seed: Option<u64>) -> Vec<f32> {
+    fn reset_into(&mut self, seed: Option<u64>, obs: &mut [f32]) {
         match seed {
             Some(seed) => self.rng = Some(NumpyRng::new(seed)),
             // Gymnasium seeds from OS entropy on the first reset without a seed.
@@ -548,17 +547,17 @@ impl Env for LunarLander {
         self.clock.start();
         self.last_action = 0;
         // Gymnasium's reset returns the observation of one no-op step (outside the time limit count).
-        let (obs, _, _) = self.frame(0, true);
-        obs
+        let (first, _, _) = self.frame(0, true);
+        obs.copy_from_slice(&first);
     }
 
-    fn step(&mut self, action: usize) -> Result<Step, EnvError> {
+    fn step_into(&mut self, action: usize, obs: &mut [f32]) -> Result<Outcome, EnvError> {
         self.clock.check_step(action)?;
-        let (obs, reward, terminated) = self.frame(action, false);
+        let (next, reward, terminated) = self.frame(action, false);
         self.last_action = action;
         let truncated = self.clock.finish_step(terminated);
-        Ok(Step {
-            obs,
+        obs.copy_from_slice(&next);
+        Ok(Outcome {
             reward,
             terminated,
             truncated,

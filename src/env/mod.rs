@@ -21,7 +21,20 @@ pub use lunar_lander::LunarLander;
 pub use mountain_car::MountainCar;
 pub use rollout::{Episode, mean_std_min_max, return_stats, rollouts};
 
-/// What one environment step returns (Gymnasium's 5-tuple without `info`).
+/// What one environment step reports besides the observation, which [`Env::step_into`] writes into the caller's
+/// buffer.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Outcome {
+    /// Reward of the step (float64 as Gymnasium computes it).
+    pub reward: f64,
+    /// The episode reached a terminal state of the task.
+    pub terminated: bool,
+    /// The episode was cut by the time limit (see [`Step::truncated`]).
+    pub truncated: bool,
+}
+
+/// What one environment step returns (Gymnasium's 5-tuple without `info`), with the observation in a fresh
+/// `Vec` ([`Env::step`]; loops that step many times use [`Env::step_into`] and allocate nothing).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Step {
     /// Observation after the step (float32, as Gymnasium returns it).
@@ -69,12 +82,39 @@ pub enum EnvError {
 ///
 /// The time limit is part of the environment (as Gymnasium's `TimeLimit` wrapper is part of `gym.make`):
 /// `step` sets `truncated` when the limit is reached (on the limit step, also if it terminated there).
+///
+/// Observations go into a buffer the caller owns (`obs`, exactly [`Env::obs_dim`] long: a buffer of another
+/// length is a bug in the caller and panics), so stepping allocates nothing; [`Env::reset`] and [`Env::step`]
+/// return them in a fresh `Vec` instead, for code where one allocation per step does not matter.
 pub trait Env: Send {
-    /// Starts an episode. `Some(seed)` reseeds the generator exactly as `reset(seed=seed)` does in Gymnasium;
-    /// `None` continues the current generator (the first unseeded reset seeds from OS entropy, as Gymnasium).
-    fn reset(&mut self, seed: Option<u64>) -> Vec<f32>;
-    /// Advances one step. Errors on an action out of range or a step without a running episode.
-    fn step(&mut self, action: usize) -> Result<Step, EnvError>;
+    /// Starts an episode and writes its first observation into `obs`. `Some(seed)` reseeds the generator exactly
+    /// as `reset(seed=seed)` does in Gymnasium; `None` continues the current generator (the first unseeded reset
+    /// seeds from OS entropy, as Gymnasium).
+    fn reset_into(&mut self, seed: Option<u64>, obs: &mut [f32]);
+    /// Advances one step and writes the observation after it into `obs`. Errors on an action out of range or a
+    /// step without a running episode (`obs` is then left as it was).
+    fn step_into(&mut self, action: usize, obs: &mut [f32]) -> Result<Outcome, EnvError>;
+    /// [`Env::reset_into`] into a fresh `Vec`.
+    fn reset(&mut self, seed: Option<u64>) -> Vec<f32> {
+        let mut obs = vec![0.0; self.obs_dim()];
+        self.reset_into(seed, &mut obs);
+        obs
+    }
+    /// [`Env::step_into`] into a fresh `Vec`.
+    fn step(&mut self, action: usize) -> Result<Step, EnvError> {
+        let mut obs = vec![0.0; self.obs_dim()];
+        let Outcome {
+            reward,
+            terminated,
+            truncated,
+        } = self.step_into(action, &mut obs)?;
+        Ok(Step {
+            obs,
+            reward,
+            terminated,
+            truncated,
+        })
+    }
     /// The registered facts of this environment (id, sizes, time limit, solve threshold).
     fn spec(&self) -> &'static EnvSpec;
     /// Length of the observation vector.
@@ -436,4 +476,50 @@ pub(crate) fn check_state(env: &'static str, state: &[f64], len: usize) -> Resul
         });
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Stepping into one reused buffer (first filled with NaN) follows the same trajectory as fresh vectors
+    /// from zeros, so every environment writes the whole observation on every reset and step; a failed step
+    /// leaves the buffer as it was.
+    #[test]
+    fn step_into_a_reused_buffer_writes_every_value_and_matches_fresh_vectors() {
+        for spec in SPECS {
+            let (mut a, mut b) = (make(spec.id).unwrap(), make(spec.id).unwrap());
+            let mut obs = vec![f32::NAN; spec.obs_dim];
+            let mut rng = NumpyRng::new(11);
+            for episode in 0..3u64 {
+                a.reset_into(Some(episode), &mut obs);
+                let fresh = b.reset(Some(episode));
+                assert_eq!(bits(&obs), bits(&fresh), "{} reset {episode}", spec.id);
+                loop {
+                    let action = (rng.next_raw_u64() % spec.n_actions as u64) as usize;
+                    let outcome = a.step_into(action, &mut obs).unwrap();
+                    let step = b.step(action).unwrap();
+                    assert_eq!(bits(&obs), bits(&step.obs), "{} step", spec.id);
+                    assert_eq!(
+                        (
+                            outcome.reward.to_bits(),
+                            outcome.terminated,
+                            outcome.truncated
+                        ),
+                        (step.reward.to_bits(), step.terminated, step.truncated)
+                    );
+                    if outcome.terminated || outcome.truncated {
+                        break;
+                    }
+                }
+                let before = obs.clone();
+                assert!(a.step_into(0, &mut obs).is_err(), "{}", spec.id);
+                assert_eq!(bits(&obs), bits(&before), "{} failed step", spec.id);
+            }
+        }
+    }
+
+    fn bits(values: &[f32]) -> Vec<u32> {
+        values.iter().map(|v| v.to_bits()).collect()
+    }
 }

@@ -7,7 +7,7 @@
 //! and velocity >= 0; reward -1 per step; limit 200 steps. The initial position is one draw of
 //! `uniform(-0.6, -0.4)`, the initial velocity 0 (docs/environments.md, "Classic control").
 
-use super::{Env, EnvError, EnvRng, EpisodeClock, Step, check_state};
+use super::{Env, EnvError, EnvRng, EpisodeClock, Outcome, check_state};
 
 const ID: &str = "MountainCar-v0";
 const MIN_POSITION: f64 = -1.2;
@@ -53,8 +53,8 @@ impl MountainCar {
         [self.position, self.velocity]
     }
 
-    fn observation(&self) -> Vec<f32> {
-        vec![self.position as f32, self.velocity as f32]
+    fn observation(&self) -> [f32; 2] {
+        [self.position as f32, self.velocity as f32]
     }
 }
 
@@ -71,14 +71,14 @@ impl Env for MountainCar {
         super::spec(ID).expect("MountainCar-v0 is registered")
     }
 
-    fn reset(&mut self, seed: Option<u64>) -> Vec<f32> {
+    fn reset_into(&mut self, seed: Option<u64>, obs: &mut [f32]) {
         self.position = self.rng.reseed(seed).uniform(-0.6, -0.4);
         self.velocity = 0.0;
         self.clock.start();
-        self.observation()
+        obs.copy_from_slice(&self.observation());
     }
 
-    fn step(&mut self, action: usize) -> Result<Step, EnvError> {
+    fn step_into(&mut self, action: usize, obs: &mut [f32]) -> Result<Outcome, EnvError> {
         self.clock.check_step(action)?;
         let push = (action as f64 - 1.0) * FORCE;
         let mut velocity = self.velocity + (push + (3.0 * self.position).cos() * (-GRAVITY));
@@ -92,8 +92,8 @@ impl Env for MountainCar {
         self.velocity = velocity;
         let terminated = position >= GOAL_POSITION && velocity >= GOAL_VELOCITY;
         let truncated = self.clock.finish_step(terminated);
-        Ok(Step {
-            obs: self.observation(),
+        obs.copy_from_slice(&self.observation());
+        Ok(Outcome {
             reward: -1.0,
             terminated,
             truncated,
@@ -123,7 +123,7 @@ impl Env for MountainCar {
         self.position = state[0];
         self.velocity = state[1];
         self.clock.start();
-        Ok(self.observation())
+        Ok(self.observation().to_vec())
     }
 }
 

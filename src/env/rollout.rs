@@ -24,18 +24,19 @@ pub fn rollouts<E: From<EnvError>>(
 ) -> Result<Vec<Episode>, E> {
     // Capacity is only a hint: a huge `episodes` must not abort on allocation before the first episode.
     let mut out = Vec::with_capacity(episodes.min(1 << 16));
+    let mut obs = vec![0.0; env.obs_dim()];
     for i in 0..episodes {
-        let mut obs = env.reset(seed(i));
+        env.reset_into(seed(i), &mut obs);
         let mut episode = Episode {
             ret: 0.0,
             length: 0,
             terminated: false,
         };
         loop {
-            let s = env.step(policy(&obs)?)?;
+            let action = policy(&obs)?;
+            let s = env.step_into(action, &mut obs)?;
             episode.ret += s.reward;
             episode.length += 1;
-            obs = s.obs;
             if s.terminated || s.truncated {
                 episode.terminated = s.terminated;
                 break;

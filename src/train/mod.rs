@@ -101,25 +101,28 @@ impl Evaluator {
     pub fn evaluate(&mut self, net: &QNet, step: usize) -> Result<EvalPoint> {
         self.returns.clear();
         self.running.clear();
+        let d = net.obs_dim();
         self.obs.clear();
+        self.obs.resize(self.envs.len() * d, 0.0);
         for (i, env) in self.envs.iter_mut().enumerate() {
-            self.obs.extend_from_slice(&env.reset(None));
+            env.reset_into(None, &mut self.obs[i * d..(i + 1) * d]);
             self.running.push(i);
             self.returns.push(0.0);
         }
-        let d = net.obs_dim();
         while !self.running.is_empty() {
             self.actions.resize(self.running.len(), 0);
             test_policy_actions(net, &mut self.ws, &self.obs, &mut self.actions);
-            // Step every running environment; compact the finished ones out, keeping the order.
+            // Step every running environment; compact the finished ones out, keeping the order (row `kept` is
+            // at or before row `row`, so the running environment's new observation moves up in place).
             let mut kept = 0;
             for row in 0..self.running.len() {
                 let i = self.running[row];
-                let s = self.envs[i].step(self.actions[row])?;
+                let s = self.envs[i]
+                    .step_into(self.actions[row], &mut self.obs[row * d..(row + 1) * d])?;
                 self.returns[i] += s.reward;
                 if !(s.terminated || s.truncated) {
                     self.running[kept] = i;
-                    self.obs[kept * d..(kept + 1) * d].copy_from_slice(&s.obs);
+                    self.obs.copy_within(row * d..(row + 1) * d, kept * d);
                     kept += 1;
                 }
             }
@@ -336,7 +339,10 @@ fn train_run(
     let mut batch = Batch::default();
     let mut queries = cfg.query_controller()?;
     let mut st = LoopState::default();
+    // The observation the agent acts on and the one the step writes (swapped after each step: no allocation).
+    // `obs` stays empty until training starts (a snapshot taken in pre-training has none).
     let mut obs = Vec::new();
+    let mut next_obs = Vec::new();
 
     // Continue from a snapshot: every part back where it was.
     let resume_from = snapshots.as_ref().and_then(|(_, s)| *s);
@@ -363,7 +369,7 @@ fn train_run(
                 }
             };
             for &a in &st.ep_actions {
-                obs = env.step(a)?.obs;
+                env.step_into(a, &mut obs)?;
             }
             ensure!(
                 obs == state.f32s("obs")?,
@@ -479,20 +485,21 @@ fn train_run(
         }
 
         // 2. Step the environment; expert transitions are stored as demonstrations (margin loss, bonus priority).
-        let s = env.step(action)?;
+        next_obs.resize(obs.len(), 0.0);
+        let s = env.step_into(action, &mut next_obs)?;
         st.ep_actions.push(action);
         let terminal = s.terminated || (s.truncated && cfg.timeout_as_terminal);
         replay.push(Transition {
             obs: &obs,
             action,
             reward: s.reward as f32,
-            next_obs: &s.obs,
+            next_obs: &next_obs,
             terminal,
             is_demo: by_expert,
         })?;
         st.ep_return += s.reward;
         st.ep_len += 1;
-        obs = s.obs;
+        std::mem::swap(&mut obs, &mut next_obs);
         if s.terminated || s.truncated {
             log.episode(st.episode, step + 1, st.ep_return, st.ep_len, st.ep_demo)?;
             st.episode += 1;
@@ -500,7 +507,7 @@ fn train_run(
             replay.end_episode()?;
             st.ep_actions.clear();
             st.ep_generator = env.generator().map(|g| g.to_words());
-            obs = env.reset(None);
+            env.reset_into(None, &mut obs);
             agent.begin_episode();
             queries.end_episode();
         }
