@@ -1,28 +1,58 @@
-//! The committed verdict tables regenerate from the committed per-run data: one cell of
-//! `results/readings.csv` recomputed directly from `results/evaluations.csv` with code independent of the
-//! library's statistics, and the whole tables rebuilt by `arld report --from-evaluations`.
+//! The committed results regenerate from the committed per-run files (`results/runs/`): one cell of
+//! `results/readings.csv` recomputed directly from the runs' `eval.csv` files with code independent of the
+//! library's statistics, every committed table rebuilt by `arld report results/runs`, and the verdict tables
+//! rebuilt again from `results/evaluations.csv` alone.
 
 use std::collections::BTreeMap;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::process::Command;
 
 fn results() -> &'static Path {
     Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/results"))
 }
 
-/// Per seed, the (step, mean) curve of one configuration, straight from the CSV text.
-fn curves(env: &str, method: &str, net: &str) -> BTreeMap<u64, Vec<(u64, f64)>> {
-    let text = std::fs::read_to_string(results().join("evaluations.csv")).expect("evaluations.csv");
-    let mut out: BTreeMap<u64, Vec<(u64, f64)>> = BTreeMap::new();
-    for line in text.lines().skip(1) {
-        let f: Vec<&str> = line.split(',').collect();
-        if f[0] == env && f[1] == method && f[2] == net && f[3] == "default" {
-            out.entry(f[4].parse().unwrap())
-                .or_default()
-                .push((f[5].parse().unwrap(), f[6].parse().unwrap()));
-        }
-    }
-    out
+/// The default-variant run directories of one configuration: `results/runs/ENV/METHOD-NET/seedN`.
+fn run_dirs(env: &str, method: &str, net: &str) -> BTreeMap<u64, PathBuf> {
+    let dir = results()
+        .join("runs")
+        .join(env)
+        .join(format!("{method}-{net}"));
+    std::fs::read_dir(&dir)
+        .unwrap_or_else(|e| panic!("{}: {e}", dir.display()))
+        .filter_map(|entry| {
+            let path = entry.unwrap().path();
+            let seed = path
+                .file_name()?
+                .to_str()?
+                .strip_prefix("seed")?
+                .parse()
+                .ok()?;
+            Some((seed, path))
+        })
+        .collect()
+}
+
+/// The (step, mean) points of one run's eval.csv, straight from the CSV text.
+fn curve(run: &Path) -> Vec<(u64, f64)> {
+    let text = std::fs::read_to_string(run.join("eval.csv")).unwrap();
+    let mut lines = text.lines();
+    assert_eq!(lines.next(), Some("step,mean,std,min,max"));
+    lines
+        .map(|l| {
+            let f: Vec<&str> = l.split(',').collect();
+            (f[0].parse().unwrap(), f[1].parse().unwrap())
+        })
+        .collect()
+}
+
+/// An integer key of the run's config.toml, read as text.
+fn config_value(run: &Path, key: &str) -> u64 {
+    let text = std::fs::read_to_string(run.join("config.toml")).unwrap();
+    text.lines()
+        .find_map(|l| l.strip_prefix(&format!("{key} = ")))
+        .unwrap_or_else(|| panic!("{key} in {}", run.display()))
+        .parse()
+        .unwrap()
 }
 
 fn middle(mut v: Vec<f64>) -> f64 {
@@ -50,14 +80,17 @@ fn committed_row(env: &str, method: &str, net: &str) -> BTreeMap<String, String>
 }
 
 #[test]
-fn acrobot_gdqn_cell_recomputed_from_the_raw_evaluations() {
-    // GDQN-B on Acrobot: many seeds hit -100 at the first test and then collapse, so the readings differ.
-    let (target, train_steps, k) = (-100.0, 200_000u64, 3usize);
-    let curves = curves("Acrobot-v1", "gdqn", "bootstrap");
-    assert_eq!(curves.len(), 20);
+fn acrobot_gdqn_cell_recomputed_from_the_per_run_files() {
+    // GDQN-B on Acrobot: many seeds hit -100 at the first test and then fall back, so the readings differ.
+    let (target, k) = (-100.0, 3usize);
+    let runs = run_dirs("Acrobot-v1", "gdqn", "bootstrap");
+    assert_eq!(runs.len(), 20);
     let mut first = Vec::new();
     let mut held = Vec::new();
-    for curve in curves.values() {
+    let mut finals = Vec::new();
+    for run in runs.values() {
+        let train_steps = config_value(run, "train_steps");
+        let curve = curve(run);
         let hit = curve
             .iter()
             .find(|p| p.1 >= target)
@@ -72,39 +105,74 @@ fn acrobot_gdqn_cell_recomputed_from_the_raw_evaluations() {
             }
         }
         held.push(sustained as f64);
+        let last: Vec<f64> = curve.iter().rev().take(10).map(|p| p.1).collect();
+        finals.push(last.iter().sum::<f64>() / last.len() as f64);
     }
     let row = committed_row("Acrobot-v1", "gdqn", "bootstrap");
     assert_eq!(row["seeds"], "20");
-    assert_eq!(
-        row["first_hit_median"].parse::<f64>().unwrap(),
-        middle(first)
-    );
-    assert_eq!(
-        row["sustained_median"].parse::<f64>().unwrap(),
-        middle(held)
+    let number = |key: &str| row[key].parse::<f64>().unwrap();
+    assert_eq!(number("first_hit_median"), middle(first));
+    assert_eq!(number("sustained_median"), middle(held));
+    let final_median = middle(finals);
+    // Written with two decimals.
+    assert!(
+        (number("final_score_median") - final_median).abs() <= 0.005 + 1e-9,
+        "final score {} vs {final_median}",
+        row["final_score_median"]
     );
 }
 
-#[test]
-fn committed_verdict_tables_regenerate_byte_identically() {
-    let out = tempfile::tempdir().unwrap();
+fn arld(args: &[&str], out: &Path) {
+    // From the repository's root, so that paths in the outputs read as in the committed files.
     let status = Command::new(env!("CARGO_BIN_EXE_arld"))
-        .args(["report", "--from-evaluations", "-o"])
-        .arg(out.path())
-        .arg(results().join("evaluations.csv"))
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .args(args)
+        .arg("-o")
+        .arg(out)
         .output()
         .expect("arld runs");
     assert!(
         status.status.success(),
-        "{}",
+        "arld {args:?}: {}",
         String::from_utf8_lossy(&status.stderr)
     );
-    for name in ["readings.md", "readings.csv", "claims.md", "claims.csv"] {
-        let fresh = std::fs::read(out.path().join(name)).unwrap();
+}
+
+fn assert_same(fresh: &Path, names: &[&str]) {
+    for name in names {
+        let new = std::fs::read(fresh.join(name)).unwrap();
         let committed = std::fs::read(results().join(name)).unwrap();
         assert!(
-            fresh == committed,
+            new == committed,
             "results/{name} does not match a fresh computation"
         );
     }
+}
+
+const VERDICT_TABLES: [&str; 4] = ["readings.md", "readings.csv", "claims.md", "claims.csv"];
+
+#[test]
+fn committed_tables_regenerate_from_the_per_run_files() {
+    let out = tempfile::tempdir().unwrap();
+    arld(&["report", "results/runs"], out.path());
+    assert_same(out.path(), &VERDICT_TABLES);
+    assert_same(
+        out.path(),
+        &["table.md", "table.csv", "evaluations.csv", "report.md"],
+    );
+}
+
+#[test]
+fn committed_verdict_tables_regenerate_from_the_evaluations_alone() {
+    let out = tempfile::tempdir().unwrap();
+    let evaluations = results().join("evaluations.csv");
+    arld(
+        &[
+            "report",
+            "--from-evaluations",
+            evaluations.to_str().unwrap(),
+        ],
+        out.path(),
+    );
+    assert_same(out.path(), &VERDICT_TABLES);
 }
