@@ -262,7 +262,8 @@ pub fn run_report(args: ReportArgs) -> Result<ExitCode> {
         });
         std::fs::create_dir_all(&out)
             .with_context(|| format!("cannot create {}", out.display()))?;
-        let (files, _) = verdict::write_verdict(&runs, &out, args.sustain)?;
+        let cells = verdict::cells(&runs, args.sustain);
+        let (files, _) = verdict::write_verdict(&cells, &out, args.sustain)?;
         println!("{} runs; wrote:", runs.len());
         for f in &files {
             println!("  {}", f.display());

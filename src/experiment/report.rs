@@ -13,6 +13,7 @@
 use super::protocol::env_order;
 use super::stats::{self, median};
 use super::sweep::{SWEEP_FILE, SweepGrid};
+use super::verdict::Cell;
 use super::{figures, plot};
 use crate::paper::{self, PAPER_TASKS, TABLE5_METHODS, TABLE5_NETS};
 use crate::train::run_dir::{
@@ -120,8 +121,9 @@ fn format_steps(value: f64) -> String {
 }
 
 /// Table 5 as Markdown and CSV from the `default`-variant groups: rows DQN..ADQNP for -B then -N, one column
-/// group per environment with our median, the paper's median and the number of seeds.
-pub fn table5(groups: &[RunGroup]) -> Result<(String, String)> {
+/// group per environment with our median, the paper's median and the number of seeds; the CSV adds the sustained
+/// and median-curve readings of the same cell from `readings` ([`super::verdict::cells`]).
+pub fn table5(groups: &[RunGroup], readings: &[Cell]) -> Result<(String, String)> {
     let defaults: Vec<&RunGroup> = groups
         .iter()
         .filter(|g| g.variant == DEFAULT_VARIANT)
@@ -144,7 +146,11 @@ pub fn table5(groups: &[RunGroup]) -> Result<(String, String)> {
     )?;
     writeln!(
         md,
-        "Bold: our best median on that task among the methods of the same network."
+        "Bold: our best median on that task among the methods of the same network. The reading is the first hit"
+    )?;
+    writeln!(
+        md,
+        "(the first evaluation at the target); table.csv adds the sustained and median-curve readings."
     )?;
     writeln!(md)?;
     let header: Vec<String> = envs.iter().map(|e| e.to_string()).collect();
@@ -158,6 +164,8 @@ pub fn table5(groups: &[RunGroup]) -> Result<(String, String)> {
             format!("{env} paper"),
             format!("{env} seeds"),
             format!("{env} solved"),
+            format!("{env} sustained"),
+            format!("{env} median curve"),
         ]);
     }
     csv_writer.write_record(&csv_header)?;
@@ -193,11 +201,19 @@ pub fn table5(groups: &[RunGroup]) -> Result<(String, String)> {
                             g.solved,
                             g.seeds.len()
                         ));
+                        let cell = readings.iter().find(|c| {
+                            c.env == g.env
+                                && c.method == g.method.name()
+                                && c.net == g.net.name()
+                                && c.variant == g.variant
+                        });
                         csv_row.extend([
                             ours_text,
                             theirs_text,
                             g.seeds.len().to_string(),
                             g.solved.to_string(),
+                            cell.map_or(String::new(), |c| format_steps(c.sustained.median)),
+                            cell.map_or(String::new(), |c| c.median_curve.to_string()),
                         ]);
                     }
                     None => {
@@ -207,6 +223,8 @@ pub fn table5(groups: &[RunGroup]) -> Result<(String, String)> {
                             theirs_text,
                             "0".to_string(),
                             "0".to_string(),
+                            "".to_string(),
+                            "".to_string(),
                         ]);
                     }
                 }
@@ -309,8 +327,9 @@ pub fn report(dir: &Path, out_dir: &Path, sustain: usize) -> Result<ReportSummar
         }
     }
     let groups = group_runs(&runs);
+    let cells = super::verdict::cells(&runs, sustain);
     let mut files = Vec::new();
-    let (table_md, table_csv) = table5(&groups)?;
+    let (table_md, table_csv) = table5(&groups, &cells)?;
     let table_md_path = out_dir.join("table.md");
     write_atomic(&table_md_path, table_md.as_bytes())?;
     let table_csv_path = out_dir.join("table.csv");
@@ -320,7 +339,7 @@ pub fn report(dir: &Path, out_dir: &Path, sustain: usize) -> Result<ReportSummar
     write_atomic(&evaluations_path, evaluations_csv(&runs).as_bytes())?;
     files.push(evaluations_path);
 
-    let (verdict_files, verdict_md) = super::verdict::write_verdict(&runs, out_dir, sustain)?;
+    let (verdict_files, verdict_md) = super::verdict::write_verdict(&cells, out_dir, sustain)?;
     files.extend(verdict_files);
 
     let figures = figures::paper_figures(&runs);

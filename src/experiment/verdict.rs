@@ -663,14 +663,9 @@ pub fn claims_table(claims: &[Claim]) -> (String, String) {
 
 /// Writes `readings.md`, `readings.csv`, `claims.md` and `claims.csv` into `out_dir`; returns the files and a
 /// Markdown section with both tables for `report.md`.
-pub fn write_verdict(
-    runs: &[RunRecord],
-    out_dir: &Path,
-    k: usize,
-) -> Result<(Vec<PathBuf>, String)> {
-    let cells = cells(runs, k);
-    let (readings_md, readings_csv) = readings_table(&cells, k);
-    let (claims_md, claims_csv) = claims_table(&claims(&cells));
+pub fn write_verdict(cells: &[Cell], out_dir: &Path, k: usize) -> Result<(Vec<PathBuf>, String)> {
+    let (readings_md, readings_csv) = readings_table(cells, k);
+    let (claims_md, claims_csv) = claims_table(&claims(cells));
     let mut files = Vec::new();
     for (name, text) in [
         ("readings.md", &readings_md),
