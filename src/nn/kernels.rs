@@ -11,8 +11,9 @@
 //! place). A product with `bᵀ` (the input gradient `dY · Wᵀ`) first writes `Wᵀ` with [`transpose`].
 //!
 //! Outputs are computed in register blocks of `R` rows by `C` vectors whose accumulators stay in
-//! registers over the whole `k` loop; the leftover columns (fewer than a vector) run one lane at a time
-//! with `f32::mul_add`, which rounds exactly like a vector lane.
+//! registers over the whole `k` loop; on the vector levels the leftover columns (fewer than a vector) run in
+//! narrower vectors (8 lanes, then 4 lanes, the last 1-3 columns masked), on the scalar level one lane at a
+//! time with `f32::mul_add`, which rounds exactly like a vector lane.
 
 #[cfg(target_arch = "x86_64")]
 use std::arch::x86_64::*;
@@ -110,6 +111,51 @@ impl Lanes for Avx512 {
     }
 }
 
+/// The first `N` (1 to 4) lanes of a 4-lane vector (FMA; masked loads and stores from AVX touch only those `N`
+/// floats): the column rest below a vector of the AVX2 and AVX-512 levels, so no output runs lane by lane there.
+/// The unused lanes compute on zeros and are never stored.
+#[cfg(target_arch = "x86_64")]
+pub(crate) struct Fma4<const N: usize>;
+
+#[cfg(target_arch = "x86_64")]
+impl<const N: usize> Fma4<N> {
+    #[inline(always)]
+    unsafe fn mask() -> __m128i {
+        unsafe {
+            _mm_setr_epi32(
+                if N > 0 { -1 } else { 0 },
+                if N > 1 { -1 } else { 0 },
+                if N > 2 { -1 } else { 0 },
+                if N > 3 { -1 } else { 0 },
+            )
+        }
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+impl<const N: usize> Lanes for Fma4<N> {
+    const WIDTH: usize = N;
+    type V = __m128;
+    #[inline(always)]
+    unsafe fn splat(x: f32) -> __m128 {
+        unsafe { _mm_set1_ps(x) }
+    }
+    #[inline(always)]
+    unsafe fn load(p: *const f32) -> __m128 {
+        // SAFETY: the caller guarantees `N` readable floats; the masked-out lanes are not accessed.
+        unsafe { _mm_maskload_ps(p, Self::mask()) }
+    }
+    #[inline(always)]
+    unsafe fn store(p: *mut f32, v: __m128) {
+        // SAFETY: the caller guarantees `N` writable floats; the masked-out lanes are not accessed.
+        unsafe { _mm_maskstore_ps(p, Self::mask(), v) }
+    }
+    #[inline(always)]
+    unsafe fn fma(a: __m128, b: __m128, c: __m128) -> __m128 {
+        unsafe { _mm_fmadd_ps(a, b, c) }
+    }
+}
+
 /// A strided `rows x cols` left operand: element `(r, k)` at `r * row_stride + k * col_stride`.
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct Strided<'a> {
@@ -195,6 +241,22 @@ pub(crate) fn product<S: Lanes>(dst: &mut [f32], a: Strided, b: &[f32], init: Op
             // The AVX-512 level is only chosen on CPUs that also have AVX2 and FMA (`SimdLevel::detected`).
             rows_blocked::<Avx2, 1>(&p, m, col);
             col += Avx2::WIDTH;
+        }
+        // A rest under 8 columns of the vector levels (the tasks' 2-4 actions, the heads' 4- and 6-column
+        // rests) in 4-lane FMA vectors, masked for the last 1-3 columns.
+        #[cfg(target_arch = "x86_64")]
+        if S::WIDTH >= Avx2::WIDTH {
+            if col + 4 <= n {
+                rows_blocked::<Fma4<4>, 1>(&p, m, col);
+                col += 4;
+            }
+            match n - col {
+                1 => rows_blocked::<Fma4<1>, 1>(&p, m, col),
+                2 => rows_blocked::<Fma4<2>, 1>(&p, m, col),
+                3 => rows_blocked::<Fma4<3>, 1>(&p, m, col),
+                _ => {}
+            }
+            col = n;
         }
         while col < n {
             rows_blocked::<Scalar, 1>(&p, m, col);
@@ -328,6 +390,12 @@ mod tests {
             (32, 64, 4),
             (3, 5, 17),
             (9, 2, 1),
+            (6, 64, 2),
+            (5, 64, 3),
+            (32, 64, 20),
+            (7, 9, 22),
+            (5, 64, 30),
+            (3, 4, 15),
         ] {
             let a_data: Vec<f32> = (0..m * k)
                 .map(|i| ((i * 37 % 101) as f32 - 50.0) * 0.013)
@@ -349,17 +417,21 @@ mod tests {
                     assert_eq!(out, expected, "scalar {m}x{k}x{n}");
                     #[cfg(target_arch = "x86_64")]
                     {
+                        // Written into the front of a longer buffer: nothing may land past `m * n`.
+                        let mut buf = vec![f32::NAN; m * n + 8];
                         if detected >= SimdLevel::Avx2 {
-                            out.fill(f32::NAN);
+                            buf.fill(f32::NAN);
                             // SAFETY: the CPU has AVX2 and FMA.
-                            unsafe { product_avx2(&mut out, a, &b, init) };
-                            assert_eq!(out, expected, "avx2 {m}x{k}x{n}");
+                            unsafe { product_avx2(&mut buf[..m * n], a, &b, init) };
+                            assert_eq!(buf[..m * n], expected, "avx2 {m}x{k}x{n}");
+                            assert!(buf[m * n..].iter().all(|v| v.is_nan()), "avx2 wrote past");
                         }
                         if detected >= SimdLevel::Avx512 {
-                            out.fill(f32::NAN);
+                            buf.fill(f32::NAN);
                             // SAFETY: the CPU has AVX-512F.
-                            unsafe { product_avx512(&mut out, a, &b, init) };
-                            assert_eq!(out, expected, "avx512 {m}x{k}x{n}");
+                            unsafe { product_avx512(&mut buf[..m * n], a, &b, init) };
+                            assert_eq!(buf[..m * n], expected, "avx512 {m}x{k}x{n}");
+                            assert!(buf[m * n..].iter().all(|v| v.is_nan()), "avx512 wrote past");
                         }
                     }
                     for r in 0..m {
