@@ -5,9 +5,29 @@ use arld::expert::demos::Demonstrations;
 use arld::expert::pipeline::{Candidate, evaluate_expert, select_experts};
 use arld::expert::{self, CheckpointExpert, SPEC_HELP};
 use arld::train::{ConfigInput, Method, NetKind};
-use clap::Subcommand;
+use clap::{Args, Subcommand};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
+
+/// The environment and the expert of `expert eval` and `demo collect`.
+#[derive(Args)]
+pub struct ExpertArgs {
+    #[arg(long)]
+    env: String,
+    /// Expert spec.
+    #[arg(long)]
+    expert: String,
+    /// Seconds an expert process (`cmd:...`) may take to answer.
+    #[arg(long, default_value_t = expert::process::DEFAULT_TIMEOUT_S)]
+    expert_timeout: f64,
+}
+
+impl ExpertArgs {
+    /// The expert, seeded with `seed`.
+    fn build(&self, seed: u64) -> Result<Box<dyn expert::Expert>> {
+        expert::from_spec(&self.expert, &self.env, seed, self.expert_timeout)
+    }
+}
 
 #[derive(Subcommand)]
 pub enum ExpertCommand {
@@ -41,14 +61,8 @@ pub enum ExpertCommand {
     /// Print an expert's statistics: mean and std of the return, min, average steps, and the target.
     #[command(after_help = SPEC_HELP)]
     Eval {
-        #[arg(long)]
-        env: String,
-        /// Expert spec.
-        #[arg(long)]
-        expert: String,
-        /// Seconds an expert process (`cmd:...`) may take to answer.
-        #[arg(long, default_value_t = expert::process::DEFAULT_TIMEOUT_S)]
-        expert_timeout: f64,
+        #[command(flatten)]
+        expert: ExpertArgs,
         #[arg(long, default_value_t = 100)]
         episodes: usize,
         /// Episode i resets with seed SEED + i.
@@ -65,14 +79,8 @@ pub enum DemoCommand {
     /// Collect whole expert episodes until N transitions are gathered, as DQfD does, into a .jsonl file.
     #[command(after_help = SPEC_HELP)]
     Collect {
-        #[arg(long)]
-        env: String,
-        /// Expert spec.
-        #[arg(long)]
-        expert: String,
-        /// Seconds an expert process (`cmd:...`) may take to answer.
-        #[arg(long, default_value_t = expert::process::DEFAULT_TIMEOUT_S)]
-        expert_timeout: f64,
+        #[command(flatten)]
+        expert: ExpertArgs,
         /// Number of transitions.
         #[arg(long)]
         transitions: usize,
@@ -88,14 +96,13 @@ pub enum DemoCommand {
 pub fn run_expert(cmd: ExpertCommand) -> Result<ExitCode> {
     match cmd {
         ExpertCommand::Eval {
-            env,
-            expert,
-            expert_timeout,
+            expert: args,
             episodes,
             seed,
             json,
         } => {
-            let mut e = expert::from_spec(&expert, &env, seed, expert_timeout)?;
+            let mut e = args.build(seed)?;
+            let ExpertArgs { env, expert, .. } = args;
             let s = evaluate_expert(e.as_mut(), &env, episodes, seed)?;
             let target = arld::env::make(&env)?.solve_threshold();
             if json {
@@ -217,15 +224,13 @@ fn evaluate_checkpoints(dir: &Path, env: &str, episodes: usize) -> Result<Vec<Ca
 pub fn run_demo(cmd: DemoCommand) -> Result<ExitCode> {
     match cmd {
         DemoCommand::Collect {
-            env,
             expert,
-            expert_timeout,
             transitions,
             seed,
             out,
         } => {
-            let mut e = expert::from_spec(&expert, &env, seed, expert_timeout)?;
-            let demos = Demonstrations::collect(&env, e.as_mut(), transitions, seed)?;
+            let mut e = expert.build(seed)?;
+            let demos = Demonstrations::collect(&expert.env, e.as_mut(), transitions, seed)?;
             demos.save(&out)?;
             let ret: f32 = demos.transitions.iter().map(|t| t.reward).sum();
             println!(

@@ -322,26 +322,24 @@ pub fn register(
         "{obs_dim} observation values, {n_actions} actions, time limit {max_episode_steps}, threshold \
          {solve_threshold}"
     );
-    if let Some(builtin) = SPECS.iter().find(|s| s.id == id) {
-        return if same(builtin) {
-            Ok(builtin)
-        } else {
-            Err(bad(format!(
-                "the built-in {id} has {}, this one {given}; register it under another id",
-                describe(builtin)
-            )))
-        };
-    }
-    let mut external = external_specs();
-    if let Some(known) = external.iter().find(|s| s.id == id) {
-        return if same(known) {
+    // An id already in use: the same shape is that spec, another shape an error naming both.
+    let in_use = |known: &'static EnvSpec, clash: &dyn Fn(String) -> String| {
+        if same(known) {
             Ok(known)
         } else {
-            Err(bad(format!(
-                "it was registered before with {}, now with {given}",
-                describe(known)
-            )))
-        };
+            Err(bad(clash(describe(known))))
+        }
+    };
+    if let Some(builtin) = SPECS.iter().find(|s| s.id == id) {
+        return in_use(builtin, &|had| {
+            format!("the built-in {id} has {had}, this one {given}; register it under another id")
+        });
+    }
+    let mut external = external_specs();
+    if let Some(&known) = external.iter().find(|s| s.id == id) {
+        return in_use(known, &|had| {
+            format!("it was registered before with {had}, now with {given}")
+        });
     }
     let spec: &'static EnvSpec = Box::leak(Box::new(EnvSpec {
         id: Box::leak(id.to_string().into_boxed_str()),

@@ -85,6 +85,20 @@ pub fn query_timeline(runs: &[&RunRecord]) -> Vec<Band> {
     bands(per_bin)
 }
 
+/// A curve of `group`'s runs summarised by `reduce`, or `None` for an empty group.
+fn curve(
+    group: Vec<&RunRecord>,
+    label: String,
+    color: usize,
+    reduce: fn(&[&RunRecord]) -> Vec<Band>,
+) -> Option<Curve> {
+    (!group.is_empty()).then(|| Curve {
+        label,
+        color,
+        points: reduce(&group),
+    })
+}
+
 /// Readable legend text for an expert spec of the expert-quality study.
 fn expert_label(spec: &str) -> String {
     match spec {
@@ -137,16 +151,17 @@ fn methods_figure(
             let curves = methods
                 .iter()
                 .filter_map(|method| {
-                    let group: Vec<&RunRecord> = in_env
+                    let group = in_env
                         .iter()
                         .copied()
                         .filter(|r| r.method == *method)
                         .collect();
-                    (!group.is_empty()).then(|| Curve {
-                        label: method.paper_name(),
-                        color: method_color(*method),
-                        points: median_curve(&group),
-                    })
+                    curve(
+                        group,
+                        method.paper_name(),
+                        method_color(*method),
+                        median_curve,
+                    )
                 })
                 .collect();
             Panel {
@@ -184,16 +199,17 @@ fn t_query_figure(runs: &[RunRecord], net: NetKind) -> Option<FigureContent> {
                 .iter()
                 .enumerate()
                 .filter_map(|(i, value)| {
-                    let group: Vec<&RunRecord> = in_env
+                    let group = in_env
                         .iter()
                         .filter(|(_, t)| t == value)
                         .map(|(r, _)| *r)
                         .collect();
-                    (!group.is_empty()).then(|| Curve {
-                        label: format!("t_query = {value}"),
-                        color: [4, 3, 5, 1, 6, 2, 0, 7][i % PALETTE.len()],
-                        points: median_curve(&group),
-                    })
+                    curve(
+                        group,
+                        format!("t_query = {value}"),
+                        [4, 3, 5, 1, 6, 2, 0, 7][i % PALETTE.len()],
+                        median_curve,
+                    )
                 })
                 .collect();
             Panel {
@@ -251,16 +267,17 @@ fn expert_figure(runs: &[RunRecord], net: NetKind) -> Option<FigureContent> {
                 .iter()
                 .enumerate()
                 .filter_map(|(i, expert)| {
-                    let group: Vec<&RunRecord> = in_panel
+                    let group = in_panel
                         .iter()
                         .copied()
                         .filter(|r| r.expert.as_ref().unwrap_or(&r.variant) == expert)
                         .collect();
-                    (!group.is_empty()).then(|| Curve {
-                        label: expert_label(expert),
-                        color: [4, 1, 3, 5, 6, 2, 0, 7][i % PALETTE.len()],
-                        points: median_curve(&group),
-                    })
+                    curve(
+                        group,
+                        expert_label(expert),
+                        [4, 1, 3, 5, 6, 2, 0, 7][i % PALETTE.len()],
+                        median_curve,
+                    )
                 })
                 .collect();
             let (_, suffix) = net_words(net);
@@ -297,16 +314,17 @@ fn query_figure(runs: &[RunRecord], net: NetKind) -> Option<FigureContent> {
             let curves = methods
                 .iter()
                 .filter_map(|method| {
-                    let group: Vec<&RunRecord> = selected
+                    let group = selected
                         .iter()
                         .copied()
                         .filter(|r| &r.env == env && r.method == *method)
                         .collect();
-                    (!group.is_empty()).then(|| Curve {
-                        label: method.paper_name(),
-                        color: method_color(*method),
-                        points: query_timeline(&group),
-                    })
+                    curve(
+                        group,
+                        method.paper_name(),
+                        method_color(*method),
+                        query_timeline,
+                    )
                 })
                 .collect();
             Panel {

@@ -32,23 +32,15 @@ pub fn evaluations_csv(runs: &[RunRecord]) -> String {
         .flat_map(|r| r.eval.iter().map(move |p| (r, p)))
         .collect();
     // Sorted by names, as the file reads.
-    rows.sort_by(|(a, p), (b, q)| {
+    rows.sort_by_key(|&(r, p)| {
         (
-            &a.env,
-            a.method.name(),
-            a.net.name(),
-            &a.variant,
-            a.seed,
+            r.env.as_str(),
+            r.method.name(),
+            r.net.name(),
+            r.variant.as_str(),
+            r.seed,
             p.step,
         )
-            .cmp(&(
-                &b.env,
-                b.method.name(),
-                b.net.name(),
-                &b.variant,
-                b.seed,
-                q.step,
-            ))
     });
     // The mean is written exactly (the shortest text that reads back as the same f64), so that the readings
     // computed from this file alone equal those computed from the runs; the spread columns to 3 decimals.

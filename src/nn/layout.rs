@@ -72,30 +72,25 @@ impl Layout {
             next += len;
             segment
         };
-        let fc1_w = take(obs_dim * HIDDEN);
-        let fc1_b = take(HIDDEN);
-        let fc2_w = take(HIDDEN * HIDDEN);
-        let fc2_b = take(HIDDEN);
-        let out_w = take(HIDDEN * out_width);
-        let out_b = take(out_width);
         let noisy = matches!(kind, OutputKind::Noisy);
-        let sigma_w = take(if noisy { HIDDEN * n_actions } else { 0 });
-        let sigma_b = take(if noisy { n_actions } else { 0 });
-        Self {
+        // Field initialisers run in the order written, which is the storage order.
+        let mut layout = Self {
             obs_dim,
             n_actions,
             kind,
             out_width,
-            fc1_w,
-            fc1_b,
-            fc2_w,
-            fc2_b,
-            out_w,
-            out_b,
-            sigma_w,
-            sigma_b,
-            len: next,
-        }
+            fc1_w: take(obs_dim * HIDDEN),
+            fc1_b: take(HIDDEN),
+            fc2_w: take(HIDDEN * HIDDEN),
+            fc2_b: take(HIDDEN),
+            out_w: take(HIDDEN * out_width),
+            out_b: take(out_width),
+            sigma_w: take(if noisy { HIDDEN * n_actions } else { 0 }),
+            sigma_b: take(if noisy { n_actions } else { 0 }),
+            len: 0,
+        };
+        layout.len = next;
+        layout
     }
 
     pub fn heads(&self) -> usize {
@@ -123,22 +118,22 @@ impl<'a> TensorsMut<'a> {
             layout.len,
             "flat vector does not match the network layout"
         );
-        let (fc1_w, rest) = data.split_at_mut(layout.fc1_w.len);
-        let (fc1_b, rest) = rest.split_at_mut(layout.fc1_b.len);
-        let (fc2_w, rest) = rest.split_at_mut(layout.fc2_w.len);
-        let (fc2_b, rest) = rest.split_at_mut(layout.fc2_b.len);
-        let (out_w, rest) = rest.split_at_mut(layout.out_w.len);
-        let (out_b, rest) = rest.split_at_mut(layout.out_b.len);
-        let (sigma_w, sigma_b) = rest.split_at_mut(layout.sigma_w.len);
+        // Cuts the next `segment.len` values off the front of what is left; called in storage order.
+        let mut rest = data;
+        let mut take = |segment: Segment| {
+            let (tensor, tail) = std::mem::take(&mut rest).split_at_mut(segment.len);
+            rest = tail;
+            tensor
+        };
         Self {
-            fc1_w,
-            fc1_b,
-            fc2_w,
-            fc2_b,
-            out_w,
-            out_b,
-            sigma_w,
-            sigma_b,
+            fc1_w: take(layout.fc1_w),
+            fc1_b: take(layout.fc1_b),
+            fc2_w: take(layout.fc2_w),
+            fc2_b: take(layout.fc2_b),
+            out_w: take(layout.out_w),
+            out_b: take(layout.out_b),
+            sigma_w: take(layout.sigma_w),
+            sigma_b: take(layout.sigma_b),
         }
     }
 }

@@ -344,6 +344,36 @@ fn train_run(
     let mut obs = Vec::new();
     let mut next_obs = Vec::new();
 
+    // A snapshot point of the loop: snapshots the run in `$ck` when `$at` is due or a stop was asked for, and on
+    // a stop ends the run with `$stopped` (what was done) and where the snapshot is.
+    macro_rules! snapshot_point {
+        ($ck:expr, $at:expr, $stopped:expr) => {{
+            let ck: &mut Checkpointer = $ck;
+            let stop = crate::interrupt::requested();
+            if stop || ck.due($at) {
+                let parts = RunParts {
+                    agent: &agent,
+                    replay: &replay,
+                    queries: &queries,
+                    replay_rng: &replay_rng,
+                    query_rng: &query_rng,
+                    evaluator: &evaluator,
+                    expert_state: expert.as_deref().and_then(|e| e.state()),
+                    obs: &obs,
+                };
+                snapshot(ck, &st, parts, log, stop)?;
+            }
+            if stop {
+                return Err(crate::interrupt::Interrupted(format!(
+                    "{}; snapshot in {}",
+                    $stopped,
+                    ck.path().display()
+                ))
+                .into());
+            }
+        }};
+    }
+
     // Continue from a snapshot: every part back where it was.
     let resume_from = snapshots.as_ref().and_then(|(_, s)| *s);
     if let Some(state) = resume_from {
@@ -397,28 +427,11 @@ fn train_run(
             );
             st.pretrain_done += 1;
             if let Some((ck, _)) = snapshots.as_mut() {
-                let stop = crate::interrupt::requested();
-                if stop || ck.due(st.pretrain_done) {
-                    let parts = RunParts {
-                        agent: &agent,
-                        replay: &replay,
-                        queries: &queries,
-                        replay_rng: &replay_rng,
-                        query_rng: &query_rng,
-                        evaluator: &evaluator,
-                        expert_state: expert.as_deref().and_then(|e| e.state()),
-                        obs: &obs,
-                    };
-                    snapshot(ck, &st, parts, log, stop)?;
-                }
-                if stop {
-                    return Err(crate::interrupt::Interrupted(format!(
-                        "stopped after {} pre-training updates; snapshot in {}",
-                        st.pretrain_done,
-                        ck.path().display()
-                    ))
-                    .into());
-                }
+                snapshot_point!(
+                    ck,
+                    st.pretrain_done,
+                    format!("stopped after {} pre-training updates", st.pretrain_done)
+                );
             }
         }
         agent.sync_target();
@@ -572,29 +585,11 @@ fn train_run(
         if let Some((ck, _)) = snapshots.as_mut()
             && st.step < cfg.train_steps
         {
-            let stop = crate::interrupt::requested();
-            if stop || ck.due(st.step) {
-                let parts = RunParts {
-                    agent: &agent,
-                    replay: &replay,
-                    queries: &queries,
-                    replay_rng: &replay_rng,
-                    query_rng: &query_rng,
-                    evaluator: &evaluator,
-                    expert_state: expert.as_deref().and_then(|e| e.state()),
-                    obs: &obs,
-                };
-                snapshot(ck, &st, parts, log, stop)?;
-            }
-            if stop {
-                return Err(crate::interrupt::Interrupted(format!(
-                    "stopped at step {} of {}; snapshot in {}",
-                    st.step,
-                    cfg.train_steps,
-                    ck.path().display()
-                ))
-                .into());
-            }
+            snapshot_point!(
+                ck,
+                st.step,
+                format!("stopped at step {} of {}", st.step, cfg.train_steps)
+            );
         }
     }
 
