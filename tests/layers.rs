@@ -1,10 +1,12 @@
 //! The crate's architecture, checked: imports only go down the layers (docs: the module list in `src/lib.rs`)
 //! and no two source files depend on each other, directly or through others.
 //!
-//! Every `crate::…`, `super::…` and `self::…` path in the library's code (comments and `#[cfg(test)]` code
-//! left out) is resolved to the source file it names. Two checks follow: a path from one top-level module to
-//! another must go to a lower layer, and the graph of files must have no cycle (a file's `mod` declarations are
-//! not uses; its `pub use` re-exports are).
+//! Every `crate::…`, `super::…` and `self::…` path in the library's code (comments and `#[cfg(test)]` items
+//! left out, wherever they stand) is resolved to the source file it names. Two checks follow: a path from one
+//! top-level module to another must go to a lower layer, and the graph of files must have no cycle (a file's
+//! `mod` declarations are not uses; its `pub use` re-exports are). A `mod.rs` naming its own children by
+//! relative paths (`pub use adam::Adam`) is not counted: that is how a folder re-exports its parts, and the
+//! parts may use `super::`. Every module `src/lib.rs` declares must have a layer.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
@@ -40,13 +42,76 @@ fn module_path(src: &Path, file: &Path) -> Vec<String> {
     parts
 }
 
-/// The library's code of a file: without comment lines and without `#[cfg(test)]` code (always last here).
+/// The library's code of a file: without comment lines and without the items marked `#[cfg(test)]` (a `mod
+/// tests;` line, a `use` or a function, or a whole `mod tests { ... }`), wherever they stand.
 fn code(text: &str) -> String {
-    let body = text.split("#[cfg(test)]").next().unwrap_or("");
-    body.lines()
+    let lines: Vec<&str> = text
+        .lines()
         .filter(|l| !l.trim_start().starts_with("//"))
-        .collect::<Vec<_>>()
-        .join("\n")
+        .collect();
+    let mut kept = Vec::new();
+    let mut i = 0;
+    while i < lines.len() {
+        if lines[i].trim() != "#[cfg(test)]" {
+            kept.push(lines[i]);
+            i += 1;
+            continue;
+        }
+        // Skip the attribute, any further attributes, then the item: to its `;` or its closing brace.
+        i += 1;
+        while i < lines.len() && lines[i].trim_start().starts_with("#[") {
+            i += 1;
+        }
+        let mut depth = 0i64;
+        let mut opened = false;
+        while i < lines.len() {
+            let line = lines[i];
+            i += 1;
+            depth += braces(line);
+            opened |= line.contains('{');
+            if (opened && depth <= 0) || (!opened && line.trim_end().ends_with(';')) {
+                break;
+            }
+        }
+    }
+    kept.join("\n")
+}
+
+/// Opening minus closing braces of a line, outside string and character literals.
+fn braces(line: &str) -> i64 {
+    let mut depth = 0;
+    let mut chars = line.chars().peekable();
+    while let Some(c) = chars.next() {
+        match c {
+            '"' => {
+                while let Some(s) = chars.next() {
+                    match s {
+                        '\\' => {
+                            chars.next();
+                        }
+                        '"' => break,
+                        _ => {}
+                    }
+                }
+            }
+            '\'' => {
+                // A character literal ('{', '\'') or a lifetime ('a): skip a literal's closing quote.
+                let rest: String = chars.clone().take(3).collect();
+                if rest.starts_with('\\') {
+                    chars.next();
+                    chars.next();
+                    chars.next();
+                } else if rest.chars().nth(1) == Some('\'') {
+                    chars.next();
+                    chars.next();
+                }
+            }
+            '{' => depth += 1,
+            '}' => depth -= 1,
+            _ => {}
+        }
+    }
+    depth
 }
 
 fn is_ident(c: char) -> bool {
@@ -134,6 +199,30 @@ fn imports_go_down_the_layers_and_no_file_depends_on_itself() {
         .iter()
         .map(|f| (module_path(&src, f), f.clone()))
         .collect();
+    // Every top-level module the library declares has a layer, and the layers name no module that is gone.
+    let lib = std::fs::read_to_string(src.join("lib.rs")).unwrap();
+    let declared: BTreeSet<String> = code(&lib)
+        .lines()
+        .filter_map(|l| {
+            l.trim()
+                .strip_prefix("pub mod ")
+                .or(l.trim().strip_prefix("mod "))
+        })
+        .map(|l| l.trim_end_matches(';').trim().to_string())
+        .collect();
+    let layered: BTreeSet<String> = LAYERS
+        .iter()
+        .flat_map(|l| l.iter())
+        .map(|m| m.to_string())
+        .collect();
+    assert_eq!(declared, layered, "src/lib.rs's modules and LAYERS differ");
+    for module in modules.keys() {
+        assert!(
+            layered.contains(&module[0]),
+            "src/{} is in no layer; add it to LAYERS",
+            module[0]
+        );
+    }
     // The longest prefix of `segments` that names a file.
     let resolve = |segments: &[String]| -> Option<Vec<String>> {
         (1..=segments.len())
@@ -212,7 +301,10 @@ fn imports_go_down_the_layers_and_no_file_depends_on_itself() {
             panic!("import cycle: {}", cycle.join(" -> "));
         }
     }
-    // The check sees the crate: the training loop uses the agent, the report uses the sweep.
+    // The check sees the crate: the training loop uses the agent, the report uses the sweep, and code after
+    // a `#[cfg(test)]` item is read (Adam's use of the SIMD dispatch follows a test-only import).
+    let path = |p: &[&str]| p.iter().map(|s| s.to_string()).collect::<Vec<_>>();
+    assert!(edges[&path(&["nn", "adam"])].contains(&path(&["nn", "simd"])));
     assert!(edges[&vec!["train".to_string()]].contains(&vec!["agent".to_string()]));
     assert!(
         edges[&vec!["experiment".to_string(), "report".to_string()]]
