@@ -257,9 +257,8 @@ pub struct TrainConfig {
     pub checkpoint_every: usize,
     /// Write a full-state snapshot of the run (`snapshot.safetensors`, to resume it exactly) every this many
     /// environment steps, and every this many pre-training updates; 0: only when stopped by SIGTERM/SIGINT
-    /// \[OURS: 100000; a snapshot with a full 100k LunarLander replay is 8.5 MB and holds the run up about 4 ms
-    /// (its sync to disk runs in the background): well under 1% even every 10k steps
-    /// (`cargo bench --bench snapshot`)\].
+    /// \[OURS: 100000; the sync to disk runs in the background, and what a snapshot costs the run is measured
+    /// by `cargo bench --bench snapshot` (figures in the README)\].
     pub snapshot_every: usize,
 }
 
