@@ -7,11 +7,17 @@
 
 use std::sync::Arc;
 use std::sync::OnceLock;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 
 fn flag() -> &'static Arc<AtomicBool> {
     static FLAG: OnceLock<Arc<AtomicBool>> = OnceLock::new();
     FLAG.get_or_init(|| Arc::new(AtomicBool::new(false)))
+}
+
+/// The number of the last stop signal received (0: none).
+fn last_signal() -> &'static Arc<AtomicUsize> {
+    static SIGNAL: OnceLock<Arc<AtomicUsize>> = OnceLock::new();
+    SIGNAL.get_or_init(|| Arc::new(AtomicUsize::new(0)))
 }
 
 /// Installs the SIGTERM/SIGINT handlers (idempotent).
@@ -23,8 +29,10 @@ pub fn install() -> std::io::Result<()> {
     use signal_hook::consts::{SIGINT, SIGTERM};
     // Order matters: the conditional shutdown sees the flag before this signal sets it.
     signal_hook::flag::register_conditional_shutdown(SIGINT, 130, Arc::clone(flag()))?;
-    signal_hook::flag::register(SIGINT, Arc::clone(flag()))?;
-    signal_hook::flag::register(SIGTERM, Arc::clone(flag()))?;
+    for signal in [SIGINT, SIGTERM] {
+        signal_hook::flag::register_usize(signal, Arc::clone(last_signal()), signal as usize)?;
+        signal_hook::flag::register(signal, Arc::clone(flag()))?;
+    }
     let _ = INSTALLED.set(());
     Ok(())
 }
@@ -32,6 +40,22 @@ pub fn install() -> std::io::Result<()> {
 /// Whether a stop was requested.
 pub fn requested() -> bool {
     flag().load(Ordering::Relaxed)
+}
+
+/// The stop signal received, if a signal (not [`request`]) asked for the stop: its number and name.
+pub fn signal() -> Option<(i32, &'static str)> {
+    use signal_hook::consts::{SIGINT, SIGTERM};
+    match last_signal().load(Ordering::Relaxed) as i32 {
+        SIGINT => Some((SIGINT, "SIGINT")),
+        SIGTERM => Some((SIGTERM, "SIGTERM")),
+        _ => None,
+    }
+}
+
+/// The exit status of a program stopped by a stop request, as shells report a process a signal ended:
+/// 128 + the signal's number (130 for SIGINT, 143 for SIGTERM; 130 when no signal was involved).
+pub fn exit_status() -> u8 {
+    128 + signal().map_or(2, |(n, _)| n as u8)
 }
 
 /// Requests a stop, as a signal would.

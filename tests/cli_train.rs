@@ -339,3 +339,48 @@ fn expert_process_runs_and_its_failures_are_clear() {
         );
     }
 }
+
+#[test]
+fn expert_train_reuses_only_a_run_of_the_same_configuration_and_writes_into_the_working_directory()
+{
+    let work = tempfile::tempdir().unwrap();
+    let expert_train = |extra: &[&str]| {
+        Command::new(env!("CARGO_BIN_EXE_arld"))
+            .current_dir(work.path())
+            .args(["expert", "train", "--env", "CartPole-v0", "--episodes", "2"])
+            .args(["--set", "train_steps=2000"])
+            .args(extra)
+            .output()
+            .expect("runs")
+    };
+    let first = expert_train(&[]);
+    let err = String::from_utf8_lossy(&first.stderr);
+    assert!(first.status.success(), "{err}");
+    assert!(err.contains("trained"), "{err}");
+    // The default output is ./experts/<env> of the working directory; the run, ./runs/expert_<env>_seed0.
+    let selection = work.path().join("experts/CartPole-v0/selection.json");
+    assert!(selection.is_file());
+    assert!(
+        work.path()
+            .join("runs/expert_CartPole-v0_seed0/summary.json")
+            .is_file()
+    );
+    // The same configuration again: the finished run is reused.
+    let again = expert_train(&[]);
+    let err = String::from_utf8_lossy(&again.stderr);
+    assert!(again.status.success(), "{err}");
+    assert!(err.contains("reusing the finished training run"), "{err}");
+    // Another configuration: refused, naming every key that differs, and nothing is written.
+    std::fs::remove_file(&selection).unwrap();
+    let other = expert_train(&["--set", "lr=0.002", "--set", "batch_size=16"]);
+    let err = String::from_utf8_lossy(&other.stderr);
+    assert_eq!(other.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("another configuration")
+            && err.contains("lr = ")
+            && err.contains("batch_size = 32 (16)"),
+        "{err}"
+    );
+    assert!(!err.contains("train_steps"), "{err}");
+    assert!(!selection.exists());
+}

@@ -128,7 +128,9 @@ fn survives(args: &[&str], moments: &[Moment]) -> Vec<String> {
     let full = work.path().join("full");
     finish(spawn(&train_args(args, &full)));
     let cut = work.path().join("cut");
-    let start = train_args(args, &cut);
+    let mut start = train_args(args, &cut);
+    // A run killed before its first snapshot starts again from nothing.
+    start.push("--overwrite".into());
     let mut hits = Vec::new();
     for moment in moments {
         match kill_at(&start, &cut, moment) {
@@ -351,4 +353,186 @@ fn with_metadata(file: &[u8], key: &str, value: &str) -> Vec<u8> {
     out.extend_from_slice(&text);
     out.extend_from_slice(&file[8 + n..]);
     out
+}
+
+/// The rows of a CSV log: the header must be `header`, and every row must end with a newline and have as many
+/// fields as the header, each a number (or empty, or a word where the column holds words).
+fn parse_log(dir: &Path, name: &str, header: &str) -> Vec<Vec<String>> {
+    let text = std::fs::read_to_string(dir.join(name)).unwrap_or_else(|e| panic!("{name}: {e}"));
+    assert!(
+        text.starts_with(header),
+        "{name} does not begin with its header: {text:?}"
+    );
+    assert!(text.ends_with('\n'), "{name} ends in a torn row: {text:?}");
+    let columns = header.trim_end().split(',').count();
+    text.lines()
+        .skip(1)
+        .map(|line| {
+            let fields: Vec<String> = line.split(',').map(str::to_string).collect();
+            assert_eq!(fields.len(), columns, "{name}: torn row {line:?}");
+            for f in &fields {
+                assert!(
+                    f.is_empty()
+                        || f.parse::<f64>().is_ok()
+                        || f.chars().all(|c| c.is_ascii_alphabetic()),
+                    "{name}: bad field {f:?} in {line:?}"
+                );
+            }
+            fields
+        })
+        .collect()
+}
+
+/// Starts a run, waits until it has evaluated once, sends it `signal`, and returns its exit status and stderr.
+fn stop_with(signal: &str, args: &[String], dir: &Path) -> (Option<i32>, String) {
+    let child = spawn(args);
+    let started = Instant::now();
+    while !dir.join("eval.csv").is_file() {
+        assert!(
+            started.elapsed() < Duration::from_secs(120),
+            "the run never evaluated"
+        );
+        std::thread::sleep(Duration::from_millis(2));
+    }
+    let status = Command::new("kill")
+        .args([format!("-{signal}"), child.id().to_string()])
+        .status()
+        .expect("run kill");
+    assert!(status.success());
+    let out = child.wait_with_output().unwrap();
+    (
+        out.status.code(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+#[test]
+fn a_run_stopped_with_sigint_or_sigterm_leaves_whole_logs_and_says_where_it_stopped() {
+    let work = tempfile::tempdir().unwrap();
+    let args = [
+        "--env",
+        "CartPole-v0",
+        "--method",
+        "adqn",
+        "--set",
+        "train_steps=60000",
+    ];
+    let full = work.path().join("full");
+    finish(spawn(&train_args(&args, &full)));
+    for (signal, code) in [("INT", 130), ("TERM", 143)] {
+        let dir = work.path().join(signal);
+        let (status, err) = stop_with(signal, &train_args(&args, &dir), &dir);
+        assert_eq!(status, Some(code), "{err}");
+        assert_eq!(err.trim_end().lines().count(), 1, "one line: {err}");
+        assert!(
+            err.contains(&format!("SIG{signal}")) && err.contains("--resume"),
+            "{err}"
+        );
+        // Every log whole, with its header; the run marked incomplete at the step its message names.
+        let eval = parse_log(&dir, "eval.csv", "step,mean,std,min,max\n");
+        let episodes = parse_log(
+            &dir,
+            "episodes.csv",
+            "episode,step,return,length,demo_steps\n",
+        );
+        let queries = parse_log(
+            &dir,
+            "queries.csv",
+            "step,episode,uncertainty,threshold,expert_action,agent_action,expert,response_s,answered\n",
+        );
+        assert!(!eval.is_empty() && !episodes.is_empty() && !queries.is_empty());
+        let step = snapshot_position(&dir).expect("snapshot.json")["step"]
+            .as_u64()
+            .unwrap();
+        assert!(
+            err.contains(&format!("stopped at step {step} of 60000")),
+            "{err}"
+        );
+        assert!(step < 60000);
+        let last =
+            |rows: &[Vec<String>], col: usize| rows.last().unwrap()[col].parse::<u64>().unwrap();
+        assert!(last(&eval, 0) <= step && last(&episodes, 1) <= step && last(&queries, 0) < step);
+        assert!(!dir.join("summary.json").exists());
+        assert!(arld::train::run_dir::check_complete(&dir).is_err());
+        // The same command again is refused (it would mix two runs); --resume continues to the results of an
+        // uninterrupted run.
+        let out = Command::new(ARLD)
+            .args(train_args(&args, &dir))
+            .output()
+            .unwrap();
+        assert_eq!(out.status.code(), Some(1));
+        let refusal = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            refusal.contains("not empty")
+                && refusal.contains("--resume")
+                && refusal.contains("--overwrite"),
+            "{refusal}"
+        );
+        finish(spawn(&[
+            "train".to_string(),
+            "--quiet".to_string(),
+            "--resume".to_string(),
+            dir.display().to_string(),
+        ]));
+        for name in ["eval.csv", "episodes.csv", "queries.csv"] {
+            assert!(
+                std::fs::read(full.join(name)).unwrap() == std::fs::read(dir.join(name)).unwrap(),
+                "{name} differs after SIG{signal} and --resume"
+            );
+        }
+        assert_eq!(summary_without_time(&full), summary_without_time(&dir));
+    }
+}
+
+#[test]
+fn overwrite_clears_an_earlier_run_and_nothing_else() {
+    let work = tempfile::tempdir().unwrap();
+    let dir = work.path().join("run");
+    let with = |extra: &[&str]| {
+        let mut a = vec![
+            "--env",
+            "CartPole-v0",
+            "--method",
+            "dqn",
+            "--set",
+            "train_steps=2000",
+        ];
+        a.extend_from_slice(extra);
+        train_args(&a, &dir)
+    };
+    finish(spawn(&with(&["--set", "checkpoint_every=1000"])));
+    assert!(dir.join("checkpoints/step_00001000.safetensors").is_file());
+    // A finished run is not replaced without --overwrite.
+    let out = Command::new(ARLD).args(with(&[])).output().unwrap();
+    assert_eq!(out.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("a finished run"));
+    // With it, the new run's directory holds only its own files: no checkpoints of the earlier run.
+    finish(spawn(&with(&["--overwrite"])));
+    assert!(!dir.join("checkpoints").exists());
+    assert!(dir.join("summary.json").is_file());
+    // A directory holding anything a run does not write is never cleared.
+    std::fs::write(dir.join("notes.txt"), "mine").unwrap();
+    let out = Command::new(ARLD)
+        .args(with(&["--overwrite"]))
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("notes.txt") && err.contains("no run writes"),
+        "{err}"
+    );
+    assert_eq!(
+        std::fs::read_to_string(dir.join("notes.txt")).unwrap(),
+        "mine"
+    );
+    assert!(dir.join("summary.json").is_file());
+    // A file where the run directory should be is refused.
+    let file = work.path().join("file");
+    std::fs::write(&file, "x").unwrap();
+    let out = Command::new(ARLD)
+        .args(train_args(&["--env", "CartPole-v0"], &file))
+        .output()
+        .unwrap();
+    assert!(String::from_utf8_lossy(&out.stderr).contains("is not a directory"));
 }

@@ -1,6 +1,6 @@
 //! `arld expert ...` and `arld demo ...`: the expert pipeline, expert statistics, and demonstration collection.
 use anyhow::{Context, Result};
-use arld::experiment::run_one;
+use arld::experiment::run_or_reuse;
 use arld::expert::demos::Demonstrations;
 use arld::expert::pipeline::{Candidate, evaluate_expert, select_experts};
 use arld::expert::{self, CheckpointExpert, SPEC_HELP};
@@ -42,7 +42,8 @@ pub enum ExpertCommand {
         /// heads explore deeper, which MountainCar needs).
         #[arg(long, value_enum, default_value_t = NetKind::Plain)]
         net: NetKind,
-        /// Where the selected experts go [default: experts/<env>].
+        /// Where the selected experts go [default: experts/<env> in the working directory; the shipped experts
+        /// are never replaced].
         #[arg(long)]
         out: Option<PathBuf>,
         /// Training run directory [default: runs/expert_<env>_seed<seed>].
@@ -149,12 +150,10 @@ pub fn run_expert(cmd: ExpertCommand) -> Result<ExitCode> {
             let cfg = input.resolve()?;
             let run_dir = run_dir
                 .unwrap_or_else(|| PathBuf::from("runs").join(format!("expert_{env}_seed{seed}")));
-            // A finished training run (summary.json written last) is reused: only the selection runs again.
-            if arld::train::run_dir::is_complete(&run_dir) {
-                eprintln!("reusing the finished training run in {}", run_dir.display());
-            } else {
-                let summary = run_one(&cfg, Some(&run_dir), true)?;
-                eprintln!("trained: final score {:.2}", summary.final_score);
+            // A finished training run of this configuration is reused: only the selection runs again.
+            match run_or_reuse(&cfg, &run_dir, true)? {
+                None => eprintln!("reusing the finished training run in {}", run_dir.display()),
+                Some(summary) => eprintln!("trained: final score {:.2}", summary.final_score),
             }
             eprintln!("evaluating every checkpoint over {episodes} episodes");
             let candidates = evaluate_checkpoints(
@@ -163,7 +162,7 @@ pub fn run_expert(cmd: ExpertCommand) -> Result<ExitCode> {
                 episodes,
             )?;
             let (weak, perfect) = select_experts(&candidates, &env)?;
-            let out = out.unwrap_or_else(|| expert::shipped_dir().join(&env));
+            let out = out.unwrap_or_else(|| PathBuf::from("experts").join(&env));
             std::fs::create_dir_all(&out)?;
             let command = std::env::args().collect::<Vec<_>>().join(" ");
             let mut selection =

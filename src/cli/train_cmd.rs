@@ -57,11 +57,15 @@ pub struct TrainArgs {
     /// Run directory [default: runs/<env>_<method>-<net>_seed<seed>].
     #[arg(long, short)]
     out: Option<PathBuf>,
+    /// Replace the run in the output directory (without it, a directory that is not empty is refused, so that
+    /// nothing of an earlier run is mixed into the new one).
+    #[arg(long)]
+    overwrite: bool,
     /// Print the resolved configuration as TOML and exit.
     #[arg(long)]
     print_config: bool,
     /// Continue the interrupted run in RUN_DIR from its snapshot, with the configuration it was started with.
-    #[arg(long, value_name = "RUN_DIR", conflicts_with_all = ["env", "config", "overrides", "expert", "demos", "out", "print_config"])]
+    #[arg(long, value_name = "RUN_DIR", conflicts_with_all = ["env", "config", "overrides", "expert", "demos", "out", "overwrite", "print_config"])]
     resume: Option<PathBuf>,
     /// Hide the progress bar.
     #[arg(long)]
@@ -133,15 +137,26 @@ pub fn run(args: TrainArgs) -> anyhow::Result<ExitCode> {
         .clone()
         .or_else(|| args.out.clone())
         .unwrap_or_else(|| PathBuf::from("runs").join(cfg.run_name()));
+    if args.resume.is_none() {
+        arld::train::run_dir::prepare_new_run(&dir, args.overwrite)?;
+    }
     arld::interrupt::install()?;
     let s = match run_one(&cfg, Some(&dir), !args.quiet) {
         Ok(s) => s,
         Err(err) if arld::interrupt::requested() => {
-            eprintln!(
-                "{err:#}\ncontinue with: arld train --resume {}",
-                dir.display()
-            );
-            return Ok(ExitCode::from(arld::experiment::slurm::EXIT_INTERRUPTED));
+            // One line: what stopped the run, where it stands, how to continue.
+            let signal = arld::interrupt::signal().map_or("a stop request", |(_, name)| name);
+            let snapshot = dir.join(arld::train::snapshot::SNAPSHOT_FILE);
+            let message = format!("{err:#}").replace('\n', " ");
+            if snapshot.is_file() {
+                eprintln!(
+                    "arld: {signal}: {message}; the run is incomplete; continue with: arld train --resume {}",
+                    dir.display()
+                );
+            } else {
+                eprintln!("arld: {signal}: the run stopped before its first snapshot: {message}");
+            }
+            return Ok(ExitCode::from(arld::interrupt::exit_status()));
         }
         Err(err) => return Err(err),
     };

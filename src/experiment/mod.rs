@@ -93,6 +93,35 @@ pub fn run_one(cfg: &TrainConfig, out_dir: Option<&Path>, progress: bool) -> Res
     Ok(summary)
 }
 
+/// Runs `cfg` into `dir`, or reuses the finished run there when it was run with exactly `cfg` (returns `None`
+/// then). A finished run of another configuration is refused, naming the keys that differ; an interrupted run
+/// with a snapshot continues; any other leftovers of a run are cleared first, so that no earlier run's files
+/// (checkpoints) mix into this one.
+pub fn run_or_reuse(cfg: &TrainConfig, dir: &Path, progress: bool) -> Result<Option<Summary>> {
+    use crate::train::run_dir;
+    if run_dir::is_complete(dir) {
+        let config = dir.join(run_dir::CONFIG_FILE);
+        let mut input = train::ConfigInput::new(&cfg.env, cfg.method, cfg.net, cfg.seed);
+        input.apply_file(&config)?;
+        let earlier = input
+            .resolve()
+            .with_context(|| format!("the finished run's {} is not valid", config.display()))?;
+        let differences = earlier.differences(cfg);
+        anyhow::ensure!(
+            differences.is_empty(),
+            "{} holds a finished run of another configuration; its values (and the ones asked for) differ in: \
+             {}; give another run directory, or the same settings",
+            dir.display(),
+            differences.join(", ")
+        );
+        return Ok(None);
+    }
+    if !dir.join(train::snapshot::SNAPSHOT_FILE).is_file() {
+        run_dir::prepare_new_run(dir, true)?;
+    }
+    run_one(cfg, Some(dir), progress).map(Some)
+}
+
 /// Runs one grid point of a sweep into `dir` (its configuration: [`sweep::RunSpec::config`]).
 pub fn run_spec(spec: &sweep::RunSpec, dir: &Path) -> Result<()> {
     run_one(&spec.config()?, Some(dir), false)?;

@@ -363,6 +363,9 @@ fn format_bytes(bytes: f64) -> String {
 /// The keys that name a run rather than tune it: the preset is chosen from them.
 const IDENTITY_KEYS: [&str; 4] = ["env", "method", "net", "seed"];
 
+/// The largest config file read (a whole configuration is about 1 KB).
+pub const MAX_CONFIG_BYTES: u64 = 4 << 20;
+
 /// A run's configuration as given (low level): its identity and the values of config files and `--set` pairs
 /// in the order given. [`ConfigInput::resolve`] makes the [`TrainConfig`] from it.
 #[derive(Clone, Debug, PartialEq)]
@@ -389,9 +392,28 @@ impl ConfigInput {
 
     /// Takes every key of a TOML file (a run's `config.toml` is one).
     pub fn apply_file(&mut self, path: &Path) -> Result<()> {
+        let meta = std::fs::metadata(path)
+            .with_context(|| format!("cannot read config file {}", path.display()))?;
+        ensure!(
+            meta.is_file(),
+            "config file {} is not a regular file",
+            path.display()
+        );
+        ensure!(
+            meta.len() <= MAX_CONFIG_BYTES,
+            "config file {} has {} bytes; a configuration is a few hundred bytes, and files over {} MiB are refused",
+            path.display(),
+            meta.len(),
+            MAX_CONFIG_BYTES >> 20
+        );
         let text = std::fs::read_to_string(path)
             .with_context(|| format!("cannot read config file {}", path.display()))?;
-        let table: toml::Table = toml::from_str(&text)
+        self.apply_text(&text, path)
+    }
+
+    /// Takes every key of a TOML document (the content of the config file `path`, named in errors).
+    pub fn apply_text(&mut self, text: &str, path: &Path) -> Result<()> {
+        let table: toml::Table = toml::from_str(text)
             .with_context(|| format!("config file {} is not valid TOML", path.display()))?;
         let origin = format!("config file {}", path.display());
         for (key, value) in table {
@@ -593,6 +615,20 @@ impl TrainConfig {
     /// The configuration as TOML, for the run directory.
     pub fn to_toml(&self) -> String {
         toml::to_string_pretty(self).expect("config serialises")
+    }
+
+    /// The keys whose values differ between `self` and `other`, each as `key = <self's> (<other's>)`, in key
+    /// order.
+    pub fn differences(&self, other: &TrainConfig) -> Vec<String> {
+        let (a, b) = (Self::preset_table(self), Self::preset_table(other));
+        let mut keys: Vec<&String> = a.keys().chain(b.keys()).collect();
+        keys.sort();
+        keys.dedup();
+        let shown = |v: Option<&toml::Value>| v.map_or("(none)".to_string(), |v| v.to_string());
+        keys.into_iter()
+            .filter(|k| a.get(*k) != b.get(*k))
+            .map(|k| format!("{k} = {} ({})", shown(a.get(k)), shown(b.get(k))))
+            .collect()
     }
 
     /// Checks every value: the one place a run's configuration is validated (called by

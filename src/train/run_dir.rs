@@ -49,6 +49,90 @@ pub fn is_complete(dir: &Path) -> bool {
     dir.join(SUMMARY_FILE).is_file()
 }
 
+/// Whether `name` is an entry a run writes into its directory (its files, checkpoints, TensorBoard events,
+/// snapshot, and the temporary files of its atomic writes).
+fn is_run_entry(name: &str) -> bool {
+    use super::snapshot::{SNAPSHOT_FILE, SNAPSHOT_INFO_FILE};
+    [
+        CONFIG_FILE,
+        EVAL_FILE,
+        EPISODES_FILE,
+        QUERIES_FILE,
+        SUMMARY_FILE,
+        WEIGHTS_FILE,
+        CHECKPOINTS_DIR,
+        SNAPSHOT_FILE,
+        SNAPSHOT_INFO_FILE,
+    ]
+    .contains(&name)
+        || name.starts_with("events.out.tfevents.")
+        || name.starts_with('.') && name.contains(".tmp")
+}
+
+/// Makes `dir` ready for a new run, so that nothing of an earlier run is mixed into it: a missing or empty
+/// directory is fine; a non-empty one is refused, unless `overwrite`, when it is cleared, but only if it holds
+/// nothing but a run's files (`--overwrite` never deletes anything a run did not write).
+pub fn prepare_new_run(dir: &Path, overwrite: bool) -> Result<()> {
+    let meta = match std::fs::symlink_metadata(dir) {
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(()),
+        meta => meta.with_context(|| format!("cannot inspect {}", dir.display()))?,
+    };
+    let meta = if meta.file_type().is_symlink() {
+        std::fs::metadata(dir)
+            .with_context(|| format!("cannot follow the link {}", dir.display()))?
+    } else {
+        meta
+    };
+    if !meta.is_dir() {
+        bail!(
+            "the run directory {} exists and is not a directory",
+            dir.display()
+        );
+    }
+    let mut names: Vec<String> = std::fs::read_dir(dir)
+        .with_context(|| format!("cannot read {}", dir.display()))?
+        .map(|e| Ok(e?.file_name().to_string_lossy().into_owned()))
+        .collect::<std::io::Result<_>>()
+        .with_context(|| format!("cannot read {}", dir.display()))?;
+    if names.is_empty() {
+        return Ok(());
+    }
+    names.sort();
+    if !overwrite {
+        let what = if dir.join(super::snapshot::SNAPSHOT_FILE).is_file() {
+            format!(
+                "an interrupted run (continue it with `arld train --resume {}`)",
+                dir.display()
+            )
+        } else if is_complete(dir) {
+            "a finished run".to_string()
+        } else {
+            names.join(", ")
+        };
+        bail!(
+            "the run directory {} is not empty: it holds {what}; give --overwrite to replace it, or another --out",
+            dir.display()
+        );
+    }
+    if let Some(other) = names.iter().find(|n| !is_run_entry(n)) {
+        bail!(
+            "--overwrite clears only run directories, and {} holds {other:?}, which no run writes; choose another --out",
+            dir.display()
+        );
+    }
+    for name in &names {
+        let path = dir.join(name);
+        let removed = if path.symlink_metadata()?.is_dir() {
+            std::fs::remove_dir_all(&path)
+        } else {
+            std::fs::remove_file(&path)
+        };
+        removed
+            .with_context(|| format!("cannot remove {} to overwrite the run", path.display()))?;
+    }
+    Ok(())
+}
+
 /// One evaluation: `eval_episodes` test episodes without exploration.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct EvalPoint {
