@@ -47,6 +47,7 @@ impl AtomicFile {
         let name = path
             .file_name()
             .ok_or_else(|| error(std::io::Error::other("the path has no file name")))?;
+        check_replaceable(path).map_err(error)?;
         let dir = path
             .parent()
             .filter(|p| !p.as_os_str().is_empty())
@@ -124,6 +125,36 @@ impl Drop for AtomicFile {
             let _ = std::fs::remove_file(&self.tmp);
         }
     }
+}
+
+/// Refuses a target that exists and is not a regular file: renaming over a directory fails late, and renaming
+/// over a device (`/dev/null`), a pipe or a symbolic link would replace the node itself, not write into it.
+fn check_replaceable(path: &Path) -> std::io::Result<()> {
+    let meta = match std::fs::symlink_metadata(path) {
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(()),
+        meta => meta?,
+    };
+    let kind = meta.file_type();
+    if kind.is_file() {
+        return Ok(());
+    }
+    use std::os::unix::fs::FileTypeExt;
+    let what = if kind.is_symlink() {
+        "a symbolic link"
+    } else if kind.is_dir() {
+        "a directory"
+    } else if kind.is_char_device() || kind.is_block_device() {
+        "a device"
+    } else if kind.is_fifo() {
+        "a named pipe"
+    } else if kind.is_socket() {
+        "a socket"
+    } else {
+        "not a regular file"
+    };
+    Err(std::io::Error::other(format!(
+        "it is {what}; arld writes its outputs only to new or regular files"
+    )))
 }
 
 /// Every temporary file's name begins with this (then the target's name), so that what a killed process left
@@ -205,5 +236,40 @@ mod tests {
         assert_eq!(left, [".s.bin.other", "other.bin", "s.bin"]);
         assert_eq!(std::fs::read(&path).unwrap(), b"old");
         remove_leftovers(&dir.path().join("missing/s.bin")).unwrap();
+    }
+
+    #[test]
+    fn a_target_that_is_not_a_regular_file_is_refused_and_left_alone() {
+        let dir = tempfile::tempdir().unwrap();
+        let real = dir.path().join("real.txt");
+        std::fs::write(&real, b"kept").unwrap();
+        let link = dir.path().join("link.txt");
+        std::os::unix::fs::symlink(&real, &link).unwrap();
+        let sub = dir.path().join("sub");
+        std::fs::create_dir(&sub).unwrap();
+        for (target, what) in [
+            (link.as_path(), "symbolic link"),
+            (sub.as_path(), "directory"),
+            (Path::new("/dev/null"), "device"),
+        ] {
+            let err = write_atomic(target, b"x").unwrap_err().to_string();
+            assert!(err.contains(what), "{target:?}: {err}");
+        }
+        // Nothing replaced, nothing left behind.
+        assert!(
+            std::fs::symlink_metadata(&link)
+                .unwrap()
+                .file_type()
+                .is_symlink()
+        );
+        assert_eq!(std::fs::read(&real).unwrap(), b"kept");
+        assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 3);
+        use std::os::unix::fs::FileTypeExt;
+        assert!(
+            std::fs::metadata("/dev/null")
+                .unwrap()
+                .file_type()
+                .is_char_device()
+        );
     }
 }

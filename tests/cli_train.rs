@@ -384,3 +384,248 @@ fn expert_train_reuses_only_a_run_of_the_same_configuration_and_writes_into_the_
     assert!(!err.contains("train_steps"), "{err}");
     assert!(!selection.exists());
 }
+
+/// Values too large for their field, counts of zero, sizes no machine has: each named in a clear error before
+/// any work, and nothing written.
+#[test]
+fn numbers_out_of_range_name_their_field() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("run");
+    let o = out.to_str().unwrap();
+    let too_big = "9223372036854775808";
+    fails_with(
+        &["train", "--env", "CartPole-v0", "--seed", too_big, "-o", o],
+        &["seed", too_big],
+    );
+    fails_with(
+        &[
+            "train",
+            "--env",
+            "CartPole-v0",
+            "--set",
+            &format!("seed={too_big}"),
+            "-o",
+            o,
+        ],
+        &["seed"],
+    );
+    fails_with(
+        &["expert", "eval", "--env", "CartPole-v0", "--episodes", "0"],
+        &["--episodes", "0"],
+    );
+    fails_with(
+        &["env", "rollout", "--env", "CartPole-v0", "--episodes", "0"],
+        &["--episodes", "0"],
+    );
+    let demos = dir.path().join("d.jsonl");
+    let d = demos.to_str().unwrap();
+    fails_with(
+        &[
+            "demo",
+            "collect",
+            "--env",
+            "CartPole-v0",
+            "--expert",
+            "scripted",
+            "--transitions",
+            "0",
+            "-o",
+            d,
+        ],
+        &["--transitions", "0"],
+    );
+    let sweep = dir.path().join("sweep");
+    let s = sweep.to_str().unwrap();
+    for seeds in ["100000000000", "0..100000000000"] {
+        fails_with(
+            &[
+                "sweep",
+                "--env",
+                "CartPole-v0",
+                "--method",
+                "dqn",
+                "--seeds",
+                seeds,
+                "-o",
+                s,
+            ],
+            &["seeds", "at most 10000"],
+        );
+    }
+    fails_with(
+        &[
+            "sweep",
+            "--env",
+            "CartPole-v0",
+            "--method",
+            "dqn",
+            "--seeds",
+            &format!("1,{too_big}"),
+            "-o",
+            s,
+        ],
+        &["seed", too_big],
+    );
+    fails_with(
+        &["reproduce", "--seeds", "100000000000", "-o", s],
+        &["--seeds", "100000000000"],
+    );
+    assert!(!out.exists() && !sweep.exists() && !demos.exists());
+}
+
+/// An output path that is a device, a directory or a symbolic link is refused, and left as it was.
+#[test]
+fn outputs_are_written_only_to_regular_files() {
+    let dir = tempfile::tempdir().unwrap();
+    let target = dir.path().join("target.jsonl");
+    std::fs::write(&target, "kept").unwrap();
+    let link = dir.path().join("link.jsonl");
+    std::os::unix::fs::symlink(&target, &link).unwrap();
+    let sub = dir.path().join("sub");
+    std::fs::create_dir(&sub).unwrap();
+    for (path, what) in [
+        (Path::new("/dev/null"), "a device"),
+        (link.as_path(), "a symbolic link"),
+        (sub.as_path(), "a directory"),
+    ] {
+        let stderr = fails_with(
+            &[
+                "demo",
+                "collect",
+                "--env",
+                "CartPole-v0",
+                "--expert",
+                "scripted",
+                "--transitions",
+                "20",
+                "-o",
+                path.to_str().unwrap(),
+            ],
+            &[what],
+        );
+        // The reason once, not repeated by the error's chain.
+        assert_eq!(stderr.matches(what).count(), 1, "{stderr}");
+    }
+    use std::os::unix::fs::FileTypeExt;
+    assert!(
+        std::fs::metadata("/dev/null")
+            .unwrap()
+            .file_type()
+            .is_char_device()
+    );
+    assert!(link.symlink_metadata().unwrap().file_type().is_symlink());
+    assert_eq!(std::fs::read_to_string(&target).unwrap(), "kept");
+    // Nothing left behind: no temporary file beside any of them.
+    let mut names: Vec<String> = std::fs::read_dir(dir.path())
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    names.sort();
+    assert_eq!(names, ["link.jsonl", "sub", "target.jsonl"]);
+    assert_eq!(std::fs::read_dir(&sub).unwrap().count(), 0);
+}
+
+/// Demonstration files whose header promises what the file cannot hold, or nothing at all, are refused when
+/// loaded, before anything is allocated for them.
+#[test]
+fn demonstration_headers_are_checked_against_the_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("run");
+    let header = |transitions: u64| {
+        format!(
+            "{{\"format\":\"arld-demos\",\"version\":1,\"env\":\"CartPole-v0\",\"expert\":\"x\",\"seed\":0,\
+             \"obs_dim\":4,\"n_actions\":2,\"transitions\":{transitions},\"episodes\":1}}\n"
+        )
+    };
+    for (name, text, needle) in [
+        (
+            "huge.jsonl",
+            header(100_000_000_000_000),
+            "more than a file of",
+        ),
+        ("none.jsonl", header(0), "no transitions"),
+        ("empty.jsonl", String::new(), "empty demonstration file"),
+    ] {
+        let path = dir.path().join(name);
+        std::fs::write(&path, text).unwrap();
+        for method in ["dqfd", "adqnp"] {
+            fails_with(
+                &[
+                    "train",
+                    "--env",
+                    "CartPole-v0",
+                    "--method",
+                    method,
+                    "--demos",
+                    path.to_str().unwrap(),
+                    "-o",
+                    out.to_str().unwrap(),
+                ],
+                &[name, needle],
+            );
+        }
+    }
+    assert!(!out.exists());
+}
+
+/// A learning rate that makes the loss blow up ends the run with "diverged at step N" and a hint, exit 1; the
+/// run is incomplete (no summary) and its logs parse. The step is checked against a recomputation: the first
+/// update comes at `learning_starts`, so divergence cannot be reported before it.
+#[test]
+fn a_diverging_run_stops_with_the_step_and_a_hint() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("run");
+    let stderr = fails_with(
+        &[
+            "train",
+            "--env",
+            "CartPole-v0",
+            "--net",
+            "plain",
+            "--set",
+            "lr=1e12",
+            "--set",
+            "learning_starts=300",
+            "--set",
+            "train_steps=5000",
+            "-o",
+            out.to_str().unwrap(),
+        ],
+        &["diverged at step", "lower `lr`", "incomplete"],
+    );
+    let step: usize = stderr
+        .split("diverged at step ")
+        .nth(1)
+        .and_then(|rest| rest.split(':').next())
+        .and_then(|n| n.trim().parse().ok())
+        .unwrap_or_else(|| panic!("no step in: {stderr}"));
+    assert!((300..5000).contains(&step), "{stderr}");
+    assert!(!out.join("summary.json").exists());
+    let episodes = std::fs::read_to_string(out.join("episodes.csv")).unwrap();
+    assert!(episodes.starts_with("episode,step,return,length,demo_steps\n"));
+    for row in episodes.lines().skip(1) {
+        assert_eq!(row.split(',').count(), 5, "torn row {row:?}");
+        let at: usize = row.split(',').nth(1).unwrap().parse().unwrap();
+        assert!(at <= step, "an episode logged after the divergence: {row}");
+    }
+    // The same run with a sane learning rate goes on past that step.
+    let ok = arld(&[
+        "train",
+        "--env",
+        "CartPole-v0",
+        "--net",
+        "plain",
+        "--set",
+        "learning_starts=300",
+        "--set",
+        &format!("train_steps={}", step + 200),
+        "--quiet",
+        "-o",
+        dir.path().join("sane").to_str().unwrap(),
+    ]);
+    assert!(
+        ok.status.success(),
+        "{}",
+        String::from_utf8_lossy(&ok.stderr)
+    );
+}

@@ -4,7 +4,7 @@
 //! and file; `rollout` plays a policy for a number of seeded episodes and prints return and length
 //! statistics; `list` prints the registered environments.
 
-use anyhow::{Context, bail};
+use anyhow::bail;
 use arld::env::conformance::{EnvReport, check_file};
 use arld::env::{self, Env};
 use arld::rng::NumpyRng;
@@ -44,8 +44,8 @@ pub enum EnvCommand {
         #[arg(long, value_enum, default_value_t = RolloutPolicy::Random)]
         policy: RolloutPolicy,
         /// Number of episodes.
-        #[arg(long, default_value_t = 100, value_name = "N")]
-        episodes: u64,
+        #[arg(long, default_value_t = 100, value_name = "N", value_parser = super::count(super::MAX_EPISODES))]
+        episodes: usize,
         /// Base seed: episode i resets with SEED+i, and the policy's generator is seeded with SEED.
         #[arg(long, default_value_t = 0, value_name = "S")]
         seed: u64,
@@ -151,22 +151,17 @@ fn check(files: &[PathBuf]) -> anyhow::Result<ExitCode> {
 fn rollout(
     env_id: &str,
     policy: RolloutPolicy,
-    episodes: u64,
+    episodes: usize,
     seed: u64,
     json: bool,
 ) -> anyhow::Result<ExitCode> {
-    if episodes == 0 {
-        bail!("--episodes must be at least 1");
-    }
-    let last_seed = seed
-        .checked_add(episodes - 1)
-        .context("--seed plus --episodes overflows the 64-bit seed range")?;
+    let last_seed = super::last_seed(seed, episodes)?;
     let mut env: Box<dyn Env> = env::make(env_id)?;
     let mut action_rng = NumpyRng::new(seed);
     let n_actions = env.n_actions();
     let episodes_played = env::rollouts(
         env.as_mut(),
-        usize::try_from(episodes).context("--episodes is too large")?,
+        episodes,
         |i| Some(seed + i as u64),
         |_| {
             Ok::<_, anyhow::Error>(match policy {

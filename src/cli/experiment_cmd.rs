@@ -111,8 +111,8 @@ pub struct ReproduceArgs {
     /// Only these environments (repeatable) [default: all four tasks].
     #[arg(long)]
     env: Vec<String>,
-    /// Seeds per configuration.
-    #[arg(long, default_value_t = 20)]
+    /// Seeds per configuration (0..SEEDS).
+    #[arg(long, default_value_t = 20, value_parser = clap::value_parser!(u64).range(1..=arld::experiment::sweep::MAX_SEEDS))]
     seeds: u64,
     /// A few minutes on CartPole-v0: the methods comparison with 3 seeds.
     #[arg(long)]

@@ -53,7 +53,7 @@ pub enum ExpertCommand {
         #[arg(long)]
         checkpoint_every: Option<usize>,
         /// Episodes per checkpoint evaluation.
-        #[arg(long, default_value_t = 100)]
+        #[arg(long, default_value_t = 100, value_parser = super::count(super::MAX_EPISODES))]
         episodes: usize,
         /// Override one training config key (repeatable).
         #[arg(long = "set", value_name = "KEY=VALUE")]
@@ -64,7 +64,8 @@ pub enum ExpertCommand {
     Eval {
         #[command(flatten)]
         expert: ExpertArgs,
-        #[arg(long, default_value_t = 100)]
+        /// Episodes to play (each from its own seed).
+        #[arg(long, default_value_t = 100, value_parser = super::count(super::MAX_EPISODES))]
         episodes: usize,
         /// Episode i resets with seed SEED + i.
         #[arg(long, default_value_t = 10_000)]
@@ -83,7 +84,7 @@ pub enum DemoCommand {
         #[command(flatten)]
         expert: ExpertArgs,
         /// Number of transitions.
-        #[arg(long)]
+        #[arg(long, value_parser = super::count(arld::expert::demos::MAX_TRANSITIONS as u64))]
         transitions: usize,
         /// Episode i resets with seed SEED + i.
         #[arg(long, default_value_t = 0)]
@@ -102,6 +103,7 @@ pub fn run_expert(cmd: ExpertCommand) -> Result<ExitCode> {
             seed,
             json,
         } => {
+            super::last_seed(seed, episodes)?;
             let mut e = args.build(seed)?;
             let ExpertArgs { env, expert, .. } = args;
             let s = evaluate_expert(e.as_mut(), &env, episodes, seed)?;

@@ -158,7 +158,19 @@ pub fn run(args: TrainArgs) -> anyhow::Result<ExitCode> {
             }
             return Ok(ExitCode::from(arld::interrupt::exit_status()));
         }
-        Err(err) => return Err(err),
+        Err(err) => {
+            // Whatever ended it, the run stays incomplete: no summary.json, its logs whole up to here.
+            eprintln!("error: {}", super::error_line(&err));
+            if !dir.join(arld::train::run_dir::CONFIG_FILE).is_file() {
+                return Ok(ExitCode::FAILURE);
+            }
+            eprintln!(
+                "the run in {} is incomplete: its logs (episodes.csv, queries.csv, eval.csv once an evaluation \
+                 ran) end where it stopped, and it has no summary.json",
+                dir.display()
+            );
+            return Ok(ExitCode::FAILURE);
+        }
     };
     println!(
         "{}: steps to solve {}{}, final score {:.2}, queries {}, {:.0} steps/s, {:.1} s -> {}",

@@ -68,7 +68,10 @@ fn deserialize_seeds<'de, D: serde::Deserializer<'de>>(
     deserializer: D,
 ) -> Result<Vec<u64>, D::Error> {
     match SeedsValue::deserialize(deserializer) {
-        Ok(SeedsValue::Count(n)) => Ok((0..n).collect()),
+        Ok(SeedsValue::Count(n)) => {
+            check_seed_count(n).map_err(serde::de::Error::custom)?;
+            Ok((0..n).collect())
+        }
         Ok(SeedsValue::List(list)) => Ok(list),
         Err(_) => Err(serde::de::Error::custom(
             "`seeds` must be a count (seeds = 20 means seeds 0..19) or a list of non-negative integers",
@@ -83,7 +86,11 @@ struct SweepFile {
     sweep: SweepGrid,
 }
 
-/// Parses seeds given on a command line: `20` (seeds 0..19), `3..8` (seeds 3..7) or `0,4,9`.
+/// The most seeds a sweep runs per configuration (the paper used 20).
+pub const MAX_SEEDS: u64 = 10_000;
+
+/// Parses seeds given on a command line: `20` (seeds 0..19), `3..8` (seeds 3..7) or `0,4,9`; at most
+/// [`MAX_SEEDS`] of them (their values are checked with the rest of the grid, [`SweepGrid::validate`]).
 pub fn parse_seeds(text: &str) -> Result<Vec<u64>> {
     let text = text.trim();
     let parse = |s: &str| -> Result<u64> {
@@ -91,17 +98,29 @@ pub fn parse_seeds(text: &str) -> Result<Vec<u64>> {
             .parse::<u64>()
             .with_context(|| format!("'{s}' is not a non-negative integer seed"))
     };
-    if let Some((start, end)) = text.split_once("..") {
+    let seeds: Vec<u64> = if let Some((start, end)) = text.split_once("..") {
         let (start, end) = (parse(start)?, parse(end)?);
         if start >= end {
             bail!("seed range '{text}' is empty (use START..END with START < END)");
         }
-        Ok((start..end).collect())
+        check_seed_count(end - start)?;
+        (start..end).collect()
     } else if text.contains(',') {
-        text.split(',').map(parse).collect()
+        text.split(',').map(parse).collect::<Result<_>>()?
     } else {
-        Ok((0..parse(text)?).collect())
+        let n = parse(text)?;
+        check_seed_count(n)?;
+        (0..n).collect()
+    };
+    check_seed_count(seeds.len() as u64)?;
+    Ok(seeds)
+}
+
+fn check_seed_count(n: u64) -> Result<()> {
+    if n > MAX_SEEDS {
+        bail!("--seeds asks for {n} seeds per configuration; a sweep runs at most {MAX_SEEDS}");
     }
+    Ok(())
 }
 
 /// Characters allowed in names that become directory names.
@@ -233,7 +252,12 @@ impl SweepGrid {
         check_list("envs", &self.envs, true)?;
         check_list("methods", &self.methods, true)?;
         check_list("nets", &self.nets, true)?;
+        check_seed_count(self.seeds.len() as u64)?;
         check_list("seeds", &self.seeds, true)?;
+        let max_seed = crate::train::config::MAX_SEED;
+        if let Some(s) = self.seeds.iter().find(|&&s| s > max_seed) {
+            bail!("seed {s} is too large for the field `seed`: at most {max_seed}");
+        }
         check_list("t_query", &self.t_query, false)?;
         check_list("experts", &self.experts, false)?;
         check_list("vary", &self.vary, false)?;

@@ -57,6 +57,13 @@ struct Header {
     episodes: usize,
 }
 
+/// The most transitions a demonstration set is collected with (about 2 GB in memory for LunarLander).
+pub const MAX_TRANSITIONS: usize = 10_000_000;
+/// The largest demonstration file read (a LunarLander set of 100k transitions is about 30 MB).
+pub const MAX_DEMO_FILE_BYTES: u64 = 4 << 30;
+/// Fewer bytes than any transition line takes (the shortest, with empty vectors and one-digit numbers, has 95).
+const MIN_TRANSITION_BYTES: u64 = 64;
+
 /// A set of demonstrations for one environment.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Demonstrations {
@@ -80,7 +87,7 @@ impl Demonstrations {
         n: usize,
         seed: u64,
     ) -> Result<Self> {
-        let mut transitions = Vec::with_capacity(n);
+        let mut transitions = Vec::with_capacity(n.min(1 << 16)); // a hint: grows as episodes come
         let mut episode = 0usize;
         while transitions.len() < n {
             let mut obs = env.reset(Some(seed + episode as u64));
@@ -229,11 +236,38 @@ impl Demonstrations {
         Ok(())
     }
 
-    /// Reads and checks a demonstration file; `expect_env` rejects a file recorded on another environment.
+    /// Reads and checks a demonstration file; `expect_env` rejects a file recorded on another environment. A
+    /// file with no transitions is an error: the methods that load demonstrations pre-train on them.
     pub fn load(path: &Path, expect_env: Option<&str>) -> Result<Self> {
         let file = std::fs::File::open(path)
             .with_context(|| format!("cannot open demonstration file {}", path.display()))?;
-        let mut lines = BufReader::new(file).lines();
+        let meta = file
+            .metadata()
+            .with_context(|| format!("cannot read demonstration file {}", path.display()))?;
+        ensure!(
+            meta.is_file(),
+            "demonstration file {} is not a regular file",
+            path.display()
+        );
+        ensure!(
+            meta.len() <= MAX_DEMO_FILE_BYTES,
+            "demonstration file {} has {} bytes; files over {} GiB are refused",
+            path.display(),
+            meta.len(),
+            MAX_DEMO_FILE_BYTES >> 30
+        );
+        Self::read(BufReader::new(file), meta.len(), path, expect_env)
+    }
+
+    /// Parses the `len` bytes of a demonstration file from `reader` (`path` only names it in errors). The
+    /// header's counts are checked against `len` before anything is allocated for them.
+    pub fn read(
+        reader: impl BufRead,
+        len: u64,
+        path: &Path,
+        expect_env: Option<&str>,
+    ) -> Result<Self> {
+        let mut lines = reader.lines();
         let first = lines
             .next()
             .with_context(|| format!("{}: empty demonstration file", path.display()))??;
@@ -259,9 +293,22 @@ impl Demonstrations {
                 header.env
             );
         }
+        ensure!(
+            header.transitions > 0,
+            "{}: the file holds no transitions; DQfD and ADQNP pre-train on demonstrations, so give a file \
+             with some (`arld demo collect`)",
+            path.display()
+        );
+        ensure!(
+            header.transitions as u64 <= len / MIN_TRANSITION_BYTES,
+            "{}:1: the header announces {} transitions, more than a file of {len} bytes can hold",
+            path.display(),
+            header.transitions
+        );
         let e =
             env::make(&header.env).map_err(|err| anyhow::anyhow!("{}:1: {err}", path.display()))?;
-        let mut transitions = Vec::with_capacity(header.transitions);
+        // Capacity is a hint only: the vector grows with what the file really holds.
+        let mut transitions = Vec::with_capacity(header.transitions.min(1 << 16));
         for (i, line) in lines.enumerate() {
             let line = line?;
             if line.trim().is_empty() {

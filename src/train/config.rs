@@ -364,6 +364,9 @@ fn format_bytes(bytes: f64) -> String {
 const IDENTITY_KEYS: [&str; 4] = ["env", "method", "net", "seed"];
 
 /// The largest config file read (a whole configuration is about 1 KB).
+/// The largest seed: a run's configuration is TOML, whose integers are signed 64-bit.
+pub const MAX_SEED: u64 = i64::MAX as u64;
+/// The config file size limit.
 pub const MAX_CONFIG_BYTES: u64 = 4 << 20;
 
 /// A run's configuration as given (low level): its identity and the values of config files and `--set` pairs
@@ -531,6 +534,11 @@ impl TrainConfig {
     /// The paper's configuration for `method` with `net` on `env` (docs/algorithm.md §9), before any value
     /// given by the user; [`ConfigInput::resolve`] starts from it.
     pub fn preset(env: &str, method: Method, net: NetKind, seed: u64) -> Result<Self> {
+        ensure!(
+            seed <= MAX_SEED,
+            "seed {seed} is too large for the field `seed`: at most {MAX_SEED} (the largest integer a config \
+             file holds)"
+        );
         let (p, schedule) = task_preset(env)?;
         let t_query = match net {
             NetKind::Noisy => p.t_query_noisy,

@@ -424,7 +424,7 @@ fn train_run(
                 &mut replay_rng,
                 &mut batch,
                 st.pretrain_done + 1,
-            );
+            )?;
             st.pretrain_done += 1;
             if let Some((ck, _)) = snapshots.as_mut() {
                 snapshot_point!(
@@ -529,8 +529,9 @@ fn train_run(
         if learning && (step + 1).is_multiple_of(cfg.train_freq) && replay.len() >= cfg.batch_size {
             let beta = cfg.beta0 + (1.0 - cfg.beta0) * (step as f64 / cfg.train_steps as f64);
             replay.sample(cfg.batch_size, beta as f32, &mut replay_rng, &mut batch);
-            let (stats, priorities) = agent.update(&batch);
-            replay.update_priorities(&batch.idx, priorities);
+            let stats = learn(cfg, &mut agent, &mut replay, &batch, || {
+                format!("step {}", step + 1)
+            })?;
             st.updates += 1;
             if st.updates.is_multiple_of(cfg.target_period) {
                 agent.sync_target();
@@ -650,7 +651,7 @@ pub fn pretrain(
 ) -> Result<()> {
     push_demos(cfg, replay, demos)?;
     for update in 1..=cfg.pretrain_steps {
-        pretrain_update(cfg, agent, replay, rng, batch, update);
+        pretrain_update(cfg, agent, replay, rng, batch, update)?;
     }
     agent.sync_target();
     Ok(())
@@ -685,13 +686,59 @@ fn pretrain_update(
     rng: &mut Pcg64,
     batch: &mut Batch,
     update: usize,
-) {
+) -> Result<()> {
     replay.sample_demo_only(cfg.batch_size, cfg.beta0 as f32, rng, batch);
-    let (_, priorities) = agent.update(batch);
-    replay.update_priorities(&batch.idx, priorities);
+    learn(cfg, agent, replay, batch, || {
+        format!("pre-training update {update}")
+    })?;
     if update.is_multiple_of(cfg.target_period) {
         agent.sync_target();
     }
+    Ok(())
+}
+
+/// A run whose learning blew up: a loss or the gradient is no longer a finite number.
+#[derive(Debug, thiserror::Error)]
+#[error(
+    "diverged at {at}: the {what} is {value}; the learning rate may be too high for this task: try a lower \
+     `lr` (now {lr}, e.g. --set lr={lower})"
+)]
+pub struct Diverged {
+    pub at: String,
+    pub what: &'static str,
+    pub value: f32,
+    pub lr: f64,
+    pub lower: f64,
+}
+
+/// One prioritized update on `batch` and the new priorities of its transitions. A loss or gradient that is not
+/// finite ends the run with [`Diverged`] (`at` says where), before a priority or weight is taken from it.
+fn learn(
+    cfg: &TrainConfig,
+    agent: &mut Agent,
+    replay: &mut Replay,
+    batch: &Batch,
+    at: impl FnOnce() -> String,
+) -> Result<crate::agent::UpdateStats> {
+    let (stats, priorities) = agent.update(batch);
+    let checked = [
+        ("TD loss", stats.td_loss),
+        ("margin loss", stats.margin_loss),
+        ("n-step loss", stats.nstep_loss),
+        ("gradient norm", stats.grad_norm),
+    ];
+    if let Some(&(what, value)) = checked.iter().find(|(_, v)| !v.is_finite()) {
+        return Err(Diverged {
+            at: at(),
+            what,
+            value,
+            lr: cfg.lr,
+            lower: cfg.lr / 10.0,
+        }
+        .into());
+    }
+    replay.update_priorities(&batch.idx, priorities);
+    Ok(stats)
 }
 
 /// Asks the expert for the action at `obs` (one step of a segment; `agent_action` on the step that opens it) and
