@@ -46,7 +46,7 @@ mod workspace;
 use rand::Rng;
 
 pub use adam::{Adam, Grads, clip_grad_norm};
-pub use io::ModelFileError;
+pub use io::{ModelFileError, parse_model};
 pub use layout::OutputKind;
 pub use noisy::{NoiseSample, noise_transform};
 pub use simd::{SimdCapError, SimdLevel, simd_level};

@@ -1,0 +1,35 @@
+#!/usr/bin/env bash
+# Runs every fuzz target for a set time (default 60 s each; SECONDS_PER_TARGET=N, or name targets as
+# arguments) and copies any input that crashed a target into fuzz/regressions/<target>/, where
+# tests/fuzz_regressions.rs replays it in the ordinary test suite. Needs cargo-fuzz (`cargo install
+# cargo-fuzz`); on a stable toolchain RUSTC_BOOTSTRAP=1 lets it use libFuzzer's sanitizer flags.
+# Prints one line per target: its time, its executions and what it found.
+set -euo pipefail
+cd "$(dirname "$0")"
+seconds="${SECONDS_PER_TARGET:-60}"
+targets=("$@")
+[ "${#targets[@]}" -gt 0 ] || targets=(config demos checkpoint trace)
+export RUSTC_BOOTSTRAP=1
+cargo fuzz build -O
+status=0
+for t in "${targets[@]}"; do
+  corpus="corpus/$t"
+  mkdir -p "$corpus" "artifacts/$t" "regressions/$t"
+  log="artifacts/$t/last-run.log"
+  # The committed seeds start the corpus; the corpus itself stays local (git-ignored).
+  set +e
+  cargo fuzz run -O "$t" "$corpus" "seeds/$t" -- -max_total_time="$seconds" -rss_limit_mb=2048 \
+    -malloc_limit_mb=2048 -timeout=20 -print_final_stats=1 >"$log" 2>&1
+  code=$?
+  set -e
+  execs=$(grep -o 'stat::number_of_executed_units: *[0-9]*' "$log" | grep -o '[0-9]*$' | tail -1)
+  found=0
+  for crash in artifacts/"$t"/crash-* artifacts/"$t"/oom-* artifacts/"$t"/timeout-* artifacts/"$t"/leak-*; do
+    [ -e "$crash" ] || continue
+    cp "$crash" "regressions/$t/"
+    found=$((found + 1))
+  done
+  echo "$t: ${seconds} s, ${execs:-?} executions, exit $code, $found crashing inputs (in regressions/$t)"
+  [ "$code" -eq 0 ] || status=1
+done
+exit "$status"
