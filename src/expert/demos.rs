@@ -301,7 +301,8 @@ impl Demonstrations {
         );
         ensure!(
             header.transitions as u64 <= len / MIN_TRANSITION_BYTES,
-            "{}:1: the header announces {} transitions, more than a file of {len} bytes can hold",
+            "{}: truncated demonstration file: the header announces {} transitions, more than a file of {len} \
+             bytes can hold",
             path.display(),
             header.transitions
         );

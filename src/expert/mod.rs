@@ -224,54 +224,103 @@ with probability P), `web[:OPTIONS]` (a person answering in a browser; see `arld
 program in any language speaking JSON lines on stdin/stdout, e.g. cmd:\"python examples/expert.py\"; the protocol \
 is in src/expert/process.rs and the README).";
 
-/// Whether the expert of `spec` can give demonstrations outside a run (collected before training): every kind
-/// but the web expert, which answers a running training loop's queries only.
-pub fn demonstrates(spec: &str) -> bool {
-    spec.split(':').next() != Some("web")
+/// An expert spec, parsed: which expert [`from_spec`] builds. Parsing checks the form of every part, so that a
+/// configuration can be refused before any work (a run validates its spec first); building then loads
+/// files, starts processes and servers.
+#[derive(Clone, Debug, PartialEq)]
+pub enum ExpertSpec {
+    /// `checkpoint:PATH`.
+    Checkpoint(PathBuf),
+    /// `shipped:weak` or `shipped:perfect`.
+    Shipped(&'static str),
+    /// `cmd:COMMAND`.
+    Command(String),
+    /// `scripted`.
+    Scripted,
+    /// `web[:OPTIONS]`.
+    Web(web::WebOptions),
+    /// `noisy:P:SPEC`.
+    Noisy { p: f64, inner: Box<ExpertSpec> },
+}
+
+impl std::str::FromStr for ExpertSpec {
+    type Err = anyhow::Error;
+
+    fn from_str(spec: &str) -> Result<Self> {
+        let (kind, rest) = spec.split_once(':').unwrap_or((spec, ""));
+        Ok(match kind {
+            "checkpoint" if !rest.is_empty() => Self::Checkpoint(PathBuf::from(rest)),
+            "shipped" if rest == "weak" => Self::Shipped("weak"),
+            "shipped" if rest == "perfect" => Self::Shipped("perfect"),
+            "cmd" if !rest.trim().is_empty() => Self::Command(rest.to_string()),
+            "scripted" if rest.is_empty() => Self::Scripted,
+            "web" => Self::Web(rest.parse()?),
+            "noisy" => {
+                let (p, inner) = rest
+                    .split_once(':')
+                    .context("noisy expert spec must be noisy:P:SPEC")?;
+                let p: f64 = p
+                    .parse()
+                    .with_context(|| format!("bad probability '{p}' in expert spec '{spec}'"))?;
+                ensure!(
+                    (0.0..=1.0).contains(&p),
+                    "the random-action probability of '{spec}' must be in [0, 1], got {p}"
+                );
+                Self::Noisy {
+                    p,
+                    inner: Box::new(inner.parse()?),
+                }
+            }
+            _ => bail!("unknown expert spec '{spec}'. {SPEC_HELP}"),
+        })
+    }
+}
+
+impl ExpertSpec {
+    /// Whether this expert can give demonstrations outside a run (collected before training): every kind but
+    /// the web expert, which answers a running training loop's queries only.
+    pub fn demonstrates(&self) -> bool {
+        match self {
+            Self::Web(_) => false,
+            Self::Noisy { inner, .. } => inner.demonstrates(),
+            _ => true,
+        }
+    }
 }
 
 /// Builds an expert from a spec for the environment `env_id`; `seed` seeds any randomness the expert has and
 /// `timeout_s` bounds an expert process's answer.
 pub fn from_spec(spec: &str, env_id: &str, seed: u64, timeout_s: f64) -> Result<Box<dyn Expert>> {
+    build(&spec.parse()?, env_id, seed, timeout_s)
+}
+
+/// Builds the expert of a parsed spec ([`from_spec`]).
+pub fn build(
+    spec: &ExpertSpec,
+    env_id: &str,
+    seed: u64,
+    timeout_s: f64,
+) -> Result<Box<dyn Expert>> {
     let env_spec = *crate::env::spec(env_id)?;
-    let (kind, rest) = spec.split_once(':').unwrap_or((spec, ""));
-    match kind {
-        "checkpoint" if !rest.is_empty() => Ok(Box::new(CheckpointExpert::load(
-            Path::new(rest),
-            &env_spec,
-        )?)),
-        "shipped" if matches!(rest, "weak" | "perfect") => {
-            let path = shipped_path(env_id, rest);
+    Ok(match spec {
+        ExpertSpec::Checkpoint(path) => Box::new(CheckpointExpert::load(path, &env_spec)?),
+        ExpertSpec::Shipped(quality) => {
+            let path = shipped_path(env_id, quality);
             ensure!(
                 path.exists(),
-                "no shipped {rest} expert for {env_id} (looked for {})",
+                "no shipped {quality} expert for {env_id} (looked for {})",
                 path.display()
             );
-            Ok(Box::new(CheckpointExpert::load(&path, &env_spec)?))
+            Box::new(CheckpointExpert::load(&path, &env_spec)?)
         }
-        "cmd" => Ok(Box::new(process::ProcessExpert::spawn(
-            rest, &env_spec, timeout_s,
-        )?)),
-        "scripted" if rest.is_empty() => Ok(Box::new(scripted::ScriptedExpert::new(env_id)?)),
-        "web" => Ok(Box::new(web::WebExpert::start(
-            &rest.parse::<web::WebOptions>()?,
-            env_id,
-        )?)),
-        "noisy" => {
-            let (p, inner) = rest
-                .split_once(':')
-                .context("noisy expert spec must be noisy:P:SPEC")?;
-            let p: f64 = p
-                .parse()
-                .with_context(|| format!("bad probability '{p}' in expert spec '{spec}'"))?;
-            let inner = from_spec(inner, env_id, seed.wrapping_add(1), timeout_s)?;
-            Ok(Box::new(NoisyExpert::new(
-                inner,
-                p,
-                env_spec.n_actions,
-                seed,
-            )?))
+        ExpertSpec::Command(command) => Box::new(process::ProcessExpert::spawn(
+            command, &env_spec, timeout_s,
+        )?),
+        ExpertSpec::Scripted => Box::new(scripted::ScriptedExpert::new(env_id)?),
+        ExpertSpec::Web(options) => Box::new(web::WebExpert::start(options, env_id)?),
+        ExpertSpec::Noisy { p, inner } => {
+            let inner = build(inner, env_id, seed.wrapping_add(1), timeout_s)?;
+            Box::new(NoisyExpert::new(inner, *p, env_spec.n_actions, seed)?)
         }
-        _ => bail!("unknown expert spec '{spec}'. {SPEC_HELP}"),
-    }
+    })
 }

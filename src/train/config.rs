@@ -736,10 +736,12 @@ impl TrainConfig {
                 "{} needs an expert: `expert` must not be empty",
                 self.method
             );
-        }
-        if self.method.pretrains() && self.demo_file.is_empty() {
+            let spec: crate::expert::ExpertSpec = self
+                .expert
+                .parse()
+                .context("config key `expert` is not an expert spec")?;
             ensure!(
-                crate::expert::demonstrates(&self.expert),
+                !self.method.pretrains() || !self.demo_file.is_empty() || spec.demonstrates(),
                 "{} pre-trains on demonstrations collected from the expert before training, which the expert \
                  `{}` cannot give (it answers queries during training only): give them with --demos FILE \
                  (`demo_file`)",
