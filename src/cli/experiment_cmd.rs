@@ -4,7 +4,9 @@ use arld::experiment::protocol::{paper_grids, part_names};
 use arld::experiment::report::report;
 use arld::experiment::run_spec;
 use arld::experiment::slurm::{self, SlurmOptions};
-use arld::experiment::sweep::{RunState, Shard, SweepGrid, run_grid, run_grid_shard, sweep_status};
+use arld::experiment::sweep::{
+    RunState, Shard, SweepGrid, SweepOutcome, run_grid, run_grid_shard, sweep_status,
+};
 use arld::experiment::verdict;
 use clap::Args;
 use std::path::PathBuf;
@@ -161,15 +163,11 @@ pub fn run_sweep(args: SweepArgs) -> Result<ExitCode> {
         return submit_slurm(&args, &grid, &out);
     }
     arld::interrupt::install()?;
-    let outcome = match run_grid_shard(&grid, &out, args.jobs, args.shard, &run_spec) {
-        Ok(outcome) => outcome,
-        Err(err) if arld::interrupt::requested() => {
-            eprintln!(
-                "stopped: the runs in progress wrote snapshots; the same command continues them\n{err:#}"
-            );
-            return Ok(ExitCode::from(slurm::EXIT_INTERRUPTED));
-        }
-        Err(err) => return Err(err),
+    let Some(outcome) = interruptible(run_grid_shard(
+        &grid, &out, args.jobs, args.shard, &run_spec,
+    ))?
+    else {
+        return Ok(ExitCode::from(slurm::EXIT_INTERRUPTED));
     };
     for (path, problem) in &outcome.damaged {
         println!("damaged and run again: {} ({problem})", path.display());
@@ -290,6 +288,21 @@ fn print_report(dir: &std::path::Path, out: &std::path::Path, sustain: usize) ->
     Ok(ExitCode::SUCCESS)
 }
 
+/// The outcome of a sweep, or `None` when it was stopped (Ctrl-C, SIGTERM): then its runs in progress wrote
+/// snapshots, and the same command continues them.
+fn interruptible(outcome: Result<SweepOutcome>) -> Result<Option<SweepOutcome>> {
+    match outcome {
+        Ok(outcome) => Ok(Some(outcome)),
+        Err(err) if arld::interrupt::requested() => {
+            eprintln!(
+                "stopped: the runs in progress wrote snapshots; the same command continues them\n{err:#}"
+            );
+            Ok(None)
+        }
+        Err(err) => Err(err),
+    }
+}
+
 pub fn run_reproduce(args: ReproduceArgs) -> Result<ExitCode> {
     let (envs, seeds, parts) = if args.quick {
         (
@@ -309,6 +322,7 @@ pub fn run_reproduce(args: ReproduceArgs) -> Result<ExitCode> {
     for e in &envs {
         arld::env::make(e)?;
     }
+    arld::interrupt::install()?;
     let mut ran_any = false;
     for (name, mut grid) in paper_grids(seeds) {
         if !parts.is_empty() && !parts.iter().any(|p| p == name) {
@@ -322,7 +336,9 @@ pub fn run_reproduce(args: ReproduceArgs) -> Result<ExitCode> {
         }
         ran_any = true;
         eprintln!("== {name}: {} runs", grid.specs()?.len());
-        let outcome = run_grid(&grid, &args.out, args.jobs, &run_spec)?;
+        let Some(outcome) = interruptible(run_grid(&grid, &args.out, args.jobs, &run_spec))? else {
+            return Ok(ExitCode::from(slurm::EXIT_INTERRUPTED));
+        };
         eprintln!(
             "   {} complete ({} were already)",
             outcome.total, outcome.already_complete

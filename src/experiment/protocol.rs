@@ -47,6 +47,20 @@ pub const ABLATIONS: [(&str, &[&str]); 2] = [
     ),
 ];
 
+/// The ablations repeated on the harder tasks ([`HARDER_TASKS`]), chosen from the Acrobot-v1 results at 20 seeds:
+/// (a) time limits as terminal and (c) the budget in queries each changed a ranking there, and (d) epsilon over the
+/// whole run is the first candidate for our DQN's failure on MountainCar-v0.
+pub const HARDER_ABLATIONS: [(&str, &[&str]); 2] = [
+    (
+        "timeout_as_terminal=true,eps_fraction=1",
+        &["dqn", "bdqn", "adqn"],
+    ),
+    ("budget_unit=queries", &["bdqn", "adqn"]),
+];
+
+/// The tasks of [`HARDER_ABLATIONS`], cheapest first.
+pub const HARDER_TASKS: [&str; 2] = ["MountainCar-v0", "LunarLander-v2"];
+
 /// (e) CartPole-v0's target period: the notes' 500 instead of our tuned 250.
 pub const CARTPOLE_TARGET_ABLATION: &str = "target_period=500";
 
@@ -62,7 +76,7 @@ pub const PAPER_SEEDS: u64 = 20;
 /// - `experts`: ADQN and DQfD on Lunar Lander x both nets x three experts (Figure 4);
 /// - `n_r`: ADQN on Acrobot x both nets x N_r in {100, 10000} (1000 is the methods part's);
 /// - `ablations`: [`ABLATIONS`] on Acrobot and [`CARTPOLE_TARGET_ABLATION`] on CartPole, for DQN, BDQN and ADQN
-///   x both nets (the methods part's runs are the baseline).
+///   x both nets (the methods part's runs are the baseline), then [`HARDER_ABLATIONS`] on [`HARDER_TASKS`].
 ///
 /// Every other setting is left to the per-task presets of the training code. A part may have several grids.
 pub fn paper_grids(seeds: u64) -> Vec<(&'static str, SweepGrid)> {
@@ -133,6 +147,11 @@ pub fn paper_grids(seeds: u64) -> Vec<(&'static str, SweepGrid)> {
             &["dqn", "bdqn", "adqn"],
         ),
     ));
+    for env in HARDER_TASKS {
+        for (vary, methods) in HARDER_ABLATIONS {
+            grids.push(("ablations", ablation(env, vary, methods)));
+        }
+    }
     grids
 }
 
@@ -163,7 +182,11 @@ mod tests {
                 2 * 2 * 20,
                 3 * 2 * 2 * 20,
                 2 * 2 * 2 * 20,
-                3 * 2 * 20
+                3 * 2 * 20,
+                3 * 2 * 2 * 20,
+                2 * 2 * 20,
+                3 * 2 * 2 * 20,
+                2 * 2 * 20
             ]
         );
         assert_eq!(
