@@ -13,7 +13,7 @@
 //! functions of the float32 reset state in float32 (NumPy's own float32 `cos`/`sin`); here they are evaluated
 //! in float64 and rounded, which agrees except in about one case in a thousand, by one float32 ulp.
 
-use super::{Env, EnvError, EnvRng, EpisodeClock, Outcome, check_state};
+use super::{Env, EnvCore, EnvError, Outcome};
 use std::f64::consts::PI;
 
 const ID: &str = "Acrobot-v1";
@@ -38,8 +38,7 @@ const TORQUES: [f64; 3] = [-1.0, 0.0, 1.0];
 pub struct Acrobot {
     /// `[theta1, theta2, dtheta1, dtheta2]` in float64.
     state: [f64; 4],
-    rng: EnvRng,
-    clock: EpisodeClock,
+    core: EnvCore,
 }
 
 impl Default for Acrobot {
@@ -52,8 +51,7 @@ impl Acrobot {
     pub fn new() -> Self {
         Self {
             state: [0.0; 4],
-            rng: EnvRng::default(),
-            clock: EpisodeClock::new(ID, 3, 500),
+            core: EnvCore::new(ID),
         }
     }
 
@@ -141,30 +139,26 @@ fn bound(x: f64, low: f64, high: f64) -> f64 {
 }
 
 impl Env for Acrobot {
-    fn generator(&self) -> Option<crate::rng::NumpyRng> {
-        self.rng.get()
+    fn core(&self) -> Option<&EnvCore> {
+        Some(&self.core)
     }
 
-    fn set_generator(&mut self, rng: Option<crate::rng::NumpyRng>) {
-        self.rng.set(rng);
-    }
-
-    fn spec(&self) -> &'static super::EnvSpec {
-        super::spec(ID).expect("Acrobot-v1 is registered")
+    fn core_mut(&mut self) -> Option<&mut EnvCore> {
+        Some(&mut self.core)
     }
 
     fn reset_into(&mut self, seed: Option<u64>, obs: &mut [f32]) {
-        let rng = self.rng.reseed(seed);
+        let rng = self.core.rng.reseed(seed);
         for value in &mut self.state {
             // Gymnasium stores the drawn state as float32.
             *value = f64::from(rng.uniform(-0.1, 0.1) as f32);
         }
-        self.clock.start();
+        self.core.clock.start();
         obs.copy_from_slice(&self.observation());
     }
 
     fn step_into(&mut self, action: usize, obs: &mut [f32]) -> Result<Outcome, EnvError> {
-        self.clock.check_step(action)?;
+        self.core.clock.check_step(action)?;
         let next = rk4_step(self.state, TORQUES[action]);
         self.state = [
             wrap(next[0], -PI, PI),
@@ -174,7 +168,7 @@ impl Env for Acrobot {
         ];
         let [theta1, theta2, _, _] = self.state;
         let terminated = -theta1.cos() - (theta2 + theta1).cos() > 1.0;
-        let truncated = self.clock.finish_step(terminated);
+        let truncated = self.core.clock.finish_step(terminated);
         obs.copy_from_slice(&self.observation());
         Ok(Outcome {
             reward: if terminated { 0.0 } else { -1.0 },
@@ -193,9 +187,7 @@ impl Env for Acrobot {
 
     /// Overwrites `[theta1, theta2, dtheta1, dtheta2]` in float64 (Gymnasium's `env.unwrapped.state = ...`).
     fn set_state(&mut self, state: &[f64]) -> Result<Vec<f32>, EnvError> {
-        check_state(ID, state, 4)?;
-        self.state.copy_from_slice(state);
-        self.clock.start();
+        self.core.restart_at(state, &mut self.state)?;
         Ok(self.observation().to_vec())
     }
 }

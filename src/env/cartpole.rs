@@ -8,7 +8,7 @@
 //! v0 and v1 differ only in the time limit (200 vs 500) and the solve threshold (195 vs 475).
 //! The initial state is four draws of `uniform(-0.05, 0.05)` (docs/environments.md, "Classic control").
 
-use super::{Env, EnvError, EnvRng, EpisodeClock, Outcome, check_state, spec};
+use super::{Env, EnvCore, EnvError, Outcome};
 
 const GRAVITY: f64 = 9.8;
 const MASS_CART: f64 = 1.0;
@@ -26,26 +26,21 @@ const THETA_THRESHOLD: f64 = 12.0 * 2.0 * std::f64::consts::PI / 360.0;
 /// CartPole with its Gymnasium time limit.
 #[derive(Debug, Clone)]
 pub struct CartPole {
-    spec: &'static super::EnvSpec,
     /// `[x, x_dot, theta, theta_dot]` in float64.
     state: [f64; 4],
-    rng: EnvRng,
-    clock: EpisodeClock,
+    core: EnvCore,
 }
 
 impl CartPole {
     /// `id` is `CartPole-v0` or `CartPole-v1`; any other id panics (use [`super::make`] for user input).
     pub fn new(id: &'static str) -> Self {
-        let spec = spec(id).expect("CartPole::new needs a registered id");
         assert!(
             id.starts_with("CartPole-"),
             "CartPole::new called with {id}"
         );
         Self {
-            spec,
             state: [0.0; 4],
-            rng: EnvRng::default(),
-            clock: EpisodeClock::new(spec.id, 2, spec.max_episode_steps),
+            core: EnvCore::new(id),
         }
     }
 
@@ -70,28 +65,25 @@ impl CartPole {
 }
 
 impl Env for CartPole {
-    fn generator(&self) -> Option<crate::rng::NumpyRng> {
-        self.rng.get()
+    fn core(&self) -> Option<&EnvCore> {
+        Some(&self.core)
     }
 
-    fn set_generator(&mut self, rng: Option<crate::rng::NumpyRng>) {
-        self.rng.set(rng);
-    }
-
-    fn spec(&self) -> &'static super::EnvSpec {
-        self.spec
+    fn core_mut(&mut self) -> Option<&mut EnvCore> {
+        Some(&mut self.core)
     }
 
     fn reset_into(&mut self, seed: Option<u64>, obs: &mut [f32]) {
-        self.rng
+        self.core
+            .rng
             .reseed(seed)
             .uniform_fill(-0.05, 0.05, &mut self.state);
-        self.clock.start();
+        self.core.clock.start();
         obs.copy_from_slice(&self.observation());
     }
 
     fn step_into(&mut self, action: usize, obs: &mut [f32]) -> Result<Outcome, EnvError> {
-        self.clock.check_step(action)?;
+        self.core.clock.check_step(action)?;
         let [x, x_dot, theta, theta_dot] = self.state;
         let force = if action == 1 { FORCE_MAG } else { -FORCE_MAG };
         let cos_theta = theta.cos();
@@ -115,7 +107,7 @@ impl Env for CartPole {
             || x > X_THRESHOLD
             || theta < -THETA_THRESHOLD
             || theta > THETA_THRESHOLD;
-        let truncated = self.clock.finish_step(terminated);
+        let truncated = self.core.clock.finish_step(terminated);
         obs.copy_from_slice(&self.observation());
         Ok(Outcome {
             reward: 1.0,
@@ -135,9 +127,7 @@ impl Env for CartPole {
 
     /// Overwrites `[x, x_dot, theta, theta_dot]` (Gymnasium's `env.unwrapped.state = ...`).
     fn set_state(&mut self, state: &[f64]) -> Result<Vec<f32>, EnvError> {
-        check_state(self.spec.id, state, 4)?;
-        self.state.copy_from_slice(state);
-        self.clock.start();
+        self.core.restart_at(state, &mut self.state)?;
         Ok(self.observation().to_vec())
     }
 }

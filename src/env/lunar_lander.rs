@@ -25,7 +25,7 @@ use wrapped2d::b2;
 use wrapped2d::dynamics::world::callbacks::ContactAccess;
 use wrapped2d::user_data::{UserData, UserDataTypes};
 
-use super::{Env, EnvError, EpisodeClock, Outcome};
+use super::{Env, EnvCore, EnvError, Outcome};
 use crate::rng::NumpyRng;
 
 // Constants of Gymnasium's lunar_lander.py (pixels unless stated; SCALE converts pixels to metres).
@@ -60,10 +60,9 @@ const VIEWPORT_H: f64 = 400.0;
 /// Number of terrain segments.
 const CHUNKS: usize = 11;
 
-/// Actions: 0 do nothing, 1 fire left orientation engine, 2 fire main engine, 3 fire right engine.
-const N_ACTIONS: usize = 4;
+/// Observation length. The four actions are 0 do nothing, 1 fire left orientation engine, 2 fire main engine,
+/// 3 fire right engine; the action count and time limit are the registered spec's ([`super::SPECS`]).
 const OBS_DIM: usize = 8;
-const MAX_EPISODE_STEPS: usize = 1000;
 
 /// What a Box2D body is, stored as its user data so the contact listener can tell bodies apart.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
@@ -295,6 +294,15 @@ impl Scene {
         }
     }
 
+    /// An engine's push: the impulse `-offset * strength` at the world point `at` (Gymnasium's
+    /// `ApplyLinearImpulse` for the particle the engine throws out at `offset` from the lander).
+    fn push(&mut self, (ox, oy): (f64, f64), at: (f64, f64), strength: f64) {
+        let impulse = vec2(-ox * strength, -oy * strength);
+        self.world
+            .body_mut(self.lander)
+            .apply_linear_impulse(&impulse, &vec2(at.0, at.1), true);
+    }
+
     /// Fires the engines of `action` (one of 0..4) with the given dispersion draws and advances the
     /// world by one frame. Returns the main and side engine powers (for the fuel cost).
     fn advance(&mut self, action: usize, dispersion: [f64; 2]) -> (f64, f64) {
@@ -313,14 +321,11 @@ impl Scene {
                 + side.0 * dispersion[1];
             let oy = -tip.1 * (MAIN_ENGINE_Y_LOCATION / SCALE + 2.0 * dispersion[0])
                 - side.1 * dispersion[1];
-            let impulse_pos = vec2(pos_x + ox, pos_y + oy);
-            let impulse = vec2(
-                -ox * MAIN_ENGINE_POWER * m_power,
-                -oy * MAIN_ENGINE_POWER * m_power,
+            self.push(
+                (ox, oy),
+                (pos_x + ox, pos_y + oy),
+                MAIN_ENGINE_POWER * m_power,
             );
-            self.world
-                .body_mut(self.lander)
-                .apply_linear_impulse(&impulse, &impulse_pos, true);
         }
 
         let mut s_power = 0.0;
@@ -331,17 +336,11 @@ impl Scene {
             let ox = tip.0 * dispersion[0] + side.0 * lever;
             let oy = -tip.1 * dispersion[0] - side.1 * lever;
             // Gymnasium offsets the side engines by 17 pixels horizontally, not SIDE_ENGINE_HEIGHT.
-            let impulse_pos = vec2(
+            let at = (
                 pos_x + ox - tip.0 * 17.0 / SCALE,
                 pos_y + oy + tip.1 * SIDE_ENGINE_HEIGHT / SCALE,
             );
-            let impulse = vec2(
-                -ox * SIDE_ENGINE_POWER * s_power,
-                -oy * SIDE_ENGINE_POWER * s_power,
-            );
-            self.world
-                .body_mut(self.lander)
-                .apply_linear_impulse(&impulse, &impulse_pos, true);
+            self.push((ox, oy), at, SIDE_ENGINE_POWER * s_power);
         }
 
         self.world.step((1.0 / FPS) as f32, 6 * 30, 2 * 30);
@@ -431,16 +430,14 @@ fn shaping(s: &[f64; OBS_DIM]) -> f64 {
 
 /// Gymnasium's LunarLander with discrete actions and no wind (`LunarLander-v2` / `LunarLander-v3`).
 pub struct LunarLander {
-    id: &'static str,
     /// Vertical gravity of the world (Gymnasium's `gravity` keyword; -10 in the registered task).
     gravity: f32,
-    rng: Option<NumpyRng>,
     scene: Option<Scene>,
     prev_shaping: f64,
     /// The last action (drawing only: which engine fired).
     last_action: usize,
-    /// Running flag and time limit.
-    clock: EpisodeClock,
+    /// Spec, generator, running flag and time limit.
+    core: EnvCore,
 }
 
 // SAFETY: `wrapped2d::World` holds raw pointers to a C++ `b2World` (and its bodies) that this struct
@@ -469,21 +466,20 @@ impl LunarLander {
             });
         }
         Ok(LunarLander {
-            id,
             gravity,
-            rng: None,
             scene: None,
             prev_shaping: 0.0,
             last_action: 0,
-            clock: EpisodeClock::new(id, N_ACTIONS, MAX_EPISODE_STEPS),
+            core: EnvCore::new(id),
         })
     }
 
     /// One frame of Gymnasium's `step` without the time limit: engines, physics, observation, reward.
     fn frame(&mut self, action: usize, first: bool) -> ([f32; OBS_DIM], f64, bool) {
         let rng = self
+            .core
             .rng
-            .as_mut()
+            .current()
             .expect("frame() runs only after reset() set the generator");
         let scene = self
             .scene
@@ -521,30 +517,20 @@ impl LunarLander {
 }
 
 impl Env for LunarLander {
-    fn generator(&self) -> Option<NumpyRng> {
-        self.rng.clone()
+    fn core(&self) -> Option<&EnvCore> {
+        Some(&self.core)
     }
 
-    fn set_generator(&mut self, rng: Option<NumpyRng>) {
-        self.rng = rng;
-    }
-
-    fn spec(&self) -> &'static super::EnvSpec {
-        super::spec(self.id).expect("LunarLander ids are registered")
+    fn core_mut(&mut self) -> Option<&mut EnvCore> {
+        Some(&mut self.core)
     }
 
     fn reset_into(&mut self, seed: Option<u64>, obs: &mut [f32]) {
-        match seed {
-            Some(seed) => self.rng = Some(NumpyRng::new(seed)),
-            // Gymnasium seeds from OS entropy on the first reset without a seed.
-            None if self.rng.is_none() => self.rng = Some(NumpyRng::from_entropy()),
-            None => {}
-        }
-        let rng = self.rng.as_mut().expect("generator set above");
+        let rng = self.core.rng.reseed(seed);
         // Drop the old world before building the new one (Gymnasium destroys, then creates).
         self.scene = None;
         self.scene = Some(Scene::build(rng, self.gravity));
-        self.clock.start();
+        self.core.clock.start();
         self.last_action = 0;
         // Gymnasium's reset returns the observation of one no-op step (outside the time limit count).
         let (first, _, _) = self.frame(0, true);
@@ -552,10 +538,10 @@ impl Env for LunarLander {
     }
 
     fn step_into(&mut self, action: usize, obs: &mut [f32]) -> Result<Outcome, EnvError> {
-        self.clock.check_step(action)?;
+        self.core.clock.check_step(action)?;
         let (next, reward, terminated) = self.frame(action, false);
         self.last_action = action;
-        let truncated = self.clock.finish_step(terminated);
+        let truncated = self.core.clock.finish_step(terminated);
         obs.copy_from_slice(&next);
         Ok(Outcome {
             reward,
@@ -611,7 +597,7 @@ mod tests {
         assert!(matches!(env.step(0), Err(EnvError::NeedsReset { .. })));
         env.reset(Some(0));
         assert!(matches!(
-            env.step(N_ACTIONS),
+            env.step(env.n_actions()),
             Err(EnvError::ActionOutOfRange {
                 action: 4,
                 n_actions: 4,
@@ -644,6 +630,8 @@ mod tests {
         // Find an episode the heuristic hovers through (some seeds reach the limit) and check the flags:
         // not truncated before step 1000, truncated on it, and no step after it without a reset.
         let mut env = LunarLander::new("LunarLander-v2");
+        let limit = env.max_episode_steps();
+        assert_eq!(limit, 1000);
         let mut found = false;
         for seed in 0..200 {
             let mut obs = env.reset(Some(seed));
@@ -655,9 +643,9 @@ mod tests {
                 if step.terminated || step.truncated {
                     break step;
                 }
-                assert!(steps < MAX_EPISODE_STEPS, "no truncation at the limit");
+                assert!(steps < limit, "no truncation at the limit");
             };
-            if steps == MAX_EPISODE_STEPS {
+            if steps == limit {
                 assert!(last.truncated);
                 assert!(matches!(env.step(0), Err(EnvError::NeedsReset { .. })));
                 found = true;

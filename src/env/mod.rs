@@ -115,8 +115,22 @@ pub trait Env: Send {
             truncated,
         })
     }
+    /// The bookkeeping of a built-in environment ([`EnvCore`]), which [`Env::spec`], [`Env::generator`] and
+    /// [`Env::set_generator`] read by default; `None` (the default) for an environment that implements those
+    /// three itself.
+    fn core(&self) -> Option<&EnvCore> {
+        None
+    }
+    /// [`Env::core`], to change.
+    fn core_mut(&mut self) -> Option<&mut EnvCore> {
+        None
+    }
     /// The registered facts of this environment (id, sizes, time limit, solve threshold).
-    fn spec(&self) -> &'static EnvSpec;
+    fn spec(&self) -> &'static EnvSpec {
+        self.core()
+            .expect("an environment without an EnvCore implements Env::spec")
+            .spec
+    }
     /// Length of the observation vector.
     fn obs_dim(&self) -> usize {
         self.spec().obs_dim
@@ -141,9 +155,15 @@ pub trait Env: Send {
     /// [`Env::set_generator`] it lets a run put an environment back where it was: restore the generator that
     /// the episode's reset drew from, reset, and replay the episode's actions (our environments are
     /// deterministic given both).
-    fn generator(&self) -> Option<NumpyRng>;
+    fn generator(&self) -> Option<NumpyRng> {
+        self.core().and_then(|core| core.rng.get())
+    }
     /// Replaces the generator (see [`Env::generator`]).
-    fn set_generator(&mut self, rng: Option<NumpyRng>);
+    fn set_generator(&mut self, rng: Option<NumpyRng>) {
+        if let Some(core) = self.core_mut() {
+            core.rng.set(rng);
+        }
+    }
     /// Overwrites the internal float64 state (classic control; used by the `set` conformance case).
     /// Resets the step counter. Environments without such a state return an error.
     fn set_state(&mut self, _state: &[f64]) -> Result<Vec<f32>, EnvError> {
@@ -364,6 +384,36 @@ pub fn make(id: &str) -> Result<Box<dyn Env>, EnvError> {
     }
 }
 
+/// What every built-in environment keeps besides its physics: its registered facts, the reset generator and the
+/// step bookkeeping (see [`Env::core`]).
+#[derive(Debug, Clone)]
+pub struct EnvCore {
+    pub spec: &'static EnvSpec,
+    pub rng: EnvRng,
+    pub clock: EpisodeClock,
+}
+
+impl EnvCore {
+    /// The bookkeeping of the registered environment `id`; panics if `id` is not registered (built-in ids are).
+    pub fn new(id: &str) -> Self {
+        let spec = spec(id).unwrap_or_else(|err| panic!("{err}"));
+        EnvCore {
+            spec,
+            rng: EnvRng::default(),
+            clock: EpisodeClock::new(spec.id, spec.n_actions, spec.max_episode_steps),
+        }
+    }
+
+    /// `set_state` of a classic-control task: checks `state` (see [`check_state`]), copies it into `target` (of
+    /// the state's length) and starts a new episode.
+    pub fn restart_at(&mut self, state: &[f64], target: &mut [f64]) -> Result<(), EnvError> {
+        check_state(self.spec.id, state, target.len())?;
+        target.copy_from_slice(state);
+        self.clock.start();
+        Ok(())
+    }
+}
+
 /// The seeding rule every environment shares (Gymnasium's `Env.reset(seed=...)` and `np_random`).
 ///
 /// `Some(seed)` builds a fresh `np.random.default_rng(seed)`; `None` keeps drawing from the current generator,
@@ -382,6 +432,11 @@ impl EnvRng {
     /// Replaces the current generator.
     pub fn set(&mut self, rng: Option<NumpyRng>) {
         self.rng = rng;
+    }
+
+    /// The generator the last reset left, to keep drawing from within the episode; `None` before any reset.
+    pub fn current(&mut self) -> Option<&mut NumpyRng> {
+        self.rng.as_mut()
     }
 
     /// Applies the reset seed and returns the generator to draw the initial state from.

@@ -7,7 +7,7 @@
 //! and velocity >= 0; reward -1 per step; limit 200 steps. The initial position is one draw of
 //! `uniform(-0.6, -0.4)`, the initial velocity 0 (docs/environments.md, "Classic control").
 
-use super::{Env, EnvError, EnvRng, EpisodeClock, Outcome, check_state};
+use super::{Env, EnvCore, EnvError, Outcome};
 
 const ID: &str = "MountainCar-v0";
 const MIN_POSITION: f64 = -1.2;
@@ -28,8 +28,7 @@ fn hill_height(x: f64) -> f64 {
 pub struct MountainCar {
     position: f64,
     velocity: f64,
-    rng: EnvRng,
-    clock: EpisodeClock,
+    core: EnvCore,
 }
 
 impl Default for MountainCar {
@@ -43,8 +42,7 @@ impl MountainCar {
         Self {
             position: 0.0,
             velocity: 0.0,
-            rng: EnvRng::default(),
-            clock: EpisodeClock::new(ID, 3, 200),
+            core: EnvCore::new(ID),
         }
     }
 
@@ -59,27 +57,23 @@ impl MountainCar {
 }
 
 impl Env for MountainCar {
-    fn generator(&self) -> Option<crate::rng::NumpyRng> {
-        self.rng.get()
+    fn core(&self) -> Option<&EnvCore> {
+        Some(&self.core)
     }
 
-    fn set_generator(&mut self, rng: Option<crate::rng::NumpyRng>) {
-        self.rng.set(rng);
-    }
-
-    fn spec(&self) -> &'static super::EnvSpec {
-        super::spec(ID).expect("MountainCar-v0 is registered")
+    fn core_mut(&mut self) -> Option<&mut EnvCore> {
+        Some(&mut self.core)
     }
 
     fn reset_into(&mut self, seed: Option<u64>, obs: &mut [f32]) {
-        self.position = self.rng.reseed(seed).uniform(-0.6, -0.4);
+        self.position = self.core.rng.reseed(seed).uniform(-0.6, -0.4);
         self.velocity = 0.0;
-        self.clock.start();
+        self.core.clock.start();
         obs.copy_from_slice(&self.observation());
     }
 
     fn step_into(&mut self, action: usize, obs: &mut [f32]) -> Result<Outcome, EnvError> {
-        self.clock.check_step(action)?;
+        self.core.clock.check_step(action)?;
         let push = (action as f64 - 1.0) * FORCE;
         let mut velocity = self.velocity + (push + (3.0 * self.position).cos() * (-GRAVITY));
         velocity = velocity.clamp(-MAX_SPEED, MAX_SPEED);
@@ -91,7 +85,7 @@ impl Env for MountainCar {
         self.position = position;
         self.velocity = velocity;
         let terminated = position >= GOAL_POSITION && velocity >= GOAL_VELOCITY;
-        let truncated = self.clock.finish_step(terminated);
+        let truncated = self.core.clock.finish_step(terminated);
         obs.copy_from_slice(&self.observation());
         Ok(Outcome {
             reward: -1.0,
@@ -119,10 +113,9 @@ impl Env for MountainCar {
 
     /// Overwrites `[position, velocity]` (Gymnasium's `env.unwrapped.state = ...`).
     fn set_state(&mut self, state: &[f64]) -> Result<Vec<f32>, EnvError> {
-        check_state(ID, state, 2)?;
-        self.position = state[0];
-        self.velocity = state[1];
-        self.clock.start();
+        let mut new_state = [0.0; 2];
+        self.core.restart_at(state, &mut new_state)?;
+        [self.position, self.velocity] = new_state;
         Ok(self.observation().to_vec())
     }
 }
