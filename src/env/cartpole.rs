@@ -8,7 +8,8 @@
 //! v0 and v1 differ only in the time limit (200 vs 500) and the solve threshold (195 vs 475).
 //! The initial state is four draws of `uniform(-0.05, 0.05)` (docs/environments.md, "Classic control").
 
-use super::{Env, EnvCore, EnvError, Outcome};
+use super::{Dynamics, EnvRng, Simulated};
+use crate::rng::NumpyRng;
 
 const GRAVITY: f64 = 9.8;
 const MASS_CART: f64 = 1.0;
@@ -24,11 +25,12 @@ const X_THRESHOLD: f64 = 2.4;
 const THETA_THRESHOLD: f64 = 12.0 * 2.0 * std::f64::consts::PI / 360.0;
 
 /// CartPole with its Gymnasium time limit.
+pub type CartPole = Simulated<CartPolePhysics>;
+
+/// CartPole's state: `[x, x_dot, theta, theta_dot]` in float64.
 #[derive(Debug, Clone)]
-pub struct CartPole {
-    /// `[x, x_dot, theta, theta_dot]` in float64.
+pub struct CartPolePhysics {
     state: [f64; 4],
-    core: EnvCore,
 }
 
 impl CartPole {
@@ -38,10 +40,7 @@ impl CartPole {
             id.starts_with("CartPole-"),
             "CartPole::new called with {id}"
         );
-        Self {
-            state: [0.0; 4],
-            core: EnvCore::new(id),
-        }
+        Simulated::with_physics(id, CartPolePhysics { state: [0.0; 4] })
     }
 
     /// CartPole-v0: 200 steps, solved at 195.
@@ -56,34 +55,16 @@ impl CartPole {
 
     /// The float64 state `[x, x_dot, theta, theta_dot]`.
     pub fn state(&self) -> [f64; 4] {
-        self.state
-    }
-
-    fn observation(&self) -> [f32; 4] {
-        self.state.map(|value| value as f32)
+        self.physics().state
     }
 }
 
-impl Env for CartPole {
-    fn core(&self) -> Option<&EnvCore> {
-        Some(&self.core)
+impl Dynamics for CartPolePhysics {
+    fn reset(&mut self, rng: &mut NumpyRng) {
+        rng.uniform_fill(-0.05, 0.05, &mut self.state);
     }
 
-    fn core_mut(&mut self) -> Option<&mut EnvCore> {
-        Some(&mut self.core)
-    }
-
-    fn reset_into(&mut self, seed: Option<u64>, obs: &mut [f32]) {
-        self.core
-            .rng
-            .reseed(seed)
-            .uniform_fill(-0.05, 0.05, &mut self.state);
-        self.core.clock.start();
-        obs.copy_from_slice(&self.observation());
-    }
-
-    fn step_into(&mut self, action: usize, obs: &mut [f32]) -> Result<Outcome, EnvError> {
-        self.core.clock.check_step(action)?;
+    fn step(&mut self, action: usize, _rng: &mut EnvRng) -> (f64, bool) {
         let [x, x_dot, theta, theta_dot] = self.state;
         let force = if action == 1 { FORCE_MAG } else { -FORCE_MAG };
         let cos_theta = theta.cos();
@@ -107,13 +88,18 @@ impl Env for CartPole {
             || x > X_THRESHOLD
             || theta < -THETA_THRESHOLD
             || theta > THETA_THRESHOLD;
-        let truncated = self.core.clock.finish_step(terminated);
-        obs.copy_from_slice(&self.observation());
-        Ok(Outcome {
-            reward: 1.0,
-            terminated,
-            truncated,
-        })
+        (1.0, terminated)
+    }
+
+    fn observe(&self, obs: &mut [f32]) {
+        for (o, &value) in obs.iter_mut().zip(&self.state) {
+            *o = value as f32;
+        }
+    }
+
+    /// `[x, x_dot, theta, theta_dot]` (Gymnasium's `env.unwrapped.state`).
+    fn state_mut(&mut self) -> Option<&mut [f64]> {
+        Some(&mut self.state)
     }
 
     fn geometry(&self) -> Option<super::Geometry> {
@@ -124,17 +110,12 @@ impl Env for CartPole {
             pole_length: 2.0 * HALF_LENGTH,
         })
     }
-
-    /// Overwrites `[x, x_dot, theta, theta_dot]` (Gymnasium's `env.unwrapped.state = ...`).
-    fn set_state(&mut self, state: &[f64]) -> Result<Vec<f32>, EnvError> {
-        self.core.restart_at(state, &mut self.state)?;
-        Ok(self.observation().to_vec())
-    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::env::{Env, EnvError};
 
     #[test]
     fn versions_differ_only_in_limits() {

@@ -25,7 +25,7 @@ use wrapped2d::b2;
 use wrapped2d::dynamics::world::callbacks::ContactAccess;
 use wrapped2d::user_data::{UserData, UserDataTypes};
 
-use super::{Env, EnvCore, EnvError, Outcome};
+use super::{Dynamics, EnvError, EnvRng, Simulated};
 use crate::rng::NumpyRng;
 
 // Constants of Gymnasium's lunar_lander.py (pixels unless stated; SCALE converts pixels to metres).
@@ -429,15 +429,18 @@ fn shaping(s: &[f64; OBS_DIM]) -> f64 {
 }
 
 /// Gymnasium's LunarLander with discrete actions and no wind (`LunarLander-v2` / `LunarLander-v3`).
-pub struct LunarLander {
+pub type LunarLander = Simulated<LunarLanderPhysics>;
+
+/// The lander's world and what the reward and the drawing need from the previous frame.
+pub struct LunarLanderPhysics {
     /// Vertical gravity of the world (Gymnasium's `gravity` keyword; -10 in the registered task).
     gravity: f32,
     scene: Option<Scene>,
     prev_shaping: f64,
     /// The last action (drawing only: which engine fired).
     last_action: usize,
-    /// Spec, generator, running flag and time limit.
-    core: EnvCore,
+    /// The observation the last frame computed.
+    obs: [f32; OBS_DIM],
 }
 
 // SAFETY: `wrapped2d::World` holds raw pointers to a C++ `b2World` (and its bodies) that this struct
@@ -445,7 +448,7 @@ pub struct LunarLander {
 // shares atomics with it. Box2D keeps no thread-affine state, so the whole world may move to another
 // thread together with its owner. (Box2D 2.3 bumps a few global profiling counters in its distance
 // and time-of-impact routines; they are statistics that the simulation never reads.)
-unsafe impl Send for LunarLander {}
+unsafe impl Send for LunarLanderPhysics {}
 
 impl LunarLander {
     /// Creates the environment under the Gymnasium id it answers to (`LunarLander-v2` or `-v3`: the
@@ -465,22 +468,25 @@ impl LunarLander {
                 ),
             });
         }
-        Ok(LunarLander {
+        let physics = LunarLanderPhysics {
             gravity,
             scene: None,
             prev_shaping: 0.0,
             last_action: 0,
-            core: EnvCore::new(id),
-        })
+            obs: [0.0; OBS_DIM],
+        };
+        Ok(Simulated::with_physics(id, physics))
     }
+}
 
+impl LunarLanderPhysics {
     /// One frame of Gymnasium's `step` without the time limit: engines, physics, observation, reward.
-    fn frame(&mut self, action: usize, first: bool) -> ([f32; OBS_DIM], f64, bool) {
-        let rng = self
-            .core
-            .rng
-            .current()
-            .expect("frame() runs only after reset() set the generator");
+    fn frame(
+        &mut self,
+        action: usize,
+        first: bool,
+        rng: &mut NumpyRng,
+    ) -> ([f32; OBS_DIM], f64, bool) {
         let scene = self
             .scene
             .as_mut()
@@ -516,38 +522,28 @@ impl LunarLander {
     }
 }
 
-impl Env for LunarLander {
-    fn core(&self) -> Option<&EnvCore> {
-        Some(&self.core)
-    }
-
-    fn core_mut(&mut self) -> Option<&mut EnvCore> {
-        Some(&mut self.core)
-    }
-
-    fn reset_into(&mut self, seed: Option<u64>, obs: &mut [f32]) {
-        let rng = self.core.rng.reseed(seed);
+impl Dynamics for LunarLanderPhysics {
+    fn reset(&mut self, rng: &mut NumpyRng) {
         // Drop the old world before building the new one (Gymnasium destroys, then creates).
         self.scene = None;
         self.scene = Some(Scene::build(rng, self.gravity));
-        self.core.clock.start();
         self.last_action = 0;
         // Gymnasium's reset returns the observation of one no-op step (outside the time limit count).
-        let (first, _, _) = self.frame(0, true);
-        obs.copy_from_slice(&first);
+        (self.obs, _, _) = self.frame(0, true, rng);
     }
 
-    fn step_into(&mut self, action: usize, obs: &mut [f32]) -> Result<Outcome, EnvError> {
-        self.core.clock.check_step(action)?;
-        let (next, reward, terminated) = self.frame(action, false);
+    fn step(&mut self, action: usize, rng: &mut EnvRng) -> (f64, bool) {
+        let rng = rng
+            .current()
+            .expect("a step runs only after reset() set the generator");
+        let (next, reward, terminated) = self.frame(action, false, rng);
         self.last_action = action;
-        let truncated = self.core.clock.finish_step(terminated);
-        obs.copy_from_slice(&next);
-        Ok(Outcome {
-            reward,
-            terminated,
-            truncated,
-        })
+        self.obs = next;
+        (reward, terminated)
+    }
+
+    fn observe(&self, obs: &mut [f32]) {
+        obs.copy_from_slice(&self.obs);
     }
 
     fn geometry(&self) -> Option<super::Geometry> {
@@ -590,6 +586,7 @@ pub fn heuristic_action(obs: &[f32]) -> usize {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::env::Env;
 
     #[test]
     fn step_before_reset_and_bad_actions_are_errors() {

@@ -115,22 +115,8 @@ pub trait Env: Send {
             truncated,
         })
     }
-    /// The bookkeeping of a built-in environment ([`EnvCore`]), which [`Env::spec`], [`Env::generator`] and
-    /// [`Env::set_generator`] read by default; `None` (the default) for an environment that implements those
-    /// three itself.
-    fn core(&self) -> Option<&EnvCore> {
-        None
-    }
-    /// [`Env::core`], to change.
-    fn core_mut(&mut self) -> Option<&mut EnvCore> {
-        None
-    }
     /// The registered facts of this environment (id, sizes, time limit, solve threshold).
-    fn spec(&self) -> &'static EnvSpec {
-        self.core()
-            .expect("an environment without an EnvCore implements Env::spec")
-            .spec
-    }
+    fn spec(&self) -> &'static EnvSpec;
     /// Length of the observation vector.
     fn obs_dim(&self) -> usize {
         self.spec().obs_dim
@@ -155,22 +141,13 @@ pub trait Env: Send {
     /// [`Env::set_generator`] it lets a run put an environment back where it was: restore the generator that
     /// the episode's reset drew from, reset, and replay the episode's actions (our environments are
     /// deterministic given both).
-    fn generator(&self) -> Option<NumpyRng> {
-        self.core().and_then(|core| core.rng.get())
-    }
+    fn generator(&self) -> Option<NumpyRng>;
     /// Replaces the generator (see [`Env::generator`]).
-    fn set_generator(&mut self, rng: Option<NumpyRng>) {
-        if let Some(core) = self.core_mut() {
-            core.rng.set(rng);
-        }
-    }
+    fn set_generator(&mut self, rng: Option<NumpyRng>);
     /// Overwrites the internal float64 state (classic control; used by the `set` conformance case).
     /// Resets the step counter. Environments without such a state return an error.
     fn set_state(&mut self, _state: &[f64]) -> Result<Vec<f32>, EnvError> {
-        Err(EnvError::BadState {
-            env: self.id(),
-            msg: "setting the internal state is not supported".into(),
-        })
+        Err(state_not_supported(self.id()))
     }
     /// What a viewer needs to draw the current state (see [`Geometry`]); `None` if the environment has no
     /// drawing. Reading it never changes the environment.
@@ -384,33 +361,108 @@ pub fn make(id: &str) -> Result<Box<dyn Env>, EnvError> {
     }
 }
 
-/// What every built-in environment keeps besides its physics: its registered facts, the reset generator and the
-/// step bookkeeping (see [`Env::core`]).
-#[derive(Debug, Clone)]
-pub struct EnvCore {
-    pub spec: &'static EnvSpec,
-    pub rng: EnvRng,
-    pub clock: EpisodeClock,
+/// The physics of a built-in task, which [`Simulated`] makes an [`Env`]: the initial state, a step with a valid
+/// action, and what the viewer and the conformance `set` case need.
+pub trait Dynamics: Send {
+    /// Draws the initial state from the reset's generator.
+    fn reset(&mut self, rng: &mut NumpyRng);
+    /// One step with an action in range; `rng` holds the episode's generator (a task that draws while stepping
+    /// draws from it). Returns the reward and whether the task terminated.
+    fn step(&mut self, action: usize, rng: &mut EnvRng) -> (f64, bool);
+    /// Writes the observation of the current state into `obs`.
+    fn observe(&self, obs: &mut [f32]);
+    /// The float64 state that [`Env::set_state`] overwrites; `None` (the default) for a task without one.
+    fn state_mut(&mut self) -> Option<&mut [f64]> {
+        None
+    }
+    /// See [`Env::geometry`].
+    fn geometry(&self) -> Option<Geometry> {
+        None
+    }
 }
 
-impl EnvCore {
-    /// The bookkeeping of the registered environment `id`; panics if `id` is not registered (built-in ids are).
-    pub fn new(id: &str) -> Self {
+/// A built-in environment: a task's [`Dynamics`] with what every task keeps besides its physics, its
+/// registered facts, the reset generator ([`EnvRng`]) and the step bookkeeping ([`EpisodeClock`]).
+#[derive(Debug, Clone)]
+pub struct Simulated<D> {
+    spec: &'static EnvSpec,
+    rng: EnvRng,
+    clock: EpisodeClock,
+    physics: D,
+}
+
+impl<D> Simulated<D> {
+    /// The registered environment `id` with `physics`; panics if `id` is not registered (built-in ids are).
+    pub fn with_physics(id: &str, physics: D) -> Self {
         let spec = spec(id).unwrap_or_else(|err| panic!("{err}"));
-        EnvCore {
+        Simulated {
             spec,
             rng: EnvRng::default(),
             clock: EpisodeClock::new(spec.id, spec.n_actions, spec.max_episode_steps),
+            physics,
         }
     }
 
-    /// `set_state` of a classic-control task: checks `state` (see [`check_state`]), copies it into `target` (of
-    /// the state's length) and starts a new episode.
-    pub fn restart_at(&mut self, state: &[f64], target: &mut [f64]) -> Result<(), EnvError> {
-        check_state(self.spec.id, state, target.len())?;
+    /// The task's physics (its state).
+    pub fn physics(&self) -> &D {
+        &self.physics
+    }
+}
+
+impl<D: Dynamics> Env for Simulated<D> {
+    fn reset_into(&mut self, seed: Option<u64>, obs: &mut [f32]) {
+        self.physics.reset(self.rng.reseed(seed));
+        self.clock.start();
+        self.physics.observe(obs);
+    }
+
+    fn step_into(&mut self, action: usize, obs: &mut [f32]) -> Result<Outcome, EnvError> {
+        self.clock.check_step(action)?;
+        let (reward, terminated) = self.physics.step(action, &mut self.rng);
+        let truncated = self.clock.finish_step(terminated);
+        self.physics.observe(obs);
+        Ok(Outcome {
+            reward,
+            terminated,
+            truncated,
+        })
+    }
+
+    fn spec(&self) -> &'static EnvSpec {
+        self.spec
+    }
+
+    fn generator(&self) -> Option<NumpyRng> {
+        self.rng.get()
+    }
+
+    fn set_generator(&mut self, rng: Option<NumpyRng>) {
+        self.rng.set(rng);
+    }
+
+    fn set_state(&mut self, state: &[f64]) -> Result<Vec<f32>, EnvError> {
+        let id = self.spec.id;
+        let target = self
+            .physics
+            .state_mut()
+            .ok_or_else(|| state_not_supported(id))?;
+        check_state(id, state, target.len())?;
         target.copy_from_slice(state);
         self.clock.start();
-        Ok(())
+        let mut obs = vec![0.0; self.spec.obs_dim];
+        self.physics.observe(&mut obs);
+        Ok(obs)
+    }
+
+    fn geometry(&self) -> Option<Geometry> {
+        self.physics.geometry()
+    }
+}
+
+fn state_not_supported(env: &'static str) -> EnvError {
+    EnvError::BadState {
+        env,
+        msg: "setting the internal state is not supported".into(),
     }
 }
 
