@@ -11,7 +11,7 @@ use arld::agent::Agent;
 use arld::env;
 use arld::experiment::run_one;
 use arld::replay::{Replay, ReplayConfig, Transition};
-use arld::state::StateDict;
+use arld::state::{Persist, StateDict};
 use arld::train::{Checkpointer, ConfigInput, Method, NetKind, TrainConfig};
 use rand::{Rng, SeedableRng};
 use std::time::Instant;

@@ -1,8 +1,8 @@
 //! The state of a component as named raw arrays and small JSON values: what a run's snapshot is made of
 //! (`train::snapshot` gathers one [`StateDict`] from every part of a run and writes it to disk).
 //!
-//! Components at every layer fill and read a `StateDict` through `save_state` / `load_state` methods under a
-//! prefix of their own (`agent.`, `replay.`, ...), so a snapshot knows nothing about their insides. Arrays stay
+//! Components at every layer fill and read a `StateDict` through [`Persist`] (`save_state` / `load_state`) under
+//! a prefix of their own (`agent.`, `replay.`, ...), so a snapshot knows nothing about their insides. Arrays stay
 //! raw numbers (they become little-endian safetensors tensors), borrowed from the component while a snapshot
 //! is written, so that writing one copies nothing; small values (counters, generator states) are JSON. Reading
 //! checks every name, type and length: a damaged or foreign snapshot is an error, never a panic.
@@ -74,6 +74,16 @@ pub enum StateError {
     },
     #[error("`{name}` in the snapshot cannot be read: {msg}")]
     Value { name: String, msg: String },
+}
+
+/// A component whose state goes into snapshots: it writes its arrays and values into a [`StateDict`] under names
+/// that start with `prefix.`, and reads back what it wrote into a component built with the same configuration
+/// (a mismatch is an error).
+pub trait Persist {
+    /// Writes the state into `state` under `prefix`, borrowing the arrays.
+    fn save_state<'a>(&'a self, prefix: &str, state: &mut StateDict<'a>);
+    /// Reads what [`Persist::save_state`] wrote.
+    fn load_state(&mut self, prefix: &str, state: &StateDict<'_>) -> Result<(), StateError>;
 }
 
 /// Named arrays and JSON values; `'a` is the life of the components whose arrays it borrows.

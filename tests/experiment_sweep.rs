@@ -477,14 +477,15 @@ fn group_medians_follow_the_design_for_every_configuration() {
     report_fixture(dir.path());
     let (runs, notes) = run_dir::load_runs(dir.path()).unwrap();
     assert!(notes.is_empty(), "{notes:?}");
-    for group in report::group_runs(&runs) {
+    for group in arld::experiment::verdict::cells(&runs, arld::experiment::verdict::DEFAULT_SUSTAIN)
+    {
         // Rebuild the specs of this group and compute the median by hand from the designed solve steps.
         let mut steps: Vec<u64> = runs
             .iter()
             .filter(|r| {
                 r.env == group.env
-                    && r.method == group.method
-                    && r.net == group.net
+                    && r.method.name() == group.method
+                    && r.net.name() == group.net
                     && r.variant == group.variant
             })
             .map(|r| {
@@ -509,7 +510,7 @@ fn group_medians_follow_the_design_for_every_configuration() {
             (steps[n / 2 - 1] + steps[n / 2]) as f64 / 2.0
         };
         assert_eq!(
-            group.median_steps_to_solve, expected,
+            group.first_hit.median, expected,
             "{} {} {} {}",
             group.env, group.method, group.net, group.variant
         );

@@ -7,6 +7,13 @@
 //! `mod` declarations are not uses; its `pub use` re-exports are). A `mod.rs` naming its own children by
 //! relative paths (`pub use adam::Adam`) is not counted: that is how a folder re-exports its parts, and the
 //! parts may use `super::`. Every module `src/lib.rs` declares must have a layer.
+//!
+//! The library's two clients sit above every layer: the binary's command modules (`src/cli`, used from
+//! `src/main.rs`) and the Python bindings (`python/src`). They reach the library only through its public API,
+//! `arld::…` paths, and may use any of it; the library never names them (no `crate::cli`, no `arld_python`).
+//! Within the binary, a command file (`src/cli/train_cmd.rs`, ...) does not use another: what two commands
+//! share belongs in the library or in `src/cli/mod.rs`. No source file pulls in another by `#[path]` or
+//! `include!`, which would pass code around the module tree and this check.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
@@ -118,15 +125,15 @@ fn is_ident(c: char) -> bool {
     c.is_ascii_alphanumeric() || c == '_'
 }
 
-/// Every path that starts at `crate`, `super` or `self`, expanded over `{…}` groups to their first segments,
-/// as (anchor, segments).
+/// Every path that starts at `crate`, `super`, `self` or `arld` (the library, named from its clients), expanded
+/// over `{…}` groups to their first segments, as (anchor, segments).
 fn paths(code: &str) -> Vec<(String, Vec<String>)> {
     let chars: Vec<char> = code.chars().collect();
     let mut out = Vec::new();
     let mut i = 0;
     while i < chars.len() {
         let at_word = i == 0 || !is_ident(chars[i - 1]);
-        let anchor = ["crate::", "super::", "self::"]
+        let anchor = ["crate::", "super::", "self::", "arld::"]
             .into_iter()
             .find(|a| at_word && chars[i..].iter().take(a.len()).collect::<String>() == *a);
         let Some(anchor) = anchor else {
@@ -175,29 +182,103 @@ fn paths(code: &str) -> Vec<(String, Vec<String>)> {
     out
 }
 
-#[test]
-fn imports_go_down_the_layers_and_no_file_depends_on_itself() {
-    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
+/// The `.rs` files below `dir`, skipping the folders named in `skip`.
+fn rust_files(dir: &Path, skip: &[&str]) -> Vec<PathBuf> {
     let mut files = Vec::new();
-    let mut stack = vec![src.clone()];
+    let mut stack = vec![dir.to_path_buf()];
     while let Some(dir) = stack.pop() {
         for entry in std::fs::read_dir(&dir).unwrap().flatten() {
             let path = entry.path();
-            if path.is_dir() && path.file_name().is_some_and(|n| n != "cli") {
-                stack.push(path);
-            } else if path.extension().is_some_and(|e| e == "rs")
-                && !matches!(
-                    path.file_name().and_then(|n| n.to_str()),
-                    Some("lib.rs" | "main.rs")
-                )
-            {
+            if path.is_dir() {
+                if path
+                    .file_name()
+                    .is_some_and(|n| !skip.iter().any(|s| n == *s))
+                {
+                    stack.push(path);
+                }
+            } else if path.extension().is_some_and(|e| e == "rs") {
                 files.push(path);
             }
         }
     }
-    let modules: BTreeMap<Vec<String>, PathBuf> = files
+    files.sort();
+    files
+}
+
+/// Which crate a source file belongs to, and so what its `crate::` names.
+#[derive(Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Debug)]
+enum Crate {
+    Library,
+    /// `src/main.rs` and `src/cli`: the `arld` binary.
+    Binary,
+    /// `python/src`: the bindings.
+    Python,
+}
+
+/// A file of one of the crates: its module path within its crate (the crate root's is empty), prefixed with
+/// the client's name for the clients (`cli::train_cmd`, `python`), so that no two files share a key.
+struct SourceFile {
+    krate: Crate,
+    /// Module path within its crate: `src/train/run_dir.rs` -> [train, run_dir], `src/cli/train_cmd.rs` ->
+    /// [cli, train_cmd], `src/main.rs` and `python/src/lib.rs` -> [].
+    module: Vec<String>,
+    path: PathBuf,
+}
+
+impl SourceFile {
+    /// The file's node in the graph: the module path, with `main` / `python` in front for the clients.
+    fn node(&self) -> Vec<String> {
+        let client = match self.krate {
+            Crate::Library => return self.module.clone(),
+            Crate::Binary => "main",
+            Crate::Python => "python",
+        };
+        std::iter::once(client.to_string())
+            .chain(self.module.iter().cloned())
+            .collect()
+    }
+}
+
+#[test]
+fn imports_go_down_the_layers_and_no_file_depends_on_itself() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let src = root.join("src");
+    let mut sources = Vec::new();
+    for path in rust_files(&src, &[]) {
+        let in_cli = path.starts_with(src.join("cli"));
+        let krate = match path.file_name().and_then(|n| n.to_str()) {
+            Some("lib.rs") => continue,
+            Some("main.rs") => Crate::Binary,
+            _ if in_cli => Crate::Binary,
+            _ => Crate::Library,
+        };
+        let module = if path == src.join("main.rs") {
+            vec![]
+        } else {
+            module_path(&src, &path)
+        };
+        sources.push(SourceFile {
+            krate,
+            module,
+            path,
+        });
+    }
+    let python = root.join("python/src");
+    for path in rust_files(&python, &[]) {
+        let module = if path == python.join("lib.rs") {
+            vec![]
+        } else {
+            module_path(&python, &path)
+        };
+        sources.push(SourceFile {
+            krate: Crate::Python,
+            module,
+            path,
+        });
+    }
+    let nodes: BTreeMap<(Crate, Vec<String>), Vec<String>> = sources
         .iter()
-        .map(|f| (module_path(&src, f), f.clone()))
+        .map(|f| ((f.krate, f.module.clone()), f.node()))
         .collect();
     // Every top-level module the library declares has a layer, and the layers name no module that is gone.
     let lib = std::fs::read_to_string(src.join("lib.rs")).unwrap();
@@ -216,49 +297,92 @@ fn imports_go_down_the_layers_and_no_file_depends_on_itself() {
         .map(|m| m.to_string())
         .collect();
     assert_eq!(declared, layered, "src/lib.rs's modules and LAYERS differ");
-    for module in modules.keys() {
+    for f in sources.iter().filter(|f| f.krate == Crate::Library) {
         assert!(
-            layered.contains(&module[0]),
+            layered.contains(&f.module[0]),
             "src/{} is in no layer; add it to LAYERS",
-            module[0]
+            f.module[0]
         );
     }
-    // The longest prefix of `segments` that names a file.
-    let resolve = |segments: &[String]| -> Option<Vec<String>> {
-        (1..=segments.len())
+    // The longest prefix of `segments` that names a file of `krate`.
+    let resolve = |krate: Crate, segments: &[String]| -> Option<Vec<String>> {
+        (0..=segments.len())
             .rev()
             .map(|n| segments[..n].to_vec())
-            .find(|p| modules.contains_key(p))
+            .find(|p| nodes.contains_key(&(krate, p.clone())))
+            .map(|p| nodes[&(krate, p)].clone())
     };
     let mut edges: BTreeMap<Vec<String>, BTreeSet<Vec<String>>> = BTreeMap::new();
     let mut violations = Vec::new();
-    for (module, file) in &modules {
-        let is_mod_rs = file.file_name().is_some_and(|n| n == "mod.rs");
-        let text = std::fs::read_to_string(file).unwrap();
-        for (anchor, segments) in paths(&code(&text)) {
+    for file in &sources {
+        let (module, node) = (&file.module, file.node());
+        let shown = file.path.strip_prefix(root).unwrap().display().to_string();
+        let text = code(&std::fs::read_to_string(&file.path).unwrap());
+        for pulled in ["#[path", "include!("] {
+            if text.contains(pulled) {
+                violations.push(format!("{shown} pulls in source with {pulled}"));
+            }
+        }
+        if file.krate == Crate::Library && text.contains("arld_python") {
+            violations.push(format!("{shown} names the Python bindings"));
+        }
+        for (anchor, segments) in paths(&text) {
+            if anchor == "arld" {
+                // The library as its clients see it: its public modules.
+                if file.krate == Crate::Library {
+                    violations.push(format!("{shown} names its own crate as arld::"));
+                    continue;
+                }
+                if let Some(target) = resolve(Crate::Library, &segments) {
+                    edges.entry(node.clone()).or_default().insert(target);
+                }
+                continue;
+            }
             let mut full: Vec<String> = match anchor.as_str() {
                 "crate" => vec![],
-                // `super` of a file is its folder's module; of a folder's mod.rs, the folder's parent.
-                "super" if is_mod_rs => module[..module.len().saturating_sub(1)].to_vec(),
-                "super" => module[..module.len() - 1].to_vec(),
+                // `super` of a file is its folder's module; of a folder's mod.rs (whose module is the
+                // folder), the folder's parent.
+                "super" => module[..module.len().saturating_sub(1)].to_vec(),
                 _ => module.clone(), // self
             };
             full.extend(segments);
-            let Some(target) = resolve(&full) else {
+            if file.krate == Crate::Library && full.first().is_some_and(|m| m == "cli") {
+                violations.push(format!(
+                    "{shown} uses the binary's cli::{}",
+                    full[1..].join("::")
+                ));
+                continue;
+            }
+            let Some(target) = resolve(file.krate, &full) else {
                 continue;
             };
-            if &target == module {
+            if target == node {
                 continue;
             }
-            let (from, to) = (&module[0], &target[0]);
-            if from != to && layer(to) >= layer(from) {
-                violations.push(format!(
-                    "{} uses {} (not a lower layer)",
-                    module.join("::"),
-                    target.join("::")
-                ));
+            match file.krate {
+                Crate::Library => {
+                    let (from, to) = (&module[0], &target[0]);
+                    if from != to && layer(to) >= layer(from) {
+                        violations.push(format!(
+                            "{} uses {} (not a lower layer)",
+                            module.join("::"),
+                            target.join("::")
+                        ));
+                    }
+                }
+                // Command files (main::cli::X) do not use each other; cli/mod.rs and main.rs are shared.
+                Crate::Binary => {
+                    if node.len() > 2 && target.len() > 2 && node[2] != target[2] {
+                        violations.push(format!(
+                            "{} uses {} (command files do not use each other)",
+                            node[1..].join("::"),
+                            target[1..].join("::")
+                        ));
+                    }
+                }
+                Crate::Python => {}
             }
-            edges.entry(module.clone()).or_default().insert(target);
+            edges.entry(node.clone()).or_default().insert(target);
         }
     }
     assert!(
@@ -296,7 +420,7 @@ fn imports_go_down_the_layers_and_no_file_depends_on_itself() {
         None
     }
     let mut state = BTreeMap::new();
-    for module in modules.keys() {
+    for module in nodes.values() {
         if let Some(cycle) = visit(module, &edges, &mut state, &mut Vec::new()) {
             panic!("import cycle: {}", cycle.join(" -> "));
         }
@@ -310,4 +434,7 @@ fn imports_go_down_the_layers_and_no_file_depends_on_itself() {
         edges[&vec!["experiment".to_string(), "report".to_string()]]
             .contains(&vec!["experiment".to_string(), "sweep".to_string()])
     );
+    // ... and its clients: the train command uses the training loop, the bindings the environments.
+    assert!(edges[&path(&["main", "cli", "train_cmd"])].contains(&path(&["train"])));
+    assert!(edges[&path(&["python"])].contains(&path(&["env"])));
 }

@@ -10,7 +10,8 @@
 //! every environment step (`check_signals`), so it interrupts training as a `KeyboardInterrupt`.
 
 use arld::env::{self, Env, EnvError, EnvSpec, Outcome};
-use arld::expert::{self, Expert, demos::Demonstrations};
+use arld::expert::demos::{DemoColumns, Demonstrations};
+use arld::expert::{self, Expert};
 use arld::nn::QNet;
 use arld::rng::NumpyRng;
 use arld::train::{self, ConfigInput, RunLog, SeedPurpose, TrainConfig, seed_for};
@@ -512,16 +513,25 @@ struct DemoArrays {
 }
 
 impl DemoArrays {
+    /// The library's [`DemoColumns`], checked and read into demonstrations there.
     fn into_demonstrations(self, cfg: &TrainConfig) -> anyhow::Result<Demonstrations> {
-        Demonstrations::from_arrays(
-            &cfg.env,
-            self.obs,
-            self.actions,
-            self.rewards,
-            self.next_obs,
-            self.terminated,
-            self.truncated,
-        )
+        let DemoArrays {
+            obs,
+            actions,
+            rewards,
+            next_obs,
+            terminated,
+            truncated,
+        } = self;
+        let columns = DemoColumns {
+            obs,
+            actions,
+            rewards,
+            next_obs,
+            terminated,
+            truncated,
+        };
+        Demonstrations::from_columns(&cfg.env, columns)
     }
 }
 

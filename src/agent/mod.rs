@@ -12,6 +12,7 @@ use crate::nn::{
 };
 use crate::query::{js_divergence, noisy_variance};
 use crate::replay::Batch;
+use crate::state::{Persist, StateDict, StateError};
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64;
 use serde::{Deserialize, Serialize};
@@ -144,47 +145,6 @@ impl Agent {
         }
     }
 
-    /// Writes everything that changes while the agent learns and acts (online and target weights, Adam's
-    /// moments and step, the generator, the active head, the noise samples) into `state` under `prefix`.
-    /// Scratch buffers are left out: every use overwrites them.
-    pub fn save_state<'a>(&'a self, prefix: &str, state: &mut crate::state::StateDict<'a>) {
-        self.online.save_state(&format!("{prefix}.online"), state);
-        self.target.save_state(&format!("{prefix}.target"), state);
-        self.adam.save_state(&format!("{prefix}.adam"), state);
-        state.put_text(&format!("{prefix}.rng"), &self.rng);
-        state.put_value(&format!("{prefix}.active_head"), &self.active_head);
-        for (name, noise) in [
-            ("act", &self.noise_act),
-            ("online", &self.noise_online),
-            ("argmax", &self.noise_argmax),
-            ("target", &self.noise_target),
-        ] {
-            noise.save_state(&format!("{prefix}.noise_{name}"), state);
-        }
-    }
-
-    /// Reads what [`Agent::save_state`] wrote into an agent built with the same configuration.
-    pub fn load_state(
-        &mut self,
-        prefix: &str,
-        state: &crate::state::StateDict<'_>,
-    ) -> Result<(), crate::state::StateError> {
-        self.online.load_state(&format!("{prefix}.online"), state)?;
-        self.target.load_state(&format!("{prefix}.target"), state)?;
-        self.adam.load_state(&format!("{prefix}.adam"), state)?;
-        self.rng = state.text(&format!("{prefix}.rng"))?;
-        self.active_head = state.value(&format!("{prefix}.active_head"))?;
-        for (name, noise) in [
-            ("act", &mut self.noise_act),
-            ("online", &mut self.noise_online),
-            ("argmax", &mut self.noise_argmax),
-            ("target", &mut self.noise_target),
-        ] {
-            noise.load_state(&format!("{prefix}.noise_{name}"), state)?;
-        }
-        Ok(())
-    }
-
     /// The online network.
     pub fn network(&self) -> &QNet {
         &self.online
@@ -259,36 +219,23 @@ impl Agent {
             noisy.then_some(&self.noise_online),
             &mut self.ws_batch,
         );
-        let qn_online = self.online.forward(
+        let next_noise = noisy.then_some((&self.noise_argmax, &self.noise_target));
+        let (qn_online, qn_target) = next_state_q(
+            [&self.online, &self.target],
             &batch.next_obs,
             b,
-            noisy.then_some(&self.noise_argmax),
-            &mut self.ws_next_online,
+            next_noise,
+            [&mut self.ws_next_online, &mut self.ws_next_target],
         );
-        let qn_target = self.target.forward(
-            &batch.next_obs,
-            b,
-            noisy.then_some(&self.noise_target),
-            &mut self.ws_next_target,
-        );
-
-        let nstep = if self.lambda_n > 0.0 {
-            let qo = self.online.forward(
+        let nstep = (self.lambda_n > 0.0).then(|| {
+            next_state_q(
+                [&self.online, &self.target],
                 &batch.nstep_next_obs,
                 b,
-                noisy.then_some(&self.noise_argmax),
-                &mut self.ws_nstep_online,
-            );
-            let qt = self.target.forward(
-                &batch.nstep_next_obs,
-                b,
-                noisy.then_some(&self.noise_target),
-                &mut self.ws_nstep_target,
-            );
-            Some((qo, qt))
-        } else {
-            None
-        };
+                next_noise,
+                [&mut self.ws_nstep_online, &mut self.ws_nstep_target],
+            )
+        });
         let losses = LossParams {
             gamma: self.gamma,
             loss: self.loss,
@@ -349,6 +296,62 @@ impl Agent {
     pub fn rng(&mut self) -> &mut Pcg64 {
         &mut self.rng
     }
+}
+
+impl Persist for Agent {
+    /// Writes everything that changes while the agent learns and acts (online and target weights, Adam's
+    /// moments and step, the generator, the active head, the noise samples) into `state` under `prefix`.
+    /// Scratch buffers are left out: every use overwrites them.
+    fn save_state<'a>(&'a self, prefix: &str, state: &mut StateDict<'a>) {
+        self.online.save_state(&format!("{prefix}.online"), state);
+        self.target.save_state(&format!("{prefix}.target"), state);
+        self.adam.save_state(&format!("{prefix}.adam"), state);
+        state.put_text(&format!("{prefix}.rng"), &self.rng);
+        state.put_value(&format!("{prefix}.active_head"), &self.active_head);
+        for (name, noise) in [
+            ("act", &self.noise_act),
+            ("online", &self.noise_online),
+            ("argmax", &self.noise_argmax),
+            ("target", &self.noise_target),
+        ] {
+            noise.save_state(&format!("{prefix}.noise_{name}"), state);
+        }
+    }
+
+    /// Reads what [`Agent::save_state`] wrote into an agent built with the same configuration.
+    fn load_state(&mut self, prefix: &str, state: &StateDict<'_>) -> Result<(), StateError> {
+        self.online.load_state(&format!("{prefix}.online"), state)?;
+        self.target.load_state(&format!("{prefix}.target"), state)?;
+        self.adam.load_state(&format!("{prefix}.adam"), state)?;
+        self.rng = state.text(&format!("{prefix}.rng"))?;
+        self.active_head = state.value(&format!("{prefix}.active_head"))?;
+        for (name, noise) in [
+            ("act", &mut self.noise_act),
+            ("online", &mut self.noise_online),
+            ("argmax", &mut self.noise_argmax),
+            ("target", &mut self.noise_target),
+        ] {
+            noise.load_state(&format!("{prefix}.noise_{name}"), state)?;
+        }
+        Ok(())
+    }
+}
+
+/// The double-DQN pair of forward passes over next states (`b` rows of `obs`): the online network's Q-values,
+/// which pick the action, and the target network's, which value it; each network with its own noise sample when
+/// noisy, each into its own workspace.
+fn next_state_q<'w>(
+    [online, target]: [&QNet; 2],
+    obs: &[f32],
+    b: usize,
+    noise: Option<(&NoiseSample, &NoiseSample)>,
+    [ws_online, ws_target]: [&'w mut Workspace; 2],
+) -> (&'w [f32], &'w [f32]) {
+    let (online_noise, target_noise) = noise.unzip();
+    (
+        online.forward(obs, b, online_noise, ws_online),
+        target.forward(obs, b, target_noise, ws_target),
+    )
 }
 
 /// The test-time policy of a network, without exploration (docs/algorithm.md §5): a majority vote over the
@@ -555,21 +558,17 @@ mod tests {
         );
         batch.nstep_rewards = vec![2.5, -0.5, 1.0, 3.0];
         batch.nstep_discounts = vec![0.7, 0.0, 0.5, 0.9];
-        let q: Vec<f32> = (0..heads * b * a)
-            .map(|i| ((i * 37 % 11) as f32 - 5.0) * 0.3)
-            .collect();
-        let qn_online: Vec<f32> = (0..heads * b * a)
-            .map(|i| ((i * 17 % 7) as f32 - 3.0) * 0.5)
-            .collect();
-        let qn_target: Vec<f32> = (0..heads * b * a)
-            .map(|i| ((i * 13 % 5) as f32 - 2.0) * 0.7)
-            .collect();
-        let qn_online_n: Vec<f32> = (0..heads * b * a)
-            .map(|i| ((i * 7 % 9) as f32 - 4.0) * 0.4)
-            .collect();
-        let qn_target_n: Vec<f32> = (0..heads * b * a)
-            .map(|i| ((i * 11 % 13) as f32 - 6.0) * 0.2)
-            .collect();
+        // Q-values spread over a few levels: ((i * step) mod levels - shift) * scale.
+        let pattern = |step: usize, levels: usize, shift: f32, scale: f32| -> Vec<f32> {
+            (0..heads * b * a)
+                .map(|i| ((i * step % levels) as f32 - shift) * scale)
+                .collect()
+        };
+        let q = pattern(37, 11, 5.0, 0.3);
+        let qn_online = pattern(17, 7, 3.0, 0.5);
+        let qn_target = pattern(13, 5, 2.0, 0.7);
+        let qn_online_n = pattern(7, 9, 4.0, 0.4);
+        let qn_target_n = pattern(11, 13, 6.0, 0.2);
         for (loss, lambda_n) in [
             (TdLoss::Mse, 0.0),
             (TdLoss::Huber, 0.0),

@@ -13,7 +13,8 @@
 //! functions of the float32 reset state in float32 (NumPy's own float32 `cos`/`sin`); here they are evaluated
 //! in float64 and rounded, which agrees except in about one case in a thousand, by one float32 ulp.
 
-use super::{Env, EnvError, EnvRng, EpisodeClock, Outcome, check_state};
+use super::{Dynamics, EnvRng, Simulated};
+use crate::rng::NumpyRng;
 use std::f64::consts::PI;
 
 const ID: &str = "Acrobot-v1";
@@ -34,12 +35,12 @@ const MAX_VEL_2: f64 = 9.0 * PI;
 const TORQUES: [f64; 3] = [-1.0, 0.0, 1.0];
 
 /// Acrobot-v1 with its 500-step limit.
+pub type Acrobot = Simulated<AcrobotPhysics>;
+
+/// Acrobot's state: `[theta1, theta2, dtheta1, dtheta2]` in float64.
 #[derive(Debug, Clone)]
-pub struct Acrobot {
-    /// `[theta1, theta2, dtheta1, dtheta2]` in float64.
+pub struct AcrobotPhysics {
     state: [f64; 4],
-    rng: EnvRng,
-    clock: EpisodeClock,
 }
 
 impl Default for Acrobot {
@@ -50,28 +51,12 @@ impl Default for Acrobot {
 
 impl Acrobot {
     pub fn new() -> Self {
-        Self {
-            state: [0.0; 4],
-            rng: EnvRng::default(),
-            clock: EpisodeClock::new(ID, 3, 500),
-        }
+        Simulated::with_physics(ID, AcrobotPhysics { state: [0.0; 4] })
     }
 
     /// The float64 state `[theta1, theta2, dtheta1, dtheta2]`.
     pub fn state(&self) -> [f64; 4] {
-        self.state
-    }
-
-    fn observation(&self) -> [f32; 6] {
-        let [theta1, theta2, dtheta1, dtheta2] = self.state;
-        [
-            theta1.cos() as f32,
-            theta1.sin() as f32,
-            theta2.cos() as f32,
-            theta2.sin() as f32,
-            dtheta1 as f32,
-            dtheta2 as f32,
-        ]
+        self.physics().state
     }
 }
 
@@ -140,31 +125,15 @@ fn bound(x: f64, low: f64, high: f64) -> f64 {
     x.max(low).min(high)
 }
 
-impl Env for Acrobot {
-    fn generator(&self) -> Option<crate::rng::NumpyRng> {
-        self.rng.get()
-    }
-
-    fn set_generator(&mut self, rng: Option<crate::rng::NumpyRng>) {
-        self.rng.set(rng);
-    }
-
-    fn spec(&self) -> &'static super::EnvSpec {
-        super::spec(ID).expect("Acrobot-v1 is registered")
-    }
-
-    fn reset_into(&mut self, seed: Option<u64>, obs: &mut [f32]) {
-        let rng = self.rng.reseed(seed);
+impl Dynamics for AcrobotPhysics {
+    fn reset(&mut self, rng: &mut NumpyRng) {
         for value in &mut self.state {
             // Gymnasium stores the drawn state as float32.
             *value = f64::from(rng.uniform(-0.1, 0.1) as f32);
         }
-        self.clock.start();
-        obs.copy_from_slice(&self.observation());
     }
 
-    fn step_into(&mut self, action: usize, obs: &mut [f32]) -> Result<Outcome, EnvError> {
-        self.clock.check_step(action)?;
+    fn step(&mut self, action: usize, _rng: &mut EnvRng) -> (f64, bool) {
         let next = rk4_step(self.state, TORQUES[action]);
         self.state = [
             wrap(next[0], -PI, PI),
@@ -174,13 +143,24 @@ impl Env for Acrobot {
         ];
         let [theta1, theta2, _, _] = self.state;
         let terminated = -theta1.cos() - (theta2 + theta1).cos() > 1.0;
-        let truncated = self.clock.finish_step(terminated);
-        obs.copy_from_slice(&self.observation());
-        Ok(Outcome {
-            reward: if terminated { 0.0 } else { -1.0 },
-            terminated,
-            truncated,
-        })
+        (if terminated { 0.0 } else { -1.0 }, terminated)
+    }
+
+    fn observe(&self, obs: &mut [f32]) {
+        let [theta1, theta2, dtheta1, dtheta2] = self.state;
+        obs.copy_from_slice(&[
+            theta1.cos() as f32,
+            theta1.sin() as f32,
+            theta2.cos() as f32,
+            theta2.sin() as f32,
+            dtheta1 as f32,
+            dtheta2 as f32,
+        ]);
+    }
+
+    /// `[theta1, theta2, dtheta1, dtheta2]` in float64 (Gymnasium's `env.unwrapped.state`).
+    fn state_mut(&mut self) -> Option<&mut [f64]> {
+        Some(&mut self.state)
     }
 
     fn geometry(&self) -> Option<super::Geometry> {
@@ -190,19 +170,12 @@ impl Env for Acrobot {
             link_lengths: [LINK_LENGTH_1, LINK_LENGTH_2],
         })
     }
-
-    /// Overwrites `[theta1, theta2, dtheta1, dtheta2]` in float64 (Gymnasium's `env.unwrapped.state = ...`).
-    fn set_state(&mut self, state: &[f64]) -> Result<Vec<f32>, EnvError> {
-        check_state(ID, state, 4)?;
-        self.state.copy_from_slice(state);
-        self.clock.start();
-        Ok(self.observation().to_vec())
-    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::env::{Env, EnvError};
 
     #[test]
     fn wrap_and_bound_follow_gymnasium() {

@@ -8,7 +8,8 @@
 //! v0 and v1 differ only in the time limit (200 vs 500) and the solve threshold (195 vs 475).
 //! The initial state is four draws of `uniform(-0.05, 0.05)` (docs/environments.md, "Classic control").
 
-use super::{Env, EnvError, EnvRng, EpisodeClock, Outcome, check_state, spec};
+use super::{Dynamics, EnvRng, Simulated};
+use crate::rng::NumpyRng;
 
 const GRAVITY: f64 = 9.8;
 const MASS_CART: f64 = 1.0;
@@ -24,29 +25,22 @@ const X_THRESHOLD: f64 = 2.4;
 const THETA_THRESHOLD: f64 = 12.0 * 2.0 * std::f64::consts::PI / 360.0;
 
 /// CartPole with its Gymnasium time limit.
+pub type CartPole = Simulated<CartPolePhysics>;
+
+/// CartPole's state: `[x, x_dot, theta, theta_dot]` in float64.
 #[derive(Debug, Clone)]
-pub struct CartPole {
-    spec: &'static super::EnvSpec,
-    /// `[x, x_dot, theta, theta_dot]` in float64.
+pub struct CartPolePhysics {
     state: [f64; 4],
-    rng: EnvRng,
-    clock: EpisodeClock,
 }
 
 impl CartPole {
     /// `id` is `CartPole-v0` or `CartPole-v1`; any other id panics (use [`super::make`] for user input).
     pub fn new(id: &'static str) -> Self {
-        let spec = spec(id).expect("CartPole::new needs a registered id");
         assert!(
             id.starts_with("CartPole-"),
             "CartPole::new called with {id}"
         );
-        Self {
-            spec,
-            state: [0.0; 4],
-            rng: EnvRng::default(),
-            clock: EpisodeClock::new(spec.id, 2, spec.max_episode_steps),
-        }
+        Simulated::with_physics(id, CartPolePhysics { state: [0.0; 4] })
     }
 
     /// CartPole-v0: 200 steps, solved at 195.
@@ -61,37 +55,16 @@ impl CartPole {
 
     /// The float64 state `[x, x_dot, theta, theta_dot]`.
     pub fn state(&self) -> [f64; 4] {
-        self.state
-    }
-
-    fn observation(&self) -> [f32; 4] {
-        self.state.map(|value| value as f32)
+        self.physics().state
     }
 }
 
-impl Env for CartPole {
-    fn generator(&self) -> Option<crate::rng::NumpyRng> {
-        self.rng.get()
+impl Dynamics for CartPolePhysics {
+    fn reset(&mut self, rng: &mut NumpyRng) {
+        rng.uniform_fill(-0.05, 0.05, &mut self.state);
     }
 
-    fn set_generator(&mut self, rng: Option<crate::rng::NumpyRng>) {
-        self.rng.set(rng);
-    }
-
-    fn spec(&self) -> &'static super::EnvSpec {
-        self.spec
-    }
-
-    fn reset_into(&mut self, seed: Option<u64>, obs: &mut [f32]) {
-        self.rng
-            .reseed(seed)
-            .uniform_fill(-0.05, 0.05, &mut self.state);
-        self.clock.start();
-        obs.copy_from_slice(&self.observation());
-    }
-
-    fn step_into(&mut self, action: usize, obs: &mut [f32]) -> Result<Outcome, EnvError> {
-        self.clock.check_step(action)?;
+    fn step(&mut self, action: usize, _rng: &mut EnvRng) -> (f64, bool) {
         let [x, x_dot, theta, theta_dot] = self.state;
         let force = if action == 1 { FORCE_MAG } else { -FORCE_MAG };
         let cos_theta = theta.cos();
@@ -115,13 +88,18 @@ impl Env for CartPole {
             || x > X_THRESHOLD
             || theta < -THETA_THRESHOLD
             || theta > THETA_THRESHOLD;
-        let truncated = self.clock.finish_step(terminated);
-        obs.copy_from_slice(&self.observation());
-        Ok(Outcome {
-            reward: 1.0,
-            terminated,
-            truncated,
-        })
+        (1.0, terminated)
+    }
+
+    fn observe(&self, obs: &mut [f32]) {
+        for (o, &value) in obs.iter_mut().zip(&self.state) {
+            *o = value as f32;
+        }
+    }
+
+    /// `[x, x_dot, theta, theta_dot]` (Gymnasium's `env.unwrapped.state`).
+    fn state_mut(&mut self) -> Option<&mut [f64]> {
+        Some(&mut self.state)
     }
 
     fn geometry(&self) -> Option<super::Geometry> {
@@ -132,19 +110,12 @@ impl Env for CartPole {
             pole_length: 2.0 * HALF_LENGTH,
         })
     }
-
-    /// Overwrites `[x, x_dot, theta, theta_dot]` (Gymnasium's `env.unwrapped.state = ...`).
-    fn set_state(&mut self, state: &[f64]) -> Result<Vec<f32>, EnvError> {
-        check_state(self.spec.id, state, 4)?;
-        self.state.copy_from_slice(state);
-        self.clock.start();
-        Ok(self.observation().to_vec())
-    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::env::{Env, EnvError};
 
     #[test]
     fn versions_differ_only_in_limits() {

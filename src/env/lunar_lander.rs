@@ -25,7 +25,7 @@ use wrapped2d::b2;
 use wrapped2d::dynamics::world::callbacks::ContactAccess;
 use wrapped2d::user_data::{UserData, UserDataTypes};
 
-use super::{Env, EnvError, EpisodeClock, Outcome};
+use super::{Dynamics, EnvError, EnvRng, Simulated};
 use crate::rng::NumpyRng;
 
 // Constants of Gymnasium's lunar_lander.py (pixels unless stated; SCALE converts pixels to metres).
@@ -60,10 +60,9 @@ const VIEWPORT_H: f64 = 400.0;
 /// Number of terrain segments.
 const CHUNKS: usize = 11;
 
-/// Actions: 0 do nothing, 1 fire left orientation engine, 2 fire main engine, 3 fire right engine.
-const N_ACTIONS: usize = 4;
+/// Observation length. The four actions are 0 do nothing, 1 fire left orientation engine, 2 fire main engine,
+/// 3 fire right engine; the action count and time limit are the registered spec's ([`super::SPECS`]).
 const OBS_DIM: usize = 8;
-const MAX_EPISODE_STEPS: usize = 1000;
 
 /// What a Box2D body is, stored as its user data so the contact listener can tell bodies apart.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
@@ -295,6 +294,15 @@ impl Scene {
         }
     }
 
+    /// An engine's push: the impulse `-offset * strength` at the world point `at` (Gymnasium's
+    /// `ApplyLinearImpulse` for the particle the engine throws out at `offset` from the lander).
+    fn push(&mut self, (ox, oy): (f64, f64), at: (f64, f64), strength: f64) {
+        let impulse = vec2(-ox * strength, -oy * strength);
+        self.world
+            .body_mut(self.lander)
+            .apply_linear_impulse(&impulse, &vec2(at.0, at.1), true);
+    }
+
     /// Fires the engines of `action` (one of 0..4) with the given dispersion draws and advances the
     /// world by one frame. Returns the main and side engine powers (for the fuel cost).
     fn advance(&mut self, action: usize, dispersion: [f64; 2]) -> (f64, f64) {
@@ -313,14 +321,11 @@ impl Scene {
                 + side.0 * dispersion[1];
             let oy = -tip.1 * (MAIN_ENGINE_Y_LOCATION / SCALE + 2.0 * dispersion[0])
                 - side.1 * dispersion[1];
-            let impulse_pos = vec2(pos_x + ox, pos_y + oy);
-            let impulse = vec2(
-                -ox * MAIN_ENGINE_POWER * m_power,
-                -oy * MAIN_ENGINE_POWER * m_power,
+            self.push(
+                (ox, oy),
+                (pos_x + ox, pos_y + oy),
+                MAIN_ENGINE_POWER * m_power,
             );
-            self.world
-                .body_mut(self.lander)
-                .apply_linear_impulse(&impulse, &impulse_pos, true);
         }
 
         let mut s_power = 0.0;
@@ -331,17 +336,11 @@ impl Scene {
             let ox = tip.0 * dispersion[0] + side.0 * lever;
             let oy = -tip.1 * dispersion[0] - side.1 * lever;
             // Gymnasium offsets the side engines by 17 pixels horizontally, not SIDE_ENGINE_HEIGHT.
-            let impulse_pos = vec2(
+            let at = (
                 pos_x + ox - tip.0 * 17.0 / SCALE,
                 pos_y + oy + tip.1 * SIDE_ENGINE_HEIGHT / SCALE,
             );
-            let impulse = vec2(
-                -ox * SIDE_ENGINE_POWER * s_power,
-                -oy * SIDE_ENGINE_POWER * s_power,
-            );
-            self.world
-                .body_mut(self.lander)
-                .apply_linear_impulse(&impulse, &impulse_pos, true);
+            self.push((ox, oy), at, SIDE_ENGINE_POWER * s_power);
         }
 
         self.world.step((1.0 / FPS) as f32, 6 * 30, 2 * 30);
@@ -430,17 +429,18 @@ fn shaping(s: &[f64; OBS_DIM]) -> f64 {
 }
 
 /// Gymnasium's LunarLander with discrete actions and no wind (`LunarLander-v2` / `LunarLander-v3`).
-pub struct LunarLander {
-    id: &'static str,
+pub type LunarLander = Simulated<LunarLanderPhysics>;
+
+/// The lander's world and what the reward and the drawing need from the previous frame.
+pub struct LunarLanderPhysics {
     /// Vertical gravity of the world (Gymnasium's `gravity` keyword; -10 in the registered task).
     gravity: f32,
-    rng: Option<NumpyRng>,
     scene: Option<Scene>,
     prev_shaping: f64,
     /// The last action (drawing only: which engine fired).
     last_action: usize,
-    /// Running flag and time limit.
-    clock: EpisodeClock,
+    /// The observation the last frame computed.
+    obs: [f32; OBS_DIM],
 }
 
 // SAFETY: `wrapped2d::World` holds raw pointers to a C++ `b2World` (and its bodies) that this struct
@@ -448,7 +448,7 @@ pub struct LunarLander {
 // shares atomics with it. Box2D keeps no thread-affine state, so the whole world may move to another
 // thread together with its owner. (Box2D 2.3 bumps a few global profiling counters in its distance
 // and time-of-impact routines; they are statistics that the simulation never reads.)
-unsafe impl Send for LunarLander {}
+unsafe impl Send for LunarLanderPhysics {}
 
 impl LunarLander {
     /// Creates the environment under the Gymnasium id it answers to (`LunarLander-v2` or `-v3`: the
@@ -468,23 +468,25 @@ impl LunarLander {
                 ),
             });
         }
-        Ok(LunarLander {
-            id,
+        let physics = LunarLanderPhysics {
             gravity,
-            rng: None,
             scene: None,
             prev_shaping: 0.0,
             last_action: 0,
-            clock: EpisodeClock::new(id, N_ACTIONS, MAX_EPISODE_STEPS),
-        })
+            obs: [0.0; OBS_DIM],
+        };
+        Ok(Simulated::with_physics(id, physics))
     }
+}
 
+impl LunarLanderPhysics {
     /// One frame of Gymnasium's `step` without the time limit: engines, physics, observation, reward.
-    fn frame(&mut self, action: usize, first: bool) -> ([f32; OBS_DIM], f64, bool) {
-        let rng = self
-            .rng
-            .as_mut()
-            .expect("frame() runs only after reset() set the generator");
+    fn frame(
+        &mut self,
+        action: usize,
+        first: bool,
+        rng: &mut NumpyRng,
+    ) -> ([f32; OBS_DIM], f64, bool) {
         let scene = self
             .scene
             .as_mut()
@@ -520,48 +522,28 @@ impl LunarLander {
     }
 }
 
-impl Env for LunarLander {
-    fn generator(&self) -> Option<NumpyRng> {
-        self.rng.clone()
-    }
-
-    fn set_generator(&mut self, rng: Option<NumpyRng>) {
-        self.rng = rng;
-    }
-
-    fn spec(&self) -> &'static super::EnvSpec {
-        super::spec(self.id).expect("LunarLander ids are registered")
-    }
-
-    fn reset_into(&mut self, seed: Option<u64>, obs: &mut [f32]) {
-        match seed {
-            Some(seed) => self.rng = Some(NumpyRng::new(seed)),
-            // Gymnasium seeds from OS entropy on the first reset without a seed.
-            None if self.rng.is_none() => self.rng = Some(NumpyRng::from_entropy()),
-            None => {}
-        }
-        let rng = self.rng.as_mut().expect("generator set above");
+impl Dynamics for LunarLanderPhysics {
+    fn reset(&mut self, rng: &mut NumpyRng) {
         // Drop the old world before building the new one (Gymnasium destroys, then creates).
         self.scene = None;
         self.scene = Some(Scene::build(rng, self.gravity));
-        self.clock.start();
         self.last_action = 0;
         // Gymnasium's reset returns the observation of one no-op step (outside the time limit count).
-        let (first, _, _) = self.frame(0, true);
-        obs.copy_from_slice(&first);
+        (self.obs, _, _) = self.frame(0, true, rng);
     }
 
-    fn step_into(&mut self, action: usize, obs: &mut [f32]) -> Result<Outcome, EnvError> {
-        self.clock.check_step(action)?;
-        let (next, reward, terminated) = self.frame(action, false);
+    fn step(&mut self, action: usize, rng: &mut EnvRng) -> (f64, bool) {
+        let rng = rng
+            .current()
+            .expect("a step runs only after reset() set the generator");
+        let (next, reward, terminated) = self.frame(action, false, rng);
         self.last_action = action;
-        let truncated = self.clock.finish_step(terminated);
-        obs.copy_from_slice(&next);
-        Ok(Outcome {
-            reward,
-            terminated,
-            truncated,
-        })
+        self.obs = next;
+        (reward, terminated)
+    }
+
+    fn observe(&self, obs: &mut [f32]) {
+        obs.copy_from_slice(&self.obs);
     }
 
     fn geometry(&self) -> Option<super::Geometry> {
@@ -604,6 +586,7 @@ pub fn heuristic_action(obs: &[f32]) -> usize {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::env::Env;
 
     #[test]
     fn step_before_reset_and_bad_actions_are_errors() {
@@ -611,7 +594,7 @@ mod tests {
         assert!(matches!(env.step(0), Err(EnvError::NeedsReset { .. })));
         env.reset(Some(0));
         assert!(matches!(
-            env.step(N_ACTIONS),
+            env.step(env.n_actions()),
             Err(EnvError::ActionOutOfRange {
                 action: 4,
                 n_actions: 4,
@@ -644,6 +627,8 @@ mod tests {
         // Find an episode the heuristic hovers through (some seeds reach the limit) and check the flags:
         // not truncated before step 1000, truncated on it, and no step after it without a reset.
         let mut env = LunarLander::new("LunarLander-v2");
+        let limit = env.max_episode_steps();
+        assert_eq!(limit, 1000);
         let mut found = false;
         for seed in 0..200 {
             let mut obs = env.reset(Some(seed));
@@ -655,9 +640,9 @@ mod tests {
                 if step.terminated || step.truncated {
                     break step;
                 }
-                assert!(steps < MAX_EPISODE_STEPS, "no truncation at the limit");
+                assert!(steps < limit, "no truncation at the limit");
             };
-            if steps == MAX_EPISODE_STEPS {
+            if steps == limit {
                 assert!(last.truncated);
                 assert!(matches!(env.step(0), Err(EnvError::NeedsReset { .. })));
                 found = true;

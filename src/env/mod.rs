@@ -147,10 +147,7 @@ pub trait Env: Send {
     /// Overwrites the internal float64 state (classic control; used by the `set` conformance case).
     /// Resets the step counter. Environments without such a state return an error.
     fn set_state(&mut self, _state: &[f64]) -> Result<Vec<f32>, EnvError> {
-        Err(EnvError::BadState {
-            env: self.id(),
-            msg: "setting the internal state is not supported".into(),
-        })
+        Err(state_not_supported(self.id()))
     }
     /// What a viewer needs to draw the current state (see [`Geometry`]); `None` if the environment has no
     /// drawing. Reading it never changes the environment.
@@ -364,6 +361,111 @@ pub fn make(id: &str) -> Result<Box<dyn Env>, EnvError> {
     }
 }
 
+/// The physics of a built-in task, which [`Simulated`] makes an [`Env`]: the initial state, a step with a valid
+/// action, and what the viewer and the conformance `set` case need.
+pub trait Dynamics: Send {
+    /// Draws the initial state from the reset's generator.
+    fn reset(&mut self, rng: &mut NumpyRng);
+    /// One step with an action in range; `rng` holds the episode's generator (a task that draws while stepping
+    /// draws from it). Returns the reward and whether the task terminated.
+    fn step(&mut self, action: usize, rng: &mut EnvRng) -> (f64, bool);
+    /// Writes the observation of the current state into `obs`.
+    fn observe(&self, obs: &mut [f32]);
+    /// The float64 state that [`Env::set_state`] overwrites; `None` (the default) for a task without one.
+    fn state_mut(&mut self) -> Option<&mut [f64]> {
+        None
+    }
+    /// See [`Env::geometry`].
+    fn geometry(&self) -> Option<Geometry> {
+        None
+    }
+}
+
+/// A built-in environment: a task's [`Dynamics`] with what every task keeps besides its physics, its
+/// registered facts, the reset generator ([`EnvRng`]) and the step bookkeeping ([`EpisodeClock`]).
+#[derive(Debug, Clone)]
+pub struct Simulated<D> {
+    spec: &'static EnvSpec,
+    rng: EnvRng,
+    clock: EpisodeClock,
+    physics: D,
+}
+
+impl<D> Simulated<D> {
+    /// The registered environment `id` with `physics`; panics if `id` is not registered (built-in ids are).
+    pub fn with_physics(id: &str, physics: D) -> Self {
+        let spec = spec(id).unwrap_or_else(|err| panic!("{err}"));
+        Simulated {
+            spec,
+            rng: EnvRng::default(),
+            clock: EpisodeClock::new(spec.id, spec.n_actions, spec.max_episode_steps),
+            physics,
+        }
+    }
+
+    /// The task's physics (its state).
+    pub fn physics(&self) -> &D {
+        &self.physics
+    }
+}
+
+impl<D: Dynamics> Env for Simulated<D> {
+    fn reset_into(&mut self, seed: Option<u64>, obs: &mut [f32]) {
+        self.physics.reset(self.rng.reseed(seed));
+        self.clock.start();
+        self.physics.observe(obs);
+    }
+
+    fn step_into(&mut self, action: usize, obs: &mut [f32]) -> Result<Outcome, EnvError> {
+        self.clock.check_step(action)?;
+        let (reward, terminated) = self.physics.step(action, &mut self.rng);
+        let truncated = self.clock.finish_step(terminated);
+        self.physics.observe(obs);
+        Ok(Outcome {
+            reward,
+            terminated,
+            truncated,
+        })
+    }
+
+    fn spec(&self) -> &'static EnvSpec {
+        self.spec
+    }
+
+    fn generator(&self) -> Option<NumpyRng> {
+        self.rng.get()
+    }
+
+    fn set_generator(&mut self, rng: Option<NumpyRng>) {
+        self.rng.set(rng);
+    }
+
+    fn set_state(&mut self, state: &[f64]) -> Result<Vec<f32>, EnvError> {
+        let id = self.spec.id;
+        let target = self
+            .physics
+            .state_mut()
+            .ok_or_else(|| state_not_supported(id))?;
+        check_state(id, state, target.len())?;
+        target.copy_from_slice(state);
+        self.clock.start();
+        let mut obs = vec![0.0; self.spec.obs_dim];
+        self.physics.observe(&mut obs);
+        Ok(obs)
+    }
+
+    fn geometry(&self) -> Option<Geometry> {
+        self.physics.geometry()
+    }
+}
+
+fn state_not_supported(env: &'static str) -> EnvError {
+    EnvError::BadState {
+        env,
+        msg: "setting the internal state is not supported".into(),
+    }
+}
+
 /// The seeding rule every environment shares (Gymnasium's `Env.reset(seed=...)` and `np_random`).
 ///
 /// `Some(seed)` builds a fresh `np.random.default_rng(seed)`; `None` keeps drawing from the current generator,
@@ -382,6 +484,11 @@ impl EnvRng {
     /// Replaces the current generator.
     pub fn set(&mut self, rng: Option<NumpyRng>) {
         self.rng = rng;
+    }
+
+    /// The generator the last reset left, to keep drawing from within the episode; `None` before any reset.
+    pub fn current(&mut self) -> Option<&mut NumpyRng> {
+        self.rng.as_mut()
     }
 
     /// Applies the reset seed and returns the generator to draw the initial state from.

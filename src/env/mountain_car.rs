@@ -7,7 +7,8 @@
 //! and velocity >= 0; reward -1 per step; limit 200 steps. The initial position is one draw of
 //! `uniform(-0.6, -0.4)`, the initial velocity 0 (docs/environments.md, "Classic control").
 
-use super::{Env, EnvError, EnvRng, EpisodeClock, Outcome, check_state};
+use super::{Dynamics, EnvRng, Simulated};
+use crate::rng::NumpyRng;
 
 const ID: &str = "MountainCar-v0";
 const MIN_POSITION: f64 = -1.2;
@@ -24,12 +25,12 @@ fn hill_height(x: f64) -> f64 {
 }
 
 /// MountainCar-v0 with its 200-step limit.
+pub type MountainCar = Simulated<MountainCarPhysics>;
+
+/// The car's `[position, velocity]`, in float64.
 #[derive(Debug, Clone)]
-pub struct MountainCar {
-    position: f64,
-    velocity: f64,
-    rng: EnvRng,
-    clock: EpisodeClock,
+pub struct MountainCarPhysics {
+    state: [f64; 2],
 }
 
 impl Default for MountainCar {
@@ -40,67 +41,47 @@ impl Default for MountainCar {
 
 impl MountainCar {
     pub fn new() -> Self {
-        Self {
-            position: 0.0,
-            velocity: 0.0,
-            rng: EnvRng::default(),
-            clock: EpisodeClock::new(ID, 3, 200),
-        }
+        Simulated::with_physics(ID, MountainCarPhysics { state: [0.0; 2] })
     }
 
     /// The float64 state `[position, velocity]`.
     pub fn state(&self) -> [f64; 2] {
-        [self.position, self.velocity]
-    }
-
-    fn observation(&self) -> [f32; 2] {
-        [self.position as f32, self.velocity as f32]
+        self.physics().state
     }
 }
 
-impl Env for MountainCar {
-    fn generator(&self) -> Option<crate::rng::NumpyRng> {
-        self.rng.get()
+impl Dynamics for MountainCarPhysics {
+    fn reset(&mut self, rng: &mut NumpyRng) {
+        self.state = [rng.uniform(-0.6, -0.4), 0.0];
     }
 
-    fn set_generator(&mut self, rng: Option<crate::rng::NumpyRng>) {
-        self.rng.set(rng);
-    }
-
-    fn spec(&self) -> &'static super::EnvSpec {
-        super::spec(ID).expect("MountainCar-v0 is registered")
-    }
-
-    fn reset_into(&mut self, seed: Option<u64>, obs: &mut [f32]) {
-        self.position = self.rng.reseed(seed).uniform(-0.6, -0.4);
-        self.velocity = 0.0;
-        self.clock.start();
-        obs.copy_from_slice(&self.observation());
-    }
-
-    fn step_into(&mut self, action: usize, obs: &mut [f32]) -> Result<Outcome, EnvError> {
-        self.clock.check_step(action)?;
+    fn step(&mut self, action: usize, _rng: &mut EnvRng) -> (f64, bool) {
+        let [position, velocity] = self.state;
         let push = (action as f64 - 1.0) * FORCE;
-        let mut velocity = self.velocity + (push + (3.0 * self.position).cos() * (-GRAVITY));
+        let mut velocity = velocity + (push + (3.0 * position).cos() * (-GRAVITY));
         velocity = velocity.clamp(-MAX_SPEED, MAX_SPEED);
-        let position = (self.position + velocity).clamp(MIN_POSITION, MAX_POSITION);
+        let position = (position + velocity).clamp(MIN_POSITION, MAX_POSITION);
         // Inelastic collision with the left wall.
         if position == MIN_POSITION && velocity < 0.0 {
             velocity = 0.0;
         }
-        self.position = position;
-        self.velocity = velocity;
+        self.state = [position, velocity];
         let terminated = position >= GOAL_POSITION && velocity >= GOAL_VELOCITY;
-        let truncated = self.clock.finish_step(terminated);
-        obs.copy_from_slice(&self.observation());
-        Ok(Outcome {
-            reward: -1.0,
-            terminated,
-            truncated,
-        })
+        (-1.0, terminated)
+    }
+
+    fn observe(&self, obs: &mut [f32]) {
+        let [position, velocity] = self.state;
+        obs.copy_from_slice(&[position as f32, velocity as f32]);
+    }
+
+    /// `[position, velocity]` (Gymnasium's `env.unwrapped.state`).
+    fn state_mut(&mut self) -> Option<&mut [f64]> {
+        Some(&mut self.state)
     }
 
     fn geometry(&self) -> Option<super::Geometry> {
+        let position = self.state[0];
         let hill = (0..=60)
             .map(|i| {
                 let x = MIN_POSITION + (MAX_POSITION - MIN_POSITION) * f64::from(i) / 60.0;
@@ -108,28 +89,20 @@ impl Env for MountainCar {
             })
             .collect();
         Some(super::Geometry::MountainCar {
-            position: self.position,
-            height: hill_height(self.position),
+            position,
+            height: hill_height(position),
             // The slope of the hill under the car: d/dx of 0.45 sin(3x).
-            angle: (1.35 * (3.0 * self.position).cos()).atan(),
+            angle: (1.35 * (3.0 * position).cos()).atan(),
             goal: GOAL_POSITION,
             hill,
         })
-    }
-
-    /// Overwrites `[position, velocity]` (Gymnasium's `env.unwrapped.state = ...`).
-    fn set_state(&mut self, state: &[f64]) -> Result<Vec<f32>, EnvError> {
-        check_state(ID, state, 2)?;
-        self.position = state[0];
-        self.velocity = state[1];
-        self.clock.start();
-        Ok(self.observation().to_vec())
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::env::{Env, EnvError};
 
     #[test]
     fn left_wall_stops_the_car() {

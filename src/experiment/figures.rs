@@ -85,13 +85,15 @@ pub fn query_timeline(runs: &[&RunRecord]) -> Vec<Band> {
     bands(per_bin)
 }
 
-/// A curve of `group`'s runs summarised by `reduce`, or `None` for an empty group.
+/// The curve of the runs of `pool` that `member` selects, summarised by `reduce`; `None` when it selects none.
 fn curve(
-    group: Vec<&RunRecord>,
+    pool: &[&RunRecord],
+    member: impl Fn(&RunRecord) -> bool,
     label: String,
     color: usize,
     reduce: fn(&[&RunRecord]) -> Vec<Band>,
 ) -> Option<Curve> {
+    let group: Vec<&RunRecord> = pool.iter().copied().filter(|r| member(r)).collect();
     (!group.is_empty()).then(|| Curve {
         label,
         color,
@@ -131,109 +133,123 @@ fn net_words(net: NetKind) -> (&'static str, &'static str) {
 const RETURN_LABEL: &str = "mean test return (20 episodes)";
 const STEPS_LABEL: &str = "environment steps";
 
-/// Panels per environment, one curve per method, for the default-variant runs of `methods` on `net`.
-fn methods_figure(
-    runs: &[RunRecord],
-    net: NetKind,
-    methods: &[Method],
-    title: String,
-) -> Option<FigureContent> {
+/// Panels per environment, one curve per method, for the default-variant runs of `methods` among `runs` (one
+/// network's).
+fn methods_figure(runs: &[&RunRecord], methods: &[Method], title: String) -> Option<FigureContent> {
     let selected: Vec<&RunRecord> = runs
         .iter()
-        .filter(|r| r.net == net && r.variant == DEFAULT_VARIANT && methods.contains(&r.method))
+        .copied()
+        .filter(|r| r.variant == DEFAULT_VARIANT && methods.contains(&r.method))
         .collect();
-    let envs = env_order(selected.iter().map(|r| r.env.as_str()));
-    let panels: Vec<Panel> = envs
+    let panels = env_panels(&selected, true, |in_env| {
+        method_curves(in_env, methods, median_curve)
+    });
+    steps_figure(title, RETURN_LABEL, panels)
+}
+
+/// One panel per environment of `selected`, in the paper's order, with the curves `curves` draws from the
+/// environment's runs, and the task's solve threshold when `threshold`.
+fn env_panels(
+    selected: &[&RunRecord],
+    threshold: bool,
+    curves: impl Fn(&[&RunRecord]) -> Vec<Curve>,
+) -> Vec<Panel> {
+    env_order(selected.iter().map(|r| r.env.as_str()))
         .iter()
         .map(|env| {
             let in_env: Vec<&RunRecord> =
                 selected.iter().copied().filter(|r| &r.env == env).collect();
-            let curves = methods
-                .iter()
-                .filter_map(|method| {
-                    let group = in_env
-                        .iter()
-                        .copied()
-                        .filter(|r| r.method == *method)
-                        .collect();
-                    curve(
-                        group,
-                        method.paper_name(),
-                        method_color(*method),
-                        median_curve,
-                    )
-                })
-                .collect();
-            Panel {
-                title: env.clone(),
-                threshold: in_env.first().map(|r| r.solve_threshold),
-                curves,
-            }
+            let solve = in_env.first().map(|r| r.solve_threshold);
+            Panel::new(env.clone(), solve.filter(|_| threshold), curves(&in_env))
         })
-        .collect();
+        .collect()
+}
+
+/// A curve per method of `methods` that has runs among `runs`, summarised by `reduce`.
+fn method_curves(
+    runs: &[&RunRecord],
+    methods: &[Method],
+    reduce: fn(&[&RunRecord]) -> Vec<Band>,
+) -> Vec<Curve> {
+    methods
+        .iter()
+        .filter_map(|method| {
+            curve(
+                runs,
+                |r| r.method == *method,
+                method.paper_name(),
+                method_color(*method),
+                reduce,
+            )
+        })
+        .collect()
+}
+
+/// One median curve per value of a varied setting (`values`, in legend order) that has runs among `runs`:
+/// `has(run, value)` tells a run's value, `label` the legend text, and the i-th value takes colour `colors[i]`.
+fn setting_curves<T>(
+    runs: &[&RunRecord],
+    values: &[T],
+    has: impl Fn(&RunRecord, &T) -> bool,
+    label: impl Fn(&T) -> String,
+    colors: [usize; PALETTE.len()],
+) -> Vec<Curve> {
+    values
+        .iter()
+        .enumerate()
+        .filter_map(|(i, value)| {
+            curve(
+                runs,
+                |r| has(r, value),
+                label(value),
+                colors[i % PALETTE.len()],
+                median_curve,
+            )
+        })
+        .collect()
+}
+
+/// A figure of `panels` over environment steps with the given title and y label; `None` without panels (the
+/// figure's runs are absent).
+fn steps_figure(title: String, y_label: &str, panels: Vec<Panel>) -> Option<FigureContent> {
     (!panels.is_empty()).then(|| FigureContent {
         title,
         x_label: STEPS_LABEL.to_string(),
-        y_label: RETURN_LABEL.to_string(),
+        y_label: y_label.to_string(),
         panels,
     })
 }
 
 /// ADQN runs of the t_query study (variant `tqVALUE`): panels per environment, one curve per value.
-fn t_query_figure(runs: &[RunRecord], net: NetKind) -> Option<FigureContent> {
-    let selected: Vec<(&RunRecord, f64)> = runs
+fn t_query_figure(runs: &[&RunRecord], title: String) -> Option<FigureContent> {
+    let t_query = |r: &RunRecord| r.variant.strip_prefix("tq")?.parse::<f64>().ok();
+    let selected: Vec<&RunRecord> = runs
         .iter()
-        .filter(|r| r.net == net && r.method == Method::Adqn)
-        .filter_map(|r| Some((r, r.variant.strip_prefix("tq")?.parse::<f64>().ok()?)))
+        .copied()
+        .filter(|r| r.method == Method::Adqn && t_query(r).is_some())
         .collect();
-    let mut values: Vec<f64> = selected.iter().map(|(_, t)| *t).collect();
+    let mut values: Vec<f64> = selected.iter().filter_map(|r| t_query(r)).collect();
     values.sort_by(f64::total_cmp);
     values.dedup();
-    let envs = env_order(selected.iter().map(|(r, _)| r.env.as_str()));
-    let panels: Vec<Panel> = envs
-        .iter()
-        .map(|env| {
-            let in_env: Vec<&(&RunRecord, f64)> =
-                selected.iter().filter(|(r, _)| &r.env == env).collect();
-            let curves = values
-                .iter()
-                .enumerate()
-                .filter_map(|(i, value)| {
-                    let group = in_env
-                        .iter()
-                        .filter(|(_, t)| t == value)
-                        .map(|(r, _)| *r)
-                        .collect();
-                    curve(
-                        group,
-                        format!("t_query = {value}"),
-                        [4, 3, 5, 1, 6, 2, 0, 7][i % PALETTE.len()],
-                        median_curve,
-                    )
-                })
-                .collect();
-            Panel {
-                title: env.clone(),
-                threshold: in_env.first().map(|(r, _)| r.solve_threshold),
-                curves,
-            }
-        })
-        .collect();
-    let (words, suffix) = net_words(net);
-    (!panels.is_empty()).then(|| FigureContent {
-        title: format!("ADQN-{suffix} with t_query in {{0.05, 0.1, 0.3, 0.5}} ({words} DQN)"),
-        x_label: STEPS_LABEL.to_string(),
-        y_label: RETURN_LABEL.to_string(),
-        panels,
-    })
+    let panels = env_panels(&selected, true, |in_env| {
+        setting_curves(
+            in_env,
+            &values,
+            |r, value| t_query(r) == Some(*value),
+            |value| format!("t_query = {value}"),
+            [4, 3, 5, 1, 6, 2, 0, 7],
+        )
+    });
+    steps_figure(title, RETURN_LABEL, panels)
 }
 
 /// ADQN and DQfD runs of the expert-quality study (variant `expert-...`): a panel per (environment, method),
 /// one curve per expert.
-fn expert_figure(runs: &[RunRecord], net: NetKind) -> Option<FigureContent> {
+fn expert_figure(runs: &[&RunRecord], suffix: &str, title: String) -> Option<FigureContent> {
     let selected: Vec<&RunRecord> = runs
         .iter()
-        .filter(|r| r.net == net && (r.method == Method::Adqn || r.method == Method::Dqfd))
+        .copied()
+        .filter(|r| r.method == Method::Adqn || r.method == Method::Dqfd)
         .filter(|r| r.variant.starts_with("expert-") && !r.variant.contains('_'))
         .collect();
     // Legend order and colours follow the paper's order of experts; unknown specs come after, alphabetically.
@@ -263,84 +279,36 @@ fn expert_figure(runs: &[RunRecord], net: NetKind) -> Option<FigureContent> {
             if in_panel.is_empty() {
                 continue;
             }
-            let curves = experts
-                .iter()
-                .enumerate()
-                .filter_map(|(i, expert)| {
-                    let group = in_panel
-                        .iter()
-                        .copied()
-                        .filter(|r| r.expert.as_ref().unwrap_or(&r.variant) == expert)
-                        .collect();
-                    curve(
-                        group,
-                        expert_label(expert),
-                        [4, 1, 3, 5, 6, 2, 0, 7][i % PALETTE.len()],
-                        median_curve,
-                    )
-                })
-                .collect();
-            let (_, suffix) = net_words(net);
-            panels.push(Panel {
-                title: format!("{env}: {}-{suffix}", method.paper_name()),
-                threshold: in_panel.first().map(|r| r.solve_threshold),
+            let curves = setting_curves(
+                &in_panel,
+                &experts,
+                |r, expert| r.expert.as_ref().unwrap_or(&r.variant) == expert,
+                |expert| expert_label(expert),
+                [4, 1, 3, 5, 6, 2, 0, 7],
+            );
+            panels.push(Panel::new(
+                format!("{env}: {}-{suffix}", method.paper_name()),
+                in_panel.first().map(|r| r.solve_threshold),
                 curves,
-            });
+            ));
         }
     }
-    let (words, suffix) = net_words(net);
-    (!panels.is_empty()).then(|| FigureContent {
-        title: format!(
-            "Effect of the expert's quality on ADQN-{suffix} and DQfD-{suffix} ({words} DQN)"
-        ),
-        x_label: STEPS_LABEL.to_string(),
-        y_label: RETURN_LABEL.to_string(),
-        panels,
-    })
+    steps_figure(title, RETURN_LABEL, panels)
 }
 
 /// Queries per evaluation period for the querying methods (default variant), one panel per environment.
-fn query_figure(runs: &[RunRecord], net: NetKind) -> Option<FigureContent> {
+fn query_figure(runs: &[&RunRecord], title: String) -> Option<FigureContent> {
     let methods = [Method::Gdqn, Method::Bdqn, Method::Adqn, Method::Adqnp];
     let selected: Vec<&RunRecord> = runs
         .iter()
-        .filter(|r| r.net == net && r.variant == DEFAULT_VARIANT && methods.contains(&r.method))
+        .copied()
+        .filter(|r| r.variant == DEFAULT_VARIANT && methods.contains(&r.method))
         .filter(|r| r.query_steps.is_some())
         .collect();
-    let envs = env_order(selected.iter().map(|r| r.env.as_str()));
-    let panels: Vec<Panel> = envs
-        .iter()
-        .map(|env| {
-            let curves = methods
-                .iter()
-                .filter_map(|method| {
-                    let group = selected
-                        .iter()
-                        .copied()
-                        .filter(|r| &r.env == env && r.method == *method)
-                        .collect();
-                    curve(
-                        group,
-                        method.paper_name(),
-                        method_color(*method),
-                        query_timeline,
-                    )
-                })
-                .collect();
-            Panel {
-                title: env.clone(),
-                threshold: None,
-                curves,
-            }
-        })
-        .collect();
-    let (words, suffix) = net_words(net);
-    (!panels.is_empty()).then(|| FigureContent {
-        title: format!("When the agent asks: queries over training (-{suffix}, {words} DQN)"),
-        x_label: STEPS_LABEL.to_string(),
-        y_label: "queries per evaluation period".to_string(),
-        panels,
-    })
+    let panels = env_panels(&selected, false, |in_env| {
+        method_curves(in_env, &methods, query_timeline)
+    });
+    steps_figure(title, "queries per evaluation period", panels)
 }
 
 /// The paper's figures built from `runs`, in the paper's order, each for bootstrapped and noisy nets:
@@ -350,6 +318,7 @@ pub fn paper_figures(runs: &[RunRecord]) -> Vec<PaperFigure> {
     let mut figures = Vec::new();
     for net in [NetKind::Bootstrap, NetKind::Noisy] {
         let (words, suffix) = net_words(net);
+        let runs: Vec<&RunRecord> = runs.iter().filter(|r| r.net == net).collect();
         let mut push = |name: String, content: Option<FigureContent>, missing: String| {
             let skip_reason = if content.is_some() {
                 String::new()
@@ -365,8 +334,7 @@ pub fn paper_figures(runs: &[RunRecord]) -> Vec<PaperFigure> {
         push(
             format!("fig1_methods_{net}"),
             methods_figure(
-                runs,
-                net,
+                &runs,
                 &[Method::Dqn, Method::Gdqn, Method::Bdqn, Method::Adqn],
                 format!("Comparison between methods with {words} DQN (-{suffix})"),
             ),
@@ -375,8 +343,7 @@ pub fn paper_figures(runs: &[RunRecord]) -> Vec<PaperFigure> {
         push(
             format!("fig2_pretraining_{net}"),
             methods_figure(
-                runs,
-                net,
+                &runs,
                 &[Method::Dqfd, Method::Adqn, Method::Adqnp],
                 format!("ADQN, DQfD and ADQNP based on {words} DQN (-{suffix})"),
             ),
@@ -384,19 +351,31 @@ pub fn paper_figures(runs: &[RunRecord]) -> Vec<PaperFigure> {
         );
         push(
             format!("fig3_t_query_{net}"),
-            t_query_figure(runs, net),
+            t_query_figure(
+                &runs,
+                format!("ADQN-{suffix} with t_query in {{0.05, 0.1, 0.3, 0.5}} ({words} DQN)"),
+            ),
             format!("no complete ADQN run of a t_query sweep (variant tqVALUE) with net = {net}"),
         );
         push(
             format!("fig4_experts_{net}"),
-            expert_figure(runs, net),
+            expert_figure(
+                &runs,
+                suffix,
+                format!(
+                    "Effect of the expert's quality on ADQN-{suffix} and DQfD-{suffix} ({words} DQN)"
+                ),
+            ),
             format!(
                 "no complete ADQN or DQfD run of an expert sweep (variant expert-...) with net = {net}"
             ),
         );
         push(
             format!("fig5_queries_{net}"),
-            query_figure(runs, net),
+            query_figure(
+                &runs,
+                format!("When the agent asks: queries over training (-{suffix}, {words} DQN)"),
+            ),
             format!(
                 "no complete default-variant run of a querying method with a queries.csv and net = {net}"
             ),

@@ -54,6 +54,16 @@ pub struct Panel {
     pub curves: Vec<Curve>,
 }
 
+impl Panel {
+    pub fn new(title: String, threshold: Option<f64>, curves: Vec<Curve>) -> Self {
+        Panel {
+            title,
+            threshold,
+            curves,
+        }
+    }
+}
+
 /// A figure: a row (or grid) of panels sharing axis labels and one legend.
 #[derive(Debug, Clone)]
 pub struct FigureContent {

@@ -4,22 +4,22 @@
 //!
 //! The parts fit as follows:
 //! - [`crate::train::run_dir::load_runs`] reads every complete run below a directory into a [`RunRecord`].
-//! - [`group_runs`] applies the paper's measure per (env, method, net, variant): the first evaluation that reaches
-//!   the threshold ([`stats::first_hit`]), and the median over seeds ([`stats::median`]; docs/algorithm.md
-//!   section 11).
+//! - [`super::verdict::cells`] applies the paper's measure per (env, method, net, variant): the first evaluation
+//!   that reaches the threshold ([`stats::first_hit`]), and the median over seeds ([`stats::median`];
+//!   docs/algorithm.md section 11), beside the other readings.
 //! - [`report`] writes `table.md`, `table.csv`, `evaluations.csv`, the figures of [`super::figures`] and
 //!   `report.md`.
 
 use super::protocol::env_order;
-use super::stats::{self, median};
+use super::stats;
 use super::sweep::{SWEEP_FILE, SweepGrid};
 use super::verdict::Cell;
 use super::{figures, plot};
 use crate::paper::{self, PAPER_TASKS, TABLE5_METHODS, TABLE5_NETS};
+use crate::train::Method;
 use crate::train::run_dir::{
     self, DEFAULT_VARIANT, EvalPoint, RunRecord, SUMMARY_FILE, load_runs, write_atomic,
 };
-use crate::train::{Method, NetKind};
 use anyhow::{Context, Result, bail};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -32,16 +32,7 @@ pub fn evaluations_csv(runs: &[RunRecord]) -> String {
         .flat_map(|r| r.eval.iter().map(move |p| (r, p)))
         .collect();
     // Sorted by names, as the file reads.
-    rows.sort_by_key(|&(r, p)| {
-        (
-            r.env.as_str(),
-            r.method.name(),
-            r.net.name(),
-            r.variant.as_str(),
-            r.seed,
-            p.step,
-        )
-    });
+    rows.sort_by_key(|&(r, p)| (r.key(), p.step));
     // The mean is written exactly (the shortest text that reads back as the same f64), so that the readings
     // computed from this file alone equal those computed from the runs; the spread columns to 3 decimals.
     let mut out = String::from("env,method,net,variant,seed,step,mean,std,min,max\n");
@@ -54,54 +45,6 @@ pub fn evaluations_csv(runs: &[RunRecord]) -> String {
     out
 }
 
-/// Runs of one configuration (env, method, net, variant) and their steps to solve.
-#[derive(Debug, Clone)]
-pub struct RunGroup {
-    pub env: String,
-    pub method: Method,
-    pub net: NetKind,
-    pub variant: String,
-    /// Seeds in ascending order.
-    pub seeds: Vec<u64>,
-    /// Steps to solve of each seed, in the order of `seeds`.
-    pub steps_to_solve: Vec<u64>,
-    /// Seeds that reached the threshold within training.
-    pub solved: usize,
-    /// Median steps to solve over seeds.
-    pub median_steps_to_solve: f64,
-}
-
-/// Groups runs per (env, method, net, variant) and computes their steps to solve.
-pub fn group_runs(runs: &[RunRecord]) -> Vec<RunGroup> {
-    run_dir::configurations(runs)
-        .into_iter()
-        .map(|members| {
-            let first = members[0];
-            let (env, variant) = (&first.env, &first.variant);
-            let (method, net) = (members[0].method, members[0].net);
-            let steps: Vec<u64> = members
-                .iter()
-                .map(|r| stats::first_hit(&r.eval, r.solve_threshold, r.train_steps))
-                .collect();
-            let solved = members
-                .iter()
-                .filter(|r| r.eval.iter().any(|p| p.mean >= r.solve_threshold))
-                .count();
-            let as_f64: Vec<f64> = steps.iter().map(|&s| s as f64).collect();
-            RunGroup {
-                env: env.to_string(),
-                method,
-                net,
-                variant: variant.to_string(),
-                seeds: members.iter().map(|r| r.seed).collect(),
-                median_steps_to_solve: median(&as_f64).unwrap_or(f64::NAN),
-                steps_to_solve: steps,
-                solved,
-            }
-        })
-        .collect()
-}
-
 fn format_steps(value: f64) -> String {
     if value.is_nan() {
         "-".to_string()
@@ -112,19 +55,19 @@ fn format_steps(value: f64) -> String {
     }
 }
 
-/// Table 5 as Markdown and CSV from the `default`-variant groups: rows DQN..ADQNP for -B then -N, one column
-/// group per environment with our median, the paper's median and the number of seeds; the CSV adds the sustained
-/// and median-curve readings of the same cell from `readings` ([`super::verdict::cells`]).
-pub fn table5(groups: &[RunGroup], readings: &[Cell]) -> Result<(String, String)> {
-    let defaults: Vec<&RunGroup> = groups
+/// Table 5 as Markdown and CSV from the `default`-variant configurations ([`super::verdict::cells`]): rows
+/// DQN..ADQNP for -B then -N, one column group per environment with our median first hit, the paper's median and
+/// the number of seeds; the CSV adds the sustained and median-curve readings of the same cell.
+pub fn table5(cells: &[Cell]) -> Result<(String, String)> {
+    let defaults: Vec<&Cell> = cells
         .iter()
-        .filter(|g| g.variant == DEFAULT_VARIANT)
+        .filter(|c| c.variant == DEFAULT_VARIANT)
         .collect();
-    let envs = env_order(defaults.iter().map(|g| g.env.as_str()));
+    let envs = env_order(defaults.iter().map(|c| c.env.as_str()));
     let find = |env: &str, method: &str, net: &str| {
         defaults
             .iter()
-            .find(|g| g.env == env && g.method.name() == method && g.net.name() == net)
+            .find(|c| c.env == env && c.method == method && c.net == net)
             .copied()
     };
     let mut md = String::new();
@@ -168,48 +111,38 @@ pub fn table5(groups: &[RunGroup], readings: &[Cell]) -> Result<(String, String)
             .map(|env| {
                 TABLE5_METHODS
                     .iter()
-                    .filter_map(|method| find(env, method, net).map(|g| g.median_steps_to_solve))
+                    .filter_map(|method| find(env, method, net).map(|c| c.first_hit.median))
                     .fold(f64::INFINITY, f64::min)
             })
             .collect();
         for method in TABLE5_METHODS {
             let name = format!("{}-{suffix}", method.parse::<Method>()?.paper_name());
-            let mut cells = Vec::new();
+            let mut row = Vec::new();
             let mut csv_row = vec![method.to_string(), net.to_string()];
             for (env, best) in envs.iter().zip(&best) {
                 let ours = find(env, method, net);
                 let theirs = paper::median_steps(env, method, net);
                 let theirs_text = theirs.map_or("-".to_string(), |v| v.to_string());
                 match ours {
-                    Some(g) => {
-                        let ours_text = format_steps(g.median_steps_to_solve);
-                        let shown = if g.median_steps_to_solve == *best {
+                    Some(c) => {
+                        let ours_text = format_steps(c.first_hit.median);
+                        let shown = if c.first_hit.median == *best {
                             format!("**{ours_text}**")
                         } else {
                             ours_text.clone()
                         };
-                        cells.push(format!(
-                            "{shown} ({theirs_text}) {}/{}",
-                            g.solved,
-                            g.seeds.len()
-                        ));
-                        let cell = readings.iter().find(|c| {
-                            c.env == g.env
-                                && c.method == g.method.name()
-                                && c.net == g.net.name()
-                                && c.variant == g.variant
-                        });
+                        row.push(format!("{shown} ({theirs_text}) {}/{}", c.solved, c.seeds));
                         csv_row.extend([
                             ours_text,
                             theirs_text,
-                            g.seeds.len().to_string(),
-                            g.solved.to_string(),
-                            cell.map_or(String::new(), |c| format_steps(c.sustained.median)),
-                            cell.map_or(String::new(), |c| c.median_curve.to_string()),
+                            c.seeds.to_string(),
+                            c.solved.to_string(),
+                            format_steps(c.sustained.median),
+                            c.median_curve.to_string(),
                         ]);
                     }
                     None => {
-                        cells.push(format!("- ({theirs_text})"));
+                        row.push(format!("- ({theirs_text})"));
                         csv_row.extend([
                             "".to_string(),
                             theirs_text,
@@ -221,7 +154,7 @@ pub fn table5(groups: &[RunGroup], readings: &[Cell]) -> Result<(String, String)
                     }
                 }
             }
-            writeln!(md, "| {name} | {} |", cells.join(" | "))?;
+            writeln!(md, "| {name} | {} |", row.join(" | "))?;
             csv_writer.write_record(&csv_row)?;
         }
     }
@@ -231,23 +164,23 @@ pub fn table5(groups: &[RunGroup], readings: &[Cell]) -> Result<(String, String)
     Ok((md, String::from_utf8(csv_bytes)?))
 }
 
-/// Every group (all variants, including nets and methods outside Table 5) as a Markdown table.
-fn all_groups_markdown(groups: &[RunGroup]) -> String {
+/// Every configuration (all variants, including nets and methods outside Table 5) as a Markdown table.
+fn all_groups_markdown(cells: &[Cell]) -> String {
     let mut md = String::from(
         "| env | method | net | variant | median steps to solve | solved/seeds |\n|---|---|---|---|---|---|\n",
     );
-    let order = env_order(groups.iter().map(|g| g.env.as_str()));
+    let order = env_order(cells.iter().map(|c| c.env.as_str()));
     for env in &order {
-        for g in groups.iter().filter(|g| &g.env == env) {
+        for c in cells.iter().filter(|c| &c.env == env) {
             md.push_str(&format!(
                 "| {} | {} | {} | {} | {} | {}/{} |\n",
-                g.env,
-                g.method.paper_name(),
-                g.net,
-                g.variant,
-                format_steps(g.median_steps_to_solve),
-                g.solved,
-                g.seeds.len()
+                c.env,
+                paper::method_display_name(&c.method),
+                c.net,
+                c.variant,
+                format_steps(c.first_hit.median),
+                c.solved,
+                c.seeds
             ));
         }
     }
@@ -318,10 +251,9 @@ pub fn report(dir: &Path, out_dir: &Path, sustain: usize) -> Result<ReportSummar
             ));
         }
     }
-    let groups = group_runs(&runs);
     let cells = super::verdict::cells(&runs, sustain);
     let mut files = Vec::new();
-    let (table_md, table_csv) = table5(&groups, &cells)?;
+    let (table_md, table_csv) = table5(&cells)?;
     let table_md_path = out_dir.join("table.md");
     write_atomic(&table_md_path, table_md.as_bytes())?;
     let table_csv_path = out_dir.join("table.csv");
@@ -360,7 +292,7 @@ pub fn report(dir: &Path, out_dir: &Path, sustain: usize) -> Result<ReportSummar
         md,
         "{} complete runs in {} configurations.\n",
         runs.len(),
-        groups.len()
+        cells.len()
     )?;
     writeln!(
         md,
@@ -369,7 +301,7 @@ pub fn report(dir: &Path, out_dir: &Path, sustain: usize) -> Result<ReportSummar
     writeln!(
         md,
         "## All configurations\n\n{}",
-        all_groups_markdown(&groups)
+        all_groups_markdown(&cells)
     )?;
     writeln!(md, "{verdict_md}")?;
     writeln!(md, "## Expert statistics in the paper\n")?;
@@ -439,8 +371,8 @@ mod tests {
             .map(|c| stats::first_hit(c, 195.0, 20000) as f64)
             .collect();
         assert_eq!(steps, vec![6000.0, 7000.0, 9000.0, 20000.0]);
-        assert_eq!(median(&steps), Some(8000.0));
-        assert_eq!(median(&steps[..3]), Some(7000.0));
-        assert_eq!(median(&[]), None);
+        assert_eq!(stats::median(&steps), Some(8000.0));
+        assert_eq!(stats::median(&steps[..3]), Some(7000.0));
+        assert_eq!(stats::median(&[]), None);
     }
 }

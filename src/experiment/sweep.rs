@@ -988,19 +988,12 @@ pub fn collect_results(dir: &Path) -> Result<CollectedResults> {
 
 /// The content of `results.csv` for these runs, the number of data rows, and notes on dropped duplicates.
 pub fn results_csv_bytes(runs: &[RunRecord]) -> Result<(Vec<u8>, usize, Vec<String>)> {
-    type Key<'a> = (&'a str, &'a str, &'a str, &'a str, u64, u64);
+    // (run, step): the run's key, then the evaluation's step.
+    type Key<'a> = ((&'a str, &'a str, &'a str, &'a str, u64), u64);
     let mut rows: Vec<(Key, &run_dir::EvalPoint, &Path)> = Vec::new();
     for run in runs {
         for point in &run.eval {
-            let key = (
-                run.env.as_str(),
-                run.method.name(),
-                run.net.name(),
-                run.variant.as_str(),
-                run.seed,
-                point.step,
-            );
-            rows.push((key, point, run.dir.as_path()));
+            rows.push(((run.key(), point.step), point, run.dir.as_path()));
         }
     }
     // Stable sort: among equal keys the first run directory in path order wins.
@@ -1016,13 +1009,13 @@ pub fn results_csv_bytes(runs: &[RunRecord]) -> Result<(Vec<u8>, usize, Vec<Stri
         if previous == Some(key) {
             notes.push(format!(
                 "duplicate evaluation at step {} in {} left out",
-                key.5,
+                key.1,
                 run_dir.display()
             ));
             continue;
         }
         previous = Some(key);
-        let (env, method, net, variant, seed, step) = key;
+        let ((env, method, net, variant, seed), step) = key;
         writer.write_record([
             env.to_string(),
             method.to_string(),

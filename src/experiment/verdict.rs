@@ -370,17 +370,12 @@ fn beats_claim(
         Verdict::Inconclusive
     };
     let mut ours = counts_text(counts, measured);
-    if !beaten.is_empty() {
-        let _ = write!(
-            ours,
-            "; significantly faster than {}: {}",
-            paper::method_display_name(a),
-            beaten.join(", ")
-        );
-    }
-    if !missing.is_empty() {
-        let _ = write!(ours, "; no runs for {}", missing.join(", "));
-    }
+    let faster = format!(
+        "; significantly faster than {}: ",
+        paper::method_display_name(a)
+    );
+    append_list(&mut ours, &faster, &beaten, ", ");
+    append_list(&mut ours, "; no runs for ", &missing, ", ");
     Claim {
         claim,
         paper: format!("Table 5: best on {paper_wins}/{} tasks", tasks.len()),
@@ -389,6 +384,19 @@ fn beats_claim(
         test: format!(
             "lowest first-hit median on >= {paper_wins} tasks and no rival faster with Mann-Whitney p < {ALPHA}"
         ),
+    }
+}
+
+/// Appends `label` and the `items` joined by `separator` to `text`, when there are items.
+fn append_list<S: std::borrow::Borrow<str>>(
+    text: &mut String,
+    label: &str,
+    items: &[S],
+    separator: &str,
+) {
+    if !items.is_empty() {
+        text.push_str(label);
+        text.push_str(&items.join(separator));
     }
 }
 
@@ -477,9 +485,7 @@ fn end_above_expert(cells: &[Cell]) -> Claim {
         Verdict::Inconclusive
     };
     let mut ours = format!("{above}/{total} configurations end above the expert's mean");
-    if !below.is_empty() {
-        let _ = write!(ours, "; clearly below: {}", below.join(", "));
-    }
+    append_list(&mut ours, "; clearly below: ", &below, ", ");
     Claim {
         claim: "Methods with demonstrations end above the expert".into(),
         paper: "Figures 1-2: the learned policies outperform the imperfect expert".into(),
@@ -551,9 +557,7 @@ fn t_query_insensitive(cells: &[Cell]) -> Claim {
     if !pairs.is_empty() {
         let _ = write!(ours, " ({})", pairs.join("; "));
     }
-    if !differing.is_empty() {
-        let _ = write!(ours, "; differing: {}", differing.join("; "));
-    }
+    append_list(&mut ours, "; differing: ", &differing, "; ");
     Claim {
         claim: "ADQN is insensitive to t_query in {0.05, 0.1, 0.3, 0.5}".into(),
         paper: "Figure 3: similar curves for every t_query".into(),

@@ -64,6 +64,19 @@ pub const MAX_DEMO_FILE_BYTES: u64 = 4 << 30;
 /// Fewer bytes than any transition line takes (the shortest, with empty vectors and one-digit numbers, has 95).
 const MIN_TRANSITION_BYTES: u64 = 64;
 
+/// Demonstrations as columns, one entry per transition in episode order (an episode ends at a terminated or
+/// truncated transition): how another language hands them over (the Python bindings' `demos=`), read by
+/// [`Demonstrations::from_columns`].
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct DemoColumns {
+    pub obs: Vec<Vec<f32>>,
+    pub actions: Vec<usize>,
+    pub rewards: Vec<f32>,
+    pub next_obs: Vec<Vec<f32>>,
+    pub terminated: Vec<bool>,
+    pub truncated: Vec<bool>,
+}
+
 /// A set of demonstrations for one environment.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Demonstrations {
@@ -120,18 +133,17 @@ impl Demonstrations {
         })
     }
 
-    /// Demonstrations given as columns, one entry per transition in episode order (an episode ends at a
-    /// terminated or truncated transition). Checks lengths, sizes and actions against `env_id`.
-    #[allow(clippy::too_many_arguments)]
-    pub fn from_arrays(
-        env_id: &str,
-        obs: Vec<Vec<f32>>,
-        actions: Vec<usize>,
-        rewards: Vec<f32>,
-        next_obs: Vec<Vec<f32>>,
-        terminated: Vec<bool>,
-        truncated: Vec<bool>,
-    ) -> Result<Self> {
+    /// Demonstrations given as columns (see [`DemoColumns`]). Checks lengths, sizes and actions against
+    /// `env_id`.
+    pub fn from_columns(env_id: &str, columns: DemoColumns) -> Result<Self> {
+        let DemoColumns {
+            obs,
+            actions,
+            rewards,
+            next_obs,
+            terminated,
+            truncated,
+        } = columns;
         let spec = env::spec(env_id)?;
         let n = actions.len();
         ensure!(

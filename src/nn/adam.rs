@@ -9,6 +9,7 @@
 use super::Segment;
 use super::simd::simd_dispatch;
 use super::{Layout, QNet};
+use crate::state::{Persist, StateDict, StateError};
 
 /// Gradients of every parameter of a [`QNet`], in the same flat layout.
 #[derive(Clone, Debug)]
@@ -113,24 +114,6 @@ impl Adam {
     pub const BETA2: f32 = 0.999;
     pub const EPS: f32 = 1e-8;
 
-    /// Writes the step count and both moments into `state` under `prefix`.
-    pub fn save_state<'a>(&'a self, prefix: &str, state: &mut crate::state::StateDict<'a>) {
-        state.put_value(&format!("{prefix}.step"), &self.step);
-        state.put_f32(&format!("{prefix}.m"), &self.first_moment);
-        state.put_f32(&format!("{prefix}.v"), &self.second_moment);
-    }
-
-    /// Reads what [`Adam::save_state`] wrote.
-    pub fn load_state(
-        &mut self,
-        prefix: &str,
-        state: &crate::state::StateDict<'_>,
-    ) -> Result<(), crate::state::StateError> {
-        self.step = state.value(&format!("{prefix}.step"))?;
-        state.f32s_into(&format!("{prefix}.m"), &mut self.first_moment)?;
-        state.f32s_into(&format!("{prefix}.v"), &mut self.second_moment)
-    }
-
     /// An optimiser for `net`'s parameters with learning rate `lr` and zero moments.
     pub fn new(net: &QNet, lr: f32) -> Self {
         Self {
@@ -193,6 +176,22 @@ impl Adam {
             adam_update_avx2(params, &grads.data, m, v, &coefficients),
             adam_update(params, &grads.data, m, v, &coefficients)
         )
+    }
+}
+
+impl Persist for Adam {
+    /// Writes the step count and both moments into `state` under `prefix`.
+    fn save_state<'a>(&'a self, prefix: &str, state: &mut StateDict<'a>) {
+        state.put_value(&format!("{prefix}.step"), &self.step);
+        state.put_f32(&format!("{prefix}.m"), &self.first_moment);
+        state.put_f32(&format!("{prefix}.v"), &self.second_moment);
+    }
+
+    /// Reads what [`Adam::save_state`] wrote.
+    fn load_state(&mut self, prefix: &str, state: &StateDict<'_>) -> Result<(), StateError> {
+        self.step = state.value(&format!("{prefix}.step"))?;
+        state.f32s_into(&format!("{prefix}.m"), &mut self.first_moment)?;
+        state.f32s_into(&format!("{prefix}.v"), &mut self.second_moment)
     }
 }
 

@@ -537,16 +537,27 @@ mod tests {
         }
     }
 
+    /// A network (`obs_dim` inputs, 2 actions, `output`, parameters drawn from `seed`) saved without metadata as
+    /// `net.safetensors` in a fresh directory: the directory, the network and the file's bytes.
+    fn saved_net(
+        obs_dim: usize,
+        output: OutputKind,
+        seed: u64,
+    ) -> (tempfile::TempDir, QNet, Vec<u8>) {
+        let dir = tempfile::tempdir().unwrap();
+        let mut rng = rand_pcg::Pcg64::seed_from_u64(seed);
+        let net = QNet::new(obs_dim, 2, output, &mut rng);
+        let path = dir.path().join("net.safetensors");
+        net.save(&path, &BTreeMap::new()).unwrap();
+        let bytes = fs::read(&path).unwrap();
+        (dir, net, bytes)
+    }
+
     /// The file holds PyTorch-layout tensors: check `fc1.weight[o][i]` against the network's own
     /// single-state forward (an independent path through the in-memory layout).
     #[test]
     fn file_tensors_are_in_pytorch_layout() {
-        let dir = tempfile::tempdir().unwrap();
-        let mut rng = rand_pcg::Pcg64::seed_from_u64(12);
-        let net = QNet::new(3, 2, OutputKind::Bootstrap { heads: 2 }, &mut rng);
-        let path = dir.path().join("net.safetensors");
-        net.save(&path, &BTreeMap::new()).unwrap();
-        let bytes = fs::read(&path).unwrap();
+        let (_dir, net, bytes) = saved_net(3, OutputKind::Bootstrap { heads: 2 }, 12);
         let file = SafeTensors::deserialize(&bytes).unwrap();
         let read = |name: &str| -> Vec<f32> {
             let view = file.tensor(name).unwrap();
@@ -597,12 +608,7 @@ mod tests {
 
     #[test]
     fn missing_truncated_and_foreign_files_give_clear_errors() {
-        let dir = tempfile::tempdir().unwrap();
-        let mut rng = rand_pcg::Pcg64::seed_from_u64(13);
-        let net = QNet::new(4, 2, OutputKind::Noisy, &mut rng);
-        let path = dir.path().join("net.safetensors");
-        net.save(&path, &BTreeMap::new()).unwrap();
-        let bytes = fs::read(&path).unwrap();
+        let (dir, _, bytes) = saved_net(4, OutputKind::Noisy, 13);
 
         let missing = dir.path().join("absent.safetensors");
         let error = load_error(&missing);
@@ -644,12 +650,7 @@ mod tests {
     /// Rewrites a saved file with one tensor changed (or dropped) and checks the matching error.
     #[test]
     fn inconsistent_tensors_are_rejected() {
-        let dir = tempfile::tempdir().unwrap();
-        let mut rng = rand_pcg::Pcg64::seed_from_u64(14);
-        let net = QNet::new(4, 2, OutputKind::Bootstrap { heads: 2 }, &mut rng);
-        let path = dir.path().join("net.safetensors");
-        net.save(&path, &BTreeMap::new()).unwrap();
-        let bytes = fs::read(&path).unwrap();
+        let (dir, _, bytes) = saved_net(4, OutputKind::Bootstrap { heads: 2 }, 14);
         let original = SafeTensors::deserialize(&bytes).unwrap();
         let header = SafeTensors::read_metadata(&bytes)
             .unwrap()

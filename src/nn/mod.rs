@@ -52,6 +52,7 @@ pub use noisy::{NoiseSample, noise_transform};
 pub use simd::{SimdCapError, SimdLevel, simd_level};
 pub use workspace::Workspace;
 
+use crate::state::{Persist, StateDict, StateError};
 pub(crate) use layout::{Layout, Segment, TensorsMut};
 use linear::{MatView, init_linear};
 
@@ -178,20 +179,6 @@ impl QNet {
         &self.params[segment.range()]
     }
 
-    /// Writes the parameters into `state` as `{prefix}.params`.
-    pub fn save_state<'a>(&'a self, prefix: &str, state: &mut crate::state::StateDict<'a>) {
-        state.put_f32(&format!("{prefix}.params"), &self.params[..]);
-    }
-
-    /// Reads the parameters [`QNet::save_state`] wrote (the shapes must match this network's).
-    pub fn load_state(
-        &mut self,
-        prefix: &str,
-        state: &crate::state::StateDict<'_>,
-    ) -> Result<(), crate::state::StateError> {
-        state.f32s_into(&format!("{prefix}.params"), &mut self.params)
-    }
-
     /// Hard target update: copies `other`'s parameters into `self` without allocating.
     ///
     /// # Panics
@@ -213,6 +200,18 @@ impl QNet {
             )),
             _ => None,
         }
+    }
+}
+
+impl Persist for QNet {
+    /// Writes the parameters into `state` as `{prefix}.params`.
+    fn save_state<'a>(&'a self, prefix: &str, state: &mut StateDict<'a>) {
+        state.put_f32(&format!("{prefix}.params"), &self.params[..]);
+    }
+
+    /// Reads the parameters [`QNet::save_state`] wrote (the shapes must match this network's).
+    fn load_state(&mut self, prefix: &str, state: &StateDict<'_>) -> Result<(), StateError> {
+        state.f32s_into(&format!("{prefix}.params"), &mut self.params)
     }
 }
 

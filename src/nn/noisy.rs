@@ -11,6 +11,7 @@ use rand::Rng;
 use rand_distr::StandardNormal;
 
 use super::HIDDEN;
+use crate::state::{Persist, StateDict, StateError};
 
 /// `f(x) = sgn(x) sqrt|x|`, the factorised-noise transform of NoisyNet (docs/algorithm.md §6).
 #[inline]
@@ -52,22 +53,6 @@ impl NoiseSample {
         }
     }
 
-    /// Writes the factors into `state` under `prefix`.
-    pub fn save_state<'a>(&'a self, prefix: &str, state: &mut crate::state::StateDict<'a>) {
-        state.put_f32(&format!("{prefix}.input"), &self.input_factors);
-        state.put_f32(&format!("{prefix}.output"), &self.output_factors);
-    }
-
-    /// Reads what [`NoiseSample::save_state`] wrote.
-    pub fn load_state(
-        &mut self,
-        prefix: &str,
-        state: &crate::state::StateDict<'_>,
-    ) -> Result<(), crate::state::StateError> {
-        state.f32s_into(&format!("{prefix}.input"), &mut self.input_factors)?;
-        state.f32s_into(&format!("{prefix}.output"), &mut self.output_factors)
-    }
-
     /// Number of outputs (actions) this sample is for.
     pub fn n_actions(&self) -> usize {
         self.output_factors.len()
@@ -98,6 +83,20 @@ impl NoiseSample {
     pub fn clear(&mut self) {
         self.input_factors.fill(0.0);
         self.output_factors.fill(0.0);
+    }
+}
+
+impl Persist for NoiseSample {
+    /// Writes the factors into `state` under `prefix`.
+    fn save_state<'a>(&'a self, prefix: &str, state: &mut StateDict<'a>) {
+        state.put_f32(&format!("{prefix}.input"), &self.input_factors);
+        state.put_f32(&format!("{prefix}.output"), &self.output_factors);
+    }
+
+    /// Reads what [`NoiseSample::save_state`] wrote.
+    fn load_state(&mut self, prefix: &str, state: &StateDict<'_>) -> Result<(), StateError> {
+        state.f32s_into(&format!("{prefix}.input"), &mut self.input_factors)?;
+        state.f32s_into(&format!("{prefix}.output"), &mut self.output_factors)
     }
 }
 

@@ -35,6 +35,7 @@ use std::collections::VecDeque;
 use rand::Rng;
 
 use super::order_stats::OrderStatistics;
+use crate::state::{Persist, StateDict, StateError};
 
 /// Invalid query configuration.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
@@ -309,41 +310,6 @@ impl QueryController {
         Self { unit, ..self }
     }
 
-    /// Writes the controller's position into `state` under `prefix`: budget used, segment in progress,
-    /// queries, and the adaptive rule's window. The rule's ranking tree is not written: its answers depend only
-    /// on the values in the window, so it is rebuilt from them.
-    pub fn save_state<'a>(&'a self, prefix: &str, state: &mut crate::state::StateDict<'a>) {
-        state.put_value(
-            &format!("{prefix}.counters"),
-            &[self.budget_used, self.segment_left, self.queries],
-        );
-        if let QueryRule::Adaptive(rule) = &self.rule {
-            let window: Vec<f32> = rule.recent.iter().copied().collect();
-            state.put_f32(&format!("{prefix}.window"), window);
-        }
-    }
-
-    /// Reads what [`QueryController::save_state`] wrote into a controller built with the same rule.
-    pub fn load_state(
-        &mut self,
-        prefix: &str,
-        state: &crate::state::StateDict<'_>,
-    ) -> Result<(), crate::state::StateError> {
-        let [budget_used, segment_left, queries]: [usize; 3] =
-            state.value(&format!("{prefix}.counters"))?;
-        (self.budget_used, self.segment_left, self.queries) = (budget_used, segment_left, queries);
-        if let QueryRule::Adaptive(rule) = &mut self.rule {
-            let window = state.f32s(&format!("{prefix}.window"))?;
-            rule.recent.clear();
-            rule.ranked.clear();
-            for &u in window {
-                rule.recent.push_back(u);
-                rule.ranked.insert(u);
-            }
-        }
-        Ok(())
-    }
-
     /// The rule, e.g. to read the adaptive window.
     pub fn rule(&self) -> &QueryRule {
         &self.rule
@@ -478,6 +444,39 @@ impl QueryController {
     /// Steps per query.
     pub fn segment_len(&self) -> usize {
         self.segment_len
+    }
+}
+
+impl Persist for QueryController {
+    /// Writes the controller's position into `state` under `prefix`: budget used, segment in progress,
+    /// queries, and the adaptive rule's window. The rule's ranking tree is not written: its answers depend only
+    /// on the values in the window, so it is rebuilt from them.
+    fn save_state<'a>(&'a self, prefix: &str, state: &mut StateDict<'a>) {
+        state.put_value(
+            &format!("{prefix}.counters"),
+            &[self.budget_used, self.segment_left, self.queries],
+        );
+        if let QueryRule::Adaptive(rule) = &self.rule {
+            let window: Vec<f32> = rule.recent.iter().copied().collect();
+            state.put_f32(&format!("{prefix}.window"), window);
+        }
+    }
+
+    /// Reads what [`QueryController::save_state`] wrote into a controller built with the same rule.
+    fn load_state(&mut self, prefix: &str, state: &StateDict<'_>) -> Result<(), StateError> {
+        let [budget_used, segment_left, queries]: [usize; 3] =
+            state.value(&format!("{prefix}.counters"))?;
+        (self.budget_used, self.segment_left, self.queries) = (budget_used, segment_left, queries);
+        if let QueryRule::Adaptive(rule) = &mut self.rule {
+            let window = state.f32s(&format!("{prefix}.window"))?;
+            rule.recent.clear();
+            rule.ranked.clear();
+            for &u in window {
+                rule.recent.push_back(u);
+                rule.ranked.insert(u);
+            }
+        }
+        Ok(())
     }
 }
 

@@ -49,6 +49,7 @@ pub use sum_tree::SumMinTree;
 
 use nstep::NStepQueue;
 
+use crate::state::{Persist, StateDict, StateError};
 use rand::Rng;
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
@@ -278,90 +279,6 @@ impl Replay {
             max_priority: 1.0,
             nstep: n_step.then(|| NStepQueue::new(cfg.n_step, cfg.gamma)),
         })
-    }
-
-    /// Writes the memory's contents into `state` under `prefix`: every slot's arrays, the priorities, the
-    /// counters and the n-step queue. The sum/min trees are not written: their inner nodes are recomputed from
-    /// the leaves on every change, so rebuilding them from the priorities gives the same trees bit for bit.
-    pub fn save_state<'a>(&'a self, prefix: &str, state: &mut crate::state::StateDict<'a>) {
-        let name = |n: &str| format!("{prefix}.{n}");
-        state.put_f32(&name("obs"), &self.obs);
-        state.put_f32(&name("next_obs"), &self.next_obs);
-        let actions: Vec<u64> = self.actions.iter().map(|&a| a as u64).collect();
-        state.put_u64(&name("actions"), actions);
-        state.put_f32(&name("rewards"), &self.rewards);
-        let terminal: Vec<u8> = self.terminal.iter().map(|&t| u8::from(t)).collect();
-        state.put_u8(&name("terminal"), terminal);
-        state.put_f32(&name("nstep_next_obs"), &self.nstep_next_obs);
-        state.put_f32(&name("nstep_rewards"), &self.nstep_rewards);
-        state.put_f32(&name("nstep_discounts"), &self.nstep_discounts);
-        state.put_f32(&name("priorities"), &self.priorities);
-        state.put_value(
-            &name("counters"),
-            &[self.n_demo, self.n_agent, self.agent_next],
-        );
-        state.put_value(&name("max_priority"), &self.max_priority);
-        if let Some(queue) = &self.nstep {
-            state.put_value(&name("nstep_queue"), &queue.pending());
-        }
-    }
-
-    /// Reads what [`Replay::save_state`] wrote into a memory built with the same configuration.
-    pub fn load_state(
-        &mut self,
-        prefix: &str,
-        state: &crate::state::StateDict<'_>,
-    ) -> Result<(), crate::state::StateError> {
-        use crate::state::StateError;
-        let name = |n: &str| format!("{prefix}.{n}");
-        state.f32s_into(&name("obs"), &mut self.obs)?;
-        state.f32s_into(&name("next_obs"), &mut self.next_obs)?;
-        let mut actions = vec![0u64; self.actions.len()];
-        state.u64s_into(&name("actions"), &mut actions)?;
-        self.actions = actions.iter().map(|&a| a as usize).collect();
-        state.f32s_into(&name("rewards"), &mut self.rewards)?;
-        let mut terminal = vec![0u8; self.terminal.len()];
-        state.u8s_into(&name("terminal"), &mut terminal)?;
-        self.terminal = terminal.iter().map(|&t| t != 0).collect();
-        state.f32s_into(&name("nstep_next_obs"), &mut self.nstep_next_obs)?;
-        state.f32s_into(&name("nstep_rewards"), &mut self.nstep_rewards)?;
-        state.f32s_into(&name("nstep_discounts"), &mut self.nstep_discounts)?;
-        let mut priorities = vec![0f32; self.priorities.len()];
-        state.f32s_into(&name("priorities"), &mut priorities)?;
-        let [n_demo, n_agent, agent_next]: [usize; 3] = state.value(&name("counters"))?;
-        if n_demo > self.cfg.demo_capacity
-            || n_agent > self.cfg.capacity
-            || agent_next >= self.cfg.capacity.max(1)
-        {
-            return Err(StateError::Value {
-                name: name("counters"),
-                msg: format!(
-                    "{n_demo} demonstrations, {n_agent} agent transitions (next {agent_next}) do not fit \
-                     capacities {} and {}",
-                    self.cfg.demo_capacity, self.cfg.capacity
-                ),
-            });
-        }
-        (self.n_demo, self.n_agent, self.agent_next) = (n_demo, n_agent, agent_next);
-        self.max_priority = state.value(&name("max_priority"))?;
-        self.demo_tree = SumMinTree::new(self.cfg.demo_capacity);
-        self.agent_tree = SumMinTree::new(self.cfg.capacity);
-        let stored: Vec<usize> = self.stored_slots().collect();
-        for slot in stored {
-            let p = priorities[slot];
-            if !(p.is_finite() && p >= 0.0) {
-                return Err(StateError::Value {
-                    name: name("priorities"),
-                    msg: format!("slot {slot} has priority {p}"),
-                });
-            }
-            self.set_priority(slot, p);
-        }
-        self.priorities = priorities;
-        if let Some(queue) = &mut self.nstep {
-            queue.set_pending(state.value(&name("nstep_queue"))?);
-        }
-        Ok(())
     }
 
     /// Stores one transition. A demonstration goes to the permanent part; an agent transition to the ring,
@@ -676,6 +593,88 @@ impl Replay {
             out.nstep_rewards.push(self.nstep_rewards[slot]);
             out.nstep_discounts.push(self.nstep_discounts[slot]);
         }
+    }
+}
+
+impl Persist for Replay {
+    /// Writes the memory's contents into `state` under `prefix`: every slot's arrays, the priorities, the
+    /// counters and the n-step queue. The sum/min trees are not written: their inner nodes are recomputed from
+    /// the leaves on every change, so rebuilding them from the priorities gives the same trees bit for bit.
+    fn save_state<'a>(&'a self, prefix: &str, state: &mut StateDict<'a>) {
+        let name = |n: &str| format!("{prefix}.{n}");
+        state.put_f32(&name("obs"), &self.obs);
+        state.put_f32(&name("next_obs"), &self.next_obs);
+        let actions: Vec<u64> = self.actions.iter().map(|&a| a as u64).collect();
+        state.put_u64(&name("actions"), actions);
+        state.put_f32(&name("rewards"), &self.rewards);
+        let terminal: Vec<u8> = self.terminal.iter().map(|&t| u8::from(t)).collect();
+        state.put_u8(&name("terminal"), terminal);
+        state.put_f32(&name("nstep_next_obs"), &self.nstep_next_obs);
+        state.put_f32(&name("nstep_rewards"), &self.nstep_rewards);
+        state.put_f32(&name("nstep_discounts"), &self.nstep_discounts);
+        state.put_f32(&name("priorities"), &self.priorities);
+        state.put_value(
+            &name("counters"),
+            &[self.n_demo, self.n_agent, self.agent_next],
+        );
+        state.put_value(&name("max_priority"), &self.max_priority);
+        if let Some(queue) = &self.nstep {
+            state.put_value(&name("nstep_queue"), &queue.pending());
+        }
+    }
+
+    /// Reads what [`Replay::save_state`] wrote into a memory built with the same configuration.
+    fn load_state(&mut self, prefix: &str, state: &StateDict<'_>) -> Result<(), StateError> {
+        use StateError;
+        let name = |n: &str| format!("{prefix}.{n}");
+        state.f32s_into(&name("obs"), &mut self.obs)?;
+        state.f32s_into(&name("next_obs"), &mut self.next_obs)?;
+        let mut actions = vec![0u64; self.actions.len()];
+        state.u64s_into(&name("actions"), &mut actions)?;
+        self.actions = actions.iter().map(|&a| a as usize).collect();
+        state.f32s_into(&name("rewards"), &mut self.rewards)?;
+        let mut terminal = vec![0u8; self.terminal.len()];
+        state.u8s_into(&name("terminal"), &mut terminal)?;
+        self.terminal = terminal.iter().map(|&t| t != 0).collect();
+        state.f32s_into(&name("nstep_next_obs"), &mut self.nstep_next_obs)?;
+        state.f32s_into(&name("nstep_rewards"), &mut self.nstep_rewards)?;
+        state.f32s_into(&name("nstep_discounts"), &mut self.nstep_discounts)?;
+        let mut priorities = vec![0f32; self.priorities.len()];
+        state.f32s_into(&name("priorities"), &mut priorities)?;
+        let [n_demo, n_agent, agent_next]: [usize; 3] = state.value(&name("counters"))?;
+        if n_demo > self.cfg.demo_capacity
+            || n_agent > self.cfg.capacity
+            || agent_next >= self.cfg.capacity.max(1)
+        {
+            return Err(StateError::Value {
+                name: name("counters"),
+                msg: format!(
+                    "{n_demo} demonstrations, {n_agent} agent transitions (next {agent_next}) do not fit \
+                     capacities {} and {}",
+                    self.cfg.demo_capacity, self.cfg.capacity
+                ),
+            });
+        }
+        (self.n_demo, self.n_agent, self.agent_next) = (n_demo, n_agent, agent_next);
+        self.max_priority = state.value(&name("max_priority"))?;
+        self.demo_tree = SumMinTree::new(self.cfg.demo_capacity);
+        self.agent_tree = SumMinTree::new(self.cfg.capacity);
+        let stored: Vec<usize> = self.stored_slots().collect();
+        for slot in stored {
+            let p = priorities[slot];
+            if !(p.is_finite() && p >= 0.0) {
+                return Err(StateError::Value {
+                    name: name("priorities"),
+                    msg: format!("slot {slot} has priority {p}"),
+                });
+            }
+            self.set_priority(slot, p);
+        }
+        self.priorities = priorities;
+        if let Some(queue) = &mut self.nstep {
+            queue.set_pending(state.value(&name("nstep_queue"))?);
+        }
+        Ok(())
     }
 }
 

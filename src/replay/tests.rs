@@ -117,20 +117,25 @@ fn count_draws(
     counts
 }
 
-#[test]
-fn prioritized_frequencies_match_p_alpha() {
-    let (mut replay, slot_tds) = mixed_memory(true);
-    let probs = expected_probs(replay.config(), &slot_tds, 0.6);
-    let counts = count_draws(&mut replay, &slot_tds, 6000, false, 7);
-    let stat = chi_square(&counts, &probs);
+/// The draw counts fit the expected probabilities: chi-square below the 99.9% critical value.
+fn assert_draws_fit(counts: &[u64], probs: &[f64]) {
+    let stat = chi_square(counts, probs);
     let critical = chi2_critical_999(probs.len() - 1);
     assert!(
         stat < critical,
         "chi-square {stat} >= {critical}; counts {counts:?}"
     );
+}
+
+#[test]
+fn prioritized_frequencies_match_p_alpha() {
+    let (mut replay, slot_tds) = mixed_memory(true);
+    let probs = expected_probs(replay.config(), &slot_tds, 0.6);
+    let counts = count_draws(&mut replay, &slot_tds, 6000, false, 7);
+    assert_draws_fit(&counts, &probs);
     // The test has power: the same counts are far from the α = 1 distribution.
     let wrong = expected_probs(replay.config(), &slot_tds, 1.0);
-    assert!(chi_square(&counts, &wrong) > 10.0 * critical);
+    assert!(chi_square(&counts, &wrong) > 10.0 * chi2_critical_999(probs.len() - 1));
 }
 
 #[test]
@@ -139,12 +144,7 @@ fn demo_only_frequencies_match_p_alpha_among_demos() {
     let demos: Vec<(usize, f32)> = slot_tds.iter().copied().filter(|&(s, _)| s < 3).collect();
     let probs = expected_probs(replay.config(), &demos, 0.6);
     let counts = count_draws(&mut replay, &demos, 3000, true, 11);
-    let stat = chi_square(&counts, &probs);
-    let critical = chi2_critical_999(probs.len() - 1);
-    assert!(
-        stat < critical,
-        "chi-square {stat} >= {critical}; counts {counts:?}"
-    );
+    assert_draws_fit(&counts, &probs);
 }
 
 #[test]
@@ -152,12 +152,7 @@ fn uniform_mode_frequencies_are_uniform_with_unit_weights() {
     let (mut replay, slot_tds) = mixed_memory(false);
     let n = slot_tds.len();
     let counts = count_draws(&mut replay, &slot_tds, 6000, false, 13);
-    let probs = vec![1.0 / n as f64; n];
-    let stat = chi_square(&counts, &probs);
-    assert!(
-        stat < chi2_critical_999(n - 1),
-        "chi-square {stat}; counts {counts:?}"
-    );
+    assert_draws_fit(&counts, &vec![1.0 / n as f64; n]);
     // Power: the priorities are very uneven, so prioritized frequencies would fail this.
     let prioritized = expected_probs(replay.config(), &slot_tds, 0.6);
     assert!(chi_square(&counts, &prioritized) > 10.0 * chi2_critical_999(n - 1));

@@ -90,13 +90,19 @@ impl Method {
 impl std::str::FromStr for Method {
     type Err = anyhow::Error;
     fn from_str(s: &str) -> Result<Self> {
-        Method::ALL
-            .into_iter()
-            .find(|m| m.name() == s)
-            .with_context(|| {
-                format!("unknown method '{s}'; known: dqn, dqfd, gdqn, bdqn, adqn, adqnp")
-            })
+        parse_named(s, &Method::ALL, Method::name, "method")
     }
+}
+
+/// The choice of `all` whose `name` is `s`; the error names what was asked for and every known name.
+fn parse_named<T: Copy>(s: &str, all: &[T], name: fn(T) -> &'static str, what: &str) -> Result<T> {
+    all.iter()
+        .copied()
+        .find(|&v| name(v) == s)
+        .with_context(|| {
+            let known: Vec<&str> = all.iter().map(|&v| name(v)).collect();
+            format!("unknown {what} '{s}'; known: {}", known.join(", "))
+        })
 }
 
 impl fmt::Display for Method {
@@ -118,6 +124,8 @@ pub enum NetKind {
 }
 
 impl NetKind {
+    pub const ALL: [NetKind; 3] = [NetKind::Plain, NetKind::Bootstrap, NetKind::Noisy];
+
     pub fn name(self) -> &'static str {
         match self {
             NetKind::Plain => "plain",
@@ -130,12 +138,7 @@ impl NetKind {
 impl std::str::FromStr for NetKind {
     type Err = anyhow::Error;
     fn from_str(s: &str) -> Result<Self> {
-        match s {
-            "plain" => Ok(NetKind::Plain),
-            "bootstrap" => Ok(NetKind::Bootstrap),
-            "noisy" => Ok(NetKind::Noisy),
-            _ => bail!("unknown network '{s}'; known: plain, bootstrap, noisy"),
-        }
+        parse_named(s, &NetKind::ALL, NetKind::name, "network")
     }
 }
 

@@ -21,7 +21,7 @@ use crate::expert::{Answer, Expert, Progress, Query};
 use crate::nn::{QNet, Workspace};
 use crate::query::{QueryController, QueryRule};
 use crate::replay::{Batch, Replay, ReplayConfig, Transition};
-use crate::state::StateDict;
+use crate::state::{Persist, StateDict};
 use anyhow::{Context, Result, ensure};
 use rand::SeedableRng;
 use rand_pcg::Pcg64;

@@ -274,6 +274,20 @@ pub struct RunRecord {
     pub summary_steps_to_solve: Option<u64>,
 }
 
+impl RunRecord {
+    /// The run's identity as reports sort and group runs: the names of its env, method, net and variant, then
+    /// its seed.
+    pub fn key(&self) -> (&str, &str, &str, &str, u64) {
+        (
+            &self.env,
+            self.method.name(),
+            self.net.name(),
+            &self.variant,
+            self.seed,
+        )
+    }
+}
+
 /// Whether the complete run in `dir` is whole: its summary, configuration and evaluation curve are present and
 /// parse (its query log too, when there is one), and the curve ends at the run's last step with the summary's
 /// final score (a curve cut short does not). An error says what is missing or damaged. Sweeps run again any run that fails this.
@@ -504,8 +518,9 @@ pub fn configurations(runs: &[RunRecord]) -> Vec<Vec<&RunRecord>> {
     let mut groups: std::collections::BTreeMap<(&str, &str, &str, &str), Vec<&RunRecord>> =
         std::collections::BTreeMap::new();
     for run in runs {
+        let (env, method, net, variant, _seed) = run.key();
         groups
-            .entry((&run.env, run.method.name(), run.net.name(), &run.variant))
+            .entry((env, method, net, variant))
             .or_default()
             .push(run);
     }
