@@ -230,7 +230,7 @@ impl SweepGrid {
         Ok(toml::to_string(&file)?)
     }
 
-    /// Checks the grid: every list non-empty and free of duplicates, t_query in (0, 1], `set` entries of the
+    /// Checks the grid: every list non-empty and free of duplicates, `set` entries of the
     /// form key=value that do not clash with a varied dimension, and every run's configuration resolves (known
     /// environment, values valid for its method): all before any run starts.
     pub fn validate(&self) -> Result<()> {
@@ -264,11 +264,6 @@ impl SweepGrid {
         for env in &self.envs {
             if !is_path_safe(env) {
                 bail!("environment id '{env}' may only contain letters, digits, '-', '_' and '.'");
-            }
-        }
-        for &t in &self.t_query {
-            if !(t > 0.0 && t <= 1.0) {
-                bail!("t_query {t} is outside (0, 1]: it is a proportion of recent steps");
             }
         }
         for expert in &self.experts {
