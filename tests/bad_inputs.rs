@@ -109,6 +109,13 @@ fn strings(args: &[&str]) -> Vec<String> {
     args.iter().map(|s| s.to_string()).collect()
 }
 
+/// The words of a command line, with the word `{}` replaced by `value` (which may be empty or hold spaces).
+fn command(line: &str, value: &str) -> Vec<String> {
+    line.split(' ')
+        .map(|w| if w == "{}" { value } else { w }.to_string())
+        .collect()
+}
+
 /// Damaged copies of `bytes`: cut at `cuts` points spread over the file, and `flips` single bytes replaced
 /// by characters that break numbers, strings and structure, at positions spread over the first `region` bytes
 /// (the whole file, or the part that is not raw numbers).
@@ -127,13 +134,13 @@ fn damaged(bytes: &[u8], cuts: usize, flips: usize, region: usize) -> Vec<Vec<u8
     out
 }
 
-/// Writes each of `files` into `dir` and probes `args` with `{}` replaced by the file's path.
-fn probe_files(dir: &Path, tally: &mut Tally, files: Vec<Vec<u8>>, ext: &str, args: &[&str]) {
+/// Writes each of `files` into `dir` and probes the command `line` with `{}` replaced by the file's path.
+fn probe_files(dir: &Path, tally: &mut Tally, files: Vec<Vec<u8>>, ext: &str, line: &str) {
     for (i, bytes) in files.into_iter().enumerate() {
         let path: PathBuf = dir.join(format!("input{i}.{ext}"));
         std::fs::write(&path, bytes).unwrap();
-        let args: Vec<String> = args
-            .iter()
+        let args: Vec<String> = line
+            .split(' ')
             .map(|a| a.replace("{}", path.to_str().unwrap()))
             .collect();
         tally.add(probe(dir, &args, Duration::from_secs(120)));
@@ -162,66 +169,22 @@ fn every_bad_input_is_a_clean_error() {
     ];
     for flag in ["--seed", "--episodes"] {
         for v in numbers {
-            cli.add(probe(
-                work,
-                &strings(&["expert", "eval", "--env", "CartPole-v0", flag, v]),
-                quick,
-            ));
+            let line = format!("expert eval --env CartPole-v0 {flag} {{}}");
+            cli.add(probe(work, &command(&line, v), quick));
         }
     }
     for v in numbers.iter().chain(&["0"]) {
-        cli.add(probe(
-            work,
-            &strings(&[
-                "demo",
-                "collect",
-                "--env",
-                "CartPole-v0",
-                "--expert",
-                "scripted",
-            ])
-            .into_iter()
-            .chain(strings(&["--transitions", v, "-o", "d.jsonl"]))
-            .collect::<Vec<_>>(),
-            quick,
-        ));
-        cli.add(probe(
-            work,
-            &strings(&[
-                "sweep",
-                "--env",
-                "CartPole-v0",
-                "--method",
-                "dqn",
-                "--seeds",
-                v,
-                "-o",
-                "s",
-            ]),
-            quick,
-        ));
-        cli.add(probe(
-            work,
-            &strings(&["reproduce", "--seeds", v, "-o", "s"]),
-            quick,
-        ));
+        for line in [
+            "demo collect --env CartPole-v0 --expert scripted --transitions {} -o d.jsonl",
+            "reproduce --seeds {} -o s",
+        ] {
+            cli.add(probe(work, &command(line, v), quick));
+        }
     }
-    for seeds in ["5..3", "a..b", "1,,2", "0..100000000000", "1,1"] {
-        cli.add(probe(
-            work,
-            &strings(&[
-                "sweep",
-                "--env",
-                "CartPole-v0",
-                "--method",
-                "dqn",
-                "--seeds",
-                seeds,
-                "-o",
-                "s",
-            ]),
-            quick,
-        ));
+    let seed_lists = ["5..3", "a..b", "1,,2", "0..100000000000", "1,1"];
+    for seeds in numbers.iter().chain(&["0"]).chain(&seed_lists) {
+        let line = "sweep --env CartPole-v0 --method dqn --seeds {} -o s";
+        cli.add(probe(work, &command(line, seeds), quick));
     }
     let train = |extra: &[&str]| {
         let mut args = strings(&[
@@ -290,14 +253,7 @@ fn every_bad_input_is_a_clean_error() {
     let mut configs = Tally::default();
     let keys: Vec<String> = String::from_utf8(
         Command::new(env!("CARGO_BIN_EXE_arld"))
-            .args([
-                "train",
-                "--env",
-                "CartPole-v0",
-                "--method",
-                "adqn",
-                "--print-config",
-            ])
+            .args("train --env CartPole-v0 --method adqn --print-config".split(' '))
             .output()
             .unwrap()
             .stdout,
@@ -347,16 +303,7 @@ fn every_bad_input_is_a_clean_error() {
         &mut configs,
         documents,
         "toml",
-        &[
-            "train",
-            "--env",
-            "CartPole-v0",
-            "--method",
-            "adqn",
-            "--config",
-            "{}",
-            "--print-config",
-        ],
+        "train --env CartPole-v0 --method adqn --config {} --print-config",
     );
     table.push(("configurations", configs));
 
@@ -386,26 +333,10 @@ fn every_bad_input_is_a_clean_error() {
             damaged(&bytes, 40, 60, bytes.len())
         },
         "jsonl",
-        &[
-            "train",
-            "--env",
-            "CartPole-v0",
-            "--method",
-            "dqfd",
-            "--net",
-            "plain",
-            "--demos",
-            "{}",
-            "--set",
-            "pretrain_steps=2",
-            "--set",
-            "train_steps=600",
-            "--set",
-            "eval_episodes=1",
-            "--quiet",
-            "-o",
-            "run",
-        ],
+        concat!(
+            "train --env CartPole-v0 --method dqfd --net plain --demos {} --set pretrain_steps=2 ",
+            "--set train_steps=600 --set eval_episodes=1 --quiet -o run"
+        ),
     );
     table.push(("demonstration files", demos));
 
@@ -419,16 +350,7 @@ fn every_bad_input_is_a_clean_error() {
         &mut checkpoints,
         damaged(&weights, 60, 80, header),
         "safetensors",
-        &[
-            "expert",
-            "eval",
-            "--env",
-            "CartPole-v0",
-            "--expert",
-            "checkpoint:{}",
-            "--episodes",
-            "1",
-        ],
+        "expert eval --env CartPole-v0 --expert checkpoint:{} --episodes 1",
     );
     table.push(("checkpoints", checkpoints));
 
@@ -442,7 +364,7 @@ fn every_bad_input_is_a_clean_error() {
         &mut traces,
         damaged(head.as_bytes(), 40, 60, head.len()),
         "jsonl",
-        &["env", "check", "{}"],
+        "env check {}",
     );
     table.push(("traces", traces));
 

@@ -515,21 +515,13 @@ struct DemoArrays {
 impl DemoArrays {
     /// The library's [`DemoColumns`], checked and read into demonstrations there.
     fn into_demonstrations(self, cfg: &TrainConfig) -> anyhow::Result<Demonstrations> {
-        let DemoArrays {
-            obs,
-            actions,
-            rewards,
-            next_obs,
-            terminated,
-            truncated,
-        } = self;
         let columns = DemoColumns {
-            obs,
-            actions,
-            rewards,
-            next_obs,
-            terminated,
-            truncated,
+            obs: self.obs,
+            actions: self.actions,
+            rewards: self.rewards,
+            next_obs: self.next_obs,
+            terminated: self.terminated,
+            truncated: self.truncated,
         };
         Demonstrations::from_columns(&cfg.env, columns)
     }
