@@ -329,7 +329,7 @@ fn malformed_sweep_files_give_clear_errors() {
         base.replace("seeds = 2", "seeds = \"many\"")
     ));
     assert!(seeds.contains("seeds"), "{seeds}");
-    let t_query = error(&format!("[sweep]\n{base}t_query = [0.0]\n"));
+    let t_query = error(&format!("[sweep]\n{base}t_query = [1.5]\n"));
     assert!(t_query.contains("t_query"), "{t_query}");
     let clash = error(&format!(
         "[sweep]\n{base}t_query = [0.1]\nset = [\"t_query=0.3\"]\n"
