@@ -26,7 +26,7 @@ fn threshold(env: &str) -> f64 {
 /// steps, later for larger t_query values and some experts, so configurations differ; a designed step past the
 /// end of training means the run never solves.
 fn designed_solve_step(spec: &RunSpec) -> Option<u64> {
-    if spec.seed == 3 {
+    if spec.id.seed == 3 {
         return None;
     }
     let method_index = [
@@ -38,7 +38,7 @@ fn designed_solve_step(spec: &RunSpec) -> Option<u64> {
         Method::Adqnp,
     ]
     .iter()
-    .position(|m| *m == spec.method)
+    .position(|m| *m == spec.id.method)
     .unwrap() as u64;
     let t_query_shift = spec.t_query.map_or(0, |t| (t * 10.0) as u64);
     let expert_shift = spec.expert.as_deref().map_or(0, |e| match e {
@@ -46,15 +46,15 @@ fn designed_solve_step(spec: &RunSpec) -> Option<u64> {
         _ if e.contains("weak") => 1,
         _ => 0,
     });
-    let step = EVAL_PERIOD * (2 + spec.seed + method_index + t_query_shift + expert_shift);
+    let step = EVAL_PERIOD * (2 + spec.id.seed + method_index + t_query_shift + expert_shift);
     (step <= TRAIN_STEPS).then_some(step)
 }
 
 fn fake_mean(spec: &RunSpec, step: u64) -> f64 {
-    let target = threshold(&spec.env);
+    let target = threshold(&spec.id.env);
     match designed_solve_step(spec) {
-        Some(solve) if step >= solve => target + 5.0 + spec.seed as f64,
-        _ => target - 100.0 + step as f64 / 1000.0 + spec.seed as f64 * 0.25,
+        Some(solve) if step >= solve => target + 5.0 + spec.id.seed as f64,
+        _ => target - 100.0 + step as f64 / 1000.0 + spec.id.seed as f64 * 0.25,
     }
 }
 
@@ -68,7 +68,7 @@ fn write_fake_run(spec: &RunSpec, dir: &Path, interrupt: bool) -> Result<()> {
         format!(
             "env = \"{}\"\nmethod = \"{}\"\nnet = \"{}\"\nseed = {}\nt_query = {t_query}\nexpert = {expert}\n\
              train_steps = {TRAIN_STEPS}\neval_period = {EVAL_PERIOD}\ngamma = 0.9\n",
-            spec.env, spec.method, spec.net, spec.seed
+            spec.id.env, spec.id.method, spec.id.net, spec.id.seed
         ),
     )?;
     let last = if interrupt {
@@ -95,8 +95,8 @@ fn write_fake_run(spec: &RunSpec, dir: &Path, interrupt: bool) -> Result<()> {
         format!("{}1,200,200,200,0\n", run_dir::EPISODES_HEADER),
     )?;
     let mut queries = String::from(run_dir::QUERIES_HEADER);
-    if spec.method != Method::Dqn && spec.method != Method::Dqfd {
-        for k in 0..(20 + spec.seed) {
+    if spec.id.method != Method::Dqn && spec.id.method != Method::Dqfd {
+        for k in 0..(20 + spec.id.seed) {
             // Queries thin out over training; the uncertainty columns may be empty.
             let event = run_dir::QueryEvent {
                 step: (k * k * 20) as usize,
@@ -120,13 +120,13 @@ fn write_fake_run(spec: &RunSpec, dir: &Path, interrupt: bool) -> Result<()> {
     run_dir::write_summary(
         dir,
         &Summary {
-            env: spec.env.clone(),
-            method: spec.method,
-            net: spec.net,
-            seed: spec.seed,
+            env: spec.id.env.clone(),
+            method: spec.id.method,
+            net: spec.id.net,
+            seed: spec.id.seed,
             steps_to_solve: solve.unwrap_or(TRAIN_STEPS) as usize,
             solved: solve.is_some(),
-            solve_threshold: threshold(&spec.env),
+            solve_threshold: threshold(&spec.id.env),
             train_steps: TRAIN_STEPS as usize,
             final_score: fake_mean(spec, TRAIN_STEPS),
             demos_pretrain: 0,
@@ -245,20 +245,20 @@ fn results_rows_match_each_runs_eval_csv_in_sorted_order() {
         for step in (EVAL_PERIOD..=TRAIN_STEPS).step_by(EVAL_PERIOD as usize) {
             let mean = fake_mean(&spec, step);
             let key = (
-                spec.env.clone(),
-                spec.method.to_string(),
-                spec.net.to_string(),
-                spec.seed,
+                spec.id.env.clone(),
+                spec.id.method.to_string(),
+                spec.id.net.to_string(),
+                spec.id.seed,
                 step,
             );
             expected.push((
                 key,
                 format!(
                     "{},{},{},default,{},{step},{mean},1.5,{},{}",
-                    spec.env,
-                    spec.method,
-                    spec.net,
-                    spec.seed,
+                    spec.id.env,
+                    spec.id.method,
+                    spec.id.net,
+                    spec.id.seed,
                     mean - 3.0,
                     mean + 3.0
                 ),
@@ -278,7 +278,7 @@ fn failing_and_panicking_runs_are_reported_without_stopping_the_others() {
     };
     let dir = tempfile::tempdir().unwrap();
     let result = sweep::run_grid(&grid, dir.path(), 2, &|spec, dir| {
-        match (spec.method, spec.seed) {
+        match (spec.id.method, spec.id.seed) {
             (Method::Adqn, 1) => panic!("simulated bug"),
             (Method::Dqn, 2) => Ok(()), // returns without summary.json
             _ => write_fake_run(spec, dir, false),
@@ -483,17 +483,14 @@ fn group_medians_follow_the_design_for_every_configuration() {
         let mut steps: Vec<u64> = runs
             .iter()
             .filter(|r| {
-                r.env == group.env
-                    && r.method.name() == group.method
-                    && r.net.name() == group.net
+                r.id.env == group.env
+                    && r.id.method.name() == group.method
+                    && r.id.net.name() == group.net
                     && r.variant == group.variant
             })
             .map(|r| {
                 let spec = RunSpec {
-                    env: r.env.clone(),
-                    method: r.method,
-                    net: r.net,
-                    seed: r.seed,
+                    id: r.id.clone(),
                     t_query: r.t_query.filter(|_| r.variant.starts_with("tq")),
                     expert: r.expert.clone().filter(|_| r.variant.starts_with("expert")),
                     set: vec![],
@@ -556,7 +553,7 @@ fn runs_start_seed_by_seed_and_a_sweep_directory_keeps_its_overrides() {
     let dir = tempfile::tempdir().unwrap();
     let order = std::sync::Mutex::new(Vec::new());
     sweep::run_grid(&grid, dir.path(), 1, &|spec, run_dir| {
-        order.lock().unwrap().push(spec.seed);
+        order.lock().unwrap().push(spec.id.seed);
         write_fake_run(spec, run_dir, false)
     })
     .unwrap();

@@ -13,11 +13,11 @@
 //! functions of the float32 reset state in float32 (NumPy's own float32 `cos`/`sin`); here they are evaluated
 //! in float64 and rounded, which agrees except in about one case in a thousand, by one float32 ulp.
 
-use super::{Dynamics, EnvRng, Simulated};
+use super::Simulated;
+use super::classic::{Classic, ClassicTask, SingleId};
 use crate::rng::NumpyRng;
 use std::f64::consts::PI;
 
-const ID: &str = "Acrobot-v1";
 const DT: f64 = 0.2;
 const LINK_LENGTH_1: f64 = 1.0;
 /// Only drawn: the dynamics use the second link's centre of mass.
@@ -35,29 +35,14 @@ const MAX_VEL_2: f64 = 9.0 * PI;
 const TORQUES: [f64; 3] = [-1.0, 0.0, 1.0];
 
 /// Acrobot-v1 with its 500-step limit.
-pub type Acrobot = Simulated<AcrobotPhysics>;
+pub type Acrobot = Simulated<Classic<AcrobotPhysics, 4>>;
 
-/// Acrobot's state: `[theta1, theta2, dtheta1, dtheta2]` in float64.
+/// Acrobot's dynamics, on the float64 state `[theta1, theta2, dtheta1, dtheta2]`.
 #[derive(Debug, Clone)]
-pub struct AcrobotPhysics {
-    state: [f64; 4],
-}
+pub struct AcrobotPhysics;
 
-impl Default for Acrobot {
-    fn default() -> Self {
-        Self::new()
-    }
-}
-
-impl Acrobot {
-    pub fn new() -> Self {
-        Simulated::with_physics(ID, AcrobotPhysics { state: [0.0; 4] })
-    }
-
-    /// The float64 state `[theta1, theta2, dtheta1, dtheta2]`.
-    pub fn state(&self) -> [f64; 4] {
-        self.physics().state
-    }
+impl SingleId for AcrobotPhysics {
+    const ID: &'static str = "Acrobot-v1";
 }
 
 /// Time derivative of the state under `torque` ("book" dynamics; operation order as in Gymnasium's `_dsdt`).
@@ -125,29 +110,29 @@ fn bound(x: f64, low: f64, high: f64) -> f64 {
     x.max(low).min(high)
 }
 
-impl Dynamics for AcrobotPhysics {
-    fn reset(&mut self, rng: &mut NumpyRng) {
-        for value in &mut self.state {
+impl ClassicTask<4> for AcrobotPhysics {
+    fn reset(state: &mut [f64; 4], rng: &mut NumpyRng) {
+        for value in state {
             // Gymnasium stores the drawn state as float32.
             *value = f64::from(rng.uniform(-0.1, 0.1) as f32);
         }
     }
 
-    fn step(&mut self, action: usize, _rng: &mut EnvRng) -> (f64, bool) {
-        let next = rk4_step(self.state, TORQUES[action]);
-        self.state = [
+    fn step(state: &mut [f64; 4], action: usize) -> (f64, bool) {
+        let next = rk4_step(*state, TORQUES[action]);
+        *state = [
             wrap(next[0], -PI, PI),
             wrap(next[1], -PI, PI),
             bound(next[2], -MAX_VEL_1, MAX_VEL_1),
             bound(next[3], -MAX_VEL_2, MAX_VEL_2),
         ];
-        let [theta1, theta2, _, _] = self.state;
+        let [theta1, theta2, _, _] = *state;
         let terminated = -theta1.cos() - (theta2 + theta1).cos() > 1.0;
         (if terminated { 0.0 } else { -1.0 }, terminated)
     }
 
-    fn observe(&self, obs: &mut [f32]) {
-        let [theta1, theta2, dtheta1, dtheta2] = self.state;
+    fn observe(state: &[f64; 4], obs: &mut [f32]) {
+        let [theta1, theta2, dtheta1, dtheta2] = *state;
         obs.copy_from_slice(&[
             theta1.cos() as f32,
             theta1.sin() as f32,
@@ -158,17 +143,12 @@ impl Dynamics for AcrobotPhysics {
         ]);
     }
 
-    /// `[theta1, theta2, dtheta1, dtheta2]` in float64 (Gymnasium's `env.unwrapped.state`).
-    fn state_mut(&mut self) -> Option<&mut [f64]> {
-        Some(&mut self.state)
-    }
-
-    fn geometry(&self) -> Option<super::Geometry> {
-        Some(super::Geometry::Acrobot {
-            theta1: self.state[0],
-            theta2: self.state[1],
+    fn geometry(state: &[f64; 4]) -> super::Geometry {
+        super::Geometry::Acrobot {
+            theta1: state[0],
+            theta2: state[1],
             link_lengths: [LINK_LENGTH_1, LINK_LENGTH_2],
-        })
+        }
     }
 }
 

@@ -8,7 +8,8 @@
 //! v0 and v1 differ only in the time limit (200 vs 500) and the solve threshold (195 vs 475).
 //! The initial state is four draws of `uniform(-0.05, 0.05)` (docs/environments.md, "Classic control").
 
-use super::{Dynamics, EnvRng, Simulated};
+use super::Simulated;
+use super::classic::{Classic, ClassicTask};
 use crate::rng::NumpyRng;
 
 const GRAVITY: f64 = 9.8;
@@ -25,13 +26,11 @@ const X_THRESHOLD: f64 = 2.4;
 const THETA_THRESHOLD: f64 = 12.0 * 2.0 * std::f64::consts::PI / 360.0;
 
 /// CartPole with its Gymnasium time limit.
-pub type CartPole = Simulated<CartPolePhysics>;
+pub type CartPole = Simulated<Classic<CartPolePhysics, 4>>;
 
-/// CartPole's state: `[x, x_dot, theta, theta_dot]` in float64.
+/// CartPole's dynamics, on the float64 state `[x, x_dot, theta, theta_dot]`.
 #[derive(Debug, Clone)]
-pub struct CartPolePhysics {
-    state: [f64; 4],
-}
+pub struct CartPolePhysics;
 
 impl CartPole {
     /// `id` is `CartPole-v0` or `CartPole-v1`; any other id panics (use [`super::make`] for user input).
@@ -40,7 +39,7 @@ impl CartPole {
             id.starts_with("CartPole-"),
             "CartPole::new called with {id}"
         );
-        Simulated::with_physics(id, CartPolePhysics { state: [0.0; 4] })
+        Simulated::classic(id)
     }
 
     /// CartPole-v0: 200 steps, solved at 195.
@@ -52,20 +51,15 @@ impl CartPole {
     pub fn v1() -> Self {
         Self::new("CartPole-v1")
     }
-
-    /// The float64 state `[x, x_dot, theta, theta_dot]`.
-    pub fn state(&self) -> [f64; 4] {
-        self.physics().state
-    }
 }
 
-impl Dynamics for CartPolePhysics {
-    fn reset(&mut self, rng: &mut NumpyRng) {
-        rng.uniform_fill(-0.05, 0.05, &mut self.state);
+impl ClassicTask<4> for CartPolePhysics {
+    fn reset(state: &mut [f64; 4], rng: &mut NumpyRng) {
+        rng.uniform_fill(-0.05, 0.05, state);
     }
 
-    fn step(&mut self, action: usize, _rng: &mut EnvRng) -> (f64, bool) {
-        let [x, x_dot, theta, theta_dot] = self.state;
+    fn step(state: &mut [f64; 4], action: usize) -> (f64, bool) {
+        let [x, x_dot, theta, theta_dot] = *state;
         let force = if action == 1 { FORCE_MAG } else { -FORCE_MAG };
         let cos_theta = theta.cos();
         let sin_theta = theta.sin();
@@ -75,13 +69,13 @@ impl Dynamics for CartPolePhysics {
             / (HALF_LENGTH * (4.0 / 3.0 - MASS_POLE * (cos_theta * cos_theta) / TOTAL_MASS));
         let x_acc = temp - POLE_MASS_LENGTH * theta_acc * cos_theta / TOTAL_MASS;
         // Explicit Euler: positions move with the old velocities.
-        self.state = [
+        *state = [
             x + TAU * x_dot,
             x_dot + TAU * x_acc,
             theta + TAU * theta_dot,
             theta_dot + TAU * theta_acc,
         ];
-        let [x, _, theta, _] = self.state;
+        let [x, _, theta, _] = *state;
         // Written as Gymnasium's four comparisons (a NaN state does not terminate, as there).
         #[allow(clippy::manual_range_contains)]
         let terminated = x < -X_THRESHOLD
@@ -91,24 +85,19 @@ impl Dynamics for CartPolePhysics {
         (1.0, terminated)
     }
 
-    fn observe(&self, obs: &mut [f32]) {
-        for (o, &value) in obs.iter_mut().zip(&self.state) {
+    fn observe(state: &[f64; 4], obs: &mut [f32]) {
+        for (o, &value) in obs.iter_mut().zip(state) {
             *o = value as f32;
         }
     }
 
-    /// `[x, x_dot, theta, theta_dot]` (Gymnasium's `env.unwrapped.state`).
-    fn state_mut(&mut self) -> Option<&mut [f64]> {
-        Some(&mut self.state)
-    }
-
-    fn geometry(&self) -> Option<super::Geometry> {
-        Some(super::Geometry::CartPole {
-            x: self.state[0],
-            theta: self.state[2],
+    fn geometry(state: &[f64; 4]) -> super::Geometry {
+        super::Geometry::CartPole {
+            x: state[0],
+            theta: state[2],
             x_threshold: X_THRESHOLD,
             pole_length: 2.0 * HALF_LENGTH,
-        })
+        }
     }
 }
 

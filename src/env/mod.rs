@@ -10,6 +10,7 @@ use thiserror::Error;
 
 pub mod acrobot;
 pub mod cartpole;
+pub mod classic;
 pub mod conformance;
 pub mod lunar_lander;
 pub mod mountain_car;

@@ -7,10 +7,10 @@
 //! and velocity >= 0; reward -1 per step; limit 200 steps. The initial position is one draw of
 //! `uniform(-0.6, -0.4)`, the initial velocity 0 (docs/environments.md, "Classic control").
 
-use super::{Dynamics, EnvRng, Simulated};
+use super::Simulated;
+use super::classic::{Classic, ClassicTask, SingleId};
 use crate::rng::NumpyRng;
 
-const ID: &str = "MountainCar-v0";
 const MIN_POSITION: f64 = -1.2;
 const MAX_POSITION: f64 = 0.6;
 const MAX_SPEED: f64 = 0.07;
@@ -25,38 +25,23 @@ fn hill_height(x: f64) -> f64 {
 }
 
 /// MountainCar-v0 with its 200-step limit.
-pub type MountainCar = Simulated<MountainCarPhysics>;
+pub type MountainCar = Simulated<Classic<MountainCarPhysics, 2>>;
 
-/// The car's `[position, velocity]`, in float64.
+/// The car's dynamics, on the float64 state `[position, velocity]`.
 #[derive(Debug, Clone)]
-pub struct MountainCarPhysics {
-    state: [f64; 2],
+pub struct MountainCarPhysics;
+
+impl SingleId for MountainCarPhysics {
+    const ID: &'static str = "MountainCar-v0";
 }
 
-impl Default for MountainCar {
-    fn default() -> Self {
-        Self::new()
-    }
-}
-
-impl MountainCar {
-    pub fn new() -> Self {
-        Simulated::with_physics(ID, MountainCarPhysics { state: [0.0; 2] })
+impl ClassicTask<2> for MountainCarPhysics {
+    fn reset(state: &mut [f64; 2], rng: &mut NumpyRng) {
+        *state = [rng.uniform(-0.6, -0.4), 0.0];
     }
 
-    /// The float64 state `[position, velocity]`.
-    pub fn state(&self) -> [f64; 2] {
-        self.physics().state
-    }
-}
-
-impl Dynamics for MountainCarPhysics {
-    fn reset(&mut self, rng: &mut NumpyRng) {
-        self.state = [rng.uniform(-0.6, -0.4), 0.0];
-    }
-
-    fn step(&mut self, action: usize, _rng: &mut EnvRng) -> (f64, bool) {
-        let [position, velocity] = self.state;
+    fn step(state: &mut [f64; 2], action: usize) -> (f64, bool) {
+        let [position, velocity] = *state;
         let push = (action as f64 - 1.0) * FORCE;
         let mut velocity = velocity + (push + (3.0 * position).cos() * (-GRAVITY));
         velocity = velocity.clamp(-MAX_SPEED, MAX_SPEED);
@@ -65,37 +50,32 @@ impl Dynamics for MountainCarPhysics {
         if position == MIN_POSITION && velocity < 0.0 {
             velocity = 0.0;
         }
-        self.state = [position, velocity];
+        *state = [position, velocity];
         let terminated = position >= GOAL_POSITION && velocity >= GOAL_VELOCITY;
         (-1.0, terminated)
     }
 
-    fn observe(&self, obs: &mut [f32]) {
-        let [position, velocity] = self.state;
+    fn observe(state: &[f64; 2], obs: &mut [f32]) {
+        let [position, velocity] = *state;
         obs.copy_from_slice(&[position as f32, velocity as f32]);
     }
 
-    /// `[position, velocity]` (Gymnasium's `env.unwrapped.state`).
-    fn state_mut(&mut self) -> Option<&mut [f64]> {
-        Some(&mut self.state)
-    }
-
-    fn geometry(&self) -> Option<super::Geometry> {
-        let position = self.state[0];
+    fn geometry(state: &[f64; 2]) -> super::Geometry {
+        let position = state[0];
         let hill = (0..=60)
             .map(|i| {
                 let x = MIN_POSITION + (MAX_POSITION - MIN_POSITION) * f64::from(i) / 60.0;
                 [x, hill_height(x)]
             })
             .collect();
-        Some(super::Geometry::MountainCar {
+        super::Geometry::MountainCar {
             position,
             height: hill_height(position),
             // The slope of the hill under the car: d/dx of 0.45 sin(3x).
             angle: (1.35 * (3.0 * position).cos()).atan(),
             goal: GOAL_POSITION,
             hill,
-        })
+        }
     }
 }
 

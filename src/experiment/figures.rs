@@ -139,7 +139,7 @@ fn methods_figure(runs: &[&RunRecord], methods: &[Method], title: String) -> Opt
     let selected: Vec<&RunRecord> = runs
         .iter()
         .copied()
-        .filter(|r| r.variant == DEFAULT_VARIANT && methods.contains(&r.method))
+        .filter(|r| r.variant == DEFAULT_VARIANT && methods.contains(&r.id.method))
         .collect();
     let panels = env_panels(&selected, true, |in_env| {
         method_curves(in_env, methods, median_curve)
@@ -154,11 +154,14 @@ fn env_panels(
     threshold: bool,
     curves: impl Fn(&[&RunRecord]) -> Vec<Curve>,
 ) -> Vec<Panel> {
-    env_order(selected.iter().map(|r| r.env.as_str()))
+    env_order(selected.iter().map(|r| r.id.env.as_str()))
         .iter()
         .map(|env| {
-            let in_env: Vec<&RunRecord> =
-                selected.iter().copied().filter(|r| &r.env == env).collect();
+            let in_env: Vec<&RunRecord> = selected
+                .iter()
+                .copied()
+                .filter(|r| &r.id.env == env)
+                .collect();
             let solve = in_env.first().map(|r| r.solve_threshold);
             Panel::new(env.clone(), solve.filter(|_| threshold), curves(&in_env))
         })
@@ -176,7 +179,7 @@ fn method_curves(
         .filter_map(|method| {
             curve(
                 runs,
-                |r| r.method == *method,
+                |r| r.id.method == *method,
                 method.paper_name(),
                 method_color(*method),
                 reduce,
@@ -226,7 +229,7 @@ fn t_query_figure(runs: &[&RunRecord], title: String) -> Option<FigureContent> {
     let selected: Vec<&RunRecord> = runs
         .iter()
         .copied()
-        .filter(|r| r.method == Method::Adqn && t_query(r).is_some())
+        .filter(|r| r.id.method == Method::Adqn && t_query(r).is_some())
         .collect();
     let mut values: Vec<f64> = selected.iter().filter_map(|r| t_query(r)).collect();
     values.sort_by(f64::total_cmp);
@@ -249,7 +252,7 @@ fn expert_figure(runs: &[&RunRecord], suffix: &str, title: String) -> Option<Fig
     let selected: Vec<&RunRecord> = runs
         .iter()
         .copied()
-        .filter(|r| r.method == Method::Adqn || r.method == Method::Dqfd)
+        .filter(|r| r.id.method == Method::Adqn || r.id.method == Method::Dqfd)
         .filter(|r| r.variant.starts_with("expert-") && !r.variant.contains('_'))
         .collect();
     // Legend order and colours follow the paper's order of experts; unknown specs come after, alphabetically.
@@ -267,14 +270,14 @@ fn expert_figure(runs: &[&RunRecord], suffix: &str, title: String) -> Option<Fig
         )
     });
     experts.dedup();
-    let envs = env_order(selected.iter().map(|r| r.env.as_str()));
+    let envs = env_order(selected.iter().map(|r| r.id.env.as_str()));
     let mut panels = Vec::new();
     for env in &envs {
         for method in [Method::Adqn, Method::Dqfd] {
             let in_panel: Vec<&RunRecord> = selected
                 .iter()
                 .copied()
-                .filter(|r| &r.env == env && r.method == method)
+                .filter(|r| &r.id.env == env && r.id.method == method)
                 .collect();
             if in_panel.is_empty() {
                 continue;
@@ -302,7 +305,7 @@ fn query_figure(runs: &[&RunRecord], title: String) -> Option<FigureContent> {
     let selected: Vec<&RunRecord> = runs
         .iter()
         .copied()
-        .filter(|r| r.variant == DEFAULT_VARIANT && methods.contains(&r.method))
+        .filter(|r| r.variant == DEFAULT_VARIANT && methods.contains(&r.id.method))
         .filter(|r| r.query_steps.is_some())
         .collect();
     let panels = env_panels(&selected, false, |in_env| {
@@ -318,7 +321,7 @@ pub fn paper_figures(runs: &[RunRecord]) -> Vec<PaperFigure> {
     let mut figures = Vec::new();
     for net in [NetKind::Bootstrap, NetKind::Noisy] {
         let (words, suffix) = net_words(net);
-        let runs: Vec<&RunRecord> = runs.iter().filter(|r| r.net == net).collect();
+        let runs: Vec<&RunRecord> = runs.iter().filter(|r| r.id.net == net).collect();
         let mut push = |name: String, content: Option<FigureContent>, missing: String| {
             let skip_reason = if content.is_some() {
                 String::new()
@@ -388,16 +391,18 @@ pub fn paper_figures(runs: &[RunRecord]) -> Vec<PaperFigure> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::train::run_dir::EvalPoint;
+    use crate::train::run_dir::{EvalPoint, RunId};
     use std::path::PathBuf;
 
     fn run(seed: u64, means: &[f64], queries: Option<Vec<u64>>) -> RunRecord {
         RunRecord {
             dir: PathBuf::from(format!("seed{seed}")),
-            env: "CartPole-v0".into(),
-            method: Method::Adqn,
-            net: NetKind::Bootstrap,
-            seed,
+            id: RunId {
+                env: "CartPole-v0".into(),
+                method: Method::Adqn,
+                net: NetKind::Bootstrap,
+                seed,
+            },
             variant: DEFAULT_VARIANT.into(),
             t_query: None,
             expert: None,

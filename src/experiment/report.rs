@@ -39,7 +39,16 @@ pub fn evaluations_csv(runs: &[RunRecord]) -> String {
     for (r, p) in rows {
         out.push_str(&format!(
             "{},{},{},{},{},{},{},{:.3},{:.3},{:.3}\n",
-            r.env, r.method, r.net, r.variant, r.seed, p.step, p.mean, p.std, p.min, p.max
+            r.id.env,
+            r.id.method,
+            r.id.net,
+            r.variant,
+            r.id.seed,
+            p.step,
+            p.mean,
+            p.std,
+            p.min,
+            p.max
         ));
     }
     out

@@ -12,7 +12,7 @@
 //! - [`collect_results`] reads every complete run under a directory and writes `results.csv`, one row per
 //!   evaluation point.
 
-use crate::train::run_dir::{self, DEFAULT_VARIANT, RunRecord, write_atomic};
+use crate::train::run_dir::{self, DEFAULT_VARIANT, RunId, RunRecord, write_atomic};
 use crate::train::{ConfigInput, Method, NetKind, TrainConfig};
 use anyhow::{Context, Result, bail};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
@@ -332,7 +332,7 @@ impl SweepGrid {
         }
         // The seed does not change which values are valid: resolving one seed per configuration suffices.
         let first_seed = self.seeds[0];
-        for spec in self.expand().iter().filter(|s| s.seed == first_seed) {
+        for spec in self.expand().iter().filter(|s| s.id.seed == first_seed) {
             spec.config().with_context(|| {
                 format!(
                     "the sweep's run {} is misconfigured",
@@ -374,10 +374,12 @@ impl SweepGrid {
                             for vary in &varies {
                                 for &seed in &self.seeds {
                                     specs.push(RunSpec {
-                                        env: env.clone(),
-                                        method,
-                                        net,
-                                        seed,
+                                        id: RunId {
+                                            env: env.clone(),
+                                            method,
+                                            net,
+                                            seed,
+                                        },
                                         t_query,
                                         expert: expert.cloned(),
                                         set: self.set.clone(),
@@ -398,10 +400,8 @@ impl SweepGrid {
 /// `arld train --set`) and its `vary` override, then the varied t_query and expert, if any.
 #[derive(Debug, Clone, PartialEq)]
 pub struct RunSpec {
-    pub env: String,
-    pub method: Method,
-    pub net: NetKind,
-    pub seed: u64,
+    /// Task, method, network and seed.
+    pub id: RunId,
     pub t_query: Option<f64>,
     pub expert: Option<String>,
     pub set: Vec<String>,
@@ -412,7 +412,7 @@ pub struct RunSpec {
 impl RunSpec {
     /// The run's configuration as given.
     pub fn config_input(&self) -> Result<ConfigInput> {
-        let mut input = ConfigInput::new(&self.env, self.method, self.net, self.seed);
+        let mut input = ConfigInput::new(&self.id.env, self.id.method, self.id.net, self.id.seed);
         for o in self.set.iter().chain(&self.vary) {
             input.apply_override(o)?;
         }
@@ -449,11 +449,11 @@ impl RunSpec {
     /// `CartPole-v0/adqn-bootstrap/tq0.05/seed3`. Reports recover the variant from this layout.
     pub fn dir_name(&self) -> PathBuf {
         run_dir::sweep_run_path(
-            &self.env,
-            self.method,
-            self.net,
+            &self.id.env,
+            self.id.method,
+            self.id.net,
             self.variant().as_deref(),
-            self.seed,
+            self.id.seed,
         )
     }
 
@@ -651,11 +651,11 @@ fn run_sweep_inner(
     // Seed by seed: every configuration gets its first seeds early, so a partial sweep already reports on all.
     let mut seed_order: Vec<u64> = Vec::new();
     for spec in specs {
-        if !seed_order.contains(&spec.seed) {
-            seed_order.push(spec.seed);
+        if !seed_order.contains(&spec.id.seed) {
+            seed_order.push(spec.id.seed);
         }
     }
-    pending.sort_by_key(|spec| seed_order.iter().position(|&s| s == spec.seed));
+    pending.sort_by_key(|spec| seed_order.iter().position(|&s| s == spec.id.seed));
     let already_complete = specs.len() - pending.len();
     let jobs = if jobs == 0 {
         std::thread::available_parallelism().map_or(1, |n| n.get())

@@ -13,7 +13,7 @@ use super::stats::{
 };
 use crate::paper::{self, PAPER_TASKS, TABLE5_NETS};
 use crate::train::TrainConfig;
-use crate::train::run_dir::{DEFAULT_VARIANT, EvalPoint, RunRecord};
+use crate::train::run_dir::{DEFAULT_VARIANT, EvalPoint, RunId, RunRecord};
 use anyhow::{Context, Result, bail};
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
@@ -83,9 +83,9 @@ pub fn cells(runs: &[RunRecord], k: usize) -> Vec<Cell> {
             let curves: Vec<Vec<EvalPoint>> = members.iter().map(|r| r.eval.clone()).collect();
             let first = members[0];
             Cell {
-                env: first.env.clone(),
-                method: first.method.name().to_string(),
-                net: first.net.name().to_string(),
+                env: first.id.env.clone(),
+                method: first.id.method.name().to_string(),
+                net: first.id.net.name().to_string(),
                 variant: first.variant.clone(),
                 seeds: members.len(),
                 solved: members
@@ -752,10 +752,12 @@ pub fn runs_from_evaluations_csv(path: &Path) -> Result<Vec<RunRecord>> {
                 expert: None,
                 query_steps: None,
                 summary_steps_to_solve: None,
-                method: method.parse()?,
-                net: net.parse()?,
-                env,
-                seed,
+                id: RunId {
+                    method: method.parse()?,
+                    net: net.parse()?,
+                    env,
+                    seed,
+                },
                 variant,
                 eval,
             })
@@ -771,10 +773,12 @@ mod tests {
         let spec = crate::env::spec(env).unwrap();
         RunRecord {
             dir: "x".into(),
-            env: env.into(),
-            method: method.parse().unwrap(),
-            net: net.parse().unwrap(),
-            seed,
+            id: RunId {
+                env: env.into(),
+                method: method.parse().unwrap(),
+                net: net.parse().unwrap(),
+                seed,
+            },
             variant: DEFAULT_VARIANT.into(),
             t_query: None,
             expert: None,

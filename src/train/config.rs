@@ -24,6 +24,38 @@ use serde::{Deserialize, Serialize};
 use std::fmt;
 use std::path::Path;
 
+/// An enum with fixed names, from one list of `Variant => "name"`: `ALL` (every choice, in the order listed),
+/// `name()` (the name on the command line and in files and directory names, which serde and clap also use),
+/// `Display` (the name) and `FromStr` (by [`parse_named`], which names `what` and every known name on error).
+macro_rules! fixed_names {
+    ($ty:ident, $what:literal, { $($variant:ident => $name:literal),+ $(,)? }) => {
+        impl $ty {
+            /// Every choice, in declaration order.
+            pub const ALL: [$ty; [$($name),+].len()] = [$($ty::$variant),+];
+
+            /// The choice's name: command line, files, directory names.
+            pub fn name(self) -> &'static str {
+                match self {
+                    $($ty::$variant => $name,)+
+                }
+            }
+        }
+
+        impl std::str::FromStr for $ty {
+            type Err = anyhow::Error;
+            fn from_str(s: &str) -> Result<Self> {
+                parse_named(s, &$ty::ALL, $ty::name, $what)
+            }
+        }
+
+        impl fmt::Display for $ty {
+            fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+                f.write_str(self.name())
+            }
+        }
+    };
+}
+
 /// The learning method (docs/algorithm.md §9).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize, clap::ValueEnum)]
 #[serde(rename_all = "lowercase")]
@@ -43,15 +75,6 @@ pub enum Method {
 }
 
 impl Method {
-    pub const ALL: [Method; 6] = [
-        Method::Dqn,
-        Method::Dqfd,
-        Method::Gdqn,
-        Method::Bdqn,
-        Method::Adqn,
-        Method::Adqnp,
-    ];
-
     /// Does the method pre-train on demonstrations collected before training?
     pub fn pretrains(self) -> bool {
         matches!(self, Method::Dqfd | Method::Adqnp)
@@ -74,25 +97,16 @@ impl Method {
     pub fn paper_name(self) -> String {
         crate::paper::method_display_name(self.name())
     }
-
-    pub fn name(self) -> &'static str {
-        match self {
-            Method::Dqn => "dqn",
-            Method::Dqfd => "dqfd",
-            Method::Gdqn => "gdqn",
-            Method::Bdqn => "bdqn",
-            Method::Adqn => "adqn",
-            Method::Adqnp => "adqnp",
-        }
-    }
 }
 
-impl std::str::FromStr for Method {
-    type Err = anyhow::Error;
-    fn from_str(s: &str) -> Result<Self> {
-        parse_named(s, &Method::ALL, Method::name, "method")
-    }
-}
+fixed_names!(Method, "method", {
+    Dqn => "dqn",
+    Dqfd => "dqfd",
+    Gdqn => "gdqn",
+    Bdqn => "bdqn",
+    Adqn => "adqn",
+    Adqnp => "adqnp",
+});
 
 /// The choice of `all` whose `name` is `s`; the error names what was asked for and every known name.
 fn parse_named<T: Copy>(s: &str, all: &[T], name: fn(T) -> &'static str, what: &str) -> Result<T> {
@@ -103,12 +117,6 @@ fn parse_named<T: Copy>(s: &str, all: &[T], name: fn(T) -> &'static str, what: &
             let known: Vec<&str> = all.iter().map(|&v| name(v)).collect();
             format!("unknown {what} '{s}'; known: {}", known.join(", "))
         })
-}
-
-impl fmt::Display for Method {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(self.name())
-    }
 }
 
 /// The output stage of the Q-network (docs/algorithm.md §2).
@@ -123,30 +131,11 @@ pub enum NetKind {
     Noisy,
 }
 
-impl NetKind {
-    pub const ALL: [NetKind; 3] = [NetKind::Plain, NetKind::Bootstrap, NetKind::Noisy];
-
-    pub fn name(self) -> &'static str {
-        match self {
-            NetKind::Plain => "plain",
-            NetKind::Bootstrap => "bootstrap",
-            NetKind::Noisy => "noisy",
-        }
-    }
-}
-
-impl std::str::FromStr for NetKind {
-    type Err = anyhow::Error;
-    fn from_str(s: &str) -> Result<Self> {
-        parse_named(s, &NetKind::ALL, NetKind::name, "network")
-    }
-}
-
-impl fmt::Display for NetKind {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(self.name())
-    }
-}
+fixed_names!(NetKind, "network", {
+    Plain => "plain",
+    Bootstrap => "bootstrap",
+    Noisy => "noisy",
+});
 
 /// All hyperparameters of one training run, resolved and validated ([`ConfigInput::resolve`]). Field docs give
 /// the default and its source tag (\[P\] paper, \[DQfD\], \[PER\], \[BS\], \[NN\], \[OURS\] as in
@@ -879,6 +868,40 @@ mod tests {
     }
 
     #[test]
+    fn fixed_names_agree_with_serde_clap_display_and_from_str() {
+        use clap::ValueEnum;
+        fn check<T>(all: &[T], name: fn(T) -> &'static str)
+        where
+            T: Copy
+                + PartialEq
+                + fmt::Debug
+                + fmt::Display
+                + std::str::FromStr
+                + Serialize
+                + ValueEnum,
+        {
+            assert_eq!(all.len(), T::value_variants().len());
+            for &v in all {
+                let n = name(v);
+                assert_eq!(v.to_string(), n);
+                assert!(n.parse::<T>().ok() == Some(v));
+                assert_eq!(serde_json::to_string(&v).unwrap(), format!("\"{n}\""));
+                assert_eq!(v.to_possible_value().unwrap().get_name(), n);
+            }
+        }
+        check(&Method::ALL, Method::name);
+        check(&NetKind::ALL, NetKind::name);
+        assert_eq!(
+            format!("{:#}", "dqn2".parse::<Method>().unwrap_err()),
+            "unknown method 'dqn2'; known: dqn, dqfd, gdqn, bdqn, adqn, adqnp"
+        );
+        assert_eq!(
+            format!("{:#}", "big".parse::<NetKind>().unwrap_err()),
+            "unknown network 'big'; known: plain, bootstrap, noisy"
+        );
+    }
+
+    #[test]
     fn presets_follow_the_paper_table() {
         let c = TrainConfig::preset("Acrobot-v1", Method::Adqnp, NetKind::Noisy, 1).unwrap();
         assert_eq!(
@@ -1070,20 +1093,13 @@ mod tests {
 
     #[test]
     fn sizes_are_bounded_with_the_memory_they_would_need() {
-        let err = error(
-            "CartPole-v0",
-            Method::Adqn,
-            NetKind::Bootstrap,
-            &["replay_size=10000000000"],
-        );
-        assert!(err.contains("replay_size") && err.contains("GiB"), "{err}");
-        let err = error(
-            "CartPole-v0",
-            Method::Adqn,
-            NetKind::Bootstrap,
-            &["budget=9000000000000000000"],
-        );
-        assert!(err.contains("GiB"), "{err}");
+        for (set, key) in [
+            ("replay_size=10000000000", "replay_size"),
+            ("budget=9000000000000000000", "budget"),
+        ] {
+            let err = error("CartPole-v0", Method::Adqn, NetKind::Bootstrap, &[set]);
+            assert!(err.contains(key) && err.contains("GiB"), "{set}: {err}");
+        }
     }
 
     #[test]

@@ -245,15 +245,22 @@ pub fn curve_csv(curve: &[EvalPoint]) -> String {
     s
 }
 
+/// Which run: its task, method, network and seed, as a sweep plans it and a run directory records it.
+#[derive(Debug, Clone, PartialEq, Eq, Hash)]
+pub struct RunId {
+    pub env: String,
+    pub method: Method,
+    pub net: NetKind,
+    pub seed: u64,
+}
+
 /// Everything a report needs from one complete run directory.
 #[derive(Debug, Clone)]
 pub struct RunRecord {
     /// The run directory.
     pub dir: PathBuf,
-    pub env: String,
-    pub method: Method,
-    pub net: NetKind,
-    pub seed: u64,
+    /// Task, method, network and seed.
+    pub id: RunId,
     /// Variant label (`default`, `tq0.05`, `expert-shipped-weak`, ...).
     pub variant: String,
     /// The t_query the run used, if its config records one.
@@ -278,13 +285,13 @@ impl RunRecord {
     /// The run's identity as reports sort and group runs: the names of its env, method, net and variant, then
     /// its seed.
     pub fn key(&self) -> (&str, &str, &str, &str, u64) {
-        (
-            &self.env,
-            self.method.name(),
-            self.net.name(),
-            &self.variant,
-            self.seed,
-        )
+        let RunId {
+            env,
+            method,
+            net,
+            seed,
+        } = &self.id;
+        (env, method.name(), net.name(), &self.variant, *seed)
     }
 }
 
@@ -451,10 +458,12 @@ pub fn read_run(dir: &Path, relative: &Path) -> Result<RunRecord> {
     Ok(RunRecord {
         dir: dir.to_path_buf(),
         variant: variant_from_path(relative, summary.method, summary.net, summary.seed),
-        env: summary.env,
-        method: summary.method,
-        net: summary.net,
-        seed: summary.seed,
+        id: RunId {
+            env: summary.env,
+            method: summary.method,
+            net: summary.net,
+            seed: summary.seed,
+        },
         t_query,
         expert,
         solve_threshold: summary.solve_threshold,
@@ -527,7 +536,7 @@ pub fn configurations(runs: &[RunRecord]) -> Vec<Vec<&RunRecord>> {
     groups
         .into_values()
         .map(|mut members| {
-            members.sort_by_key(|r| r.seed);
+            members.sort_by_key(|r| r.id.seed);
             members
         })
         .collect()
@@ -586,7 +595,7 @@ mod tests {
         assert_eq!(read_summary(dir.path()).unwrap(), summary);
         let record = read_run(dir.path(), Path::new("CartPole-v0/bdqn-noisy/seed4")).unwrap();
         assert_eq!(
-            (record.method, record.net, record.eval_period),
+            (record.id.method, record.id.net, record.eval_period),
             (Method::Bdqn, NetKind::Noisy, 1000)
         );
         assert_eq!(record.query_steps, None);
