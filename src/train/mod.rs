@@ -701,18 +701,19 @@ fn pretrain_update(
 #[derive(Debug, thiserror::Error)]
 #[error(
     "diverged at {at}: the {what} is {value}; the learning rate may be too high for this task: try a lower \
-     `lr` (now {lr}, e.g. --set lr={lower})"
+     `lr` (now {lr}, e.g. --set lr={lower})",
+    lower = .lr / 10.0
 )]
 pub struct Diverged {
     pub at: String,
     pub what: &'static str,
     pub value: f32,
     pub lr: f64,
-    pub lower: f64,
 }
 
 /// One prioritized update on `batch` and the new priorities of its transitions. A loss or gradient that is not
-/// finite ends the run with [`Diverged`] (`at` says where), before a priority or weight is taken from it.
+/// finite ends the run with [`Diverged`] (`at` says where), before any priority is taken from it; the weights
+/// the update spoiled are never saved, since the run ends there.
 fn learn(
     cfg: &TrainConfig,
     agent: &mut Agent,
@@ -733,7 +734,6 @@ fn learn(
             what,
             value,
             lr: cfg.lr,
-            lower: cfg.lr / 10.0,
         }
         .into());
     }
