@@ -19,14 +19,28 @@ use std::cmp::Ordering;
 
 /// Marks a missing child.
 const NIL: u32 = u32::MAX;
+/// Index into [`Node::children`] of the subtree with the lower keys.
+const SMALLER: usize = 0;
+/// Index into [`Node::children`] of the subtree with the higher keys.
+const LARGER: usize = 1;
+
+/// The side of a node on which `key` belongs, or `None` if it is the node's own key.
+#[inline(always)]
+fn side(key: f32, node_key: f32) -> Option<usize> {
+    match key.total_cmp(&node_key) {
+        Ordering::Equal => None,
+        // Computed, not branched on: the comparison result is hard to predict.
+        ordering => Some(if ordering.is_gt() { LARGER } else { SMALLER }),
+    }
+}
 
 #[derive(Clone, Debug)]
 struct Node {
     key: f32,
     /// Heap priority: a parent's priority is at least its children's.
     priority: u32,
-    left: u32,
-    right: u32,
+    /// Children by side: `[SMALLER]` holds the lower keys, `[LARGER]` the higher ones.
+    children: [u32; 2],
     /// How many copies of `key` the multiset holds.
     count: u32,
     /// Total multiplicity of the subtree rooted here (this node's `count` included).
@@ -119,14 +133,14 @@ impl OrderStatistics {
         // Walk down from the root: larger keys are on the right, so skip the right subtree first.
         while current != NIL {
             let node = &self.nodes[current as usize];
-            let larger = self.size_of(node.right);
+            let larger = self.size_of(node.children[LARGER]);
             if remaining < larger {
-                current = node.right;
+                current = node.children[LARGER];
             } else if remaining < larger + node.count {
                 return Some(node.key);
             } else {
                 remaining -= larger + node.count;
-                current = node.left;
+                current = node.children[SMALLER];
             }
         }
         unreachable!("subtree sizes are inconsistent")
@@ -153,7 +167,8 @@ impl OrderStatistics {
     /// Recomputes a node's subtree size from its children.
     fn update_size(&mut self, index: u32) {
         let node = &self.nodes[index as usize];
-        let size = self.size_of(node.left) + self.size_of(node.right) + node.count;
+        let [smaller, larger] = node.children;
+        let size = self.size_of(smaller) + self.size_of(larger) + node.count;
         self.nodes[index as usize].size = size;
     }
 
@@ -170,8 +185,7 @@ impl OrderStatistics {
         let node = Node {
             key,
             priority: self.next_priority(),
-            left: NIL,
-            right: NIL,
+            children: [NIL; 2],
             count: 1,
             size: 1,
         };
@@ -187,24 +201,16 @@ impl OrderStatistics {
         }
     }
 
-    /// Rotates the left child up; returns the new subtree root.
-    fn rotate_right(&mut self, index: u32) -> u32 {
-        let left = self.nodes[index as usize].left;
-        self.nodes[index as usize].left = self.nodes[left as usize].right;
-        self.nodes[left as usize].right = index;
+    /// Rotates the child on `side` up into `index`'s place; returns the new subtree root.
+    fn rotate_up(&mut self, index: u32, side: usize) -> u32 {
+        // Both sides are 0 or 1; the mask lets the compiler drop the bounds checks.
+        let (side, other) = (side & 1, (side ^ 1) & 1);
+        let child = self.nodes[index as usize].children[side];
+        self.nodes[index as usize].children[side] = self.nodes[child as usize].children[other];
+        self.nodes[child as usize].children[other] = index;
         self.update_size(index);
-        self.update_size(left);
-        left
-    }
-
-    /// Rotates the right child up; returns the new subtree root.
-    fn rotate_left(&mut self, index: u32) -> u32 {
-        let right = self.nodes[index as usize].right;
-        self.nodes[index as usize].right = self.nodes[right as usize].left;
-        self.nodes[right as usize].left = index;
-        self.update_size(index);
-        self.update_size(right);
-        right
+        self.update_size(child);
+        child
     }
 
     /// Inserts into the subtree at `index`; returns the subtree's new root. Recursion depth is the tree depth.
@@ -213,32 +219,18 @@ impl OrderStatistics {
             return self.allocate(key);
         }
         let i = index as usize;
-        match key.total_cmp(&self.nodes[i].key) {
-            Ordering::Equal => {
-                self.nodes[i].count += 1;
-                self.nodes[i].size += 1;
-                index
-            }
-            Ordering::Less => {
-                let child = self.insert_under(self.nodes[i].left, key);
-                self.nodes[i].left = child;
-                if self.nodes[child as usize].priority > self.nodes[i].priority {
-                    self.rotate_right(index)
-                } else {
-                    self.update_size(index);
-                    index
-                }
-            }
-            Ordering::Greater => {
-                let child = self.insert_under(self.nodes[i].right, key);
-                self.nodes[i].right = child;
-                if self.nodes[child as usize].priority > self.nodes[i].priority {
-                    self.rotate_left(index)
-                } else {
-                    self.update_size(index);
-                    index
-                }
-            }
+        let Some(side) = side(key, self.nodes[i].key) else {
+            self.nodes[i].count += 1;
+            self.nodes[i].size += 1;
+            return index;
+        };
+        let child = self.insert_under(self.nodes[i].children[side], key);
+        self.nodes[i].children[side] = child;
+        if self.nodes[child as usize].priority > self.nodes[i].priority {
+            self.rotate_up(index, side)
+        } else {
+            self.update_size(index);
+            index
         }
     }
 
@@ -248,27 +240,20 @@ impl OrderStatistics {
             return NIL;
         }
         let i = index as usize;
-        match key.total_cmp(&self.nodes[i].key) {
-            Ordering::Equal => {
-                *removed = true;
-                if self.nodes[i].count > 1 {
-                    self.nodes[i].count -= 1;
-                    self.nodes[i].size -= 1;
-                    return index;
-                }
-                let merged = self.merge(self.nodes[i].left, self.nodes[i].right);
-                self.free_slots.push(index);
-                return merged;
+        let Some(side) = side(key, self.nodes[i].key) else {
+            *removed = true;
+            if self.nodes[i].count > 1 {
+                self.nodes[i].count -= 1;
+                self.nodes[i].size -= 1;
+                return index;
             }
-            Ordering::Less => {
-                let child = self.remove_under(self.nodes[i].left, key, removed);
-                self.nodes[i].left = child;
-            }
-            Ordering::Greater => {
-                let child = self.remove_under(self.nodes[i].right, key, removed);
-                self.nodes[i].right = child;
-            }
-        }
+            let [smaller, larger] = self.nodes[i].children;
+            let merged = self.merge(smaller, larger);
+            self.free_slots.push(index);
+            return merged;
+        };
+        let child = self.remove_under(self.nodes[i].children[side], key, removed);
+        self.nodes[i].children[side] = child;
         if *removed {
             self.update_size(index);
         }
@@ -284,13 +269,13 @@ impl OrderStatistics {
             return low;
         }
         if self.nodes[low as usize].priority > self.nodes[high as usize].priority {
-            let joined = self.merge(self.nodes[low as usize].right, high);
-            self.nodes[low as usize].right = joined;
+            let joined = self.merge(self.nodes[low as usize].children[LARGER], high);
+            self.nodes[low as usize].children[LARGER] = joined;
             self.update_size(low);
             low
         } else {
-            let joined = self.merge(low, self.nodes[high as usize].left);
-            self.nodes[high as usize].left = joined;
+            let joined = self.merge(low, self.nodes[high as usize].children[SMALLER]);
+            self.nodes[high as usize].children[SMALLER] = joined;
             self.update_size(high);
             high
         }
@@ -324,7 +309,7 @@ impl OrderStatistics {
                     "search order violated"
                 );
             }
-            for child in [node.left, node.right] {
+            for child in node.children {
                 if child != NIL {
                     assert!(
                         tree.nodes[child as usize].priority <= node.priority,
@@ -332,8 +317,8 @@ impl OrderStatistics {
                     );
                 }
             }
-            let (left_size, left_nodes) = walk(tree, node.left, low, Some(node.key));
-            let (right_size, right_nodes) = walk(tree, node.right, Some(node.key), high);
+            let (left_size, left_nodes) = walk(tree, node.children[SMALLER], low, Some(node.key));
+            let (right_size, right_nodes) = walk(tree, node.children[LARGER], Some(node.key), high);
             assert_eq!(
                 node.size,
                 left_size + right_size + node.count,
@@ -484,7 +469,8 @@ mod tests {
                 0
             } else {
                 let node = &tree.nodes[index as usize];
-                1 + depth(tree, node.left).max(depth(tree, node.right))
+                let [smaller, larger] = node.children;
+                1 + depth(tree, smaller).max(depth(tree, larger))
             }
         }
         let measured = depth(&tree, tree.root);
