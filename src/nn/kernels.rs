@@ -225,12 +225,14 @@ pub(crate) fn product<S: Lanes>(dst: &mut [f32], a: Strided, b: &[f32], init: Op
     // to lie inside the slices; `dst` is borrowed mutably, so it aliases nothing.
     unsafe {
         let full = n / S::WIDTH * S::WIDTH;
-        let mut col = 0;
-        const C: usize = 4;
-        while col + C * S::WIDTH <= full {
-            rows_blocked::<S, C>(&p, m, col);
-            col += C * S::WIDTH;
-        }
+        // Block width in vectors: 4 rows x C vectors of accumulators, plus C loaded vectors and one
+        // broadcast, must fit the register file (16 vector registers on AVX2, 32 on AVX-512). Fewer than
+        // 4 rows (a single-state forward) run one row at a time, where 4 vectors fit on every level.
+        let mut col = if S::WIDTH == 8 && m >= 4 {
+            column_blocks::<S, 2>(&p, m, full)
+        } else {
+            column_blocks::<S, 4>(&p, m, full)
+        };
         while col + S::WIDTH <= full {
             rows_blocked::<S, 1>(&p, m, col);
             col += S::WIDTH;
@@ -275,6 +277,18 @@ struct Operands {
     b: *const f32,
     init: Option<*const f32>,
     k: usize,
+}
+
+/// Blocks of `C` vectors from column 0 while they fit in `full`; returns the first column left.
+#[inline(always)]
+unsafe fn column_blocks<S: Lanes, const C: usize>(p: &Operands, m: usize, full: usize) -> usize {
+    let mut col = 0;
+    while col + C * S::WIDTH <= full {
+        // SAFETY: forwarded from `product`.
+        unsafe { rows_blocked::<S, C>(p, m, col) };
+        col += C * S::WIDTH;
+    }
+    col
 }
 
 /// Columns `col..col + C * WIDTH` of all `m` rows, four rows at a time.
