@@ -25,6 +25,8 @@ use std::arch::x86_64::*;
 /// target features, and `load`/`store` need `WIDTH` readable/writable floats at the pointer.
 pub(crate) trait Lanes {
     const WIDTH: usize;
+    /// Vector registers of the instruction set, which bound a register block's size in [`product`].
+    const REGISTERS: usize;
     type V: Copy;
     unsafe fn splat(x: f32) -> Self::V;
     unsafe fn load(p: *const f32) -> Self::V;
@@ -38,6 +40,7 @@ pub(crate) struct Scalar;
 
 impl Lanes for Scalar {
     const WIDTH: usize = 1;
+    const REGISTERS: usize = 16;
     type V = f32;
     #[inline(always)]
     unsafe fn splat(x: f32) -> f32 {
@@ -66,6 +69,7 @@ pub(crate) struct Avx2;
 #[cfg(target_arch = "x86_64")]
 impl Lanes for Avx2 {
     const WIDTH: usize = 8;
+    const REGISTERS: usize = 16;
     type V = __m256;
     #[inline(always)]
     unsafe fn splat(x: f32) -> __m256 {
@@ -92,6 +96,7 @@ pub(crate) struct Avx512;
 #[cfg(target_arch = "x86_64")]
 impl Lanes for Avx512 {
     const WIDTH: usize = 16;
+    const REGISTERS: usize = 32;
     type V = __m512;
     #[inline(always)]
     unsafe fn splat(x: f32) -> __m512 {
@@ -135,6 +140,7 @@ impl<const N: usize> Fma4<N> {
 #[cfg(target_arch = "x86_64")]
 impl<const N: usize> Lanes for Fma4<N> {
     const WIDTH: usize = N;
+    const REGISTERS: usize = 16;
     type V = __m128;
     #[inline(always)]
     unsafe fn splat(x: f32) -> __m128 {
@@ -226,9 +232,9 @@ pub(crate) fn product<S: Lanes>(dst: &mut [f32], a: Strided, b: &[f32], init: Op
     unsafe {
         let full = n / S::WIDTH * S::WIDTH;
         // Block width in vectors: 4 rows x C vectors of accumulators, plus C loaded vectors and one
-        // broadcast, must fit the register file (16 vector registers on AVX2, 32 on AVX-512). Fewer than
-        // 4 rows (a single-state forward) run one row at a time, where 4 vectors fit on every level.
-        let mut col = if S::WIDTH == 8 && m >= 4 {
+        // broadcast, must fit the register file: C = 4 (21 registers) only with 32 of them, else C = 2.
+        // Fewer than 4 rows (a single-state forward) run one row at a time, where 4 vectors always fit.
+        let mut col = if S::REGISTERS < 32 && m >= 4 {
             column_blocks::<S, 2>(&p, m, full)
         } else {
             column_blocks::<S, 4>(&p, m, full)
