@@ -242,6 +242,45 @@ pub struct Replay {
     max_priority: f32,
     /// Transitions of the current episode waiting for their n-step return (`cfg.n_step > 0`).
     nstep: Option<NStepQueue>,
+    /// Reused buffers of the batched tree searches and updates (no allocation per step).
+    scratch: Scratch,
+}
+
+/// Per-tree buffers of one batched search or update.
+#[derive(Clone, Debug, Default)]
+struct TreeScratch {
+    points: Vec<f64>,
+    leaves: Vec<usize>,
+    updates: Vec<(usize, f64)>,
+}
+
+impl TreeScratch {
+    /// Finds the leaf of every point in `tree`.
+    fn search(&mut self, tree: &SumMinTree) {
+        self.leaves.resize(self.points.len(), 0);
+        if !self.points.is_empty() {
+            tree.find_prefix_many(&self.points, &mut self.leaves);
+        }
+    }
+}
+
+/// [`TreeScratch`] for both trees, and which tree each point of a batch went to.
+#[derive(Clone, Debug, Default)]
+struct Scratch {
+    demo: TreeScratch,
+    agent: TreeScratch,
+    in_demo: Vec<bool>,
+}
+
+impl Scratch {
+    fn clear(&mut self) {
+        for tree in [&mut self.demo, &mut self.agent] {
+            tree.points.clear();
+            tree.leaves.clear();
+            tree.updates.clear();
+        }
+        self.in_demo.clear();
+    }
 }
 
 impl Replay {
@@ -278,6 +317,7 @@ impl Replay {
             agent_next: 0,
             max_priority: 1.0,
             nstep: n_step.then(|| NStepQueue::new(cfg.n_step, cfg.gamma)),
+            scratch: Scratch::default(),
         })
     }
 
@@ -450,8 +490,10 @@ impl Replay {
                 } else {
                     self.cfg.demo_capacity + (k - self.n_demo)
                 };
-                self.write_sample(slot, 1.0, out);
+                out.idx.push(slot);
+                out.weights.push(1.0);
             }
+            self.gather(out);
             return;
         }
         let demo_total = self.demo_tree.total();
@@ -459,17 +501,37 @@ impl Replay {
         let total = demo_total + agent_total;
         let min_mass = self.demo_tree.min().min(self.agent_tree.min());
         let segment = total / batch_size as f64;
+        // The demonstration part covers [0, demo_total) of the mass, the ring the rest. The points
+        // are drawn in order, then each tree's share is searched in one batched descent.
+        let mut scratch = std::mem::take(&mut self.scratch);
+        scratch.clear();
         for k in 0..batch_size {
             let u = (k as f64 + rng.random::<f64>()) * segment;
-            // The demonstration part covers [0, demo_total) of the mass, the ring the rest.
-            let slot = if agent_total <= 0.0 || (u < demo_total && demo_total > 0.0) {
-                self.demo_tree.find_prefix(u)
+            let demo = agent_total <= 0.0 || (u < demo_total && demo_total > 0.0);
+            scratch.in_demo.push(demo);
+            if demo {
+                scratch.demo.points.push(u);
             } else {
-                self.cfg.demo_capacity + self.agent_tree.find_prefix(u - demo_total)
-            };
-            let weight = is_weight(self.mass(slot), min_mass, beta);
-            self.write_sample(slot, weight, out);
+                scratch.agent.points.push(u - demo_total);
+            }
         }
+        scratch.demo.search(&self.demo_tree);
+        scratch.agent.search(&self.agent_tree);
+        let (mut demo_leaves, mut agent_leaves) =
+            (scratch.demo.leaves.iter(), scratch.agent.leaves.iter());
+        for &demo in &scratch.in_demo {
+            let slot = match demo {
+                true => demo_leaves.next().copied(),
+                false => agent_leaves
+                    .next()
+                    .map(|leaf| self.cfg.demo_capacity + leaf),
+            }
+            .expect("one leaf per point");
+            out.idx.push(slot);
+            out.weights.push(is_weight(self.mass(slot), min_mass, beta));
+        }
+        self.scratch = scratch;
+        self.gather(out);
     }
 
     /// Like [`Replay::sample`], but from the demonstration part only (DQfD pre-training). In
@@ -492,19 +554,27 @@ impl Replay {
         out.clear();
         if !self.cfg.prioritized {
             for _ in 0..batch_size {
-                let slot = rng.random_range(0..self.n_demo);
-                self.write_sample(slot, 1.0, out);
+                out.idx.push(rng.random_range(0..self.n_demo));
+                out.weights.push(1.0);
             }
+            self.gather(out);
             return;
         }
         let segment = self.demo_tree.total() / batch_size as f64;
         let min_mass = self.demo_tree.min();
+        let mut scratch = std::mem::take(&mut self.scratch);
+        scratch.clear();
         for k in 0..batch_size {
             let u = (k as f64 + rng.random::<f64>()) * segment;
-            let slot = self.demo_tree.find_prefix(u);
-            let weight = is_weight(self.mass(slot), min_mass, beta);
-            self.write_sample(slot, weight, out);
+            scratch.demo.points.push(u);
         }
+        scratch.demo.search(&self.demo_tree);
+        for &slot in &scratch.demo.leaves {
+            out.idx.push(slot);
+            out.weights.push(is_weight(self.mass(slot), min_mass, beta));
+        }
+        self.scratch = scratch;
+        self.gather(out);
     }
 
     /// Sets `p = |δ| + ε` for each sampled slot, with ε by the slot's kind, and raises the
@@ -537,8 +607,28 @@ impl Replay {
             };
             let p = td.abs() + eps;
             self.max_priority = self.max_priority.max(p);
-            self.set_priority(slot, p);
+            self.priorities[slot] = p;
         }
+        if !self.cfg.prioritized {
+            return;
+        }
+        // Masses are written per tree in one batched update, in the order of `idx` (a slot sampled
+        // twice keeps its last priority, as one `set_priority` per slot would leave it).
+        let mut scratch = std::mem::take(&mut self.scratch);
+        scratch.clear();
+        for &slot in idx {
+            let mass = self.mass_of(self.priorities[slot]);
+            match self.is_demo_slot(slot) {
+                true => scratch.demo.updates.push((slot, mass)),
+                false => scratch
+                    .agent
+                    .updates
+                    .push((slot - self.cfg.demo_capacity, mass)),
+            }
+        }
+        self.demo_tree.set_many(&scratch.demo.updates);
+        self.agent_tree.set_many(&scratch.agent.updates);
+        self.scratch = scratch;
     }
 
     fn is_demo_slot(&self, slot: usize) -> bool {
@@ -568,7 +658,7 @@ impl Replay {
             // Uniform sampling never reads the trees; the raw priorities above stay inspectable.
             return;
         }
-        let mass = f64::from(p).powf(f64::from(self.cfg.alpha));
+        let mass = self.mass_of(p);
         if self.is_demo_slot(slot) {
             self.demo_tree.set(slot, mass);
         } else {
@@ -576,22 +666,38 @@ impl Replay {
         }
     }
 
-    fn write_sample(&self, slot: usize, weight: f32, out: &mut Batch) {
-        let row = slot * self.obs_dim..(slot + 1) * self.obs_dim;
-        out.idx.push(slot);
-        out.weights.push(weight);
-        out.obs.extend_from_slice(&self.obs[row.clone()]);
-        out.actions.push(self.actions[slot]);
-        out.rewards.push(self.rewards[slot]);
-        out.next_obs.extend_from_slice(&self.next_obs[row]);
-        out.terminal.push(self.terminal[slot]);
-        out.is_demo.push(self.is_demo_slot(slot));
+    /// Sampling mass `p^α` of raw priority `p`.
+    fn mass_of(&self, p: f32) -> f64 {
+        f64::from(p).powf(f64::from(self.cfg.alpha))
+    }
+
+    /// Fills every per-sample field of `out` from the slots in `out.idx`, one field at a time: the
+    /// slots are random, so nearly every read misses the cache, and a loop over one field keeps many
+    /// of those reads in flight at once.
+    fn gather(&self, out: &mut Batch) {
+        let d = self.obs_dim;
+        let rows = |from: &[f32], to: &mut Vec<f32>| {
+            for &slot in &out.idx {
+                to.extend_from_slice(&from[slot * d..(slot + 1) * d]);
+            }
+        };
+        rows(&self.obs, &mut out.obs);
+        rows(&self.next_obs, &mut out.next_obs);
+        let idx = &out.idx;
+        out.actions
+            .extend(idx.iter().map(|&slot| self.actions[slot]));
+        out.rewards
+            .extend(idx.iter().map(|&slot| self.rewards[slot]));
+        out.terminal
+            .extend(idx.iter().map(|&slot| self.terminal[slot]));
+        out.is_demo
+            .extend(idx.iter().map(|&slot| self.is_demo_slot(slot)));
         if self.nstep.is_some() {
-            let row = slot * self.obs_dim..(slot + 1) * self.obs_dim;
-            out.nstep_next_obs
-                .extend_from_slice(&self.nstep_next_obs[row]);
-            out.nstep_rewards.push(self.nstep_rewards[slot]);
-            out.nstep_discounts.push(self.nstep_discounts[slot]);
+            rows(&self.nstep_next_obs, &mut out.nstep_next_obs);
+            out.nstep_rewards
+                .extend(idx.iter().map(|&slot| self.nstep_rewards[slot]));
+            out.nstep_discounts
+                .extend(idx.iter().map(|&slot| self.nstep_discounts[slot]));
         }
     }
 }
