@@ -6,8 +6,8 @@
 #   SEEDS     seeds of every method on every task in the slice (default 2: 96 runs)
 #   FRACTION  share of each task's training steps to run (default 1; e.g. 0.1 for a quick estimate, which
 #             extrapolates the per-step cost linearly and so ignores how episode lengths change over training)
-# The slice runs two at a time (`arld sweep --jobs 2`); the estimate is the summed per-run wall time
-# (summary.json) scaled to 960 full runs and divided by two cores. Writes bench/out/methods_table.json.
+# The slice runs two at a time (`arld sweep --jobs 2`); the estimate is the summed per-run CPU time
+# (summary.json's cpu_time_s) scaled to 960 full runs and divided by two cores. Writes bench/out/methods_table.json.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 seeds="${1:-2}"
@@ -32,7 +32,9 @@ out, seeds, fraction, elapsed = pathlib.Path(sys.argv[1]), int(sys.argv[2]), flo
 per_task = {}
 for summary in out.glob("*/**/summary.json"):
     s = json.loads(summary.read_text())
-    per_task.setdefault(s["env"], []).append(s["wall_time_s"])
+    # CPU seconds of the training thread where the summary has them (a busy machine does not inflate them),
+    # else wall-clock seconds.
+    per_task.setdefault(s["env"], []).append(s.get("cpu_time_s", s["wall_time_s"]))
 runs = sum(len(v) for v in per_task.values())
 core_s = sum(sum(v) for v in per_task.values())
 # Every task has 12 methods x 20 seeds in the table; the slice has 12 x seeds of each.

@@ -133,6 +133,7 @@ fn write_fake_run(spec: &RunSpec, dir: &Path, interrupt: bool) -> Result<()> {
             queries_used: 20,
             episodes: 1,
             wall_time_s: 0.1,
+            cpu_time_s: None,
             steps_per_s: 1e5,
         },
     )

@@ -94,6 +94,7 @@ fn summary_without_time(dir: &Path) -> serde_json::Value {
     let map = v.as_object_mut().unwrap();
     map.remove("wall_time_s");
     map.remove("steps_per_s");
+    map.remove("cpu_time_s");
     v
 }
 

@@ -27,6 +27,8 @@ use rand::SeedableRng;
 use rand_pcg::Pcg64;
 use std::time::Instant;
 
+use cpu_time::ThreadTime;
+
 /// ε-greedy schedule: linear from `eps_start` to `eps_end` over `eps_fraction` of training (§5).
 pub fn epsilon_at(cfg: &TrainConfig, step: usize) -> f64 {
     if !cfg.eps_greedy_on_top && cfg.net != NetKind::Plain {
@@ -246,6 +248,51 @@ struct LoopState {
     /// it (words of [`crate::rng::NumpyRng`]; `None` for the first episode, which resets with the run's seed).
     ep_actions: Vec<usize>,
     ep_generator: Option<[u64; 6]>,
+    /// Wall-clock and CPU seconds the run spent before this point, over all its sessions (absent from
+    /// snapshots of older versions, which then count from their resume).
+    #[serde(default)]
+    elapsed_s: f64,
+    #[serde(default)]
+    cpu_s: f64,
+}
+
+/// The time a run has taken: wall-clock seconds, and CPU seconds of the thread that trains it (which a paused
+/// process or a busy machine does not inflate), over this session and the earlier ones its snapshot carried.
+struct RunClock {
+    wall: Instant,
+    cpu: Option<ThreadTime>,
+    carried: (f64, f64),
+}
+
+impl RunClock {
+    fn start() -> Self {
+        Self {
+            wall: Instant::now(),
+            cpu: ThreadTime::try_now().ok(),
+            carried: (0.0, 0.0),
+        }
+    }
+
+    /// Adds the time a resumed run had spent before its snapshot.
+    fn carry(&mut self, st: &LoopState) {
+        self.carried = (st.elapsed_s, st.cpu_s);
+    }
+
+    /// Wall-clock and CPU seconds so far (CPU `None` where the system cannot tell a thread's CPU time).
+    fn totals(&self) -> (f64, Option<f64>) {
+        let wall = self.carried.0 + self.wall.elapsed().as_secs_f64();
+        let cpu = self
+            .cpu
+            .as_ref()
+            .map(|t| self.carried.1 + t.elapsed().as_secs_f64());
+        (wall, cpu)
+    }
+
+    /// Writes the totals into the loop state a snapshot saves.
+    fn stamp(&self, st: &mut LoopState) {
+        let (wall, cpu) = self.totals();
+        (st.elapsed_s, st.cpu_s) = (wall, cpu.unwrap_or(0.0));
+    }
 }
 
 /// Everything a snapshot gathers, borrowed from the loop.
@@ -304,7 +351,7 @@ fn train_run(
     log: &mut RunLog,
     mut snapshots: Option<(&mut Checkpointer, Option<&StateDict>)>,
 ) -> Result<(Summary, Agent)> {
-    let started = Instant::now();
+    let mut clock = RunClock::start();
     let (obs_dim, n_actions) = (env.obs_dim(), env.n_actions());
     ensure!(
         !cfg.method.queries() || expert.is_some(),
@@ -361,6 +408,7 @@ fn train_run(
                     expert_state: expert.as_deref().and_then(|e| e.state()),
                     obs: &obs,
                 };
+                clock.stamp(&mut st);
                 snapshot(ck, &st, parts, log, stop)?;
             }
             if stop {
@@ -389,6 +437,7 @@ fn train_run(
             e.restore(&saved)?;
         }
         st = state.value("loop")?;
+        clock.carry(&st);
         if st.training {
             // The environment: the generator its episode's reset drew from, the reset, the actions taken.
             obs = match st.ep_generator {
@@ -594,7 +643,7 @@ fn train_run(
         }
     }
 
-    let wall = started.elapsed().as_secs_f64();
+    let (wall, cpu) = clock.totals();
     let threshold = env.solve_threshold();
     let (steps, solved) = steps_to_solve(log.curve(), threshold, cfg.train_steps as u64);
     let summary = Summary {
@@ -611,6 +660,7 @@ fn train_run(
         queries_used: queries.budget_used(),
         episodes: st.episode,
         wall_time_s: wall,
+        cpu_time_s: cpu,
         steps_per_s: cfg.train_steps as f64 / wall.max(1e-9),
     };
     if let Some(dir) = log.dir() {
@@ -772,4 +822,37 @@ fn ask_expert(
         );
     }
     Ok(answer)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A resumed run's time is what its snapshot carried plus this session's; the CPU time of an idle thread
+    /// does not grow with the wall clock.
+    #[test]
+    fn the_run_clock_carries_time_across_a_resume() {
+        let mut clock = RunClock::start();
+        let st = LoopState {
+            elapsed_s: 100.0,
+            cpu_s: 40.0,
+            ..LoopState::default()
+        };
+        clock.carry(&st);
+        std::thread::sleep(std::time::Duration::from_millis(50));
+        let (wall, cpu) = clock.totals();
+        assert!((100.05..101.0).contains(&wall), "wall {wall}");
+        let cpu = cpu.expect("Linux tells a thread's CPU time");
+        assert!((40.0..40.04).contains(&cpu), "cpu {cpu}");
+        let mut saved = LoopState::default();
+        clock.stamp(&mut saved);
+        assert!(saved.elapsed_s >= wall && saved.cpu_s >= cpu);
+        // A snapshot of an older version, without the fields, counts from zero.
+        let old: LoopState = serde_json::from_str(
+            r#"{"pretrain_done":0,"training":false,"step":0,"episode":0,"ep_return":0.0,"ep_len":0,
+                "ep_demo":0,"updates":0,"ep_actions":[],"ep_generator":null}"#,
+        )
+        .unwrap();
+        assert_eq!((old.elapsed_s, old.cpu_s), (0.0, 0.0));
+    }
 }

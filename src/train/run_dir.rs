@@ -221,7 +221,12 @@ pub struct Summary {
     pub demos_pretrain: usize,
     pub queries_used: usize,
     pub episodes: usize,
+    /// Wall-clock seconds of the whole run, over all its sessions when it was resumed from a snapshot.
     pub wall_time_s: f64,
+    /// CPU seconds of the thread that trained, over all sessions: the run's cost, which a busy machine or a
+    /// paused process does not inflate (absent from older summaries, and where the system cannot tell it).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cpu_time_s: Option<f64>,
     pub steps_per_s: f64,
 }
 
@@ -588,6 +593,7 @@ mod tests {
             queries_used: 12,
             episodes: 30,
             wall_time_s: 1.5,
+            cpu_time_s: Some(1.4),
             steps_per_s: 2000.0,
         };
         write_summary(dir.path(), &summary).unwrap();
