@@ -1,5 +1,6 @@
 //! Real `arld` processes that meet each other or are killed: the sweep directory's lock (a second sweep is
-//! refused naming the holder; the lock of a SIGKILLed sweep is taken over) and damaged runs (run again, listed).
+//! refused naming the holder; the lock of a SIGKILLed sweep is taken over), damaged runs (run again, listed),
+//! and runs whose configuration equals a finished one (its files taken, not run again).
 
 use std::path::Path;
 use std::process::{Child, Command, Output, Stdio};
@@ -144,4 +145,80 @@ fn concurrent_killed_and_damaged_sweeps_end_with_the_uninterrupted_results() {
         std::fs::read_to_string(out.join("results.csv")).unwrap(),
         expected
     );
+}
+
+/// A sweep extended with t_query values, one of them the task's default for ADQN-B (CartPole-v0: 0.05): that
+/// variant takes the files of the finished default runs, and they are the bytes an independent sweep that runs
+/// it writes. The other value runs.
+#[test]
+fn a_variant_equal_to_a_finished_run_takes_its_files_which_match_running_it() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (extended, fresh) = (tmp.path().join("extended"), tmp.path().join("fresh"));
+    let sweep = |out: &Path, t_query: Option<&str>| -> Output {
+        let mut args = vec![
+            "sweep",
+            "--env",
+            "CartPole-v0",
+            "--method",
+            "adqn",
+            "--net",
+            "bootstrap",
+            "--seeds",
+            "2",
+            "--set",
+            "train_steps=1500",
+            "--set",
+            "eval_period=500",
+            "--jobs",
+            "1",
+            "-o",
+            out.to_str().unwrap(),
+        ];
+        if let Some(t) = t_query {
+            args.extend(["--t-query", t]);
+        }
+        let out = output(&args);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        out
+    };
+    sweep(&extended, None);
+    let out = sweep(&extended, Some("0.05,0.5"));
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        stdout.contains("4 runs (0 already complete, 2 the same as a finished run, 2 run now)"),
+        "{stdout}"
+    );
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(
+        stderr.matches("whose files it takes").count(),
+        2,
+        "{stderr}"
+    );
+    assert!(
+        !stderr.contains("tq0.5/seed0: the same configuration"),
+        "{stderr}"
+    );
+    sweep(&fresh, Some("0.05"));
+    for seed in ["seed0", "seed1"] {
+        let variant = Path::new("CartPole-v0/adqn-bootstrap/tq0.05").join(seed);
+        for file in [
+            "config.toml",
+            "eval.csv",
+            "queries.csv",
+            "episodes.csv",
+            "weights.safetensors",
+        ] {
+            let taken = std::fs::read(extended.join(&variant).join(file)).unwrap();
+            let ran = std::fs::read(fresh.join(&variant).join(file)).unwrap();
+            assert!(
+                taken == ran,
+                "{}/{file} differs from running it",
+                variant.display()
+            );
+        }
+    }
 }

@@ -173,9 +173,10 @@ pub fn run_sweep(args: SweepArgs) -> Result<ExitCode> {
         println!("damaged and run again: {} ({problem})", path.display());
     }
     println!(
-        "{} runs ({} already complete, {} run now); results: {}",
+        "{} runs ({} already complete, {} the same as a finished run, {} run now); results: {}",
         outcome.total,
         outcome.already_complete,
+        outcome.reused,
         outcome.completed,
         outcome.results_csv.display()
     );
@@ -340,8 +341,8 @@ pub fn run_reproduce(args: ReproduceArgs) -> Result<ExitCode> {
             return Ok(ExitCode::from(slurm::EXIT_INTERRUPTED));
         };
         eprintln!(
-            "   {} complete ({} were already)",
-            outcome.total, outcome.already_complete
+            "   {} complete ({} were already, {} the same as a finished run)",
+            outcome.total, outcome.already_complete, outcome.reused
         );
     }
     if !ran_any {

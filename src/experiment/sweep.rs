@@ -8,7 +8,9 @@
 //!   every spec through a caller-supplied run function on `jobs` threads. The sweep knows nothing about
 //!   training: a run is a directory, and it is complete exactly when its `summary.json` exists (the training
 //!   code writes it last, atomically). That makes the sweep resumable: complete runs are skipped, incomplete
-//!   ones are cleared and run again.
+//!   ones are cleared and run again (or continue from their snapshot). A pending run whose resolved
+//!   configuration equals that of a finished variant of the same environment, method, network and seed takes
+//!   its files instead of running: runs are deterministic.
 //! - [`collect_results`] reads every complete run under a directory and writes `results.csv`, one row per
 //!   evaluation point.
 
@@ -482,6 +484,8 @@ pub struct SweepOutcome {
     pub total: usize,
     /// Runs already complete before this call (skipped).
     pub already_complete: usize,
+    /// Runs that took the files of a finished run with the same resolved configuration instead of running.
+    pub reused: usize,
     /// Runs performed by this call that succeeded.
     pub completed: usize,
     /// Path of the `results.csv` written at the end.
@@ -657,6 +661,38 @@ fn run_sweep_inner(
     }
     pending.sort_by_key(|spec| seed_order.iter().position(|&s| s == spec.id.seed));
     let already_complete = specs.len() - pending.len();
+    // A pending run whose resolved configuration equals a finished run's (a variant whose override is the
+    // default, such as `tq0.3` where 0.3 is the task's t_query) takes that run's files: runs are
+    // deterministic, so running it again would only write the same bytes.
+    let mut reused = 0;
+    pending.retain(|spec| {
+        let path = dir.join(spec.dir_name());
+        if path.join(crate::train::snapshot::SNAPSHOT_FILE).is_file() {
+            return true;
+        }
+        let Some(source) = identical_run(spec, dir) else {
+            return true;
+        };
+        match copy_run(spec, &source, &path) {
+            Ok(()) => {
+                eprintln!(
+                    "run {}: the same configuration as {}, whose files it takes",
+                    path.display(),
+                    source.display()
+                );
+                reused += 1;
+                false
+            }
+            Err(err) => {
+                eprintln!(
+                    "run {}: could not take the files of {} ({err:#}); running it",
+                    path.display(),
+                    source.display()
+                );
+                true
+            }
+        }
+    });
     let jobs = if jobs == 0 {
         std::thread::available_parallelism().map_or(1, |n| n.get())
     } else {
@@ -751,10 +787,73 @@ fn run_sweep_inner(
     Ok(SweepOutcome {
         total: specs.len(),
         already_complete,
+        reused,
         completed: completed.into_inner(),
         results_csv: collected,
         damaged,
     })
+}
+
+/// A finished run in the sweep directory, other than `spec`'s own, with the same environment, method, network
+/// and seed (any variant) and the same resolved configuration as `spec`.
+fn identical_run(spec: &RunSpec, dir: &Path) -> Option<PathBuf> {
+    let config = spec.config().ok()?;
+    let own = dir.join(spec.dir_name());
+    let base = dir
+        .join(&spec.id.env)
+        .join(format!("{}-{}", spec.id.method, spec.id.net));
+    let seed = format!("seed{}", spec.id.seed);
+    let mut candidates = vec![base.join(&seed)];
+    let mut variants: Vec<PathBuf> = std::fs::read_dir(&base)
+        .ok()?
+        .flatten()
+        .map(|entry| entry.path().join(&seed))
+        .collect();
+    variants.sort();
+    candidates.extend(variants);
+    candidates.into_iter().find(|candidate| {
+        *candidate != own
+            && run_dir::check_complete(candidate).is_ok()
+            && run_config(spec, candidate).is_ok_and(|other| other == config)
+    })
+}
+
+/// The resolved configuration of the finished run in `run` (its `config.toml` over the preset of `spec`'s
+/// environment, method, network and seed, so keys added since it ran take their defaults).
+fn run_config(spec: &RunSpec, run: &Path) -> Result<TrainConfig> {
+    let mut input = ConfigInput::new(&spec.id.env, spec.id.method, spec.id.net, spec.id.seed);
+    input.apply_file(&run.join(run_dir::CONFIG_FILE))?;
+    input.resolve()
+}
+
+/// Gives `to` the files of the finished run `from`, as `spec`'s run: its own resolved `config.toml`, and the
+/// summary last, so the copy is complete only once whole.
+fn copy_run(spec: &RunSpec, from: &Path, to: &Path) -> Result<()> {
+    if to.exists() {
+        std::fs::remove_dir_all(to)
+            .with_context(|| format!("cannot clear incomplete run directory {}", to.display()))?;
+    }
+    std::fs::create_dir_all(to).with_context(|| format!("cannot create {}", to.display()))?;
+    for entry in
+        std::fs::read_dir(from).with_context(|| format!("cannot read {}", from.display()))?
+    {
+        let entry = entry?;
+        let name = entry.file_name();
+        let skip = [run_dir::SUMMARY_FILE, run_dir::CONFIG_FILE];
+        if !entry.file_type()?.is_file() || skip.iter().any(|s| name == *s) {
+            continue;
+        }
+        let bytes = std::fs::read(entry.path())
+            .with_context(|| format!("cannot read {}", entry.path().display()))?;
+        write_atomic(&to.join(&name), &bytes)?;
+    }
+    write_atomic(
+        &to.join(run_dir::CONFIG_FILE),
+        spec.config()?.to_toml().as_bytes(),
+    )?;
+    let summary = std::fs::read(from.join(run_dir::SUMMARY_FILE))?;
+    write_atomic(&to.join(run_dir::SUMMARY_FILE), &summary)?;
+    run_dir::check_complete(to).context("the copy is not whole")
 }
 
 /// Clears an incomplete run directory, performs the run, and checks that it left `summary.json`.
