@@ -35,23 +35,27 @@ if ! has_sb3 "$venv"; then
 fi
 
 cargo build --release --quiet
-echo "== arld: CartPole-v1, dqn, plain 64-64, batch 32, train_freq 1, uniform replay, $steps steps"
-rm -rf "$out/arld_cartpole"
-# CPU seconds of the arld process (user + system) besides the run's own wall-clock steps/s: on a loaded machine the
-# CPU-time rate is the steadier figure.
-arld_cpu=$(python3 - "$steps" "$out/arld_cartpole" <<'PY'
-import resource, subprocess, sys
+echo "== arld: CartPole-v1, dqn, plain 64-64, batch 32, train_freq 1, uniform replay, $steps steps (median of 3 runs)"
+# The run's own steps/s (wall clock) and CPU seconds of its training thread (summary.json), median of three runs:
+# on this class of shared virtual machine one run can be a third slower than the next.
+read -r arld_sps arld_cpu < <(python3 - "$steps" "$out/arld_cartpole" <<'PY'
+import json, shutil, statistics, subprocess, sys
 steps, out = sys.argv[1], sys.argv[2]
-subprocess.run(["./target/release/arld", "train", "--env", "CartPole-v1", "--method", "dqn", "--net", "plain",
-                "--seed", "0", "--quiet", "--set", f"train_steps={steps}", "--set", "batch_size=32",
-                "--set", "train_freq=1", "--set", "prioritized=false", "--set", "learning_starts=100",
-                "--set", "replay_size=1000000", "--set", "target_period=10000", "--set", f"eval_period={steps}",
-                "--set", "eval_episodes=1", "-o", out], check=True, stdout=subprocess.DEVNULL)
-usage = resource.getrusage(resource.RUSAGE_CHILDREN)
-print(usage.ru_utime + usage.ru_stime)
+rates, cpus = [], []
+for _ in range(3):
+    shutil.rmtree(out, ignore_errors=True)
+    subprocess.run(["./target/release/arld", "train", "--env", "CartPole-v1", "--method", "dqn", "--net", "plain",
+                    "--seed", "0", "--quiet", "--set", f"train_steps={steps}", "--set", "batch_size=32",
+                    "--set", "train_freq=1", "--set", "prioritized=false", "--set", "learning_starts=100",
+                    "--set", "replay_size=1000000", "--set", "target_period=10000", "--set", f"eval_period={steps}",
+                    "--set", "eval_episodes=1", "-o", out], check=True, stdout=subprocess.DEVNULL)
+    summary = json.load(open(f"{out}/summary.json"))
+    rates.append(summary["steps_per_s"])
+    cpus.append(summary["cpu_time_s"])
+print(f"arld runs: {', '.join(f'{r:,.0f}' for r in rates)} steps/s", file=sys.stderr)
+print(statistics.median(rates), statistics.median(cpus))
 PY
 )
-arld_sps=$(python3 -c "import json,sys; print(json.load(open(sys.argv[1]))['steps_per_s'])" "$out/arld_cartpole/summary.json")
 
 echo "== Stable-Baselines3 DQN ($venv): the same configuration, $steps steps"
 read -r sb3_sps sb3_cpu < <("$venv/bin/python" - "$steps" <<'PY'
