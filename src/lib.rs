@@ -16,6 +16,7 @@
 //! - [`paper`]: the paper's tables (tasks, parameters, expert statistics, steps to solve) as data.
 //! - [`files`]: the one atomic file write every saved file goes through.
 //! - [`state`]: a component's state as named raw arrays and small values (what snapshots are made of).
+//! - [`math`]: the correctly rounded elementary functions every computation uses (one result on every CPU).
 //! - [`interrupt`]: SIGTERM/SIGINT as a stop request that the training loop polls.
 //! - [`tboard`]: a minimal TensorBoard event-file writer for scalar curves.
 //!
@@ -27,6 +28,7 @@ pub mod experiment;
 pub mod expert;
 pub mod files;
 pub mod interrupt;
+pub mod math;
 pub mod nn;
 pub mod paper;
 pub mod query;

@@ -135,6 +135,7 @@ fn write_fake_run(spec: &RunSpec, dir: &Path, interrupt: bool) -> Result<()> {
             wall_time_s: 0.1,
             cpu_time_s: None,
             steps_per_s: 1e5,
+            numerics: Some(arld::math::NUMERICS.to_string()),
         },
     )
 }
@@ -582,4 +583,41 @@ fn runs_start_seed_by_seed_and_a_sweep_directory_keeps_its_overrides() {
     };
     let error = sweep::run_grid(&changed, dir.path(), 1, &|_, _| unreachable!()).unwrap_err();
     assert!(format!("{error:#}").contains("gamma=0.5"), "{error:#}");
+}
+
+/// A complete run of an older arld (its summary has no `numerics`: the C library's elementary functions) is run
+/// again by the next sweep, and is not taken as the source of an identical variant's files; current runs are not.
+#[test]
+fn runs_of_the_c_librarys_elementary_functions_are_run_again() {
+    let grid = small_grid();
+    let total = grid.specs().unwrap().len();
+    let dir = tempfile::tempdir().unwrap();
+    sweep::run_grid(&grid, dir.path(), 2, &|spec, d| {
+        write_fake_run(spec, d, false)
+    })
+    .unwrap();
+    let specs = grid.specs().unwrap();
+    let old = dir.path().join(specs[3].dir_name());
+    let summary_path = old.join(run_dir::SUMMARY_FILE);
+    let mut summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&summary_path).unwrap()).unwrap();
+    summary.as_object_mut().unwrap().remove("numerics").unwrap();
+    std::fs::write(&summary_path, serde_json::to_string(&summary).unwrap()).unwrap();
+    assert!(run_dir::is_stale(&old));
+
+    let rerun = std::sync::Mutex::new(Vec::new());
+    let outcome = sweep::run_grid(&grid, dir.path(), 2, &|spec, d| {
+        rerun.lock().unwrap().push(d.to_path_buf());
+        write_fake_run(spec, d, false)
+    })
+    .unwrap();
+    assert_eq!(rerun.into_inner().unwrap(), vec![old.clone()]);
+    assert_eq!(
+        (outcome.already_complete, outcome.completed),
+        (total - 1, 1)
+    );
+    assert!(
+        !run_dir::is_stale(&old),
+        "the run again says how it computed"
+    );
 }

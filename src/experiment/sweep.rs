@@ -8,7 +8,9 @@
 //!   every spec through a caller-supplied run function on `jobs` threads. The sweep knows nothing about
 //!   training: a run is a directory, and it is complete exactly when its `summary.json` exists (the training
 //!   code writes it last, atomically). That makes the sweep resumable: complete runs are skipped, incomplete
-//!   ones are cleared and run again (or continue from their snapshot). A pending run whose resolved
+//!   ones are cleared and run again (or continue from their snapshot). A complete run of an older arld that
+//!   used the C library's elementary functions ([`run_dir::is_stale`]) is run again, so that every run of a
+//!   sweep regenerates byte for byte with this arld on any CPU. A pending run whose resolved
 //!   configuration equals that of a finished variant of the same environment, method, network and seed takes
 //!   its files instead of running: runs are deterministic.
 //! - [`collect_results`] reads every complete run under a directory and writes `results.csv`, one row per
@@ -604,7 +606,8 @@ impl std::str::FromStr for Shard {
 
 /// Runs every spec into `dir/<spec.dir_name()>` on `jobs` threads (each run single-threaded; `jobs` = 0 means
 /// one per available core), seed by seed (all configurations of the first seed, then the next, in the order
-/// seeds first appear in `specs`). Runs whose `summary.json` exists are skipped; a directory without it is cleared
+/// seeds first appear in `specs`). Runs whose `summary.json` exists are skipped (unless stale, see the module
+/// docs); a directory without it is cleared
 /// and run again. A failing (or panicking) run does not stop the others: failures are collected and returned
 /// together as an error after all runs. `results.csv` is rewritten at the end either way.
 /// An overall progress bar (runs done / total, ETA) is drawn only when stderr is a terminal.
@@ -640,6 +643,14 @@ fn run_sweep_inner(
                 return true;
             }
             match run_dir::check_complete(&path) {
+                Ok(()) if run_dir::is_stale(&path) => {
+                    eprintln!(
+                        "run {} was computed with the C library's elementary functions by an older arld, \
+                         whose results depend on the CPU; running it again",
+                        path.display()
+                    );
+                    true
+                }
                 Ok(()) => false,
                 Err(err) => {
                     eprintln!(
@@ -814,6 +825,7 @@ fn identical_run(spec: &RunSpec, dir: &Path) -> Option<PathBuf> {
     candidates.into_iter().find(|candidate| {
         *candidate != own
             && run_dir::check_complete(candidate).is_ok()
+            && !run_dir::is_stale(candidate)
             && run_config(spec, candidate).is_ok_and(|other| other == config)
     })
 }

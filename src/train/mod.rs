@@ -662,6 +662,7 @@ fn train_run(
         wall_time_s: wall,
         cpu_time_s: cpu,
         steps_per_s: cfg.train_steps as f64 / wall.max(1e-9),
+        numerics: Some(crate::math::NUMERICS.to_string()),
     };
     if let Some(dir) = log.dir() {
         agent.network().save(

@@ -228,6 +228,18 @@ pub struct Summary {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub cpu_time_s: Option<f64>,
     pub steps_per_s: f64,
+    /// How the run's elementary functions (sin, exp, pow, ...) were computed: [`crate::math::NUMERICS`] for
+    /// runs of this arld; absent for runs of arld before `src/math.rs`, which used the C library's, whose results
+    /// depend on the CPU (such a run regenerates byte for byte only with that arld on a CPU like the one it ran
+    /// on; sweeps run it again, see [`is_stale`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub numerics: Option<String>,
+}
+
+/// Whether the complete run in `dir` was computed with other elementary functions than this arld's
+/// ([`Summary::numerics`]), so that this arld would not regenerate it byte for byte.
+pub fn is_stale(dir: &Path) -> bool {
+    read_summary(dir).is_ok_and(|s| s.numerics.as_deref() != Some(crate::math::NUMERICS))
 }
 
 /// First evaluation step whose mean reaches `threshold`, or `train_steps` if none does (docs/algorithm.md §11).
@@ -595,6 +607,7 @@ mod tests {
             wall_time_s: 1.5,
             cpu_time_s: Some(1.4),
             steps_per_s: 2000.0,
+            numerics: Some(crate::math::NUMERICS.to_string()),
         };
         write_summary(dir.path(), &summary).unwrap();
         assert!(is_complete(dir.path()));
