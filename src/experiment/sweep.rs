@@ -635,6 +635,7 @@ fn run_sweep_inner(
         .with_context(|| format!("cannot create sweep directory {}", dir.display()))?;
     // A run with a summary whose files are damaged is run again, and said so (never silently left out).
     let mut damaged = Vec::new();
+    let mut stale = Vec::new();
     let mut pending: Vec<&RunSpec> = specs
         .iter()
         .filter(|spec| {
@@ -644,11 +645,7 @@ fn run_sweep_inner(
             }
             match run_dir::check_complete(&path) {
                 Ok(()) if run_dir::is_stale(&path) => {
-                    eprintln!(
-                        "run {} was computed with the C library's elementary functions by an older arld, \
-                         whose results depend on the CPU; running it again",
-                        path.display()
-                    );
+                    stale.push(path);
                     true
                 }
                 Ok(()) => false,
@@ -663,6 +660,14 @@ fn run_sweep_inner(
             }
         })
         .collect();
+    if let Some(first) = stale.first() {
+        eprintln!(
+            "{} complete runs (such as {}) were computed by an older arld with the C library's elementary \
+             functions, whose results depend on the CPU; running them again",
+            stale.len(),
+            first.display()
+        );
+    }
     // Seed by seed: every configuration gets its first seeds early, so a partial sweep already reports on all.
     let mut seed_order: Vec<u64> = Vec::new();
     for spec in specs {
