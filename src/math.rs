@@ -145,30 +145,36 @@ unsafe extern "C" {
     fn __real_cosf(x: f32) -> f32;
 }
 
-/// Box2D's single-precision sine: glibc's where its builds agree, else correctly rounded.
+/// glibc's `f32` sine or cosine (`glibc`) where its builds agree, else CORE-MATH's (`correctly_rounded`).
+#[cfg(target_os = "linux")]
+#[inline(always)]
+fn box2d_trig(
+    x: f32,
+    glibc: unsafe extern "C" fn(f32) -> f32,
+    correctly_rounded: fn(f32) -> f32,
+) -> f32 {
+    if x.abs() < GLIBC_F32_TRIG_AGREES_BELOW {
+        // SAFETY: glibc's sinf or cosf, a pure function of one float.
+        unsafe { glibc(x) }
+    } else {
+        correctly_rounded(x)
+    }
+}
+
+/// Box2D's single-precision sine (see the module docs).
 #[cfg(target_os = "linux")]
 #[doc(hidden)]
 #[unsafe(no_mangle)]
 pub extern "C" fn __wrap_sinf(x: f32) -> f32 {
-    if x.abs() < GLIBC_F32_TRIG_AGREES_BELOW {
-        // SAFETY: glibc's sinf, a pure function of one float.
-        unsafe { __real_sinf(x) }
-    } else {
-        core_math::sinf(x)
-    }
+    box2d_trig(x, __real_sinf, core_math::sinf)
 }
 
-/// Box2D's single-precision cosine, as [`__wrap_sinf`].
+/// Box2D's single-precision cosine (see the module docs).
 #[cfg(target_os = "linux")]
 #[doc(hidden)]
 #[unsafe(no_mangle)]
 pub extern "C" fn __wrap_cosf(x: f32) -> f32 {
-    if x.abs() < GLIBC_F32_TRIG_AGREES_BELOW {
-        // SAFETY: glibc's cosf, a pure function of one float.
-        unsafe { __real_cosf(x) }
-    } else {
-        core_math::cosf(x)
-    }
+    box2d_trig(x, __real_cosf, core_math::cosf)
 }
 
 /// `sincosf` (the compiler merges Box2D's `sinf` and `cosf` of one angle into it): the two functions above. glibc's
