@@ -3,13 +3,38 @@
 # the whole table's wall time on two cores.
 #
 # Usage: bench/methods_table.sh [SEEDS] [FRACTION]
+#        bench/methods_table.sh committed
 #   SEEDS     seeds of every method on every task in the slice (default 2: 96 runs)
 #   FRACTION  share of each task's training steps to run (default 1; e.g. 0.1 for a quick estimate, which
 #             extrapolates the per-step cost linearly and so ignores how episode lengths change over training)
 # The slice runs two at a time (`arld sweep --jobs 2`); the estimate is the summed per-run CPU time
 # (summary.json's cpu_time_s) scaled to 960 full runs and divided by two cores. Writes bench/out/methods_table.json.
+# `committed` runs nothing: it sums the CPU time of the methods-table runs under results/runs that this arld's
+# numerics computed (summary.json's "numerics"), and extrapolates the tasks' means to all 960 runs.
 set -euo pipefail
 cd "$(dirname "$0")/.."
+
+if [ "${1:-}" = committed ]; then
+  python3 - <<'PY'
+import json, pathlib
+per_task = {}
+for summary in sorted(pathlib.Path("results/runs").glob("*/*/seed*/summary.json")):
+    s = json.loads(summary.read_text())
+    if s.get("numerics") != "correctly-rounded" or s.get("cpu_time_s") is None:
+        continue
+    per_task.setdefault(s["env"], []).append(s["cpu_time_s"])
+if not per_task:
+    raise SystemExit("no methods-table run of this arld's numerics under results/runs yet")
+total = 0.0
+for env, times in sorted(per_task.items()):
+    mean = sum(times) / len(times)
+    total += mean * 240
+    print(f"{env:16s} {len(times):3d}/240 runs, mean {mean:6.1f} CPU s, sum {sum(times) / 3600:5.2f} h")
+print(f"whole table (960 runs) at these means: {total / 3600:.2f} core-hours = {total / 7200:.2f} h on two cores"
+      + ("" if len(per_task) == 4 else f" (only {len(per_task)} of 4 tasks so far)"))
+PY
+  exit 0
+fi
 seeds="${1:-2}"
 fraction="${2:-1}"
 out=bench/out/methods_table
