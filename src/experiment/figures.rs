@@ -416,6 +416,7 @@ mod tests {
                 .collect(),
             query_steps: queries,
             summary_steps_to_solve: None,
+            numerics: None,
         }
     }
 

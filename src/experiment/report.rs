@@ -260,6 +260,18 @@ pub fn report(dir: &Path, out_dir: &Path, sustain: usize) -> Result<ReportSummar
             ));
         }
     }
+    let older = runs
+        .iter()
+        .filter(|run| run.numerics.as_deref() != Some(crate::math::NUMERICS))
+        .count();
+    if older > 0 {
+        notes.push(format!(
+            "{older} of {} runs were computed by an older arld with the C library's elementary functions (no \
+             `numerics` in summary.json), whose rounding depends on the CPU: they regenerate byte for byte only \
+             with that arld on a CPU with FMA; `arld reproduce` computes them again",
+            runs.len()
+        ));
+    }
     let cells = super::verdict::cells(&runs, sustain);
     let mut files = Vec::new();
     let (table_md, table_csv) = table5(&cells)?;

@@ -752,6 +752,7 @@ pub fn runs_from_evaluations_csv(path: &Path) -> Result<Vec<RunRecord>> {
                 expert: None,
                 query_steps: None,
                 summary_steps_to_solve: None,
+                numerics: None,
                 id: RunId {
                     method: method.parse()?,
                     net: net.parse()?,
@@ -798,6 +799,7 @@ mod tests {
                 .collect(),
             query_steps: None,
             summary_steps_to_solve: None,
+            numerics: None,
         }
     }
 

@@ -296,6 +296,9 @@ pub struct RunRecord {
     pub query_steps: Option<Vec<u64>>,
     /// `steps_to_solve` as the training code recorded it in `summary.json`, for cross-checking.
     pub summary_steps_to_solve: Option<u64>,
+    /// `summary.json`'s `numerics` (how the elementary functions were computed; `None` for older runs or
+    /// records not read from a run directory).
+    pub numerics: Option<String>,
 }
 
 impl RunRecord {
@@ -489,6 +492,7 @@ pub fn read_run(dir: &Path, relative: &Path) -> Result<RunRecord> {
         eval,
         query_steps: read_query_steps(dir)?,
         summary_steps_to_solve: Some(summary.steps_to_solve as u64),
+        numerics: summary.numerics,
     })
 }
 
