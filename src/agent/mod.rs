@@ -38,6 +38,8 @@ pub struct AgentConfig {
     /// Discount factor γ.
     pub gamma: f32,
     pub loss: TdLoss,
+    /// Double DQN's target (online argmax, target value); false: the target network's maximum.
+    pub double_q: bool,
     /// Global gradient-norm clip.
     pub grad_clip: f32,
     /// Large-margin loss margin M and its weight λ.
@@ -85,6 +87,7 @@ pub struct Agent {
     abs_td: Vec<f32>,
     gamma: f32,
     loss: TdLoss,
+    double_q: bool,
     grad_clip: f32,
     margin: f32,
     lambda: f32,
@@ -133,6 +136,7 @@ impl Agent {
             abs_td: vec![0.0; batch],
             gamma: cfg.gamma,
             loss: cfg.loss,
+            double_q: cfg.double_q,
             grad_clip: cfg.grad_clip,
             margin: cfg.margin,
             lambda: cfg.lambda,
@@ -221,6 +225,7 @@ impl Agent {
         );
         let next_noise = noisy.then_some((&self.noise_argmax, &self.noise_target));
         let (qn_online, qn_target) = next_state_q(
+            self.double_q,
             [&self.online, &self.target],
             &batch.next_obs,
             b,
@@ -229,6 +234,7 @@ impl Agent {
         );
         let nstep = (self.lambda_n > 0.0).then(|| {
             next_state_q(
+                self.double_q,
                 [&self.online, &self.target],
                 &batch.nstep_next_obs,
                 b,
@@ -337,10 +343,12 @@ impl Persist for Agent {
     }
 }
 
-/// The double-DQN pair of forward passes over next states (`b` rows of `obs`): the online network's Q-values,
-/// which pick the action, and the target network's, which value it; each network with its own noise sample when
-/// noisy, each into its own workspace.
+/// The forward passes over next states (`b` rows of `obs`) that the TD target needs: the Q-values that pick the
+/// action and those that value it, each network with its own noise sample when noisy, each into its own
+/// workspace. Double DQN (`double`): the online network picks, the target network values. Otherwise the target
+/// network does both (its maximum), and the online pass is skipped.
 fn next_state_q<'w>(
+    double: bool,
     [online, target]: [&QNet; 2],
     obs: &[f32],
     b: usize,
@@ -348,10 +356,11 @@ fn next_state_q<'w>(
     [ws_online, ws_target]: [&'w mut Workspace; 2],
 ) -> (&'w [f32], &'w [f32]) {
     let (online_noise, target_noise) = noise.unzip();
-    (
-        online.forward(obs, b, online_noise, ws_online),
-        target.forward(obs, b, target_noise, ws_target),
-    )
+    let values = target.forward(obs, b, target_noise, ws_target);
+    if !double {
+        return (values, values);
+    }
+    (online.forward(obs, b, online_noise, ws_online), values)
 }
 
 /// The test-time policy of a network, without exploration (docs/algorithm.md §5): a majority vote over the
@@ -665,5 +674,68 @@ mod tests {
         // y = 1 + 0.5 * 2 = 2; delta = 3 - 2 = 1.
         assert!((td - 1.0).abs() < 1e-6 && (abs_td[0] - 1.0).abs() < 1e-6);
         assert!((dq[0] - 2.0).abs() < 1e-6 && dq[1] == 0.0);
+    }
+    /// The TD error of an update against an independent recomputation from single-state Q-values: with
+    /// `double_q` the online network picks the next action and the target network values it; without, the target
+    /// network's maximum.
+    #[test]
+    fn the_td_target_follows_double_q() {
+        let (d, a, b, gamma) = (3, 4, 4, 0.9f32);
+        let obs: Vec<f32> = (0..b * d).map(|i| (i as f32 * 0.37).sin()).collect();
+        let next_obs: Vec<f32> = (0..b * d).map(|i| (i as f32 * 0.53).cos() * 2.0).collect();
+        let mut differ = false;
+        for double_q in [false, true] {
+            let cfg = AgentConfig {
+                output: OutputKind::Plain,
+                batch_size: b,
+                lr: 1e-3,
+                gamma,
+                loss: TdLoss::Mse,
+                double_q,
+                grad_clip: 10.0,
+                margin: 0.8,
+                lambda: 0.0,
+                lambda_n: 0.0,
+                l2: 0.0,
+                exact_factorised_var: false,
+            };
+            let mut agent = Agent::new(&cfg, d, a, 7);
+            agent.target = QNet::new(d, a, OutputKind::Plain, &mut Pcg64::seed_from_u64(99));
+            let mut batch = batch_of(
+                vec![0, 1, 2, 3],
+                vec![1.0, -0.5, 0.25, 2.0],
+                vec![false; b],
+                vec![false; b],
+            );
+            batch.obs = obs.clone();
+            batch.next_obs = next_obs.clone();
+            let mut expected = Vec::new();
+            for i in 0..b {
+                let (mut q, mut q_online, mut q_target) = ([0.0f32; 4], [0.0f32; 4], [0.0f32; 4]);
+                let rows = i * d..(i + 1) * d;
+                agent
+                    .online
+                    .q_values_single(&obs[rows.clone()], None, &mut q);
+                agent
+                    .online
+                    .q_values_single(&next_obs[rows.clone()], None, &mut q_online);
+                agent
+                    .target
+                    .q_values_single(&next_obs[rows], None, &mut q_target);
+                let picked = q_target[argmax(&q_online)];
+                let maximum = q_target.iter().copied().fold(f32::MIN, f32::max);
+                differ |= picked != maximum;
+                let next = if double_q { picked } else { maximum };
+                expected.push((q[batch.actions[i]] - (batch.rewards[i] + gamma * next)).abs());
+            }
+            let (_, abs_td) = agent.update(&batch);
+            for (got, want) in abs_td.iter().zip(&expected) {
+                assert!(
+                    (got - want).abs() < 1e-5,
+                    "double_q = {double_q}: |delta| {got} vs {want}"
+                );
+            }
+        }
+        assert!(differ, "the case must tell the two targets apart");
     }
 }

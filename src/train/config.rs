@@ -172,6 +172,9 @@ pub struct TrainConfig {
     pub heads: usize,
     /// TD loss \[P: squared error\].
     pub loss: TdLoss,
+    /// Double DQN's TD target, the online network picking the next action and the target network valuing it
+    /// \[P: true\]; false: the target network's maximum, as in the original DQN (and Stable-Baselines3's).
+    pub double_q: bool,
     /// Global gradient-norm clip \[OURS: 10\].
     pub grad_clip: f64,
     /// Treat time-limit truncation as terminal (the 2018 Gym behaviour) \[OURS: false\].
@@ -558,6 +561,7 @@ impl TrainConfig {
             target_period: schedule.target_period,
             heads: 10,
             loss: TdLoss::Mse,
+            double_q: true,
             grad_clip: 10.0,
             timeout_as_terminal: false,
             eps_start: 0.9,
@@ -833,6 +837,7 @@ impl TrainConfig {
             lr: self.lr as f32,
             gamma: self.gamma as f32,
             loss: self.loss,
+            double_q: self.double_q,
             grad_clip: self.grad_clip as f32,
             margin: self.margin as f32,
             lambda: self.lambda as f32,
@@ -1111,6 +1116,7 @@ mod tests {
             "net",
             "seed",
             "loss",
+            "double_q",
             "timeout_as_terminal",
             "queries_from_learning_starts",
             "eps_greedy_on_top",
