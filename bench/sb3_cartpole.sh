@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # arld against Stable-Baselines3 DQN, side by side in one run, on SB3's DQN configuration:
 # CartPole-v1, a 64-64 network, batch 32, one gradient update per environment step, uniform replay, and SB3's
-# TD target (the target network's maximum: arld's `double_q = false`; SB3's DQN has no double-DQN option).
+# TD target (the target network's maximum: arld's `double_q = false`; SB3's DQN has no double-DQN option), Huber
+# loss, learning rate 1e-4, gamma 0.99 and epsilon from 1 to 0.05 over the first 10% (SB3's defaults).
 # Both are single-threaded (torch.set_num_threads(1); one arld run uses one core) and train the same number of
 # steps with no evaluation in between. Prints both speeds and their ratio, by wall clock and by CPU time (the
 # steadier figure on a loaded machine), and writes bench/out/sb3_cartpole.json.
@@ -48,7 +49,8 @@ for _ in range(3):
     subprocess.run(["./target/release/arld", "train", "--env", "CartPole-v1", "--method", "dqn", "--net", "plain",
                     "--seed", "0", "--quiet", "--set", f"train_steps={steps}", "--set", "batch_size=32",
                     "--set", "train_freq=1", "--set", "prioritized=false", "--set", "learning_starts=100",
-                    "--set", "double_q=false",
+                    "--set", "double_q=false", "--set", "loss=huber", "--set", "lr=0.0001",
+                    "--set", "eps_start=1.0", "--set", "eps_end=0.05", "--set", "gamma=0.99",
                     "--set", "replay_size=1000000", "--set", "target_period=10000", "--set", f"eval_period={steps}",
                     "--set", "eval_episodes=1", "-o", out], check=True, stdout=subprocess.DEVNULL)
     summary = json.load(open(f"{out}/summary.json"))
