@@ -3,9 +3,8 @@ every kind, and every way an environment or expert can fail."""
 
 import json
 import os
-import signal
+import subprocess
 import sys
-import threading
 from pathlib import Path
 
 import gymnasium as gym
@@ -206,10 +205,12 @@ def test_demonstrations_from_arrays_for_dqfd():
 
 
 def test_ctrl_c_interrupts_learn():
-    timer = threading.Timer(1.0, lambda: os.kill(os.getpid(), signal.SIGINT))
-    timer.start()
+    # SIGINT from another process, as a terminal's Ctrl-C: a Python timer thread would first need the GIL, which
+    # the training loop gives up only between steps, so the signal could come late or never.
+    killer = subprocess.Popen(["sh", "-c", f"sleep 1; kill -INT {os.getpid()}"])
     try:
         with pytest.raises(KeyboardInterrupt):
             arld.Agent("dqn", gym.make("CartPole-v1")).learn(10_000_000)
     finally:
-        timer.cancel()
+        killer.kill()
+        killer.wait()
