@@ -3,6 +3,7 @@ every kind, and every way an environment or expert can fail."""
 
 import json
 import os
+import signal
 import subprocess
 import sys
 from pathlib import Path
@@ -205,6 +206,9 @@ def test_demonstrations_from_arrays_for_dqfd():
 
 
 def test_ctrl_c_interrupts_learn():
+    # Python's own Ctrl-C handler, whatever this process inherited: a shell starts background jobs with SIGINT
+    # ignored, and Python then installs no handler.
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
     # SIGINT from another process, as a terminal's Ctrl-C: a Python timer thread would first need the GIL, which
     # the training loop gives up only between steps, so the signal could come late or never.
     killer = subprocess.Popen(["sh", "-c", f"sleep 1; kill -INT {os.getpid()}"])
@@ -214,3 +218,4 @@ def test_ctrl_c_interrupts_learn():
     finally:
         killer.kill()
         killer.wait()
+        signal.signal(signal.SIGINT, previous)
