@@ -621,3 +621,55 @@ fn runs_of_the_c_librarys_elementary_functions_are_run_again() {
         "the run again says how it computed"
     );
 }
+
+/// An interrupted run whose snapshot an older arld wrote (no `numerics` in its header) starts again from a clean
+/// directory; one whose snapshot this arld wrote is left for the run to resume.
+#[test]
+fn snapshots_of_the_c_librarys_elementary_functions_are_not_resumed() {
+    let grid = small_grid();
+    let specs = grid.specs().unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let snapshot = |numerics: Option<&str>| {
+        let mut meta = serde_json::json!({"format": "1"});
+        if let Some(n) = numerics {
+            meta["numerics"] = n.into();
+        }
+        let mut header = serde_json::to_vec(&serde_json::json!({ "__metadata__": meta })).unwrap();
+        header.resize(header.len().next_multiple_of(8), b' ');
+        let mut bytes = (header.len() as u64).to_le_bytes().to_vec();
+        bytes.extend(header);
+        bytes
+    };
+    let (old, current) = (
+        dir.path().join(specs[0].dir_name()),
+        dir.path().join(specs[1].dir_name()),
+    );
+    for (run, numerics) in [(&old, None), (&current, Some(arld::math::NUMERICS))] {
+        std::fs::create_dir_all(run).unwrap();
+        std::fs::write(
+            run.join(arld::train::snapshot::SNAPSHOT_FILE),
+            snapshot(numerics),
+        )
+        .unwrap();
+        std::fs::write(run.join("marker"), b"").unwrap();
+    }
+    assert!(arld::train::snapshot::is_stale(&old));
+    assert!(!arld::train::snapshot::is_stale(&current));
+    let outcome = sweep::run_grid(&grid, dir.path(), 1, &|spec, d| {
+        if d == old {
+            assert!(
+                !d.join("marker").exists(),
+                "the old snapshot's directory is cleared"
+            );
+        }
+        if d == current {
+            assert!(
+                d.join("marker").exists(),
+                "the current snapshot is kept to resume"
+            );
+        }
+        write_fake_run(spec, d, false)
+    });
+    let outcome = outcome.unwrap();
+    assert_eq!(outcome.completed, outcome.total);
+}

@@ -876,9 +876,18 @@ fn copy_run(spec: &RunSpec, from: &Path, to: &Path) -> Result<()> {
 /// Clears an incomplete run directory, performs the run, and checks that it left `summary.json`.
 /// A panic inside `run_fn` is turned into an error so that one broken run cannot take down the sweep.
 fn run_one_spec(spec: &RunSpec, path: &Path, status: &Path, run_fn: &RunFn) -> Result<()> {
-    // An interrupted run with a snapshot continues from it; any other incomplete run starts again.
+    // An interrupted run with a snapshot continues from it; any other incomplete run starts again, and so does
+    // one whose snapshot an older arld computed with other elementary functions.
     let has_snapshot = path.join(crate::train::snapshot::SNAPSHOT_FILE).is_file();
-    if path.exists() && !has_snapshot {
+    let stale = has_snapshot && crate::train::snapshot::is_stale(path);
+    if stale {
+        eprintln!(
+            "run {}: its snapshot was computed by an older arld with the C library's elementary functions; \
+             starting the run again",
+            path.display()
+        );
+    }
+    if path.exists() && (!has_snapshot || stale) {
         std::fs::remove_dir_all(path)
             .with_context(|| format!("cannot clear incomplete run directory {}", path.display()))?;
     }

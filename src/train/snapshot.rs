@@ -9,7 +9,7 @@
 //! and scripts. A snapshot records the format version, the arld version and the run's whole configuration; a
 //! snapshot of another configuration or version is refused with the difference named.
 
-use super::TrainConfig;
+use super::{ConfigInput, TrainConfig};
 use crate::state::{Array, StateDict};
 use anyhow::{Context, Result, bail};
 use safetensors::{Dtype, SafeTensors};
@@ -29,6 +29,7 @@ pub struct Checkpointer {
     dir: PathBuf,
     /// Snapshot every this many units of work (environment steps; pre-training updates); 0: only on request.
     every: usize,
+    config: TrainConfig,
     config_toml: String,
     /// The thread making the last snapshot durable (see [`Checkpointer::save`]).
     pending: Option<std::thread::JoinHandle<Result<()>>>,
@@ -44,6 +45,7 @@ impl Checkpointer {
         Self {
             dir: dir.to_path_buf(),
             every: cfg.snapshot_every,
+            config: cfg.clone(),
             config_toml: cfg.to_toml(),
             pending: None,
             spent_s: 0.0,
@@ -79,6 +81,7 @@ impl Checkpointer {
         let metadata = [
             ("format", FORMAT_VERSION.to_string()),
             ("arld", env!("CARGO_PKG_VERSION").to_string()),
+            ("numerics", crate::math::NUMERICS.to_string()),
             ("config", self.config_toml.clone()),
             ("values", values),
         ];
@@ -137,7 +140,7 @@ impl Checkpointer {
         }
         let bytes =
             std::fs::read(&path).with_context(|| format!("cannot read {}", path.display()))?;
-        let state = decode(&bytes, &self.config_toml)
+        let state = decode(&bytes, &self.config)
             .with_context(|| format!("cannot resume from {}", path.display()))?;
         Ok(Some(state))
     }
@@ -162,6 +165,37 @@ impl Drop for Checkpointer {
     fn drop(&mut self) {
         let _ = self.wait();
     }
+}
+
+/// Whether the run directory `dir` holds a snapshot computed with other elementary functions than this arld's
+/// (an older arld's): it cannot be resumed, and a sweep starts its run again.
+pub fn is_stale(dir: &Path) -> bool {
+    let Ok(bytes) = std::fs::read(dir.join(SNAPSHOT_FILE)) else {
+        return false;
+    };
+    SafeTensors::read_metadata(&bytes).is_ok_and(|(_, header)| {
+        header
+            .metadata()
+            .as_ref()
+            .and_then(|m| m.get("numerics"))
+            .map(String::as_str)
+            != Some(crate::math::NUMERICS)
+    })
+}
+
+/// How the configuration a snapshot recorded differs from `config` (see [`TrainConfig::differences`]). The
+/// recorded text is read as a config file is: a key an older arld did not have takes its default, so adding a
+/// key does not orphan the snapshots written before it.
+fn config_differences(recorded: &str, config: &TrainConfig) -> Result<Vec<String>> {
+    if recorded == config.to_toml() {
+        return Ok(Vec::new());
+    }
+    let mut input = ConfigInput::new(&config.env, config.method, config.net, config.seed);
+    input
+        .apply_text(recorded, Path::new("(the snapshot's configuration)"))
+        .and_then(|()| input.resolve())
+        .map(|then| then.differences(config))
+        .context("the snapshot's configuration cannot be read by this arld")
 }
 
 /// Writes `state` as a safetensors file: the header (every array's type, length and place; `metadata` under
@@ -238,7 +272,7 @@ fn fnv1a(bytes: &[u8]) -> u64 {
 }
 
 /// Reads a snapshot file's bytes, checking format, version and configuration.
-fn decode(bytes: &[u8], config_toml: &str) -> Result<StateDict<'static>> {
+fn decode(bytes: &[u8], config: &TrainConfig) -> Result<StateDict<'static>> {
     let (_, header) =
         SafeTensors::read_metadata(bytes).context("the file is not a readable safetensors file")?;
     let meta = header.metadata().clone().unwrap_or_default();
@@ -261,23 +295,21 @@ fn decode(bytes: &[u8], config_toml: &str) -> Result<StateDict<'static>> {
             env!("CARGO_PKG_VERSION")
         );
     }
-    let recorded = get("config")?;
-    if recorded != config_toml {
-        let differences: Vec<String> = recorded
-            .lines()
-            .zip(config_toml.lines())
-            .filter(|(a, b)| a != b)
-            .take(5)
-            .map(|(a, b)| format!("snapshot `{a}`, now `{b}`"))
-            .collect();
+    if meta.get("numerics").map(String::as_str) != Some(crate::math::NUMERICS) {
         bail!(
-            "the snapshot belongs to another configuration ({}); start the run again in a new directory, or \
-             give the configuration it was started with",
-            if differences.is_empty() {
-                "the key lists differ".to_string()
-            } else {
-                differences.join("; ")
-            }
+            "the snapshot was computed with {} elementary functions, this arld uses {} ones; results would not \
+             match an uninterrupted run: start the run again",
+            meta.get("numerics")
+                .map_or("the C library's", String::as_str),
+            crate::math::NUMERICS
+        );
+    }
+    let differences = config_differences(get("config")?, config)?;
+    if !differences.is_empty() {
+        bail!(
+            "the snapshot belongs to another configuration (snapshot's value first: {}); start the run again in \
+             a new directory, or give the configuration it was started with",
+            differences.join("; ")
         );
     }
     let mut state = StateDict {
@@ -313,7 +345,7 @@ fn read_le<T, const N: usize>(bytes: &[u8], from_le: fn([u8; N]) -> T) -> Vec<T>
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::train::{ConfigInput, Method, NetKind};
+    use crate::train::{Method, NetKind};
 
     fn config(seed: u64) -> TrainConfig {
         ConfigInput::new("CartPole-v0", Method::Dqn, NetKind::Bootstrap, seed)
@@ -355,9 +387,44 @@ mod tests {
         let mut other = Checkpointer::new(dir.path(), &config(1));
         let err = format!("{:#}", other.load().unwrap_err());
         assert!(
-            err.contains("another configuration")
-                && err.contains("seed = 0")
-                && err.contains("seed = 1"),
+            err.contains("another configuration") && err.contains("seed = 0 (1)"),
+            "{err}"
+        );
+        // A snapshot written before a key existed resumes when the key's default is the run's value; one
+        // whose elementary functions were the C library's (no `numerics` recorded) is refused.
+        let path = ck.path();
+        let write_with = |metadata: &[(&str, String)]| {
+            let mut bytes = Vec::new();
+            encode(&mut bytes, &state, metadata).unwrap();
+            std::fs::write(&path, bytes).unwrap();
+        };
+        let without_key: String = config(0)
+            .to_toml()
+            .lines()
+            .filter(|l| !l.starts_with("double_q"))
+            .map(|l| format!("{l}\n"))
+            .collect();
+        assert_ne!(without_key, config(0).to_toml());
+        let metadata = |numerics: Option<&str>, config: &str| {
+            let mut m = vec![
+                ("format", FORMAT_VERSION.to_string()),
+                ("arld", env!("CARGO_PKG_VERSION").to_string()),
+                ("config", config.to_string()),
+                ("values", serde_json::to_string(&state.values).unwrap()),
+            ];
+            m.extend(numerics.map(|n| ("numerics", n.to_string())));
+            m
+        };
+        write_with(&metadata(Some(crate::math::NUMERICS), &without_key));
+        assert_eq!(ck.load().unwrap().unwrap(), state);
+        let with_other_value = without_key.replace("lr = ", "double_q = false\nlr = ");
+        write_with(&metadata(Some(crate::math::NUMERICS), &with_other_value));
+        let err = format!("{:#}", ck.load().unwrap_err());
+        assert!(err.contains("double_q = false (true)"), "{err}");
+        write_with(&metadata(None, &config(0).to_toml()));
+        let err = format!("{:#}", ck.load().unwrap_err());
+        assert!(
+            err.contains("the C library's elementary functions"),
             "{err}"
         );
         std::fs::write(ck.path(), b"not a snapshot").unwrap();
