@@ -33,6 +33,20 @@ pub(crate) trait Lanes {
     unsafe fn store(p: *mut f32, v: Self::V);
     /// `a * b + c` with one rounding.
     unsafe fn fma(a: Self::V, b: Self::V, c: Self::V) -> Self::V;
+    /// The first `lanes` floats at `p` (1 to `WIDTH`), the other lanes zero; only those floats are read.
+    #[inline(always)]
+    unsafe fn load_first(p: *const f32, lanes: usize) -> Self::V {
+        debug_assert_eq!(lanes, Self::WIDTH);
+        // SAFETY: forwarded; a level without masked loads is only asked for whole vectors.
+        unsafe { Self::load(p) }
+    }
+    /// Stores the first `lanes` lanes of `v` at `p`; only those floats are written.
+    #[inline(always)]
+    unsafe fn store_first(p: *mut f32, v: Self::V, lanes: usize) {
+        debug_assert_eq!(lanes, Self::WIDTH);
+        // SAFETY: forwarded; a level without masked stores is only asked for whole vectors.
+        unsafe { Self::store(p, v) }
+    }
 }
 
 /// One lane at a time.
@@ -87,6 +101,26 @@ impl Lanes for Avx2 {
     unsafe fn fma(a: __m256, b: __m256, c: __m256) -> __m256 {
         unsafe { _mm256_fmadd_ps(a, b, c) }
     }
+    #[inline(always)]
+    unsafe fn load_first(p: *const f32, lanes: usize) -> __m256 {
+        // SAFETY: the caller guarantees `lanes` readable floats; the masked-out lanes are not accessed.
+        unsafe { _mm256_maskload_ps(p, avx2_mask(lanes)) }
+    }
+    #[inline(always)]
+    unsafe fn store_first(p: *mut f32, v: __m256, lanes: usize) {
+        // SAFETY: the caller guarantees `lanes` writable floats; the masked-out lanes are not accessed.
+        unsafe { _mm256_maskstore_ps(p, avx2_mask(lanes), v) }
+    }
+}
+
+/// The AVX2 mask of the first `lanes` (1 to 8) lanes.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+unsafe fn avx2_mask(lanes: usize) -> __m256i {
+    const ONES_THEN_ZEROS: [i32; 16] = [-1, -1, -1, -1, -1, -1, -1, -1, 0, 0, 0, 0, 0, 0, 0, 0];
+    debug_assert!((1..=8).contains(&lanes));
+    // SAFETY: `8 - lanes` is in 0..8, so 8 ints from there lie inside the table.
+    unsafe { _mm256_loadu_si256(ONES_THEN_ZEROS.as_ptr().add(8 - lanes).cast()) }
 }
 
 /// 16 lanes (AVX-512F).
@@ -117,7 +151,7 @@ impl Lanes for Avx512 {
 }
 
 /// The first `N` (1 to 4) lanes of a 4-lane vector (FMA; masked loads and stores from AVX touch only those `N`
-/// floats): the column rest below a vector of the AVX2 and AVX-512 levels, so no output runs lane by lane there.
+/// floats): the column rest below 8 columns of the AVX-512 level, so no output runs lane by lane there.
 /// The unused lanes compute on zeros and are never stored.
 #[cfg(target_arch = "x86_64")]
 pub(crate) struct Fma4<const N: usize>;
@@ -239,35 +273,51 @@ pub(crate) fn product<S: Lanes>(dst: &mut [f32], a: Strided, b: &[f32], init: Op
         } else {
             column_blocks::<S, 4>(&p, m, full)
         };
+        // AVX2's rest (under 16 columns, or 32 for fewer than 4 rows): 9-15 columns as one block of two
+        // vectors whose second is masked, 1-8 as one (masked) vector over 8 rows at a time, so that 8
+        // accumulators hide the FMA latency as in the full blocks.
+        #[cfg(target_arch = "x86_64")]
+        if S::WIDTH == Avx2::WIDTH {
+            while col + 2 * S::WIDTH <= n {
+                rows_blocked::<S, 4, 2, false>(&p, m, col, S::WIDTH);
+                col += 2 * S::WIDTH;
+            }
+            match n - col {
+                0 => {}
+                rest @ 1..=8 => rows_blocked::<S, 8, 1, true>(&p, m, col, rest),
+                rest => rows_blocked::<S, 4, 2, true>(&p, m, col, rest - S::WIDTH),
+            }
+            col = n;
+        }
         while col + S::WIDTH <= full {
-            rows_blocked::<S, 1>(&p, m, col);
+            rows_blocked::<S, 4, 1, false>(&p, m, col, S::WIDTH);
             col += S::WIDTH;
         }
         // An 8-column rest of a 16-lane level in AVX2 vectors (the 10 heads' 40 columns), not lane by lane.
         #[cfg(target_arch = "x86_64")]
         if S::WIDTH > Avx2::WIDTH && col + Avx2::WIDTH <= n {
             // The AVX-512 level is only chosen on CPUs that also have AVX2 and FMA (`SimdLevel::detected`).
-            rows_blocked::<Avx2, 1>(&p, m, col);
+            rows_blocked::<Avx2, 4, 1, false>(&p, m, col, Avx2::WIDTH);
             col += Avx2::WIDTH;
         }
-        // A rest under 8 columns of the vector levels (the tasks' 2-4 actions, the heads' 4- and 6-column
+        // A rest under 8 columns of the AVX-512 level (the tasks' 2-4 actions, the heads' 4- and 6-column
         // rests) in 4-lane FMA vectors, masked for the last 1-3 columns.
         #[cfg(target_arch = "x86_64")]
-        if S::WIDTH >= Avx2::WIDTH {
+        if S::WIDTH > Avx2::WIDTH {
             if col + 4 <= n {
-                rows_blocked::<Fma4<4>, 1>(&p, m, col);
+                rows_blocked::<Fma4<4>, 4, 1, false>(&p, m, col, 4);
                 col += 4;
             }
             match n - col {
-                1 => rows_blocked::<Fma4<1>, 1>(&p, m, col),
-                2 => rows_blocked::<Fma4<2>, 1>(&p, m, col),
-                3 => rows_blocked::<Fma4<3>, 1>(&p, m, col),
+                1 => rows_blocked::<Fma4<1>, 4, 1, false>(&p, m, col, 1),
+                2 => rows_blocked::<Fma4<2>, 4, 1, false>(&p, m, col, 2),
+                3 => rows_blocked::<Fma4<3>, 4, 1, false>(&p, m, col, 3),
                 _ => {}
             }
             col = n;
         }
         while col < n {
-            rows_blocked::<Scalar, 1>(&p, m, col);
+            rows_blocked::<Scalar, 4, 1, false>(&p, m, col, 1);
             col += 1;
         }
     }
@@ -291,39 +341,65 @@ unsafe fn column_blocks<S: Lanes, const C: usize>(p: &Operands, m: usize, full: 
     let mut col = 0;
     while col + C * S::WIDTH <= full {
         // SAFETY: forwarded from `product`.
-        unsafe { rows_blocked::<S, C>(p, m, col) };
+        unsafe { rows_blocked::<S, 4, C, false>(p, m, col, S::WIDTH) };
         col += C * S::WIDTH;
     }
     col
 }
 
-/// Columns `col..col + C * WIDTH` of all `m` rows, four rows at a time.
+/// Columns `col..` of all `m` rows in blocks of `C` vectors, `R` rows at a time, then 4, then 1. `MASKED`: the
+/// last vector holds only its first `lanes` columns.
 #[inline(always)]
-unsafe fn rows_blocked<S: Lanes, const C: usize>(p: &Operands, m: usize, col: usize) {
+unsafe fn rows_blocked<S: Lanes, const R: usize, const C: usize, const MASKED: bool>(
+    p: &Operands,
+    m: usize,
+    col: usize,
+    lanes: usize,
+) {
     let mut row = 0;
     // SAFETY: forwarded from `product`.
     unsafe {
-        while row + 4 <= m {
-            block::<S, 4, C>(p, row, col);
+        while row + R <= m {
+            block::<S, R, C, MASKED>(p, row, col, lanes);
+            row += R;
+        }
+        while R > 4 && row + 4 <= m {
+            block::<S, 4, C, MASKED>(p, row, col, lanes);
             row += 4;
         }
         while row < m {
-            block::<S, 1, C>(p, row, col);
+            block::<S, 1, C, MASKED>(p, row, col, lanes);
             row += 1;
         }
     }
 }
 
-/// Rows `row..row + R`, columns `col..col + C * WIDTH`: `R x C` accumulators over the whole `k` loop.
+/// Rows `row..row + R`, columns `col..col + C * WIDTH` (the last vector's first `lanes` columns if `MASKED`):
+/// `R x C` accumulators over the whole `k` loop.
 #[inline(always)]
-unsafe fn block<S: Lanes, const R: usize, const C: usize>(p: &Operands, row: usize, col: usize) {
+unsafe fn block<S: Lanes, const R: usize, const C: usize, const MASKED: bool>(
+    p: &Operands,
+    row: usize,
+    col: usize,
+    lanes: usize,
+) {
+    let load = |ptr: *const f32, c: usize| {
+        // SAFETY: forwarded from `product` (the caller's pointer is inside the checked shapes).
+        unsafe {
+            if MASKED && c == C - 1 {
+                S::load_first(ptr, lanes)
+            } else {
+                S::load(ptr)
+            }
+        }
+    };
     // SAFETY: forwarded from `product` (every pointer offset is inside the checked shapes).
     unsafe {
         let start = match p.init {
             Some(bias) => {
                 let mut v = [S::splat(0.0); C];
                 for (c, v) in v.iter_mut().enumerate() {
-                    *v = S::load(bias.add(col + c * S::WIDTH));
+                    *v = load(bias.add(col + c * S::WIDTH), c);
                 }
                 v
             }
@@ -335,7 +411,7 @@ unsafe fn block<S: Lanes, const R: usize, const C: usize>(p: &Operands, row: usi
         for _ in 0..p.k {
             let mut bv = [S::splat(0.0); C];
             for (c, v) in bv.iter_mut().enumerate() {
-                *v = S::load(b_ptr.add(c * S::WIDTH));
+                *v = load(b_ptr.add(c * S::WIDTH), c);
             }
             for (r, acc_row) in acc.iter_mut().enumerate() {
                 let av = S::splat(*a_ptr.add(r * p.a_rs));
@@ -349,7 +425,11 @@ unsafe fn block<S: Lanes, const R: usize, const C: usize>(p: &Operands, row: usi
         for (r, acc_row) in acc.iter().enumerate() {
             let out = p.dst.add((row + r) * p.n + col);
             for (c, &v) in acc_row.iter().enumerate() {
-                S::store(out.add(c * S::WIDTH), v);
+                if MASKED && c == C - 1 {
+                    S::store_first(out.add(c * S::WIDTH), v, lanes);
+                } else {
+                    S::store(out.add(c * S::WIDTH), v);
+                }
             }
         }
     }
@@ -403,7 +483,11 @@ mod tests {
     #[test]
     fn every_level_computes_the_same_fma_chain_bit_for_bit() {
         let detected = SimdLevel::detected();
-        for (m, k, n) in [
+        // Every column rest of every level (1-40 columns), for row counts with and without leftover blocks.
+        let rests = [1, 3, 9, 20, 32]
+            .into_iter()
+            .flat_map(|m| (1..=40).map(move |n| (m, 7, n)));
+        for (m, k, n) in rests.chain([
             (1, 3, 64),
             (5, 64, 64),
             (7, 13, 40),
@@ -416,7 +500,7 @@ mod tests {
             (7, 9, 22),
             (5, 64, 30),
             (3, 4, 15),
-        ] {
+        ]) {
             let a_data: Vec<f32> = (0..m * k)
                 .map(|i| ((i * 37 % 101) as f32 - 50.0) * 0.013)
                 .collect();
