@@ -584,3 +584,57 @@ fn a_diverging_run_stops_with_the_step_and_a_hint() {
         String::from_utf8_lossy(&ok.stderr)
     );
 }
+
+/// A run's config.toml given with --config runs that configuration without --env; the identity flags and --set
+/// win over the file's keys; a file without `env` and no --env is a clear error.
+#[test]
+fn a_config_file_names_the_run_and_flags_win_over_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("run.toml");
+    std::fs::write(
+        &file,
+        "env = \"Acrobot-v1\"\nmethod = \"adqn\"\nnet = \"noisy\"\nseed = 7\nlr = 0.002\n",
+    )
+    .unwrap();
+    let file = file.to_str().unwrap();
+    let printed = |extra: &[&str]| -> toml::Table {
+        let mut args = vec!["train", "--config", file, "--print-config"];
+        args.extend_from_slice(extra);
+        let out = arld(&args);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        toml::from_str(&String::from_utf8_lossy(&out.stdout)).unwrap()
+    };
+    let from_file = printed(&[]);
+    assert_eq!(from_file["env"].as_str(), Some("Acrobot-v1"));
+    assert_eq!(from_file["method"].as_str(), Some("adqn"));
+    assert_eq!(from_file["net"].as_str(), Some("noisy"));
+    assert_eq!(from_file["seed"].as_integer(), Some(7));
+    assert_eq!(from_file["lr"].as_float(), Some(0.002));
+    let flagged = printed(&[
+        "--env",
+        "CartPole-v0",
+        "--method",
+        "dqn",
+        "--net",
+        "plain",
+        "--seed",
+        "3",
+        "--set",
+        "lr=0.005",
+    ]);
+    assert_eq!(flagged["env"].as_str(), Some("CartPole-v0"));
+    assert_eq!(flagged["method"].as_str(), Some("dqn"));
+    assert_eq!(flagged["net"].as_str(), Some("plain"));
+    assert_eq!(flagged["seed"].as_integer(), Some(3));
+    assert_eq!(flagged["lr"].as_float(), Some(0.005));
+    let no_env = dir.path().join("no_env.toml");
+    std::fs::write(&no_env, "lr = 0.002\n").unwrap();
+    fails_with(
+        &["train", "--config", no_env.to_str().unwrap()],
+        &["no environment", "--env"],
+    );
+}

@@ -17,19 +17,22 @@ A run snapshots itself every `snapshot_every` steps and when stopped (Ctrl-C, SI
 continues it to the results an uninterrupted run gives."
 )]
 pub struct TrainArgs {
-    /// Gymnasium id: CartPole-v0, CartPole-v1, Acrobot-v1, MountainCar-v0, LunarLander-v2, LunarLander-v3.
-    #[arg(long, required_unless_present = "resume")]
+    /// Gymnasium id: CartPole-v0, CartPole-v1, Acrobot-v1, MountainCar-v0, LunarLander-v2, LunarLander-v3
+    /// (or the config file's `env`).
+    #[arg(long, required_unless_present_any = ["resume", "config"])]
     env: Option<String>,
-    /// Learning method.
-    #[arg(long, value_enum, default_value_t = Method::Dqn)]
-    method: Method,
-    /// Output stage of the Q-network: plain, bootstrap (10 heads, "-B") or noisy ("-N").
-    #[arg(long, value_enum, default_value_t = NetKind::Bootstrap)]
-    net: NetKind,
-    /// Seed of every random draw of the run.
-    #[arg(long, default_value_t = 0)]
-    seed: u64,
-    /// TOML file overriding preset values.
+    /// Learning method [default: the config file's `method`, else dqn].
+    #[arg(long, value_enum)]
+    method: Option<Method>,
+    /// Output stage of the Q-network: plain, bootstrap (10 heads, "-B") or noisy ("-N") [default: the config
+    /// file's `net`, else bootstrap].
+    #[arg(long, value_enum)]
+    net: Option<NetKind>,
+    /// Seed of every random draw of the run [default: the config file's `seed`, else 0].
+    #[arg(long)]
+    seed: Option<u64>,
+    /// TOML file of config keys over the preset (a run's config.toml is one); --env, --method, --net, --seed
+    /// and --set win over it.
     #[arg(long)]
     config: Option<PathBuf>,
     /// Override one config key (repeatable), e.g. --set lr=0.001.
@@ -87,13 +90,26 @@ pub fn resolve(args: &TrainArgs) -> anyhow::Result<TrainConfig> {
         input.apply_file(&config)?;
         return input.resolve();
     }
-    let env = args
-        .env
-        .as_deref()
-        .expect("clap requires --env without --resume");
-    let mut input = ConfigInput::new(env, args.method, args.net, args.seed);
+    // The identity flags win over the config file's keys, which win over the defaults.
+    let mut input = ConfigInput::new("", Method::Dqn, NetKind::Bootstrap, 0);
     if let Some(path) = &args.config {
         input.apply_file(path)?;
+    }
+    if let Some(env) = &args.env {
+        input.set("env", env.as_str())?;
+    }
+    anyhow::ensure!(
+        !input.env().is_empty(),
+        "no environment: give --env, or an `env` key in the config file"
+    );
+    if let Some(method) = args.method {
+        input.set("method", method.name())?;
+    }
+    if let Some(net) = args.net {
+        input.set("net", net.name())?;
+    }
+    if let Some(seed) = args.seed {
+        input.set_seed(seed);
     }
     for o in &args.overrides {
         input.apply_override(o)?;

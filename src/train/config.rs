@@ -388,6 +388,16 @@ impl ConfigInput {
         }
     }
 
+    /// The environment id given so far (empty if none was).
+    pub fn env(&self) -> &str {
+        &self.env
+    }
+
+    /// Sets the seed (a command-line flag: every u64 up to [`MAX_SEED`] is checked when resolved).
+    pub fn set_seed(&mut self, seed: u64) {
+        self.seed = seed;
+    }
+
     /// Takes every key of a TOML file (a run's `config.toml` is one).
     pub fn apply_file(&mut self, path: &Path) -> Result<()> {
         let meta = std::fs::metadata(path)
