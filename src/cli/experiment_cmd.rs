@@ -5,7 +5,7 @@ use arld::experiment::report::report;
 use arld::experiment::run_spec;
 use arld::experiment::slurm::{self, SlurmOptions};
 use arld::experiment::sweep::{
-    RunState, Shard, SweepGrid, SweepOutcome, run_grid, run_grid_shard, sweep_status,
+    OlderRuns, RunState, Shard, SweepGrid, SweepOutcome, run_grid_shard, sweep_status,
 };
 use arld::experiment::verdict;
 use clap::Args;
@@ -59,6 +59,11 @@ pub struct SweepArgs {
     /// Run only shard I of N of the sweep's runs (0 <= I < N; runs dealt round-robin), e.g. --shard 3/8.
     #[arg(long, value_name = "I/N")]
     shard: Option<Shard>,
+    /// Count complete runs of an older arld (computed with the C library's elementary functions, whose results
+    /// depend on the CPU) as complete instead of running them again: only missing runs are computed.
+    #[arg(long)]
+    keep_older: bool,
+
     /// Show which runs of the sweep in DIR are done, running, failed or pending, and where; runs nothing.
     #[arg(long, value_name = "DIR", conflicts_with_all = ["grid", "env", "method", "out", "shard", "slurm"])]
     status: Option<PathBuf>,
@@ -131,6 +136,10 @@ pub struct ReproduceArgs {
     /// Where the report goes [default: OUT/report].
     #[arg(long, value_name = "DIR")]
     report: Option<PathBuf>,
+    /// Count complete runs of an older arld (computed with the C library's elementary functions, whose results
+    /// depend on the CPU) as complete instead of running them again: only missing runs are computed.
+    #[arg(long)]
+    keep_older: bool,
 }
 
 pub fn run_sweep(args: SweepArgs) -> Result<ExitCode> {
@@ -164,7 +173,12 @@ pub fn run_sweep(args: SweepArgs) -> Result<ExitCode> {
     }
     arld::interrupt::install()?;
     let Some(outcome) = interruptible(run_grid_shard(
-        &grid, &out, args.jobs, args.shard, &run_spec,
+        &grid,
+        &out,
+        args.jobs,
+        args.shard,
+        older_runs(args.keep_older),
+        &run_spec,
     ))?
     else {
         return Ok(ExitCode::from(slurm::EXIT_INTERRUPTED));
@@ -192,6 +206,7 @@ fn submit_slurm(args: &SweepArgs, grid: &SweepGrid, out: &std::path::Path) -> Re
         shards: args.shards.unwrap_or(runs).min(runs),
         cpus_per_task: args.jobs.max(1),
         signal_lead_s: args.signal_lead,
+        keep_older: args.keep_older,
     };
     let arld = std::env::current_exe()?;
     let script = slurm::job_script(out, &arld, &opts)?;
@@ -337,7 +352,11 @@ pub fn run_reproduce(args: ReproduceArgs) -> Result<ExitCode> {
         }
         ran_any = true;
         eprintln!("== {name}: {} runs", grid.specs()?.len());
-        let Some(outcome) = interruptible(run_grid(&grid, &args.out, args.jobs, &run_spec))? else {
+        let older = older_runs(args.keep_older);
+        let Some(outcome) = interruptible(run_grid_shard(
+            &grid, &args.out, args.jobs, None, older, &run_spec,
+        ))?
+        else {
             return Ok(ExitCode::from(slurm::EXIT_INTERRUPTED));
         };
         eprintln!(
@@ -354,4 +373,13 @@ pub fn run_reproduce(args: ReproduceArgs) -> Result<ExitCode> {
         &report_dir,
         arld::experiment::verdict::DEFAULT_SUSTAIN,
     )
+}
+
+/// The sweep's policy for the runs of an older arld, from `--keep-older`.
+fn older_runs(keep: bool) -> OlderRuns {
+    if keep {
+        OlderRuns::Keep
+    } else {
+        OlderRuns::RunAgain
+    }
 }
