@@ -1,8 +1,8 @@
 //! The batched passes: [`QNet::forward`] of a batch of states (activations kept in the [`Workspace`]) and
 //! [`QNet::backward`] of the last forward, for a loss gradient with respect to the Q-values.
 
-use super::kernels::{Lanes, Strided, product, transpose};
-use super::linear::{column_sums, relu_backward, relu_in_place};
+use super::kernels::{Lanes, Strided, product, relu_backward, transpose};
+use super::linear::{column_sums, relu_in_place};
 use super::simd::at_simd_level;
 use super::{Grads, HIDDEN, NoiseSample, OutputKind, QNet, TensorsMut, Workspace, noisy};
 
@@ -195,13 +195,13 @@ impl QNet {
                 }
             }
         }
-        relu_backward(d_h2, h2);
+        relu_backward::<S>(d_h2, h2);
         column_sums(d_h2, g.fc2_b);
         product::<S>(g.fc2_w, Strided::transposed(h1, batch, HIDDEN), d_h2, None);
         let d_h1 = &mut ws.d_h1[..batch * HIDDEN];
         transpose(self.tensor(l.fc2_w), HIDDEN, HIDDEN, w_t);
         product::<S>(d_h1, Strided::row_major(d_h2, batch, HIDDEN), w_t, None);
-        relu_backward(d_h1, h1);
+        relu_backward::<S>(d_h1, h1);
         column_sums(d_h1, g.fc1_b);
         product::<S>(
             g.fc1_w,

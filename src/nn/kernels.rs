@@ -33,6 +33,8 @@ pub(crate) trait Lanes {
     unsafe fn store(p: *mut f32, v: Self::V);
     /// `a * b + c` with one rounding.
     unsafe fn fma(a: Self::V, b: Self::V, c: Self::V) -> Self::V;
+    /// `g` in the lanes where `a > 0`, +0 elsewhere (ReLU's backward pass), by a bit mask.
+    unsafe fn keep_where_positive(g: Self::V, a: Self::V) -> Self::V;
     /// The first `lanes` floats at `p` (1 to `WIDTH`), the other lanes zero; only those floats are read.
     #[inline(always)]
     unsafe fn load_first(p: *const f32, lanes: usize) -> Self::V {
@@ -74,6 +76,10 @@ impl Lanes for Scalar {
     unsafe fn fma(a: f32, b: f32, c: f32) -> f32 {
         a.mul_add(b, c)
     }
+    #[inline(always)]
+    unsafe fn keep_where_positive(g: f32, a: f32) -> f32 {
+        if a > 0.0 { g } else { 0.0 }
+    }
 }
 
 /// 8 lanes (AVX2 + FMA).
@@ -100,6 +106,10 @@ impl Lanes for Avx2 {
     #[inline(always)]
     unsafe fn fma(a: __m256, b: __m256, c: __m256) -> __m256 {
         unsafe { _mm256_fmadd_ps(a, b, c) }
+    }
+    #[inline(always)]
+    unsafe fn keep_where_positive(g: __m256, a: __m256) -> __m256 {
+        unsafe { _mm256_and_ps(g, _mm256_cmp_ps::<_CMP_GT_OQ>(a, _mm256_setzero_ps())) }
     }
     #[inline(always)]
     unsafe fn load_first(p: *const f32, lanes: usize) -> __m256 {
@@ -148,6 +158,10 @@ impl Lanes for Avx512 {
     unsafe fn fma(a: __m512, b: __m512, c: __m512) -> __m512 {
         unsafe { _mm512_fmadd_ps(a, b, c) }
     }
+    #[inline(always)]
+    unsafe fn keep_where_positive(g: __m512, a: __m512) -> __m512 {
+        unsafe { _mm512_maskz_mov_ps(_mm512_cmp_ps_mask::<_CMP_GT_OQ>(a, _mm512_setzero_ps()), g) }
+    }
 }
 
 /// The first `N` (1 to 4) lanes of a 4-lane vector (FMA; masked loads and stores from AVX touch only those `N`
@@ -193,6 +207,10 @@ impl<const N: usize> Lanes for Fma4<N> {
     #[inline(always)]
     unsafe fn fma(a: __m128, b: __m128, c: __m128) -> __m128 {
         unsafe { _mm_fmadd_ps(a, b, c) }
+    }
+    #[inline(always)]
+    unsafe fn keep_where_positive(g: __m128, a: __m128) -> __m128 {
+        unsafe { _mm_and_ps(g, _mm_cmpgt_ps(a, _mm_setzero_ps())) }
     }
 }
 
@@ -432,6 +450,27 @@ unsafe fn block<S: Lanes, const R: usize, const C: usize, const MASKED: bool>(
                 }
             }
         }
+    }
+}
+
+/// ReLU backward in place: `grad` zeroed (+0) wherever the layer's post-ReLU output `activations` is not
+/// positive, `WIDTH` lanes at a time. Written with the level's vectors because LLVM vectorises the plain loop
+/// into masked stores (`vmaskmovps`), which AMD CPUs run in microcode: 15% of the backward pass on an EPYC.
+#[inline(always)]
+pub(crate) fn relu_backward<S: Lanes>(grad: &mut [f32], activations: &[f32]) {
+    assert_eq!(grad.len(), activations.len(), "relu_backward: lengths differ");
+    let vectors = grad.len() / S::WIDTH * S::WIDTH;
+    let (body, tail) = grad.split_at_mut(vectors);
+    for (i, g) in body.chunks_exact_mut(S::WIDTH).enumerate() {
+        // SAFETY: `g` and the activations at the same offset hold WIDTH floats each.
+        unsafe {
+            let a = S::load(activations.as_ptr().add(i * S::WIDTH));
+            S::store(g.as_mut_ptr(), S::keep_where_positive(S::load(g.as_ptr()), a));
+        }
+    }
+    for (g, &a) in tail.iter_mut().zip(&activations[vectors..]) {
+        // SAFETY: the scalar level has no target feature.
+        *g = unsafe { Scalar::keep_where_positive(*g, a) };
     }
 }
 

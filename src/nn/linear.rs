@@ -1,5 +1,5 @@
-//! Dense-layer building blocks around the matrix product (`kernels.rs`): the element-wise passes (ReLU
-//! backward, bias gradients) and PyTorch's initialisation.
+//! Dense-layer building blocks around the matrix product (`kernels.rs`): the element-wise passes (ReLU, bias
+//! gradients; ReLU's backward pass is in `kernels.rs`, in the level's vectors) and PyTorch's initialisation.
 //!
 //! A [`MatView`] says how a `rows x cols` matrix is laid out inside a slice (row and column strides), so
 //! the initialisation can write PyTorch's `[out][in]` draws into a transposed storage.
@@ -42,17 +42,6 @@ impl MatView {
 pub(crate) fn relu_in_place(values: &mut [f32]) {
     for v in values.iter_mut() {
         *v = v.max(0.0);
-    }
-}
-
-/// ReLU backward in place: zero the gradient wherever the layer's output was not positive.
-///
-/// `activations` holds the post-ReLU outputs, so `a > 0` is exactly "the unit was active".
-#[inline(always)]
-pub(crate) fn relu_backward(grad: &mut [f32], activations: &[f32]) {
-    // A select rather than a conditional store, so the loop vectorises.
-    for (g, &a) in grad.iter_mut().zip(activations) {
-        *g = if a > 0.0 { *g } else { 0.0 };
     }
 }
 
