@@ -458,14 +458,21 @@ unsafe fn block<S: Lanes, const R: usize, const C: usize, const MASKED: bool>(
 /// into masked stores (`vmaskmovps`), which AMD CPUs run in microcode: 15% of the backward pass on an EPYC.
 #[inline(always)]
 pub(crate) fn relu_backward<S: Lanes>(grad: &mut [f32], activations: &[f32]) {
-    assert_eq!(grad.len(), activations.len(), "relu_backward: lengths differ");
+    assert_eq!(
+        grad.len(),
+        activations.len(),
+        "relu_backward: lengths differ"
+    );
     let vectors = grad.len() / S::WIDTH * S::WIDTH;
     let (body, tail) = grad.split_at_mut(vectors);
     for (i, g) in body.chunks_exact_mut(S::WIDTH).enumerate() {
         // SAFETY: `g` and the activations at the same offset hold WIDTH floats each.
         unsafe {
             let a = S::load(activations.as_ptr().add(i * S::WIDTH));
-            S::store(g.as_mut_ptr(), S::keep_where_positive(S::load(g.as_ptr()), a));
+            S::store(
+                g.as_mut_ptr(),
+                S::keep_where_positive(S::load(g.as_ptr()), a),
+            );
         }
     }
     for (g, &a) in tail.iter_mut().zip(&activations[vectors..]) {

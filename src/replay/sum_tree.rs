@@ -121,14 +121,15 @@ impl SumMinTree {
                 for (node, u) in node[..n].iter_mut().zip(&mut u[..n]) {
                     // Invariant: the sum at `node` is > 0. Going left when `u < left` keeps it
                     // because u >= 0; going right is only done into a positive subtree; otherwise
-                    // left holds all the mass. Branch-free: which child is taken is a coin flip
-                    // weighted by the masses, so a branch would be mispredicted about every other
-                    // level.
+                    // left holds all the mass.
                     let left = self.sums[2 * *node];
                     let right = self.sums[2 * *node + 1];
-                    let go_right = !(*u < left || right <= 0.0);
-                    *u = if go_right { *u - left } else { *u };
+                    let go_right;
+                    (go_right, *u) = descend(*u, left, right);
                     *node = 2 * *node + usize::from(go_right);
+                    // The next node's grandchildren (4 sums, one cache line) are read two levels on:
+                    // asking for them now overlaps their cache miss with this level's other walks.
+                    prefetch(&self.sums, 4 * *node);
                 }
                 width *= 2;
             }
@@ -187,6 +188,50 @@ impl SumMinTree {
                 width *= 2;
             }
         }
+    }
+}
+
+/// One step of the search from a node with child sums `left` and `right`: whether it goes right, which is
+/// `!(u < left || right <= 0)`, and the point within the child, `u - left` going right and `u` otherwise.
+///
+/// Branch-free: which child is taken is a coin flip weighted by the masses, so a branch is mispredicted about
+/// every other level. On x86-64 it is written with SSE2 masks, because LLVM compiles the plain `if` and even a
+/// bit-mask formulation back into a branch.
+#[inline(always)]
+fn descend(u: f64, left: f64, right: f64) -> (bool, f64) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        use std::arch::x86_64::*;
+        // SAFETY: SSE2 is part of the x86-64 baseline.
+        unsafe {
+            let (u, l) = (_mm_set_sd(u), _mm_set_sd(left));
+            let go = _mm_and_pd(
+                _mm_cmpnlt_sd(u, l),
+                _mm_cmpnle_sd(_mm_set_sd(right), _mm_setzero_pd()),
+            );
+            // `u - 0` is `u` exactly.
+            let within = _mm_sub_sd(u, _mm_and_pd(l, go));
+            (_mm_movemask_pd(go) & 1 == 1, _mm_cvtsd_f64(within))
+        }
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        let go = !(u < left || right <= 0.0);
+        (go, if go { u - left } else { u })
+    }
+}
+
+/// Asks the CPU to bring `values[index]` into the cache (nothing if `index` is out of range).
+#[inline(always)]
+fn prefetch(values: &[f64], index: usize) {
+    #[cfg(target_arch = "x86_64")]
+    if index < values.len() {
+        // SAFETY: a prefetch of an address inside the slice; it reads nothing and writes nothing.
+        unsafe {
+            std::arch::x86_64::_mm_prefetch::<{ std::arch::x86_64::_MM_HINT_T0 }>(
+                values.as_ptr().add(index).cast(),
+            )
+        };
     }
 }
 
