@@ -236,10 +236,14 @@ fn submit_slurm(args: &SweepArgs, grid: &SweepGrid, out: &std::path::Path) -> Re
 fn print_status(dir: &std::path::Path) -> Result<ExitCode> {
     let runs = sweep_status(dir)?;
     let (mut done, mut running, mut failed, mut interrupted, mut pending) = (0, 0, 0, 0, 0);
+    let mut older = 0;
     for (spec, state) in &runs {
         let name = spec.dir_name();
         match state {
-            RunState::Done => done += 1,
+            RunState::Done => {
+                done += 1;
+                older += usize::from(arld::train::run_dir::is_stale(&dir.join(&name)));
+            }
             RunState::Running { host, slurm_job } => {
                 running += 1;
                 let job = slurm_job
@@ -259,8 +263,17 @@ fn print_status(dir: &std::path::Path) -> Result<ExitCode> {
             RunState::Pending => pending += 1,
         }
     }
+    let older = if older > 0 {
+        format!(
+            " ({older} by an older arld with the C library's elementary functions: the sweep computes them again \
+             unless given --keep-older)"
+        )
+    } else {
+        String::new()
+    };
     println!(
-        "{} runs: {done} done, {running} running, {failed} failed, {interrupted} interrupted, {pending} pending",
+        "{} runs: {done} done{older}, {running} running, {failed} failed, {interrupted} interrupted, {pending} \
+         pending",
         runs.len()
     );
     Ok(ExitCode::SUCCESS)
