@@ -59,10 +59,8 @@ pub struct SweepArgs {
     /// Run only shard I of N of the sweep's runs (0 <= I < N; runs dealt round-robin), e.g. --shard 3/8.
     #[arg(long, value_name = "I/N")]
     shard: Option<Shard>,
-    /// Count complete runs of an older arld (computed with the C library's elementary functions, whose results
-    /// depend on the CPU) as complete instead of running them again: only missing runs are computed.
-    #[arg(long)]
-    keep_older: bool,
+    #[command(flatten)]
+    older: OlderRunsArg,
 
     /// Show which runs of the sweep in DIR are done, running, failed or pending, and where; runs nothing.
     #[arg(long, value_name = "DIR", conflicts_with_all = ["grid", "env", "method", "out", "shard", "slurm"])]
@@ -136,10 +134,8 @@ pub struct ReproduceArgs {
     /// Where the report goes [default: OUT/report].
     #[arg(long, value_name = "DIR")]
     report: Option<PathBuf>,
-    /// Count complete runs of an older arld (computed with the C library's elementary functions, whose results
-    /// depend on the CPU) as complete instead of running them again: only missing runs are computed.
-    #[arg(long)]
-    keep_older: bool,
+    #[command(flatten)]
+    older: OlderRunsArg,
 }
 
 pub fn run_sweep(args: SweepArgs) -> Result<ExitCode> {
@@ -177,7 +173,7 @@ pub fn run_sweep(args: SweepArgs) -> Result<ExitCode> {
         &out,
         args.jobs,
         args.shard,
-        older_runs(args.keep_older),
+        args.older.policy(),
         &run_spec,
     ))?
     else {
@@ -206,7 +202,7 @@ fn submit_slurm(args: &SweepArgs, grid: &SweepGrid, out: &std::path::Path) -> Re
         shards: args.shards.unwrap_or(runs).min(runs),
         cpus_per_task: args.jobs.max(1),
         signal_lead_s: args.signal_lead,
-        keep_older: args.keep_older,
+        keep_older: args.older.keep_older,
     };
     let arld = std::env::current_exe()?;
     let script = slurm::job_script(out, &arld, &opts)?;
@@ -365,7 +361,7 @@ pub fn run_reproduce(args: ReproduceArgs) -> Result<ExitCode> {
         }
         ran_any = true;
         eprintln!("== {name}: {} runs", grid.specs()?.len());
-        let older = older_runs(args.keep_older);
+        let older = args.older.policy();
         let Some(outcome) = interruptible(run_grid_shard(
             &grid, &args.out, args.jobs, None, older, &run_spec,
         ))?
@@ -388,11 +384,22 @@ pub fn run_reproduce(args: ReproduceArgs) -> Result<ExitCode> {
     )
 }
 
-/// The sweep's policy for the runs of an older arld, from `--keep-older`.
-fn older_runs(keep: bool) -> OlderRuns {
-    if keep {
-        OlderRuns::Keep
-    } else {
-        OlderRuns::RunAgain
+/// `--keep-older` of `arld sweep` and `arld reproduce`.
+#[derive(Args)]
+pub struct OlderRunsArg {
+    /// Count complete runs of an older arld (computed with the C library's elementary functions, whose results
+    /// depend on the CPU) as complete instead of running them again: only missing runs are computed.
+    #[arg(long)]
+    keep_older: bool,
+}
+
+impl OlderRunsArg {
+    /// The sweep's policy for the runs of an older arld.
+    fn policy(&self) -> OlderRuns {
+        if self.keep_older {
+            OlderRuns::Keep
+        } else {
+            OlderRuns::RunAgain
+        }
     }
 }

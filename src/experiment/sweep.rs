@@ -659,7 +659,7 @@ fn run_sweep_inner(
             match run_dir::check_complete(&path) {
                 Ok(()) if run_dir::is_stale(&path) => {
                     stale.push(path);
-                    true
+                    older == OlderRuns::RunAgain
                 }
                 Ok(()) => false,
                 Err(err) => {
@@ -684,9 +684,6 @@ fn run_sweep_inner(
                 OlderRuns::Keep => "kept as they are (--keep-older)",
             }
         );
-        if older == OlderRuns::Keep {
-            pending.retain(|spec| !stale.contains(&dir.join(spec.dir_name())));
-        }
     }
     // Seed by seed: every configuration gets its first seeds early, so a partial sweep already reports on all.
     let mut seed_order: Vec<u64> = Vec::new();
