@@ -50,7 +50,7 @@ pub struct SweepArgs {
     /// A variant per override (repeatable), e.g. --vary n_r=100 --vary n_r=10000; runs go to `.../n_r-100/seedN`.
     #[arg(long, value_name = "KEY=VALUE")]
     vary: Vec<String>,
-    /// Parallel runs [default: one per core].
+    /// Parallel runs (0: one per core).
     #[arg(long, default_value_t = 0)]
     jobs: usize,
     /// Sweep directory.
@@ -125,7 +125,7 @@ pub struct ReproduceArgs {
     /// Which parts: methods, t_query, experts, n_r, ablations (repeatable) [default: all].
     #[arg(long)]
     part: Vec<String>,
-    /// Parallel runs [default: one per core].
+    /// Parallel runs (0: one per core).
     #[arg(long, default_value_t = 0)]
     jobs: usize,
     /// Output directory: every part's runs go into one tree, `ENV/METHOD-NET[/VARIANT]/seedN`.
