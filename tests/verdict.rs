@@ -1,6 +1,6 @@
 //! The committed results regenerate from the committed per-run files (`results/runs/`): one cell of
-//! `results/readings.csv` recomputed directly from the runs' `eval.csv` files with code independent of the
-//! library's statistics, every committed table rebuilt by `arld report results/runs`, and the verdict tables
+//! `results/readings.csv` and one row of `results/ablations.csv` recomputed directly from the runs' `eval.csv`
+//! files with code independent of the library's statistics, every committed table rebuilt by `arld report results/runs`, and the verdict tables
 //! rebuilt again from `results/evaluations.csv` alone.
 
 use std::collections::BTreeMap;
@@ -13,10 +13,16 @@ fn results() -> &'static Path {
 
 /// The default-variant run directories of one configuration: `results/runs/ENV/METHOD-NET/seedN`.
 fn run_dirs(env: &str, method: &str, net: &str) -> BTreeMap<u64, PathBuf> {
+    variant_run_dirs(env, method, net, "")
+}
+
+/// The run directories of one configuration: `results/runs/ENV/METHOD-NET/VARIANT/seedN` (`""`: the default).
+fn variant_run_dirs(env: &str, method: &str, net: &str, variant: &str) -> BTreeMap<u64, PathBuf> {
     let dir = results()
         .join("runs")
         .join(env)
-        .join(format!("{method}-{net}"));
+        .join(format!("{method}-{net}"))
+        .join(variant);
     std::fs::read_dir(&dir)
         .unwrap_or_else(|e| panic!("{}: {e}", dir.display()))
         .filter_map(|entry| {
@@ -65,13 +71,14 @@ fn middle(mut v: Vec<f64>) -> f64 {
     }
 }
 
-fn committed_row(env: &str, method: &str, net: &str) -> BTreeMap<String, String> {
-    let text = std::fs::read_to_string(results().join("readings.csv")).expect("readings.csv");
+/// The row of a committed CSV table whose line starts with `key` (its first columns, comma-separated).
+fn committed_row(table: &str, key: &str) -> BTreeMap<String, String> {
+    let text = std::fs::read_to_string(results().join(table)).expect("the committed table");
     let mut lines = text.lines();
     let header: Vec<&str> = lines.next().unwrap().split(',').collect();
     let row = lines
-        .find(|l| l.starts_with(&format!("{env},{method},{net},")))
-        .expect("the cell is in readings.csv");
+        .find(|l| l.starts_with(&format!("{key},")))
+        .unwrap_or_else(|| panic!("{key} is in {table}"));
     header
         .iter()
         .map(|h| h.to_string())
@@ -108,7 +115,7 @@ fn acrobot_gdqn_cell_recomputed_from_the_per_run_files() {
         let last: Vec<f64> = curve.iter().rev().take(10).map(|p| p.1).collect();
         finals.push(last.iter().sum::<f64>() / last.len() as f64);
     }
-    let row = committed_row("Acrobot-v1", "gdqn", "bootstrap");
+    let row = committed_row("readings.csv", "Acrobot-v1,gdqn,bootstrap");
     assert_eq!(row["seeds"], "20");
     let number = |key: &str| row[key].parse::<f64>().unwrap();
     assert_eq!(number("first_hit_median"), middle(first));
@@ -120,6 +127,51 @@ fn acrobot_gdqn_cell_recomputed_from_the_per_run_files() {
         "final score {} vs {final_median}",
         row["final_score_median"]
     );
+}
+
+/// First-hit steps of every seed of a configuration: the first evaluation at `target`, or the whole run.
+fn first_hits(runs: &BTreeMap<u64, PathBuf>, target: f64) -> Vec<f64> {
+    runs.values()
+        .map(|run| {
+            let train_steps = config_value(run, "train_steps");
+            curve(run)
+                .iter()
+                .find(|p| p.1 >= target)
+                .map_or(train_steps, |p| p.0) as f64
+        })
+        .collect()
+}
+
+#[test]
+fn mountaincar_time_limit_ablation_row_recomputed_from_the_per_run_files() {
+    // DQN-B on MountainCar-v0 with time limits as terminal against its default: the ablation that finds why
+    // our DQN fails there, so the row VERDICT.md leans on most.
+    let target = -110.0;
+    let ablation = variant_run_dirs(
+        "MountainCar-v0",
+        "dqn",
+        "bootstrap",
+        "timeout_as_terminal-true",
+    );
+    let default = run_dirs("MountainCar-v0", "dqn", "bootstrap");
+    assert_eq!((ablation.len(), default.len()), (20, 20));
+    let (hits, default_hits) = (first_hits(&ablation, target), first_hits(&default, target));
+    let solved = |runs: &BTreeMap<u64, PathBuf>| {
+        runs.values()
+            .filter(|run| curve(run).iter().any(|p| p.1 >= target))
+            .count()
+            .to_string()
+    };
+    let row = committed_row(
+        "ablations.csv",
+        "MountainCar-v0,timeout_as_terminal-true,dqn,bootstrap",
+    );
+    let number = |key: &str| row[key].parse::<f64>().unwrap();
+    assert_eq!(row["seeds"], "20");
+    assert_eq!(row["solved"], solved(&ablation));
+    assert_eq!(row["default_solved"], solved(&default));
+    assert_eq!(number("first_hit_median"), middle(hits));
+    assert_eq!(number("default_first_hit_median"), middle(default_hits));
 }
 
 fn arld(args: &[&str], out: &Path) {
@@ -149,7 +201,14 @@ fn assert_same(fresh: &Path, names: &[&str]) {
     }
 }
 
-const VERDICT_TABLES: [&str; 4] = ["readings.md", "readings.csv", "claims.md", "claims.csv"];
+const VERDICT_TABLES: [&str; 6] = [
+    "readings.md",
+    "readings.csv",
+    "claims.md",
+    "claims.csv",
+    "ablations.md",
+    "ablations.csv",
+];
 
 #[test]
 fn committed_tables_regenerate_from_the_per_run_files() {

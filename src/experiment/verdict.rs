@@ -1,7 +1,8 @@
 //! The paper's claims, tested on finished runs: the readings table (three readings of steps to solve with
 //! bootstrap intervals and Mann–Whitney p-values against ADQN, and the final score) and the claims table
 //! (each claim of the paper's results section, its evidence in the paper, ours under each reading, and the
-//! verdict with the test that decides it).
+//! verdict with the test that decides it), and the ablations table (each variant of an open choice against the
+//! default of the same method and network).
 //!
 //! Everything here is computed from [`RunRecord`]s, so the tables regenerate from the run directories or from
 //! `results/evaluations.csv` alone ([`runs_from_evaluations_csv`]). The paper's own numbers come from
@@ -235,6 +236,118 @@ pub fn readings_table(cells: &[Cell], k: usize) -> (String, String) {
                     paper_median.map_or(String::new(), |v| v.to_string()),
                 );
             }
+        }
+    }
+    (md, csv)
+}
+
+/// Whether a variant is one of the studies of the open choices (`KEY-VALUE`: the N_r study and the ablations,
+/// docs/algorithm.md §13), as opposed to the default, the t_query sweep or the expert-quality sweep.
+fn is_open_choice_variant(variant: &str) -> bool {
+    variant != DEFAULT_VARIANT && !variant.starts_with("tq") && !variant.starts_with("expert-")
+}
+
+/// The N_r study and the ablations against the default: for every (env, variant, net, method) with a default
+/// cell to compare with, the first-hit reading and the final score of the variant next to the default's, each
+/// with the two-sided Mann–Whitney p of variant against default, and the first-hit p against ADQN under the same
+/// variant (does the variant change the ranking?).
+pub fn variants_table(cells: &[Cell]) -> (String, String) {
+    let mut md = String::from(
+        "The N_r study and the ablations of the open choices (docs/algorithm.md §13), each against the default \
+         configuration of the same method and network: median over seeds [bootstrap 95% interval] of the first hit \
+         (never solving counts as the whole run) and of the final score (mean of the last evaluations), with the \
+         two-sided Mann–Whitney p of the variant against the default, and the first-hit p against ADQN under the \
+         same variant.\n",
+    );
+    let mut csv = String::from(
+        "env,variant,method,net,seeds,solved,first_hit_median,first_hit_lo,first_hit_hi,default_first_hit_median,\
+         first_hit_p_vs_default,first_hit_p_vs_adqn,final_score_median,final_score_lo,final_score_hi,\
+         default_final_score_median,final_score_p_vs_default,default_seeds,default_solved\n",
+    );
+    let show = |r: &Reading| {
+        format!(
+            "{} [{}, {}]",
+            fmt_num(r.median),
+            fmt_num(r.interval.0),
+            fmt_num(r.interval.1)
+        )
+    };
+    let num = |v: f64| {
+        if v.is_nan() {
+            String::new()
+        } else {
+            format!("{v}")
+        }
+    };
+    let pv = |p: Option<f64>| p.map_or(String::new(), |p| format!("{p:.6}"));
+    for env in env_order(cells.iter().map(|c| c.env.as_str())) {
+        let mut variants: Vec<&str> = cells
+            .iter()
+            .filter(|c| c.env == env && is_open_choice_variant(&c.variant))
+            .map(|c| c.variant.as_str())
+            .collect();
+        variants.sort_unstable();
+        variants.dedup();
+        for variant in variants {
+            let mut rows = String::new();
+            for (net, suffix) in TABLE5_NETS {
+                for method in paper::TABLE5_METHODS {
+                    let (Some(cell), Some(default)) = (
+                        find(cells, &env, method, net, variant),
+                        find(cells, &env, method, net, DEFAULT_VARIANT),
+                    ) else {
+                        continue;
+                    };
+                    let p_default = p_value(&cell.first_hit, &default.first_hit);
+                    let p_adqn = find(cells, &env, "adqn", net, variant)
+                        .filter(|_| method != "adqn")
+                        .and_then(|a| p_value(&cell.first_hit, &a.first_hit));
+                    let p_final = p_value(&cell.final_score, &default.final_score);
+                    let _ = writeln!(
+                        rows,
+                        "| {}-{suffix} | {} ({}) | {} | {} ({}) | {} | {} | {} | {} | {} |",
+                        paper::method_display_name(method),
+                        cell.seeds,
+                        cell.solved,
+                        show(&cell.first_hit),
+                        fmt_num(default.first_hit.median),
+                        default.solved,
+                        fmt_p(p_default),
+                        fmt_p(p_adqn),
+                        show(&cell.final_score),
+                        fmt_num(default.final_score.median),
+                        fmt_p(p_final),
+                    );
+                    let _ = writeln!(
+                        csv,
+                        "{env},{variant},{method},{net},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
+                        cell.seeds,
+                        cell.solved,
+                        num(cell.first_hit.median),
+                        num(cell.first_hit.interval.0),
+                        num(cell.first_hit.interval.1),
+                        num(default.first_hit.median),
+                        pv(p_default),
+                        pv(p_adqn),
+                        num(cell.final_score.median),
+                        num(cell.final_score.interval.0),
+                        num(cell.final_score.interval.1),
+                        num(default.final_score.median),
+                        pv(p_final),
+                        default.seeds,
+                        default.solved,
+                    );
+                }
+            }
+            if rows.is_empty() {
+                continue;
+            }
+            let _ = write!(
+                md,
+                "\n### {env}, {variant}\n\n\
+                 | method | seeds (solved) | first hit | default (solved) | p vs default | p vs ADQN | final score | \
+                 default | p vs default |\n|---|---|---|---|---|---|---|---|---|\n{rows}"
+            );
         }
     }
     (md, csv)
@@ -665,17 +778,20 @@ pub fn claims_table(claims: &[Claim]) -> (String, String) {
     (md, csv)
 }
 
-/// Writes `readings.md`, `readings.csv`, `claims.md` and `claims.csv` into `out_dir`; returns the files and a
-/// Markdown section with both tables for `report.md`.
+/// Writes `readings.md`, `readings.csv`, `claims.md`, `claims.csv`, `ablations.md` and `ablations.csv` into
+/// `out_dir`; returns the files and a Markdown section with the claims and readings tables for `report.md`.
 pub fn write_verdict(cells: &[Cell], out_dir: &Path, k: usize) -> Result<(Vec<PathBuf>, String)> {
     let (readings_md, readings_csv) = readings_table(cells, k);
     let (claims_md, claims_csv) = claims_table(&claims(cells));
+    let (variants_md, variants_csv) = variants_table(cells);
     let mut files = Vec::new();
     for (name, text) in [
         ("readings.md", &readings_md),
         ("readings.csv", &readings_csv),
         ("claims.md", &claims_md),
         ("claims.csv", &claims_csv),
+        ("ablations.md", &variants_md),
+        ("ablations.csv", &variants_csv),
     ] {
         let path = out_dir.join(name);
         crate::files::write_atomic(&path, text.as_bytes())?;
