@@ -99,7 +99,7 @@ pub struct ReportArgs {
     /// Evaluations a sustained solve must hold for after reaching the target (the "sustained" reading).
     #[arg(long, default_value_t = arld::experiment::verdict::DEFAULT_SUSTAIN)]
     sustain: usize,
-    /// Read DIR as an evaluations.csv and write only the readings and claims tables (no figures).
+    /// Read DIR as an evaluations.csv and write only the readings, claims and ablations tables (no figures).
     #[arg(long)]
     from_evaluations: bool,
 }
