@@ -143,6 +143,40 @@ fn fmt_p(p: Option<f64>) -> String {
     }
 }
 
+/// A reading for Markdown: `median [lo, hi]`.
+fn show(r: &Reading) -> String {
+    format!(
+        "{} [{}, {}]",
+        fmt_num(r.median),
+        fmt_num(r.interval.0),
+        fmt_num(r.interval.1)
+    )
+}
+
+/// A number for CSV, in full (empty when undefined).
+fn num(v: f64) -> String {
+    if v.is_nan() {
+        String::new()
+    } else {
+        format!("{v}")
+    }
+}
+
+/// A reading for CSV: `median,lo,hi`.
+fn csv_reading(r: &Reading) -> String {
+    format!(
+        "{},{},{}",
+        num(r.median),
+        num(r.interval.0),
+        num(r.interval.1)
+    )
+}
+
+/// A p-value for CSV (empty when undefined).
+fn pv(p: Option<f64>) -> String {
+    p.map_or(String::new(), |p| format!("{p:.6}"))
+}
+
 /// The readings table of the `default` variant: one row per (env, net, method), in the paper's order.
 pub fn readings_table(cells: &[Cell], k: usize) -> (String, String) {
     let mut md = String::new();
@@ -184,14 +218,6 @@ pub fn readings_table(cells: &[Cell], k: usize) -> (String, String) {
                     p(|c| &c.final_score),
                 );
                 let paper_median = paper::median_steps(env, method, net);
-                let show = |r: &Reading| {
-                    format!(
-                        "{} [{}, {}]",
-                        fmt_num(r.median),
-                        fmt_num(r.interval.0),
-                        fmt_num(r.interval.1)
-                    )
-                };
                 let _ = writeln!(
                     md,
                     "| {}-{suffix} | {} ({}) | {} | {} | {} | {} | {} | {} | {} | {} |",
@@ -207,31 +233,17 @@ pub fn readings_table(cells: &[Cell], k: usize) -> (String, String) {
                     fmt_p(p_final),
                     paper_median.map_or("-".into(), |v| v.to_string()),
                 );
-                let num = |v: f64| {
-                    if v.is_nan() {
-                        String::new()
-                    } else {
-                        format!("{v}")
-                    }
-                };
-                let pv = |p: Option<f64>| p.map_or(String::new(), |p| format!("{p:.6}"));
                 let _ = writeln!(
                     csv,
-                    "{env},{method},{net},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
+                    "{env},{method},{net},{},{},{},{},{},{},{},{},{},{}",
                     cell.seeds,
                     cell.solved,
-                    num(cell.first_hit.median),
-                    num(cell.first_hit.interval.0),
-                    num(cell.first_hit.interval.1),
+                    csv_reading(&cell.first_hit),
                     pv(p_first),
-                    num(cell.sustained.median),
-                    num(cell.sustained.interval.0),
-                    num(cell.sustained.interval.1),
+                    csv_reading(&cell.sustained),
                     pv(p_sustained),
                     cell.median_curve,
-                    num(cell.final_score.median),
-                    num(cell.final_score.interval.0),
-                    num(cell.final_score.interval.1),
+                    csv_reading(&cell.final_score),
                     pv(p_final),
                     paper_median.map_or(String::new(), |v| v.to_string()),
                 );
@@ -264,22 +276,6 @@ pub fn variants_table(cells: &[Cell]) -> (String, String) {
          first_hit_p_vs_default,first_hit_p_vs_adqn,final_score_median,final_score_lo,final_score_hi,\
          default_final_score_median,final_score_p_vs_default,default_seeds,default_solved\n",
     );
-    let show = |r: &Reading| {
-        format!(
-            "{} [{}, {}]",
-            fmt_num(r.median),
-            fmt_num(r.interval.0),
-            fmt_num(r.interval.1)
-        )
-    };
-    let num = |v: f64| {
-        if v.is_nan() {
-            String::new()
-        } else {
-            format!("{v}")
-        }
-    };
-    let pv = |p: Option<f64>| p.map_or(String::new(), |p| format!("{p:.6}"));
     for env in env_order(cells.iter().map(|c| c.env.as_str())) {
         let mut variants: Vec<&str> = cells
             .iter()
@@ -320,18 +316,14 @@ pub fn variants_table(cells: &[Cell]) -> (String, String) {
                     );
                     let _ = writeln!(
                         csv,
-                        "{env},{variant},{method},{net},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
+                        "{env},{variant},{method},{net},{},{},{},{},{},{},{},{},{},{},{}",
                         cell.seeds,
                         cell.solved,
-                        num(cell.first_hit.median),
-                        num(cell.first_hit.interval.0),
-                        num(cell.first_hit.interval.1),
+                        csv_reading(&cell.first_hit),
                         num(default.first_hit.median),
                         pv(p_default),
                         pv(p_adqn),
-                        num(cell.final_score.median),
-                        num(cell.final_score.interval.0),
-                        num(cell.final_score.interval.1),
+                        csv_reading(&cell.final_score),
                         num(default.final_score.median),
                         pv(p_final),
                         default.seeds,
