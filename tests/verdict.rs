@@ -1,7 +1,8 @@
 //! The committed results regenerate from the committed per-run files (`results/runs/`): one cell of
 //! `results/readings.csv` and one row of `results/ablations.csv` recomputed directly from the runs' `eval.csv`
-//! files with code independent of the library's statistics, every committed table rebuilt by `arld report results/runs`, and the verdict tables
-//! rebuilt again from `results/evaluations.csv` alone.
+//! files with code independent of the library's statistics, every committed table rebuilt by
+//! `arld report results/runs`, the verdict tables rebuilt again from `results/evaluations.csv` alone, and the
+//! README's results table the committed one.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -218,6 +219,27 @@ fn committed_tables_regenerate_from_the_per_run_files() {
     assert_same(
         out.path(),
         &["table.md", "table.csv", "evaluations.csv", "report.md"],
+    );
+}
+
+#[test]
+fn the_readmes_results_table_is_the_committed_table() {
+    let readme =
+        std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/README.md")).unwrap();
+    let block = readme
+        .split("<!-- RESULTS -->\n")
+        .nth(1)
+        .and_then(|rest| rest.split("<!-- /RESULTS -->").next())
+        .expect("README.md has a <!-- RESULTS --> block");
+    let table = std::fs::read_to_string(results().join("table.md")).unwrap();
+    let rows: String = table
+        .lines()
+        .filter(|l| l.starts_with('|'))
+        .map(|l| format!("{l}\n"))
+        .collect();
+    assert_eq!(
+        block, rows,
+        "README.md's results table is not results/table.md's (copy the table's rows between the markers)"
     );
 }
 
