@@ -342,6 +342,12 @@ pub fn variants_table(cells: &[Cell]) -> (String, String) {
             );
         }
     }
+    if csv.lines().count() == 1 {
+        md.push_str(
+            "\nNo run here varies an open choice against a default of the same method and network \
+             (`arld reproduce --part n_r --part ablations` makes them).\n",
+        );
+    }
     (md, csv)
 }
 
@@ -909,6 +915,48 @@ mod tests {
             summary_steps_to_solve: None,
             numerics: None,
         }
+    }
+
+    #[test]
+    fn an_ablation_row_compares_the_variant_with_its_default() {
+        // DQN-B on CartPole: by default the target at the 7th test, with the variant at the 2nd, 8 seeds each.
+        let mut runs = Vec::new();
+        for seed in 0..8 {
+            runs.push(run(
+                "CartPole-v0",
+                "dqn",
+                "bootstrap",
+                seed,
+                &[0., 0., 0., 0., 0., 0., 200.0],
+            ));
+            let mut variant = run("CartPole-v0", "dqn", "bootstrap", seed, &[0., 200.0]);
+            variant.variant = "target_period-500".into();
+            runs.push(variant);
+        }
+        let (md, csv) = variants_table(&cells(&runs, DEFAULT_SUSTAIN));
+        let rows: Vec<&str> = csv.lines().skip(1).collect();
+        assert_eq!(rows.len(), 1, "{csv}");
+        let fields: Vec<&str> = rows[0].split(',').collect();
+        assert_eq!(
+            &fields[..6],
+            [
+                "CartPole-v0",
+                "target_period-500",
+                "dqn",
+                "bootstrap",
+                "8",
+                "8"
+            ]
+        );
+        // First hit 2000 against the default's 7000; every variant seed ahead of every default seed.
+        assert_eq!((fields[6], fields[9]), ("2000", "7000"));
+        let p: f64 = fields[10].parse().unwrap();
+        assert!(p < 0.001, "p = {p}");
+        assert!(md.contains("### CartPole-v0, target_period-500"), "{md}");
+        // Without variants the table says so instead of being empty.
+        let (md, csv) = variants_table(&cells(&runs[..1], DEFAULT_SUSTAIN));
+        assert_eq!(csv.lines().count(), 1);
+        assert!(md.contains("No run here varies an open choice"), "{md}");
     }
 
     #[test]
