@@ -10,7 +10,9 @@ use super::plot::{Band, Curve, FigureContent, PALETTE, Panel};
 use super::protocol::{self, env_order};
 use super::stats::quantile;
 use crate::paper::TABLE5_METHODS;
-use crate::train::run_dir::{DEFAULT_VARIANT, RunRecord};
+use crate::train::run_dir::{
+    DEFAULT_VARIANT, EXPERT_VARIANT_PREFIX, RunRecord, T_QUERY_VARIANT_PREFIX,
+};
 use crate::train::{Method, NetKind};
 use std::collections::BTreeMap;
 
@@ -225,7 +227,12 @@ fn steps_figure(title: String, y_label: &str, panels: Vec<Panel>) -> Option<Figu
 
 /// ADQN runs of the t_query study (variant `tqVALUE`): panels per environment, one curve per value.
 fn t_query_figure(runs: &[&RunRecord], title: String) -> Option<FigureContent> {
-    let t_query = |r: &RunRecord| r.variant.strip_prefix("tq")?.parse::<f64>().ok();
+    let t_query = |r: &RunRecord| {
+        r.variant
+            .strip_prefix(T_QUERY_VARIANT_PREFIX)?
+            .parse::<f64>()
+            .ok()
+    };
     let selected: Vec<&RunRecord> = runs
         .iter()
         .copied()
@@ -253,7 +260,7 @@ fn expert_figure(runs: &[&RunRecord], suffix: &str, title: String) -> Option<Fig
         .iter()
         .copied()
         .filter(|r| r.id.method == Method::Adqn || r.id.method == Method::Dqfd)
-        .filter(|r| r.variant.starts_with("expert-") && !r.variant.contains('_'))
+        .filter(|r| r.variant.starts_with(EXPERT_VARIANT_PREFIX) && !r.variant.contains('_'))
         .collect();
     // Legend order and colours follow the paper's order of experts; unknown specs come after, alphabetically.
     let mut experts: Vec<String> = selected

@@ -16,7 +16,10 @@
 //! - [`collect_results`] reads every complete run under a directory and writes `results.csv`, one row per
 //!   evaluation point.
 
-use crate::train::run_dir::{self, DEFAULT_VARIANT, RunId, RunRecord, write_atomic};
+use crate::train::run_dir::{
+    self, DEFAULT_VARIANT, EXPERT_VARIANT_PREFIX, RunId, RunRecord, T_QUERY_VARIANT_PREFIX,
+    write_atomic,
+};
 use crate::train::{ConfigInput, Method, NetKind, TrainConfig};
 use anyhow::{Context, Result, bail};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
@@ -437,10 +440,10 @@ impl RunSpec {
     /// The varied dimensions beyond env/method/net/seed (e.g. `tq0.05`), or `None` when nothing else varies.
     pub fn variant(&self) -> Option<String> {
         let parts: Vec<String> = [
-            self.t_query.map(|t| format!("tq{t}")),
+            self.t_query.map(|t| format!("{T_QUERY_VARIANT_PREFIX}{t}")),
             self.expert
                 .as_ref()
-                .map(|e| format!("expert-{}", dir_fragment(e))),
+                .map(|e| format!("{EXPERT_VARIANT_PREFIX}{}", dir_fragment(e))),
             self.vary.as_deref().map(dir_fragment),
         ]
         .into_iter()

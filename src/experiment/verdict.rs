@@ -14,7 +14,9 @@ use super::stats::{
 };
 use crate::paper::{self, PAPER_TASKS, TABLE5_NETS};
 use crate::train::TrainConfig;
-use crate::train::run_dir::{DEFAULT_VARIANT, EvalPoint, RunId, RunRecord};
+use crate::train::run_dir::{
+    DEFAULT_VARIANT, EXPERT_VARIANT_PREFIX, EvalPoint, RunId, RunRecord, T_QUERY_VARIANT_PREFIX,
+};
 use anyhow::{Context, Result, bail};
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
@@ -256,7 +258,9 @@ pub fn readings_table(cells: &[Cell], k: usize) -> (String, String) {
 /// Whether a variant is one of the studies of the open choices (`KEY-VALUE`: the N_r study and the ablations,
 /// docs/algorithm.md §13), as opposed to the default, the t_query sweep or the expert-quality sweep.
 fn is_open_choice_variant(variant: &str) -> bool {
-    variant != DEFAULT_VARIANT && !variant.starts_with("tq") && !variant.starts_with("expert-")
+    variant != DEFAULT_VARIANT
+        && !variant.starts_with(T_QUERY_VARIANT_PREFIX)
+        && !variant.starts_with(EXPERT_VARIANT_PREFIX)
 }
 
 /// The N_r study and the ablations against the default: for every (env, variant, net, method) with a default
@@ -628,7 +632,7 @@ fn variants<'a>(
 /// does; inconclusive without at least two t_query values of five seeds each.
 fn t_query_insensitive(cells: &[Cell]) -> Claim {
     let (mut pairs, mut differing, mut settings) = (Vec::new(), Vec::new(), 0);
-    for ((env, _, net), group) in variants(cells, "tq") {
+    for ((env, _, net), group) in variants(cells, T_QUERY_VARIANT_PREFIX) {
         if group.len() < 2 || group.iter().any(|c| c.seeds < 5) {
             continue;
         }
@@ -691,7 +695,7 @@ fn expert_robustness(cells: &[Cell]) -> Claim {
                 "LunarLander-v2",
                 method,
                 net,
-                &format!("expert-{spec}"),
+                &format!("{EXPERT_VARIANT_PREFIX}{spec}"),
             )
         };
         let (weak, perfect) = (cell("shipped-weak")?, cell("shipped-perfect")?);

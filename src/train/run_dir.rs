@@ -37,6 +37,10 @@ pub const QUERIES_HEADER: &str =
     "step,episode,uncertainty,threshold,expert_action,agent_action,expert,response_s,answered\n";
 /// Variant label of a run that varies neither t_query nor the expert.
 pub const DEFAULT_VARIANT: &str = "default";
+/// Prefix of a t_query variant's name (`tq0.05`).
+pub const T_QUERY_VARIANT_PREFIX: &str = "tq";
+/// Prefix of an expert variant's name (`expert-shipped-weak`).
+pub const EXPERT_VARIANT_PREFIX: &str = "expert-";
 
 /// Path of the checkpoint written after `step` environment steps.
 pub fn checkpoint_path(dir: &Path, step: usize) -> PathBuf {
