@@ -1,11 +1,19 @@
-//! Link-time redirection of the C library's elementary functions to `src/math.rs` (see that module's docs).
+//! The build's native parts: Box2D compiled with the system's C++ compiler, and the link-time redirection of the
+//! C library's elementary functions to `src/math.rs` (see that module's docs).
+//!
+//! Box2D 2.3.1 comes with the `wrapped2d` crate, whose own build script would run CMake. `.cargo/config.toml`
+//! sets `BOX2D_LIB_DIR` to `native/box2d-stub/`, an empty archive, so that script only compiles its C++
+//! front end; this script compiles Box2D's sources from wrapped2d's package with the `cc` crate (`-O3 -DNDEBUG`,
+//! what CMake's Release build used) and hands the archive to the linker after every Rust library, where the
+//! front end's references to Box2D are resolved. A C++ compiler is all it needs.
 //!
 //! For every `extern "C" fn __wrap_<name>` defined in `src/math.rs`, the linker gets `--wrap=<name>` (every
 //! reference to `<name>`, from Rust, the standard library or the bundled Box2D, goes to `__wrap_<name>`) and
 //! `--undefined=__wrap_<name>` (so the definition is taken from this crate's library whatever the link order).
 //! The Python extension (`python/Cargo.toml`) runs this same script, so both find `src/math.rs` next to it.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
+use std::process::Command;
 
 fn main() {
     // `src/math.rs` of this package, or of its parent for the Python extension (`python/`).
@@ -17,16 +25,82 @@ fn main() {
         .expect("build.rs finds arld's src/math.rs");
     println!("cargo:rerun-if-changed={}", math.display());
     println!("cargo:rerun-if-changed=build.rs");
+    let box2d = compile_box2d();
     let target_os = std::env::var("CARGO_CFG_TARGET_OS").unwrap_or_default();
     if target_os != "linux" {
         // `--wrap` is a GNU ld / lld option; elsewhere the platform's C library computes these functions.
         return;
     }
+    // After every library on the command line (user link arguments come last), so the archive resolves the
+    // references of wrapped2d's front end.
+    println!("cargo:rustc-link-arg={}", box2d.display());
+    println!("cargo:rustc-link-arg=-lstdc++");
     let source = std::fs::read_to_string(&math).expect("build.rs reads src/math.rs");
     for name in wrapped_names(&source) {
         println!("cargo:rustc-link-arg=-Wl,--wrap={name}");
         println!("cargo:rustc-link-arg=-Wl,--undefined=__wrap_{name}");
     }
+}
+
+/// Compiles Box2D's sources from the `wrapped2d` package into `OUT_DIR/libarld_box2d.a`; returns its path.
+fn compile_box2d() -> PathBuf {
+    let root = wrapped2d_dir().join("Box2D/Box2D");
+    let mut sources = Vec::new();
+    collect_cpp(&root.join("Box2D"), &mut sources);
+    sources.sort();
+    assert!(
+        !sources.is_empty(),
+        "no Box2D sources under {} (is the wrapped2d package complete?)",
+        root.display()
+    );
+    cc::Build::new()
+        .cpp(true)
+        .include(&root)
+        .files(&sources)
+        .opt_level(3)
+        .define("NDEBUG", None)
+        .warnings(false)
+        .cargo_metadata(false)
+        .compile("arld_box2d");
+    let out = std::env::var("OUT_DIR").expect("cargo sets OUT_DIR");
+    Path::new(&out).join("libarld_box2d.a")
+}
+
+fn collect_cpp(dir: &Path, into: &mut Vec<PathBuf>) {
+    let entries = std::fs::read_dir(dir).unwrap_or_else(|e| panic!("cannot read {}: {e}", dir.display()));
+    for entry in entries {
+        let path = entry.expect("a directory entry").path();
+        if path.is_dir() {
+            collect_cpp(&path, into);
+        } else if path.extension().is_some_and(|ext| ext == "cpp") {
+            into.push(path);
+        }
+    }
+}
+
+/// Where Cargo unpacked the `wrapped2d` package this build uses (registry, vendored or git), from `cargo metadata`.
+fn wrapped2d_dir() -> PathBuf {
+    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+    let manifest = std::env::var("CARGO_MANIFEST_DIR").expect("cargo sets CARGO_MANIFEST_DIR");
+    let out = Command::new(&cargo)
+        .args(["metadata", "--format-version", "1", "--offline"])
+        .current_dir(&manifest)
+        .output()
+        .unwrap_or_else(|e| panic!("cannot run `{cargo} metadata` to find Box2D's sources: {e}"));
+    assert!(
+        out.status.success(),
+        "`cargo metadata` failed while looking for Box2D's sources: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let meta: serde_json::Value =
+        serde_json::from_slice(&out.stdout).expect("`cargo metadata` prints JSON");
+    let packages = meta["packages"].as_array().expect("`cargo metadata` lists packages");
+    let wrapped2d = packages
+        .iter()
+        .find(|p| p["name"] == "wrapped2d")
+        .expect("the wrapped2d package is among the dependencies");
+    let path = wrapped2d["manifest_path"].as_str().expect("a package has a manifest path");
+    Path::new(path).parent().expect("a manifest has a directory").to_path_buf()
 }
 
 /// The `<name>` of every `fn __wrap_<name>` in `source`, also those a macro defines (`/ __wrap_<name> =`).
