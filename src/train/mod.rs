@@ -19,7 +19,7 @@ use crate::env::{self, Env};
 use crate::expert::demos::Demonstrations;
 use crate::expert::{Answer, Expert, Progress, Query};
 use crate::nn::{QNet, Workspace};
-use crate::query::{QueryController, QueryRule};
+use crate::query::{DecisionInput, Needs, OracleView, QueryController};
 use crate::replay::{Batch, Replay, ReplayConfig, Transition};
 use crate::state::{Persist, StateDict};
 use anyhow::{Context, Result, ensure};
@@ -503,18 +503,29 @@ fn train_run(
                 // Nobody answered mid-segment: the agent takes the rest of it back.
                 Answer::Unanswered { .. } => {
                     queries.withdraw();
-                    agent.act(&obs, epsilon_at(cfg, step), false).0
+                    agent.act(&obs, epsilon_at(cfg, step), Needs::NOTHING).0
                 }
             }
         } else if cfg.queries_from_learning_starts && !learning {
             // Ablation: no queries before the first update; the rule does not see these steps.
-            agent.act(&obs, epsilon_at(cfg, step), false).0
+            agent.act(&obs, epsilon_at(cfg, step), Needs::NOTHING).0
         } else {
-            let want_uncertainty = queries.uncertainty_wanted_now();
-            let (agent_action, uncertainty) =
-                agent.act(&obs, epsilon_at(cfg, step), want_uncertainty);
-            step_uncertainty = uncertainty;
-            let decision = queries.decide(uncertainty, &mut query_rng);
+            let want = queries.signals_wanted_now();
+            let (agent_action, signals) = agent.act(&obs, epsilon_at(cfg, step), want);
+            step_uncertainty = signals.uncertainty;
+            let oracle = if want.oracle {
+                Some(peek_expert(&mut expert, &obs, queries.rule().name())?)
+            } else {
+                None
+            };
+            let input = DecisionInput {
+                step,
+                train_steps: cfg.train_steps,
+                agent_action,
+                signals: &signals,
+                oracle: oracle.as_ref(),
+            };
+            let decision = queries.decide(&input, &mut query_rng);
             if decision.query {
                 let answer = ask_expert(&mut expert, &obs, &*env, Some(agent_action), &queries)?;
                 let (expert_action, response_s) = match answer {
@@ -527,7 +538,7 @@ fn train_run(
                 log.query(&QueryEvent {
                     step,
                     episode: st.episode,
-                    uncertainty,
+                    uncertainty: decision.score,
                     threshold: decision.threshold,
                     expert_action,
                     agent_action,
@@ -590,9 +601,7 @@ fn train_run(
                 log.scalar("train/margin_loss", step + 1, stats.margin_loss)?;
                 log.scalar("train/epsilon", step + 1, epsilon_at(cfg, step) as f32)?;
                 log.scalar("query/budget_used", step + 1, queries.budget_used() as f32)?;
-                if let QueryRule::Adaptive(rule) = queries.rule()
-                    && let Some(thr) = rule.threshold()
-                {
+                if let Some(thr) = queries.rule().threshold() {
                     log.scalar("query/threshold", step + 1, thr)?;
                 }
             }
@@ -790,6 +799,24 @@ fn learn(
     }
     replay.update_priorities(&batch.idx, priorities);
     Ok(stats)
+}
+
+/// The expert's action and Q-values for an oracle query rule (no question asked, no budget spent).
+fn peek_expert(
+    expert: &mut Option<&mut dyn Expert>,
+    obs: &[f32],
+    rule: &str,
+) -> Result<OracleView> {
+    let expert = expert
+        .as_deref_mut()
+        .context("the query rule reads the expert's Q-values, but no expert was given")?;
+    let description = expert.describe();
+    expert.peek(obs).with_context(|| {
+        format!(
+            "the {rule} query rule is an oracle reference: it reads the expert's Q-values, which only \
+             checkpoint experts give, and {description} has none"
+        )
+    })
 }
 
 /// Asks the expert for the action at `obs` (one step of a segment; `agent_action` on the step that opens it) and

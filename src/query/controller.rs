@@ -1,27 +1,25 @@
-//! Query rules and the controller that turns their decisions into expert control under a budget.
+//! The query controller: turns a rule's decisions into expert control under a budget.
 //!
-//! - [`AdaptiveQuantileRule`]: the paper's Algorithm 1 (docs/algorithm.md sections 8 and 13). It keeps the last N_r
-//!   uncertainties in a deque (for eviction order) and an [`OrderStatistics`] tree (for ranks), and queries when
-//!   the current uncertainty exceeds the `floor(|D| * t_query)`-th largest recent one, so that about a fraction
-//!   `t_query` of agent decisions trigger a query whatever the scale of the uncertainty.
-//! - [`QueryRule`]: the four strategies compared in the paper (section 5.1; docs/algorithm.md section 9): never
-//!   (DQN, DQfD), greedy (GDQN), Bernoulli (BDQN) and adaptive (ADQN, ADQNP).
-//! - [`QueryController`]: owns a rule, the budget and the current segment. The budget counts demonstrated
-//!   *transitions* (or, as an ablation, queries: [`BudgetUnit`]) and is never exceeded; one query hands the expert control for `segment_len` consecutive steps
-//!   (the paper's "five consecutive expert demonstrations"), cut short by the end of the episode or of the budget.
-//!   The rule is only consulted when the agent is about to act, never during expert control.
+//! [`QueryController`] owns a [`QueryRule`], the budget and the current segment. The budget counts demonstrated
+//! *transitions* (or, as an ablation, queries: [`BudgetUnit`]) and is never exceeded; one query hands the expert
+//! control for `segment_len` consecutive steps (the paper's "five consecutive expert demonstrations"), cut short
+//! by the end of the episode or of the budget. The rule is only consulted when the agent is about to act, never
+//! during expert control, and not once the budget is spent.
 //!
 //! One step of the training loop, in terms of this module:
 //!
 //! ```
-//! # use arld::query::{QueryController, QueryRule};
+//! # use arld::query::{QueryController, RuleSpec, RuleDefaults, BudgetUnit, Signals, DecisionInput};
 //! # use rand::SeedableRng;
 //! # let mut rng = rand_pcg::Pcg64::seed_from_u64(0);
-//! # let mut controller = QueryController::new(QueryRule::adaptive(1000, 0.3).unwrap(), 100, 5).unwrap();
-//! # let compute_uncertainty = || 0.5f32;
+//! # let defaults = RuleDefaults { t_query: 0.3, n_r: 1000, budget: 100, segment_len: 5, train_steps: 1000, unit: BudgetUnit::Transitions };
+//! # let rule = "adaptive".parse::<RuleSpec>().unwrap().build(&defaults).unwrap();
+//! # let mut controller = QueryController::new(rule, 100, 5).unwrap();
+//! # let signals_of = |_needs| Signals { uncertainty: Some(0.5), ..Signals::default() };
 //! let expert_acts = controller.expert_in_control() || {
-//!     let uncertainty = controller.uncertainty_wanted_now().then(compute_uncertainty);
-//!     controller.decide(uncertainty, &mut rng).query
+//!     let signals = signals_of(controller.signals_wanted_now());
+//!     let input = DecisionInput { step: 0, train_steps: 1000, agent_action: 0, signals: &signals, oracle: None };
+//!     controller.decide(&input, &mut rng).query
 //! };
 //! if expert_acts {
 //!     // ... the expert picks the action; the transition is stored as a demonstration ...
@@ -30,30 +28,10 @@
 //! // ... on episode end: controller.end_episode();
 //! ```
 
-use std::collections::VecDeque;
+use rand::RngCore;
 
-use rand::Rng;
-
-use super::order_stats::OrderStatistics;
+use super::rules::{Needs, OracleView, QueryContext, QueryError, QueryRule, Signals};
 use crate::state::{Persist, StateDict, StateError};
-
-/// Invalid query configuration.
-#[derive(Clone, Debug, PartialEq, thiserror::Error)]
-pub enum QueryError {
-    #[error("t_query must lie in [0, 1] (it is the fraction of recent steps to query), got {0}")]
-    TQueryOutOfRange(f64),
-    #[error("the Bernoulli query probability must lie in [0, 1], got {0}")]
-    ProbabilityOutOfRange(f64),
-    #[error("the adaptive rule's window N_r must hold at least one uncertainty, got N_r = 0")]
-    EmptyWindow,
-    #[error("segment_len must be at least 1: a query hands the expert at least one step")]
-    EmptySegment,
-    #[error(
-        "the {rule} query rule ranks uncertainties, but the network has no uncertainty measure; \
-         use a bootstrapped (JS divergence) or noisy (predictive variance) network, or a rule that needs none"
-    )]
-    NoUncertaintySource { rule: &'static str },
-}
 
 /// Outcome of one query decision.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -61,9 +39,10 @@ pub enum QueryError {
 pub struct Decision {
     /// Whether the expert takes over from this step on.
     pub query: bool,
-    /// The adaptive rule's threshold at this decision (for the query log); `None` for other rules, for an
-    /// empty window, or when the budget is spent.
+    /// The rule's threshold at this decision (for the query log), if it has one.
     pub threshold: Option<f32>,
+    /// The value the rule compared (logged as the query's uncertainty), if any.
+    pub score: Option<f32>,
     /// How many expert steps the query grants (0 without a query): `segment_len`, truncated to the budget left.
     pub expert_steps: usize,
 }
@@ -72,175 +51,20 @@ impl Decision {
     const NO_QUERY: Decision = Decision {
         query: false,
         threshold: None,
+        score: None,
         expert_steps: 0,
     };
 }
 
-/// The paper's adaptive query rule (Algorithm 1; docs/algorithm.md sections 8 and 13).
-///
-/// With D the last `n_r` uncertainties, at each agent decision:
-/// 1. if D is non-empty, `thr = (floor(|D| * t_query))-th largest of D` (0-based, index clamped to `|D| - 1`),
-///    i.e. the `(1 - t_query)`-quantile read in descending order; with D empty there is no query;
-/// 2. query iff `U > thr`;
-/// 3. push U, evicting the oldest value once D holds more than `n_r`.
-///
-/// NaN uncertainties never query and are not pushed (a NaN in the window would block every later query).
-#[derive(Clone, Debug)]
-pub struct AdaptiveQuantileRule {
-    n_r: usize,
-    t_query: f64,
-    recent: VecDeque<f32>,
-    ranked: OrderStatistics,
-}
-
-impl AdaptiveQuantileRule {
-    /// Default window N_r; the paper does not give it (docs/algorithm.md section 8, ours).
-    pub const DEFAULT_N_R: usize = 1000;
-
-    /// A rule over the last `n_r` uncertainties querying about a fraction `t_query` of decisions.
-    pub fn new(n_r: usize, t_query: f64) -> Result<Self, QueryError> {
-        if n_r == 0 {
-            return Err(QueryError::EmptyWindow);
-        }
-        if !(0.0..=1.0).contains(&t_query) {
-            return Err(QueryError::TQueryOutOfRange(t_query));
-        }
-        Ok(Self {
-            n_r,
-            t_query,
-            recent: VecDeque::with_capacity(n_r + 1),
-            ranked: OrderStatistics::with_capacity(n_r + 1),
-        })
-    }
-
-    /// A rule with the default window [`Self::DEFAULT_N_R`].
-    pub fn with_default_window(t_query: f64) -> Result<Self, QueryError> {
-        Self::new(Self::DEFAULT_N_R, t_query)
-    }
-
-    /// Window size N_r.
-    pub fn n_r(&self) -> usize {
-        self.n_r
-    }
-
-    /// Quantile position read from the top of the window: about a fraction `t_query` of decisions query.
-    pub fn t_query(&self) -> f64 {
-        self.t_query
-    }
-
-    /// Number of uncertainties currently in the window, at most `n_r`.
-    pub fn window_len(&self) -> usize {
-        self.recent.len()
-    }
-
-    /// The threshold the next decision would use, or `None` while the window is empty.
-    pub fn threshold(&self) -> Option<f32> {
-        let len = self.recent.len();
-        if len == 0 {
-            return None;
-        }
-        // floor(|D| * t_query), clamped: t_query = 1 would otherwise index one past the smallest value.
-        let index = ((len as f64 * self.t_query).floor() as usize).min(len - 1);
-        self.ranked.kth_largest(index)
-    }
-
-    /// Decides whether to query at this uncertainty, then adds it to the window. `expert_steps` is left at 0:
-    /// segments are the controller's business.
-    pub fn decide(&mut self, uncertainty: f32) -> Decision {
-        if uncertainty.is_nan() {
-            return Decision {
-                threshold: self.threshold(),
-                ..Decision::NO_QUERY
-            };
-        }
-        let threshold = self.threshold();
-        let query = threshold.is_some_and(|threshold| uncertainty > threshold);
-        self.recent.push_back(uncertainty);
-        self.ranked.insert(uncertainty);
-        if self.recent.len() > self.n_r {
-            let oldest = self.recent.pop_front().expect("window is non-empty");
-            let removed = self.ranked.remove(oldest);
-            debug_assert!(removed, "deque and tree out of sync");
-        }
-        Decision {
-            query,
-            threshold,
-            expert_steps: 0,
-        }
-    }
-}
-
-/// Query with a fixed probability at each agent decision (BDQN); built only with a probability in [0, 1].
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct BernoulliRule {
-    p: f64,
-}
-
-impl BernoulliRule {
-    pub fn new(p: f64) -> Result<Self, QueryError> {
-        if !(0.0..=1.0).contains(&p) {
-            return Err(QueryError::ProbabilityOutOfRange(p));
-        }
-        Ok(Self { p })
-    }
-
-    /// The query probability.
-    pub fn p(&self) -> f64 {
-        self.p
-    }
-}
-
-/// When the agent asks the expert (paper section 5.1; docs/algorithm.md section 9).
-#[derive(Clone, Debug)]
-pub enum QueryRule {
-    /// Never query (DQN, DQfD).
-    Never,
-    /// Query at every decision until the budget is spent (GDQN): the expert drives the first `budget` steps.
-    Greedy,
-    /// Query with fixed probability `p` at each agent decision (BDQN).
-    Bernoulli(BernoulliRule),
-    /// Uncertainty-ranked adaptive rule (ADQN, ADQNP).
-    Adaptive(AdaptiveQuantileRule),
-}
-
-impl QueryRule {
-    /// A validated Bernoulli rule.
-    pub fn bernoulli(p: f64) -> Result<Self, QueryError> {
-        Ok(QueryRule::Bernoulli(BernoulliRule::new(p)?))
-    }
-
-    /// A validated adaptive rule.
-    pub fn adaptive(n_r: usize, t_query: f64) -> Result<Self, QueryError> {
-        Ok(QueryRule::Adaptive(AdaptiveQuantileRule::new(
-            n_r, t_query,
-        )?))
-    }
-
-    /// Short lowercase name, as used in configs and logs.
-    pub fn name(&self) -> &'static str {
-        match self {
-            QueryRule::Never => "never",
-            QueryRule::Greedy => "greedy",
-            QueryRule::Bernoulli(_) => "bernoulli",
-            QueryRule::Adaptive(_) => "adaptive",
-        }
-    }
-
-    /// Whether decisions need an uncertainty value (only the adaptive rule ranks them).
-    pub fn needs_uncertainty(&self) -> bool {
-        matches!(self, QueryRule::Adaptive(_))
-    }
-
-    /// Rejects, up front, a rule that needs an uncertainty when the network provides none (plain output stage).
-    pub fn check_uncertainty_source(
-        &self,
-        network_has_uncertainty: bool,
-    ) -> Result<(), QueryError> {
-        if self.needs_uncertainty() && !network_has_uncertainty {
-            return Err(QueryError::NoUncertaintySource { rule: self.name() });
-        }
-        Ok(())
-    }
+/// What the training loop knows at an agent decision, beyond the controller's own budget and segments.
+#[derive(Clone, Copy, Debug)]
+pub struct DecisionInput<'a> {
+    pub step: usize,
+    pub train_steps: usize,
+    pub agent_action: usize,
+    pub signals: &'a Signals,
+    /// The expert's view, given only to oracle rules.
+    pub oracle: Option<&'a OracleView>,
 }
 
 /// What the budget counts. The paper's budget is in demonstrated transitions; counting queries (each one a whole
@@ -272,9 +96,9 @@ impl BudgetUnit {
 ///
 /// Invariants: `budget_spent() <= budget()`; every query grants between 1 and `segment_len` expert steps;
 /// the rule sees only the steps where the agent is about to act.
-#[derive(Clone, Debug)]
+#[derive(Debug)]
 pub struct QueryController {
-    rule: QueryRule,
+    rule: Box<dyn QueryRule>,
     budget: usize,
     unit: BudgetUnit,
     budget_used: usize,
@@ -290,7 +114,11 @@ impl QueryController {
 
     /// A controller spending at most `budget` demonstrated transitions, `segment_len` steps per query.
     /// The rule's own parameters were checked when it was built.
-    pub fn new(rule: QueryRule, budget: usize, segment_len: usize) -> Result<Self, QueryError> {
+    pub fn new(
+        rule: Box<dyn QueryRule>,
+        budget: usize,
+        segment_len: usize,
+    ) -> Result<Self, QueryError> {
         if segment_len == 0 {
             return Err(QueryError::EmptySegment);
         }
@@ -310,20 +138,24 @@ impl QueryController {
         Self { unit, ..self }
     }
 
-    /// The rule, e.g. to read the adaptive window.
-    pub fn rule(&self) -> &QueryRule {
-        &self.rule
+    /// The rule, e.g. to read its threshold.
+    pub fn rule(&self) -> &dyn QueryRule {
+        &*self.rule
     }
 
-    /// Whether the rule ranks uncertainties (see [`QueryRule::needs_uncertainty`]).
-    pub fn needs_uncertainty(&self) -> bool {
-        self.rule.needs_uncertainty()
+    /// The signals the rule reads (see [`QueryRule::needs`]).
+    pub fn needs(&self) -> Needs {
+        self.rule.needs()
     }
 
-    /// Whether the next [`decide`](Self::decide) will read an uncertainty: the rule needs one, the agent is
-    /// about to act, and budget is left. Otherwise the caller may skip computing it.
-    pub fn uncertainty_wanted_now(&self) -> bool {
-        self.needs_uncertainty() && !self.expert_in_control() && self.budget_left() > 0
+    /// The signals the next [`decide`](Self::decide) will read: the rule's, while the agent is about to act and
+    /// budget is left; nothing otherwise, so the caller may skip computing them.
+    pub fn signals_wanted_now(&self) -> Needs {
+        if !self.expert_in_control() && self.budget_left() > 0 {
+            self.needs()
+        } else {
+            Needs::NOTHING
+        }
     }
 
     /// Whether the expert acts at this step (a segment is running).
@@ -334,13 +166,13 @@ impl QueryController {
     /// Decides, as the agent is about to act, whether to query; a query opens a segment of expert control of
     /// `min(segment_len, budget_left)` steps, starting with this one.
     ///
-    /// Once the budget is spent the rule is no longer consulted: no uncertainty is read, no random number drawn.
+    /// Once the budget is spent the rule is no longer consulted: no signal is read, no random number drawn.
     ///
     /// # Panics
     /// Programming errors in the caller: calling this while [`expert_in_control`](Self::expert_in_control), or
-    /// passing `None` to a rule that [`needs_uncertainty`](Self::needs_uncertainty) while budget is left (reject
-    /// that configuration up front with [`QueryRule::check_uncertainty_source`]).
-    pub fn decide<R: Rng + ?Sized>(&mut self, uncertainty: Option<f32>, rng: &mut R) -> Decision {
+    /// without a signal the rule [`needs`](Self::needs) while budget is left (reject that configuration up
+    /// front with [`super::check_signals`]).
+    pub fn decide(&mut self, input: &DecisionInput<'_>, rng: &mut dyn RngCore) -> Decision {
         assert!(
             !self.expert_in_control(),
             "decide called during expert control; call record_expert_step instead"
@@ -348,24 +180,27 @@ impl QueryController {
         if self.budget_left() == 0 {
             return Decision::NO_QUERY;
         }
-        let rule_decision = match &mut self.rule {
-            QueryRule::Never => Decision::NO_QUERY,
-            QueryRule::Greedy => Decision {
-                query: true,
-                ..Decision::NO_QUERY
-            },
-            QueryRule::Bernoulli(rule) => Decision {
-                query: rng.random_bool(rule.p),
-                ..Decision::NO_QUERY
-            },
-            QueryRule::Adaptive(rule) => {
-                let uncertainty = uncertainty
-                    .expect("the adaptive query rule needs an uncertainty at every decision");
-                rule.decide(uncertainty)
-            }
+        let ctx = QueryContext {
+            step: input.step,
+            train_steps: input.train_steps,
+            budget: self.budget,
+            budget_spent: self.budget_spent(),
+            unit: self.unit,
+            segment_len: self.segment_len,
+            queries: self.queries,
+            agent_action: input.agent_action,
+            signals: input.signals,
+            oracle: input.oracle,
         };
-        if !rule_decision.query {
-            return rule_decision;
+        let verdict = self.rule.decide(&ctx, rng);
+        let decision = Decision {
+            query: verdict.query,
+            threshold: verdict.threshold,
+            score: verdict.score,
+            expert_steps: 0,
+        };
+        if !decision.query {
+            return decision;
         }
         self.queries += 1;
         self.segment_left = match self.unit {
@@ -374,7 +209,7 @@ impl QueryController {
         };
         Decision {
             expert_steps: self.segment_left,
-            ..rule_decision
+            ..decision
         }
     }
 
@@ -391,9 +226,10 @@ impl QueryController {
         self.budget_used += 1;
     }
 
-    /// Ends the current segment, if any: expert control never crosses an episode boundary.
+    /// Ends the current segment, if any (expert control never crosses an episode boundary), and tells the rule.
     pub fn end_episode(&mut self) {
         self.segment_left = 0;
+        self.rule.end_episode();
     }
 
     /// The expert gave the query back (nobody answered): the segment ends here and the step the expert did not
@@ -449,17 +285,14 @@ impl QueryController {
 
 impl Persist for QueryController {
     /// Writes the controller's position into `state` under `prefix`: budget used, segment in progress,
-    /// queries, and the adaptive rule's window. The rule's ranking tree is not written: its answers depend only
-    /// on the values in the window, so it is rebuilt from them.
+    /// queries, and the rule's own state (the adaptive rule's window, under `{prefix}.window` as before rules
+    /// were an interface).
     fn save_state<'a>(&'a self, prefix: &str, state: &mut StateDict<'a>) {
         state.put_value(
             &format!("{prefix}.counters"),
             &[self.budget_used, self.segment_left, self.queries],
         );
-        if let QueryRule::Adaptive(rule) = &self.rule {
-            let window: Vec<f32> = rule.recent.iter().copied().collect();
-            state.put_f32(&format!("{prefix}.window"), window);
-        }
+        self.rule.save_state(prefix, state);
     }
 
     /// Reads what [`QueryController::save_state`] wrote into a controller built with the same rule.
@@ -467,35 +300,66 @@ impl Persist for QueryController {
         let [budget_used, segment_left, queries]: [usize; 3] =
             state.value(&format!("{prefix}.counters"))?;
         (self.budget_used, self.segment_left, self.queries) = (budget_used, segment_left, queries);
-        if let QueryRule::Adaptive(rule) = &mut self.rule {
-            let window = state.f32s(&format!("{prefix}.window"))?;
-            rule.recent.clear();
-            rule.ranked.clear();
-            for &u in window {
-                rule.recent.push_back(u);
-                rule.ranked.insert(u);
-            }
-        }
-        Ok(())
+        self.rule.load_state(prefix, state)
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::query::rules::{AdaptiveQuantileRule, RuleDefaults, RuleSpec, check_signals};
     use proptest::prelude::*;
     use rand::{Rng, SeedableRng};
     use rand_pcg::Pcg64;
 
+    /// A rule from its spec, with defaults that leave nothing to chance: t_query 0.3, N_r 1000.
+    fn rule(spec: &str) -> Box<dyn QueryRule> {
+        let defaults = RuleDefaults {
+            t_query: 0.3,
+            n_r: 1000,
+            budget: 100,
+            segment_len: 5,
+            train_steps: 1000,
+            unit: BudgetUnit::Transitions,
+        };
+        spec.parse::<RuleSpec>().unwrap().build(&defaults).unwrap()
+    }
+
+    /// One decision with `uncertainty` as the only signal.
+    fn decide_with(
+        controller: &mut QueryController,
+        uncertainty: Option<f32>,
+        rng: &mut Pcg64,
+    ) -> Decision {
+        let signals = Signals {
+            uncertainty,
+            ..Signals::default()
+        };
+        let input = DecisionInput {
+            step: 0,
+            train_steps: 1000,
+            agent_action: 0,
+            signals: &signals,
+            oracle: None,
+        };
+        controller.decide(&input, rng)
+    }
+
     #[test]
     fn invalid_parameters_are_rejected_with_errors() {
+        let build = |spec: &str| {
+            spec.parse::<RuleSpec>().unwrap().build(&RuleDefaults {
+                t_query: 0.3,
+                n_r: 1000,
+                budget: 100,
+                segment_len: 5,
+                train_steps: 1000,
+                unit: BudgetUnit::Transitions,
+            })
+        };
         assert_eq!(
             AdaptiveQuantileRule::new(10, 1.5).unwrap_err(),
             QueryError::TQueryOutOfRange(1.5)
-        );
-        assert_eq!(
-            AdaptiveQuantileRule::new(10, -0.1).unwrap_err(),
-            QueryError::TQueryOutOfRange(-0.1)
         );
         assert!(matches!(
             AdaptiveQuantileRule::new(10, f64::NAN),
@@ -505,95 +369,28 @@ mod tests {
             AdaptiveQuantileRule::new(0, 0.3).unwrap_err(),
             QueryError::EmptyWindow
         );
+        assert!(build("bernoulli(p=1.01)").is_err());
+        assert!(build("bernoulli(p=-0.5)").is_err());
         assert_eq!(
-            QueryRule::bernoulli(1.01).unwrap_err(),
-            QueryError::ProbabilityOutOfRange(1.01)
-        );
-        assert_eq!(
-            QueryRule::bernoulli(-0.5).unwrap_err(),
-            QueryError::ProbabilityOutOfRange(-0.5)
-        );
-        assert_eq!(
-            QueryController::new(QueryRule::Greedy, 10, 0).unwrap_err(),
+            QueryController::new(rule("greedy"), 10, 0).unwrap_err(),
             QueryError::EmptySegment
         );
-        let adaptive = QueryRule::adaptive(100, 0.3).unwrap();
+        let adaptive = rule("adaptive");
         assert_eq!(
-            adaptive.check_uncertainty_source(false).unwrap_err(),
+            check_signals(&*adaptive, false, false).unwrap_err(),
             QueryError::NoUncertaintySource { rule: "adaptive" }
         );
-        assert!(adaptive.check_uncertainty_source(true).is_ok());
-        assert!(QueryRule::Greedy.check_uncertainty_source(false).is_ok());
+        assert!(check_signals(&*adaptive, true, false).is_ok());
+        assert!(check_signals(&*rule("greedy"), false, false).is_ok());
+        assert_eq!(
+            check_signals(&*rule("rcmp"), true, false).unwrap_err(),
+            QueryError::NoHeads { rule: "rcmp" }
+        );
         // Boundary values are valid.
         assert!(
             AdaptiveQuantileRule::new(1, 0.0).is_ok() && AdaptiveQuantileRule::new(1, 1.0).is_ok()
         );
-        assert!(QueryRule::bernoulli(0.0).is_ok() && QueryRule::bernoulli(1.0).is_ok());
-    }
-
-    proptest! {
-        #[test]
-        fn adaptive_rule_matches_sorted_window_oracle(
-            n_r in 1usize..20,
-            t_query in 0.0f64..=1.0,
-            // Few distinct values so ties (U equal to the threshold: no query) are frequent.
-            stream in proptest::collection::vec(0u8..12, 0..200),
-        ) {
-            let mut rule = AdaptiveQuantileRule::new(n_r, t_query).unwrap();
-            let mut window: VecDeque<f32> = VecDeque::new();
-            for value in stream {
-                let uncertainty = value as f32 * 0.25;
-                let mut descending: Vec<f32> = window.iter().copied().collect();
-                descending.sort_by(|a, b| b.total_cmp(a));
-                let expected_threshold = if descending.is_empty() {
-                    None
-                } else {
-                    let index = ((descending.len() as f64 * t_query).floor() as usize).min(descending.len() - 1);
-                    Some(descending[index])
-                };
-                let expected_query = expected_threshold.is_some_and(|t| uncertainty > t);
-                let decision = rule.decide(uncertainty);
-                prop_assert_eq!(decision.threshold, expected_threshold);
-                prop_assert_eq!(decision.query, expected_query);
-                window.push_back(uncertainty);
-                if window.len() > n_r {
-                    window.pop_front();
-                }
-                prop_assert_eq!(rule.window_len(), window.len());
-            }
-        }
-    }
-
-    #[test]
-    fn adaptive_rule_queries_a_fraction_t_query_of_a_stationary_stream() {
-        for (case, t_query) in [0.05, 0.1, 0.3, 0.5].into_iter().enumerate() {
-            let mut rng = Pcg64::seed_from_u64(100 + case as u64);
-            let mut rule = AdaptiveQuantileRule::with_default_window(t_query).unwrap();
-            let steps = 100_000;
-            // Exponential-looking values: the rule must not care about the distribution's scale or shape.
-            let queries = (0..steps)
-                .filter(|_| {
-                    let uniform: f32 = rng.random();
-                    rule.decide(-(1.0 - uniform).ln() * 3.7).query
-                })
-                .count();
-            let fraction = queries as f64 / steps as f64;
-            assert!(
-                (fraction - t_query).abs() <= 0.02,
-                "t_query {t_query}: queried {fraction}"
-            );
-        }
-    }
-
-    #[test]
-    fn nan_uncertainty_never_queries_and_is_not_kept() {
-        let mut rule = AdaptiveQuantileRule::new(10, 0.5).unwrap();
-        for value in [1.0, 2.0, 3.0] {
-            let _ = rule.decide(value);
-        }
-        assert!(!rule.decide(f32::NAN).query);
-        assert_eq!(rule.window_len(), 3);
-        assert!(rule.decide(3.5).query);
+        assert!(build("bernoulli(p=0)").is_ok() && build("bernoulli(p=1)").is_ok());
     }
 
     /// Who acted at one environment step of a simulated run.
@@ -623,9 +420,10 @@ mod tests {
                         let in_control = controller.expert_in_control();
                         let expert_acts = in_control || {
                             let uncertainty = controller
-                                .uncertainty_wanted_now()
+                                .signals_wanted_now()
+                                .uncertainty
                                 .then(|| rng.random::<f32>());
-                            let decision = controller.decide(uncertainty, rng);
+                            let decision = decide_with(controller, uncertainty, rng);
                             if decision.query {
                                 assert!(decision.expert_steps >= 1);
                                 current_query = Some(query_index);
@@ -650,12 +448,16 @@ mod tests {
             .collect()
     }
 
-    fn rule_strategy() -> impl Strategy<Value = QueryRule> {
+    fn rule_strategy() -> impl Strategy<Value = String> {
         prop_oneof![
-            Just(QueryRule::Never),
-            Just(QueryRule::Greedy),
-            (0.0f64..=1.0).prop_map(|p| QueryRule::bernoulli(p).unwrap()),
-            (1usize..50, 0.0f64..=1.0).prop_map(|(n_r, t)| QueryRule::adaptive(n_r, t).unwrap()),
+            Just("never".to_string()),
+            Just("greedy".to_string()),
+            (0.0f64..=1.0).prop_map(|p| format!("bernoulli(p={p})")),
+            (1usize..50, 0.0f64..=1.0)
+                .prop_map(|(n_r, t)| format!("adaptive(n_r={n_r},t_query={t})")),
+            (0.01f64..=1.0).prop_map(|h| format!("paced(horizon={h})")),
+            (0.01f64..=1.0).prop_map(|h| format!("ranked(horizon={h})")),
+            (0.01f64..=1.0).prop_map(|h| format!("budget_paced(horizon={h})")),
         ]
     }
 
@@ -668,9 +470,9 @@ mod tests {
             episode_lengths in proptest::collection::vec(0usize..40, 0..12),
             seed in any::<u64>(),
         ) {
-            let is_never = matches!(rule, QueryRule::Never);
-            let is_greedy = matches!(rule, QueryRule::Greedy);
-            let mut controller = QueryController::new(rule, budget, segment_len).unwrap();
+            let is_never = rule == "never";
+            let is_greedy = rule == "greedy";
+            let mut controller = QueryController::new(self::rule(&rule), budget, segment_len).unwrap();
             let mut rng = Pcg64::seed_from_u64(seed);
             let episodes = simulate(&mut controller, &episode_lengths, &mut rng);
 
@@ -723,14 +525,14 @@ mod tests {
     #[test]
     fn a_withdrawn_query_spends_no_budget() {
         let mut rng = Pcg64::seed_from_u64(0);
-        let mut controller = QueryController::new(QueryRule::Greedy, 10, 5).unwrap();
-        assert!(controller.decide(None, &mut rng).query);
+        let mut controller = QueryController::new(rule("greedy"), 10, 5).unwrap();
+        assert!(decide_with(&mut controller, None, &mut rng).query);
         assert_eq!(controller.segment_left(), 5);
         controller.withdraw();
         assert!(!controller.expert_in_control());
         assert_eq!((controller.budget_used(), controller.queries()), (0, 1));
         // Withdrawn mid-segment: the steps already taken stay charged.
-        assert!(controller.decide(None, &mut rng).query);
+        assert!(decide_with(&mut controller, None, &mut rng).query);
         controller.record_expert_step();
         controller.record_expert_step();
         controller.withdraw();
@@ -740,7 +542,7 @@ mod tests {
     #[test]
     fn greedy_spends_the_budget_on_the_first_steps() {
         let budget = 23;
-        let mut controller = QueryController::new(QueryRule::Greedy, budget, 5).unwrap();
+        let mut controller = QueryController::new(rule("greedy"), budget, 5).unwrap();
         let mut rng = Pcg64::seed_from_u64(1);
         let episodes = simulate(&mut controller, &[7, 3, 9, 30, 12], &mut rng);
         let actors: Vec<Actor> = episodes.into_iter().flatten().collect();
@@ -751,23 +553,23 @@ mod tests {
 
     #[test]
     fn last_segment_is_truncated_to_the_budget_left() {
-        let mut controller = QueryController::new(QueryRule::Greedy, 7, 5).unwrap();
+        let mut controller = QueryController::new(rule("greedy"), 7, 5).unwrap();
         let mut rng = Pcg64::seed_from_u64(2);
-        let first = controller.decide(None, &mut rng);
+        let first = decide_with(&mut controller, None, &mut rng);
         assert_eq!((first.query, first.expert_steps), (true, 5));
         (0..5).for_each(|_| controller.record_expert_step());
-        let second = controller.decide(None, &mut rng);
+        let second = decide_with(&mut controller, None, &mut rng);
         assert_eq!((second.query, second.expert_steps), (true, 2));
         (0..2).for_each(|_| controller.record_expert_step());
         assert!(!controller.expert_in_control());
-        assert!(!controller.decide(None, &mut rng).query);
+        assert!(!decide_with(&mut controller, None, &mut rng).query);
         assert_eq!(controller.queries(), 2);
     }
 
     #[test]
     fn a_budget_in_queries_grants_whole_segments_and_counts_queries_cut_short() {
         // Greedy with a budget of 3 queries of 5 steps over episodes of 7, 2 and 30 steps.
-        let mut controller = QueryController::new(QueryRule::Greedy, 3, 5)
+        let mut controller = QueryController::new(rule("greedy"), 3, 5)
             .unwrap()
             .counting(BudgetUnit::Queries);
         let mut rng = Pcg64::seed_from_u64(4);
@@ -790,7 +592,7 @@ mod tests {
             "the replay's demonstration part is sized by max_transitions"
         );
         // Counting transitions, the same budget of 3 would have given 3 transitions only.
-        let mut by_transitions = QueryController::new(QueryRule::Greedy, 3, 5).unwrap();
+        let mut by_transitions = QueryController::new(rule("greedy"), 3, 5).unwrap();
         simulate(&mut by_transitions, &[7, 2, 30], &mut rng);
         assert_eq!(
             (by_transitions.budget_used(), by_transitions.queries()),
@@ -802,7 +604,7 @@ mod tests {
     fn adaptive_rule_is_not_evaluated_during_expert_control() {
         // Every uncertainty pushed is an agent decision: window length = agent decisions made (below N_r).
         let mut controller =
-            QueryController::new(QueryRule::adaptive(10_000, 0.5).unwrap(), 10_000, 5).unwrap();
+            QueryController::new(rule("adaptive(n_r=10000,t_query=0.5)"), 10_000, 5).unwrap();
         let mut rng = Pcg64::seed_from_u64(3);
         let episodes = simulate(&mut controller, &[200, 150, 300], &mut rng);
         let agent_steps = episodes
@@ -811,23 +613,21 @@ mod tests {
             .filter(|a| **a == Actor::Agent)
             .count();
         let decisions = agent_steps + controller.queries();
-        let QueryRule::Adaptive(rule) = controller.rule() else {
-            unreachable!()
-        };
         assert!(controller.queries() > 0);
-        assert_eq!(rule.window_len(), decisions);
+        let mut state = StateDict::default();
+        controller.save_state("q", &mut state);
+        assert_eq!(state.f32s("q.window").unwrap().len(), decisions);
     }
 
     #[test]
     fn bernoulli_rule_queries_at_its_probability() {
         let p = 0.2;
-        let mut controller =
-            QueryController::new(QueryRule::bernoulli(p).unwrap(), usize::MAX, 1).unwrap();
+        let mut controller = QueryController::new(rule("bernoulli(p=0.2)"), usize::MAX, 1).unwrap();
         let mut rng = Pcg64::seed_from_u64(4);
         let decisions = 50_000;
         let mut queries = 0;
         for _ in 0..decisions {
-            if controller.decide(None, &mut rng).query {
+            if decide_with(&mut controller, None, &mut rng).query {
                 queries += 1;
                 controller.record_expert_step();
             }
@@ -839,8 +639,7 @@ mod tests {
     #[test]
     #[should_panic(expected = "needs an uncertainty")]
     fn adaptive_rule_without_uncertainty_is_a_programming_error() {
-        let mut controller =
-            QueryController::new(QueryRule::adaptive(10, 0.3).unwrap(), 10, 5).unwrap();
-        let _ = controller.decide(None, &mut Pcg64::seed_from_u64(5));
+        let mut controller = QueryController::new(rule("adaptive(n_r=10)"), 10, 5).unwrap();
+        let _ = decide_with(&mut controller, None, &mut Pcg64::seed_from_u64(5));
     }
 }
