@@ -48,6 +48,7 @@ pub struct SweepArgs {
     #[arg(long = "set", value_name = "KEY=VALUE")]
     overrides: Vec<String>,
     /// A variant per override (repeatable), e.g. --vary n_r=100 --vary n_r=10000; runs go to `.../n_r-100/seedN`.
+    /// Overrides joined by `;` vary together: --vary 'budget=50;query_rule=paced'.
     #[arg(long, value_name = "KEY=VALUE")]
     vary: Vec<String>,
     /// Parallel runs (0: one per core).

@@ -153,6 +153,12 @@ fn dir_fragment(spec: &str) -> String {
         .collect()
 }
 
+/// The overrides of one `vary` entry: `key=value`, or several joined by `;` to vary them together (one variant,
+/// e.g. `budget=100;query_rule=paced`).
+fn vary_parts(entry: &str) -> impl Iterator<Item = &str> {
+    entry.split(';').map(str::trim).filter(|p| !p.is_empty())
+}
+
 /// Splits command-line list values: each value may itself be comma-separated (`--envs A,B --envs C`).
 fn split_values(values: &[String]) -> Vec<String> {
     values
@@ -300,16 +306,19 @@ impl SweepGrid {
         let vary_keys = self
             .vary
             .iter()
-            .map(|entry| override_key(entry, "vary"))
+            .flat_map(|entry| vary_parts(entry))
+            .map(|part| override_key(part, "vary"))
             .collect::<Result<BTreeSet<String>>>()?;
         for entry in &self.vary {
-            let key = override_key(entry, "vary")?;
-            let dedicated = ["env", "method", "net", "seed", "t_query", "expert"];
-            if dedicated.contains(&key.as_str()) {
-                bail!(
-                    "`vary` entry '{entry}' varies `{key}`, which has its own sweep key (envs, methods, nets, \
-                     seeds, t_query, experts)"
-                );
+            for part in vary_parts(entry) {
+                let key = override_key(part, "vary")?;
+                let dedicated = ["env", "method", "net", "seed", "t_query", "expert"];
+                if dedicated.contains(&key.as_str()) {
+                    bail!(
+                        "`vary` entry '{entry}' varies `{key}`, which has its own sweep key (envs, methods, \
+                         nets, seeds, t_query, experts)"
+                    );
+                }
             }
             if !is_path_safe(&dir_fragment(entry)) {
                 bail!("`vary` entry '{entry}' cannot name a directory");
@@ -420,7 +429,8 @@ impl RunSpec {
     /// The run's configuration as given.
     pub fn config_input(&self) -> Result<ConfigInput> {
         let mut input = ConfigInput::new(&self.id.env, self.id.method, self.id.net, self.id.seed);
-        for o in self.set.iter().chain(&self.vary) {
+        let varied = self.vary.iter().flat_map(|entry| vary_parts(entry));
+        for o in self.set.iter().map(String::as_str).chain(varied) {
             input.apply_override(o)?;
         }
         if let Some(t) = self.t_query {

@@ -383,10 +383,13 @@ pub(super) const PACED: RuleInfo = RuleInfo {
 pub(super) const RCMP: RuleInfo = RuleInfo {
     name: "rcmp",
     source: "Da Silva, Hernandez-Leal, Kartal, Taylor (AAAI 2020)",
-    params: &[("threshold", "1")],
+    params: &[(
+        "threshold",
+        "0.03: about the upper decile of the head variances on design seed 0",
+    )],
     oracle: false,
     build: |params, _| {
-        let threshold = params.get("threshold", 1.0, "at least 0", |v| v >= 0.0)?;
+        let threshold = params.get("threshold", 0.03, "at least 0", |v| v >= 0.0)?;
         Ok(Box::new(RcmpRule {
             threshold: threshold as f32,
         }))
