@@ -6,9 +6,11 @@
 //! directory's format.
 //!
 //! Within this layer imports go one way: `dir_lock` <- `sweep`; `stats`, `sweep` <- `protocol`;
-//! `protocol`, `plot` <- `figures`; `figures`, `plot` <- `report`; `slurm` <- the CLI.
+//! `protocol`, `plot` <- `figures`; `protocol`, `plot`, `stats`, `verdict` <- `effort`; `effort`, `figures`, `plot`
+//! <- `report`; `slurm` <- the CLI.
 
 pub mod dir_lock;
+pub mod effort;
 pub mod figures;
 pub mod plot;
 pub mod protocol;

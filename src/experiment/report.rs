@@ -286,6 +286,10 @@ pub fn report(dir: &Path, out_dir: &Path, sustain: usize) -> Result<ReportSummar
 
     let (verdict_files, verdict_md) = super::verdict::write_verdict(&cells, out_dir, sustain)?;
     files.extend(verdict_files);
+    files.extend(
+        super::effort::write_effort(&runs, out_dir, sustain)
+            .context("cannot write the effort benchmark")?,
+    );
 
     let figures = figures::paper_figures(&runs);
     let mut figure_lines = Vec::new();
