@@ -281,7 +281,7 @@ mod tests {
     use super::*;
     use crate::query::rules::tests_support::{Recorded, replay};
     use proptest::prelude::*;
-    use rand::SeedableRng;
+    use rand::{Rng, SeedableRng};
     use rand_pcg::Pcg64;
 
     proptest! {
