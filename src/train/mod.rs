@@ -663,6 +663,8 @@ fn train_run(
         cpu_time_s: cpu,
         steps_per_s: cfg.train_steps as f64 / wall.max(1e-9),
         numerics: Some(crate::math::NUMERICS.to_string()),
+        arld_version: Some(crate::build_info::VERSION.to_string()),
+        git_commit: Some(crate::build_info::GIT_COMMIT.to_string()),
     };
     if let Some(dir) = log.dir() {
         agent.network().save(

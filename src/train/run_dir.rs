@@ -238,6 +238,12 @@ pub struct Summary {
     /// on; sweeps run it again, see [`is_stale`]).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub numerics: Option<String>,
+    /// The arld version ([`crate::build_info::VERSION`]) and git commit ([`crate::build_info::GIT_COMMIT`])
+    /// that finished the run (absent from older summaries; reports do not read them).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub arld_version: Option<String>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub git_commit: Option<String>,
 }
 
 /// Whether the complete run in `dir` was computed with other elementary functions than this arld's
@@ -616,6 +622,8 @@ mod tests {
             cpu_time_s: Some(1.4),
             steps_per_s: 2000.0,
             numerics: Some(crate::math::NUMERICS.to_string()),
+            arld_version: Some(crate::build_info::VERSION.to_string()),
+            git_commit: Some(crate::build_info::GIT_COMMIT.to_string()),
         };
         write_summary(dir.path(), &summary).unwrap();
         assert!(is_complete(dir.path()));
