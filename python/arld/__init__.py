@@ -16,6 +16,8 @@ import numpy as np
 
 from . import _arld
 
+__version__ = _arld.__version__
+
 __all__ = ["Agent", "make", "preset", "config_keys", "METHODS", "NETS"]
 
 METHODS = ("dqn", "dqfd", "gdqn", "bdqn", "adqn", "adqnp")

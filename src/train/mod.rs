@@ -342,7 +342,52 @@ fn snapshot(
     Ok(())
 }
 
+/// The run of [`train_loop`]; when it ends with an error (other than a stop request) and writes a run
+/// directory, `failed.json` records the error and the step ([`run_dir::Failure`]).
 fn train_run(
+    cfg: &TrainConfig,
+    env: &mut dyn Env,
+    test_envs: Vec<Box<dyn Env>>,
+    expert: Option<&mut dyn Expert>,
+    demos: Option<&Demonstrations>,
+    log: &mut RunLog,
+    snapshots: Option<(&mut Checkpointer, Option<&StateDict>)>,
+) -> Result<(Summary, Agent)> {
+    let mut st = LoopState::default();
+    let result = train_loop(cfg, env, test_envs, expert, demos, log, snapshots, &mut st);
+    if let (Err(err), Some(dir)) = (&result, log.dir()) {
+        let (phase, step) = if st.training {
+            // The step in progress (the one the logs and the error name), not past the last one.
+            ("training", (st.step + 1).min(cfg.train_steps))
+        } else if st.pretrain_done > 0 {
+            ("pre-training", 0)
+        } else {
+            ("setup", 0)
+        };
+        record_failure(dir, err, phase, step);
+    }
+    result
+}
+
+/// Writes `failed.json` for the error `err` into the run directory `dir`, unless `err` is a stop request (the
+/// run is then interrupted, not failed). The run's own error matters more than this file: a write that fails
+/// is only warned about.
+pub fn record_failure(dir: &std::path::Path, err: &anyhow::Error, phase: &str, step: usize) {
+    if err
+        .chain()
+        .any(|cause| cause.is::<crate::interrupt::Interrupted>())
+    {
+        return;
+    }
+    let failure = run_dir::Failure::new(err, phase, step);
+    if let Err(write_err) = run_dir::write_failure(dir, &failure) {
+        eprintln!("warning: the run failed, and recording why failed too: {write_err:#}");
+    }
+}
+
+/// The training loop proper; `st` is where it stands, also when it returns an error.
+#[allow(clippy::too_many_arguments)]
+fn train_loop(
     cfg: &TrainConfig,
     env: &mut dyn Env,
     test_envs: Vec<Box<dyn Env>>,
@@ -350,6 +395,7 @@ fn train_run(
     demos: Option<&Demonstrations>,
     log: &mut RunLog,
     mut snapshots: Option<(&mut Checkpointer, Option<&StateDict>)>,
+    st: &mut LoopState,
 ) -> Result<(Summary, Agent)> {
     let mut clock = RunClock::start();
     let (obs_dim, n_actions) = (env.obs_dim(), env.n_actions());
@@ -385,7 +431,6 @@ fn train_run(
     );
     let mut batch = Batch::default();
     let mut queries = cfg.query_controller()?;
-    let mut st = LoopState::default();
     // The observation the agent acts on and the one the step writes (swapped after each step: no allocation).
     // `obs` stays empty until training starts (a snapshot taken in pre-training has none).
     let mut obs = Vec::new();
@@ -408,8 +453,8 @@ fn train_run(
                     expert_state: expert.as_deref().and_then(|e| e.state()),
                     obs: &obs,
                 };
-                clock.stamp(&mut st);
-                snapshot(ck, &st, parts, log, stop)?;
+                clock.stamp(st);
+                snapshot(ck, st, parts, log, stop)?;
             }
             if stop {
                 return Err(crate::interrupt::Interrupted(format!(
@@ -436,8 +481,8 @@ fn train_run(
         if let (Some(e), Some(saved)) = (expert.as_deref_mut(), expert_state) {
             e.restore(&saved)?;
         }
-        st = state.value("loop")?;
-        clock.carry(&st);
+        *st = state.value("loop")?;
+        clock.carry(st);
         if st.training {
             // The environment: the generator its episode's reset drew from, the reset, the actions taken.
             obs = match st.ep_generator {
@@ -672,6 +717,8 @@ fn train_run(
         cpu_time_s: cpu,
         steps_per_s: cfg.train_steps as f64 / wall.max(1e-9),
         numerics: Some(crate::math::NUMERICS.to_string()),
+        arld_version: Some(crate::build_info::VERSION.to_string()),
+        git_commit: Some(crate::build_info::GIT_COMMIT.to_string()),
     };
     if let Some(dir) = log.dir() {
         agent.network().save(
