@@ -17,7 +17,7 @@
 //! (the held-out test), reported in a section of their own with the verdict of the goal.
 
 use super::plot::{Band, Curve, FigureContent, Panel};
-use super::protocol::{HELD_OUT_SEEDS, env_order, paper_budget};
+use super::protocol::{HELD_OUT_SEEDS, env_order, is_effort_variant, paper_budget};
 use super::stats::{bootstrap_median_interval, final_score, mann_whitney, median, sustained};
 use super::verdict::{ALPHA, FINAL_EVALUATIONS};
 use crate::train::run_dir::{DEFAULT_VARIANT, RunRecord};
@@ -65,9 +65,7 @@ fn rule_and_budget(run: &RunRecord) -> Result<Option<(String, usize)>> {
         return Ok(None);
     }
     let variant = run.variant.as_str();
-    let in_benchmark = variant == DEFAULT_VARIANT
-        || variant.starts_with("query_rule-")
-        || variant.starts_with("budget-");
+    let in_benchmark = variant == DEFAULT_VARIANT || is_effort_variant(variant);
     if !in_benchmark {
         return Ok(None);
     }
@@ -556,10 +554,15 @@ pub fn write_effort(
     };
     let mut files = Vec::new();
     let md_path = out_dir.join("effort.md");
+    let figure_links: String = report
+        .figures
+        .iter()
+        .map(|(name, content)| format!("![{}]({name}.png)\n\n", content.title))
+        .collect();
     let md = format!(
         "# The effort benchmark: which rule spends the expert's effort best\n\nWritten by `arld report` from \
-         the run directories; every number is recomputed from them.\n\n{}\n## Figures\n\n\
-         ![AUC against effort](effort_auc.png)\n\n![Questions against training step](effort_questions.png)\n",
+         the run directories; every number is recomputed from them.\n\n{}\n## Figures\n\n{figure_links}\
+         (The AUC-against-budget figure appears once a rule has runs at two budgets or more.)\n",
         report.markdown
     );
     crate::files::write_atomic(&md_path, md.as_bytes())?;

@@ -99,6 +99,12 @@ pub const DESIGN_SEEDS: std::ops::Range<u64> = 0..10;
 /// Held-out seeds for the test of the chosen rule, fixed before any of them is run.
 pub const HELD_OUT_SEEDS: std::ops::Range<u64> = 100..120;
 
+/// Whether a run's variant (its directory name) belongs to the effort benchmark: it varies the query rule or the
+/// budget ([`effort_grids`] names them `query_rule-...` and `budget-...`).
+pub fn is_effort_variant(variant: &str) -> bool {
+    variant.starts_with("query_rule-") || variant.starts_with("budget-")
+}
+
 /// The paper's budget for `env` (ADQN's preset), in demonstrated transitions.
 pub fn paper_budget(env: &str) -> usize {
     crate::train::TrainConfig::preset(env, Method::Adqn, EFFORT_NET, 0)
