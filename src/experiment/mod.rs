@@ -86,8 +86,11 @@ pub fn run_one(cfg: &TrainConfig, out_dir: Option<&Path>, progress: bool) -> Res
     Ok(summary)
 }
 
+/// What a run is given before training: its expert and its pre-training demonstrations, each if it needs them.
+type Setup = (Option<Box<dyn expert::Expert>>, Option<Demonstrations>);
+
 /// The expert and the demonstrations `cfg` needs (none for a method that needs none).
-fn setup(cfg: &TrainConfig) -> Result<(Option<Box<dyn expert::Expert>>, Option<Demonstrations>)> {
+fn setup(cfg: &TrainConfig) -> Result<Setup> {
     let mut expert = if cfg.method.needs_expert() {
         Some(expert::from_spec(
             &cfg.expert,

@@ -1241,6 +1241,8 @@ mod tests {
                 toml::Value::Float(_) => &["-1.0e300", "nan"],
                 // Zero, or a size no machine holds.
                 toml::Value::Integer(_) => &["0", "9000000000000000000"],
+                // query_rule: empty means the method's own rule; an unknown rule is refused.
+                toml::Value::String(_) if key == "query_rule" => &["\"nope\""],
                 toml::Value::String(_) => &["\"\""],
                 other => panic!("{key}: unexpected type {other:?}"),
             };

@@ -355,12 +355,22 @@ mod tests {
     #[test]
     fn the_paper_rules_on_a_recorded_sequence() {
         let recorded = Recorded::new(7, 400);
-        // Never and greedy: constant answers.
+        // Every question spends a whole segment: the rule is asked until this many questions.
+        let questions = recorded.budget / recorded.segment_len;
+        // Never: no question; greedy: a question at every decision until the budget is spent.
         assert!(replay("never", &recorded).iter().all(|q| !q));
-        assert!(replay("greedy", &recorded).iter().all(|q| *q));
-        // Bernoulli(p): one draw of the query generator per decision, `random_bool(p)`.
+        let greedy = replay("greedy", &recorded);
+        assert!(greedy[..questions].iter().all(|q| *q) && greedy[questions..].iter().all(|q| !q));
+        // Bernoulli(p): one draw of the query generator per decision, `random_bool(p)`, until the budget is spent.
         let mut rng = Pcg64::seed_from_u64(recorded.rng_seed);
-        let expected: Vec<bool> = (0..recorded.len()).map(|_| rng.random_bool(0.2)).collect();
+        let mut asked = 0;
+        let expected: Vec<bool> = (0..recorded.len())
+            .map(|_| {
+                let q = asked < questions && rng.random_bool(0.2);
+                asked += usize::from(q);
+                q
+            })
+            .collect();
         assert_eq!(replay("bernoulli(p=0.2)", &recorded), expected);
         // Adaptive: the uncertainty exceeds the floor(|D| t)-th largest of the last n_r values.
         let (n_r, t) = (50, 0.1);
@@ -375,7 +385,13 @@ mod tests {
                 let k = ((sorted.len() as f64 * t).floor() as usize).min(sorted.len() - 1);
                 recorded.uncertainty[i] > sorted[k]
             })
+            .scan(0, |asked, q| {
+                let q = q && *asked < questions;
+                *asked += usize::from(q);
+                Some(q)
+            })
             .collect();
+        assert!(expected.iter().any(|q| *q));
         assert_eq!(replay("adaptive(n_r=50,t_query=0.1)", &recorded), expected);
     }
 }
