@@ -30,6 +30,7 @@
 
 use rand::RngCore;
 
+pub use super::rules::BudgetUnit;
 use super::rules::{Needs, OracleView, QueryContext, QueryError, QueryRule, Signals};
 use crate::state::{Persist, StateDict, StateError};
 
@@ -65,31 +66,6 @@ pub struct DecisionInput<'a> {
     pub signals: &'a Signals,
     /// The expert's view, given only to oracle rules.
     pub oracle: Option<&'a OracleView>,
-}
-
-/// What the budget counts. The paper's budget is in demonstrated transitions; counting queries (each one a whole
-/// segment of up to `segment_len` transitions, however few of them the episode leaves) is an ablation of that
-/// reading (docs/algorithm.md sections 8 and 13).
-#[derive(
-    Clone, Copy, Debug, Default, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize,
-)]
-#[serde(rename_all = "lowercase")]
-pub enum BudgetUnit {
-    /// One unit per demonstrated transition; the last segment is cut at the budget.
-    #[default]
-    Transitions,
-    /// One unit per query, however many transitions its segment demonstrates.
-    Queries,
-}
-
-impl BudgetUnit {
-    /// The most demonstrated transitions a budget of `budget` units can bring, with `segment_len` steps per query.
-    pub fn max_transitions(self, budget: usize, segment_len: usize) -> usize {
-        match self {
-            BudgetUnit::Transitions => budget,
-            BudgetUnit::Queries => budget.saturating_mul(segment_len),
-        }
-    }
 }
 
 /// A query rule with its budget and expert-control segments (docs/algorithm.md sections 8-9).

@@ -24,7 +24,6 @@ use std::collections::BTreeMap;
 
 use rand::RngCore;
 
-use super::controller::BudgetUnit;
 use crate::state::{StateDict, StateError};
 
 pub use field::{
@@ -33,6 +32,31 @@ pub use field::{
 };
 pub use ours::RankedPacedRule;
 pub use paper::{AdaptiveQuantileRule, BernoulliRule, GreedyRule, NeverRule};
+
+/// What the budget counts. The paper's budget is in demonstrated transitions; counting queries (each one a whole
+/// segment of up to `segment_len` transitions, however few of them the episode leaves) is an ablation of that
+/// reading (docs/algorithm.md sections 8 and 13).
+#[derive(
+    Clone, Copy, Debug, Default, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize,
+)]
+#[serde(rename_all = "lowercase")]
+pub enum BudgetUnit {
+    /// One unit per demonstrated transition; the last segment is cut at the budget.
+    #[default]
+    Transitions,
+    /// One unit per query, however many transitions its segment demonstrates.
+    Queries,
+}
+
+impl BudgetUnit {
+    /// The most demonstrated transitions a budget of `budget` units can bring, with `segment_len` steps per query.
+    pub fn max_transitions(self, budget: usize, segment_len: usize) -> usize {
+        match self {
+            BudgetUnit::Transitions => budget,
+            BudgetUnit::Queries => budget.saturating_mul(segment_len),
+        }
+    }
+}
 
 /// Invalid query configuration.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
