@@ -21,6 +21,7 @@ use arld::train::{
 use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
+use arld::state::Persist;
 use rand::SeedableRng;
 use rand_pcg::Pcg64;
 use std::path::Path;
@@ -838,6 +839,29 @@ fn start_run(
     })
 }
 
+/// The network of a run's snapshot file, acting (and exploring) as the run did at its step; returns the policy,
+/// the configuration as JSON text and the step.
+#[pyfunction]
+fn snapshot_policy(path: &str) -> PyResult<(Policy, String, usize)> {
+    let read = || -> anyhow::Result<(Policy, String, usize)> {
+        let text = train::snapshot::recorded_config(Path::new(path))?;
+        let cfg: TrainConfig = toml::from_str(&text)?;
+        let spec = env::spec(&cfg.env)?;
+        let dir = tempfile::tempdir()?;
+        std::fs::copy(path, dir.path().join(train::snapshot::SNAPSHOT_FILE))?;
+        let state = Checkpointer::new(dir.path(), &cfg)
+            .load()?
+            .ok_or_else(|| anyhow::anyhow!("no snapshot"))?;
+        let mut agent = arld::agent::Agent::new(&cfg.agent_config(), spec.obs_dim, spec.n_actions, 0);
+        agent.load_state("agent", &state)?;
+        let st: serde_json::Value = state.value("loop")?;
+        let step = st["step"].as_u64().unwrap_or(0) as usize;
+        let policy = Policy::exploring(agent.network().clone(), &cfg, step);
+        Ok((policy, serde_json::to_string(&cfg)?, step))
+    };
+    read().map_err(|e| value_error(format!("cannot load {path}: {e:#}")))
+}
+
 /// The configuration a snapshot file recorded, as JSON text (`None` when the file is plain weights).
 #[pyfunction]
 fn snapshot_config(path: &str) -> PyResult<Option<String>> {
@@ -885,6 +909,7 @@ fn _arld(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(resolve_config, m)?)?;
     m.add_function(wrap_pyfunction!(start_run, m)?)?;
     m.add_function(wrap_pyfunction!(snapshot_config, m)?)?;
+    m.add_function(wrap_pyfunction!(snapshot_policy, m)?)?;
     m.add_class::<Run>()?;
     m.add_class::<Policy>()?;
     m.add_class::<BuiltinEnv>()?;
