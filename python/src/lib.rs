@@ -14,14 +14,14 @@ use arld::expert::demos::{DemoColumns, Demonstrations};
 use arld::expert::{self, Expert};
 use arld::nn::QNet;
 use arld::rng::NumpyRng;
+use arld::state::Persist;
 use arld::train::{
-    self, Checkpointer, ConfigInput, Control, Driver, EvalPoint, PausedRun, QueryEvent, RunLog, SeedPurpose,
-    StepView, Summary, TrainConfig, seed_for,
+    self, Checkpointer, ConfigInput, Control, Driver, EvalPoint, PausedRun, QueryEvent, RunLog,
+    SeedPurpose, StepView, Summary, TrainConfig, seed_for,
 };
 use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
-use arld::state::Persist;
 use rand::SeedableRng;
 use rand_pcg::Pcg64;
 use std::path::Path;
@@ -158,7 +158,10 @@ impl Env for PyEnv {
     fn set_generator(&mut self, rng: Option<NumpyRng>) {
         if let Some(rng) = rng {
             Python::attach(|py| {
-                if let Err(e) = self.obj.call_method1(py, "set_generator", (rng.to_words(),)) {
+                if let Err(e) = self
+                    .obj
+                    .call_method1(py, "set_generator", (rng.to_words(),))
+                {
                     self.errors.keep(e);
                 }
             });
@@ -471,7 +474,9 @@ impl Remote {
                     last_eval,
                 ),
             )?;
-            let stop = answer.bind(py).is(&pyo3::types::PyBool::new(py, false).to_owned());
+            let stop = answer
+                .bind(py)
+                .is(pyo3::types::PyBool::new(py, false).to_owned());
             Ok(!stop)
         })
         .map_err(|e: PyErr| anyhow::anyhow!("the callback raised {}", self.errors.keep(e)))
@@ -549,7 +554,9 @@ impl Run {
             });
             match got {
                 Ok(Report::Failed(e)) => {
-                    self.last.as_mut().map(|p| p.finished = true);
+                    if let Some(p) = self.last.as_mut() {
+                        p.finished = true;
+                    }
                     return Err(self.errors.raise(py, e, runtime_error));
                 }
                 Ok(report) => {
@@ -614,7 +621,9 @@ impl Run {
     /// Writes the run's full snapshot (network, optimiser, replay, query state, generators) into `dir`.
     fn snapshot(&mut self, py: Python<'_>, dir: &str) -> PyResult<()> {
         if !self.started {
-            return Err(runtime_error("the run has not started: call learn() first".into()));
+            return Err(runtime_error(
+                "the run has not started: call learn() first".into(),
+            ));
         }
         self.commands
             .send(Command::Snapshot(dir.into()))
@@ -638,7 +647,11 @@ impl Run {
     /// The current policy (a copy of the network, with the exploration of training at step `step`).
     fn policy(&self) -> PyResult<Policy> {
         let p = self.require()?;
-        Ok(Policy::exploring(p.net.clone(), &self.cfg, p.summary.train_steps))
+        Ok(Policy::exploring(
+            p.net.clone(),
+            &self.cfg,
+            p.summary.train_steps,
+        ))
     }
 
     /// The evaluations so far: dicts of step, mean, std, min, max.
@@ -734,7 +747,9 @@ fn start_run(
         let errors = thread_errors;
         // Wait for the first command: the run starts on the first `advance`.
         match remote.commands.recv() {
-            Ok(Command::Advance { until, callback }) => (remote.until, remote.callback) = (until, callback),
+            Ok(Command::Advance { until, callback }) => {
+                (remote.until, remote.callback) = (until, callback)
+            }
             _ => return Ok(()),
         }
         let spec = env::spec(&cfg.env)?;
@@ -802,7 +817,12 @@ fn start_run(
             }
         };
         let mut log = match &log_dir {
-            Some(dir) => RunLog::create(Path::new(dir), &cfg.to_toml(), cfg.train_steps as u64, false)?,
+            Some(dir) => RunLog::create(
+                Path::new(dir),
+                &cfg.to_toml(),
+                cfg.train_steps as u64,
+                false,
+            )?,
             None => RunLog::in_memory(),
         };
         train::train_driven(
@@ -852,7 +872,8 @@ fn snapshot_policy(path: &str) -> PyResult<(Policy, String, usize)> {
         let state = Checkpointer::new(dir.path(), &cfg)
             .load()?
             .ok_or_else(|| anyhow::anyhow!("no snapshot"))?;
-        let mut agent = arld::agent::Agent::new(&cfg.agent_config(), spec.obs_dim, spec.n_actions, 0);
+        let mut agent =
+            arld::agent::Agent::new(&cfg.agent_config(), spec.obs_dim, spec.n_actions, 0);
         agent.load_state("agent", &state)?;
         let st: serde_json::Value = state.value("loop")?;
         let step = st["step"].as_u64().unwrap_or(0) as usize;
@@ -868,9 +889,12 @@ fn snapshot_config(path: &str) -> PyResult<Option<String>> {
     match train::snapshot::recorded_config(Path::new(path)) {
         Err(_) => Ok(None),
         Ok(text) => {
-            let cfg: TrainConfig = toml::from_str(&text)
-                .map_err(|e| value_error(format!("{path}: its configuration cannot be read: {e}")))?;
-            serde_json::to_string(&cfg).map(Some).map_err(|e| runtime_error(e.to_string()))
+            let cfg: TrainConfig = toml::from_str(&text).map_err(|e| {
+                value_error(format!("{path}: its configuration cannot be read: {e}"))
+            })?;
+            serde_json::to_string(&cfg)
+                .map(Some)
+                .map_err(|e| runtime_error(e.to_string()))
         }
     }
 }

@@ -192,7 +192,12 @@ pub fn recorded_config(path: &Path) -> Result<String> {
         .metadata()
         .as_ref()
         .and_then(|m| m.get("config").cloned())
-        .with_context(|| format!("{} is not an arld snapshot (no `config` in its header)", path.display()))
+        .with_context(|| {
+            format!(
+                "{} is not an arld snapshot (no `config` in its header)",
+                path.display()
+            )
+        })
 }
 
 /// How the configuration a snapshot recorded differs from `config` (see [`TrainConfig::differences`]). The
