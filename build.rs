@@ -67,8 +67,7 @@ fn compile_box2d() -> PathBuf {
 }
 
 fn collect_cpp(dir: &Path, into: &mut Vec<PathBuf>) {
-    let entries =
-        std::fs::read_dir(dir).unwrap_or_else(|e| panic!("cannot read {}: {e}", dir.display()));
+    let entries = std::fs::read_dir(dir).unwrap_or_else(|e| panic!("cannot read {}: {e}", dir.display()));
     for entry in entries {
         let path = entry.expect("a directory entry").path();
         if path.is_dir() {
@@ -95,20 +94,13 @@ fn wrapped2d_dir() -> PathBuf {
     );
     let meta: serde_json::Value =
         serde_json::from_slice(&out.stdout).expect("`cargo metadata` prints JSON");
-    let packages = meta["packages"]
-        .as_array()
-        .expect("`cargo metadata` lists packages");
+    let packages = meta["packages"].as_array().expect("`cargo metadata` lists packages");
     let wrapped2d = packages
         .iter()
         .find(|p| p["name"] == "wrapped2d")
         .expect("the wrapped2d package is among the dependencies");
-    let path = wrapped2d["manifest_path"]
-        .as_str()
-        .expect("a package has a manifest path");
-    Path::new(path)
-        .parent()
-        .expect("a manifest has a directory")
-        .to_path_buf()
+    let path = wrapped2d["manifest_path"].as_str().expect("a package has a manifest path");
+    Path::new(path).parent().expect("a manifest has a directory").to_path_buf()
 }
 
 /// The `<name>` of every `fn __wrap_<name>` in `source`, also those a macro defines (`/ __wrap_<name> =`).
