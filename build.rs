@@ -11,6 +11,12 @@
 //! reference to `<name>`, from Rust, the standard library or the bundled Box2D, goes to `__wrap_<name>`) and
 //! `--undefined=__wrap_<name>` (so the definition is taken from this crate's library whatever the link order).
 //! The Python extension (`python/Cargo.toml`) runs this same script, so both find `src/math.rs` next to it.
+//!
+//! It also records the git commit the build comes from as `ARLD_GIT_COMMIT` (read by `src/build_info.rs`): the
+//! short hash of `HEAD`, with `-dirty` when tracked files differ from it; `unknown` outside a git checkout (a
+//! source tarball) or without git. A build never fails for want of git. The variable `ARLD_GIT_COMMIT`, when
+//! set, is taken as is (for builds from a tarball that know their commit). The script runs again when `HEAD`,
+//! the branch it points to, the index or the sources change, so the commit is never stale.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -25,6 +31,11 @@ fn main() {
         .expect("build.rs finds arld's src/math.rs");
     println!("cargo:rerun-if-changed={}", math.display());
     println!("cargo:rerun-if-changed=build.rs");
+    let root = math
+        .parent()
+        .and_then(Path::parent)
+        .expect("src/math.rs is in a package");
+    println!("cargo:rustc-env=ARLD_GIT_COMMIT={}", git_commit(root));
     let box2d = compile_box2d();
     let target_os = std::env::var("CARGO_CFG_TARGET_OS").unwrap_or_default();
     if target_os != "linux" {
@@ -42,9 +53,78 @@ fn main() {
     }
 }
 
-/// Compiles Box2D's sources from the `wrapped2d` package into `OUT_DIR/libarld_box2d.a`; returns its path.
+/// The commit of the checkout at `root` (`282dfac1`, `282dfac1-dirty`), or `unknown`; prints the
+/// `rerun-if-changed` lines that keep it current.
+fn git_commit(root: &Path) -> String {
+    println!("cargo:rerun-if-env-changed=ARLD_GIT_COMMIT");
+    if let Ok(given) = std::env::var("ARLD_GIT_COMMIT")
+        && !given.trim().is_empty()
+    {
+        return given.trim().to_string();
+    }
+    // Git's answer, or `None` when git is missing, fails, or `root` is no checkout.
+    let git = |args: &[&str]| -> Option<String> {
+        let out = Command::new("git")
+            .arg("-C")
+            .arg(root)
+            .args(args)
+            // `git status` must not rewrite the index: that would run this script again on the next build.
+            .env("GIT_OPTIONAL_LOCKS", "0")
+            .output()
+            .ok()?;
+        out.status
+            .success()
+            .then(|| String::from_utf8_lossy(&out.stdout).trim().to_string())
+    };
+    // Only a checkout whose top is this package's root (not a tarball unpacked inside another repository).
+    let top = git(&["rev-parse", "--show-toplevel"]).map(PathBuf::from);
+    let same = |a: &Path, b: &Path| a.canonicalize().ok() == b.canonicalize().ok();
+    if !top.is_some_and(|top| same(&top, root)) {
+        return "unknown".to_string();
+    }
+    let Some(hash) = git(&["rev-parse", "--short=8", "HEAD"]).filter(|h| !h.is_empty()) else {
+        return "unknown".to_string();
+    };
+    // HEAD, the branch it names (loose or packed), the index (commits, `git add`), and the tracked sources.
+    let mut watched = vec![
+        "HEAD".to_string(),
+        "packed-refs".to_string(),
+        "index".to_string(),
+    ];
+    if let Some(branch) = git(&["symbolic-ref", "-q", "HEAD"]) {
+        watched.push(branch);
+    }
+    for name in watched {
+        // Relative to `root` where git gives a relative path (`-C root`).
+        if let Some(path) = git(&["rev-parse", "--git-path", &name]).map(|p| root.join(p))
+            && path.exists()
+        {
+            println!("cargo:rerun-if-changed={}", path.display());
+        }
+    }
+    for dir in ["src", "python/src", "Cargo.toml"] {
+        if root.join(dir).exists() {
+            println!("cargo:rerun-if-changed={}", root.join(dir).display());
+        }
+    }
+    let dirty =
+        git(&["status", "--porcelain", "--untracked-files=no"]).is_some_and(|s| !s.is_empty());
+    if dirty { format!("{hash}-dirty") } else { hash }
+}
+
+/// Compiles Box2D's sources from the `wrapped2d` package into `OUT_DIR/libarld_box2d.a`; returns its path. The
+/// archive of an earlier run of this script is kept when it was compiled from the same sources the same way
+/// (the script runs again on every commit, and Box2D's sources do not change with arld's).
 fn compile_box2d() -> PathBuf {
-    let root = wrapped2d_dir().join("Box2D/Box2D");
+    let out = std::env::var("OUT_DIR").expect("cargo sets OUT_DIR");
+    let archive = Path::new(&out).join("libarld_box2d.a");
+    let stamp_path = Path::new(&out).join("arld_box2d.stamp");
+    let wrapped2d = wrapped2d_dir();
+    let stamp = format!("{}\n-O3 -DNDEBUG v1\n", wrapped2d.display());
+    if archive.is_file() && std::fs::read_to_string(&stamp_path).is_ok_and(|s| s == stamp) {
+        return archive;
+    }
+    let root = wrapped2d.join("Box2D/Box2D");
     let mut sources = Vec::new();
     collect_cpp(&root.join("Box2D"), &mut sources);
     sources.sort();
@@ -62,12 +142,13 @@ fn compile_box2d() -> PathBuf {
         .warnings(false)
         .cargo_metadata(false)
         .compile("arld_box2d");
-    let out = std::env::var("OUT_DIR").expect("cargo sets OUT_DIR");
-    Path::new(&out).join("libarld_box2d.a")
+    std::fs::write(&stamp_path, stamp).expect("build.rs writes its stamp into OUT_DIR");
+    archive
 }
 
 fn collect_cpp(dir: &Path, into: &mut Vec<PathBuf>) {
-    let entries = std::fs::read_dir(dir).unwrap_or_else(|e| panic!("cannot read {}: {e}", dir.display()));
+    let entries =
+        std::fs::read_dir(dir).unwrap_or_else(|e| panic!("cannot read {}: {e}", dir.display()));
     for entry in entries {
         let path = entry.expect("a directory entry").path();
         if path.is_dir() {
@@ -94,13 +175,20 @@ fn wrapped2d_dir() -> PathBuf {
     );
     let meta: serde_json::Value =
         serde_json::from_slice(&out.stdout).expect("`cargo metadata` prints JSON");
-    let packages = meta["packages"].as_array().expect("`cargo metadata` lists packages");
+    let packages = meta["packages"]
+        .as_array()
+        .expect("`cargo metadata` lists packages");
     let wrapped2d = packages
         .iter()
         .find(|p| p["name"] == "wrapped2d")
         .expect("the wrapped2d package is among the dependencies");
-    let path = wrapped2d["manifest_path"].as_str().expect("a package has a manifest path");
-    Path::new(path).parent().expect("a manifest has a directory").to_path_buf()
+    let path = wrapped2d["manifest_path"]
+        .as_str()
+        .expect("a package has a manifest path");
+    Path::new(path)
+        .parent()
+        .expect("a manifest has a directory")
+        .to_path_buf()
 }
 
 /// The `<name>` of every `fn __wrap_<name>` in `source`, also those a macro defines (`/ __wrap_<name> =`).

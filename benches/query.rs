@@ -30,7 +30,7 @@ fn normal_vec(rng: &mut Pcg64, len: usize, scale: f32) -> Vec<f32> {
 fn full_rule(rng: &mut Pcg64, mut draw: impl FnMut(&mut Pcg64) -> f32) -> AdaptiveQuantileRule {
     let mut rule = AdaptiveQuantileRule::new(N_R, 0.3).expect("valid rule");
     for _ in 0..2 * N_R {
-        let _ = rule.decide(draw(rng));
+        let _ = rule.observe(draw(rng));
     }
     rule
 }
@@ -68,7 +68,7 @@ fn bench_query(c: &mut Criterion) {
     c.bench_function("adaptive decide N_r=1000", |b| {
         let mut rule = full_rule(&mut rng.clone(), |r| r.random());
         let mut stream = Pcg64::seed_from_u64(7);
-        b.iter(|| black_box(rule.decide(stream.random())))
+        b.iter(|| black_box(rule.observe(stream.random())))
     });
 
     c.bench_function("js_divergence + adaptive decide (per step)", |b| {
@@ -80,7 +80,7 @@ fn bench_query(c: &mut Criterion) {
         b.iter(|| {
             i = (i + 1) % POOL;
             let q = &q_pool[i * HEADS * ACTIONS..(i + 1) * HEADS * ACTIONS];
-            black_box(rule.decide(js_divergence(black_box(q), HEADS, ACTIONS)))
+            black_box(rule.observe(js_divergence(black_box(q), HEADS, ACTIONS)))
         })
     });
 
@@ -96,7 +96,7 @@ fn bench_query(c: &mut Criterion) {
         b.iter(|| {
             i = (i + 1) % POOL;
             let phi = &feature_pool[i * FEATURES..(i + 1) * FEATURES];
-            black_box(rule.decide(noisy_variance(black_box(phi), &sigma_w, sigma_b, false)))
+            black_box(rule.observe(noisy_variance(black_box(phi), &sigma_w, sigma_b, false)))
         })
     });
 

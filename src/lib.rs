@@ -14,6 +14,7 @@
 //! - [`train`]: the training loop of one run, top to bottom, and its full-state snapshots.
 //! - [`experiment`]: presets, run directories, sweeps (local and on Slurm), steps to solve, tables and figures.
 //! - [`paper`]: the paper's tables (tasks, parameters, expert statistics, steps to solve) as data.
+//! - [`build_info`]: the version and the git commit this arld was built from ([`VERSION`], [`GIT_COMMIT`]).
 //! - [`files`]: the one atomic file write every saved file goes through.
 //! - [`state`]: a component's state as named raw arrays and small values (what snapshots are made of).
 //! - [`math`]: the correctly rounded elementary functions every computation uses (one result on every CPU).
@@ -23,6 +24,7 @@
 //! The binary `arld` is a thin command-line layer over this library.
 
 pub mod agent;
+pub mod build_info;
 pub mod env;
 pub mod experiment;
 pub mod expert;
@@ -37,3 +39,5 @@ pub mod rng;
 pub mod state;
 pub mod tboard;
 pub mod train;
+
+pub use build_info::{GIT_COMMIT, VERSION};

@@ -6,7 +6,7 @@ use clap::{Parser, Subcommand};
 
 /// Active Reinforcement Learning with Demonstration: DQN agents that ask an expert only where they are unsure.
 #[derive(Parser)]
-#[command(name = "arld", version, about, long_about = None)]
+#[command(name = "arld", version = arld::build_info::VERSION_LINE, about, long_about = None)]
 struct Cli {
     #[command(subcommand)]
     command: Command,

@@ -261,6 +261,13 @@ fn a_short_run_writes_every_result_file() {
 /// expert, a non-zero exit and no summary (the run stays incomplete).
 #[test]
 fn expert_process_runs_and_its_failures_are_clear() {
+    assert!(
+        Command::new("python3")
+            .arg("--version")
+            .output()
+            .is_ok_and(|o| o.status.success()),
+        "python3 is missing (it runs examples/expert.py here); `scripts/test --setup` installs it"
+    );
     let dir = tempfile::tempdir().unwrap();
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/expert.py");
     let good = format!("cmd:python3 {}", script.display());

@@ -136,6 +136,8 @@ fn write_fake_run(spec: &RunSpec, dir: &Path, interrupt: bool) -> Result<()> {
             cpu_time_s: None,
             steps_per_s: 1e5,
             numerics: Some(arld::math::NUMERICS.to_string()),
+            arld_version: None,
+            git_commit: None,
         },
     )
 }

@@ -20,7 +20,7 @@ use std::path::{Path, PathBuf};
 
 /// The layers, bottom first. Modules of one layer may not use each other.
 const LAYERS: [&[&str]; 7] = [
-    &["files", "paper", "state", "interrupt", "math"],
+    &["build_info", "files", "paper", "state", "interrupt", "math"],
     &["rng", "nn", "replay", "query"],
     &["env", "agent"],
     &["expert"],

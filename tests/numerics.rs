@@ -213,9 +213,9 @@ fn the_switch_really_changes_the_c_librarys_sin() {
             Some(t) => cmd.env("GLIBC_TUNABLES", t),
             None => cmd.env_remove("GLIBC_TUNABLES"),
         };
-        let out = cmd
-            .output()
-            .expect("python3 runs (it calls glibc's sin directly)");
+        let out = cmd.output().expect(
+            "python3 runs (it calls glibc's sin directly; `scripts/test --setup` installs it)",
+        );
         assert!(out.status.success());
         String::from_utf8(out.stdout).unwrap().trim().to_string()
     };

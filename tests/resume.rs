@@ -336,7 +336,7 @@ fn a_snapshot_of_another_configuration_is_refused() {
         .output()
         .unwrap();
     assert!(!out.status.success());
-    assert!(String::from_utf8_lossy(&out.stderr).contains("holds no snapshot"));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("holds no run to resume"));
 }
 
 /// A safetensors file's bytes with one `__metadata__` entry changed (the header rewritten, the data kept).

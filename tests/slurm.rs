@@ -1,7 +1,8 @@
 //! Sweeps on a real Slurm: a one-node cluster on localhost (munged, slurmctld, slurmd) started from a
 //! configuration written into a temporary directory. If the cluster cannot start, the test fails and says why.
 //!
-//! Needs Debian's `slurm-wlm` and `munge` (`.ci/run` installs them) and root (Slurm runs the jobs as root here).
+//! Needs Debian's `slurm-wlm` and `munge` and root (Slurm runs the jobs as root here): `scripts/test --setup`
+//! installs them; without them the test fails, naming what is missing and that command.
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
@@ -14,9 +15,41 @@ static ONE_CLUSTER: std::sync::Mutex<()> = std::sync::Mutex::new(());
 
 fn run(cmd: &mut Command) -> Output {
     let shown = format!("{cmd:?}");
-    cmd.output().unwrap_or_else(|e| {
-        panic!("cannot run {shown}: {e} (is Slurm installed? .ci/run installs slurm-wlm and munge)")
-    })
+    cmd.output()
+        .unwrap_or_else(|e| panic!("cannot run {shown}: {e} (is Slurm installed? {SETUP})"))
+}
+
+/// The one command that installs what these tests need.
+const SETUP: &str = "`scripts/test --setup` installs Slurm (slurm-wlm) and MUNGE (munge)";
+
+/// Whether `program` is on the PATH or in the system directories daemons live in.
+fn installed(program: &str) -> bool {
+    let path = std::env::var_os("PATH").unwrap_or_default();
+    std::env::split_paths(&path)
+        .chain(["/usr/sbin", "/sbin"].map(PathBuf::from))
+        .any(|dir| dir.join(program).is_file())
+}
+
+/// Fails, naming what is missing and the command that installs it, when the machine lacks Slurm or MUNGE.
+fn check_prerequisites() {
+    let missing: Vec<&str> = [
+        "slurmctld",
+        "slurmd",
+        "sbatch",
+        "squeue",
+        "sinfo",
+        "munged",
+        "munge",
+        "unmunge",
+    ]
+    .into_iter()
+    .filter(|program| !installed(program))
+    .collect();
+    assert!(
+        missing.is_empty(),
+        "the Slurm tests cannot run; missing: {}; {SETUP}",
+        missing.join(", ")
+    );
 }
 
 fn text(out: &[u8]) -> String {
@@ -32,6 +65,7 @@ struct Cluster {
 
 impl Cluster {
     fn start() -> Cluster {
+        check_prerequisites();
         let guard = ONE_CLUSTER.lock().unwrap_or_else(|e| e.into_inner());
         let host = text(&run(Command::new("hostname").arg("-s")).stdout)
             .trim()
@@ -199,7 +233,7 @@ fn start_munge() {
     ]));
     assert!(
         out.status.success(),
-        "munged did not start (it needs root and the munge package): {}",
+        "munged did not start (it needs root and the munge package; {SETUP}): {}",
         text(&out.stderr)
     );
     std::thread::sleep(Duration::from_millis(500));

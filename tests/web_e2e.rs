@@ -5,8 +5,9 @@
 //! without the token get 403 and that a watching tab's messages are refused; screenshots go to
 //! target/e2e-screenshots/.
 //!
-//! Needs Debian's `chromium` (/usr/bin/chromium, or $CHROMIUM), `node`, and `npm ci` in tests/e2e (.ci/run
-//! installs all three); without them the test fails and says what is missing.
+//! Needs Debian's `chromium` (/usr/bin/chromium, or $CHROMIUM), `node`, and `npm ci` in tests/e2e
+//! (`scripts/test --setup` installs all three); without them the test fails, naming what is missing and that
+//! command.
 
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
@@ -22,17 +23,19 @@ fn check_prerequisites() {
     let chromium = std::env::var("CHROMIUM").unwrap_or_else(|_| "/usr/bin/chromium".into());
     let mut missing = Vec::new();
     if !Path::new(&chromium).is_file() {
-        missing.push(format!("Chromium at {chromium} (apt-get install chromium)"));
+        missing.push(format!("Chromium at {chromium} (Debian's chromium)"));
     }
     if Command::new("node").arg("--version").output().is_err() {
-        missing.push("node (apt-get install nodejs npm)".to_string());
+        missing.push("node (Debian's nodejs)".to_string());
     }
     if !e2e_dir().join("node_modules/playwright-core").is_dir() {
-        missing.push("playwright-core (cd tests/e2e && npm ci)".to_string());
+        missing.push(
+            "playwright-core (in tests/e2e/node_modules, from its package-lock.json)".to_string(),
+        );
     }
     assert!(
         missing.is_empty(),
-        "the web expert's browser test cannot run; missing: {}",
+        "the web expert's browser test cannot run; missing: {}; `scripts/test --setup` installs them",
         missing.join(", ")
     );
 }

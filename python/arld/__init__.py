@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import copy
 import difflib
-import importlib.metadata
 import json
 import os
 import shutil
@@ -28,10 +27,7 @@ import numpy as np
 
 from . import _arld
 
-try:
-    __version__ = importlib.metadata.version("arld")
-except importlib.metadata.PackageNotFoundError:  # pragma: no cover - running from a source tree
-    __version__ = "0+unknown"
+__version__ = _arld.__version__
 
 __all__ = ["Agent", "make", "preset", "config_keys", "collect_demos", "METHODS", "NETS", "__version__"]
 
@@ -645,6 +641,8 @@ class Agent:
             env = _EnvBridge(self.env)
             test_envs = [_EnvBridge(e) for e in self._test_envs(self.config["eval_episodes"])]
             demo_env = _EnvBridge(self.env)
+        # The run writes its directory until it ends, maybe after the working directory changed: fix it now.
+        log_dir = None if log_dir is None else os.path.abspath(log_dir)
         return _arld.start_run(
             json.dumps(self.config), env=env, test_envs=test_envs, expert=self._expert,
             expert_name=self._expert_name, demos=self._demos, log_dir=log_dir, resume=resume, demo_env=demo_env,

@@ -335,7 +335,7 @@ impl Policy {
                 if episode_start {
                     agent.begin_episode();
                 }
-                Ok(agent.act(&obs, *eps, false).0)
+                Ok(agent.act(&obs, *eps, arld::query::Needs::NOTHING).0)
             }
         }
     }
@@ -927,6 +927,9 @@ impl DemoArrays {
 
 #[pymodule]
 fn _arld(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    // The library's version and the git commit it was built from (`arld.__version__`, `_arld.git_commit`).
+    m.add("__version__", arld::VERSION)?;
+    m.add("git_commit", arld::GIT_COMMIT)?;
     m.add_function(wrap_pyfunction!(register_env, m)?)?;
     m.add_function(wrap_pyfunction!(builtin_env_ids, m)?)?;
     m.add_function(wrap_pyfunction!(config_keys, m)?)?;

@@ -10,7 +10,7 @@
 use crate::nn::{
     Adam, Grads, HIDDEN, NoiseSample, OutputKind, QNet, Workspace, argmax, clip_grad_norm,
 };
-use crate::query::{js_divergence, noisy_variance};
+use crate::query::{Needs, Signals, head_variance, js_divergence, noisy_variance, q_gap};
 use crate::replay::Batch;
 use crate::state::{Persist, StateDict, StateError};
 use rand::{Rng, SeedableRng};
@@ -162,22 +162,20 @@ impl Agent {
     }
 
     /// The behaviour policy: greedy under the active head (or the current noise sample), ε-greedy on top.
-    /// With `want_uncertainty`, also returns the uncertainty of the state (§7): the Jensen–Shannon divergence
-    /// of the heads' softmax policies, or the predictive variance of the noisy layer for the greedy action.
-    pub fn act(
-        &mut self,
-        obs: &[f32],
-        epsilon: f64,
-        want_uncertainty: bool,
-    ) -> (usize, Option<f32>) {
+    /// Also returns the signals `want` asks for (§7 and docs/algorithm.md section 14): the uncertainty (the
+    /// Jensen–Shannon divergence of the heads' softmax policies, or the predictive variance of the noisy layer
+    /// for the greedy action), the variance of the heads' Q-values, and the active head's Q-gap. None of them
+    /// draws a random number: what is computed does not change the run.
+    pub fn act(&mut self, obs: &[f32], epsilon: f64, want: Needs) -> (usize, Signals) {
         let a = self.online.n_actions();
         let heads = self.online.heads();
         let noise = matches!(self.online.kind(), OutputKind::Noisy).then_some(&self.noise_act);
         self.online
             .q_values_single_with_features(obs, noise, &mut self.q_act, &mut self.phi);
         let q = &self.q_act;
-        let greedy = argmax(&q[self.active_head * a..(self.active_head + 1) * a]);
-        let uncertainty = if want_uncertainty {
+        let active = &q[self.active_head * a..(self.active_head + 1) * a];
+        let greedy = argmax(active);
+        let uncertainty = if want.uncertainty {
             match self.online.kind() {
                 OutputKind::Bootstrap { .. } => Some(js_divergence(q, heads, a)),
                 OutputKind::Noisy => {
@@ -197,12 +195,18 @@ impl Agent {
         } else {
             None
         };
+        let signals = Signals {
+            uncertainty,
+            head_variance: (want.head_variance && heads > 1).then(|| head_variance(q, heads, a)),
+            q_gap: want.q_gap.then(|| q_gap(active)),
+            greedy,
+        };
         let action = if epsilon > 0.0 && self.rng.random::<f64>() < epsilon {
             self.rng.random_range(0..a)
         } else {
             greedy
         };
-        (action, uncertainty)
+        (action, signals)
     }
 
     /// The test-time policy, without exploration (§5): see [`test_policy_action`].

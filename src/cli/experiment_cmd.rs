@@ -48,6 +48,7 @@ pub struct SweepArgs {
     #[arg(long = "set", value_name = "KEY=VALUE")]
     overrides: Vec<String>,
     /// A variant per override (repeatable), e.g. --vary n_r=100 --vary n_r=10000; runs go to `.../n_r-100/seedN`.
+    /// Overrides joined by `;` vary together: --vary 'budget=50;query_rule=paced'.
     #[arg(long, value_name = "KEY=VALUE")]
     vary: Vec<String>,
     /// Parallel runs (0: one per core).
@@ -62,7 +63,8 @@ pub struct SweepArgs {
     #[command(flatten)]
     older: OlderRunsArg,
 
-    /// Show which runs of the sweep in DIR are done, running, failed or pending, and where; runs nothing.
+    /// Show which runs of the sweep in DIR are done, running, failed (with the first line of the error in their
+    /// failed.json) or pending, and where; runs nothing.
     #[arg(long, value_name = "DIR", conflicts_with_all = ["grid", "env", "method", "out", "shard", "slurm"])]
     status: Option<PathBuf>,
     /// Submit the sweep to Slurm as a job array instead of running it here.
@@ -248,9 +250,10 @@ fn print_status(dir: &std::path::Path) -> Result<ExitCode> {
                     .unwrap_or_default();
                 println!("running      {} on {host}{job}", name.display());
             }
-            RunState::Failed { host, error } => {
+            RunState::Failed { host, error, step } => {
                 failed += 1;
-                println!("failed       {} on {host}: {error}", name.display());
+                let at = step.map(|s| format!(" at step {s}")).unwrap_or_default();
+                println!("failed       {} on {host}{at}: {error}", name.display());
             }
             RunState::Interrupted { host } => {
                 interrupted += 1;

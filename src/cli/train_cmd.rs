@@ -14,7 +14,8 @@ arld train --env CartPole-v0 --method adqn --expert web     (a person answers in
 Configuration is layered: the paper's preset for the task and method, then --config FILE (TOML with any of the \
 keys), then each --set key=value. `arld train --env ID --method M --print-config` shows every key with its value.\n\n\
 A run snapshots itself every `snapshot_every` steps and when stopped (Ctrl-C, SIGTERM); `arld train --resume RUN_DIR` \
-continues it to the results an uninterrupted run gives."
+continues it to the results an uninterrupted run gives (a run stopped before its first snapshot starts again from step 0). \
+A run that ends with an error writes failed.json in its directory: the error, the step, the time, the arld version and commit."
 )]
 pub struct TrainArgs {
     /// Gymnasium id: CartPole-v0, CartPole-v1, Acrobot-v1, MountainCar-v0, LunarLander-v2, LunarLander-v3
@@ -67,7 +68,8 @@ pub struct TrainArgs {
     /// Print the resolved configuration as TOML and exit.
     #[arg(long)]
     print_config: bool,
-    /// Continue the interrupted run in RUN_DIR from its snapshot, with the configuration it was started with.
+    /// Continue the interrupted run in RUN_DIR from its snapshot, with the configuration it was started with
+    /// (its config.toml); a run stopped before its first snapshot starts again from step 0.
     #[arg(long, value_name = "RUN_DIR", conflicts_with_all = ["env", "config", "overrides", "expert", "demos", "out", "overwrite", "print_config"])]
     resume: Option<PathBuf>,
     /// Hide the progress bar.
@@ -81,10 +83,16 @@ pub fn resolve(args: &TrainArgs) -> anyhow::Result<TrainConfig> {
         // The run's own config.toml names its environment, method, network and seed.
         let config = dir.join(arld::train::run_dir::CONFIG_FILE);
         anyhow::ensure!(
-            dir.join(arld::train::snapshot::SNAPSHOT_FILE).is_file(),
-            "{} holds no snapshot to resume from (a finished run has none; an unfinished one has one once it \
-             has run snapshot_every steps or was stopped with Ctrl-C/SIGTERM)",
-            dir.display()
+            config.is_file(),
+            "{} holds no run to resume: it has no {} (the configuration a run writes when it starts)",
+            dir.display(),
+            arld::train::run_dir::CONFIG_FILE
+        );
+        anyhow::ensure!(
+            !arld::train::run_dir::is_complete(dir),
+            "{} holds a finished run (it has {}): there is nothing to resume",
+            dir.display(),
+            arld::train::run_dir::SUMMARY_FILE
         );
         let mut input = ConfigInput::new("CartPole-v0", Method::Dqn, NetKind::Bootstrap, 0);
         input.apply_file(&config)?;
@@ -153,8 +161,17 @@ pub fn run(args: TrainArgs) -> anyhow::Result<ExitCode> {
         .clone()
         .or_else(|| args.out.clone())
         .unwrap_or_else(|| PathBuf::from("runs").join(cfg.run_name()));
-    if args.resume.is_none() {
-        arld::train::run_dir::prepare_new_run(&dir, args.overwrite)?;
+    match &args.resume {
+        None => arld::train::run_dir::prepare_new_run(&dir, args.overwrite)?,
+        // Killed before its first snapshot: nothing to continue from, so the run starts again.
+        Some(resume) if !resume.join(arld::train::snapshot::SNAPSHOT_FILE).is_file() => {
+            eprintln!(
+                "arld: {} has no snapshot yet (the run stopped before its first one): starting it again from step 0",
+                resume.display()
+            );
+            arld::train::run_dir::prepare_restart(resume)?;
+        }
+        Some(_) => {}
     }
     arld::interrupt::install()?;
     let s = match run_one(&cfg, Some(&dir), !args.quiet) {
@@ -180,9 +197,14 @@ pub fn run(args: TrainArgs) -> anyhow::Result<ExitCode> {
             if !dir.join(arld::train::run_dir::CONFIG_FILE).is_file() {
                 return Ok(ExitCode::FAILURE);
             }
+            let why = if dir.join(arld::train::run_dir::FAILED_FILE).is_file() {
+                format!("; {} records why", arld::train::run_dir::FAILED_FILE)
+            } else {
+                String::new()
+            };
             eprintln!(
                 "the run in {} is incomplete: its logs (episodes.csv, queries.csv, eval.csv once an evaluation \
-                 ran) end where it stopped, and it has no summary.json",
+                 ran) end where it stopped, and it has no summary.json{why}",
                 dir.display()
             );
             return Ok(ExitCode::FAILURE);

@@ -6,9 +6,11 @@
 //! directory's format.
 //!
 //! Within this layer imports go one way: `dir_lock` <- `sweep`; `stats`, `sweep` <- `protocol`;
-//! `protocol`, `plot` <- `figures`; `figures`, `plot` <- `report`; `slurm` <- the CLI.
+//! `protocol`, `plot` <- `figures`; `protocol`, `plot`, `stats`, `verdict` <- `effort`; `effort`, `figures`, `plot`
+//! <- `report`; `slurm` <- the CLI.
 
 pub mod dir_lock;
+pub mod effort;
 pub mod figures;
 pub mod plot;
 pub mod protocol;
@@ -27,7 +29,68 @@ use std::path::Path;
 /// (or keeps everything in memory when `out_dir` is `None`). A run directory holding a snapshot of an
 /// interrupted run of `cfg` is continued from it; while the run goes on it snapshots itself every
 /// `cfg.snapshot_every` steps and when asked to stop ([`crate::interrupt`]).
+///
+/// A run that ends with an error leaves `failed.json` in its directory when it has one (training records the
+/// step it failed at; an error before training, such as an expert that cannot be started, is recorded here as
+/// the `setup` phase); the summary of a later attempt that finishes the run removes it.
 pub fn run_one(cfg: &TrainConfig, out_dir: Option<&Path>, progress: bool) -> Result<Summary> {
+    let (mut expert, demos) = match setup(cfg) {
+        Ok(parts) => parts,
+        Err(err) => {
+            if let Some(dir) = out_dir.filter(|dir| dir.is_dir()) {
+                train::record_failure(dir, &err, "setup", 0);
+            }
+            return Err(err);
+        }
+    };
+    let expert = expert.as_mut().map(|e| &mut **e as &mut dyn expert::Expert);
+    let Some(dir) = out_dir else {
+        let (summary, _agent) =
+            train::train(cfg, expert, demos.as_ref(), &mut RunLog::in_memory())?;
+        return Ok(summary);
+    };
+    // A run directory with a snapshot continues from it (refused if it belongs to another configuration).
+    let mut checkpointer = Checkpointer::new(dir, cfg);
+    let opened = checkpointer.load().and_then(|snapshot| {
+        let log = match &snapshot {
+            Some(state) => RunLog::resume(
+                dir,
+                &train::resume_position(state)?,
+                cfg.train_steps as u64,
+                progress,
+            )?,
+            None => RunLog::create(dir, &cfg.to_toml(), cfg.train_steps as u64, progress)?,
+        };
+        Ok((snapshot, log))
+    });
+    let (snapshot, mut log) = match opened {
+        Ok(opened) => opened,
+        Err(err) => {
+            if dir.is_dir() {
+                train::record_failure(dir, &err, "setup", 0);
+            }
+            return Err(err);
+        }
+    };
+    if snapshot.is_some() {
+        eprintln!("{}: continuing from its snapshot", dir.display());
+    }
+    let (summary, _agent) = train::train_resumable(
+        cfg,
+        expert,
+        demos.as_ref(),
+        &mut log,
+        &mut checkpointer,
+        snapshot.as_ref(),
+    )?;
+    Ok(summary)
+}
+
+/// What a run is given before training: its expert and its pre-training demonstrations, each if it needs them.
+type Setup = (Option<Box<dyn expert::Expert>>, Option<Demonstrations>);
+
+/// The expert and the demonstrations `cfg` needs (none for a method that needs none).
+fn setup(cfg: &TrainConfig) -> Result<Setup> {
     let mut expert = if cfg.method.needs_expert() {
         Some(expert::from_spec(
             &cfg.expert,
@@ -61,36 +124,7 @@ pub fn run_one(cfg: &TrainConfig, out_dir: Option<&Path>, progress: bool) -> Res
     } else {
         None
     };
-    let expert = expert.as_mut().map(|e| &mut **e as &mut dyn expert::Expert);
-    let Some(dir) = out_dir else {
-        let (summary, _agent) =
-            train::train(cfg, expert, demos.as_ref(), &mut RunLog::in_memory())?;
-        return Ok(summary);
-    };
-    // A run directory with a snapshot continues from it (refused if it belongs to another configuration).
-    let mut checkpointer = Checkpointer::new(dir, cfg);
-    let snapshot = checkpointer.load()?;
-    if snapshot.is_some() {
-        eprintln!("{}: continuing from its snapshot", dir.display());
-    }
-    let mut log = match &snapshot {
-        Some(state) => RunLog::resume(
-            dir,
-            &train::resume_position(state)?,
-            cfg.train_steps as u64,
-            progress,
-        )?,
-        None => RunLog::create(dir, &cfg.to_toml(), cfg.train_steps as u64, progress)?,
-    };
-    let (summary, _agent) = train::train_resumable(
-        cfg,
-        expert,
-        demos.as_ref(),
-        &mut log,
-        &mut checkpointer,
-        snapshot.as_ref(),
-    )?;
-    Ok(summary)
+    Ok((expert, demos))
 }
 
 /// Runs `cfg` into `dir`, or reuses the finished run there when it was run with exactly `cfg` (returns `None`

@@ -67,6 +67,107 @@ pub const CARTPOLE_TARGET_ABLATION: &str = "target_period=500";
 /// The task of the N_r study and of the ablations (a)-(d).
 pub const STUDY_TASK: &str = "Acrobot-v1";
 
+/// The effort benchmark's query rules at the paper's budget, each run as ADQN with `query_rule` set
+/// (docs/algorithm.md section 14): the field's rules with their defaults and arld's own. The paper's rules are
+/// the methods part's GDQN, BDQN and ADQN runs.
+pub const EFFORT_RULES: [&str; 11] = [
+    "paced",
+    "paced(horizon=0.1)",
+    "rcmp",
+    "qgap",
+    "calibrated",
+    "budget_paced",
+    "variable",
+    "importance",
+    "mistake",
+    "ranked",
+    "ranked(horizon=0.1)",
+];
+
+/// The budgets of the effort benchmark beside the paper's (the methods part's runs), as multiples of it.
+pub const EFFORT_BUDGET_SCALES: [f64; 4] = [0.25, 0.5, 2.0, 4.0];
+
+/// The rules run at every budget of [`EFFORT_BUDGET_SCALES`], beside BDQN and ADQN.
+pub const EFFORT_SCALED_RULES: [&str; 2] = ["paced", "ranked(horizon=0.1)"];
+
+/// The network of the effort benchmark's screen (the noisy network is for the rules that survive it).
+pub const EFFORT_NET: NetKind = NetKind::Bootstrap;
+
+/// The effort benchmark's design seeds: rules are chosen and tuned on these only.
+pub const DESIGN_SEEDS: std::ops::Range<u64> = 0..10;
+
+/// Held-out seeds for the test of the chosen rule, fixed before any of them is run.
+pub const HELD_OUT_SEEDS: std::ops::Range<u64> = 100..120;
+
+/// Whether a run's variant (its directory name) belongs to the effort benchmark: it varies the query rule or the
+/// budget ([`effort_grids`] names them `query_rule-...` and `budget-...`).
+pub fn is_effort_variant(variant: &str) -> bool {
+    variant.starts_with("query_rule-") || variant.starts_with("budget-")
+}
+
+/// The paper's budget for `env` (ADQN's preset), in demonstrated transitions.
+pub fn paper_budget(env: &str) -> usize {
+    crate::train::TrainConfig::preset(env, Method::Adqn, EFFORT_NET, 0)
+        .map(|c| c.budget)
+        .unwrap_or(0)
+}
+
+/// The budget `scale` times the paper's for `env`, at least one transition.
+pub fn scaled_budget(env: &str, scale: f64) -> usize {
+    ((paper_budget(env) as f64 * scale).round() as usize).max(1)
+}
+
+/// The effort benchmark (issue: which rule spends the expert's effort best) as sweep grids over `seeds`: every
+/// rule of [`EFFORT_RULES`] at the paper's budget, then BDQN, ADQN and [`EFFORT_SCALED_RULES`] at the budgets of
+/// [`EFFORT_BUDGET_SCALES`], on the four tasks with [`EFFORT_NET`].
+pub fn effort_grids(seeds: &[u64]) -> Vec<SweepGrid> {
+    let tasks: Vec<&str> = crate::paper::PAPER_TASKS.iter().map(|t| t.gym_id).collect();
+    let mut grids = Vec::new();
+    for env in &tasks {
+        grids.push(SweepGrid {
+            envs: vec![env.to_string()],
+            methods: vec![Method::Adqn],
+            nets: vec![EFFORT_NET],
+            seeds: seeds.to_vec(),
+            vary: EFFORT_RULES
+                .iter()
+                .map(|r| format!("query_rule={r}"))
+                .collect(),
+            ..SweepGrid::default()
+        });
+    }
+    for env in &tasks {
+        let budgets: Vec<String> = EFFORT_BUDGET_SCALES
+            .iter()
+            .map(|&s| format!("budget={}", scaled_budget(env, s)))
+            .collect();
+        grids.push(SweepGrid {
+            envs: vec![env.to_string()],
+            methods: vec![Method::Bdqn, Method::Adqn],
+            nets: vec![EFFORT_NET],
+            seeds: seeds.to_vec(),
+            vary: budgets.clone(),
+            ..SweepGrid::default()
+        });
+        grids.push(SweepGrid {
+            envs: vec![env.to_string()],
+            methods: vec![Method::Adqn],
+            nets: vec![EFFORT_NET],
+            seeds: seeds.to_vec(),
+            vary: budgets
+                .iter()
+                .flat_map(|b| {
+                    EFFORT_SCALED_RULES
+                        .iter()
+                        .map(move |r| format!("{b};query_rule={r}"))
+                })
+                .collect(),
+            ..SweepGrid::default()
+        });
+    }
+    grids
+}
+
 /// Number of seeds the paper used per configuration.
 pub const PAPER_SEEDS: u64 = 20;
 
@@ -75,6 +176,7 @@ pub const PAPER_SEEDS: u64 = 20;
 /// - `t_query`: ADQN on the four tasks x both nets x t_query in {0.05, 0.1, 0.3, 0.5} (Figure 3);
 /// - `experts`: ADQN and DQfD on Lunar Lander x both nets x three experts (Figure 4);
 /// - `n_r`: ADQN on Acrobot x both nets x N_r in {100, 10000} (1000 is the methods part's);
+/// - `effort`: the effort benchmark ([`effort_grids`]);
 /// - `ablations`: [`ABLATIONS`] on Acrobot and [`CARTPOLE_TARGET_ABLATION`] on CartPole, for DQN, BDQN and ADQN
 ///   x both nets (the methods part's runs are the baseline), then [`HARDER_ABLATIONS`] on [`HARDER_TASKS`].
 ///
@@ -152,6 +254,9 @@ pub fn paper_grids(seeds: u64) -> Vec<(&'static str, SweepGrid)> {
             grids.push(("ablations", ablation(env, vary, methods)));
         }
     }
+    for grid in effort_grids(&seed_list) {
+        grids.push(("effort", grid));
+    }
     grids
 }
 
@@ -186,13 +291,34 @@ mod tests {
                 3 * 2 * 2 * 20,
                 2 * 2 * 20,
                 3 * 2 * 2 * 20,
-                2 * 2 * 20
+                2 * 2 * 20,
+                11 * 20,
+                11 * 20,
+                11 * 20,
+                11 * 20,
+                2 * 4 * 20,
+                8 * 20,
+                2 * 4 * 20,
+                8 * 20,
+                2 * 4 * 20,
+                8 * 20,
+                2 * 4 * 20,
+                8 * 20,
             ]
         );
         assert_eq!(
             part_names(),
-            ["methods", "t_query", "experts", "n_r", "ablations"]
+            [
+                "methods",
+                "t_query",
+                "experts",
+                "n_r",
+                "ablations",
+                "effort"
+            ]
         );
+        assert_eq!(paper_budget("CartPole-v0"), 200);
+        assert_eq!(scaled_budget("CartPole-v0", 0.25), 50);
         assert_eq!(crate::paper::PAPER_TASKS[0].gym_id, "CartPole-v0");
     }
 }

@@ -240,9 +240,19 @@ fn sweep_completion_notes(root: &Path) -> Result<Vec<String>> {
 /// runs are absent is skipped with a note), and `report.md` linking everything with the notes.
 pub fn report(dir: &Path, out_dir: &Path, sustain: usize) -> Result<ReportSummary> {
     let (runs, mut notes) = load_runs(dir)?;
+    let failed = run_dir::find_failed_runs(dir)?;
     if runs.is_empty() {
+        let failed_note = match failed.first() {
+            Some((first, failure)) => format!(
+                " ({} failed runs, such as {}: {})",
+                failed.len(),
+                first.display(),
+                failure.message()
+            ),
+            None => String::new(),
+        };
         bail!(
-            "no complete run (a directory with {SUMMARY_FILE}) under {}",
+            "no complete run (a directory with {SUMMARY_FILE}) under {}{failed_note}",
             dir.display()
         );
     }
@@ -286,6 +296,10 @@ pub fn report(dir: &Path, out_dir: &Path, sustain: usize) -> Result<ReportSummar
 
     let (verdict_files, verdict_md) = super::verdict::write_verdict(&cells, out_dir, sustain)?;
     files.extend(verdict_files);
+    files.extend(
+        super::effort::write_effort(&runs, out_dir, sustain)
+            .context("cannot write the effort benchmark")?,
+    );
 
     let figures = figures::paper_figures(&runs);
     let mut figure_lines = Vec::new();
@@ -315,6 +329,13 @@ pub fn report(dir: &Path, out_dir: &Path, sustain: usize) -> Result<ReportSummar
         runs.len(),
         cells.len()
     )?;
+    if !failed.is_empty() {
+        writeln!(
+            md,
+            "{} runs failed and are left out: see [Failed runs](#failed-runs).\n",
+            failed.len()
+        )?;
+    }
     writeln!(
         md,
         "## Steps to solve (paper's Table 5 layout)\n\n{table_md}"
@@ -350,6 +371,9 @@ pub fn report(dir: &Path, out_dir: &Path, sustain: usize) -> Result<ReportSummar
     for line in &figure_lines {
         writeln!(md, "{line}")?;
     }
+    if !failed.is_empty() {
+        md.push_str(&failed_runs_markdown(dir, &failed));
+    }
     if !notes.is_empty() {
         writeln!(md, "## Notes\n")?;
         for note in &notes {
@@ -359,11 +383,43 @@ pub fn report(dir: &Path, out_dir: &Path, sustain: usize) -> Result<ReportSummar
     let report_path = out_dir.join("report.md");
     write_atomic(&report_path, md.as_bytes())?;
     files.push(report_path);
+    if !failed.is_empty() {
+        notes.push(format!(
+            "{} runs failed and are left out (listed with their errors in report.md)",
+            failed.len()
+        ));
+    }
     Ok(ReportSummary {
         runs: runs.len(),
         files,
         notes,
     })
+}
+
+/// The `Failed runs` section of `report.md`: each failed run below `root`, where it failed and the first line of
+/// its error.
+fn failed_runs_markdown(root: &Path, failed: &[(PathBuf, run_dir::Failure)]) -> String {
+    let mut md = format!(
+        "## Failed runs\n\n{} runs ended with an error and have no {SUMMARY_FILE}; each run directory's {} holds the \
+         whole error chain, the time and the arld that ran it. Running the sweep again retries them.\n\n",
+        failed.len(),
+        run_dir::FAILED_FILE
+    );
+    for (dir, failure) in failed {
+        let relative = dir.strip_prefix(root).unwrap_or(dir);
+        let at = match failure.phase.as_str() {
+            "training" => format!(" at step {}", failure.step),
+            "" => String::new(),
+            phase => format!(" in {phase}"),
+        };
+        md.push_str(&format!(
+            "- `{}`{at}: {}\n",
+            relative.display(),
+            failure.message()
+        ));
+    }
+    md.push('\n');
+    md
 }
 
 #[cfg(test)]

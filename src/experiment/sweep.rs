@@ -153,6 +153,12 @@ fn dir_fragment(spec: &str) -> String {
         .collect()
 }
 
+/// The overrides of one `vary` entry: `key=value`, or several joined by `;` to vary them together (one variant,
+/// e.g. `budget=100;query_rule=paced`).
+fn vary_parts(entry: &str) -> impl Iterator<Item = &str> {
+    entry.split(';').map(str::trim).filter(|p| !p.is_empty())
+}
+
 /// Splits command-line list values: each value may itself be comma-separated (`--envs A,B --envs C`).
 fn split_values(values: &[String]) -> Vec<String> {
     values
@@ -300,16 +306,19 @@ impl SweepGrid {
         let vary_keys = self
             .vary
             .iter()
-            .map(|entry| override_key(entry, "vary"))
+            .flat_map(|entry| vary_parts(entry))
+            .map(|part| override_key(part, "vary"))
             .collect::<Result<BTreeSet<String>>>()?;
         for entry in &self.vary {
-            let key = override_key(entry, "vary")?;
-            let dedicated = ["env", "method", "net", "seed", "t_query", "expert"];
-            if dedicated.contains(&key.as_str()) {
-                bail!(
-                    "`vary` entry '{entry}' varies `{key}`, which has its own sweep key (envs, methods, nets, \
-                     seeds, t_query, experts)"
-                );
+            for part in vary_parts(entry) {
+                let key = override_key(part, "vary")?;
+                let dedicated = ["env", "method", "net", "seed", "t_query", "expert"];
+                if dedicated.contains(&key.as_str()) {
+                    bail!(
+                        "`vary` entry '{entry}' varies `{key}`, which has its own sweep key (envs, methods, \
+                         nets, seeds, t_query, experts)"
+                    );
+                }
             }
             if !is_path_safe(&dir_fragment(entry)) {
                 bail!("`vary` entry '{entry}' cannot name a directory");
@@ -420,7 +429,8 @@ impl RunSpec {
     /// The run's configuration as given.
     pub fn config_input(&self) -> Result<ConfigInput> {
         let mut input = ConfigInput::new(&self.id.env, self.id.method, self.id.net, self.id.seed);
-        for o in self.set.iter().chain(&self.vary) {
+        let varied = self.vary.iter().flat_map(|entry| vary_parts(entry));
+        for o in self.set.iter().map(String::as_str).chain(varied) {
             input.apply_override(o)?;
         }
         if let Some(t) = self.t_query {
@@ -907,11 +917,19 @@ fn run_one_spec(spec: &RunSpec, path: &Path, status: &Path, run_fn: &RunFn) -> R
             path.display()
         );
     }
+    // The failed.json of an earlier attempt stays until an attempt finishes the run.
+    let failed = path.join(run_dir::FAILED_FILE);
+    let earlier_failure = std::fs::read(&failed).ok();
     if path.exists() && (!has_snapshot || stale) {
         std::fs::remove_dir_all(path)
             .with_context(|| format!("cannot clear incomplete run directory {}", path.display()))?;
     }
     std::fs::create_dir_all(path).with_context(|| format!("cannot create {}", path.display()))?;
+    if let Some(bytes) = earlier_failure
+        && !failed.exists()
+    {
+        write_atomic(&failed, &bytes)?;
+    }
     RunStatus::running().write(status)?;
     let result = (|| {
         let outcome = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| run_fn(spec, path)));
@@ -1034,8 +1052,13 @@ pub enum RunState {
         host: String,
         slurm_job: Option<String>,
     },
-    /// The run failed with this error (it is retried when the sweep runs again).
-    Failed { host: String, error: String },
+    /// The run failed with this error (its first line; `failed.json` in the run directory has it all), at this
+    /// environment step when it failed while training (it is retried when the sweep runs again).
+    Failed {
+        host: String,
+        error: String,
+        step: Option<usize>,
+    },
     /// Started but its process is gone (killed or its node lost); the sweep continues it when run again.
     Interrupted { host: String },
     /// Not started.
@@ -1058,10 +1081,25 @@ pub fn sweep_status(dir: &Path) -> Result<Vec<(RunSpec, RunState)>> {
         .into_iter()
         .map(|spec| {
             let path = dir.join(spec.dir_name());
+            let status = RunStatus::read(&status_path(dir, &spec));
+            let running_here = status.as_ref().is_some_and(|status| {
+                status.state == "running"
+                    && (status.host != this_host
+                        || Path::new(&format!("/proc/{}", status.pid)).exists())
+            });
+            // The run's own failed.json says why it failed (also when the sweep's status file is gone or was
+            // written elsewhere); a new attempt in progress wins over it.
+            let failure = run_dir::read_failure(&path).ok().flatten();
             let state = if run_dir::is_complete(&path) {
                 RunState::Done
+            } else if let (Some(failure), false) = (&failure, running_here) {
+                RunState::Failed {
+                    host: status.map_or_else(|| "unknown".to_string(), |s| s.host),
+                    error: failure.message(),
+                    step: (failure.phase == "training").then_some(failure.step),
+                }
             } else {
-                match RunStatus::read(&status_path(dir, &spec)) {
+                match status {
                     None => {
                         if path.exists() {
                             RunState::Interrupted {
@@ -1073,7 +1111,14 @@ pub fn sweep_status(dir: &Path) -> Result<Vec<(RunSpec, RunState)>> {
                     }
                     Some(status) if status.state == "failed" => RunState::Failed {
                         host: status.host,
-                        error: status.error.unwrap_or_default(),
+                        error: status
+                            .error
+                            .unwrap_or_default()
+                            .lines()
+                            .next()
+                            .unwrap_or("")
+                            .to_string(),
+                        step: None,
                     },
                     Some(status) => {
                         // On this machine a dead process can be told apart from a live one; elsewhere the

@@ -256,11 +256,13 @@ pub fn readings_table(cells: &[Cell], k: usize) -> (String, String) {
 }
 
 /// Whether a variant is one of the studies of the open choices (`KEY-VALUE`: the N_r study and the ablations,
-/// docs/algorithm.md §13), as opposed to the default, the t_query sweep or the expert-quality sweep.
+/// docs/algorithm.md §13), as opposed to the default, the t_query sweep, the expert-quality sweep or the effort
+/// benchmark.
 fn is_open_choice_variant(variant: &str) -> bool {
     variant != DEFAULT_VARIANT
         && !variant.starts_with(T_QUERY_VARIANT_PREFIX)
         && !variant.starts_with(EXPERT_VARIANT_PREFIX)
+        && !super::protocol::is_effort_variant(variant)
 }
 
 /// The N_r study and the ablations against the default: for every (env, variant, net, method) with a default

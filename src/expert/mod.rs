@@ -18,7 +18,7 @@ pub mod web;
 use crate::agent::test_policy_action;
 use crate::env::{Env, EnvSpec};
 use crate::nn::QNet;
-use crate::query::QueryController;
+use crate::query::{OracleView, QueryController};
 use anyhow::{Context, Result, bail, ensure};
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64;
@@ -43,6 +43,12 @@ pub trait Expert: Send {
             action: self.act(query.obs)?,
             response_s: None,
         })
+    }
+    /// For oracle query rules only: what the expert would do at `obs` and its Q-values (averaged over heads),
+    /// without answering a query (no budget is spent, nothing advances). `None` for experts that have no
+    /// Q-values (people, scripts, processes).
+    fn peek(&mut self, _obs: &[f32]) -> Option<OracleView> {
+        None
     }
     /// Called by the training loop after every step, so that an interactive expert can show the run as it goes.
     /// It must be cheap and must not change anything the run depends on.
@@ -139,6 +145,14 @@ impl CheckpointExpert {
 impl Expert for CheckpointExpert {
     fn act(&mut self, obs: &[f32]) -> Result<usize> {
         Ok(test_policy_action(&self.net, &mut self.q, obs))
+    }
+    fn peek(&mut self, obs: &[f32]) -> Option<OracleView> {
+        let action = test_policy_action(&self.net, &mut self.q, obs);
+        let (heads, a) = (self.net.heads(), self.net.n_actions());
+        let q_values = (0..a)
+            .map(|i| (0..heads).map(|k| self.q[k * a + i]).sum::<f32>() / heads as f32)
+            .collect();
+        Some(OracleView { action, q_values })
     }
     fn describe(&self) -> String {
         format!("checkpoint:{}", self.path.display())

@@ -146,6 +146,22 @@ impl OrderStatistics {
         unreachable!("subtree sizes are inconsistent")
     }
 
+    /// How many stored values are strictly below `value` (compared with `total_cmp`), duplicates counted.
+    pub fn count_below(&self, value: f32) -> usize {
+        let mut below = 0u32;
+        let mut current = self.root;
+        while current != NIL {
+            let node = &self.nodes[current as usize];
+            if node.key.total_cmp(&value).is_lt() {
+                below += self.size_of(node.children[SMALLER]) + node.count;
+                current = node.children[LARGER];
+            } else {
+                current = node.children[SMALLER];
+            }
+        }
+        below as usize
+    }
+
     /// The `k`-th smallest value, 0-based, or `None` if `k >= len()`.
     pub fn kth_smallest(&self, k: usize) -> Option<f32> {
         let len = self.len();
@@ -408,6 +424,11 @@ mod tests {
                 }
                 prop_assert_eq!(tree.len(), oracle.len());
                 prop_assert_eq!(tree.is_empty(), oracle.is_empty());
+                if let Some(&probe) = oracle.get(oracle.len() / 2) {
+                    let below = oracle.iter().filter(|v| v.total_cmp(&probe).is_lt()).count();
+                    prop_assert_eq!(tree.count_below(probe), below);
+                    prop_assert_eq!(tree.count_below(f32::INFINITY), oracle.iter().filter(|v| v.total_cmp(&f32::INFINITY).is_lt()).count());
+                }
                 tree.check_invariants();
             }
         }

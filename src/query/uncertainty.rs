@@ -6,7 +6,39 @@
 //! - [`noisy_variance`]: predictive variance of one action's Q-value under the noise of a noisy output layer,
 //!   read as Bayesian linear regression on the penultimate features.
 //!
-//! Both are called once per agent decision, so both are allocation-free for the network sizes used here.
+//! - [`head_variance`]: RCMP's epistemic uncertainty, the variance over heads of each action's Q-value averaged
+//!   over actions; [`q_gap`]: the best minus the worst Q-value of one head (student-initiated advising).
+//!
+//! All are called once per agent decision, so both are allocation-free for the network sizes used here.
+
+/// The variance over `heads` of each action's Q-value (population variance, divided by `heads`), averaged over
+/// the `n_actions` actions; `q` is laid out `[head][action]`. Computed in `f64` in a fixed order.
+///
+/// # Panics
+/// If `heads` or `n_actions` is zero, or `q.len() != heads * n_actions`.
+pub fn head_variance(q: &[f32], heads: usize, n_actions: usize) -> f32 {
+    assert!(heads > 0 && n_actions > 0 && q.len() == heads * n_actions);
+    let mut total = 0.0f64;
+    for a in 0..n_actions {
+        let mean = (0..heads).map(|k| q[k * n_actions + a] as f64).sum::<f64>() / heads as f64;
+        let var = (0..heads)
+            .map(|k| {
+                let d = q[k * n_actions + a] as f64 - mean;
+                d * d
+            })
+            .sum::<f64>()
+            / heads as f64;
+        total += var;
+    }
+    (total / n_actions as f64) as f32
+}
+
+/// The best minus the worst of one head's Q-values.
+pub fn q_gap(q: &[f32]) -> f32 {
+    let max = q.iter().copied().fold(f32::NEG_INFINITY, f32::max);
+    let min = q.iter().copied().fold(f32::INFINITY, f32::min);
+    max - min
+}
 
 /// Largest action count handled with a stack buffer; larger action spaces fall back to a heap buffer.
 const STACK_ACTIONS: usize = 32;
@@ -147,6 +179,18 @@ pub fn noisy_variance(
 
 #[cfg(test)]
 mod tests {
+
+    #[test]
+    fn head_variance_and_q_gap_match_their_definitions() {
+        // Two heads, three actions: per action the variance of {a, b} is ((a - b) / 2)^2.
+        let q = [1.0f32, 5.0, -2.0, 3.0, 5.0, 2.0];
+        let expected = ((1.0f64 - 3.0) / 2.0).powi(2) + 0.0 + ((-2.0f64 - 2.0) / 2.0).powi(2);
+        assert_eq!(head_variance(&q, 2, 3), (expected / 3.0) as f32);
+        assert_eq!(head_variance(&[4.0, 4.0, 4.0], 3, 1), 0.0);
+        assert_eq!(q_gap(&q[..3]), 7.0);
+        assert_eq!(q_gap(&[2.5]), 0.0);
+    }
+
     use super::*;
     use proptest::prelude::*;
     use rand::SeedableRng;

@@ -17,7 +17,9 @@
 use crate::agent::AgentConfig;
 pub use crate::agent::TdLoss;
 use crate::nn::OutputKind;
-use crate::query::{BudgetUnit, QueryController, QueryError, QueryRule};
+use crate::query::{
+    BudgetUnit, QueryController, QueryError, QueryRule, RuleDefaults, RuleSpec, check_signals,
+};
 use crate::replay::ReplayConfig;
 use anyhow::{Context, Result, bail, ensure};
 use serde::{Deserialize, Serialize};
@@ -232,6 +234,11 @@ pub struct TrainConfig {
     pub t_query: f64,
     /// Window of recent uncertainties N_r \[OURS: 1000\].
     pub n_r: usize,
+    /// The query rule, as a spec `NAME` or `NAME(key=value, ...)` (`arld rules` lists them, docs/algorithm.md
+    /// section 14 says where each comes from); empty: the method's own (greedy for GDQN, bernoulli for BDQN,
+    /// adaptive for ADQN and ADQNP), whose parameters default to `t_query` and `n_r` \[OURS: empty\].
+    #[serde(default)]
+    pub query_rule: String,
     /// Expert steps per query \[P-inf: 5\].
     pub segment_len: usize,
     /// Use the exact factorised-noise variance instead of the paper's formula \[OURS: false\].
@@ -508,7 +515,11 @@ impl ConfigInput {
 /// is inert; giving another value would change nothing, which is always a mistake.
 fn unused_by(key: &str, method: Method, net: NetKind) -> Option<String> {
     match key {
-        "budget" | "budget_unit" | "segment_len" | "queries_from_learning_starts"
+        "budget"
+        | "budget_unit"
+        | "segment_len"
+        | "queries_from_learning_starts"
+        | "query_rule"
             if !method.queries() =>
         {
             Some(format!("{method} does not ask the expert during training"))
@@ -599,6 +610,7 @@ impl TrainConfig {
             queries_from_learning_starts: false,
             t_query,
             n_r: 1000,
+            query_rule: String::new(),
             segment_len: 5,
             exact_factorised_var: false,
             expert: "shipped:weak".to_string(),
@@ -725,16 +737,22 @@ impl TrainConfig {
         }
         count("n_r", self.n_r, MAX_WINDOW)?;
         // The query rule and its controller own t_query, N_r and the segment length.
-        let rule = self.query_rule()?;
-        rule.check_uncertainty_source(self.net != NetKind::Plain)
-            .map_err(|e| match e {
-                QueryError::NoUncertaintySource { .. } => anyhow::anyhow!(
-                    "{e} (the {} method needs an uncertainty estimate, which a plain network does not have: \
-                     use --net bootstrap (divergence) or --net noisy (variance))",
-                    self.method
-                ),
-                e => e.into(),
-            })?;
+        let rule = self
+            .query_rule()
+            .context("config key `query_rule` (or the method's own rule)")?;
+        check_signals(
+            &*rule,
+            self.net != NetKind::Plain,
+            self.net == NetKind::Bootstrap,
+        )
+        .map_err(|e| match e {
+            QueryError::NoUncertaintySource { .. } if self.query_rule.is_empty() => anyhow::anyhow!(
+                "{e} (the {} method needs an uncertainty estimate, which a plain network does not have: \
+                 use --net bootstrap (divergence) or --net noisy (variance))",
+                self.method
+            ),
+            e => e.into(),
+        })?;
         self.query_controller()?;
         if self.method.needs_expert() {
             ensure!(
@@ -782,15 +800,37 @@ impl TrainConfig {
         Ok(())
     }
 
-    /// The query rule of the method (§8–9): never (DQN, DQfD), greedy (GDQN), Bernoulli with probability
-    /// `t_query` (BDQN), adaptive with threshold `t_query` over `n_r` steps (ADQN, ADQNP).
-    pub fn query_rule(&self) -> Result<QueryRule, QueryError> {
-        match self.method {
-            Method::Dqn | Method::Dqfd => Ok(QueryRule::Never),
-            Method::Gdqn => Ok(QueryRule::Greedy),
-            Method::Bdqn => QueryRule::bernoulli(self.t_query),
-            Method::Adqn | Method::Adqnp => QueryRule::adaptive(self.n_r, self.t_query),
+    /// The run's query rule spec: `query_rule` if given, else the method's (§8–9): never (DQN, DQfD), greedy
+    /// (GDQN), Bernoulli with probability `t_query` (BDQN), adaptive with threshold `t_query` over `n_r` steps
+    /// (ADQN, ADQNP).
+    pub fn rule_spec(&self) -> Result<RuleSpec, QueryError> {
+        if !self.query_rule.trim().is_empty() {
+            return self.query_rule.parse();
         }
+        let name = match self.method {
+            Method::Dqn | Method::Dqfd => "never",
+            Method::Gdqn => "greedy",
+            Method::Bdqn => "bernoulli",
+            Method::Adqn | Method::Adqnp => "adaptive",
+        };
+        name.parse()
+    }
+
+    /// What the rule's parameters default to: this run's t_query, N_r, budget, segment length and length.
+    pub fn rule_defaults(&self) -> RuleDefaults {
+        RuleDefaults {
+            t_query: self.t_query,
+            n_r: self.n_r,
+            budget: self.budget,
+            segment_len: self.segment_len,
+            train_steps: self.train_steps,
+            unit: self.budget_unit,
+        }
+    }
+
+    /// The run's query rule, built from [`Self::rule_spec`].
+    pub fn query_rule(&self) -> Result<Box<dyn QueryRule>, QueryError> {
+        self.rule_spec()?.build(&self.rule_defaults())
     }
 
     /// The query rule under the run's budget and segment length.
@@ -927,7 +967,8 @@ mod tests {
         assert_eq!(c.t_query, 0.3);
         let c = TrainConfig::preset("CartPole-v0", Method::Adqn, NetKind::Noisy, 1).unwrap();
         assert_eq!((c.budget, c.n_demo, c.t_query), (200, 0, 0.5));
-        assert!(matches!(c.query_rule().unwrap(), QueryRule::Adaptive(r) if r.t_query() == 0.5));
+        assert_eq!(c.rule_spec().unwrap().to_string(), "adaptive");
+        assert_eq!(c.rule_defaults().t_query, 0.5);
     }
 
     #[test]
@@ -936,10 +977,13 @@ mod tests {
             resolve("CartPole-v0", m, NetKind::Bootstrap, &[])
                 .unwrap()
                 .query_rule()
+                .unwrap()
+                .name()
         };
-        assert!(matches!(rule(Method::Dqn).unwrap(), QueryRule::Never));
-        assert!(matches!(rule(Method::Dqfd).unwrap(), QueryRule::Never));
-        assert!(matches!(rule(Method::Gdqn).unwrap(), QueryRule::Greedy));
+        assert_eq!(rule(Method::Dqn), "never");
+        assert_eq!(rule(Method::Dqfd), "never");
+        assert_eq!(rule(Method::Gdqn), "greedy");
+        assert_eq!(rule(Method::Adqn), "adaptive");
         let bdqn = resolve(
             "CartPole-v0",
             Method::Bdqn,
@@ -947,7 +991,55 @@ mod tests {
             &["t_query=0.2"],
         )
         .unwrap();
-        assert!(matches!(bdqn.query_rule().unwrap(), QueryRule::Bernoulli(r) if r.p() == 0.2));
+        assert_eq!(bdqn.query_rule().unwrap().name(), "bernoulli");
+        assert_eq!(bdqn.rule_defaults().t_query, 0.2);
+        // query_rule replaces the method's rule; a querying method only; the network must give its signals.
+        let paced = resolve(
+            "CartPole-v0",
+            Method::Adqn,
+            NetKind::Bootstrap,
+            &["query_rule=paced(horizon=0.5)"],
+        )
+        .unwrap();
+        assert_eq!(paced.query_rule().unwrap().name(), "paced");
+        for (method, net, set, says) in [
+            (
+                Method::Dqn,
+                NetKind::Bootstrap,
+                "query_rule=paced",
+                "does not ask",
+            ),
+            (
+                Method::Adqn,
+                NetKind::Bootstrap,
+                "query_rule=nope",
+                "unknown query rule",
+            ),
+            (
+                Method::Adqn,
+                NetKind::Noisy,
+                "query_rule=rcmp",
+                "bootstrapped",
+            ),
+            (
+                Method::Adqn,
+                NetKind::Plain,
+                "query_rule=calibrated",
+                "no uncertainty",
+            ),
+            (
+                Method::Adqn,
+                NetKind::Bootstrap,
+                "query_rule=paced(x=1)",
+                "no parameter 'x'",
+            ),
+        ] {
+            let err = format!(
+                "{:#}",
+                resolve("CartPole-v0", method, net, &[set]).unwrap_err()
+            );
+            assert!(err.contains(says), "{set}: {err}");
+        }
     }
 
     #[test]
@@ -984,7 +1076,7 @@ mod tests {
             (c.method, c.net, c.n_demo, c.budget),
             (Method::Adqnp, NetKind::Noisy, 100, 100)
         );
-        assert!(matches!(c.query_rule().unwrap(), QueryRule::Adaptive(_)));
+        assert_eq!(c.query_rule().unwrap().name(), "adaptive");
     }
 
     #[test]
@@ -1149,6 +1241,8 @@ mod tests {
                 toml::Value::Float(_) => &["-1.0e300", "nan"],
                 // Zero, or a size no machine holds.
                 toml::Value::Integer(_) => &["0", "9000000000000000000"],
+                // query_rule: empty means the method's own rule; an unknown rule is refused.
+                toml::Value::String(_) if key == "query_rule" => &["\"nope\""],
                 toml::Value::String(_) => &["\"\""],
                 other => panic!("{key}: unexpected type {other:?}"),
             };

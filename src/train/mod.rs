@@ -19,7 +19,7 @@ use crate::env::{self, Env};
 use crate::expert::demos::Demonstrations;
 use crate::expert::{Answer, Expert, Progress, Query};
 use crate::nn::{QNet, Workspace};
-use crate::query::{QueryController, QueryRule};
+use crate::query::{DecisionInput, Needs, OracleView, QueryController};
 use crate::replay::{Batch, Replay, ReplayConfig, Transition};
 use crate::state::{Persist, StateDict};
 use anyhow::{Context, Result, ensure};
@@ -440,7 +440,58 @@ fn snapshot(
     Ok(())
 }
 
+/// The run of [`train_loop`]; when it ends with an error (other than a stop request) and writes a run
+/// directory, `failed.json` records the error and the step ([`run_dir::Failure`]).
 fn train_run(
+    cfg: &TrainConfig,
+    env: &mut dyn Env,
+    test_envs: Vec<Box<dyn Env>>,
+    expert: Option<&mut dyn Expert>,
+    demos: Option<&Demonstrations>,
+    log: &mut RunLog,
+    hooks: Hooks<'_>,
+) -> Result<(Summary, Agent)> {
+    let mut st = LoopState::default();
+    // A driven run may go past `train_steps` (its schedules' horizon, not its end).
+    let last_step = if hooks.driver.is_some() {
+        usize::MAX
+    } else {
+        cfg.train_steps
+    };
+    let result = train_loop(cfg, env, test_envs, expert, demos, log, hooks, &mut st);
+    if let (Err(err), Some(dir)) = (&result, log.dir()) {
+        let (phase, step) = if st.training {
+            // The step in progress (the one the logs and the error name), not past the last one.
+            ("training", (st.step + 1).min(last_step))
+        } else if st.pretrain_done > 0 {
+            ("pre-training", 0)
+        } else {
+            ("setup", 0)
+        };
+        record_failure(dir, err, phase, step);
+    }
+    result
+}
+
+/// Writes `failed.json` for the error `err` into the run directory `dir`, unless `err` is a stop request (the
+/// run is then interrupted, not failed). The run's own error matters more than this file: a write that fails
+/// is only warned about.
+pub fn record_failure(dir: &std::path::Path, err: &anyhow::Error, phase: &str, step: usize) {
+    if err
+        .chain()
+        .any(|cause| cause.is::<crate::interrupt::Interrupted>())
+    {
+        return;
+    }
+    let failure = run_dir::Failure::new(err, phase, step);
+    if let Err(write_err) = run_dir::write_failure(dir, &failure) {
+        eprintln!("warning: the run failed, and recording why failed too: {write_err:#}");
+    }
+}
+
+/// The training loop proper; `st` is where it stands, also when it returns an error.
+#[allow(clippy::too_many_arguments)]
+fn train_loop(
     cfg: &TrainConfig,
     env: &mut dyn Env,
     test_envs: Vec<Box<dyn Env>>,
@@ -448,6 +499,7 @@ fn train_run(
     demos: Option<&Demonstrations>,
     log: &mut RunLog,
     hooks: Hooks<'_>,
+    st: &mut LoopState,
 ) -> Result<(Summary, Agent)> {
     let Hooks {
         mut checkpointer,
@@ -488,7 +540,6 @@ fn train_run(
     );
     let mut batch = Batch::default();
     let mut queries = cfg.query_controller()?;
-    let mut st = LoopState::default();
     // The observation the agent acts on and the one the step writes (swapped after each step: no allocation).
     // `obs` stays empty until training starts (a snapshot taken in pre-training has none).
     let mut obs = Vec::new();
@@ -511,8 +562,8 @@ fn train_run(
                     expert_state: expert.as_deref().and_then(|e| e.state()),
                     obs: &obs,
                 };
-                clock.stamp(&mut st);
-                snapshot(ck, &st, parts, log, stop)?;
+                clock.stamp(st);
+                snapshot(ck, st, parts, log, stop)?;
             }
             if stop {
                 return Err(crate::interrupt::Interrupted(format!(
@@ -538,8 +589,8 @@ fn train_run(
         if let (Some(e), Some(saved)) = (expert.as_deref_mut(), expert_state) {
             e.restore(&saved)?;
         }
-        st = state.value("loop")?;
-        clock.carry(&st);
+        *st = state.value("loop")?;
+        clock.carry(st);
         if st.training {
             // The environment: the generator its episode's reset drew from, the reset, the actions taken.
             obs = match st.ep_generator {
@@ -605,18 +656,29 @@ fn train_run(
                 // Nobody answered mid-segment: the agent takes the rest of it back.
                 Answer::Unanswered { .. } => {
                     queries.withdraw();
-                    agent.act(&obs, epsilon_at(cfg, step), false).0
+                    agent.act(&obs, epsilon_at(cfg, step), Needs::NOTHING).0
                 }
             }
         } else if cfg.queries_from_learning_starts && !learning {
             // Ablation: no queries before the first update; the rule does not see these steps.
-            agent.act(&obs, epsilon_at(cfg, step), false).0
+            agent.act(&obs, epsilon_at(cfg, step), Needs::NOTHING).0
         } else {
-            let want_uncertainty = queries.uncertainty_wanted_now();
-            let (agent_action, uncertainty) =
-                agent.act(&obs, epsilon_at(cfg, step), want_uncertainty);
-            step_uncertainty = uncertainty;
-            let decision = queries.decide(uncertainty, &mut query_rng);
+            let want = queries.signals_wanted_now();
+            let (agent_action, signals) = agent.act(&obs, epsilon_at(cfg, step), want);
+            step_uncertainty = signals.uncertainty;
+            let oracle = if want.oracle {
+                Some(peek_expert(&mut expert, &obs, queries.rule().name())?)
+            } else {
+                None
+            };
+            let input = DecisionInput {
+                step,
+                train_steps: cfg.train_steps,
+                agent_action,
+                signals: &signals,
+                oracle: oracle.as_ref(),
+            };
+            let decision = queries.decide(&input, &mut query_rng);
             if decision.query {
                 let answer = ask_expert(&mut expert, &obs, &*env, Some(agent_action), &queries)?;
                 let (expert_action, response_s) = match answer {
@@ -629,7 +691,7 @@ fn train_run(
                 log.query(&QueryEvent {
                     step,
                     episode: st.episode,
-                    uncertainty,
+                    uncertainty: decision.score,
                     threshold: decision.threshold,
                     expert_action,
                     agent_action,
@@ -694,9 +756,7 @@ fn train_run(
                 log.scalar("train/margin_loss", step + 1, stats.margin_loss)?;
                 log.scalar("train/epsilon", step + 1, epsilon_at(cfg, step) as f32)?;
                 log.scalar("query/budget_used", step + 1, queries.budget_used() as f32)?;
-                if let QueryRule::Adaptive(rule) = queries.rule()
-                    && let Some(thr) = rule.threshold()
-                {
+                if let Some(thr) = queries.rule().threshold() {
                     log.scalar("query/threshold", step + 1, thr)?;
                 }
             }
@@ -757,15 +817,15 @@ fn train_run(
             };
             let mut control = d.after_step(&view)?;
             if control == Control::Pause {
-                let summary = summarize(cfg, &*env, log, &st, &queries, &clock, pretrain_demos);
+                let summary = summarize(cfg, &*env, log, st, &queries, &clock, pretrain_demos);
                 finish_log(cfg, &agent, log, &summary, st.step)?;
-                clock.stamp(&mut st);
+                clock.stamp(st);
                 let mut paused = PausedRun {
                     summary,
                     agent: &agent,
                     log,
                     cfg,
-                    st: &st,
+                    st,
                     parts: RunParts {
                         agent: &agent,
                         replay: &replay,
@@ -785,7 +845,7 @@ fn train_run(
         }
     }
 
-    let summary = summarize(cfg, &*env, log, &st, &queries, &clock, pretrain_demos);
+    let summary = summarize(cfg, &*env, log, st, &queries, &clock, pretrain_demos);
     finish_log(cfg, &agent, log, &summary, st.step)?;
     if let Some(ck) = checkpointer {
         ck.remove()?;
@@ -823,6 +883,8 @@ fn summarize(
         cpu_time_s: cpu,
         steps_per_s: st.step as f64 / wall.max(1e-9),
         numerics: Some(crate::math::NUMERICS.to_string()),
+        arld_version: Some(crate::build_info::VERSION.to_string()),
+        git_commit: Some(crate::build_info::GIT_COMMIT.to_string()),
     }
 }
 
@@ -956,6 +1018,24 @@ fn learn(
     }
     replay.update_priorities(&batch.idx, priorities);
     Ok(stats)
+}
+
+/// The expert's action and Q-values for an oracle query rule (no question asked, no budget spent).
+fn peek_expert(
+    expert: &mut Option<&mut dyn Expert>,
+    obs: &[f32],
+    rule: &str,
+) -> Result<OracleView> {
+    let expert = expert
+        .as_deref_mut()
+        .context("the query rule reads the expert's Q-values, but no expert was given")?;
+    let description = expert.describe();
+    expert.peek(obs).with_context(|| {
+        format!(
+            "the {rule} query rule is an oracle reference: it reads the expert's Q-values, which only \
+             checkpoint experts give, and {description} has none"
+        )
+    })
 }
 
 /// Asks the expert for the action at `obs` (one step of a segment; `agent_action` on the step that opens it) and

@@ -4,7 +4,9 @@
 //! A run directory holds `config.toml` (the resolved configuration), `eval.csv` (the evaluation curve:
 //! `step,mean,std,min,max`), `episodes.csv`, `queries.csv`, a TensorBoard event file, `weights.safetensors`,
 //! optional `checkpoints/step_NNNNNNNN.safetensors`, and `summary.json` ([`Summary`]), written last: a run is
-//! complete exactly when it exists ([`is_complete`]). Whole files are written with
+//! complete exactly when it exists ([`is_complete`]). A run that ended with an error instead leaves `failed.json`
+//! ([`Failure`]: the error chain, the step, the time, the arld version and commit), which the summary of a later
+//! attempt that finishes the run removes. Whole files are written with
 //! [`crate::files::write_atomic`]; the episode and query logs and the event file are append-only streams.
 //!
 //! Inside a sweep, runs live at `ENV/METHOD-NET[/VARIANT]/seedN` ([`sweep_run_path`]); [`load_runs`] finds the
@@ -26,6 +28,8 @@ pub const EPISODES_FILE: &str = "episodes.csv";
 pub const QUERIES_FILE: &str = "queries.csv";
 /// The summary, written last: its presence marks the run complete.
 pub const SUMMARY_FILE: &str = "summary.json";
+/// Why the run ended with an error ([`Failure`]); removed when a later attempt finishes the run.
+pub const FAILED_FILE: &str = "failed.json";
 /// The final online weights.
 pub const WEIGHTS_FILE: &str = "weights.safetensors";
 /// Periodic weights (`checkpoint_every`).
@@ -63,6 +67,7 @@ fn is_run_entry(name: &str) -> bool {
         EPISODES_FILE,
         QUERIES_FILE,
         SUMMARY_FILE,
+        FAILED_FILE,
         WEIGHTS_FILE,
         CHECKPOINTS_DIR,
         SNAPSHOT_FILE,
@@ -110,6 +115,8 @@ pub fn prepare_new_run(dir: &Path, overwrite: bool) -> Result<()> {
             )
         } else if is_complete(dir) {
             "a finished run".to_string()
+        } else if let Ok(Some(failure)) = read_failure(dir) {
+            format!("a failed run ({FAILED_FILE}: {})", failure.message())
         } else {
             names.join(", ")
         };
@@ -133,6 +140,20 @@ pub fn prepare_new_run(dir: &Path, overwrite: bool) -> Result<()> {
         };
         removed
             .with_context(|| format!("cannot remove {} to overwrite the run", path.display()))?;
+    }
+    Ok(())
+}
+
+/// Clears the directory of an unfinished run for a new attempt from step 0 (a run stopped before its first
+/// snapshot), as [`prepare_new_run`] with `overwrite` does, but keeps its `failed.json`: an earlier attempt's
+/// failure stays recorded until an attempt finishes the run.
+pub fn prepare_restart(dir: &Path) -> Result<()> {
+    let failed = dir.join(FAILED_FILE);
+    let kept = std::fs::read(&failed).ok();
+    prepare_new_run(dir, true)?;
+    if let Some(bytes) = kept {
+        std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+        write_atomic(&failed, &bytes)?;
     }
     Ok(())
 }
@@ -238,6 +259,12 @@ pub struct Summary {
     /// on; sweeps run it again, see [`is_stale`]).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub numerics: Option<String>,
+    /// The arld version ([`crate::build_info::VERSION`]) and git commit ([`crate::build_info::GIT_COMMIT`])
+    /// that finished the run (absent from older summaries; reports do not read them).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub arld_version: Option<String>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub git_commit: Option<String>,
 }
 
 /// Whether the complete run in `dir` was computed with other elementary functions than this arld's
@@ -359,10 +386,108 @@ pub fn read_summary(dir: &Path) -> Result<Summary> {
     serde_json::from_str(&text).with_context(|| format!("{} is not a run summary", path.display()))
 }
 
-/// Writes `summary.json` (last: it marks the run complete).
+/// Writes `summary.json` (last: it marks the run complete), then removes the `failed.json` of an earlier
+/// attempt.
 pub fn write_summary(dir: &Path, summary: &Summary) -> Result<()> {
     let json = serde_json::to_string_pretty(summary)?;
-    Ok(write_atomic(&dir.join(SUMMARY_FILE), json.as_bytes())?)
+    write_atomic(&dir.join(SUMMARY_FILE), json.as_bytes())?;
+    match std::fs::remove_file(dir.join(FAILED_FILE)) {
+        Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
+            Err(e).with_context(|| format!("cannot remove {}", dir.join(FAILED_FILE).display()))
+        }
+        _ => Ok(()),
+    }
+}
+
+/// Why a run ended with an error: the contents of [`FAILED_FILE`].
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Failure {
+    /// The error, outermost message first, then each cause.
+    pub error: Vec<String>,
+    /// Where the run was: `setup` (the expert, the demonstrations), `pre-training` or `training`.
+    pub phase: String,
+    /// The environment step during which it failed, counted from 1 as the logs count (0 before training on the
+    /// environment began).
+    pub step: usize,
+    /// When, in RFC 3339 (UTC) and in seconds since the Unix epoch.
+    pub time: String,
+    pub unix_s: u64,
+    /// The arld that ran it ([`crate::build_info`]).
+    pub arld_version: String,
+    pub git_commit: String,
+}
+
+impl Failure {
+    /// The failure `err` at `step` of `phase`, now, by this arld.
+    pub fn new(err: &anyhow::Error, phase: &str, step: usize) -> Self {
+        let unix_s = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0, |d| d.as_secs());
+        Self {
+            error: err.chain().map(|cause| cause.to_string()).collect(),
+            phase: phase.to_string(),
+            step,
+            time: rfc3339_utc(unix_s),
+            unix_s,
+            arld_version: crate::build_info::VERSION.to_string(),
+            git_commit: crate::build_info::GIT_COMMIT.to_string(),
+        }
+    }
+
+    /// The error on one line: the causes joined by `: ` (leaving out one whose text an outer message already
+    /// holds), cut at the first line break.
+    pub fn message(&self) -> String {
+        let mut line = String::new();
+        for cause in &self.error {
+            let cause = cause.trim();
+            if !line.contains(cause) {
+                if !line.is_empty() {
+                    line.push_str(": ");
+                }
+                line.push_str(cause);
+            }
+        }
+        line.lines().next().unwrap_or("").to_string()
+    }
+}
+
+/// Writes `failed.json` into the run directory `dir`.
+pub fn write_failure(dir: &Path, failure: &Failure) -> Result<()> {
+    let json = serde_json::to_string_pretty(failure)?;
+    Ok(write_atomic(&dir.join(FAILED_FILE), json.as_bytes())?)
+}
+
+/// The `failed.json` of the run directory `dir`, if it has one.
+pub fn read_failure(dir: &Path) -> Result<Option<Failure>> {
+    let path = dir.join(FAILED_FILE);
+    let text = match std::fs::read_to_string(&path) {
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+        text => text.with_context(|| format!("cannot read {}", path.display()))?,
+    };
+    serde_json::from_str(&text)
+        .map(Some)
+        .with_context(|| format!("{} is not a run failure", path.display()))
+}
+
+/// `unix_s` seconds since the Unix epoch as an RFC 3339 time in UTC (`2025-03-01T12:00:00Z`).
+fn rfc3339_utc(unix_s: u64) -> String {
+    let (days, secs) = (unix_s / 86_400, unix_s % 86_400);
+    // Civil date from days since 1970-01-01 (the proleptic Gregorian calendar, in 400-year eras).
+    let z = days as i64 + 719_468;
+    let era = z.div_euclid(146_097);
+    let doe = z.rem_euclid(146_097);
+    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
+    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
+    let mp = (5 * doy + 2) / 153;
+    let day = doy - (153 * mp + 2) / 5 + 1;
+    let month = if mp < 10 { mp + 3 } else { mp - 9 };
+    let year = yoe + era * 400 + i64::from(month <= 2);
+    format!(
+        "{year:04}-{month:02}-{day:02}T{:02}:{:02}:{:02}Z",
+        secs / 3600,
+        secs / 60 % 60,
+        secs % 60
+    )
 }
 
 /// Rewrites `eval.csv` with the whole curve so far.
@@ -531,6 +656,29 @@ pub fn find_runs(root: &Path, mut visit: impl FnMut(&Path)) -> Result<Vec<PathBu
     Ok(run_dirs)
 }
 
+/// Every failed run below `root` (a directory holding `failed.json` and no `summary.json`), in path order, with
+/// its failure (an unreadable `failed.json` gives a failure whose error says so).
+pub fn find_failed_runs(root: &Path) -> Result<Vec<(PathBuf, Failure)>> {
+    let mut failed = Vec::new();
+    find_runs(root, |dir| {
+        if !is_complete(dir) && dir.join(FAILED_FILE).is_file() {
+            let failure = read_failure(dir).and_then(|f| f.context("it vanished"));
+            let failure = failure.unwrap_or_else(|err| Failure {
+                error: vec![format!("{FAILED_FILE} is unreadable: {err:#}")],
+                phase: String::new(),
+                step: 0,
+                time: String::new(),
+                unix_s: 0,
+                arld_version: String::new(),
+                git_commit: String::new(),
+            });
+            failed.push((dir.to_path_buf(), failure));
+        }
+    })?;
+    failed.sort_by(|a, b| a.0.cmp(&b.0));
+    Ok(failed)
+}
+
 /// Finds every complete run below `root` and reads it. Runs that cannot be read are left out and described in
 /// the returned notes, so one damaged run does not hide the others. Runs come back in path order.
 pub fn load_runs(root: &Path) -> Result<(Vec<RunRecord>, Vec<String>)> {
@@ -616,6 +764,8 @@ mod tests {
             cpu_time_s: Some(1.4),
             steps_per_s: 2000.0,
             numerics: Some(crate::math::NUMERICS.to_string()),
+            arld_version: Some(crate::build_info::VERSION.to_string()),
+            git_commit: Some(crate::build_info::GIT_COMMIT.to_string()),
         };
         write_summary(dir.path(), &summary).unwrap();
         assert!(is_complete(dir.path()));
@@ -626,6 +776,38 @@ mod tests {
             (Method::Bdqn, NetKind::Noisy, 1000)
         );
         assert_eq!(record.query_steps, None);
+    }
+
+    #[test]
+    fn a_failure_round_trips_and_a_summary_removes_it() {
+        let dir = tempfile::tempdir().unwrap();
+        let err = anyhow::anyhow!("the process exited with status 3\nstderr: boom")
+            .context("the expert (cmd) failed to answer");
+        let failure = Failure::new(&err, "training", 1234);
+        assert_eq!(failure.error.len(), 2);
+        assert_eq!(
+            failure.message(),
+            "the expert (cmd) failed to answer: the process exited with status 3"
+        );
+        write_failure(dir.path(), &failure).unwrap();
+        assert_eq!(read_failure(dir.path()).unwrap(), Some(failure.clone()));
+        let failed = find_failed_runs(dir.path()).unwrap();
+        assert_eq!(failed, vec![(dir.path().to_path_buf(), failure)]);
+        let summary_text = r#"{"env":"CartPole-v0","method":"dqn","net":"plain","seed":0,"steps_to_solve":1,
+            "solved":false,"solve_threshold":195.0,"train_steps":1,"final_score":0.0,"demos_pretrain":0,
+            "queries_used":0,"episodes":0,"wall_time_s":0.0,"steps_per_s":0.0}"#;
+        let summary: Summary = serde_json::from_str(summary_text).unwrap();
+        assert_eq!((summary.arld_version, summary.git_commit), (None, None));
+        write_summary(dir.path(), &serde_json::from_str(summary_text).unwrap()).unwrap();
+        assert_eq!(read_failure(dir.path()).unwrap(), None);
+        assert!(find_failed_runs(dir.path()).unwrap().is_empty());
+    }
+
+    #[test]
+    fn times_are_written_in_rfc3339() {
+        assert_eq!(rfc3339_utc(0), "1970-01-01T00:00:00Z");
+        assert_eq!(rfc3339_utc(951_782_400), "2000-02-29T00:00:00Z");
+        assert_eq!(rfc3339_utc(1_735_689_599), "2024-12-31T23:59:59Z");
     }
 
     #[test]

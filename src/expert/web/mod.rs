@@ -298,10 +298,7 @@ impl Expert for WebExpert {
             return;
         }
         self.last_update = Some(now);
-        let threshold = match p.queries.rule() {
-            crate::query::QueryRule::Adaptive(rule) => rule.threshold(),
-            _ => None,
-        };
+        let threshold = p.queries.rule().threshold();
         if let Some(u) = p.uncertainty {
             self.shared.push_uncertainty((p.step, u, threshold));
         }

@@ -1,0 +1,579 @@
+//! The effort benchmark's tables (`effort.md`, `effort.csv`) and figures: every query rule, at every budget, on
+//! the same tasks and seeds, read as what the expert's effort bought.
+//!
+//! A run belongs to the benchmark when it asks the expert without pre-training (GDQN, BDQN, ADQN) and varies at
+//! most its query rule and budget ([`super::protocol::effort_grids`]). For each task, rule, network and budget
+//! (a *cell*), over its seeds:
+//! - the normalised area under the evaluation curve: the mean over evaluations of
+//!   `(return - random) / (expert - random)`, with the random policy's and the shipped weak expert's mean
+//!   returns over [`REFERENCE_EPISODES`] episodes computed here (0: as good as random, 1: as good as the
+//!   expert over the whole run);
+//! - first-hit and sustained steps to solve and the final score (the readings of [`super::verdict`]);
+//! - the effort spent: demonstrated transitions, questions asked, and the step of the last question;
+//! - medians with bootstrap 95% intervals, and two-sided Mann–Whitney p-values of the AUC against GDQN, BDQN
+//!   and ADQN at the same budget and network, on the seeds both cells have.
+//!
+//! Seeds in [`super::protocol::HELD_OUT_SEEDS`] are never pooled with the others: they form cells of their own
+//! (the held-out test), reported in a section of their own with the verdict of the goal.
+
+use super::plot::{Band, Curve, FigureContent, Panel};
+use super::protocol::{HELD_OUT_SEEDS, env_order, is_effort_variant, paper_budget};
+use super::stats::{bootstrap_median_interval, final_score, mann_whitney, median, sustained};
+use super::verdict::{ALPHA, FINAL_EVALUATIONS};
+use crate::train::run_dir::{DEFAULT_VARIANT, RunRecord};
+use anyhow::{Context, Result};
+use rand::{Rng, SeedableRng};
+use std::collections::BTreeMap;
+use std::fmt::Write as _;
+use std::path::Path;
+
+/// Episodes behind the random policy's and the expert's reference returns.
+pub const REFERENCE_EPISODES: usize = 100;
+/// Seed of the reference episodes (episode i resets with `REFERENCE_SEED + i`).
+pub const REFERENCE_SEED: u64 = 1_000_000;
+const BOOTSTRAP_RESAMPLES: usize = 10_000;
+const BOOTSTRAP_SEED: u64 = 0;
+/// The paper's rules, as the baselines every rule is compared with: (label, method).
+const BASELINES: [(&str, &str); 3] = [
+    ("greedy (GDQN)", "gdqn"),
+    ("bernoulli (BDQN)", "bdqn"),
+    ("adaptive (ADQN)", "adqn"),
+];
+
+/// What one run of the benchmark measured.
+#[derive(Clone, Debug)]
+struct RunMetrics {
+    seed: u64,
+    auc: f64,
+    first_hit: f64,
+    sustained: f64,
+    final_score: f64,
+    transitions: f64,
+    questions: f64,
+    last_question: Option<f64>,
+    /// Questions asked before each evaluation: (evaluation step, count), for the figure.
+    questions_at: Vec<(u64, u64)>,
+}
+
+/// One cell's key: task, rule label, network, budget, held out or not.
+type CellKey = (String, String, String, usize, bool);
+
+/// The rule and budget of a benchmark run, from its `config.toml`; `None` for runs outside the benchmark.
+fn rule_and_budget(run: &RunRecord) -> Result<Option<(String, usize)>> {
+    let method = run.id.method.name();
+    if !["gdqn", "bdqn", "adqn"].contains(&method) {
+        return Ok(None);
+    }
+    let variant = run.variant.as_str();
+    let in_benchmark = variant == DEFAULT_VARIANT || is_effort_variant(variant);
+    if !in_benchmark {
+        return Ok(None);
+    }
+    // A run whose configuration records no budget (made by hand, or outside the benchmark) is left out.
+    let path = run.dir.join("config.toml");
+    let Ok(text) = std::fs::read_to_string(&path) else {
+        return Ok(None);
+    };
+    let table: toml::Table =
+        toml::from_str(&text).with_context(|| format!("{} is not TOML", path.display()))?;
+    let Some(budget) = table.get("budget").and_then(toml::Value::as_integer) else {
+        return Ok(None);
+    };
+    let budget = budget as usize;
+    let rule = table
+        .get("query_rule")
+        .and_then(toml::Value::as_str)
+        .unwrap_or("")
+        .to_string();
+    let label = if rule.is_empty() {
+        BASELINES
+            .iter()
+            .find(|(_, m)| *m == method)
+            .map(|(l, _)| l.to_string())
+            .expect("a querying method")
+    } else {
+        // The canonical form of the spec, so that equal specs written differently share a cell.
+        rule.parse::<crate::query::RuleSpec>()
+            .map(|s| s.to_string())
+            .unwrap_or(rule)
+    };
+    Ok(Some((label, budget)))
+}
+
+/// The demonstrated transitions a run spent (`summary.json`'s `queries_used`).
+fn transitions_spent(run: &RunRecord) -> Result<f64> {
+    let path = run.dir.join("summary.json");
+    let text = std::fs::read_to_string(&path)
+        .with_context(|| format!("cannot read {}", path.display()))?;
+    let json: serde_json::Value =
+        serde_json::from_str(&text).with_context(|| format!("{} is not JSON", path.display()))?;
+    Ok(json["queries_used"].as_f64().unwrap_or(0.0))
+}
+
+/// Mean returns of the random policy and of the shipped weak expert on `env`.
+fn references(env: &str) -> Result<(f64, f64)> {
+    let mut e = crate::env::make(env)?;
+    let n_actions = e.n_actions();
+    let mut rng = rand_pcg::Pcg64::seed_from_u64(REFERENCE_SEED);
+    let random = crate::env::rollouts(
+        e.as_mut(),
+        REFERENCE_EPISODES,
+        |i| Some(REFERENCE_SEED + i as u64),
+        |_| Ok::<_, anyhow::Error>(rng.random_range(0..n_actions)),
+    )?;
+    let mut expert = crate::expert::from_spec("shipped:weak", env, REFERENCE_SEED, 30.0)?;
+    let stats = crate::expert::pipeline::evaluate_expert(
+        expert.as_mut(),
+        env,
+        REFERENCE_EPISODES,
+        REFERENCE_SEED,
+    )?;
+    let random_mean = random.iter().map(|e| e.ret).sum::<f64>() / random.len() as f64;
+    Ok((random_mean, stats.mean))
+}
+
+fn metrics(run: &RunRecord, reference: (f64, f64), k: usize) -> Result<RunMetrics> {
+    let (random, expert) = reference;
+    let span = expert - random;
+    let auc = if run.eval.is_empty() {
+        f64::NAN
+    } else {
+        run.eval
+            .iter()
+            .map(|p| (p.mean - random) / span)
+            .sum::<f64>()
+            / run.eval.len() as f64
+    };
+    let questions = run.query_steps.as_ref().map_or(0, Vec::len);
+    let questions_at = run
+        .eval
+        .iter()
+        .map(|p| {
+            let asked = run
+                .query_steps
+                .as_ref()
+                .map_or(0, |q| q.iter().filter(|&&s| s < p.step).count() as u64);
+            (p.step, asked)
+        })
+        .collect();
+    Ok(RunMetrics {
+        seed: run.id.seed,
+        auc,
+        first_hit: sustained(&run.eval, run.solve_threshold, 0, run.train_steps) as f64,
+        sustained: sustained(&run.eval, run.solve_threshold, k, run.train_steps) as f64,
+        final_score: final_score(&run.eval, FINAL_EVALUATIONS).unwrap_or(f64::NAN),
+        transitions: transitions_spent(run)?,
+        questions: questions as f64,
+        last_question: run
+            .query_steps
+            .as_ref()
+            .and_then(|q| q.last())
+            .map(|&s| s as f64),
+        questions_at,
+    })
+}
+
+/// Median and bootstrap 95% interval, formatted `m [lo, hi]`.
+fn reading(values: &[f64], digits: usize) -> (f64, (f64, f64), String) {
+    let m = median(values).unwrap_or(f64::NAN);
+    let (lo, hi) = bootstrap_median_interval(values, 0.95, BOOTSTRAP_RESAMPLES, BOOTSTRAP_SEED)
+        .unwrap_or((f64::NAN, f64::NAN));
+    let f = |v: f64| format!("{v:.digits$}");
+    (m, (lo, hi), format!("{} [{}, {}]", f(m), f(lo), f(hi)))
+}
+
+fn fmt_p(p: Option<f64>) -> String {
+    match p {
+        None => "–".into(),
+        Some(p) if p < 0.001 => "<0.001".into(),
+        Some(p) => format!("{p:.3}"),
+    }
+}
+
+/// The AUC p-value of `cell` against `other` on the seeds both have; with the sign of the difference of medians.
+fn compare(cell: &[RunMetrics], other: Option<&Vec<RunMetrics>>) -> (Option<f64>, f64) {
+    let Some(other) = other else {
+        return (None, 0.0);
+    };
+    let seeds: Vec<u64> = cell.iter().map(|m| m.seed).collect();
+    let theirs: Vec<f64> = other
+        .iter()
+        .filter(|m| seeds.contains(&m.seed))
+        .map(|m| m.auc)
+        .collect();
+    let ours: Vec<f64> = cell
+        .iter()
+        .filter(|m| other.iter().any(|o| o.seed == m.seed))
+        .map(|m| m.auc)
+        .collect();
+    let p = mann_whitney(&ours, &theirs).map(|(_, p)| p);
+    let diff = median(&ours).unwrap_or(f64::NAN) - median(&theirs).unwrap_or(f64::NAN);
+    (p, diff)
+}
+
+/// What the effort benchmark wrote.
+pub struct EffortReport {
+    /// Markdown (also the body of effort.md).
+    pub markdown: String,
+    pub csv: String,
+    pub figures: Vec<(String, FigureContent)>,
+}
+
+/// Computes the effort tables and figures from `runs`; `None` when no run belongs to the benchmark beyond the
+/// paper's methods at their own budget.
+pub fn effort(runs: &[RunRecord], k: usize) -> Result<Option<EffortReport>> {
+    let mut cells: BTreeMap<CellKey, Vec<RunMetrics>> = BTreeMap::new();
+    let mut refs: BTreeMap<String, (f64, f64)> = BTreeMap::new();
+    let mut beyond_paper = false;
+    for run in runs {
+        let Some((rule, budget)) = rule_and_budget(run)? else {
+            continue;
+        };
+        beyond_paper |= run.variant != DEFAULT_VARIANT;
+        let env = run.id.env.clone();
+        if !refs.contains_key(&env) {
+            refs.insert(env.clone(), references(&env)?);
+        }
+        let held_out = HELD_OUT_SEEDS.contains(&run.id.seed);
+        cells
+            .entry((env, rule, run.id.net.name().to_string(), budget, held_out))
+            .or_default()
+            .push(metrics(run, refs[&run.id.env], k)?);
+    }
+    if !beyond_paper {
+        return Ok(None);
+    }
+    let envs = env_order(cells.keys().map(|k| k.0.as_str()));
+    let mut md = String::new();
+    let mut csv = String::from(
+        "env,rule,net,budget,budget_scale,seeds,held_out,auc_median,auc_lo,auc_hi,first_hit_median,first_hit_lo,\
+         first_hit_hi,sustained_median,sustained_lo,sustained_hi,final_median,final_lo,final_hi,p_vs_gdqn,\
+         p_vs_bdqn,p_vs_adqn,transitions_median,questions_median,last_question_median\n",
+    );
+    writeln!(
+        md,
+        "AUC: the mean over evaluations of (return - random) / (expert - random), random and expert being the \
+         mean returns of the uniform random policy and of the shipped weak expert over {REFERENCE_EPISODES} \
+         episodes (seeds {REFERENCE_SEED}..); medians over seeds with bootstrap 95% intervals; p: two-sided \
+         Mann-Whitney of the AUC against the paper's rule at the same budget and network, on the seeds both \
+         have; effort: demonstrated transitions, questions asked (each a segment of up to segment_len steps, a \
+         context switch for a person) and the step of the last question (medians). Sustained: {k} more \
+         evaluations at the target after the first.\n"
+    )?;
+    for env in &envs {
+        let (random, expert) = refs[env];
+        writeln!(
+            md,
+            "## {env}\n\nrandom {random:.2}, expert {expert:.2}, the paper's budget {}.\n",
+            paper_budget(env)
+        )?;
+        for held_out in [false, true] {
+            let keys: Vec<&CellKey> = cells
+                .keys()
+                .filter(|k| &k.0 == env && k.4 == held_out)
+                .collect();
+            if keys.is_empty() {
+                continue;
+            }
+            if held_out {
+                writeln!(md, "### Held-out seeds ({HELD_OUT_SEEDS:?})\n")?;
+            }
+            writeln!(
+                md,
+                "| rule | net | budget | seeds | AUC | first hit | sustained | final | p vs GDQN | p vs BDQN | \
+                 p vs ADQN | transitions | questions | last question |\n|---|---|---|---|---|---|---|---|---|---|\
+                 ---|---|---|---|"
+            )?;
+            let mut ordered = keys.clone();
+            ordered.sort_by_key(|k| (k.3, k.2.clone(), rank_rule(&k.1), k.1.clone()));
+            for key in ordered {
+                let cell = &cells[key];
+                let base = |method_label: &str| {
+                    cells.get(&(
+                        key.0.clone(),
+                        method_label.to_string(),
+                        key.2.clone(),
+                        key.3,
+                        key.4,
+                    ))
+                };
+                let vals = |f: fn(&RunMetrics) -> f64| cell.iter().map(f).collect::<Vec<f64>>();
+                let auc = reading(&vals(|m| m.auc), 3);
+                let first = reading(&vals(|m| m.first_hit), 0);
+                let sus = reading(&vals(|m| m.sustained), 0);
+                let fin = reading(&vals(|m| m.final_score), 1);
+                let ps: Vec<Option<f64>> = BASELINES
+                    .iter()
+                    .map(|(label, _)| {
+                        if *label == key.1 {
+                            None
+                        } else {
+                            compare(cell, base(label)).0
+                        }
+                    })
+                    .collect();
+                let transitions = median(&vals(|m| m.transitions)).unwrap_or(f64::NAN);
+                let questions = median(&vals(|m| m.questions)).unwrap_or(f64::NAN);
+                let last: Vec<f64> = cell.iter().filter_map(|m| m.last_question).collect();
+                let last = median(&last);
+                writeln!(
+                    md,
+                    "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {:.0} | {:.0} | {} |",
+                    key.1,
+                    key.2,
+                    key.3,
+                    cell.len(),
+                    auc.2,
+                    first.2,
+                    sus.2,
+                    fin.2,
+                    fmt_p(ps[0]),
+                    fmt_p(ps[1]),
+                    fmt_p(ps[2]),
+                    transitions,
+                    questions,
+                    last.map_or("–".into(), |s| format!("{s:.0}")),
+                )?;
+                let pv = |p: Option<f64>| p.map_or(String::new(), |p| format!("{p}"));
+                writeln!(
+                    csv,
+                    "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
+                    key.0,
+                    csv_field(&key.1),
+                    key.2,
+                    key.3,
+                    key.3 as f64 / paper_budget(&key.0).max(1) as f64,
+                    cell.len(),
+                    key.4,
+                    auc.0,
+                    auc.1.0,
+                    auc.1.1,
+                    first.0,
+                    first.1.0,
+                    first.1.1,
+                    sus.0,
+                    sus.1.0,
+                    sus.1.1,
+                    fin.0,
+                    fin.1.0,
+                    fin.1.1,
+                    pv(ps[0]),
+                    pv(ps[1]),
+                    pv(ps[2]),
+                    transitions,
+                    questions,
+                    last.map_or(String::new(), |s| format!("{s}")),
+                )?;
+            }
+            writeln!(md)?;
+        }
+    }
+    writeln!(md, "{}", goal_verdict(&cells, &envs))?;
+    let figures = figures(&cells, &envs);
+    Ok(Some(EffortReport {
+        markdown: md,
+        csv,
+        figures,
+    }))
+}
+
+/// The paper's rules first, then the others alphabetically.
+fn rank_rule(label: &str) -> usize {
+    BASELINES
+        .iter()
+        .position(|(l, _)| *l == label)
+        .unwrap_or(BASELINES.len())
+}
+
+fn csv_field(s: &str) -> String {
+    if s.contains(',') || s.contains('"') {
+        format!("\"{}\"", s.replace('"', "\"\""))
+    } else {
+        s.to_string()
+    }
+}
+
+/// The goal of the benchmark, read on the held-out cells at the paper's budget: a rule whose AUC is
+/// significantly higher than each of GDQN, BDQN and ADQN on at least 3 of the 4 tasks, and never significantly
+/// lower, for each network.
+fn goal_verdict(cells: &BTreeMap<CellKey, Vec<RunMetrics>>, envs: &[String]) -> String {
+    let mut out = String::from("## The held-out test\n\n");
+    let candidates: std::collections::BTreeSet<(String, String)> = cells
+        .keys()
+        .filter(|k| k.4 && rank_rule(&k.1) == BASELINES.len() && k.3 == paper_budget(&k.0))
+        .map(|k| (k.1.clone(), k.2.clone()))
+        .collect();
+    if candidates.is_empty() {
+        let _ = writeln!(
+            out,
+            "Not run yet: the held-out seeds {HELD_OUT_SEEDS:?} are fixed in src/experiment/protocol.rs and no \
+             run of them exists. A rule is chosen on the design seeds first."
+        );
+        return out;
+    }
+    for (rule, net) in candidates {
+        let (mut wins, mut losses, mut tasks) = (0, 0, 0);
+        let mut lines = Vec::new();
+        for env in envs {
+            let key = |label: &str| {
+                (
+                    env.clone(),
+                    label.to_string(),
+                    net.clone(),
+                    paper_budget(env),
+                    true,
+                )
+            };
+            let Some(cell) = cells.get(&key(&rule)) else {
+                continue;
+            };
+            tasks += 1;
+            let mut all_higher = true;
+            for (label, _) in BASELINES {
+                let (p, diff) = compare(cell, cells.get(&key(label)));
+                let significant = p.is_some_and(|p| p < ALPHA);
+                all_higher &= significant && diff > 0.0;
+                if significant && diff < 0.0 {
+                    losses += 1;
+                }
+                lines.push(format!(
+                    "{env} vs {label}: p = {}, AUC difference {diff:+.3}",
+                    fmt_p(p)
+                ));
+            }
+            wins += usize::from(all_higher);
+        }
+        let met = tasks == envs.len() && wins >= 3 && losses == 0;
+        let _ = writeln!(
+            out,
+            "- **{rule}, {net}**: significantly higher than all three paper rules on {wins} of {tasks} tasks, \
+             significantly lower {losses} times: the goal is {}.",
+            if met { "met" } else { "not met" }
+        );
+        for line in lines {
+            let _ = writeln!(out, "  - {line}");
+        }
+    }
+    out
+}
+
+/// AUC against effort (one panel per task, a line per rule over budgets) and cumulative questions against
+/// training step at the paper's budget (a line per rule).
+fn figures(
+    cells: &BTreeMap<CellKey, Vec<RunMetrics>>,
+    envs: &[String],
+) -> Vec<(String, FigureContent)> {
+    let band_of = |per_x: &BTreeMap<u64, Vec<f64>>| -> Vec<Band> {
+        per_x
+            .iter()
+            .filter_map(|(&x, v)| {
+                Some(Band {
+                    x: x as f64,
+                    median: median(v)?,
+                    lower_quartile: super::stats::quantile(v, 0.25)?,
+                    upper_quartile: super::stats::quantile(v, 0.75)?,
+                })
+            })
+            .collect()
+    };
+    let mut auc_panels = Vec::new();
+    let mut question_panels = Vec::new();
+    for env in envs {
+        type PerX = BTreeMap<u64, Vec<f64>>;
+        let mut by_rule: BTreeMap<(String, String), PerX> = BTreeMap::new();
+        let mut questions: BTreeMap<(String, String), PerX> = BTreeMap::new();
+        for (key, cell) in cells.iter().filter(|(k, _)| &k.0 == env && !k.4) {
+            by_rule
+                .entry((key.1.clone(), key.2.clone()))
+                .or_default()
+                .entry(key.3 as u64)
+                .or_default()
+                .extend(cell.iter().map(|m| m.auc));
+            if key.3 == paper_budget(env) {
+                let per_step = questions.entry((key.1.clone(), key.2.clone())).or_default();
+                for m in cell {
+                    for &(step, asked) in &m.questions_at {
+                        per_step.entry(step).or_default().push(asked as f64);
+                    }
+                }
+            }
+        }
+        let curves = |lines: &BTreeMap<(String, String), PerX>, min_points: usize| -> Vec<Curve> {
+            lines
+                .iter()
+                .filter(|(_, per)| per.len() >= min_points)
+                .enumerate()
+                .map(|(i, ((rule, net), per))| Curve {
+                    label: format!("{rule} {net}"),
+                    color: i % super::plot::PALETTE.len(),
+                    points: band_of(per),
+                })
+                .collect()
+        };
+        let auc = curves(&by_rule, 2);
+        if !auc.is_empty() {
+            auc_panels.push(Panel::new(env.clone(), None, auc));
+        }
+        let asked = curves(&questions, 1);
+        if !asked.is_empty() {
+            question_panels.push(Panel::new(env.clone(), None, asked));
+        }
+    }
+    let mut out = Vec::new();
+    if !auc_panels.is_empty() {
+        out.push((
+            "effort_auc".to_string(),
+            FigureContent {
+                title: "What the expert's effort buys: normalised AUC against the budget".into(),
+                x_label: "budget (demonstrated transitions)".into(),
+                y_label: "normalised AUC (median, IQR over seeds)".into(),
+                panels: auc_panels,
+            },
+        ));
+    }
+    if !question_panels.is_empty() {
+        out.push((
+            "effort_questions".to_string(),
+            FigureContent {
+                title: "When each rule asks: questions asked so far, at the paper's budget".into(),
+                x_label: "training step".into(),
+                y_label: "questions asked (median, IQR over seeds)".into(),
+                panels: question_panels,
+            },
+        ));
+    }
+    out
+}
+
+/// Writes effort.md, effort.csv and the figures into `out_dir`; returns the files written.
+pub fn write_effort(
+    runs: &[RunRecord],
+    out_dir: &Path,
+    k: usize,
+) -> Result<Vec<std::path::PathBuf>> {
+    let Some(report) = effort(runs, k)? else {
+        return Ok(Vec::new());
+    };
+    let mut files = Vec::new();
+    let md_path = out_dir.join("effort.md");
+    let figure_links: String = report
+        .figures
+        .iter()
+        .map(|(name, content)| format!("![{}]({name}.png)\n\n", content.title))
+        .collect();
+    let md = format!(
+        "# The effort benchmark: which rule spends the expert's effort best\n\nWritten by `arld report` from \
+         the run directories; every number is recomputed from them.\n\n{}\n## Figures\n\n{figure_links}\
+         (The AUC-against-budget figure appears once a rule has runs at two budgets or more.)\n",
+        report.markdown
+    );
+    crate::files::write_atomic(&md_path, md.as_bytes())?;
+    files.push(md_path);
+    let csv_path = out_dir.join("effort.csv");
+    crate::files::write_atomic(&csv_path, report.csv.as_bytes())?;
+    files.push(csv_path);
+    for (name, content) in &report.figures {
+        files.extend(super::plot::draw_figure(content, out_dir, name)?);
+    }
+    Ok(files)
+}
