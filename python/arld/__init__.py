@@ -48,6 +48,15 @@ SB3_NAMES = {
 }
 
 
+def _json_default(value: Any) -> Any:
+    """NumPy numbers and arrays, and other sequences, as JSON sees them (for hyperparameters)."""
+    if hasattr(value, "tolist"):
+        return value.tolist()
+    if isinstance(value, (tuple, range)):
+        return list(value)
+    raise TypeError(f"{value!r} ({type(value).__name__}) is not a number, boolean, string or list")
+
+
 def config_keys() -> List[str]:
     """Every hyperparameter keyword (the CLI's `--set` keys) that `Agent` accepts."""
     return [k for k in _arld.config_keys() if k not in _IDENTITY]
@@ -342,8 +351,10 @@ class _Callbacks:
     """SB3-style callbacks (objects with on_training_start/on_step/on_training_end, e.g. BaseCallback
     subclasses, or lists of them) or a plain callable `callback(locals, globals) -> bool`, called by the run."""
 
-    def __init__(self, callback: Any, model: "Agent") -> None:
-        self.items = list(callback) if isinstance(callback, (list, tuple)) else [callback]
+    def __init__(self, callback: Any, model: "Agent", episode_log: Optional[_EpisodeLog] = None) -> None:
+        self.items = [] if callback is None else list(callback) if isinstance(callback, (list, tuple)) else [
+            callback]
+        self.episode_log = episode_log
         self.model = model
         self.locals: Dict[str, Any] = {"self": model}
         for cb in self.items:
@@ -361,6 +372,8 @@ class _Callbacks:
             step=step, num_timesteps=step, episode=episode, budget_used=budget_used, queries=queries,
             last_eval=None if last_eval is None else {"step": last_eval[0], "mean": last_eval[1]},
         )
+        if self.episode_log is not None:
+            self.episode_log(step, episode, budget_used, self.locals["last_eval"])
         go_on = True
         for cb in self.items:
             if hasattr(cb, "update_locals"):
@@ -377,6 +390,28 @@ class _Callbacks:
         for cb in self.items:
             if hasattr(cb, "on_training_end"):
                 cb.on_training_end()
+
+
+class _EpisodeLog:
+    """SB3's log_interval: with verbose >= 1, one line on standard output every `interval` finished episodes
+    (steps, episodes, the latest evaluation, the budget used, steps per second)."""
+
+    def __init__(self, interval: int, label: str) -> None:
+        self.interval, self.label = interval, label
+        self.t0 = time.perf_counter()
+        self.start_step: Optional[int] = None
+        self.logged_episodes = -1
+
+    def __call__(self, step: int, episode: int, budget_used: int, last_eval: Any) -> None:
+        if self.start_step is None:
+            self.start_step = step - 1
+        if episode == self.logged_episodes or episode == 0 or episode % self.interval != 0:
+            return
+        self.logged_episodes = episode
+        rate = (step - self.start_step) / max(1e-9, time.perf_counter() - self.t0)
+        evaluation = "none yet" if last_eval is None else f"{last_eval['mean']:.2f} at step {last_eval['step']}"
+        print(f"{self.label} | steps {step} | episodes {episode} | last evaluation {evaluation} | "
+              f"budget used {budget_used} | {rate:.0f} steps/s", flush=True)
 
 
 class _ProgressBar:
@@ -437,6 +472,9 @@ class Agent:
     exploration_fraction=eps_fraction, exploration_initial_eps=eps_start, exploration_final_eps=eps_end,
     target_update_interval=target_period, counted in updates, i.e. steps when train_freq=1,
     max_grad_norm=grad_clip).
+
+    Network: two hidden layers, 64 and 64 wide as in the paper; `hidden=[256, 256]` (or SB3's
+    `policy_kwargs=dict(net_arch=[256, 256])`) sets their widths.
     """
 
     def __init__(
@@ -470,6 +508,7 @@ class Agent:
         t_query: Optional[float] = None,  # ADQN's query fraction; BDQN's query probability [preset]
         n_r: Optional[int] = None,  # window of recent uncertainties [1000]
         heads: Optional[int] = None,  # bootstrapped heads [10]
+        hidden: Optional[Sequence[int]] = None,  # widths of the two hidden layers (net_arch) [64, 64]
         loss: Optional[str] = None,  # TD loss: "mse" or "huber" [mse]
         double_q: Optional[bool] = None,  # double DQN targets [True]
         timeout_as_terminal: Optional[bool] = None,  # treat truncation as terminal [False]
@@ -507,6 +546,8 @@ class Agent:
             if name not in valid:
                 close = difflib.get_close_matches(key, sorted(valid | set(SB3_NAMES)), n=1)
                 hint = f"; did you mean {close[0]!r}?" if close else ""
+                if key == "net_arch":
+                    hint = "; pass it as policy_kwargs=dict(net_arch=[...]), or as hidden=[...]"
                 raise TypeError(
                     f"Agent() got an unexpected keyword argument {key!r}{hint} (valid hyperparameters: "
                     + ", ".join(sorted(valid | set(SB3_NAMES))) + ")"
@@ -520,8 +561,17 @@ class Agent:
             unknown = set(policy_kwargs) - {"net_arch"}
             if unknown:
                 raise TypeError(f"policy_kwargs: only net_arch is understood, not {', '.join(sorted(unknown))}")
-            if list(policy_kwargs.get("net_arch", [64, 64])) != [64, 64]:
-                raise ValueError("policy_kwargs: net_arch other than [64, 64] is not supported by this arld yet")
+            if "net_arch" in policy_kwargs:
+                arch = policy_kwargs["net_arch"]
+                if isinstance(arch, (dict, str, bytes)) or not hasattr(arch, "__iter__"):
+                    raise TypeError(
+                        f"policy_kwargs: net_arch is the list of the two hidden layers' widths, e.g. [256, 256]; "
+                        f"got {arch!r}"
+                    )
+                arch = list(arch)
+                if "hidden" in hyper and list(hyper["hidden"]) != arch:
+                    raise TypeError("policy_kwargs net_arch and hidden= give different widths: give one of them")
+                hyper["hidden"] = arch
         if method not in METHODS:
             raise ValueError(f"unknown method {method!r}; known: {', '.join(METHODS)}")
         if net not in NETS:
@@ -549,7 +599,12 @@ class Agent:
         if demos is not None and method not in ("dqfd", "adqnp"):
             raise ValueError(f"{method} does not pre-train on demonstrations; demos= is for dqfd and adqnp")
         self._demos = None if demos is None else _demos(demos)
-        self.config = self._resolve(self._hyper)  # fails early on a bad value
+        try:
+            self.config = self._resolve(self._hyper)  # fails early on a bad value
+        except ValueError as e:
+            if "net_arch" in self.policy_kwargs and "hidden" in str(e):
+                raise ValueError(f"policy_kwargs net_arch (arld's hidden): {e}") from None
+            raise
         self._policy: Any = None
         self._run: Any = None
         self._resume: Optional[str] = None
@@ -598,7 +653,7 @@ class Agent:
             for k, v in ours.items():
                 if k not in _IDENTITY and general.get(k) != v and k not in values:
                     values[k] = v
-        pairs = [(k, json.dumps(v)) for k, v in values.items()]
+        pairs = [(k, json.dumps(v, default=_json_default)) for k, v in values.items()]
         cfg = dict(json.loads(_arld.resolve_config(self.env_id, self.method, self.net, self.seed, pairs)))
         if self._expert_name and getattr(self, "_expert", None) is not None:
             cfg["expert"] = f"python:{self._expert_name}"  # what was asked, for config.toml
@@ -652,7 +707,7 @@ class Agent:
         self,
         total_timesteps: int,
         callback: Any = None,
-        log_interval: int = 4,
+        log_interval: Optional[int] = 4,
         tb_log_name: Optional[str] = None,
         reset_num_timesteps: bool = True,
         progress_bar: bool = False,
@@ -668,10 +723,15 @@ class Agent:
         (locals, globals) -> bool; their locals hold step, episode, last_eval, budget_used and queries, and
         returning False stops training there (the run can be continued). log_dir (or tensorboard_log= of the
         agent, in numbered folders <tb_log_name>_<n>) writes the run directory: config.toml, CSVs, TensorBoard
-        events, weights, summary.json. log_interval is accepted for SB3's sake (arld logs every evaluation).
+        events, weights, summary.json. log_interval: with verbose >= 1, a line on standard output every
+        log_interval finished episodes (as SB3's DQN); None or a verbose of 0 prints none (the run directory and
+        TensorBoard get every value either way).
         """
         if total_timesteps < 1:
             raise ValueError(f"total_timesteps must be at least 1, got {total_timesteps}")
+        if log_interval is not None and (not isinstance(log_interval, (int, np.integer)) or log_interval < 1):
+            raise ValueError(f"log_interval must be a whole number of episodes, 1 or more (or None); got "
+                             f"{log_interval!r}")
         start = 0
         if self._run is not None and not reset_num_timesteps:
             start = self._run.num_timesteps
@@ -686,8 +746,10 @@ class Agent:
             self._run = self._start_run(directory, None)
             self._live_step = 0
         until = start + int(total_timesteps)
-        callbacks = None if callback is None else _Callbacks(callback, self)
-        bar = _ProgressBar(start, int(total_timesteps), f"{self.method.upper()}-{self.net}") if progress_bar else None
+        label = f"{self.method.upper()}-{self.net}"
+        episode_log = _EpisodeLog(int(log_interval), label) if self.verbose >= 1 and log_interval else None
+        callbacks = None if callback is None and episode_log is None else _Callbacks(callback, self, episode_log)
+        bar = _ProgressBar(start, int(total_timesteps), label) if progress_bar else None
         if callbacks is not None:
             callbacks.start()
         try:
@@ -712,10 +774,8 @@ class Agent:
         self._policy = run.policy()
         self.evaluations = list(run.evaluations())
         self.queries = list(run.queries())
-        summary = json.loads(run.summary())
-        summary["expert"] = f"python:{self._expert_name}" if self._expert is not None else (
-            self.config["expert"] if self.method != "dqn" else "")
-        self.summary = summary
+        # Its `expert` is the one that ran (python:<qualified name> for a Python expert), as in summary.json.
+        self.summary = json.loads(run.summary())
 
     # --- acting
 
@@ -839,6 +899,7 @@ class Agent:
         agent = cls(cfg["method"], env, cfg["net"], expert, seed=cfg["seed"], eval_env=eval_env, **kwargs)
         policy, _cfg, step = _arld.snapshot_policy(path)
         agent.config = cfg
+        agent.policy_kwargs = {"net_arch": list(cfg["hidden"])}
         agent._policy, agent._resume, agent._live_step = policy, path, step
         return agent
 

@@ -253,18 +253,30 @@ fn resolve(
     let mut input = ConfigInput::new(env, method.parse()?, net.parse()?, seed);
     for (key, json) in values {
         let value: serde_json::Value = serde_json::from_str(json)?;
-        let value = match value {
-            serde_json::Value::Bool(b) => toml::Value::Boolean(b),
-            serde_json::Value::String(s) => toml::Value::String(s),
-            serde_json::Value::Number(n) if n.is_i64() => {
-                toml::Value::Integer(n.as_i64().expect("checked"))
-            }
-            serde_json::Value::Number(n) => toml::Value::Float(n.as_f64().unwrap_or(f64::NAN)),
-            other => anyhow::bail!("`{key}`: a number, boolean or string is needed, got {other}"),
-        };
-        input.set(key, value)?;
+        input.set(key, toml_value(key, value)?)?;
     }
     input.resolve()
+}
+
+/// A Python value (as JSON) as the configuration's TOML value: a number, boolean, string, or a list of them.
+fn toml_value(key: &str, value: serde_json::Value) -> anyhow::Result<toml::Value> {
+    Ok(match value {
+        serde_json::Value::Bool(b) => toml::Value::Boolean(b),
+        serde_json::Value::String(s) => toml::Value::String(s),
+        serde_json::Value::Number(n) if n.is_i64() => {
+            toml::Value::Integer(n.as_i64().expect("checked"))
+        }
+        serde_json::Value::Number(n) => toml::Value::Float(n.as_f64().unwrap_or(f64::NAN)),
+        serde_json::Value::Array(items) => toml::Value::Array(
+            items
+                .into_iter()
+                .map(|v| toml_value(key, v))
+                .collect::<anyhow::Result<_>>()?,
+        ),
+        other => {
+            anyhow::bail!("`{key}`: a number, boolean, string or list is needed, got {other}")
+        }
+    })
 }
 
 /// A trained network acting with the test policy (no exploration), or, when it comes from a run, also with
@@ -866,6 +878,7 @@ fn snapshot_policy(path: &str) -> PyResult<(Policy, String, usize)> {
     let read = || -> anyhow::Result<(Policy, String, usize)> {
         let text = train::snapshot::recorded_config(Path::new(path))?;
         let cfg: TrainConfig = toml::from_str(&text)?;
+        cfg.validate()?;
         let spec = env::spec(&cfg.env)?;
         let dir = tempfile::tempdir()?;
         std::fs::copy(path, dir.path().join(train::snapshot::SNAPSHOT_FILE))?;

@@ -200,6 +200,8 @@ def test_tensorboard_runs_are_numbered_and_records_name_the_expert(tmp_path):
     text = (tmp_path / "ADQN_1" / "config.toml").read_text()
     assert 'expert = "python:test_sb3.expert"' in text
     assert arld.__version__
+    summary = json.loads((tmp_path / "ADQN_1" / "summary.json").read_text())
+    assert summary["expert"] == "python:test_sb3.expert"
 
 
 def test_the_readme_python_example_runs(tmp_path, monkeypatch):
@@ -214,3 +216,87 @@ def test_mypy_strict_accepts_a_user_script():
     script = Path(__file__).with_name("typing_user.py")
     out = subprocess.run([sys.executable, "-m", "mypy", "--strict", str(script)], capture_output=True, text=True)
     assert out.returncode == 0, out.stdout + out.stderr
+
+
+def _safetensors_shapes(path):
+    """Tensor shapes from a safetensors file's header (8-byte length, then JSON), read without arld."""
+    data = Path(path).read_bytes()
+    n = int.from_bytes(data[:8], "little")
+    header = json.loads(data[8:8 + n])
+    return {k: v["shape"] for k, v in header.items() if k != "__metadata__"}
+
+
+def _numpy_greedy(weights, obs):
+    """The plain network's greedy action computed with NumPy from PyTorch-layout weights."""
+    h = np.maximum(weights["fc1.weight"] @ obs + weights["fc1.bias"], 0)
+    h = np.maximum(weights["fc2.weight"] @ h + weights["fc2.bias"], 0)
+    return int(np.argmax(weights["out.weight"] @ h + weights["out.bias"]))
+
+
+def test_net_arch_sets_the_hidden_widths_and_the_saved_weights_have_them(tmp_path):
+    model = cartpole_agent("dqn", net="plain", policy_kwargs=dict(net_arch=[256, 256])).learn(
+        600, log_dir=tmp_path / "wide")
+    shapes = _safetensors_shapes(tmp_path / "wide" / "weights.safetensors")
+    assert shapes["fc1.weight"] == [256, 4] and shapes["fc2.weight"] == [256, 256]
+    assert shapes["out.weight"] == [2, 256]
+    assert "hidden = [\n    256,\n    256,\n]" in (tmp_path / "wide" / "config.toml").read_text()
+    # Uneven widths, given by arld's own name: predict is the network the file holds.
+    uneven = cartpole_agent("dqn", net="plain", hidden=[48, 24]).learn(600, log_dir=tmp_path / "uneven")
+    assert _safetensors_shapes(tmp_path / "uneven" / "weights.safetensors")["fc2.weight"] == [24, 48]
+    weights = uneven.get_parameters()["policy"]
+    rng = np.random.default_rng(0)
+    for obs in rng.normal(size=(20, 4)).astype(np.float32):
+        assert int(uneven.predict(obs)[0]) == _numpy_greedy(weights, obs.astype(np.float64))
+    # A saved run keeps its widths.
+    uneven.save(tmp_path / "uneven.arld")
+    loaded = arld.Agent.load(tmp_path / "uneven.arld", gym.make("CartPole-v1"))
+    assert loaded.policy_kwargs == {"net_arch": [48, 24]}
+    # The paper's network is 64-64 when nothing is said.
+    paper = cartpole_agent("dqn", net="plain").learn(500).get_parameters()["policy"]
+    assert paper["fc1.weight"].shape == (64, 4) and paper["fc2.weight"].shape == (64, 64)
+    for bad in ([256], [64, 64, 64], [0, 64]):
+        with pytest.raises(ValueError, match=r"net_arch .*two hidden layers"):
+            cartpole_agent("dqn", policy_kwargs=dict(net_arch=bad))
+    with pytest.raises(TypeError, match="net_arch is the list"):
+        cartpole_agent("dqn", policy_kwargs=dict(net_arch=dict(pi=[64], qf=[64])))
+
+
+def test_log_interval_prints_a_line_every_n_episodes_when_verbose(capsys):
+    episodes = []
+
+    def count(locals_, globals_):
+        episodes.append(locals_["episode"])
+        return True
+
+    model = cartpole_agent("dqn", verbose=1).learn(700, log_interval=3, callback=count)
+    lines = [l for l in capsys.readouterr().out.splitlines() if "| episodes " in l]
+    finished = model.summary["episodes"]
+    assert finished == episodes[-1] > 6
+    assert [int(l.split("| episodes ")[1].split()[0]) for l in lines] == list(range(3, finished + 1, 3))
+    cartpole_agent("dqn").learn(700, log_interval=3)  # verbose=0: SB3 prints nothing either
+    assert "| episodes " not in capsys.readouterr().out
+    with pytest.raises(ValueError, match="log_interval"):
+        cartpole_agent("dqn").learn(10, log_interval=0)
+
+
+def test_records_name_the_expert_that_ran(tmp_path):
+    from stable_baselines3 import DQN
+
+    sb3 = DQN("MlpPolicy", gym.make("CartPole-v1"), seed=0)
+    model = arld.Agent("adqn", gym.make("CartPole-v1"), expert=sb3, seed=0, eval_period=300).learn(
+        300, log_dir=tmp_path / "sb3")
+    summary = json.loads((tmp_path / "sb3" / "summary.json").read_text())
+    assert summary["expert"] == "python:stable_baselines3.dqn.dqn.DQN" == model.summary["expert"]
+    assert 'expert = "python:stable_baselines3.dqn.dqn.DQN"' in (tmp_path / "sb3" / "config.toml").read_text()
+    cartpole_agent("dqn").learn(300, log_dir=tmp_path / "dqn")
+    assert "expert" not in json.loads((tmp_path / "dqn" / "summary.json").read_text())
+
+
+def test_errors_speak_python_not_rust():
+    for kw, words in ((dict(batch_size=-1), "whole number"), (dict(batch_size=1.5), "whole number"),
+                      (dict(learning_rate="fast"), "expected a number"), (dict(hidden=64), "expected a list")):
+        with pytest.raises(ValueError, match=words) as err:
+            cartpole_agent("dqn", **kw)
+        assert not re.search(r"\b(usize|u64|i64|f64|f32)\b|floating point|\d\.\.\d", str(err.value)), err.value
+    with pytest.raises(TypeError, match="did you mean 'exploration_fraction'"):
+        cartpole_agent("dqn", exploration_fractoin=0.2)

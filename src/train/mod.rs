@@ -885,6 +885,7 @@ fn summarize(
         numerics: Some(crate::math::NUMERICS.to_string()),
         arld_version: Some(crate::build_info::VERSION.to_string()),
         git_commit: Some(crate::build_info::GIT_COMMIT.to_string()),
+        expert: cfg.expert_used().map(str::to_string),
     }
 }
 
