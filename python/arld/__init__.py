@@ -691,7 +691,13 @@ class Agent:
 
     def _start_run(self, log_dir: Optional[str], resume: Optional[str]) -> Any:
         if self._builtin:
-            env = test_envs = demo_env = None
+            # Trained entirely in Rust; the test episodes too, unless eval_env is another environment.
+            env = demo_env = None
+            given = self.eval_env if isinstance(self.eval_env, (list, tuple)) else [self.eval_env]
+            if all(e is None or (isinstance(e, _BuiltinEnv) and e.id == self.env_id) for e in given):
+                test_envs = None
+            else:
+                test_envs = [_EnvBridge(e) for e in self._test_envs(self.config["eval_episodes"])]
         else:
             env = _EnvBridge(self.env)
             test_envs = [_EnvBridge(e) for e in self._test_envs(self.config["eval_episodes"])]

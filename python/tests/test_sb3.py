@@ -300,3 +300,11 @@ def test_errors_speak_python_not_rust():
         assert not re.search(r"\b(usize|u64|i64|f64|f32)\b|floating point|\d\.\.\d", str(err.value)), err.value
     with pytest.raises(TypeError, match="did you mean 'exploration_fraction'"):
         cartpole_agent("dqn", exploration_fractoin=0.2)
+
+
+def test_a_builtin_env_evaluates_on_the_eval_env_given():
+    short = gym.wrappers.TimeLimit(gym.make("CartPole-v1"), max_episode_steps=5)
+    model = cartpole_agent("dqn", env=arld.make("CartPole-v1"), eval_env=short).learn(1000)
+    assert model.evaluations and all(e["max"] <= 5 for e in model.evaluations)
+    plain = cartpole_agent("dqn", env=arld.make("CartPole-v1")).learn(1000)
+    assert any(e["max"] > 5 for e in plain.evaluations)

@@ -21,7 +21,9 @@ def main() -> None:
     model = arld.Agent("adqn", env, net="bootstrap", expert=my_expert, seed=0, learning_rate=1e-3, budget=100,
                        policy_kwargs=dict(net_arch=[64, 64]), eval_env=gym.make("CartPole-v1", max_episode_steps=200))
     model.learn(total_timesteps=200, callback=stop_early, progress_bar=False)
-    model.learn(100, reset_num_timesteps=False)
+    model.learn(100, reset_num_timesteps=False, log_interval=None)
+    wide = arld.Agent("dqn", env, net="plain", hidden=[128, 32], verbose=1)
+    wide.learn(100, log_interval=2)
     action, state = model.predict(np.zeros(4, dtype=np.float32), deterministic=True)
     assert state is None
     print(int(action), model.num_timesteps, model.evaluations, model.queries, model.summary)

@@ -922,7 +922,7 @@ impl TrainConfig {
                 NetKind::Bootstrap => OutputKind::Bootstrap { heads: self.heads },
                 NetKind::Noisy => OutputKind::Noisy,
             },
-            hidden: [self.hidden[0], self.hidden[1]],
+            hidden: self.hidden_widths(),
             batch_size: self.batch_size,
             lr: self.lr as f32,
             gamma: self.gamma as f32,
@@ -934,6 +934,16 @@ impl TrainConfig {
             lambda_n: self.lambda_n as f32,
             l2: self.l2 as f32,
             exact_factorised_var: self.exact_factorised_var,
+        }
+    }
+
+    /// The two hidden widths of `hidden`. [`Self::validate`] checks them; a configuration read without that
+    /// check (a snapshot's own) gets the paper's widths for a malformed value, so that loading its weights fails
+    /// on their sizes instead of the network being built with impossible ones.
+    pub fn hidden_widths(&self) -> [usize; 2] {
+        match self.hidden[..] {
+            [h1, h2] if [h1, h2].iter().all(|w| (1..=MAX_HIDDEN).contains(w)) => [h1, h2],
+            _ => [HIDDEN, HIDDEN],
         }
     }
 
