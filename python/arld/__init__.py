@@ -3,14 +3,25 @@
     import gymnasium as gym, arld
     model = arld.Agent("adqn", gym.make("CartPole-v1"), net="bootstrap", expert=my_expert, budget=200, seed=0)
     model.learn(total_timesteps=20_000, progress_bar=True)
-    action = model.predict(obs)
+    action, _ = model.predict(obs)
 
 The training loop is arld's own (Rust); Python is called only to step the environment and to ask the expert.
-This module adapts Python objects (Gymnasium environments, callables, Stable-Baselines3 models) to the plain
-interfaces of the compiled part `arld._arld` and gives them Stable-Baselines3's shape.
+This module adapts Python objects (Gymnasium environments, callables, Stable-Baselines3 models and callbacks) to
+the plain interfaces of the compiled part `arld._arld` and gives them Stable-Baselines3's shape.
 """
 
+from __future__ import annotations
+
+import copy
+import difflib
 import json
+import os
+import shutil
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
@@ -18,22 +29,42 @@ from . import _arld
 
 __version__ = _arld.__version__
 
-__all__ = ["Agent", "make", "preset", "config_keys", "METHODS", "NETS"]
+__all__ = ["Agent", "make", "preset", "config_keys", "collect_demos", "METHODS", "NETS", "__version__"]
 
 METHODS = ("dqn", "dqfd", "gdqn", "bdqn", "adqn", "adqnp")
 NETS = ("plain", "bootstrap", "noisy")
 # Keys that name the run rather than tune it: given as arguments of Agent, not as keyword hyperparameters.
 _IDENTITY = ("env", "method", "net", "seed")
+# Stable-Baselines3's names for arld's keys of the same meaning.
+SB3_NAMES = {
+    "learning_rate": "lr",
+    "buffer_size": "replay_size",
+    "exploration_fraction": "eps_fraction",
+    "exploration_initial_eps": "eps_start",
+    "exploration_final_eps": "eps_end",
+    "target_update_interval": "target_period",
+    "max_grad_norm": "grad_clip",
+    "lambda_margin": "lambda",
+}
 
 
-def config_keys():
+def _json_default(value: Any) -> Any:
+    """NumPy numbers and arrays, and other sequences, as JSON sees them (for hyperparameters)."""
+    if hasattr(value, "tolist"):
+        return value.tolist()
+    if isinstance(value, (tuple, range)):
+        return list(value)
+    raise TypeError(f"{value!r} ({type(value).__name__}) is not a number, boolean, string or list")
+
+
+def config_keys() -> List[str]:
     """Every hyperparameter keyword (the CLI's `--set` keys) that `Agent` accepts."""
     return [k for k in _arld.config_keys() if k not in _IDENTITY]
 
 
-def preset(method, env, net="bootstrap", seed=0):
+def preset(method: str, env: str, net: str = "bootstrap", seed: int = 0) -> Dict[str, Any]:
     """The paper's configuration for `method` with `net` on `env` (a Gymnasium id), as a dict."""
-    return json.loads(_arld.resolve_config(env, method, net, seed, []))
+    return dict(json.loads(_arld.resolve_config(env, method, net, seed, [])))
 
 
 # --------------------------------------------------------------------------------------------- environments
@@ -41,16 +72,16 @@ def preset(method, env, net="bootstrap", seed=0):
 
 class _EnvBridge:
     """A Gymnasium environment seen through arld's environment interface: reset(seed) -> obs list,
-    step(action) -> (obs list, reward, terminated, truncated)."""
+    step(action) -> (obs list, reward, terminated, truncated), and its generator (NumPy's PCG64) as words."""
 
-    def __init__(self, env):
+    def __init__(self, env: Any) -> None:
         self.env = env
 
-    def reset(self, seed):
+    def reset(self, seed: Optional[int]) -> List[float]:
         obs, _info = self.env.reset() if seed is None else self.env.reset(seed=int(seed))
-        return np.asarray(obs, dtype=np.float32).reshape(-1).tolist()
+        return np.asarray(obs, dtype=np.float32).reshape(-1).tolist()  # type: ignore[no-any-return]
 
-    def step(self, action):
+    def step(self, action: int) -> Tuple[List[float], float, bool, bool]:
         obs, reward, terminated, truncated, _info = self.env.step(action)
         return (
             np.asarray(obs, dtype=np.float32).reshape(-1).tolist(),
@@ -59,24 +90,66 @@ class _EnvBridge:
             bool(truncated),
         )
 
+    def _bit_generator(self) -> Any:
+        rng = getattr(getattr(self.env, "unwrapped", self.env), "_np_random", None)
+        bg = getattr(rng, "bit_generator", None)
+        return bg if type(bg).__name__ == "PCG64" else None
 
-def _env_facts(env):
+    def generator(self) -> Optional[List[int]]:
+        bg = self._bit_generator()
+        if bg is None:
+            return None
+        st = bg.state
+        mask = (1 << 64) - 1
+        s, inc = st["state"]["state"], st["state"]["inc"]
+        return [s >> 64, s & mask, inc >> 64, inc & mask, int(st["has_uint32"]), int(st["uinteger"])]
+
+    def set_generator(self, words: Sequence[int]) -> None:
+        import numpy.random as npr
+
+        unwrapped = getattr(self.env, "unwrapped", self.env)
+        if self._bit_generator() is None:
+            unwrapped._np_random = npr.Generator(npr.PCG64())
+        bg = self._bit_generator()
+        bg.state = {
+            "bit_generator": "PCG64",
+            "state": {"state": (words[0] << 64) | words[1], "inc": (words[2] << 64) | words[3]},
+            "has_uint32": int(words[4]),
+            "uinteger": int(words[5]),
+        }
+
+
+def _is_vector_env(env: Any) -> bool:
+    return hasattr(env, "num_envs") and (hasattr(env, "step_async") or hasattr(env, "single_action_space"))
+
+
+def _as_env(env: Any) -> Any:
+    """An environment as given: an id string is made with gym.make (as SB3 does); vector environments are refused."""
+    if isinstance(env, str):
+        import gymnasium as gym
+
+        return gym.make(env)
+    if _is_vector_env(env):
+        raise TypeError(
+            f"arld trains on one environment, not a vector of {env.num_envs} ({type(env).__name__}): pass a single "
+            "environment, e.g. gym.make(\"CartPole-v1\") instead of gym.make_vec(...) or DummyVecEnv([...])"
+        )
+    return env
+
+
+def _env_facts(env: Any) -> Tuple[str, int, int, int, Optional[float]]:
     """(id, obs_dim, n_actions, max_episode_steps, reward_threshold) of a Gymnasium environment, or ValueError."""
     if isinstance(env, _BuiltinEnv):
-        return env._core.spec
+        return env._core.spec  # type: ignore[no-any-return]
     obs_space = getattr(env, "observation_space", None)
     act_space = getattr(env, "action_space", None)
     spec = getattr(env, "spec", None)
     name = getattr(spec, "id", None) or type(getattr(env, "unwrapped", env)).__name__
     if type(act_space).__name__ != "Discrete" or getattr(act_space, "start", 0) != 0:
-        raise ValueError(
-            f"arld needs a Discrete action space starting at 0; {name} has {act_space!r}"
-        )
+        raise ValueError(f"arld needs a Discrete action space starting at 0; {name} has {act_space!r}")
     shape = getattr(obs_space, "shape", None)
     if type(obs_space).__name__ != "Box" or shape is None or len(shape) != 1:
-        raise ValueError(
-            f"arld needs a flat Box observation space (one dimension); {name} has {obs_space!r}"
-        )
+        raise ValueError(f"arld needs a flat Box observation space (one dimension); {name} has {obs_space!r}")
     limit = getattr(spec, "max_episode_steps", None)
     if limit is None:
         raise ValueError(
@@ -86,90 +159,112 @@ def _env_facts(env):
     return (name, int(shape[0]), int(act_space.n), int(limit), threshold)
 
 
-def _same_spec_env(env):
-    """A second instance of a Gymnasium environment for evaluation."""
-    import gymnasium as gym
-
-    if getattr(env, "spec", None) is None:
-        raise ValueError("the environment has no spec to make an evaluation copy from; pass eval_env=")
+def _register(facts: Tuple[str, int, int, int, Optional[float]]) -> str:
+    """Registers a Python environment's facts; returns the id arld knows it by (the Gymnasium id, or that id with
+    its time limit and threshold when a built-in environment of that id has other ones)."""
+    name, obs_dim, n_actions, limit, threshold = facts
     try:
-        return gym.make(env.spec)
+        _arld.register_env(*facts)
+        return name
+    except ValueError:
+        derived = f"{name}[max_episode_steps={limit},reward_threshold={threshold}]"
+        _arld.register_env(derived, obs_dim, n_actions, limit, threshold)
+        return derived
+
+
+def _copy_env(env: Any) -> Any:
+    """A second instance of an environment, wrappers included (a deep copy), for evaluation."""
+    try:
+        return copy.deepcopy(env)
     except Exception as e:
         raise ValueError(
-            f"cannot make a second instance of {env.spec.id} for evaluation from its spec ({e}); pass eval_env="
+            f"cannot copy {env!r} for the test episodes ({e}); pass eval_env= a list with one environment per "
+            "test episode (eval_episodes)"
         ) from e
 
 
 class _BuiltinEnv:
     """A built-in arld environment with Gymnasium's API (`arld.make`)."""
 
-    metadata = {"render_modes": []}
+    metadata: Dict[str, Any] = {"render_modes": []}
 
-    def __init__(self, env_id):
+    def __init__(self, env_id: str) -> None:
         self._core = _arld.BuiltinEnv(env_id)
         env_id, obs_dim, n_actions, limit, threshold = self._core.spec
         self.id = env_id
+        self.spec = None
         try:
             import gymnasium as gym
 
-            self.observation_space = gym.spaces.Box(-np.inf, np.inf, (obs_dim,), np.float32)
-            self.action_space = gym.spaces.Discrete(n_actions)
+            self.observation_space: Any = gym.spaces.Box(-np.inf, np.inf, (obs_dim,), np.float32)
+            self.action_space: Any = gym.spaces.Discrete(n_actions)
         except ImportError:
             self.observation_space = None
             self.action_space = None
         self.max_episode_steps = limit
         self.reward_threshold = threshold
+        self.render_mode = None
 
-    def reset(self, seed=None, options=None):
+    def reset(self, seed: Optional[int] = None, options: Optional[Dict[str, Any]] = None) -> Tuple[Any, Dict[str, Any]]:
         return np.asarray(self._core.reset(seed), dtype=np.float32), {}
 
-    def step(self, action):
+    def step(self, action: int) -> Tuple[Any, float, bool, bool, Dict[str, Any]]:
         obs, reward, terminated, truncated = self._core.step(int(action))
         return np.asarray(obs, dtype=np.float32), reward, terminated, truncated, {}
 
-    def close(self):
+    def close(self) -> None:
         pass
 
-    def __repr__(self):
+    def __repr__(self) -> str:
         return f"arld.make({self.id!r})"
 
 
-def make(env_id):
+def make(env_id: str) -> Any:
     """A built-in environment (CartPole-v0/v1, Acrobot-v1, MountainCar-v0, LunarLander-v2/v3) with
-    Gymnasium's reset/step API; training on it runs entirely in Rust."""
+    Gymnasium's reset/step API; training on it runs entirely in Rust, without the GIL."""
     return _BuiltinEnv(env_id)
 
 
 # ---------------------------------------------------------------------------------------------------- experts
 
 
-def _expert_callable(expert, n_actions):
+def _qualified(obj: Any) -> str:
+    module = getattr(obj, "__module__", None) or type(obj).__module__
+    name = getattr(obj, "__qualname__", None) or type(obj).__qualname__
+    return f"{module}.{name}"
+
+
+def _expert_callable(expert: Any) -> Tuple[Optional[Callable[[Any], int]], str]:
     """(callable obs list -> int, name) for a Python expert, or (None, spec) for an arld expert spec."""
     if isinstance(expert, str):
         return None, expert
     if isinstance(expert, Agent):
-        policy = expert._require_policy()
-        return policy.act, "arld.Agent"
+        agent = expert
+
+        def ask_agent(obs: Any) -> int:
+            return int(agent.predict(np.asarray(obs, dtype=np.float32))[0])
+
+        return ask_agent, "arld.Agent"
     if hasattr(expert, "predict") and callable(expert.predict):
         # Stable-Baselines3's predict(obs, deterministic=True) -> (action, state).
-        def ask(obs):
+        def ask(obs: Any) -> int:
             action, _state = expert.predict(np.asarray(obs, dtype=np.float32), deterministic=True)
             return _as_action(action)
 
-        return ask, type(expert).__name__
+        return ask, _qualified(type(expert))
     if callable(expert):
 
-        def ask(obs):
+        def ask_callable(obs: Any) -> int:
             return _as_action(expert(np.asarray(obs, dtype=np.float32)))
 
-        return ask, getattr(expert, "__name__", type(expert).__name__)
+        return ask_callable, _qualified(expert)
     raise TypeError(
         "expert must be a callable obs -> action, an object with predict(obs, deterministic=True) "
         f"(a Stable-Baselines3 model), an arld.Agent or an arld expert spec string; got {type(expert).__name__}"
     )
 
 
-def _as_action(action):
+def _as_action(action: Any) -> int:
     a = np.asarray(action)
     if a.size != 1 or not (np.issubdtype(a.dtype, np.integer) or np.issubdtype(a.dtype, np.bool_)):
         if a.size == 1 and np.issubdtype(a.dtype, np.floating) and float(a.reshape(-1)[0]).is_integer():
@@ -179,60 +274,319 @@ def _as_action(action):
 
 
 class _Demos:
-    def __init__(self, obs, actions, rewards, next_obs, terminated, truncated=None):
+    def __init__(self, obs: Any, actions: Any, rewards: Any, next_obs: Any, terminated: Any, truncated: Any = None):
         n = len(actions)
         self.obs = np.asarray(obs, dtype=np.float32).reshape(n, -1).tolist()
         self.actions = [int(a) for a in np.asarray(actions).reshape(-1)]
         self.rewards = np.asarray(rewards, dtype=np.float32).reshape(-1).tolist()
         self.next_obs = np.asarray(next_obs, dtype=np.float32).reshape(n, -1).tolist()
         self.terminated = [bool(t) for t in np.asarray(terminated).reshape(-1)]
-        self.truncated = (
-            [False] * n if truncated is None else [bool(t) for t in np.asarray(truncated).reshape(-1)]
+        self.truncated = [False] * n if truncated is None else [bool(t) for t in np.asarray(truncated).reshape(-1)]
+
+
+def _demos(demos: Any) -> _Demos:
+    """Demonstrations from a dict of columns, or from imitation's transitions (duck-typed: obs, acts, next_obs,
+    dones, and rews; `infos[i]["TimeLimit.truncated"]` marks a truncation)."""
+    if isinstance(demos, dict):
+        return _Demos(**demos)
+    if all(hasattr(demos, k) for k in ("obs", "acts", "next_obs", "dones")):
+        rews = getattr(demos, "rews", None)
+        if rews is None:
+            raise ValueError(
+                "these transitions carry no rewards (imitation's Transitions): DQfD learns from rewards; give "
+                "TransitionsWithRew, a dict with rewards=, or arld.collect_demos(env, expert, n, seed)"
+            )
+        dones = np.asarray(demos.dones, dtype=bool).reshape(-1)
+        infos = getattr(demos, "infos", None)
+        truncated = np.zeros_like(dones)
+        if infos is not None:
+            truncated = np.array([bool(dict(i or {}).get("TimeLimit.truncated", False)) for i in infos], dtype=bool)
+        return _Demos(demos.obs, demos.acts, rews, demos.next_obs, dones & ~truncated, truncated)
+    raise TypeError("demos must be a dict of columns (obs, actions, rewards, next_obs, terminated[, truncated]) "
+                    "or imitation's transitions (obs, acts, rews, next_obs, dones)")
+
+
+def collect_demos(env: Any, expert: Any, n: int, seed: int = 0) -> Dict[str, np.ndarray]:
+    """`n` demonstration transitions of `expert` on `env` as given (wrappers applied): the first episode reset with
+    `seed`, the next ones without; a dict of columns for `demos=`."""
+    env = _as_env(env)
+    ask, _name = _expert_callable(expert)
+    if ask is None:
+        raise TypeError("collect_demos needs a Python expert (a callable, an SB3 model or an arld.Agent)")
+    cols: Dict[str, List[Any]] = {k: [] for k in ("obs", "actions", "rewards", "next_obs", "terminated", "truncated")}
+    obs, _ = env.reset(seed=int(seed))
+    while len(cols["actions"]) < n:
+        a = ask(np.asarray(obs, dtype=np.float32).reshape(-1))
+        nxt, r, te, tr, _ = env.step(a)
+        for k, v in zip(cols, (obs, a, r, nxt, te, tr)):
+            cols[k].append(v)
+        obs = env.reset()[0] if te or tr else nxt
+    return {
+        "obs": np.asarray(cols["obs"], dtype=np.float32),
+        "actions": np.asarray(cols["actions"], dtype=np.int64),
+        "rewards": np.asarray(cols["rewards"], dtype=np.float32),
+        "next_obs": np.asarray(cols["next_obs"], dtype=np.float32),
+        "terminated": np.asarray(cols["terminated"], dtype=bool),
+        "truncated": np.asarray(cols["truncated"], dtype=bool),
+    }
+
+
+# ------------------------------------------------------------------------------------------------- callbacks
+
+
+class _Logger:
+    """The part of SB3's logger a callback may use: `record(key, value)` keeps the latest value."""
+
+    def __init__(self) -> None:
+        self.name_to_value: Dict[str, Any] = {}
+
+    def record(self, key: str, value: Any, exclude: Any = None) -> None:
+        self.name_to_value[key] = value
+
+    def dump(self, step: int = 0) -> None:
+        pass
+
+
+class _Callbacks:
+    """SB3-style callbacks (objects with on_training_start/on_step/on_training_end, e.g. BaseCallback
+    subclasses, or lists of them) or a plain callable `callback(locals, globals) -> bool`, called by the run."""
+
+    def __init__(self, callback: Any, model: "Agent", episode_log: Optional[_EpisodeLog] = None) -> None:
+        self.items = [] if callback is None else list(callback) if isinstance(callback, (list, tuple)) else [
+            callback]
+        self.episode_log = episode_log
+        self.model = model
+        self.locals: Dict[str, Any] = {"self": model}
+        for cb in self.items:
+            if hasattr(cb, "init_callback"):
+                cb.init_callback(model)
+
+    def start(self) -> None:
+        for cb in self.items:
+            if hasattr(cb, "on_training_start"):
+                cb.on_training_start(self.locals, {})
+
+    def __call__(self, step: int, episode: int, budget_used: int, queries: int, last_eval: Any) -> bool:
+        self.model._live_step = step
+        self.locals.update(
+            step=step, num_timesteps=step, episode=episode, budget_used=budget_used, queries=queries,
+            last_eval=None if last_eval is None else {"step": last_eval[0], "mean": last_eval[1]},
         )
+        if self.episode_log is not None:
+            self.episode_log(step, episode, budget_used, self.locals["last_eval"])
+        go_on = True
+        for cb in self.items:
+            if hasattr(cb, "update_locals"):
+                cb.update_locals(self.locals)
+            if hasattr(cb, "on_step"):
+                answer = cb.on_step()
+            else:
+                answer = cb(self.locals, {})
+            if answer is False:
+                go_on = False
+        return go_on
+
+    def end(self) -> None:
+        for cb in self.items:
+            if hasattr(cb, "on_training_end"):
+                cb.on_training_end()
+
+
+class _EpisodeLog:
+    """SB3's log_interval: with verbose >= 1, one line on standard output every `interval` finished episodes
+    (steps, episodes, the latest evaluation, the budget used, steps per second)."""
+
+    def __init__(self, interval: int, label: str) -> None:
+        self.interval, self.label = interval, label
+        self.t0 = time.perf_counter()
+        self.start_step: Optional[int] = None
+        self.logged_episodes = -1
+
+    def __call__(self, step: int, episode: int, budget_used: int, last_eval: Any) -> None:
+        if self.start_step is None:
+            self.start_step = step - 1
+        if episode == self.logged_episodes or episode == 0 or episode % self.interval != 0:
+            return
+        self.logged_episodes = episode
+        rate = (step - self.start_step) / max(1e-9, time.perf_counter() - self.t0)
+        evaluation = "none yet" if last_eval is None else f"{last_eval['mean']:.2f} at step {last_eval['step']}"
+        print(f"{self.label} | steps {step} | episodes {episode} | last evaluation {evaluation} | "
+              f"budget used {budget_used} | {rate:.0f} steps/s", flush=True)
+
+
+class _ProgressBar:
+    """A text progress bar on standard error (a terminal or a notebook), left in place when training ends."""
+
+    def __init__(self, start: int, total: int, label: str) -> None:
+        self.start, self.total, self.label = start, total, label
+        self.t0 = time.perf_counter()
+        self.last = ""
+
+    def __call__(self, step: int) -> None:
+        done = max(0, step - self.start)
+        frac = min(1.0, done / max(1, self.total))
+        rate = done / max(1e-9, time.perf_counter() - self.t0)
+        bar = "#" * int(30 * frac) + "-" * (30 - int(30 * frac))
+        text = f"\r{self.label} [{bar}] {done}/{self.total} steps {rate:.0f} steps/s"
+        if text != self.last:
+            sys.stderr.write(text)
+            sys.stderr.flush()
+            self.last = text
+
+    def close(self, step: int) -> None:
+        self(step)
+        sys.stderr.write("\n")
+        sys.stderr.flush()
 
 
 # ------------------------------------------------------------------------------------------------------ agent
 
 
 class Agent:
-    """An arld agent (SB3-shaped): `Agent(method, env, net=..., expert=..., **hyperparameters)`.
+    """An arld agent with Stable-Baselines3's shape: `Agent(method, env, net=..., expert=..., **hyperparameters)`.
 
-    method: dqn, dqfd, gdqn, bdqn, adqn, adqnp. net: plain, bootstrap, noisy. env: a Gymnasium environment with
-    a flat Box observation space and a Discrete action space (wrappers included), or `arld.make(id)`.
+    method: dqn, dqfd, gdqn, bdqn, adqn, adqnp (DQfD and ADQNP pre-train on demonstrations; GDQN, BDQN, ADQN,
+    ADQNP ask the expert during training). net: plain, bootstrap (10 heads), noisy. env: a Gymnasium environment
+    with a flat Box observation space and a Discrete action space, exactly as given (wrappers, time limits), an
+    id string (made with gym.make), or `arld.make(id)` (the built-in one: trained entirely in Rust).
+
+    Queries: when the query rule fires, the expert takes over for a segment of up to `segment_len` (5) steps; the
+    budget (`budget`) counts the demonstrated transitions (environment steps the expert acted), or the queries
+    when `budget_unit="queries"`. `queries` lists every query (step, episode, uncertainty, threshold, actions).
+    Evaluations: every `eval_period` environment steps, `eval_episodes` (20) test episodes with the test policy
+    (no exploration) run on `eval_env` (copies of it, or of `env`); `evaluations` lists their returns.
+
     expert: a callable obs -> action, an object with SB3's predict(obs, deterministic=True), an arld.Agent, or
-    an arld expert spec ("shipped:weak", "checkpoint:PATH", "cmd:python my_expert.py", ...).
-    demos: for dqfd/adqnp, a dict with obs, actions, rewards, next_obs, terminated (and optionally truncated);
-    by default they are collected from the expert (built-in environments only).
-    Hyperparameters: the CLI's configuration keys with the same names and defaults (see `arld.config_keys()`);
-    `total_timesteps` of `learn` sets `train_steps`.
+    an arld expert spec ("shipped:weak", "checkpoint:PATH", "cmd:python my_expert.py"). demos (dqfd, adqnp): a
+    dict of columns (obs, actions, rewards, next_obs, terminated[, truncated]), imitation's transitions with
+    rewards, or `arld.collect_demos(env, expert, n, seed)`; by default collected from the expert on `env`.
+
+    Run length and schedules: `train_steps` is the run's length, the horizon of the schedules (ε anneals from
+    `exploration_initial_eps` to `exploration_final_eps` over `exploration_fraction × train_steps` steps; PER's
+    β anneals to 1 over `train_steps`), fixed when the agent is made (the paper's preset for its tasks, 100k
+    otherwise). `learn(n)` trains n environment steps of that run; past `train_steps` ε and β keep their final
+    values. So `learn(a)` then `learn(b, reset_num_timesteps=False)` is exactly `learn(a + b)`.
+
+    Every hyperparameter is a keyword (None: the preset's value; `arld.preset(method, env_id)` shows them).
+    SB3's names are accepted where the meaning is the same (learning_rate=lr, buffer_size=replay_size,
+    exploration_fraction=eps_fraction, exploration_initial_eps=eps_start, exploration_final_eps=eps_end,
+    target_update_interval=target_period, counted in updates, i.e. steps when train_freq=1,
+    max_grad_norm=grad_clip).
+
+    Network: two hidden layers, 64 and 64 wide as in the paper; `hidden=[256, 256]` (or SB3's
+    `policy_kwargs=dict(net_arch=[256, 256])`) sets their widths.
     """
 
-    def __init__(self, method, env, net="bootstrap", expert=None, seed=0, eval_env=None, demos=None, **hyperparameters):
-        valid = config_keys()
-        unknown = sorted(set(hyperparameters) - set(valid))
-        if unknown:
-            raise TypeError(
-                f"Agent() got unexpected keyword argument(s) {', '.join(unknown)}; valid hyperparameters: "
-                + ", ".join(valid)
-            )
+    def __init__(
+        self,
+        method: str,
+        env: Any,
+        net: str = "bootstrap",
+        expert: Any = None,
+        *,
+        seed: int = 0,
+        eval_env: Any = None,
+        demos: Any = None,
+        policy_kwargs: Optional[Dict[str, Any]] = None,
+        tensorboard_log: Optional[Union[str, os.PathLike]] = None,  # type: ignore[type-arg]
+        verbose: int = 0,
+        learning_rate: Optional[float] = None,  # Adam's step size (lr) [preset: 1e-3 CartPole, 1e-4 others]
+        buffer_size: Optional[int] = None,  # agent part of the replay memory (replay_size)
+        batch_size: Optional[int] = None,  # minibatch size [32]
+        gamma: Optional[float] = None,  # discount factor [preset]
+        exploration_fraction: Optional[float] = None,  # fraction of train_steps over which ε anneals [0.1]
+        exploration_initial_eps: Optional[float] = None,  # ε at the start (eps_start) [0.9]
+        exploration_final_eps: Optional[float] = None,  # ε at the end (eps_end) [0.01]
+        target_update_interval: Optional[int] = None,  # updates between target copies (target_period)
+        learning_starts: Optional[int] = None,  # environment steps before the first update [500/1000]
+        train_freq: Optional[int] = None,  # environment steps per update [1]
+        max_grad_norm: Optional[float] = None,  # global gradient-norm clip (grad_clip) [10]
+        train_steps: Optional[int] = None,  # the run's length: the schedules' horizon [preset]
+        budget: Optional[int] = None,  # expert transitions (or queries) allowed during training [preset]
+        budget_unit: Optional[str] = None,  # "transitions" or "queries" [transitions]
+        segment_len: Optional[int] = None,  # expert steps per query [5]
+        t_query: Optional[float] = None,  # ADQN's query fraction; BDQN's query probability [preset]
+        n_r: Optional[int] = None,  # window of recent uncertainties [1000]
+        heads: Optional[int] = None,  # bootstrapped heads [10]
+        hidden: Optional[Sequence[int]] = None,  # widths of the two hidden layers (net_arch) [64, 64]
+        loss: Optional[str] = None,  # TD loss: "mse" or "huber" [mse]
+        double_q: Optional[bool] = None,  # double DQN targets [True]
+        timeout_as_terminal: Optional[bool] = None,  # treat truncation as terminal [False]
+        eps_greedy_on_top: Optional[bool] = None,  # ε-greedy also for bootstrap/noisy nets [True]
+        prioritized: Optional[bool] = None,  # prioritized replay [True]
+        alpha: Optional[float] = None,  # priority exponent [0.6]
+        beta0: Optional[float] = None,  # initial importance-sampling exponent [0.4]
+        eps_agent: Optional[float] = None,  # priority bonus of agent transitions [0.001]
+        eps_demo: Optional[float] = None,  # priority bonus of demonstrations [1.0]
+        margin: Optional[float] = None,  # large-margin loss margin [0.8]
+        lambda_margin: Optional[float] = None,  # weight of the margin loss (config key `lambda`) [preset]
+        lambda_n: Optional[float] = None,  # weight of DQfD's n-step loss [0]
+        n_step: Optional[int] = None,  # horizon of the n-step loss [10]
+        l2: Optional[float] = None,  # L2 weight [0]
+        n_demo: Optional[int] = None,  # demonstrations collected before training (dqfd, adqnp) [preset]
+        pretrain_steps: Optional[int] = None,  # pre-training updates (dqfd, adqnp) [preset]
+        queries_from_learning_starts: Optional[bool] = None,  # no queries before learning_starts [False]
+        exact_factorised_var: Optional[bool] = None,  # exact noisy-net variance [False]
+        expert_timeout: Optional[float] = None,  # seconds an expert process may take per answer [30]
+        demo_file: Optional[str] = None,  # demonstration file for pre-training [none]
+        eval_period: Optional[int] = None,  # environment steps between evaluations [preset]
+        eval_episodes: Optional[int] = None,  # test episodes per evaluation [20]
+        checkpoint_every: Optional[int] = None,  # save weights every this many steps in the run dir [0: off]
+        snapshot_every: Optional[int] = None,  # unused from Python (the run stays alive between learn calls)
+        **other: Any,
+    ) -> None:
+        given = {k: v for k, v in locals().items() if k not in ("self", "method", "env", "net", "expert", "seed",
+                                                                  "eval_env", "demos", "policy_kwargs",
+                                                                  "tensorboard_log", "verbose", "other",
+                                                                  "__class__")}
+        hyper: Dict[str, Any] = {}
+        valid = set(config_keys())
+        for key, value in list(given.items()) + list(other.items()):
+            name = SB3_NAMES.get(key, key)
+            if name not in valid:
+                close = difflib.get_close_matches(key, sorted(valid | set(SB3_NAMES)), n=1)
+                hint = f"; did you mean {close[0]!r}?" if close else ""
+                if key == "net_arch":
+                    hint = "; pass it as policy_kwargs=dict(net_arch=[...]), or as hidden=[...]"
+                raise TypeError(
+                    f"Agent() got an unexpected keyword argument {key!r}{hint} (valid hyperparameters: "
+                    + ", ".join(sorted(valid | set(SB3_NAMES))) + ")"
+                )
+            if value is None:
+                continue
+            if name in hyper:
+                raise TypeError(f"{key!r} and another name for {name!r} were both given")
+            hyper[name] = value
+        if policy_kwargs:
+            unknown = set(policy_kwargs) - {"net_arch"}
+            if unknown:
+                raise TypeError(f"policy_kwargs: only net_arch is understood, not {', '.join(sorted(unknown))}")
+            if "net_arch" in policy_kwargs:
+                arch = policy_kwargs["net_arch"]
+                if isinstance(arch, (dict, str, bytes)) or not hasattr(arch, "__iter__"):
+                    raise TypeError(
+                        f"policy_kwargs: net_arch is the list of the two hidden layers' widths, e.g. [256, 256]; "
+                        f"got {arch!r}"
+                    )
+                arch = list(arch)
+                if "hidden" in hyper and list(hyper["hidden"]) != arch:
+                    raise TypeError("policy_kwargs net_arch and hidden= give different widths: give one of them")
+                hyper["hidden"] = arch
         if method not in METHODS:
             raise ValueError(f"unknown method {method!r}; known: {', '.join(METHODS)}")
         if net not in NETS:
             raise ValueError(f"unknown net {net!r}; known: {', '.join(NETS)}")
         self.method, self.net, self.seed = method, net, int(seed)
-        self.env = env
-        facts = _env_facts(env)
-        self._builtin = isinstance(env, _BuiltinEnv)
-        if not self._builtin:
-            _arld.register_env(*facts)
-        self.env_id = facts[0]
-        self.eval_env = eval_env
-        given = eval_env if isinstance(eval_env, (list, tuple)) else [] if eval_env is None else [eval_env]
-        if any(_env_facts(e)[1:3] != facts[1:3] for e in given):
-            raise ValueError("eval_env must have the same spaces as env")
-        self._hyper = dict(hyperparameters)
+        self.verbose = int(verbose)
+        self.tensorboard_log = None if tensorboard_log is None else str(tensorboard_log)
+        self.policy_kwargs = dict(policy_kwargs or {})
+        self.logger = _Logger()
+        self._hyper = hyper
+        self._set_env(env)
+        self.eval_env = None if eval_env is None else _as_env(eval_env)
+        self._check_eval_env()
         if expert is not None:
-            self._expert, name = _expert_callable(expert, facts[2])
+            self._expert, name = _expert_callable(expert)
             self._expert_name = name
             if self._expert is None:
                 self._hyper["expert"] = name
@@ -242,47 +596,79 @@ class Agent:
             self._expert, self._expert_name = None, ""
             if method != "dqn":
                 raise ValueError(f"{method} needs an expert: pass expert=")
-        self._demos = None if demos is None else _Demos(**demos)
-        self.config = self._resolve(self._hyper)  # fails early on a bad value
-        self._policy = None
-        self.evaluations = []
-        self.queries = []
-        self.summary = None
+        if demos is not None and method not in ("dqfd", "adqnp"):
+            raise ValueError(f"{method} does not pre-train on demonstrations; demos= is for dqfd and adqnp")
+        self._demos = None if demos is None else _demos(demos)
+        try:
+            self.config = self._resolve(self._hyper)  # fails early on a bad value
+        except ValueError as e:
+            if "net_arch" in self.policy_kwargs and "hidden" in str(e):
+                raise ValueError(f"policy_kwargs net_arch (arld's hidden): {e}") from None
+            raise
+        self._policy: Any = None
+        self._run: Any = None
+        self._resume: Optional[str] = None
+        self._live_step = 0
+        self.evaluations: List[Dict[str, Any]] = []
+        self.queries: List[Dict[str, Any]] = []
+        self.summary: Optional[Dict[str, Any]] = None
 
-    def _resolve(self, hyper):
-        values = [(k, json.dumps(v)) for k, v in hyper.items()]
-        return json.loads(_arld.resolve_config(self.env_id, self.method, self.net, self.seed, values))
+    # --- environments
 
-    def learn(self, total_timesteps=None, progress_bar=False, log_dir=None):
-        """Trains a fresh agent for `total_timesteps` environment steps (default: the preset's train_steps) with
-        arld's loop. `log_dir` writes the usual run directory (config, CSVs, TensorBoard events, weights,
-        summary). Returns self."""
-        hyper = dict(self._hyper)
-        if total_timesteps is not None:
-            hyper["train_steps"] = int(total_timesteps)
-        self.config = self._resolve(hyper)
-        if self._builtin:
-            env = test_envs = None
-        else:
-            env = _EnvBridge(self.env)
-            test_envs = [_EnvBridge(e) for e in self._test_envs(self.config["eval_episodes"])]
-        policy, evaluations, queries, summary = _arld.train(
-            json.dumps(self.config),
-            env=env,
-            test_envs=test_envs,
-            expert=self._expert,
-            expert_name=self._expert_name,
-            demos=self._demos,
-            log_dir=None if log_dir is None else str(log_dir),
-            progress=bool(progress_bar),
-        )
-        self._policy, self.evaluations, self.queries = policy, evaluations, queries
-        self.summary = json.loads(summary)
-        return self
+    def _set_env(self, env: Any) -> None:
+        env = _as_env(env)
+        facts = _env_facts(env)
+        self._builtin = isinstance(env, _BuiltinEnv)
+        self.env_id = facts[0] if self._builtin else _register(facts)
+        self._base_id = facts[0]
+        self._facts = facts
+        self.env = env
 
-    def _test_envs(self, episodes):
+    def _check_eval_env(self) -> None:
+        given = self.eval_env if isinstance(self.eval_env, (list, tuple)) else [] if self.eval_env is None else [
+            self.eval_env]
+        if any(_env_facts(e)[1:3] != self._facts[1:3] for e in given):
+            raise ValueError("eval_env must have the same spaces as env")
+
+    def get_env(self) -> Any:
+        """The training environment."""
+        return self.env
+
+    def set_env(self, env: Any, force_reset: bool = True) -> None:
+        """Trains on `env` from the next `learn` that starts a run (same spaces; a live run keeps its own)."""
+        env = _as_env(env)
+        if _env_facts(env)[1:3] != self._facts[1:3]:
+            raise ValueError("the new environment must have the same observation size and actions")
+        self._set_env(env)
+        self.config = self._resolve(self._hyper)
+
+    # --- configuration
+
+    def _resolve(self, hyper: Dict[str, Any]) -> Dict[str, Any]:
+        values = dict(hyper)
+        if self.env_id != self._base_id and self._base_id in _arld.builtin_env_ids():
+            # A re-limited or wrapped built-in task keeps the paper's values for that task.
+            ours = preset(self.method, self._base_id, self.net, self.seed)
+            general = json.loads(_arld.resolve_config(self.env_id, self.method, self.net, self.seed, []))
+            for k, v in ours.items():
+                if k not in _IDENTITY and general.get(k) != v and k not in values:
+                    values[k] = v
+        pairs = [(k, json.dumps(v, default=_json_default)) for k, v in values.items()]
+        cfg = dict(json.loads(_arld.resolve_config(self.env_id, self.method, self.net, self.seed, pairs)))
+        if self._expert_name and getattr(self, "_expert", None) is not None:
+            cfg["expert"] = f"python:{self._expert_name}"  # what was asked, for config.toml
+        return cfg
+
+    # --- training
+
+    @property
+    def num_timesteps(self) -> int:
+        """Environment steps of the current run so far."""
+        return int(self._live_step)
+
+    def _test_envs(self, episodes: int) -> List[Any]:
         """One environment per test episode (the test episodes run in lockstep): `eval_env` when it is a list of
-        that length; otherwise `eval_env` (or a copy of `env` from its spec) and copies of it from its spec."""
+        that length; otherwise `eval_env` (or a copy of `env`) and copies of it."""
         if isinstance(self.eval_env, (list, tuple)):
             if len(self.eval_env) != episodes:
                 raise ValueError(
@@ -290,45 +676,266 @@ class Agent:
                     "episodes (eval_episodes): give one environment per episode, or one to copy"
                 )
             return list(self.eval_env)
-        if self.eval_env is not None:
-            return [self.eval_env] + [_same_spec_env(self.eval_env) for _ in range(episodes - 1)]
-        return [_same_spec_env(self.env) for _ in range(episodes)]
+        first = self.eval_env if self.eval_env is not None else _copy_env(self.env)
+        return [first] + [_copy_env(first) for _ in range(episodes - 1)]
 
-    def _require_policy(self):
+    def _log_dir(self, tb_log_name: Optional[str], reset: bool) -> Optional[str]:
+        if self.tensorboard_log is None:
+            return None
+        name = tb_log_name or self.method.upper()
+        root = Path(self.tensorboard_log)
+        root.mkdir(parents=True, exist_ok=True)
+        numbers = [int(p.name[len(name) + 1:]) for p in root.glob(f"{name}_*") if p.name[len(name) + 1:].isdigit()]
+        n = max(numbers, default=0) + 1
+        return str(root / f"{name}_{n}")
+
+    def _start_run(self, log_dir: Optional[str], resume: Optional[str]) -> Any:
+        if self._builtin:
+            # Trained entirely in Rust; the test episodes too, unless eval_env is another environment.
+            env = demo_env = None
+            given = self.eval_env if isinstance(self.eval_env, (list, tuple)) else [self.eval_env]
+            if all(e is None or (isinstance(e, _BuiltinEnv) and e.id == self.env_id) for e in given):
+                test_envs = None
+            else:
+                test_envs = [_EnvBridge(e) for e in self._test_envs(self.config["eval_episodes"])]
+        else:
+            env = _EnvBridge(self.env)
+            test_envs = [_EnvBridge(e) for e in self._test_envs(self.config["eval_episodes"])]
+            demo_env = _EnvBridge(self.env)
+        # The run writes its directory until it ends, maybe after the working directory changed: fix it now.
+        log_dir = None if log_dir is None else os.path.abspath(log_dir)
+        return _arld.start_run(
+            json.dumps(self.config), env=env, test_envs=test_envs, expert=self._expert,
+            expert_name=self._expert_name, demos=self._demos, log_dir=log_dir, resume=resume, demo_env=demo_env,
+        )
+
+    def learn(
+        self,
+        total_timesteps: int,
+        callback: Any = None,
+        log_interval: Optional[int] = 4,
+        tb_log_name: Optional[str] = None,
+        reset_num_timesteps: bool = True,
+        progress_bar: bool = False,
+        log_dir: Optional[Union[str, os.PathLike]] = None,  # type: ignore[type-arg]
+    ) -> "Agent":
+        """Trains `total_timesteps` environment steps with arld's loop and returns self.
+
+        reset_num_timesteps=True starts a new run (a fresh network, replay and budget); False continues the
+        current one (network, optimiser, replay, schedules, budget, generators), so learn(a) then
+        learn(b, reset_num_timesteps=False) equals learn(a + b) byte for byte. An agent from `Agent.load` of a
+        full save continues its run on the first learn either way. callback: SB3-style callback objects
+        (on_training_start, on_step -> bool, on_training_end; BaseCallback subclasses work) or a callable
+        (locals, globals) -> bool; their locals hold step, episode, last_eval, budget_used and queries, and
+        returning False stops training there (the run can be continued). log_dir (or tensorboard_log= of the
+        agent, in numbered folders <tb_log_name>_<n>) writes the run directory: config.toml, CSVs, TensorBoard
+        events, weights, summary.json. log_interval: with verbose >= 1, a line on standard output every
+        log_interval finished episodes (as SB3's DQN); None or a verbose of 0 prints none (the run directory and
+        TensorBoard get every value either way).
+        """
+        if total_timesteps < 1:
+            raise ValueError(f"total_timesteps must be at least 1, got {total_timesteps}")
+        if log_interval is not None and (not isinstance(log_interval, (int, np.integer)) or log_interval < 1):
+            raise ValueError(f"log_interval must be a whole number of episodes, 1 or more (or None); got "
+                             f"{log_interval!r}")
+        start = 0
+        if self._run is not None and not reset_num_timesteps:
+            start = self._run.num_timesteps
+        elif self._run is None and self._resume is not None:
+            start = self._live_step
+            self._run = self._start_run(None if log_dir is None else str(log_dir), self._resume)
+            self._resume = None
+        else:
+            if self._run is not None:
+                self._run.close()
+            directory = str(log_dir) if log_dir is not None else self._log_dir(tb_log_name, True)
+            self._run = self._start_run(directory, None)
+            self._live_step = 0
+        until = start + int(total_timesteps)
+        label = f"{self.method.upper()}-{self.net}"
+        episode_log = _EpisodeLog(int(log_interval), label) if self.verbose >= 1 and log_interval else None
+        callbacks = None if callback is None and episode_log is None else _Callbacks(callback, self, episode_log)
+        bar = _ProgressBar(start, int(total_timesteps), label) if progress_bar else None
+        if callbacks is not None:
+            callbacks.start()
+        try:
+            self._live_step = self._run.advance(until, callbacks, bar)
+        finally:
+            if self._run is not None:
+                try:
+                    self._refresh()
+                except RuntimeError:
+                    pass
+            if bar is not None:
+                bar.close(self._live_step)
+            if callbacks is not None:
+                callbacks.end()
+        if self.verbose >= 1 and self.summary is not None:
+            print(f"arld {self.method}-{self.net} on {self.env_id}: {self._live_step} steps, last evaluation "
+                  f"{self.summary['final_score']:.1f}, budget used {self.summary['queries_used']}")
+        return self
+
+    def _refresh(self) -> None:
+        run = self._run
+        self._policy = run.policy()
+        self.evaluations = list(run.evaluations())
+        self.queries = list(run.queries())
+        # Its `expert` is the one that ran (python:<qualified name> for a Python expert), as in summary.json.
+        self.summary = json.loads(run.summary())
+
+    # --- acting
+
+    def _require_policy(self) -> Any:
         if self._policy is None:
             raise RuntimeError("the agent has not been trained or loaded yet: call learn() or Agent.load()")
         return self._policy
 
-    def predict(self, obs, deterministic=True):
-        """The test policy's action (no exploration) for one observation."""
-        return self._require_policy().act(np.asarray(obs, dtype=np.float32).reshape(-1).tolist())
+    def predict(
+        self,
+        observation: Any,
+        state: Any = None,
+        episode_start: Any = None,
+        deterministic: bool = True,
+    ) -> Tuple[np.ndarray, None]:
+        """(action, None) for one observation, or (array of actions, None) for a batch of them (rows).
+        deterministic=True: the test policy (greedy, bootstrap heads voting, mean noisy weights);
+        False: the exploration policy of training at the run's current step (ε-greedy with the current ε, the
+        episode's bootstrap head, sampled noise; `episode_start` begins a new episode)."""
+        policy = self._require_policy()
+        obs = np.asarray(observation, dtype=np.float32)
+        d = policy.obs_dim
+        batch = obs.ndim == 2 and obs.shape[1] == d
+        rows = obs.reshape(-1, d) if batch else obs.reshape(1, -1)
+        starts = np.zeros(len(rows), dtype=bool) if episode_start is None else np.broadcast_to(
+            np.asarray(episode_start, dtype=bool).reshape(-1), (len(rows),))
+        if deterministic:
+            actions = [policy.act(r.tolist()) for r in rows]
+        else:
+            actions = [policy.explore(r.tolist(), bool(s)) for r, s in zip(rows, starts)]
+        out = np.asarray(actions, dtype=np.int64)
+        return (out if batch else out.reshape(())), None
 
-    def save(self, path):
-        """Writes the network's weights (safetensors) with the run's identity as metadata."""
-        meta = {"env": self.env_id, "method": self.method, "net": self.net, "seed": str(self.seed)}
-        self._require_policy().save(str(path), meta)
+    # --- parameters, saving, loading
+
+    def get_parameters(self) -> Dict[str, Dict[str, np.ndarray]]:
+        """The network's weights: {"policy": {name: array}} (PyTorch's layout and names, as in saved files)."""
+        policy = self._require_policy()
+        with tempfile.TemporaryDirectory() as tmp:
+            path = os.path.join(tmp, "w.safetensors")
+            policy.save(path, {})
+            return {"policy": _read_safetensors(path)}
+
+    def set_parameters(self, load_path_or_dict: Any, exact_match: bool = True) -> None:
+        """Sets the weights `predict` (and a weights-only `save`) use, from `get_parameters()`'s dict or a weights
+        file. A live run keeps training its own network: this changes what the agent acts with, not the run."""
+        if isinstance(load_path_or_dict, (str, os.PathLike)):
+            policy, _meta = _arld.Policy.load(str(load_path_or_dict))
+        else:
+            params = load_path_or_dict.get("policy", load_path_or_dict)
+            with tempfile.TemporaryDirectory() as tmp:
+                path = os.path.join(tmp, "w.safetensors")
+                _write_safetensors(path, params)
+                policy, _meta = _arld.Policy.load(path)
+        if self._policy is not None and (policy.obs_dim, policy.n_actions) != (
+                self._policy.obs_dim, self._policy.n_actions):
+            raise ValueError("the parameters are for another observation size or number of actions")
+        self._policy = policy
+
+    def save(self, path: Union[str, os.PathLike]) -> None:  # type: ignore[type-arg]
+        """Writes the run's full state (network, optimiser, replay, query state, generators: arld's run snapshot
+        format) to `path`, so that `Agent.load(path, env).learn(n)` continues the run; an agent loaded from plain
+        weights writes its weights."""
+        if self._run is None:
+            if self._resume is not None:
+                shutil.copyfile(self._resume, path)
+                return
+            meta = {"env": self.env_id, "method": self.method, "net": self.net, "seed": str(self.seed)}
+            self._require_policy().save(str(path), meta)
+            return
+        with tempfile.TemporaryDirectory() as tmp:
+            self._run.snapshot(tmp)
+            shutil.copyfile(os.path.join(tmp, "snapshot.safetensors"), path)
 
     @classmethod
-    def load(cls, path, env=None):
-        """An agent acting with saved weights (from `save` or `arld train`). `env` (optional) is checked
-        against the weights' sizes."""
-        policy, meta = _arld.Policy.load(str(path))
+    def load(cls, path: Union[str, os.PathLike], env: Any = None, expert: Any = None,  # type: ignore[type-arg]
+             eval_env: Any = None, **kwargs: Any) -> "Agent":
+        """An agent from `save` (the run's full state: `learn` continues it; pass the environment, and the expert
+        when it was a Python one) or from plain weights (`arld train`'s weights.safetensors: it acts only)."""
+        path = str(path)
         if env is not None:
-            _id, obs_dim, n_actions, _limit, _thr = _env_facts(env)
-            if (obs_dim, n_actions) != (policy.obs_dim, policy.n_actions):
-                raise ValueError(
-                    f"{path} has {policy.obs_dim} inputs and {policy.n_actions} actions, the environment "
-                    f"{obs_dim} and {n_actions}"
-                )
-        agent = cls.__new__(cls)
-        agent.method = meta.get("method", "dqn")
-        agent.net = "bootstrap"
-        agent.seed = int(meta.get("seed", 0))
-        agent.env = env
-        agent.env_id = meta.get("env", "")
-        agent._policy = policy
-        agent.evaluations, agent.queries, agent.summary = [], [], None
+            env = _as_env(env)
+            facts = _env_facts(env)
+            env_id = facts[0] if isinstance(env, _BuiltinEnv) else _register(facts)
+        config = _arld.snapshot_config(path)
+        if config is None:
+            policy, meta = _arld.Policy.load(path)
+            if env is not None:
+                _id, obs_dim, n_actions, _limit, _thr = _env_facts(env)
+                if (obs_dim, n_actions) != (policy.obs_dim, policy.n_actions):
+                    raise ValueError(
+                        f"{path} has {policy.obs_dim} inputs and {policy.n_actions} actions, the environment "
+                        f"{obs_dim} and {n_actions}"
+                    )
+            agent = cls.__new__(cls)
+            agent.method = meta.get("method", "dqn")
+            agent.net = policy.net
+            agent.seed = int(meta.get("seed", 0))
+            agent.env = env
+            agent.env_id = meta.get("env", "")
+            agent.eval_env = eval_env
+            agent._policy, agent._run, agent._resume, agent._live_step = policy, None, None, 0
+            agent._hyper, agent.config = {}, {}
+            agent.evaluations, agent.queries, agent.summary = [], [], None
+            agent.verbose, agent.tensorboard_log, agent.policy_kwargs = 0, None, {}
+            agent.logger = _Logger()
+            return agent
+        cfg = json.loads(config)
+        if env is None:
+            env = make(cfg["env"]) if cfg["env"] in _arld.builtin_env_ids() else None
+            if env is None:
+                raise ValueError(f"{path} trained on {cfg['env']}: pass that environment as env=")
+            env_id = cfg["env"]
+        if env_id != cfg["env"]:
+            raise ValueError(f"{path} trained on {cfg['env']}, not {env_id}")
+        spec = str(cfg.get("expert", ""))
+        if expert is None and cfg["method"] != "dqn":
+            if spec.startswith("python:"):
+                raise ValueError(f"{path} was trained with the Python expert {spec[7:]}: pass it as expert=")
+            expert = spec
+        agent = cls(cfg["method"], env, cfg["net"], expert, seed=cfg["seed"], eval_env=eval_env, **kwargs)
+        policy, _cfg, step = _arld.snapshot_policy(path)
+        agent.config = cfg
+        agent.policy_kwargs = {"net_arch": list(cfg["hidden"])}
+        agent._policy, agent._resume, agent._live_step = policy, path, step
         return agent
 
-    def __repr__(self):
+    def __repr__(self) -> str:
         return f"arld.Agent({self.method!r}, {self.env_id!r}, net={self.net!r}, seed={self.seed})"
+
+
+def _read_safetensors(path: str) -> Dict[str, np.ndarray]:
+    data = Path(path).read_bytes()
+    n = int.from_bytes(data[:8], "little")
+    header = json.loads(data[8:8 + n])
+    out: Dict[str, np.ndarray] = {}
+    for name, info in header.items():
+        if name == "__metadata__":
+            continue
+        start, end = info["data_offsets"]
+        out[name] = np.frombuffer(data[8 + n + start:8 + n + end], dtype="<f4").reshape(info["shape"]).copy()
+    return out
+
+
+def _write_safetensors(path: str, params: Dict[str, Any]) -> None:
+    header: Dict[str, Any] = {}
+    blobs = []
+    offset = 0
+    for name in sorted(params):
+        arr = np.ascontiguousarray(np.asarray(params[name], dtype="<f4"))
+        raw = arr.tobytes()
+        header[name] = {"dtype": "F32", "shape": list(arr.shape), "data_offsets": [offset, offset + len(raw)]}
+        blobs.append(raw)
+        offset += len(raw)
+    text = json.dumps(header).encode()
+    text += b" " * (-len(text) % 8)
+    Path(path).write_bytes(len(text).to_bytes(8, "little") + text + b"".join(blobs))

@@ -7,9 +7,7 @@
 //! `δ_kb = Q_k(s_b, a_b) − (r_b + γ(1 − d_b) Q⁻_k(s'_b, argmax_a Q_k(s'_b, a)))` and
 //! `L_E = max_a [Q(s, a) + M·1(a ≠ a_E)] − Q(s, a_E)`.
 
-use crate::nn::{
-    Adam, Grads, HIDDEN, NoiseSample, OutputKind, QNet, Workspace, argmax, clip_grad_norm,
-};
+use crate::nn::{Adam, Grads, NoiseSample, OutputKind, QNet, Workspace, argmax, clip_grad_norm};
 use crate::query::{Needs, Signals, head_variance, js_divergence, noisy_variance, q_gap};
 use crate::replay::Batch;
 use crate::state::{Persist, StateDict, StateError};
@@ -31,6 +29,8 @@ pub enum TdLoss {
 pub struct AgentConfig {
     /// Plain, K bootstrapped heads, or noisy output.
     pub output: OutputKind,
+    /// Widths of the two hidden layers (the paper's: 64 and 64).
+    pub hidden: [usize; 2],
     /// Minibatch size the update buffers are sized for.
     pub batch_size: usize,
     /// Adam learning rate.
@@ -69,7 +69,8 @@ pub struct Agent {
     adam: Adam,
     grads: Grads,
     q_act: Vec<f32>,
-    phi: [f32; HIDDEN],
+    /// The features `phi(s)` of the last acting pass (the second hidden layer's width).
+    phi: Vec<f32>,
     ws_batch: Workspace,
     ws_next_online: Workspace,
     ws_next_target: Workspace,
@@ -100,7 +101,7 @@ impl Agent {
     /// A freshly initialised agent for an environment with `obs_dim` inputs and `n_actions` actions.
     pub fn new(cfg: &AgentConfig, obs_dim: usize, n_actions: usize, seed: u64) -> Self {
         let mut rng = Pcg64::seed_from_u64(seed);
-        let online = QNet::new(obs_dim, n_actions, cfg.output, &mut rng);
+        let online = QNet::with_hidden(obs_dim, n_actions, cfg.output, cfg.hidden, &mut rng);
         Self::from_network(cfg, online, rng)
     }
 
@@ -108,9 +109,10 @@ impl Agent {
     pub fn from_network(cfg: &AgentConfig, online: QNet, mut rng: Pcg64) -> Self {
         let target = online.clone();
         let n_actions = online.n_actions();
+        let [_, features] = online.hidden();
         let batch = cfg.batch_size;
         let mut noise = || {
-            let mut n = NoiseSample::new(n_actions);
+            let mut n = NoiseSample::with_inputs(features, n_actions);
             n.resample(&mut rng);
             n
         };
@@ -121,7 +123,7 @@ impl Agent {
             adam: Adam::new(&online, cfg.lr),
             grads: Grads::new(&online),
             q_act: vec![0.0; heads * n_actions],
-            phi: [0.0; HIDDEN],
+            phi: vec![0.0; features],
             ws_batch: Workspace::new(&online, batch),
             ws_next_online: Workspace::new(&online, batch),
             ws_next_target: Workspace::new(&online, batch),
@@ -185,7 +187,7 @@ impl Agent {
                         .expect("noisy network has sigmas");
                     Some(noisy_variance(
                         &self.phi,
-                        &sigma_w[greedy * HIDDEN..(greedy + 1) * HIDDEN],
+                        &sigma_w[greedy * self.phi.len()..(greedy + 1) * self.phi.len()],
                         sigma_b[greedy],
                         self.exact_factorised_var,
                     ))
@@ -691,6 +693,7 @@ mod tests {
         for double_q in [false, true] {
             let cfg = AgentConfig {
                 output: OutputKind::Plain,
+                hidden: [crate::nn::HIDDEN; 2],
                 batch_size: b,
                 lr: 1e-3,
                 gamma,

@@ -4,7 +4,7 @@
 use super::kernels::{Lanes, Strided, product, relu_backward, transpose};
 use super::linear::{column_sums, relu_in_place};
 use super::simd::at_simd_level;
-use super::{Grads, HIDDEN, NoiseSample, OutputKind, QNet, TensorsMut, Workspace, noisy};
+use super::{Grads, NoiseSample, OutputKind, QNet, TensorsMut, Workspace, noisy};
 
 impl QNet {
     /// Q-values of a batch (`x` is `batch * obs_dim`, row-major). Output layout `[head][batch][action]`.
@@ -43,11 +43,12 @@ impl QNet {
             "forward: x must hold batch * obs_dim values"
         );
         let (d, a, width) = (l.obs_dim, l.n_actions, l.out_width);
+        let [n1, n2] = l.hidden;
         ws.batch = batch;
 
         let x_copy = &mut ws.x[..batch * d];
         x_copy.copy_from_slice(x);
-        let h1 = &mut ws.h1[..batch * HIDDEN];
+        let h1 = &mut ws.h1[..batch * n1];
         product::<S>(
             h1,
             Strided::row_major(x_copy, batch, d),
@@ -55,15 +56,15 @@ impl QNet {
             Some(self.tensor(l.fc1_b)),
         );
         relu_in_place(h1);
-        let h2 = &mut ws.h2[..batch * HIDDEN];
+        let h2 = &mut ws.h2[..batch * n2];
         product::<S>(
             h2,
-            Strided::row_major(h1, batch, HIDDEN),
+            Strided::row_major(h1, batch, n1),
             self.tensor(l.fc2_w),
             Some(self.tensor(l.fc2_b)),
         );
         relu_in_place(h2);
-        let h2 = Strided::row_major(h2, batch, HIDDEN);
+        let h2 = Strided::row_major(h2, batch, n2);
 
         let q = &mut ws.q[..batch * width];
         match l.kind {
@@ -112,7 +113,7 @@ impl QNet {
                     &mut ws.w_eff,
                     &mut ws.b_eff,
                 );
-                transpose(&ws.w_eff, a, HIDDEN, &mut ws.w_eff_t);
+                transpose(&ws.w_eff, a, n2, &mut ws.w_eff_t);
                 product::<S>(q, h2, &ws.w_eff_t, Some(&ws.b_eff));
             }
         }
@@ -138,6 +139,7 @@ impl QNet {
         assert!(batch > 0, "backward: the workspace holds no forward pass");
         ws.check_shape(l, batch);
         let (d, a, width) = (l.obs_dim, l.n_actions, l.out_width);
+        let [n1, n2] = l.hidden;
         assert_eq!(
             dq.len(),
             batch * width,
@@ -165,14 +167,14 @@ impl QNet {
             }
             OutputKind::Plain | OutputKind::Noisy => dq,
         };
-        let h1 = &ws.h1[..batch * HIDDEN];
-        let h2 = &ws.h2[..batch * HIDDEN];
-        let d_h2 = &mut ws.d_h2[..batch * HIDDEN];
+        let h1 = &ws.h1[..batch * n1];
+        let h2 = &ws.h2[..batch * n2];
+        let d_h2 = &mut ws.d_h2[..batch * n2];
         let w_t = &mut ws.w_t;
         column_sums(d_out, g.out_b);
         match l.kind {
             OutputKind::Noisy => {
-                // dL/dW_eff as [A][64] = d_out^T · h2; it is also dL/dmu_w.
+                // dL/dW_eff as [A][h2] = d_out^T · h2; it is also dL/dmu_w.
                 product::<S>(g.out_w, Strided::transposed(d_out, batch, a), h2, None);
                 noisy::sigma_gradients(
                     g.out_w,
@@ -185,8 +187,8 @@ impl QNet {
                 product::<S>(d_h2, Strided::row_major(d_out, batch, a), &ws.w_eff, None);
             }
             OutputKind::Plain | OutputKind::Bootstrap { .. } => {
-                product::<S>(g.out_w, Strided::transposed(h2, batch, HIDDEN), d_out, None);
-                transpose(self.tensor(l.out_w), HIDDEN, width, w_t);
+                product::<S>(g.out_w, Strided::transposed(h2, batch, n2), d_out, None);
+                transpose(self.tensor(l.out_w), n2, width, w_t);
                 product::<S>(d_h2, Strided::row_major(d_out, batch, width), w_t, None);
                 // The 1/K trunk scaling of Bootstrapped DQN.
                 if l.heads() > 1 {
@@ -197,10 +199,10 @@ impl QNet {
         }
         relu_backward::<S>(d_h2, h2);
         column_sums(d_h2, g.fc2_b);
-        product::<S>(g.fc2_w, Strided::transposed(h1, batch, HIDDEN), d_h2, None);
-        let d_h1 = &mut ws.d_h1[..batch * HIDDEN];
-        transpose(self.tensor(l.fc2_w), HIDDEN, HIDDEN, w_t);
-        product::<S>(d_h1, Strided::row_major(d_h2, batch, HIDDEN), w_t, None);
+        product::<S>(g.fc2_w, Strided::transposed(h1, batch, n1), d_h2, None);
+        let d_h1 = &mut ws.d_h1[..batch * n1];
+        transpose(self.tensor(l.fc2_w), n1, n2, w_t);
+        product::<S>(d_h1, Strided::row_major(d_h2, batch, n2), w_t, None);
         relu_backward::<S>(d_h1, h1);
         column_sums(d_h1, g.fc1_b);
         product::<S>(

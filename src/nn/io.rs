@@ -2,13 +2,13 @@
 //!
 //! Every tensor is written in PyTorch's `nn.Linear` layout (`weight [out][in]`, `bias [out]`) under a
 //! readable name, whatever the in-memory layout:
-//! - trunk: `fc1.weight [64][obs_dim]`, `fc1.bias`, `fc2.weight [64][64]`, `fc2.bias`;
-//! - `Plain`: `out.weight [A][64]`, `out.bias [A]`;
-//! - `Bootstrap`: `heads.{k}.weight [A][64]`, `heads.{k}.bias [A]` for k = 0..K;
-//! - `Noisy`: `noisy.mu_w [A][64]`, `noisy.sigma_w [A][64]`, `noisy.mu_b [A]`, `noisy.sigma_b [A]`.
+//! - trunk: `fc1.weight [h1][obs_dim]`, `fc1.bias`, `fc2.weight [h2][h1]`, `fc2.bias` (64 and 64 in the paper);
+//! - `Plain`: `out.weight [A][h2]`, `out.bias [A]`;
+//! - `Bootstrap`: `heads.{k}.weight [A][h2]`, `heads.{k}.bias [A]` for k = 0..K;
+//! - `Noisy`: `noisy.mu_w [A][h2]`, `noisy.sigma_w [A][h2]`, `noisy.mu_b [A]`, `noisy.sigma_b [A]`.
 //!
 //! The header metadata holds `kind` (`plain`/`bootstrap`/`noisy`), `heads`, `obs_dim` and `n_actions`, plus
-//! the caller's own keys, which [`QNet::load`] hands back. Files are written atomically (temporary file in
+//! the caller's own keys, which [`QNet::load`] hands back; the hidden widths are the trunk tensors' shapes. Files are written atomically (temporary file in
 //! the same directory, then rename), and loading validates everything before building a network.
 
 use std::collections::{BTreeMap, HashMap};
@@ -20,7 +20,7 @@ use safetensors::{Dtype, SafeTensors};
 use thiserror::Error;
 
 use super::linear::MatView;
-use super::{HIDDEN, Layout, OutputKind, QNet};
+use super::{HIDDEN, Layout, MAX_HIDDEN, OutputKind, QNet};
 
 /// Metadata keys the network itself writes; callers may not use them.
 const RESERVED_KEYS: [&str; 4] = ["kind", "heads", "obs_dim", "n_actions"];
@@ -130,50 +130,39 @@ impl FileTensor {
 /// The file's tensors for a network layout (see the module docs).
 fn file_tensors(layout: &Layout) -> Vec<FileTensor> {
     let (d, a, width) = (layout.obs_dim, layout.n_actions, layout.out_width);
+    let [n1, n2] = layout.hidden;
     // Storage is [in][out]: the file's [out][in] element (o, i) sits at i*out + o.
     let transposed = |outputs: usize, inputs: usize| MatView::row_major(inputs, outputs).t();
     let mut tensors = vec![
-        FileTensor::matrix(
-            "fc1.weight",
-            HIDDEN,
-            d,
-            layout.fc1_w.start,
-            transposed(HIDDEN, d),
-        ),
-        FileTensor::vector("fc1.bias", HIDDEN, layout.fc1_b.start),
-        FileTensor::matrix(
-            "fc2.weight",
-            HIDDEN,
-            HIDDEN,
-            layout.fc2_w.start,
-            transposed(HIDDEN, HIDDEN),
-        ),
-        FileTensor::vector("fc2.bias", HIDDEN, layout.fc2_b.start),
+        FileTensor::matrix("fc1.weight", n1, d, layout.fc1_w.start, transposed(n1, d)),
+        FileTensor::vector("fc1.bias", n1, layout.fc1_b.start),
+        FileTensor::matrix("fc2.weight", n2, n1, layout.fc2_w.start, transposed(n2, n1)),
+        FileTensor::vector("fc2.bias", n2, layout.fc2_b.start),
     ];
     match layout.kind {
         OutputKind::Plain => {
             tensors.push(FileTensor::matrix(
                 "out.weight",
                 a,
-                HIDDEN,
+                n2,
                 layout.out_w.start,
-                transposed(a, HIDDEN),
+                transposed(a, n2),
             ));
             tensors.push(FileTensor::vector("out.bias", a, layout.out_b.start));
         }
         OutputKind::Bootstrap { heads } => {
             for head in 0..heads {
-                // Head k: columns k*A..(k+1)*A of the fused [64][K*A] storage.
+                // Head k: columns k*A..(k+1)*A of the fused [h2][K*A] storage.
                 let view = MatView {
                     rows: a,
-                    cols: HIDDEN,
+                    cols: n2,
                     row_stride: 1,
                     col_stride: width,
                 };
                 tensors.push(FileTensor::matrix(
                     format!("heads.{head}.weight"),
                     a,
-                    HIDDEN,
+                    n2,
                     layout.out_w.start + head * a,
                     view,
                 ));
@@ -185,18 +174,18 @@ fn file_tensors(layout: &Layout) -> Vec<FileTensor> {
             }
         }
         OutputKind::Noisy => {
-            let row_major = MatView::row_major(a, HIDDEN);
+            let row_major = MatView::row_major(a, n2);
             tensors.push(FileTensor::matrix(
                 "noisy.mu_w",
                 a,
-                HIDDEN,
+                n2,
                 layout.out_w.start,
                 row_major,
             ));
             tensors.push(FileTensor::matrix(
                 "noisy.sigma_w",
                 a,
-                HIDDEN,
+                n2,
                 layout.sigma_w.start,
                 row_major,
             ));
@@ -387,9 +376,20 @@ pub fn parse_model(
         ));
     }
 
+    // The hidden widths: the trunk's output sizes, `fc1.weight [h1][..]` and `fc2.weight [h2][..]`. A tensor
+    // missing, or a width out of range, leaves the paper's width, and the shape checks below name the tensor.
+    let width = |name: &str| {
+        file.tensor(name)
+            .ok()
+            .and_then(|t| t.shape().first().copied())
+            .filter(|w| (1..=MAX_HIDDEN).contains(w))
+            .unwrap_or(HIDDEN)
+    };
+    let hidden = [width("fc1.weight"), width("fc2.weight")];
+    let [n1, n2] = hidden;
     // Parameters the declared sizes need, against the data the file really holds (before allocating them).
-    let needed = (obs_dim * HIDDEN + HIDDEN * HIDDEN + 2 * HIDDEN)
-        + heads * n_actions * (HIDDEN + 1) * if kind == OutputKind::Noisy { 2 } else { 1 };
+    let needed = (obs_dim * n1 + n1 * n2 + n1 + n2)
+        + heads * n_actions * (n2 + 1) * if kind == OutputKind::Noisy { 2 } else { 1 };
     if needed.saturating_mul(4) > bytes.len() {
         return Err(metadata_error(
             "n_actions",
@@ -400,7 +400,7 @@ pub fn parse_model(
             ),
         ));
     }
-    let layout = Layout::new(obs_dim, n_actions, kind);
+    let layout = Layout::new(obs_dim, n_actions, kind, hidden);
     let expected = file_tensors(&layout);
     for name in file.names() {
         if !expected.iter().any(|t| t.name == name) {
@@ -509,19 +509,32 @@ mod tests {
     fn save_then_load_round_trips_every_kind() {
         let dir = tempfile::tempdir().unwrap();
         let mut rng = rand_pcg::Pcg64::seed_from_u64(11);
-        for kind in [
+        let kinds = [
             OutputKind::Plain,
             OutputKind::Bootstrap { heads: 3 },
             OutputKind::Noisy,
-        ] {
-            let mut net = QNet::new(5, 3, kind, &mut rng);
+        ];
+        for (kind, hidden) in kinds
+            .into_iter()
+            .flat_map(|k| [(k, [HIDDEN, HIDDEN]), (k, [256, 9])])
+        {
+            let mut net = QNet::with_hidden(5, 3, kind, hidden, &mut rng);
             // Make sigma distinct from its constant initial value so a mix-up would show.
             for (i, p) in net.parameters_mut().iter_mut().enumerate() {
                 *p += i as f32 * 1e-4;
             }
-            let path = dir.path().join(format!("{kind:?}.safetensors"));
+            let path = dir.path().join(format!("{kind:?}{hidden:?}.safetensors"));
             net.save(&path, &example_metadata()).unwrap();
+            // The file holds PyTorch's shapes for these widths.
+            let bytes = fs::read(&path).unwrap();
+            let file = SafeTensors::deserialize(&bytes).unwrap();
+            assert_eq!(file.tensor("fc1.weight").unwrap().shape(), &[hidden[0], 5]);
+            assert_eq!(
+                file.tensor("fc2.weight").unwrap().shape(),
+                &hidden[..].iter().rev().copied().collect::<Vec<_>>()[..]
+            );
             let (loaded, metadata) = QNet::load(&path).unwrap();
+            assert_eq!(loaded.hidden(), hidden);
             assert_eq!(loaded.kind(), kind);
             assert_eq!(loaded.obs_dim(), 5);
             assert_eq!(loaded.n_actions(), 3);

@@ -4,16 +4,14 @@
 
 use std::ops::Range;
 
-use super::HIDDEN;
-
 /// The output stage of the Q-network.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub enum OutputKind {
-    /// One linear layer `64 -> A`.
+    /// One linear layer `h2 -> A` (`h2`: the second hidden layer's width).
     Plain,
-    /// `heads` independent linear heads `64 -> A` on a shared trunk (Bootstrapped DQN).
+    /// `heads` independent linear heads `h2 -> A` on a shared trunk (Bootstrapped DQN).
     Bootstrap { heads: usize },
-    /// A factorised NoisyLinear `64 -> A` (NoisyNet).
+    /// A factorised NoisyLinear `h2 -> A` (NoisyNet).
     Noisy,
 }
 
@@ -42,14 +40,17 @@ impl Segment {
 
 /// Where each tensor lives in the flat parameter vector, in storage order.
 ///
-/// `out_w`/`out_b` are the output layer: for `Plain` and `Bootstrap` the (fused) weight `[64][K*A]` and
-/// bias `[K*A]` (head k owns columns `k*A..(k+1)*A`); for `Noisy` the means `mu_w [A][64]` and `mu_b [A]`,
-/// followed by `sigma_w [A][64]` and `sigma_b [A]` (empty segments otherwise).
+/// The trunk is `fc1_w [obs_dim][h1]`, `fc1_b [h1]`, `fc2_w [h1][h2]`, `fc2_b [h2]` with `[h1, h2] = hidden`.
+/// `out_w`/`out_b` are the output layer: for `Plain` and `Bootstrap` the (fused) weight `[h2][K*A]` and
+/// bias `[K*A]` (head k owns columns `k*A..(k+1)*A`); for `Noisy` the means `mu_w [A][h2]` and `mu_b [A]`,
+/// followed by `sigma_w [A][h2]` and `sigma_b [A]` (empty segments otherwise).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(crate) struct Layout {
     pub obs_dim: usize,
     pub n_actions: usize,
     pub kind: OutputKind,
+    /// Widths of the two hidden layers.
+    pub hidden: [usize; 2],
     /// Columns of the output GEMM: `heads * n_actions`.
     pub out_width: usize,
     pub fc1_w: Segment,
@@ -64,7 +65,13 @@ pub(crate) struct Layout {
 }
 
 impl Layout {
-    pub(super) fn new(obs_dim: usize, n_actions: usize, kind: OutputKind) -> Self {
+    pub(super) fn new(
+        obs_dim: usize,
+        n_actions: usize,
+        kind: OutputKind,
+        hidden: [usize; 2],
+    ) -> Self {
+        let [h1, h2] = hidden;
         let out_width = kind.heads() * n_actions;
         let mut next = 0;
         let mut take = |len: usize| {
@@ -78,14 +85,15 @@ impl Layout {
             obs_dim,
             n_actions,
             kind,
+            hidden,
             out_width,
-            fc1_w: take(obs_dim * HIDDEN),
-            fc1_b: take(HIDDEN),
-            fc2_w: take(HIDDEN * HIDDEN),
-            fc2_b: take(HIDDEN),
-            out_w: take(HIDDEN * out_width),
+            fc1_w: take(obs_dim * h1),
+            fc1_b: take(h1),
+            fc2_w: take(h1 * h2),
+            fc2_b: take(h2),
+            out_w: take(h2 * out_width),
             out_b: take(out_width),
-            sigma_w: take(if noisy { HIDDEN * n_actions } else { 0 }),
+            sigma_w: take(if noisy { h2 * n_actions } else { 0 }),
             sigma_b: take(if noisy { n_actions } else { 0 }),
             len: 0,
         };
@@ -95,6 +103,11 @@ impl Layout {
 
     pub fn heads(&self) -> usize {
         self.kind.heads()
+    }
+
+    /// Width of the second hidden layer, the features `phi(s)` the output stage reads.
+    pub fn h2(&self) -> usize {
+        self.hidden[1]
     }
 }
 

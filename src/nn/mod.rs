@@ -1,21 +1,23 @@
-//! The Q-network: a fixed-shape MLP `obs_dim -> 64 -> ReLU -> 64 -> ReLU -> output stage`
-//! (docs/algorithm.md §2), with forward and backward written by hand on the matrix kernels of `kernels.rs`.
+//! The Q-network: an MLP `obs_dim -> h1 -> ReLU -> h2 -> ReLU -> output stage` (docs/algorithm.md §2), with
+//! forward and backward written by hand on the matrix kernels of `kernels.rs`. The paper's widths are
+//! `h1 = h2 = 64` ([`HIDDEN`]); other widths ([`QNet::with_hidden`]) run on the same kernels, in the same fixed
+//! order of operations.
 //!
 //! The output stage is one of ([`OutputKind`]):
-//! - `Plain`: one linear layer `64 -> A`;
-//! - `Bootstrap { heads: K }`: K independent linear heads `64 -> A` on the shared trunk; in the backward
+//! - `Plain`: one linear layer `h2 -> A`;
+//! - `Bootstrap { heads: K }`: K independent linear heads `h2 -> A` on the shared trunk; in the backward
 //!   pass the gradient entering the trunk is scaled by `1/K` while the heads get their full gradient
 //!   (docs/algorithm.md §4, Osband et al. 2016);
-//! - `Noisy`: a factorised NoisyLinear `64 -> A` (docs/algorithm.md §6), the only noisy layer.
+//! - `Noisy`: a factorised NoisyLinear `h2 -> A` (docs/algorithm.md §6), the only noisy layer.
 //!
 //! How the parts fit:
 //! - [`QNet`] (this file) holds the parameters only, in one flat `Vec<f32>` (so Adam, clipping and target
 //!   copies are single loops over one slice), and initialises them. `layout.rs` says where each tensor
 //!   lives: trunk and plain/bootstrap weights are stored transposed, `[in][out]`, so the batch product is
 //!   `x · W` with `W`'s rows contiguous (the kernels vectorise across output columns); the K heads are fused
-//!   into one `[64][K*A]` matrix so the output stage is one product. The noisy layer keeps PyTorch's
+//!   into one `[h2][K*A]` matrix so the output stage is one product. The noisy layer keeps PyTorch's
 //!   `[out][in]` layout (its effective weights are rebuilt every pass anyway, and [`QNet::noisy_sigmas`]
-//!   hands out `sigma_w` as `[A][64]`). Files use PyTorch's layout for every tensor.
+//!   hands out `sigma_w` as `[A][h2]`). Files use PyTorch's layout for every tensor.
 //! - `batch.rs`: [`QNet::forward`] and [`QNet::backward`] of a batch; `single.rs`: [`QNet::q_values_single`],
 //!   one state for acting, the same numbers as its row of a batch.
 //! - [`Workspace`] (`workspace.rs`) holds every buffer a forward/backward pair needs, sized once for a
@@ -56,8 +58,11 @@ use crate::state::{Persist, StateDict, StateError};
 pub(crate) use layout::{Layout, Segment, TensorsMut};
 use linear::{MatView, init_linear};
 
-/// Width of both hidden layers (docs/algorithm.md §2).
+/// Width of both hidden layers in the paper's network (docs/algorithm.md §2), the default.
 pub const HIDDEN: usize = 64;
+
+/// The widest hidden layer a network may have (acting keeps one layer's activations on the stack).
+pub const MAX_HIDDEN: usize = 4096;
 
 /// The Q-network's parameters (see the module docs for the layout). Cheap to clone, e.g. for a target net.
 #[derive(Clone, Debug)]
@@ -67,50 +72,58 @@ pub struct QNet {
 }
 
 impl QNet {
-    /// Width of both hidden layers.
+    /// Width of both hidden layers in the paper's network.
     pub const HIDDEN: usize = HIDDEN;
 
-    /// A freshly initialised network.
+    /// A freshly initialised network of the paper's widths (both hidden layers [`HIDDEN`] wide); see
+    /// [`Self::with_hidden`].
+    pub fn new(obs_dim: usize, n_actions: usize, kind: OutputKind, rng: &mut impl Rng) -> Self {
+        Self::with_hidden(obs_dim, n_actions, kind, [HIDDEN, HIDDEN], rng)
+    }
+
+    /// A freshly initialised network with hidden layers `hidden = [h1, h2]` wide.
     ///
     /// Hidden layers and plain/bootstrap heads use PyTorch's `nn.Linear` default,
     /// `U[-1/sqrt(fan_in), 1/sqrt(fan_in)]` for weights and biases, drawn layer by layer in PyTorch order
     /// (fc1, fc2, then head 0, 1, ...: each head independently, Osband et al.). The noisy layer draws
-    /// `mu ~ U[-1/sqrt(64), 1/sqrt(64)]` and sets `sigma = 0.5/sqrt(64)` (docs/algorithm.md §6).
+    /// `mu ~ U[-1/sqrt(h2), 1/sqrt(h2)]` and sets `sigma = 0.5/sqrt(h2)` (docs/algorithm.md §6).
     ///
     /// # Panics
-    /// If `obs_dim`, `n_actions` or the number of heads is zero (configurations are validated upstream).
-    pub fn new(obs_dim: usize, n_actions: usize, kind: OutputKind, rng: &mut impl Rng) -> Self {
+    /// If `obs_dim`, `n_actions`, the number of heads or a width is zero, or a width exceeds [`MAX_HIDDEN`]
+    /// (configurations are validated upstream).
+    pub fn with_hidden(
+        obs_dim: usize,
+        n_actions: usize,
+        kind: OutputKind,
+        hidden: [usize; 2],
+        rng: &mut impl Rng,
+    ) -> Self {
         assert!(obs_dim > 0, "QNet: obs_dim must be positive");
+        assert!(
+            hidden.iter().all(|&h| (1..=MAX_HIDDEN).contains(&h)),
+            "QNet: hidden widths must be 1..={MAX_HIDDEN}, got {hidden:?}"
+        );
+        let [n1, n2] = hidden;
         assert!(n_actions > 0, "QNet: n_actions must be positive");
         assert!(
             kind.heads() > 0,
             "QNet: a bootstrapped network needs at least one head"
         );
-        let layout = Layout::new(obs_dim, n_actions, kind);
+        let layout = Layout::new(obs_dim, n_actions, kind, hidden);
         let mut params = vec![0.0f32; layout.len];
         let t = TensorsMut::split(&layout, &mut params);
         // Stored transposed: the PyTorch [out][in] matrix is the transpose of our [in][out] storage.
-        init_linear(
-            t.fc1_w,
-            MatView::row_major(obs_dim, HIDDEN).t(),
-            t.fc1_b,
-            rng,
-        );
-        init_linear(
-            t.fc2_w,
-            MatView::row_major(HIDDEN, HIDDEN).t(),
-            t.fc2_b,
-            rng,
-        );
+        init_linear(t.fc1_w, MatView::row_major(obs_dim, n1).t(), t.fc1_b, rng);
+        init_linear(t.fc2_w, MatView::row_major(n1, n2).t(), t.fc2_b, rng);
         match kind {
             OutputKind::Plain | OutputKind::Bootstrap { .. } => {
                 let width = layout.out_width;
                 for head in 0..kind.heads() {
-                    // Head k is columns k*A..(k+1)*A of the fused [64][K*A] matrix: as an [A][64]
+                    // Head k is columns k*A..(k+1)*A of the fused [h2][K*A] matrix: as an [A][h2]
                     // matrix it starts at column k*A with row stride 1 and column stride K*A.
                     let view = MatView {
                         rows: n_actions,
-                        cols: HIDDEN,
+                        cols: n2,
                         row_stride: 1,
                         col_stride: width,
                     };
@@ -125,8 +138,8 @@ impl QNet {
             }
             OutputKind::Noisy => {
                 // mu_w, mu_b in PyTorch order; sigma constant (Fortunato et al., factorised variant).
-                init_linear(t.out_w, MatView::row_major(n_actions, HIDDEN), t.out_b, rng);
-                let sigma = 0.5 / (HIDDEN as f32).sqrt();
+                init_linear(t.out_w, MatView::row_major(n_actions, n2), t.out_b, rng);
+                let sigma = 0.5 / (n2 as f32).sqrt();
                 t.sigma_w.fill(sigma);
                 t.sigma_b.fill(sigma);
             }
@@ -154,6 +167,11 @@ impl QNet {
 
     pub fn kind(&self) -> OutputKind {
         self.layout.kind
+    }
+
+    /// Widths of the two hidden layers, `[h1, h2]`.
+    pub fn hidden(&self) -> [usize; 2] {
+        self.layout.hidden
     }
 
     /// K for `Bootstrap`, 1 otherwise.
@@ -191,7 +209,7 @@ impl QNet {
         self.params.copy_from_slice(&other.params);
     }
 
-    /// `(sigma_w [A][64] row-major, sigma_b [A])` of a noisy network; `None` otherwise.
+    /// `(sigma_w [A][h2] row-major, sigma_b [A])` of a noisy network; `None` otherwise.
     pub fn noisy_sigmas(&self) -> Option<(&[f32], &[f32])> {
         match self.layout.kind {
             OutputKind::Noisy => Some((

@@ -19,28 +19,34 @@ pub fn noise_transform(x: f32) -> f32 {
     x.signum() * x.abs().sqrt()
 }
 
-/// One draw of factorised noise for a `HIDDEN -> n_actions` noisy layer.
+/// One draw of factorised noise for an `inputs -> n_actions` noisy layer.
 ///
 /// A fresh sample (from [`NoiseSample::new`]) is all zeros, i.e. it gives the mean weights, until
 /// [`NoiseSample::resample`] is called.
 #[derive(Clone, Debug, PartialEq)]
 pub struct NoiseSample {
-    /// `f(eps_i)` for the layer's `HIDDEN` inputs.
-    input_factors: [f32; HIDDEN],
+    /// `f(eps_i)` for the layer's inputs.
+    input_factors: Vec<f32>,
     /// `f(eps_j)` for the layer's outputs (one per action).
     output_factors: Vec<f32>,
 }
 
 impl NoiseSample {
-    /// A zero sample for a layer with `n_actions` outputs.
+    /// A zero sample for a layer of the default width ([`HIDDEN`] inputs) with `n_actions` outputs.
     pub fn new(n_actions: usize) -> Self {
+        Self::with_inputs(HIDDEN, n_actions)
+    }
+
+    /// A zero sample for a layer with `inputs` inputs (the network's second hidden width) and `n_actions`
+    /// outputs.
+    pub fn with_inputs(inputs: usize, n_actions: usize) -> Self {
         Self {
-            input_factors: [0.0; HIDDEN],
+            input_factors: vec![0.0; inputs],
             output_factors: vec![0.0; n_actions],
         }
     }
 
-    /// Draws new noise: `HIDDEN` input factors first, then one output factor per action, each
+    /// Draws new noise: the input factors first, then one output factor per action, each
     /// `f(eps)` with `eps ~ N(0, 1)` from the caller's generator.
     pub fn resample(&mut self, rng: &mut impl Rng) {
         for factor in self
@@ -59,7 +65,7 @@ impl NoiseSample {
     }
 
     /// `f(eps_i)`, one per input unit.
-    pub fn input_factors(&self) -> &[f32; HIDDEN] {
+    pub fn input_factors(&self) -> &[f32] {
         &self.input_factors
     }
 
@@ -69,13 +75,18 @@ impl NoiseSample {
     }
 
     /// Sets the factors directly (tests and replays of a recorded sample).
-    pub fn set_factors(&mut self, input_factors: &[f32; HIDDEN], output_factors: &[f32]) {
+    pub fn set_factors(&mut self, input_factors: &[f32], output_factors: &[f32]) {
         assert_eq!(
             output_factors.len(),
             self.output_factors.len(),
             "noise sample: wrong action count"
         );
-        self.input_factors = *input_factors;
+        assert_eq!(
+            input_factors.len(),
+            self.input_factors.len(),
+            "noise sample: wrong input count"
+        );
+        self.input_factors.copy_from_slice(input_factors);
         self.output_factors.copy_from_slice(output_factors);
     }
 
@@ -100,7 +111,7 @@ impl Persist for NoiseSample {
     }
 }
 
-/// The parameters of the noisy output layer: `mu_w`, `sigma_w` are `[A][HIDDEN]` (PyTorch layout),
+/// The parameters of the noisy output layer: `mu_w`, `sigma_w` are `[A][inputs]` (PyTorch layout),
 /// `mu_b`, `sigma_b` are `[A]`.
 pub(crate) struct NoisyParams<'a> {
     pub mu_w: &'a [f32],
@@ -111,12 +122,12 @@ pub(crate) struct NoisyParams<'a> {
 
 /// Builds the effective weights `mu + sigma ⊙ eps` of one forward pass.
 ///
-/// The result `w_eff` is `[A][HIDDEN]` like `mu_w`. `input`/`output` are the noise factors (all zeros for
+/// The result `w_eff` is `[A][inputs]` like `mu_w`. `input`/`output` are the noise factors (all zeros for
 /// the mean network).
 #[inline(always)]
 pub(crate) fn effective_weights(
     layer: &NoisyParams,
-    input: &[f32; HIDDEN],
+    input: &[f32],
     output: &[f32],
     w_eff: &mut [f32],
     b_eff: &mut [f32],
@@ -127,10 +138,11 @@ pub(crate) fn effective_weights(
         mu_b,
         sigma_b,
     } = *layer;
-    for ((&eps_out, w_row), (mu_row, sigma_row)) in output
-        .iter()
-        .zip(w_eff.chunks_exact_mut(HIDDEN))
-        .zip(mu_w.chunks_exact(HIDDEN).zip(sigma_w.chunks_exact(HIDDEN)))
+    for ((&eps_out, w_row), (mu_row, sigma_row)) in
+        output.iter().zip(w_eff.chunks_exact_mut(input.len())).zip(
+            mu_w.chunks_exact(input.len())
+                .zip(sigma_w.chunks_exact(input.len())),
+        )
     {
         for (((w, &mu), &sigma), &eps_in) in w_row.iter_mut().zip(mu_row).zip(sigma_row).zip(input)
         {
@@ -142,20 +154,20 @@ pub(crate) fn effective_weights(
     }
 }
 
-/// `dL/dsigma = eps ⊙ dL/dmu` for the weights (`[A][HIDDEN]`) and the bias (`[A]`).
+/// `dL/dsigma = eps ⊙ dL/dmu` for the weights (`[A][inputs]`) and the bias (`[A]`).
 #[inline(always)]
 pub(crate) fn sigma_gradients(
     grad_mu_w: &[f32],
     grad_mu_b: &[f32],
-    input: &[f32; HIDDEN],
+    input: &[f32],
     output: &[f32],
     grad_sigma_w: &mut [f32],
     grad_sigma_b: &mut [f32],
 ) {
     for ((&eps_out, g_mu), g_sigma) in output
         .iter()
-        .zip(grad_mu_w.chunks_exact(HIDDEN))
-        .zip(grad_sigma_w.chunks_exact_mut(HIDDEN))
+        .zip(grad_mu_w.chunks_exact(input.len()))
+        .zip(grad_sigma_w.chunks_exact_mut(input.len()))
     {
         for ((gs, &gm), &eps_in) in g_sigma.iter_mut().zip(g_mu).zip(input) {
             *gs = gm * (eps_out * eps_in);

@@ -1,32 +1,54 @@
 //! The single-state path for acting: [`QNet::q_values_single`] computes one state's Q-values without a
 //! workspace, with the same chain of operations (so the same numbers) as that state's row of a batch.
 
+use std::cell::RefCell;
+
 use super::kernels::{Lanes, Strided, product};
 use super::linear::relu_in_place;
 use super::simd::at_simd_level;
-use super::{HIDDEN, NoiseSample, OutputKind, QNet};
+use super::{MAX_HIDDEN, NoiseSample, OutputKind, QNet};
+
+thread_local! {
+    /// The first hidden layer's activations of the single-state pass, and the features when the caller keeps
+    /// none: grown to the widest network the thread has run, so acting allocates nothing after its first step.
+    static H1: RefCell<Vec<f32>> = const { RefCell::new(Vec::new()) };
+    static FEATURES: RefCell<Vec<f32>> = const { RefCell::new(Vec::new()) };
+}
+
+/// The noise factors of a noisy layer acting with its mean weights.
+static ZEROS: [f32; MAX_HIDDEN] = [0.0; MAX_HIDDEN];
+
+/// The first `n` values of a scratch buffer, grown to hold them.
+fn scratch(buffer: &mut Vec<f32>, n: usize) -> &mut [f32] {
+    if buffer.len() < n {
+        buffer.resize(n, 0.0);
+    }
+    &mut buffer[..n]
+}
 
 impl QNet {
     /// Q-values of one state, `[head][action]` (length `heads * n_actions`), for acting: the same numbers
     /// as that state's row of a batched [`Self::forward`]. `noise` as in [`Self::forward`].
     pub fn q_values_single(&self, obs: &[f32], noise: Option<&NoiseSample>, q_out: &mut [f32]) {
-        let mut features = [0.0f32; HIDDEN];
-        self.q_values_single_with_features(obs, noise, q_out, &mut features);
+        let mut buffer = FEATURES.take();
+        let features = scratch(&mut buffer, self.layout.h2());
+        self.q_values_single_with_features(obs, noise, q_out, features);
+        FEATURES.set(buffer);
     }
 
-    /// [`Self::q_values_single`] that also returns the penultimate activations `phi(s)` (64 values), which
-    /// the noisy predictive-variance uncertainty needs (docs/algorithm.md §7).
+    /// [`Self::q_values_single`] that also returns the penultimate activations `phi(s)` (the second hidden
+    /// layer's width of values), which the noisy predictive-variance uncertainty needs (docs/algorithm.md §7).
     ///
     /// # Panics
-    /// If `obs` or `q_out` has the wrong length, or the noise sample is for another action count.
+    /// If `obs`, `q_out` or `features` has the wrong length, or the noise sample is for another shape.
     pub fn q_values_single_with_features(
         &self,
         obs: &[f32],
         noise: Option<&NoiseSample>,
         q_out: &mut [f32],
-        features: &mut [f32; HIDDEN],
+        features: &mut [f32],
     ) {
-        at_simd_level!(self, single_impl(obs: &[f32], noise: Option<&NoiseSample>, q_out: &mut [f32], features: &mut [f32; HIDDEN]));
+        at_simd_level!(self, single_impl(obs: &[f32], noise: Option<&NoiseSample>, q_out: &mut [f32], features: &mut [f32]));
     }
 
     #[inline(always)]
@@ -35,9 +57,10 @@ impl QNet {
         obs: &[f32],
         noise: Option<&NoiseSample>,
         q_out: &mut [f32],
-        features: &mut [f32; HIDDEN],
+        features: &mut [f32],
     ) {
         let l = &self.layout;
+        let [n1, n2] = l.hidden;
         assert_eq!(
             obs.len(),
             l.obs_dim,
@@ -48,33 +71,41 @@ impl QNet {
             l.out_width,
             "q_values_single: q_out must hold heads * n_actions values"
         );
-        let mut h1 = [0.0f32; HIDDEN];
+        assert_eq!(
+            features.len(),
+            n2,
+            "q_values_single: features must hold the second hidden layer's width"
+        );
+        // Taken out of the thread's slot rather than borrowed in a closure: the products stay in this function,
+        // compiled for the SIMD level.
+        let mut buffer = H1.take();
+        let h1 = scratch(&mut buffer, n1);
         product::<S>(
-            &mut h1,
+            h1,
             Strided::row_major(obs, 1, l.obs_dim),
             self.tensor(l.fc1_w),
             Some(self.tensor(l.fc1_b)),
         );
-        relu_in_place(&mut h1);
+        relu_in_place(h1);
         product::<S>(
             features,
-            Strided::row_major(&h1, 1, HIDDEN),
+            Strided::row_major(h1, 1, n1),
             self.tensor(l.fc2_w),
             Some(self.tensor(l.fc2_b)),
         );
+        H1.set(buffer);
         relu_in_place(features);
         match l.kind {
             OutputKind::Plain | OutputKind::Bootstrap { .. } => {
                 // With batch 1, [head][batch][action] is the fused [K*A] order.
                 product::<S>(
                     q_out,
-                    Strided::row_major(features, 1, HIDDEN),
+                    Strided::row_major(features, 1, n2),
                     self.tensor(l.out_w),
                     Some(self.tensor(l.out_b)),
                 );
             }
             OutputKind::Noisy => {
-                let zero_in = [0.0f32; HIDDEN];
                 let (eps_in, eps_out) = match noise {
                     Some(sample) => {
                         assert_eq!(
@@ -82,9 +113,14 @@ impl QNet {
                             l.n_actions,
                             "q_values_single: wrong noise sample"
                         );
+                        assert_eq!(
+                            sample.input_factors().len(),
+                            n2,
+                            "q_values_single: noise sample for another layer width"
+                        );
                         (sample.input_factors(), Some(sample.output_factors()))
                     }
-                    None => (&zero_in, None),
+                    None => (&ZEROS[..n2], None),
                 };
                 let (mu_w, sigma_w) = (self.tensor(l.out_w), self.tensor(l.sigma_w));
                 let (mu_b, sigma_b) = (self.tensor(l.out_b), self.tensor(l.sigma_b));
@@ -92,7 +128,7 @@ impl QNet {
                 // (noisy::effective_weights: w = mu + sigma * (eps_out * eps_in), b = mu + sigma * eps_out).
                 for (action, q) in q_out.iter_mut().enumerate() {
                     let e_out = eps_out.map_or(0.0, |e| e[action]);
-                    let rows = action * HIDDEN..(action + 1) * HIDDEN;
+                    let rows = action * n2..(action + 1) * n2;
                     let mut acc = mu_b[action] + sigma_b[action] * e_out;
                     for (((&f, &mu), &sigma), &e_in) in features
                         .iter()

@@ -24,8 +24,15 @@ struct Case {
 }
 
 fn case(kind: OutputKind, seed: u64, with_noise: bool) -> Case {
+    case_with(kind, seed, with_noise, [HIDDEN, HIDDEN])
+}
+
+/// Uneven widths other than the paper's, for the checks of configurable hidden layers.
+const OTHER_WIDTHS: [usize; 2] = [7, 13];
+
+fn case_with(kind: OutputKind, seed: u64, with_noise: bool, hidden: [usize; 2]) -> Case {
     let mut rng = Pcg64::seed_from_u64(seed);
-    let mut net = QNet::new(OBS_DIM, N_ACTIONS, kind, &mut rng);
+    let mut net = QNet::with_hidden(OBS_DIM, N_ACTIONS, kind, hidden, &mut rng);
     // Spread sigma so every sigma entry gets a distinct value (the initial value is a constant).
     if let OutputKind::Noisy = kind {
         let layout = *net.layout();
@@ -42,7 +49,7 @@ fn case(kind: OutputKind, seed: u64, with_noise: bool) -> Case {
         .map(|_| rng.random_range(-1.0f32..1.0))
         .collect();
     let noise = with_noise.then(|| {
-        let mut sample = NoiseSample::new(N_ACTIONS);
+        let mut sample = NoiseSample::with_inputs(hidden[1], N_ACTIONS);
         sample.resample(&mut rng);
         sample
     });
@@ -71,22 +78,23 @@ fn reference_q(layout: &Layout, p: &[f64], x: &[f64], noise: Option<&NoiseSample
         layout.out_width,
         layout.heads(),
     );
+    let [n1, n2] = layout.hidden;
     let batch = x.len() / d;
     let mut q = vec![0.0; heads * batch * a];
     for b in 0..batch {
-        let mut h1 = [0.0f64; HIDDEN];
+        let mut h1 = vec![0.0f64; n1];
         for (o, h) in h1.iter_mut().enumerate() {
             let mut s = p[layout.fc1_b.start + o];
             for i in 0..d {
-                s += x[b * d + i] * p[layout.fc1_w.start + i * HIDDEN + o];
+                s += x[b * d + i] * p[layout.fc1_w.start + i * n1 + o];
             }
             *h = s.max(0.0);
         }
-        let mut h2 = [0.0f64; HIDDEN];
+        let mut h2 = vec![0.0f64; n2];
         for (o, h) in h2.iter_mut().enumerate() {
             let mut s = p[layout.fc2_b.start + o];
             for (i, &h1_i) in h1.iter().enumerate() {
-                s += h1_i * p[layout.fc2_w.start + i * HIDDEN + o];
+                s += h1_i * p[layout.fc2_w.start + i * n2 + o];
             }
             *h = s.max(0.0);
         }
@@ -110,13 +118,13 @@ fn reference_q(layout: &Layout, p: &[f64], x: &[f64], noise: Option<&NoiseSample
                             n.output_factors()[act] as f64,
                             n.input_factors().iter().map(|&e| e as f64).collect(),
                         ),
-                        None => (0.0, vec![0.0; HIDDEN]),
+                        None => (0.0, vec![0.0; n2]),
                     };
                     let mut s =
                         p[layout.out_b.start + act] + p[layout.sigma_b.start + act] * eps_out;
-                    for i in 0..HIDDEN {
-                        let weight = p[layout.out_w.start + act * HIDDEN + i]
-                            + p[layout.sigma_w.start + act * HIDDEN + i] * eps_out * eps_in[i];
+                    for i in 0..n2 {
+                        let weight = p[layout.out_w.start + act * n2 + i]
+                            + p[layout.sigma_w.start + act * n2 + i] * eps_out * eps_in[i];
                         s += weight * h2[i];
                     }
                     q[b * a + act] = s;
@@ -211,6 +219,19 @@ fn noisy_gradients_match_finite_differences_under_a_fixed_noise_sample() {
 }
 
 #[test]
+fn other_hidden_widths_match_finite_differences_for_every_kind() {
+    for (kind, seed) in [
+        (OutputKind::Plain, 21),
+        (OutputKind::Bootstrap { heads: 3 }, 22),
+        (OutputKind::Noisy, 23),
+    ] {
+        let c = case_with(kind, seed, kind == OutputKind::Noisy, OTHER_WIDTHS);
+        assert_eq!(c.net.hidden(), OTHER_WIDTHS);
+        check_against_finite_differences(&c);
+    }
+}
+
+#[test]
 fn noisy_without_noise_matches_finite_differences_and_has_zero_sigma_gradients() {
     let c = case(OutputKind::Noisy, 4, false);
     check_against_finite_differences(&c);
@@ -251,15 +272,16 @@ fn check_against_candle(case: &Case) {
         layout.out_width,
         layout.heads(),
     );
+    let [n1, n2] = layout.hidden;
     let (q, grads) = analytic(case);
     let p = case.net.parameters();
     let t = |s: Segment| &p[s.range()];
 
     let x = Tensor::from_slice(&case.x, (BATCH, d), &Device::Cpu).unwrap();
-    let w1 = var(t(layout.fc1_w), &[d, HIDDEN]);
-    let b1 = var(t(layout.fc1_b), &[HIDDEN]);
-    let w2 = var(t(layout.fc2_w), &[HIDDEN, HIDDEN]);
-    let b2 = var(t(layout.fc2_b), &[HIDDEN]);
+    let w1 = var(t(layout.fc1_w), &[d, n1]);
+    let b1 = var(t(layout.fc1_b), &[n1]);
+    let w2 = var(t(layout.fc2_w), &[n1, n2]);
+    let b2 = var(t(layout.fc2_b), &[n2]);
     let h1 = x
         .matmul(&w1)
         .unwrap()
@@ -300,7 +322,7 @@ fn check_against_candle(case: &Case) {
             .unwrap();
             for k in 0..heads {
                 let cols = k * a..(k + 1) * a;
-                let wk = var(&columns(t(layout.out_w), width, cols.clone()), &[HIDDEN, a]);
+                let wk = var(&columns(t(layout.out_w), width, cols.clone()), &[n2, a]);
                 let bk = var(&t(layout.out_b)[cols.clone()], &[a]);
                 let qk = h2_hooked.matmul(&wk).unwrap().broadcast_add(&bk).unwrap();
                 loss = (loss + (&qk * &loss_weights(k)).unwrap().sum_all().unwrap()).unwrap();
@@ -314,14 +336,16 @@ fn check_against_candle(case: &Case) {
             }
         }
         OutputKind::Noisy => {
-            let noise = case.noise.clone().unwrap_or_else(|| NoiseSample::new(a));
-            let eps_in =
-                Tensor::from_slice(noise.input_factors(), (1, HIDDEN), &Device::Cpu).unwrap();
+            let noise = case
+                .noise
+                .clone()
+                .unwrap_or_else(|| NoiseSample::with_inputs(n2, a));
+            let eps_in = Tensor::from_slice(noise.input_factors(), (1, n2), &Device::Cpu).unwrap();
             let eps_out = Tensor::from_slice(noise.output_factors(), (a, 1), &Device::Cpu).unwrap();
             let eps_w = eps_out.matmul(&eps_in).unwrap();
             let eps_b = eps_out.flatten_all().unwrap();
-            let mu_w = var(t(layout.out_w), &[a, HIDDEN]);
-            let sigma_w = var(t(layout.sigma_w), &[a, HIDDEN]);
+            let mu_w = var(t(layout.out_w), &[a, n2]);
+            let sigma_w = var(t(layout.sigma_w), &[a, n2]);
             let mu_b = var(t(layout.out_b), &[a]);
             let sigma_b = var(t(layout.sigma_b), &[a]);
             let weight = (mu_w.as_tensor() + (sigma_w.as_tensor() * &eps_w).unwrap()).unwrap();
@@ -363,19 +387,39 @@ fn noisy_gradients_match_candle_under_a_fixed_noise_sample() {
     check_against_candle(&case(OutputKind::Noisy, 7, true));
 }
 
+#[test]
+fn other_hidden_widths_match_candle_for_every_kind() {
+    for (kind, seed) in [
+        (OutputKind::Plain, 24),
+        (OutputKind::Bootstrap { heads: 4 }, 25),
+        (OutputKind::Noisy, 26),
+    ] {
+        check_against_candle(&case_with(
+            kind,
+            seed,
+            kind == OutputKind::Noisy,
+            OTHER_WIDTHS,
+        ));
+    }
+}
+
 // ---- consistency of the other entry points ----
 
 #[test]
 /// Bit for bit: lockstep evaluation (one batched forward for all test episodes) must choose the same
 /// actions as acting on each state alone.
 fn single_state_forward_equals_the_batch_forward_bit_for_bit_for_every_kind() {
-    for (kind, with_noise) in [
+    for ((kind, with_noise), hidden) in [
         (OutputKind::Plain, false),
         (OutputKind::Bootstrap { heads: 3 }, false),
         (OutputKind::Noisy, false),
         (OutputKind::Noisy, true),
-    ] {
-        let c = case(kind, 8, with_noise);
+    ]
+    .into_iter()
+    .flat_map(|k| [(k, [HIDDEN, HIDDEN]), (k, OTHER_WIDTHS)])
+    {
+        let c = case_with(kind, 8, with_noise, hidden);
+        let n2 = hidden[1];
         let mut ws = Workspace::new(&c.net, BATCH);
         let q = c
             .net
@@ -384,7 +428,7 @@ fn single_state_forward_equals_the_batch_forward_bit_for_bit_for_every_kind() {
         let (heads, a) = (kind.heads(), N_ACTIONS);
         for b in 0..BATCH {
             let mut single = vec![0.0f32; heads * a];
-            let mut features = [0.0f32; HIDDEN];
+            let mut features = vec![0.0f32; n2];
             c.net.q_values_single_with_features(
                 &c.x[b * OBS_DIM..(b + 1) * OBS_DIM],
                 c.noise.as_ref(),
@@ -401,10 +445,7 @@ fn single_state_forward_equals_the_batch_forward_bit_for_bit_for_every_kind() {
                     );
                 }
             }
-            for (f, g) in features
-                .iter()
-                .zip(&ws.features()[b * HIDDEN..(b + 1) * HIDDEN])
-            {
+            for (f, g) in features.iter().zip(&ws.features()[b * n2..(b + 1) * n2]) {
                 assert_eq!(f.to_bits(), g.to_bits());
             }
         }

@@ -1,7 +1,7 @@
 //! [`Workspace`]: the buffers of forward and backward passes for one network shape, sized once for a
 //! maximum batch, holding the activations of the last forward for the backward pass.
 
-use super::{HIDDEN, Layout, OutputKind, QNet};
+use super::{Layout, OutputKind, QNet};
 
 /// Buffers for forward/backward passes of networks of one shape, up to a maximum batch size.
 ///
@@ -19,9 +19,9 @@ pub struct Workspace {
     /// Output GEMM result `[batch][K*A]` before reordering (bootstrap only).
     pub(super) fused: Vec<f32>,
     pub(super) q: Vec<f32>,
-    /// Noise factors and effective output weights (`[A][64]` and transposed `[64][A]`) and bias of the
+    /// Noise factors and effective output weights (`[A][h2]` and transposed `[h2][A]`) and bias of the
     /// last noisy forward.
-    pub(super) noise_in: [f32; HIDDEN],
+    pub(super) noise_in: Vec<f32>,
     pub(super) noise_out: Vec<f32>,
     pub(super) w_eff: Vec<f32>,
     pub(super) w_eff_t: Vec<f32>,
@@ -29,7 +29,7 @@ pub struct Workspace {
     pub(super) d_fused: Vec<f32>,
     pub(super) d_h2: Vec<f32>,
     pub(super) d_h1: Vec<f32>,
-    /// A transposed weight matrix for the input gradient of a layer (`[out][64]`, the widest layer).
+    /// A transposed weight matrix for the input gradient of a layer (`[out][in]`, sized for the larger one).
     pub(super) w_t: Vec<f32>,
 }
 
@@ -37,6 +37,7 @@ impl Workspace {
     /// Buffers for `net`'s shape and batches of up to `max_batch` rows.
     pub fn new(net: &QNet, max_batch: usize) -> Self {
         let l = net.layout;
+        let [n1, n2] = l.hidden;
         let noisy = matches!(l.kind, OutputKind::Noisy);
         let bootstrap = matches!(l.kind, OutputKind::Bootstrap { .. });
         let noisy_len = |n: usize| if noisy { n } else { 0 };
@@ -46,19 +47,19 @@ impl Workspace {
             max_batch,
             batch: 0,
             x: vec![0.0; max_batch * l.obs_dim],
-            h1: vec![0.0; max_batch * HIDDEN],
-            h2: vec![0.0; max_batch * HIDDEN],
+            h1: vec![0.0; max_batch * n1],
+            h2: vec![0.0; max_batch * n2],
             fused: vec![0.0; bootstrap_len(max_batch * l.out_width)],
             q: vec![0.0; max_batch * l.out_width],
-            noise_in: [0.0; HIDDEN],
+            noise_in: vec![0.0; noisy_len(n2)],
             noise_out: vec![0.0; noisy_len(l.n_actions)],
-            w_eff: vec![0.0; noisy_len(HIDDEN * l.n_actions)],
-            w_eff_t: vec![0.0; noisy_len(HIDDEN * l.n_actions)],
+            w_eff: vec![0.0; noisy_len(n2 * l.n_actions)],
+            w_eff_t: vec![0.0; noisy_len(n2 * l.n_actions)],
             b_eff: vec![0.0; noisy_len(l.n_actions)],
             d_fused: vec![0.0; bootstrap_len(max_batch * l.out_width)],
-            d_h2: vec![0.0; max_batch * HIDDEN],
-            d_h1: vec![0.0; max_batch * HIDDEN],
-            w_t: vec![0.0; HIDDEN * l.out_width.max(HIDDEN)],
+            d_h2: vec![0.0; max_batch * n2],
+            d_h1: vec![0.0; max_batch * n1],
+            w_t: vec![0.0; (n2 * l.out_width).max(n1 * n2)],
         }
     }
 
@@ -87,9 +88,9 @@ impl Workspace {
         self.batch
     }
 
-    /// Penultimate activations `phi` of the last forward, `[batch][64]`.
+    /// Penultimate activations `phi` of the last forward, `[batch][h2]`.
     pub fn features(&self) -> &[f32] {
-        &self.h2[..self.batch * HIDDEN]
+        &self.h2[..self.batch * self.layout.h2()]
     }
 
     /// Q-values of the last forward, `[head][batch][action]`.

@@ -16,7 +16,7 @@
 
 use crate::agent::AgentConfig;
 pub use crate::agent::TdLoss;
-use crate::nn::OutputKind;
+use crate::nn::{HIDDEN, MAX_HIDDEN, OutputKind};
 use crate::query::{
     BudgetUnit, QueryController, QueryError, QueryRule, RuleDefaults, RuleSpec, check_signals,
 };
@@ -172,6 +172,9 @@ pub struct TrainConfig {
     pub target_period: usize,
     /// Number of bootstrapped heads \[P: 10\].
     pub heads: usize,
+    /// Widths of the network's two hidden layers \[P: 64, 64\]; other widths run on the same kernels.
+    #[serde(default = "paper_hidden")]
+    pub hidden: Vec<usize>,
     /// TD loss \[P: squared error\].
     pub loss: TdLoss,
     /// Double DQN's TD target, the online network picking the next action and the target network valuing it
@@ -459,7 +462,10 @@ impl ConfigInput {
     fn set_from(&mut self, key: &str, value: toml::Value, origin: &str) -> Result<()> {
         let shown = value.to_string();
         let bad = |e: toml::de::Error| {
-            anyhow::anyhow!("bad value {shown} for config key '{key}': {}", e.message())
+            anyhow::anyhow!(
+                "bad value {shown} for config key '{key}': {}",
+                plain_terms(e.message())
+            )
         };
         match key {
             "env" => self.env = value.try_into().map_err(bad)?,
@@ -502,13 +508,39 @@ impl ConfigInput {
             cfg = table.try_into().map_err(|e: toml::de::Error| {
                 anyhow::anyhow!(
                     "{origin}: bad value {shown} for config key '{key}': {}",
-                    e.message()
+                    plain_terms(e.message())
                 )
             })?;
         }
         cfg.validate()?;
         Ok(cfg)
     }
+}
+
+/// The paper's hidden widths (docs/algorithm.md §2), also those of a configuration that names none.
+fn paper_hidden() -> Vec<usize> {
+    vec![HIDDEN, HIDDEN]
+}
+
+/// A value-type error of the configuration's reader in the words of a config file (and of Python), not of
+/// Rust's types: `expected usize` becomes `expected a whole number (0 or more)`.
+fn plain_terms(message: &str) -> String {
+    const TERMS: [(&str, &str); 9] = [
+        ("expected usize", "expected a whole number (0 or more)"),
+        ("expected u64", "expected a whole number (0 or more)"),
+        ("expected u32", "expected a whole number (0 or more)"),
+        ("expected i64", "expected a whole number"),
+        ("expected f64", "expected a number"),
+        ("expected f32", "expected a number"),
+        ("expected a boolean", "expected true or false"),
+        ("expected a sequence", "expected a list"),
+        ("floating point", "number"),
+    ];
+    TERMS
+        .iter()
+        .fold(message.to_string(), |text, (rust, plain)| {
+            text.replace(rust, plain)
+        })
 }
 
 /// Why a key means nothing for this method and network (`None`: it is used). The preset's value of such a key
@@ -581,6 +613,7 @@ impl TrainConfig {
             train_freq: 1,
             target_period: schedule.target_period,
             heads: 10,
+            hidden: paper_hidden(),
             loss: TdLoss::Mse,
             double_q: true,
             grad_clip: 10.0,
@@ -702,6 +735,12 @@ impl TrainConfig {
         count("train_freq", self.train_freq, MAX_STEPS)?;
         count("target_period", self.target_period, MAX_STEPS)?;
         count("heads", self.heads, MAX_HEADS)?;
+        ensure!(
+            self.hidden.len() == 2 && self.hidden.iter().all(|w| (1..=MAX_HIDDEN).contains(w)),
+            "hidden must give the widths of the network's two hidden layers, each between 1 and {MAX_HIDDEN} \
+             (e.g. [256, 256]), got {:?}",
+            self.hidden
+        );
         positive("grad_clip", self.grad_clip)?;
         // Exploration.
         unit("eps_start", self.eps_start)?;
@@ -883,6 +922,7 @@ impl TrainConfig {
                 NetKind::Bootstrap => OutputKind::Bootstrap { heads: self.heads },
                 NetKind::Noisy => OutputKind::Noisy,
             },
+            hidden: self.hidden_widths(),
             batch_size: self.batch_size,
             lr: self.lr as f32,
             gamma: self.gamma as f32,
@@ -895,6 +935,23 @@ impl TrainConfig {
             l2: self.l2 as f32,
             exact_factorised_var: self.exact_factorised_var,
         }
+    }
+
+    /// The two hidden widths of `hidden`. [`Self::validate`] checks them; a configuration read without that
+    /// check (a snapshot's own) gets the paper's widths for a malformed value, so that loading its weights fails
+    /// on their sizes instead of the network being built with impossible ones.
+    pub fn hidden_widths(&self) -> [usize; 2] {
+        match self.hidden[..] {
+            [h1, h2] if [h1, h2].iter().all(|w| (1..=MAX_HIDDEN).contains(w)) => [h1, h2],
+            _ => [HIDDEN, HIDDEN],
+        }
+    }
+
+    /// The expert the run asks (`expert`): during training, or for the demonstrations it pre-trains on unless
+    /// they come from `demo_file`; `None` when it asks none.
+    pub fn expert_used(&self) -> Option<&str> {
+        let asks = self.method.queries() || (self.method.pretrains() && self.demo_file.is_empty());
+        asks.then_some(self.expert.as_str())
     }
 
     /// A short name for the run directory: `CartPole-v0_adqn-bootstrap_seed3`.
@@ -1199,6 +1256,61 @@ mod tests {
     }
 
     #[test]
+    fn hidden_widths_are_configurable_and_the_paper_keeps_64_64() {
+        let paper = resolve("CartPole-v0", Method::Adqn, NetKind::Noisy, &[]).unwrap();
+        assert_eq!(paper.agent_config().hidden, [HIDDEN, HIDDEN]);
+        assert_eq!(HIDDEN, 64);
+        let wide = resolve(
+            "CartPole-v0",
+            Method::Adqn,
+            NetKind::Noisy,
+            &["hidden=[256, 32]"],
+        )
+        .unwrap();
+        assert_eq!(wide.agent_config().hidden, [256, 32]);
+        // config.toml records the widths and gives them back.
+        let back: TrainConfig = toml::from_str(&wide.to_toml()).unwrap();
+        assert_eq!(back.hidden, vec![256, 32]);
+        // A configuration written before the key existed is the paper's network.
+        let mut old: toml::Table = toml::from_str(&paper.to_toml()).unwrap();
+        assert!(old.remove("hidden").is_some());
+        let old = toml::to_string(&old).unwrap();
+        assert_eq!(
+            toml::from_str::<TrainConfig>(&old).unwrap().hidden,
+            vec![64, 64]
+        );
+        for bad in [
+            "hidden=[256]",
+            "hidden=[64, 64, 64]",
+            "hidden=[0, 64]",
+            "hidden=[64, 5000]",
+        ] {
+            let err = error("CartPole-v0", Method::Dqn, NetKind::Plain, &[bad]);
+            assert!(
+                err.contains("two hidden layers") && err.contains("hidden"),
+                "{bad}: {err}"
+            );
+        }
+    }
+
+    #[test]
+    fn type_errors_are_in_the_words_of_a_config_file_not_of_rust() {
+        for (set, words) in [
+            ("batch_size=-1", "a whole number (0 or more)"),
+            ("batch_size=1.5", "a whole number (0 or more)"),
+            ("lr=\"x\"", "expected a number"),
+            ("hidden=64", "expected a list"),
+            ("hidden=[-64, 64]", "a whole number (0 or more)"),
+        ] {
+            let err = error("CartPole-v0", Method::Dqn, NetKind::Plain, &[set]);
+            assert!(err.contains(words), "{set}: {err}");
+            for rust in ["usize", "u64", "f64", "f32", "i64", "floating point"] {
+                assert!(!err.contains(rust), "{set}: {err}");
+            }
+        }
+    }
+
+    #[test]
     fn sizes_are_bounded_with_the_memory_they_would_need() {
         for (set, key) in [
             ("replay_size=10000000000", "replay_size"),
@@ -1244,6 +1356,8 @@ mod tests {
                 // query_rule: empty means the method's own rule; an unknown rule is refused.
                 toml::Value::String(_) if key == "query_rule" => &["\"nope\""],
                 toml::Value::String(_) => &["\"\""],
+                // hidden: a width of zero, or too few layers.
+                toml::Value::Array(_) => &["[0, 64]", "[64]"],
                 other => panic!("{key}: unexpected type {other:?}"),
             };
             let rejected = bad.iter().any(|v| {

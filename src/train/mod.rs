@@ -25,6 +25,7 @@ use crate::state::{Persist, StateDict};
 use anyhow::{Context, Result, ensure};
 use rand::SeedableRng;
 use rand_pcg::Pcg64;
+use std::path::Path;
 use std::time::Instant;
 
 use cpu_time::ThreadTime;
@@ -162,7 +163,8 @@ pub fn train(
     log: &mut RunLog,
 ) -> Result<(Summary, Agent)> {
     let mut env = env::make(&cfg.env)?;
-    train_run(cfg, env.as_mut(), test_envs(cfg)?, expert, demos, log, None)
+    let run = Hooks::default();
+    train_run(cfg, env.as_mut(), test_envs(cfg)?, expert, demos, log, run)
 }
 
 /// The configuration's environment once per test episode, for the lockstep [`Evaluator`].
@@ -197,7 +199,7 @@ pub fn train_in(
         test_envs.len(),
         cfg.eval_episodes
     );
-    train_run(cfg, env, test_envs, expert, demos, log, None)
+    train_run(cfg, env, test_envs, expert, demos, log, Hooks::default())
 }
 
 /// [`train`] with snapshots: every `cfg.snapshot_every` steps (and pre-training updates), and when a stop is
@@ -221,8 +223,103 @@ pub fn train_resumable(
         expert,
         demos,
         log,
-        Some((checkpointer, resume_from)),
+        Hooks {
+            checkpointer: Some(checkpointer),
+            resume_from,
+            driver: None,
+        },
     )
+}
+
+/// [`train_in`] driven from outside ([`Driver`]): the run has no fixed end. After every environment step the
+/// driver says whether to go on, pause (it then holds the whole live run, [`PausedRun`], until it says to go
+/// on or stop) or stop; the run ends (its summary, weights and `summary.json`) only when the driver stops it.
+/// `cfg.train_steps` is then the horizon of the schedules (ε, β) and of the last evaluation, not a limit:
+/// past it ε stays at `eps_end` and β at 1. With `resume_from` the run continues from a snapshot. Pausing and
+/// going on changes nothing in the run: it is the same loop, so two stretches equal one of their total length.
+#[allow(clippy::too_many_arguments)]
+pub fn train_driven(
+    cfg: &TrainConfig,
+    env: &mut dyn Env,
+    test_envs: Vec<Box<dyn Env>>,
+    expert: Option<&mut dyn Expert>,
+    demos: Option<&Demonstrations>,
+    log: &mut RunLog,
+    driver: &mut dyn Driver,
+    resume_from: Option<&StateDict>,
+) -> Result<(Summary, Agent)> {
+    ensure!(
+        test_envs.len() == cfg.eval_episodes,
+        "{} test environments for {} test episodes (eval_episodes): give one per episode",
+        test_envs.len(),
+        cfg.eval_episodes
+    );
+    let hooks = Hooks {
+        checkpointer: None,
+        resume_from,
+        driver: Some(driver),
+    };
+    train_run(cfg, env, test_envs, expert, demos, log, hooks)
+}
+
+/// What a [`Driver`] says after a step.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Control {
+    /// Take the next step.
+    Continue,
+    /// Hand the live run to [`Driver::paused`].
+    Pause,
+    /// End the run here.
+    Stop,
+}
+
+/// Where a run stands after a step, for a [`Driver`].
+pub struct StepView<'a> {
+    /// Environment steps done.
+    pub step: usize,
+    /// Episodes finished.
+    pub episode: usize,
+    /// Demonstrated transitions asked for so far (or queries, as `budget_unit` says).
+    pub budget_used: usize,
+    pub log: &'a RunLog,
+    pub agent: &'a Agent,
+}
+
+/// Steers a run of [`train_driven`] from outside (e.g. a Python `learn` call that trains for a while, returns,
+/// and is called again).
+pub trait Driver {
+    /// Called after every environment step.
+    fn after_step(&mut self, at: &StepView<'_>) -> Result<Control>;
+    /// Called when `after_step` paused the run; returns [`Control::Continue`] or [`Control::Stop`] (a pause
+    /// again is a stop).
+    fn paused(&mut self, run: &mut PausedRun<'_>) -> Result<Control>;
+}
+
+/// A paused run, whole: its summary so far, the agent, the log, and a snapshot of everything on request.
+pub struct PausedRun<'a> {
+    pub summary: Summary,
+    pub agent: &'a Agent,
+    pub log: &'a mut RunLog,
+    cfg: &'a TrainConfig,
+    st: &'a LoopState,
+    parts: RunParts<'a>,
+}
+
+impl PausedRun<'_> {
+    /// Writes a snapshot of the run (the format of [`Checkpointer`]) into `dir` and waits until it is there.
+    pub fn snapshot(&mut self, dir: &Path) -> Result<()> {
+        let mut ck = Checkpointer::new(dir, self.cfg);
+        let parts = self.parts.clone();
+        snapshot(&mut ck, self.st, parts, self.log, true)
+    }
+}
+
+/// The optional parts of a run: snapshots, a snapshot to continue from, a driver.
+#[derive(Default)]
+struct Hooks<'a> {
+    checkpointer: Option<&'a mut Checkpointer>,
+    resume_from: Option<&'a StateDict<'a>>,
+    driver: Option<&'a mut dyn Driver>,
 }
 
 /// The log position recorded in a snapshot.
@@ -296,6 +393,7 @@ impl RunClock {
 }
 
 /// Everything a snapshot gathers, borrowed from the loop.
+#[derive(Clone)]
 struct RunParts<'a> {
     agent: &'a Agent,
     replay: &'a Replay,
@@ -351,14 +449,20 @@ fn train_run(
     expert: Option<&mut dyn Expert>,
     demos: Option<&Demonstrations>,
     log: &mut RunLog,
-    snapshots: Option<(&mut Checkpointer, Option<&StateDict>)>,
+    hooks: Hooks<'_>,
 ) -> Result<(Summary, Agent)> {
     let mut st = LoopState::default();
-    let result = train_loop(cfg, env, test_envs, expert, demos, log, snapshots, &mut st);
+    // A driven run may go past `train_steps` (its schedules' horizon, not its end).
+    let last_step = if hooks.driver.is_some() {
+        usize::MAX
+    } else {
+        cfg.train_steps
+    };
+    let result = train_loop(cfg, env, test_envs, expert, demos, log, hooks, &mut st);
     if let (Err(err), Some(dir)) = (&result, log.dir()) {
         let (phase, step) = if st.training {
             // The step in progress (the one the logs and the error name), not past the last one.
-            ("training", (st.step + 1).min(cfg.train_steps))
+            ("training", (st.step + 1).min(last_step))
         } else if st.pretrain_done > 0 {
             ("pre-training", 0)
         } else {
@@ -394,9 +498,14 @@ fn train_loop(
     mut expert: Option<&mut dyn Expert>,
     demos: Option<&Demonstrations>,
     log: &mut RunLog,
-    mut snapshots: Option<(&mut Checkpointer, Option<&StateDict>)>,
+    hooks: Hooks<'_>,
     st: &mut LoopState,
 ) -> Result<(Summary, Agent)> {
+    let Hooks {
+        mut checkpointer,
+        resume_from,
+        mut driver,
+    } = hooks;
     let mut clock = RunClock::start();
     let (obs_dim, n_actions) = (env.obs_dim(), env.n_actions());
     ensure!(
@@ -468,7 +577,6 @@ fn train_loop(
     }
 
     // Continue from a snapshot: every part back where it was.
-    let resume_from = snapshots.as_ref().and_then(|(_, s)| *s);
     if let Some(state) = resume_from {
         agent.load_state("agent", state)?;
         replay.load_state("replay", state)?;
@@ -520,7 +628,7 @@ fn train_loop(
                 st.pretrain_done + 1,
             )?;
             st.pretrain_done += 1;
-            if let Some((ck, _)) = snapshots.as_mut() {
+            if let Some(ck) = checkpointer.as_deref_mut() {
                 snapshot_point!(
                     ck,
                     st.pretrain_done,
@@ -537,7 +645,7 @@ fn train_loop(
         obs = env.reset(Some(env_seed));
         agent.begin_episode();
     }
-    while st.step < cfg.train_steps {
+    while driver.is_some() || st.step < cfg.train_steps {
         let step = st.step;
         let learning = step + 1 >= cfg.learning_starts;
         // 1. Who acts: the agent, or the expert when a query is running or the rule asks for one now.
@@ -632,7 +740,9 @@ fn train_loop(
 
         // 3. Learn: one prioritized double-DQN update per `train_freq` steps, hard target copies.
         if learning && (step + 1).is_multiple_of(cfg.train_freq) && replay.len() >= cfg.batch_size {
-            let beta = cfg.beta0 + (1.0 - cfg.beta0) * (step as f64 / cfg.train_steps as f64);
+            // A driven run may go past `train_steps`, the schedule's horizon: β then stays at 1.
+            let progress = (step as f64 / cfg.train_steps as f64).min(1.0);
+            let beta = cfg.beta0 + (1.0 - cfg.beta0) * progress;
             replay.sample(cfg.batch_size, beta as f32, &mut replay_rng, &mut batch);
             let stats = learn(cfg, &mut agent, &mut replay, &batch, || {
                 format!("step {}", step + 1)
@@ -686,7 +796,7 @@ fn train_loop(
         st.step += 1;
 
         // 5. Snapshot the whole run when due or asked to stop (not after the last step: the results follow).
-        if let Some((ck, _)) = snapshots.as_mut()
+        if let Some(ck) = checkpointer.as_deref_mut()
             && st.step < cfg.train_steps
         {
             snapshot_point!(
@@ -695,12 +805,68 @@ fn train_loop(
                 format!("stopped at step {} of {}", st.step, cfg.train_steps)
             );
         }
+
+        // 6. A driven run: its driver may pause it (and hold the live run meanwhile) or stop it.
+        if let Some(d) = driver.as_deref_mut() {
+            let view = StepView {
+                step: st.step,
+                episode: st.episode,
+                budget_used: queries.budget_used(),
+                log,
+                agent: &agent,
+            };
+            let mut control = d.after_step(&view)?;
+            if control == Control::Pause {
+                let summary = summarize(cfg, &*env, log, st, &queries, &clock, pretrain_demos);
+                finish_log(cfg, &agent, log, &summary, st.step)?;
+                clock.stamp(st);
+                let mut paused = PausedRun {
+                    summary,
+                    agent: &agent,
+                    log,
+                    cfg,
+                    st,
+                    parts: RunParts {
+                        agent: &agent,
+                        replay: &replay,
+                        queries: &queries,
+                        replay_rng: &replay_rng,
+                        query_rng: &query_rng,
+                        evaluator: &evaluator,
+                        expert_state: expert.as_deref().and_then(|e| e.state()),
+                        obs: &obs,
+                    },
+                };
+                control = d.paused(&mut paused)?;
+            }
+            if control != Control::Continue {
+                break;
+            }
+        }
     }
 
+    let summary = summarize(cfg, &*env, log, st, &queries, &clock, pretrain_demos);
+    finish_log(cfg, &agent, log, &summary, st.step)?;
+    if let Some(ck) = checkpointer {
+        ck.remove()?;
+    }
+    Ok((summary, agent))
+}
+
+/// The run's summary after `st.step` environment steps.
+fn summarize(
+    cfg: &TrainConfig,
+    env: &dyn Env,
+    log: &RunLog,
+    st: &LoopState,
+    queries: &QueryController,
+    clock: &RunClock,
+    pretrain_demos: usize,
+) -> Summary {
     let (wall, cpu) = clock.totals();
     let threshold = env.solve_threshold();
-    let (steps, solved) = steps_to_solve(log.curve(), threshold, cfg.train_steps as u64);
-    let summary = Summary {
+    let (steps, solved) = steps_to_solve(log.curve(), threshold, st.step as u64);
+    Summary {
         env: cfg.env.clone(),
         method: cfg.method,
         net: cfg.net,
@@ -708,29 +874,36 @@ fn train_loop(
         steps_to_solve: steps as usize,
         solved,
         solve_threshold: threshold,
-        train_steps: cfg.train_steps,
+        train_steps: st.step,
         final_score: log.curve().last().map(|p| p.mean).unwrap_or(f64::NAN),
         demos_pretrain: pretrain_demos,
         queries_used: queries.budget_used(),
         episodes: st.episode,
         wall_time_s: wall,
         cpu_time_s: cpu,
-        steps_per_s: cfg.train_steps as f64 / wall.max(1e-9),
+        steps_per_s: st.step as f64 / wall.max(1e-9),
         numerics: Some(crate::math::NUMERICS.to_string()),
         arld_version: Some(crate::build_info::VERSION.to_string()),
         git_commit: Some(crate::build_info::GIT_COMMIT.to_string()),
-    };
+        expert: cfg.expert_used().map(str::to_string),
+    }
+}
+
+/// The run directory's results after `step` steps: the weights, then `summary.json`.
+fn finish_log(
+    cfg: &TrainConfig,
+    agent: &Agent,
+    log: &mut RunLog,
+    summary: &Summary,
+    step: usize,
+) -> Result<()> {
     if let Some(dir) = log.dir() {
         agent.network().save(
             &dir.join(run_dir::WEIGHTS_FILE),
-            &weights_metadata(cfg, cfg.train_steps),
+            &weights_metadata(cfg, step),
         )?;
     }
-    log.finish(&summary)?;
-    if let Some((ck, _)) = snapshots.as_mut() {
-        ck.remove()?;
-    }
-    Ok((summary, agent))
+    log.finish(summary)
 }
 
 /// Metadata stored with saved weights: where they come from.

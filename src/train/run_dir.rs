@@ -265,6 +265,10 @@ pub struct Summary {
     pub arld_version: Option<String>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub git_commit: Option<String>,
+    /// The expert the run used (its spec, e.g. `shipped:weak`, or `python:module.name` for a Python expert);
+    /// absent when the method uses none, and from older summaries.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub expert: Option<String>,
 }
 
 /// Whether the complete run in `dir` was computed with other elementary functions than this arld's
@@ -766,6 +770,7 @@ mod tests {
             numerics: Some(crate::math::NUMERICS.to_string()),
             arld_version: Some(crate::build_info::VERSION.to_string()),
             git_commit: Some(crate::build_info::GIT_COMMIT.to_string()),
+            expert: Some("shipped:weak".into()),
         };
         write_summary(dir.path(), &summary).unwrap();
         assert!(is_complete(dir.path()));

@@ -183,6 +183,23 @@ pub fn is_stale(dir: &Path) -> bool {
     })
 }
 
+/// The configuration (TOML text) the snapshot file `path` recorded, or an error saying the file is no snapshot.
+pub fn recorded_config(path: &Path) -> Result<String> {
+    let bytes = std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
+    let (_, header) = SafeTensors::read_metadata(&bytes)
+        .with_context(|| format!("{} is not a readable safetensors file", path.display()))?;
+    header
+        .metadata()
+        .as_ref()
+        .and_then(|m| m.get("config").cloned())
+        .with_context(|| {
+            format!(
+                "{} is not an arld snapshot (no `config` in its header)",
+                path.display()
+            )
+        })
+}
+
 /// How the configuration a snapshot recorded differs from `config` (see [`TrainConfig::differences`]). The
 /// recorded text is read as a config file is: a key an older arld did not have takes its default, so adding a
 /// key does not orphan the snapshots written before it.

@@ -1,0 +1,310 @@
+"""What a Stable-Baselines3 user's fingers do, against real Gymnasium and SB3: predict and evaluate_policy,
+learn in stretches (byte-identical to one stretch), callbacks, save/load of the full run, environments as users
+have them (re-limited, wrapped, one eval_env, vector envs refused), demonstrations through wrappers, the
+README's example, and mypy --strict on a user script."""
+
+import json
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import arld
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+def expert(obs):
+    return int(obs[2] + 0.5 * obs[3] > 0)
+
+
+def cartpole_agent(method="adqn", env=None, **kw):
+    env = gym.make("CartPole-v1") if env is None else env
+    return arld.Agent(method, env, expert=None if method == "dqn" else expert, seed=2, eval_period=500, **kw)
+
+
+def test_evaluate_policy_of_stable_baselines3_runs_an_arld_model():
+    from stable_baselines3.common.evaluation import evaluate_policy
+    from stable_baselines3.common.monitor import Monitor
+
+    model = cartpole_agent().learn(1500)
+    mean, std = evaluate_policy(model, Monitor(gym.make("CartPole-v1")), n_eval_episodes=3)
+    assert mean > 0 and std >= 0
+    action, state = model.predict(np.zeros(4, dtype=np.float32))
+    assert state is None and action.shape == () and int(action) in (0, 1)
+    actions, _ = model.predict(np.zeros((5, 4), dtype=np.float32))
+    assert actions.shape == (5,)
+    # deterministic=False explores as training does: ε is still high early in a run.
+    early = cartpole_agent(exploration_initial_eps=1.0, exploration_final_eps=1.0).learn(10)
+    explored = {int(early.predict(np.zeros(4), deterministic=False)[0]) for _ in range(50)}
+    assert explored == {0, 1}
+
+
+@pytest.mark.parametrize("method,net", [("adqn", "bootstrap"), ("bdqn", "noisy"), ("dqfd", "plain")])
+def test_learn_in_two_stretches_equals_one_byte_for_byte(tmp_path, method, net):
+    kw = dict(net=net, pretrain_steps=100) if method == "dqfd" else dict(net=net)
+    runs = []
+    for stretches, name in (((700, 1300), "two"), ((2000,), "one")):
+        model = cartpole_agent(method, **kw)
+        for i, n in enumerate(stretches):
+            model.learn(n, reset_num_timesteps=i == 0, log_dir=tmp_path / name)
+        model.save(tmp_path / f"{name}.arld")
+        runs.append(model)
+    two, one = runs
+    assert two.evaluations == one.evaluations and two.queries == one.queries
+    assert two.summary["train_steps"] == one.summary["train_steps"] == 2000
+    a, b = two.get_parameters()["policy"], one.get_parameters()["policy"]
+    assert a.keys() == b.keys() and all(np.array_equal(a[k], b[k]) for k in a)
+    for f in ("eval.csv", "queries.csv", "episodes.csv"):
+        if (tmp_path / "one" / f).exists():
+            assert (tmp_path / "two" / f).read_bytes() == (tmp_path / "one" / f).read_bytes(), f
+
+
+def test_load_continues_the_saved_run(tmp_path):
+    model = cartpole_agent().learn(1000)
+    model.save(tmp_path / "run.arld")
+    loaded = arld.Agent.load(tmp_path / "run.arld", gym.make("CartPole-v1"), expert=expert)
+    assert loaded.num_timesteps == 1000 and loaded.net == "bootstrap"
+    loaded.learn(1000)
+    whole = cartpole_agent().learn(2000)
+    assert loaded.evaluations == [e for e in whole.evaluations if e["step"] > 1000]
+    assert loaded.summary["queries_used"] == whole.summary["queries_used"]
+    # A Python expert is not in the file: loading without it says so.
+    with pytest.raises(ValueError, match="pass it as expert="):
+        arld.Agent.load(tmp_path / "run.arld", gym.make("CartPole-v1"))
+    # Plain weights of a plain network say so, and act.
+    dqn = cartpole_agent("dqn", net="plain").learn(600, log_dir=tmp_path / "dqn")
+    weights = arld.Agent.load(tmp_path / "dqn" / "weights.safetensors")
+    assert weights.net == "plain"
+    assert weights.predict(np.ones(4))[0] == dqn.predict(np.ones(4))[0]
+    with pytest.raises(RuntimeError, match="trained or loaded"):
+        arld.Agent("dqn", gym.make("CartPole-v1")).predict(np.zeros(4))
+
+
+class Scaled(gym.ObservationWrapper):
+    """A user's wrapper: observations scaled by 2."""
+
+    outputs = []
+
+    def observation(self, obs):
+        out = (2 * obs).astype(np.float32)
+        Scaled.outputs.append(out.tobytes())
+        return out
+
+
+def test_relimited_and_wrapped_environments_train_as_given():
+    limited = cartpole_agent(env=gym.make("CartPole-v1", max_episode_steps=200), eval_env=gym.make(
+        "CartPole-v1", max_episode_steps=200)).learn(1000)
+    assert limited.env_id.startswith("CartPole-v1[max_episode_steps=200")
+    assert all(e["max"] <= 200 for e in limited.evaluations)
+    assert limited.config["lr"] == arld.preset("adqn", "CartPole-v1")["lr"]  # still CartPole's preset
+    seen = []
+
+    def watching(obs):
+        seen.append(np.array(obs))
+        return expert(obs / 2)
+
+    wrapped = arld.Agent("adqn", Scaled(gym.make("CartPole-v1")), expert=watching, seed=0,
+                         eval_env=Scaled(gym.make("CartPole-v1")), eval_period=500).learn(1000)
+    assert len(wrapped.evaluations) == 2 and seen
+    made = set(Scaled.outputs)
+    assert all(o.astype(np.float32).tobytes() in made for o in seen)  # the expert sees the wrapper's output
+    # The built-in environment's fast path equals Gymnasium's unchanged environment.
+    fast = cartpole_agent(env=arld.make("CartPole-v1")).learn(1000)
+    slow = cartpole_agent().learn(1000)
+    assert fast.evaluations == slow.evaluations and fast.queries == slow.queries
+    # An id string, as SB3 takes it.
+    assert cartpole_agent(env="CartPole-v1").learn(500).evaluations == slow.evaluations[:1]
+
+
+def test_vector_environments_are_refused_with_what_to_pass():
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    for venv in (gym.make_vec("CartPole-v1", num_envs=2), DummyVecEnv([lambda: gym.make("CartPole-v1")])):
+        with pytest.raises(TypeError, match="pass a single environment"):
+            arld.Agent("dqn", venv)
+
+
+def test_dqfd_demonstrations_come_through_the_wrapper():
+    seen = []
+
+    def watching(obs):
+        seen.append(np.array(obs))
+        return expert(obs / 2)
+
+    env = Scaled(gym.make("CartPole-v1"))
+    model = arld.Agent("dqfd", env, expert=watching, seed=0, n_demo=100, pretrain_steps=50)
+    model.learn(600)
+    assert model.summary["demos_pretrain"] == 100 and len(seen) >= 100
+    # Every observation the expert saw is one the wrapper made.
+    made = set(Scaled.outputs)
+    assert all(o.astype(np.float32).tobytes() in made for o in seen)
+    demos = arld.collect_demos(Scaled(gym.make("CartPole-v1")), watching, 100, seed=0)
+    first, _ = gym.make("CartPole-v1").reset(seed=0)
+    assert np.array_equal(demos["obs"][0], 2 * first) and len(demos["actions"]) == 100
+
+    class Transitions:  # imitation's TransitionsWithRew, duck-typed
+        obs, acts, next_obs, rews = demos["obs"], demos["actions"], demos["next_obs"], demos["rewards"]
+        dones = demos["terminated"] | demos["truncated"]
+        infos = [{} for _ in demos["actions"]]
+
+    arld.Agent("dqfd", Scaled(gym.make("CartPole-v1")), expert=watching, demos=Transitions(),
+               pretrain_steps=50).learn(500)
+    with pytest.raises(ValueError, match="does not pre-train"):
+        arld.Agent("adqn", gym.make("CartPole-v1"), expert=expert, demos=demos)
+
+
+def test_callbacks_see_the_run_and_stop_it():
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    class StopAt(BaseCallback):
+        def __init__(self):
+            super().__init__()
+            self.events = []
+
+        def _on_training_start(self):
+            self.events.append("start")
+
+        def _on_step(self):
+            return self.num_timesteps < 777
+
+        def _on_training_end(self):
+            self.events.append(("end", self.locals["step"], self.locals["queries"]))
+
+    cb = StopAt()
+    model = cartpole_agent()
+    model.learn(5000, callback=cb)
+    assert model.num_timesteps == 777 and cb.n_calls == 777
+    assert cb.events[0] == "start" and cb.events[-1][:2] == ("end", 777)
+    # The run goes on from there as if it had never stopped.
+    model.learn(1223, reset_num_timesteps=False)
+    assert model.evaluations == cartpole_agent().learn(2000).evaluations
+    calls = []
+
+    def plain(locals_, globals_):
+        calls.append(locals_["step"])
+        return locals_["step"] < 10
+
+    cartpole_agent().learn(100, callback=plain)
+    assert calls == list(range(1, 11))
+
+
+def test_tensorboard_runs_are_numbered_and_records_name_the_expert(tmp_path):
+    for _ in range(2):
+        cartpole_agent(tensorboard_log=tmp_path).learn(500)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["ADQN_1", "ADQN_2"]
+    text = (tmp_path / "ADQN_1" / "config.toml").read_text()
+    assert 'expert = "python:test_sb3.expert"' in text
+    assert arld.__version__
+    summary = json.loads((tmp_path / "ADQN_1" / "summary.json").read_text())
+    assert summary["expert"] == "python:test_sb3.expert"
+
+
+def test_the_readme_python_example_runs(tmp_path, monkeypatch):
+    readme = (REPO / "README.md").read_text()
+    code = re.search(r"## From Python.*?```python\n(.*?)```", readme, re.S).group(1)
+    monkeypatch.chdir(tmp_path)
+    code = code.replace("total_timesteps=20_000", "total_timesteps=1_000")
+    exec(compile(code, "README.md", "exec"), {})
+
+
+def test_mypy_strict_accepts_a_user_script():
+    script = Path(__file__).with_name("typing_user.py")
+    out = subprocess.run([sys.executable, "-m", "mypy", "--strict", str(script)], capture_output=True, text=True)
+    assert out.returncode == 0, out.stdout + out.stderr
+
+
+def _safetensors_shapes(path):
+    """Tensor shapes from a safetensors file's header (8-byte length, then JSON), read without arld."""
+    data = Path(path).read_bytes()
+    n = int.from_bytes(data[:8], "little")
+    header = json.loads(data[8:8 + n])
+    return {k: v["shape"] for k, v in header.items() if k != "__metadata__"}
+
+
+def _numpy_greedy(weights, obs):
+    """The plain network's greedy action computed with NumPy from PyTorch-layout weights."""
+    h = np.maximum(weights["fc1.weight"] @ obs + weights["fc1.bias"], 0)
+    h = np.maximum(weights["fc2.weight"] @ h + weights["fc2.bias"], 0)
+    return int(np.argmax(weights["out.weight"] @ h + weights["out.bias"]))
+
+
+def test_net_arch_sets_the_hidden_widths_and_the_saved_weights_have_them(tmp_path):
+    model = cartpole_agent("dqn", net="plain", policy_kwargs=dict(net_arch=[256, 256])).learn(
+        600, log_dir=tmp_path / "wide")
+    shapes = _safetensors_shapes(tmp_path / "wide" / "weights.safetensors")
+    assert shapes["fc1.weight"] == [256, 4] and shapes["fc2.weight"] == [256, 256]
+    assert shapes["out.weight"] == [2, 256]
+    assert "hidden = [\n    256,\n    256,\n]" in (tmp_path / "wide" / "config.toml").read_text()
+    # Uneven widths, given by arld's own name: predict is the network the file holds.
+    uneven = cartpole_agent("dqn", net="plain", hidden=[48, 24]).learn(600, log_dir=tmp_path / "uneven")
+    assert _safetensors_shapes(tmp_path / "uneven" / "weights.safetensors")["fc2.weight"] == [24, 48]
+    weights = uneven.get_parameters()["policy"]
+    rng = np.random.default_rng(0)
+    for obs in rng.normal(size=(20, 4)).astype(np.float32):
+        assert int(uneven.predict(obs)[0]) == _numpy_greedy(weights, obs.astype(np.float64))
+    # A saved run keeps its widths.
+    uneven.save(tmp_path / "uneven.arld")
+    loaded = arld.Agent.load(tmp_path / "uneven.arld", gym.make("CartPole-v1"))
+    assert loaded.policy_kwargs == {"net_arch": [48, 24]}
+    # The paper's network is 64-64 when nothing is said.
+    paper = cartpole_agent("dqn", net="plain").learn(500).get_parameters()["policy"]
+    assert paper["fc1.weight"].shape == (64, 4) and paper["fc2.weight"].shape == (64, 64)
+    for bad in ([256], [64, 64, 64], [0, 64]):
+        with pytest.raises(ValueError, match=r"net_arch .*two hidden layers"):
+            cartpole_agent("dqn", policy_kwargs=dict(net_arch=bad))
+    with pytest.raises(TypeError, match="net_arch is the list"):
+        cartpole_agent("dqn", policy_kwargs=dict(net_arch=dict(pi=[64], qf=[64])))
+
+
+def test_log_interval_prints_a_line_every_n_episodes_when_verbose(capsys):
+    episodes = []
+
+    def count(locals_, globals_):
+        episodes.append(locals_["episode"])
+        return True
+
+    model = cartpole_agent("dqn", verbose=1).learn(700, log_interval=3, callback=count)
+    lines = [l for l in capsys.readouterr().out.splitlines() if "| episodes " in l]
+    finished = model.summary["episodes"]
+    assert finished == episodes[-1] > 6
+    assert [int(l.split("| episodes ")[1].split()[0]) for l in lines] == list(range(3, finished + 1, 3))
+    cartpole_agent("dqn").learn(700, log_interval=3)  # verbose=0: SB3 prints nothing either
+    assert "| episodes " not in capsys.readouterr().out
+    with pytest.raises(ValueError, match="log_interval"):
+        cartpole_agent("dqn").learn(10, log_interval=0)
+
+
+def test_records_name_the_expert_that_ran(tmp_path):
+    from stable_baselines3 import DQN
+
+    sb3 = DQN("MlpPolicy", gym.make("CartPole-v1"), seed=0)
+    model = arld.Agent("adqn", gym.make("CartPole-v1"), expert=sb3, seed=0, eval_period=300).learn(
+        300, log_dir=tmp_path / "sb3")
+    summary = json.loads((tmp_path / "sb3" / "summary.json").read_text())
+    assert summary["expert"] == "python:stable_baselines3.dqn.dqn.DQN" == model.summary["expert"]
+    assert 'expert = "python:stable_baselines3.dqn.dqn.DQN"' in (tmp_path / "sb3" / "config.toml").read_text()
+    cartpole_agent("dqn").learn(300, log_dir=tmp_path / "dqn")
+    assert "expert" not in json.loads((tmp_path / "dqn" / "summary.json").read_text())
+
+
+def test_errors_speak_python_not_rust():
+    for kw, words in ((dict(batch_size=-1), "whole number"), (dict(batch_size=1.5), "whole number"),
+                      (dict(learning_rate="fast"), "expected a number"), (dict(hidden=64), "expected a list")):
+        with pytest.raises(ValueError, match=words) as err:
+            cartpole_agent("dqn", **kw)
+        assert not re.search(r"\b(usize|u64|i64|f64|f32)\b|floating point|\d\.\.\d", str(err.value)), err.value
+    with pytest.raises(TypeError, match="did you mean 'exploration_fraction'"):
+        cartpole_agent("dqn", exploration_fractoin=0.2)
+
+
+def test_a_builtin_env_evaluates_on_the_eval_env_given():
+    short = gym.wrappers.TimeLimit(gym.make("CartPole-v1"), max_episode_steps=5)
+    model = cartpole_agent("dqn", env=arld.make("CartPole-v1"), eval_env=short).learn(1000)
+    assert model.evaluations and all(e["max"] <= 5 for e in model.evaluations)
+    plain = cartpole_agent("dqn", env=arld.make("CartPole-v1")).learn(1000)
+    assert any(e["max"] > 5 for e in plain.evaluations)
