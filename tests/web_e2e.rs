@@ -62,30 +62,13 @@ struct Outcome {
     run: PathBuf,
 }
 
-/// Starts `arld train --expert web ...`, lets the scripted person answer, and returns what both did.
-fn run_with_person(env: &str, web_args: &[&str], sets: &[&str], person_args: &[&str]) -> Outcome {
-    let tmp = tempfile::tempdir().unwrap().keep();
-    let run = tmp.join("run");
-    let mut cmd = Command::new(env!("CARGO_BIN_EXE_arld"));
-    cmd.args([
-        "train",
-        "--env",
-        env,
-        "--method",
-        "adqn",
-        "--net",
-        "bootstrap",
-    ])
-    .args(["--expert", "web", "--listen", "127.0.0.1:0", "--quiet"])
-    .args(web_args)
-    .arg("-o")
-    .arg(&run);
-    for s in sets {
-        cmd.args(["--set", s]);
-    }
-    let mut arld = cmd
+/// Starts `arld` with `args` (stdout piped, `--quiet` added) and returns it with the URL it printed.
+fn start_arld(args: &[&std::ffi::OsStr], stderr: Stdio) -> (Child, String) {
+    let mut arld = Command::new(env!("CARGO_BIN_EXE_arld"))
+        .args(args)
+        .arg("--quiet")
         .stdout(Stdio::piped())
-        .stderr(Stdio::inherit())
+        .stderr(stderr)
         .spawn()
         .expect("start arld");
     let mut lines = BufReader::new(arld.stdout.take().unwrap()).lines();
@@ -98,36 +81,74 @@ fn run_with_person(env: &str, web_args: &[&str], sets: &[&str], person_args: &[&
             break line[i..].trim().to_string();
         }
     };
+    // Keep reading its output, so that a full pipe never blocks it.
+    std::thread::spawn(move || lines.for_each(drop));
     assert!(url.starts_with("http://127.0.0.1:") && url.contains("?token="));
-    let shots = Path::new(env!("CARGO_TARGET_TMPDIR"))
-        .join("../e2e-screenshots")
-        .join(env);
-    let person = Command::new("node")
+    (arld, url)
+}
+
+/// Runs the scripted person on `url` until it leaves; its report (the last JSON line it printed).
+fn run_person(url: &str, shots: &Path, person_args: &[&str], what: &str) -> serde_json::Value {
+    let out = Command::new("node")
         .current_dir(e2e_dir())
         .arg("person.mjs")
-        .args(["--url", &url, "--shots"])
-        .arg(&shots)
+        .args(["--url", url, "--shots"])
+        .arg(shots)
         .args(person_args)
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
+        .output()
         .expect("start node");
-    let out = person.wait_with_output().expect("node");
-    let status = wait(&mut arld, Duration::from_secs(120), "arld");
     assert!(
         out.status.success(),
-        "the scripted person failed on {env}: {}{}",
+        "the scripted person failed on {what}: {}{}",
         String::from_utf8_lossy(&out.stderr),
         String::from_utf8_lossy(&out.stdout)
     );
-    assert!(status.success(), "arld failed on {env}");
-    let report: serde_json::Value = serde_json::from_slice(
+    serde_json::from_slice(
         out.stdout
             .split(|&b| b == b'\n')
             .rfind(|l| l.starts_with(b"{"))
             .expect("the person's report"),
     )
-    .unwrap();
+    .unwrap()
+}
+
+fn shots_dir(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_TARGET_TMPDIR"))
+        .join("../e2e-screenshots")
+        .join(name)
+}
+
+/// Starts `arld train --expert web ...`, lets the scripted person answer, and returns what both did.
+fn run_with_person(env: &str, web_args: &[&str], sets: &[&str], person_args: &[&str]) -> Outcome {
+    let tmp = tempfile::tempdir().unwrap().keep();
+    let run = tmp.join("run");
+    let mut args: Vec<std::ffi::OsString> = [
+        "train",
+        "--env",
+        env,
+        "--method",
+        "adqn",
+        "--net",
+        "bootstrap",
+        "--expert",
+        "web",
+        "--listen",
+        "127.0.0.1:0",
+    ]
+    .iter()
+    .map(Into::into)
+    .collect();
+    args.extend(web_args.iter().map(Into::into));
+    args.extend(["-o".into(), run.clone().into_os_string()]);
+    for s in sets {
+        args.extend(["--set".into(), s.into()]);
+    }
+    let args: Vec<&std::ffi::OsStr> = args.iter().map(|a| a.as_os_str()).collect();
+    let (mut arld, url) = start_arld(&args, Stdio::inherit());
+    let shots = shots_dir(env);
+    let report = run_person(&url, &shots, person_args, env);
+    let status = wait(&mut arld, Duration::from_secs(120), "arld");
+    assert!(status.success(), "arld failed on {env}");
     if person_args.contains(&"--reload") {
         assert_eq!(report["reloaded"], true);
     }
@@ -228,4 +249,133 @@ fn a_scripted_person_answers_in_headless_chromium() {
         lander.answers
     );
     assert_eq!(summary(&lander.run)["train_steps"], 2500);
+}
+
+/// The floats of a JSON array.
+fn floats(v: &serde_json::Value) -> Vec<f64> {
+    v.as_array()
+        .expect("an array")
+        .iter()
+        .map(|x| x.as_f64().unwrap())
+        .collect()
+}
+
+#[test]
+fn a_stop_while_a_question_is_open_loses_nothing_and_resume_asks_it_again() {
+    check_prerequisites();
+    let run = tempfile::tempdir().unwrap().keep().join("run");
+    let run_arg = run.clone().into_os_string();
+    let mut args: Vec<&std::ffi::OsStr> = [
+        "train",
+        "--env",
+        "CartPole-v0",
+        "--method",
+        "adqn",
+        "--net",
+        "bootstrap",
+        "--expert",
+        "web",
+        "--listen",
+        "127.0.0.1:0",
+        "--set",
+        "train_steps=1500",
+        "--set",
+        "budget=30",
+        "--set",
+        "eval_period=500",
+        "-o",
+    ]
+    .iter()
+    .map(std::ffi::OsStr::new)
+    .collect();
+    args.push(&run_arg);
+    let (mut arld, url) = start_arld(&args, Stdio::piped());
+
+    // The person answers three questions and leaves the fourth open; then a SIGTERM stops the run.
+    let before = run_person(
+        &url,
+        &shots_dir("stop"),
+        &["--answer", "3"],
+        "the stopped run",
+    );
+    let answered: Vec<usize> = before["answers"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|a| a.as_u64().unwrap() as usize)
+        .collect();
+    assert_eq!(answered.len(), 3);
+    let open = &before["open"];
+    assert!(
+        open.is_object(),
+        "the person saw no fourth question: {before}"
+    );
+    let killed = Command::new("kill")
+        .args(["-TERM", &arld.id().to_string()])
+        .status()
+        .expect("kill");
+    assert!(killed.success());
+    let status = wait(&mut arld, Duration::from_secs(20), "arld after SIGTERM");
+    let mut stderr = String::new();
+    std::io::Read::read_to_string(&mut arld.stderr.take().unwrap(), &mut stderr).unwrap();
+    assert_eq!(
+        status.code(),
+        Some(143),
+        "exit status after SIGTERM; stderr: {stderr}"
+    );
+    assert!(
+        stderr.contains("while a question was open")
+            && stderr.contains(&format!("arld train --resume {}", run.display())),
+        "the stop does not say where the run stands and how to continue: {stderr}"
+    );
+    assert!(run.join("snapshot.safetensors").is_file(), "no snapshot");
+    let csv_before = std::fs::read_to_string(run.join("queries.csv")).unwrap();
+    let rows = queries(&run);
+    assert_eq!(
+        rows.iter().map(|r| r.expert_action).collect::<Vec<_>>(),
+        answered.iter().map(|&a| Some(a)).collect::<Vec<_>>(),
+        "queries.csv after the stop does not hold the person's answers"
+    );
+    assert!(std::fs::metadata(run.join("episodes.csv")).unwrap().len() > 0);
+
+    // Resumed, the run asks the open question again; the person answers to the end.
+    let (mut arld, url) = start_arld(
+        &[
+            std::ffi::OsStr::new("train"),
+            std::ffi::OsStr::new("--resume"),
+            run.as_os_str(),
+        ],
+        Stdio::inherit(),
+    );
+    let after = run_person(&url, &shots_dir("resumed"), &[], "the resumed run");
+    let status = wait(&mut arld, Duration::from_secs(120), "the resumed arld");
+    assert!(status.success(), "the resumed run failed");
+    let first = &after["first"];
+    assert_eq!(
+        floats(&first["obs"]),
+        floats(&open["obs"]),
+        "the resumed run did not ask the open question again"
+    );
+    assert_eq!(first["agent_action"], open["agent_action"]);
+    assert_eq!(first["steps_left"], open["steps_left"]);
+    let csv_after = std::fs::read_to_string(run.join("queries.csv")).unwrap();
+    assert!(
+        csv_after.starts_with(&csv_before),
+        "the answers before the stop changed:\n{csv_before}\n---\n{csv_after}"
+    );
+    let rows = queries(&run);
+    let later: Vec<usize> = after["answers"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|a| a.as_u64().unwrap() as usize)
+        .collect();
+    assert_eq!(
+        rows.iter()
+            .filter(|r| r.answered)
+            .map(|r| r.expert_action.unwrap())
+            .collect::<Vec<_>>(),
+        [answered, later].concat()
+    );
+    assert_eq!(summary(&run)["train_steps"], 1500);
 }

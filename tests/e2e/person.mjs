@@ -2,7 +2,8 @@
 // questions by pressing keys with a simple controller that reads the state the page received, saves screenshots
 // (training, asking, mid-segment) and checks that the drawing is not blank and that requests without the token
 // are refused. Usage:
-//   node person.mjs --url URL --shots DIR [--skip N] [--realtime] [--after STEP] [--reload]
+//   node person.mjs --url URL --shots DIR [--skip N] [--realtime] [--after STEP] [--reload] [--answer N]
+// (--answer: answer N opening questions, then leave as soon as the next one is open, reporting it as "open".)
 // (--reload: open a second, watching tab, and reload the answering tab once while training runs.)
 // (--after: take the screenshots only once the run has passed STEP, e.g. to show a learning curve.)
 // Prints one JSON line: {"answers": [actions answered to opening questions, in order], "skipped": N, ...}.
@@ -23,6 +24,7 @@ const skip = Number(args.skip || 0);
 const realtime = !!args.realtime;
 const after = Number(args.after || 0);
 const reload = !!args.reload;
+const answerLimit = Number(args.answer || 0);
 fs.mkdirSync(shots, { recursive: true });
 const fail = (msg) => { console.error(`person: ${msg}`); process.exit(1); };
 
@@ -132,6 +134,8 @@ async function shot(name) {
 // ---- answering ------------------------------------------------------------------------------------------
 const answers = [];
 let skipped = 0, steps = 0, lastId = 0, held = null, reloaded = false, watching = null;
+// The first opening question this person saw, and the one left open (with --answer).
+let first = null, open = null;
 const state = () => page.evaluate(() => ({ prompt: arld.prompt, status: arld.status, ended: arld.ended }));
 async function holdKey(a) {
   if (held === a) return;
@@ -175,6 +179,9 @@ for (;;) {
   if (p.agent_action !== null && p.waits) {
     if (p.id <= lastId) continue;
     lastId = p.id;
+    const question = { obs: p.obs, agent_action: p.agent_action, steps_left: p.steps_left };
+    if (first === null) first = question;
+    if (answerLimit && answers.length >= answerLimit) { open = question; break; }
     if (skipped < skip) {
       // Nobody answers this one: it must go back to the agent.
       skipped++;
@@ -201,12 +208,12 @@ for (;;) {
   else if (p.waits && p.id > lastId) { lastId = p.id; steps++; await page.keyboard.press(keyOf(a)); }
 }
 await holdKey(null);
-if (reload) {
+if (reload && !open) {
   if (!reloaded) fail("the run ended before the page could be reloaded");
   if (!(await watching.evaluate(() => arld.ended))) fail("the watching tab did not see the end of the run");
 }
 await browser.close();
 fs.rmSync(userDataDir, { recursive: true, force: true });
 if (pageErrors.length) fail(`the page threw: ${pageErrors.join("; ")}`);
-for (const name of ["training", "asking", "mid-segment"]) if (!taken[name]) fail(`no "${name}" screenshot: the run never showed that state`);
-console.log(JSON.stringify({ env: hello.env, answers, skipped, steps, reloaded, refused, watcherErrors: watcher, drawn: taken }));
+if (!answerLimit) for (const name of ["training", "asking", "mid-segment"]) if (!taken[name]) fail(`no "${name}" screenshot: the run never showed that state`);
+console.log(JSON.stringify({ env: hello.env, answers, skipped, steps, reloaded, refused, watcherErrors: watcher, drawn: taken, first, open }));

@@ -31,6 +31,8 @@ use std::time::{Duration, Instant};
 pub const DEFAULT_LISTEN: &str = "127.0.0.1:8765";
 /// Live updates per second while training runs.
 const UPDATES_PER_S: f64 = 15.0;
+/// How often a wait for the person looks for a stop request.
+const STOP_POLL: Duration = Duration::from_millis(50);
 
 /// How the web expert listens and how the person answers. Written as the spec `web:listen=ADDR,fps=N,timeout=S`
 /// (every part optional, e.g. `web` or `web:fps=10`).
@@ -205,10 +207,19 @@ impl WebExpert {
             .timeout
             .map(|t| asked + Duration::from_secs_f64(t));
         loop {
+            // A stop request (Ctrl-C, SIGTERM) ends the wait within a poll: the run snapshots with the question
+            // open and asks it again when resumed.
+            if crate::interrupt::requested() {
+                return Err(crate::interrupt::Interrupted(
+                    "stopped while the person had a question open".into(),
+                )
+                .into());
+            }
             let wait = match deadline {
                 Some(d) => d.saturating_duration_since(Instant::now()),
-                None => Duration::from_secs(3600),
-            };
+                None => STOP_POLL,
+            }
+            .min(STOP_POLL);
             match self.keys.recv_timeout(wait) {
                 // Keys meant for an earlier prompt (pressed twice, or late) are dropped.
                 Ok(key) if key.id != id => {}
@@ -323,8 +334,13 @@ impl Expert for WebExpert {
 impl Drop for WebExpert {
     /// Tells the open tabs that the run is over, gives them a moment to receive it, and stops the server.
     fn drop(&mut self) {
+        let message = if crate::interrupt::requested() {
+            "The run was stopped. Your answers are saved; resumed, it continues where it stopped."
+        } else {
+            "The run is over."
+        };
         let msg = ServerMsg::End {
-            message: "The run is over.".into(),
+            message: message.into(),
         }
         .to_json();
         self.shared.publish(msg, |b, m| {
