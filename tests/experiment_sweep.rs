@@ -138,6 +138,7 @@ fn write_fake_run(spec: &RunSpec, dir: &Path, interrupt: bool) -> Result<()> {
             numerics: Some(arld::math::NUMERICS.to_string()),
             arld_version: None,
             git_commit: None,
+            person_s: None,
         },
     )
 }

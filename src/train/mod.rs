@@ -787,7 +787,17 @@ fn train_loop(
         numerics: Some(crate::math::NUMERICS.to_string()),
         arld_version: Some(crate::build_info::VERSION.to_string()),
         git_commit: Some(crate::build_info::GIT_COMMIT.to_string()),
+        person_s: expert.as_deref().and_then(|e| e.person_seconds()),
     };
+    if let Some(expert) = expert.as_deref_mut() {
+        expert.finish(&crate::expert::RunEnd {
+            solved,
+            steps_to_solve: summary.steps_to_solve,
+            train_steps: cfg.train_steps,
+            final_score: summary.final_score,
+            dir: log.dir().map(|d| d.to_path_buf()),
+        });
+    }
     if let Some(dir) = log.dir() {
         agent.network().save(
             &dir.join(run_dir::WEIGHTS_FILE),

@@ -265,6 +265,10 @@ pub struct Summary {
     pub arld_version: Option<String>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub git_commit: Option<String>,
+    /// Seconds a person spent answering the queries (a web expert), over all the run's sessions; absent for
+    /// programs.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub person_s: Option<f64>,
 }
 
 /// Whether the complete run in `dir` was computed with other elementary functions than this arld's
@@ -766,6 +770,7 @@ mod tests {
             numerics: Some(crate::math::NUMERICS.to_string()),
             arld_version: Some(crate::build_info::VERSION.to_string()),
             git_commit: Some(crate::build_info::GIT_COMMIT.to_string()),
+            person_s: None,
         };
         write_summary(dir.path(), &summary).unwrap();
         assert!(is_complete(dir.path()));

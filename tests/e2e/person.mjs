@@ -135,7 +135,7 @@ async function shot(name) {
 const answers = [];
 let skipped = 0, steps = 0, lastId = 0, held = null, reloaded = false, watching = null;
 // The first opening question this person saw, and the one left open (with --answer).
-let first = null, open = null;
+let first = null, open = null, budgetSpentSeen = false;
 const state = () => page.evaluate(() => ({ prompt: arld.prompt, status: arld.status, ended: arld.ended }));
 async function holdKey(a) {
   if (held === a) return;
@@ -155,6 +155,13 @@ for (;;) {
   if (s.ended) break;
   const p = s.prompt;
   if (!p) {
+    if (s.status && s.status.budget_used >= s.status.budget && !s.ended) {
+      const text = await page.evaluate(() => document.getElementById("prompt-text").textContent);
+      // The budget may have run out between the two reads; the page must never promise questions once it has.
+      const still = await page.evaluate(() => !arld.prompt && arld.status.budget_used >= arld.status.budget && !arld.ended);
+      if (still && !text.startsWith("No questions left")) fail(`with the budget spent the page says: "${text}"`);
+      budgetSpentSeen = true;
+    }
     if (s.status && s.status.step > 0) await shot("training");
     if (reload && taken.training && !reloaded) {
       // A second tab watches; the answering tab reloads and must get control back, the run going on.
@@ -165,9 +172,17 @@ for (;;) {
         arld.controller !== arld.hello.client && document.getElementById("role").textContent.includes("watching"));
       await page.reload();
       await page.waitForFunction(() => window.arld && arld.hello, null, { timeout: 30000 });
-      // Control went to the watching tab when this one closed; take it back with the button.
+      // Control went to the watching tab when this one closed; take it back with the button while a question
+      // is open: the panel must be answerable at once, not greyed until the next question.
+      await page.waitForFunction(() => arld.ended || (arld.prompt && arld.prompt.waits), null, { timeout: 0, polling: 5 });
       await page.click("#take-control");
       await controlling();
+      const panel = await page.evaluate(() => ({
+        open: !!(arld.prompt && arld.prompt.waits),
+        disabled: [...document.querySelectorAll("#buttons button")].some((b) => b.disabled),
+        text: document.getElementById("prompt-text").textContent,
+      }));
+      if (panel.open && (panel.disabled || panel.text.includes("Another tab"))) fail(`after taking control back the panel stays greyed: ${JSON.stringify(panel)}`);
       await page.waitForFunction(() => arld.status !== null);
       continue;
     }
@@ -212,8 +227,20 @@ if (reload && !open) {
   if (!reloaded) fail("the run ended before the page could be reloaded");
   if (!(await watching.evaluate(() => arld.ended))) fail("the watching tab did not see the end of the run");
 }
+const endScreen = open ? null : await page.evaluate(() => ({
+  shown: !document.getElementById("end").hidden,
+  title: document.getElementById("end-title").textContent,
+  rows: [...document.querySelectorAll("#end-table tr")].map((r) => [r.cells[0].textContent, r.cells[1].textContent]),
+  xlabels: [document.getElementById("uchart").dataset.xlabels, document.getElementById("curve").dataset.xlabels],
+  outcome: arld.outcome,
+}));
+if (!open) await page.screenshot({ path: path.join(shots, "end.png") });
 await browser.close();
 fs.rmSync(userDataDir, { recursive: true, force: true });
 if (pageErrors.length) fail(`the page threw: ${pageErrors.join("; ")}`);
+if (endScreen) {
+  if (!endScreen.shown || !endScreen.outcome) fail(`no end screen at the end of the run: ${JSON.stringify(endScreen)}`);
+  if (!endScreen.xlabels.every((l) => l && /\d/.test(l))) fail(`the charts have no x-axis labels: ${JSON.stringify(endScreen.xlabels)}`);
+}
 if (!answerLimit) for (const name of ["training", "asking", "mid-segment"]) if (!taken[name]) fail(`no "${name}" screenshot: the run never showed that state`);
-console.log(JSON.stringify({ env: hello.env, answers, skipped, steps, reloaded, refused, watcherErrors: watcher, drawn: taken, first, open }));
+console.log(JSON.stringify({ env: hello.env, answers, skipped, steps, reloaded, refused, watcherErrors: watcher, drawn: taken, first, open, budgetSpentSeen, endScreen }));
