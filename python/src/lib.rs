@@ -21,6 +21,8 @@ use pyo3::types::{PyDict, PyList};
 use std::path::Path;
 use std::sync::{Arc, Mutex};
 
+mod web;
+
 /// The first Python exception raised during a call into the library, kept until the call returns.
 #[derive(Clone, Default)]
 struct ErrorSlot(Arc<Mutex<Option<PyErr>>>);
@@ -169,6 +171,9 @@ impl Env for Interruptible {
     }
     fn set_generator(&mut self, rng: Option<NumpyRng>) {
         self.inner.set_generator(rng)
+    }
+    fn geometry(&self) -> Option<env::Geometry> {
+        self.inner.geometry()
     }
 }
 
@@ -404,6 +409,7 @@ fn train_run(
                 }),
             })
         };
+        let web_env = env.as_ref().map(|e| e.clone_ref(py));
         let mut env = make(env)?;
         let test_envs = match test_envs {
             Some(objs) => objs
@@ -414,13 +420,25 @@ fn train_run(
                 .map(|_| make(None))
                 .collect::<anyhow::Result<Vec<_>>>()?,
         };
+        let keep = {
+            let errors = errors.clone();
+            move |e| errors.keep(e)
+        };
         let mut expert: Option<Box<dyn Expert>> = match expert {
-            Some(call) => Some(Box::new(PyExpert {
-                call,
-                name: expert_name,
-                n_actions: spec.n_actions,
-                errors: errors.clone(),
-            })),
+            Some(call) => match web::expert(
+                call.bind(py),
+                web_env.as_ref().map(|e| e.bind(py)),
+                spec,
+                keep,
+            )? {
+                Some(web) => Some(web),
+                None => Some(Box::new(PyExpert {
+                    call,
+                    name: expert_name,
+                    n_actions: spec.n_actions,
+                    errors: errors.clone(),
+                })),
+            },
             None if cfg.method.needs_expert() => Some(expert::from_spec(
                 &cfg.expert,
                 &cfg.env,
@@ -539,5 +557,6 @@ fn _arld(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(train_run, m)?)?;
     m.add_class::<Policy>()?;
     m.add_class::<BuiltinEnv>()?;
+    m.add_class::<web::PyWebExpert>()?;
     Ok(())
 }

@@ -3,6 +3,8 @@
 // (training, asking, mid-segment) and checks that the drawing is not blank and that requests without the token
 // are refused. Usage:
 //   node person.mjs --url URL --shots DIR [--skip N] [--realtime] [--after STEP] [--reload] [--answer N]
+// (--policy ENV: answer with the controller of ENV, e.g. CartPole-v0 for a CartPole registered under another id.)
+// (--expect-image: the page must show frames the environment rendered, not a drawing of its geometry.)
 // (--answer: answer N opening questions, then leave as soon as the next one is open, reporting it as "open".)
 // (--reload: open a second, watching tab, and reload the answering tab once while training runs.)
 // (--after: take the screenshots only once the run has passed STEP, e.g. to show a learning curve.)
@@ -25,6 +27,7 @@ const realtime = !!args.realtime;
 const after = Number(args.after || 0);
 const reload = !!args.reload;
 const answerLimit = Number(args.answer || 0);
+const expectImage = !!args["expect-image"];
 fs.mkdirSync(shots, { recursive: true });
 const fail = (msg) => { console.error(`person: ${msg}`); process.exit(1); };
 
@@ -89,7 +92,7 @@ const controlling = () =>
 await page.goto(url.href);
 await controlling();
 const hello = await page.evaluate(() => arld.hello);
-const policy = policies[hello.env] || fail(`no controller for ${hello.env}`);
+const policy = policies[args.policy || hello.env] || fail(`no controller for ${args.policy || hello.env}`);
 const keyOf = (a) => hello.actions[a].keys[0];
 
 // A second tab watches: its keys are refused, malformed messages get error frames, and the run goes on.
@@ -107,6 +110,11 @@ const watcher = await page.evaluate(async () => {
 if (watcher.length !== 4) fail(`the watching tab got ${watcher.length} error frames for 4 bad messages: ${JSON.stringify(watcher)}`);
 
 async function blankCheck(name) {
+  if (expectImage) {
+    // A rendered frame arrives as a PNG and is drawn once decoded.
+    await page.waitForFunction(() => arld.frame && arld.frame.image, null, { timeout: 10000 })
+      .catch(() => fail(`no rendered frame on the page at "${name}"`));
+  }
   const d = await page.evaluate(() => {
     const c = document.getElementById("env");
     const px = c.getContext("2d").getImageData(0, 0, c.width, c.height).data;
