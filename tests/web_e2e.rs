@@ -156,9 +156,25 @@ fn run_with_person(env: &str, web_args: &[&str], sets: &[&str], person_args: &[&
         assert!(shots.join(format!("{name}.png")).is_file(), "{name}.png");
     }
     let refused = &report["refused"];
-    for what in ["page", "script", "wrongToken", "websocket", "other"] {
-        assert_eq!(refused[what], 403, "{what} without the token");
+    for what in [
+        "page",
+        "script",
+        "wrongToken",
+        "websocket",
+        "other",
+        "foreignHost",
+        "foreignOrigin",
+        "otherPort",
+        "repeatedToken",
+    ] {
+        assert_eq!(refused[what], 403, "{what}: not refused");
     }
+    assert!(
+        refused["csp"]
+            .as_str()
+            .unwrap()
+            .contains("script-src 'self'")
+    );
     Outcome {
         answers: report["answers"]
             .as_array()
@@ -378,4 +394,99 @@ fn a_stop_while_a_question_is_open_loses_nothing_and_resume_asks_it_again() {
         [answered, later].concat()
     );
     assert_eq!(summary(&run)["train_steps"], 1500);
+}
+
+/// One HTTP GET of `url` (`http://IP:PORT/PATH`) with plain sockets; the status code.
+fn http_status(url: &str) -> u16 {
+    use std::io::{Read, Write};
+    let rest = url.strip_prefix("http://").expect("an http URL");
+    let (host, path) = rest.split_at(rest.find('/').unwrap_or(rest.len()));
+    let mut stream = std::net::TcpStream::connect(host).expect("connect to the printed address");
+    stream
+        .set_read_timeout(Some(Duration::from_secs(5)))
+        .unwrap();
+    write!(
+        stream,
+        "GET {path} HTTP/1.1\r\nHost: {host}\r\nConnection: close\r\n\r\n"
+    )
+    .unwrap();
+    let mut response = String::new();
+    let _ = stream.read_to_string(&mut response);
+    response
+        .split_whitespace()
+        .nth(1)
+        .and_then(|c| c.parse().ok())
+        .unwrap_or_else(|| panic!("no HTTP status in {response:?}"))
+}
+
+/// Listening on every interface, the printed URL names an address other machines can reach (not 127.0.0.1
+/// or 0.0.0.0), and the page answers there; the run waits for the page, and a stop before it opens says so.
+#[test]
+fn listening_everywhere_prints_a_reachable_url_and_waits_for_the_page() {
+    let run = tempfile::tempdir().unwrap().keep().join("run");
+    let mut args: Vec<&std::ffi::OsStr> = [
+        "train",
+        "--env",
+        "CartPole-v0",
+        "--method",
+        "adqn",
+        "--expert",
+        "web",
+        "--listen",
+        "0.0.0.0:0",
+        "-o",
+    ]
+    .iter()
+    .map(std::ffi::OsStr::new)
+    .collect();
+    args.push(run.as_os_str());
+    let mut arld = Command::new(env!("CARGO_BIN_EXE_arld"))
+        .args(&args)
+        .arg("--quiet")
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("start arld");
+    let mut lines = BufReader::new(arld.stdout.take().unwrap()).lines();
+    let url = loop {
+        let line = lines.next().expect("arld printed no URL").unwrap();
+        if let Some(i) = line.find("http://") {
+            break line[i..].trim().to_string();
+        }
+    };
+    let ip: std::net::IpAddr = url["http://".len()..]
+        .rsplit_once(':')
+        .unwrap()
+        .0
+        .trim_matches(['[', ']'])
+        .parse()
+        .unwrap_or_else(|e| panic!("{url}: {e}"));
+    let has_outward = std::net::UdpSocket::bind("0.0.0.0:0")
+        .and_then(|s| s.connect("192.0.2.1:9").and_then(|()| s.local_addr()))
+        .is_ok_and(|a| !a.ip().is_loopback());
+    assert!(!ip.is_unspecified(), "the URL names no address: {url}");
+    if has_outward {
+        assert!(!ip.is_loopback(), "the URL names this machine only: {url}");
+    }
+    assert_eq!(
+        http_status(&url),
+        200,
+        "the printed URL does not serve the page"
+    );
+    // The page was fetched, but no tab is open (no WebSocket): the run waits for one.
+    std::thread::sleep(Duration::from_millis(500));
+    let killed = Command::new("kill")
+        .args(["-TERM", &arld.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(killed.success());
+    let status = wait(&mut arld, Duration::from_secs(20), "arld after SIGTERM");
+    let mut stderr = String::new();
+    std::io::Read::read_to_string(&mut arld.stderr.take().unwrap(), &mut stderr).unwrap();
+    assert_eq!(status.code(), Some(143), "{stderr}");
+    assert!(
+        stderr.contains("before the page was opened"),
+        "the run did not wait for the page: {stderr}"
+    );
+    assert!(!run.join("queries.csv").is_file() || queries(&run).is_empty());
 }

@@ -72,6 +72,21 @@ const refused = {
   other: await status("/../../etc/passwd"),
 };
 for (const [what, code] of Object.entries(refused)) if (code !== 403) fail(`a request without the token (${what}) got ${code}, not 403`);
+// With the token, but naming another host or origin (DNS rebinding, another site's page), or the token twice.
+const token = url.searchParams.get("token");
+const withToken = `/?token=${token}`;
+Object.assign(refused, {
+  foreignHost: await status(withToken, { Host: `rebound.example:${url.port}` }),
+  foreignOrigin: await status(`/ws?token=${token}`, { ...upgrade, Origin: "http://evil.example" }),
+  otherPort: await status(withToken, { Host: `127.0.0.1:${Number(url.port) + 1}` }),
+  repeatedToken: await status(`/?token=${token}&token=${token}`),
+});
+for (const what of ["foreignHost", "foreignOrigin", "otherPort", "repeatedToken"])
+  if (refused[what] !== 403) fail(`a request with the token but ${what} got ${refused[what]}, not 403`);
+const csp = await new Promise((resolve, reject) =>
+  http.get({ host: url.hostname, port: url.port, path: withToken }, (res) => { res.resume(); resolve(res.headers["content-security-policy"]); }).on("error", reject));
+if (!csp || !csp.includes("default-src 'none'")) fail(`the page has no Content-Security-Policy: ${csp}`);
+refused.csp = csp;
 if ((await status(`/ws?token=${url.searchParams.get("token")}`, upgrade)) !== 101) fail("the WebSocket with the token was not accepted");
 
 // ---- the browser ------------------------------------------------------------------------------------------
