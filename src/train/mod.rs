@@ -789,7 +789,7 @@ fn train_loop(
         git_commit: Some(crate::build_info::GIT_COMMIT.to_string()),
         person_s: expert.as_deref().and_then(|e| e.person_seconds()),
     };
-    if let Some(expert) = expert.as_deref_mut() {
+    if let Some(expert) = expert {
         expert.finish(&crate::expert::RunEnd {
             solved,
             steps_to_solve: summary.steps_to_solve,
