@@ -139,6 +139,7 @@ fn write_fake_run(spec: &RunSpec, dir: &Path, interrupt: bool) -> Result<()> {
             arld_version: None,
             git_commit: None,
             expert: None,
+            person_s: None,
         },
     )
 }

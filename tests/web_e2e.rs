@@ -62,30 +62,13 @@ struct Outcome {
     run: PathBuf,
 }
 
-/// Starts `arld train --expert web ...`, lets the scripted person answer, and returns what both did.
-fn run_with_person(env: &str, web_args: &[&str], sets: &[&str], person_args: &[&str]) -> Outcome {
-    let tmp = tempfile::tempdir().unwrap().keep();
-    let run = tmp.join("run");
-    let mut cmd = Command::new(env!("CARGO_BIN_EXE_arld"));
-    cmd.args([
-        "train",
-        "--env",
-        env,
-        "--method",
-        "adqn",
-        "--net",
-        "bootstrap",
-    ])
-    .args(["--expert", "web", "--listen", "127.0.0.1:0", "--quiet"])
-    .args(web_args)
-    .arg("-o")
-    .arg(&run);
-    for s in sets {
-        cmd.args(["--set", s]);
-    }
-    let mut arld = cmd
+/// Starts `arld` with `args` (stdout piped, `--quiet` added) and returns it with the URL it printed.
+fn start_arld(args: &[&std::ffi::OsStr], stderr: Stdio) -> (Child, String) {
+    let mut arld = Command::new(env!("CARGO_BIN_EXE_arld"))
+        .args(args)
+        .arg("--quiet")
         .stdout(Stdio::piped())
-        .stderr(Stdio::inherit())
+        .stderr(stderr)
         .spawn()
         .expect("start arld");
     let mut lines = BufReader::new(arld.stdout.take().unwrap()).lines();
@@ -98,36 +81,74 @@ fn run_with_person(env: &str, web_args: &[&str], sets: &[&str], person_args: &[&
             break line[i..].trim().to_string();
         }
     };
+    // Keep reading its output, so that a full pipe never blocks it.
+    std::thread::spawn(move || lines.for_each(drop));
     assert!(url.starts_with("http://127.0.0.1:") && url.contains("?token="));
-    let shots = Path::new(env!("CARGO_TARGET_TMPDIR"))
-        .join("../e2e-screenshots")
-        .join(env);
-    let person = Command::new("node")
+    (arld, url)
+}
+
+/// Runs the scripted person on `url` until it leaves; its report (the last JSON line it printed).
+fn run_person(url: &str, shots: &Path, person_args: &[&str], what: &str) -> serde_json::Value {
+    let out = Command::new("node")
         .current_dir(e2e_dir())
         .arg("person.mjs")
-        .args(["--url", &url, "--shots"])
-        .arg(&shots)
+        .args(["--url", url, "--shots"])
+        .arg(shots)
         .args(person_args)
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
+        .output()
         .expect("start node");
-    let out = person.wait_with_output().expect("node");
-    let status = wait(&mut arld, Duration::from_secs(120), "arld");
     assert!(
         out.status.success(),
-        "the scripted person failed on {env}: {}{}",
+        "the scripted person failed on {what}: {}{}",
         String::from_utf8_lossy(&out.stderr),
         String::from_utf8_lossy(&out.stdout)
     );
-    assert!(status.success(), "arld failed on {env}");
-    let report: serde_json::Value = serde_json::from_slice(
+    serde_json::from_slice(
         out.stdout
             .split(|&b| b == b'\n')
             .rfind(|l| l.starts_with(b"{"))
             .expect("the person's report"),
     )
-    .unwrap();
+    .unwrap()
+}
+
+fn shots_dir(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_TARGET_TMPDIR"))
+        .join("../e2e-screenshots")
+        .join(name)
+}
+
+/// Starts `arld train --expert web ...`, lets the scripted person answer, and returns what both did.
+fn run_with_person(env: &str, web_args: &[&str], sets: &[&str], person_args: &[&str]) -> Outcome {
+    let tmp = tempfile::tempdir().unwrap().keep();
+    let run = tmp.join("run");
+    let mut args: Vec<std::ffi::OsString> = [
+        "train",
+        "--env",
+        env,
+        "--method",
+        "adqn",
+        "--net",
+        "bootstrap",
+        "--expert",
+        "web",
+        "--listen",
+        "127.0.0.1:0",
+    ]
+    .iter()
+    .map(Into::into)
+    .collect();
+    args.extend(web_args.iter().map(Into::into));
+    args.extend(["-o".into(), run.clone().into_os_string()]);
+    for s in sets {
+        args.extend(["--set".into(), s.into()]);
+    }
+    let args: Vec<&std::ffi::OsStr> = args.iter().map(|a| a.as_os_str()).collect();
+    let (mut arld, url) = start_arld(&args, Stdio::inherit());
+    let shots = shots_dir(env);
+    let report = run_person(&url, &shots, person_args, env);
+    let status = wait(&mut arld, Duration::from_secs(120), "arld");
+    assert!(status.success(), "arld failed on {env}");
     if person_args.contains(&"--reload") {
         assert_eq!(report["reloaded"], true);
     }
@@ -135,9 +156,25 @@ fn run_with_person(env: &str, web_args: &[&str], sets: &[&str], person_args: &[&
         assert!(shots.join(format!("{name}.png")).is_file(), "{name}.png");
     }
     let refused = &report["refused"];
-    for what in ["page", "script", "wrongToken", "websocket", "other"] {
-        assert_eq!(refused[what], 403, "{what} without the token");
+    for what in [
+        "page",
+        "script",
+        "wrongToken",
+        "websocket",
+        "other",
+        "foreignHost",
+        "foreignOrigin",
+        "otherPort",
+        "repeatedToken",
+    ] {
+        assert_eq!(refused[what], 403, "{what}: not refused");
     }
+    assert!(
+        refused["csp"]
+            .as_str()
+            .unwrap()
+            .contains("script-src 'self'")
+    );
     Outcome {
         answers: report["answers"]
             .as_array()
@@ -228,4 +265,228 @@ fn a_scripted_person_answers_in_headless_chromium() {
         lander.answers
     );
     assert_eq!(summary(&lander.run)["train_steps"], 2500);
+}
+
+/// The floats of a JSON array.
+fn floats(v: &serde_json::Value) -> Vec<f64> {
+    v.as_array()
+        .expect("an array")
+        .iter()
+        .map(|x| x.as_f64().unwrap())
+        .collect()
+}
+
+#[test]
+fn a_stop_while_a_question_is_open_loses_nothing_and_resume_asks_it_again() {
+    check_prerequisites();
+    let run = tempfile::tempdir().unwrap().keep().join("run");
+    let run_arg = run.clone().into_os_string();
+    let mut args: Vec<&std::ffi::OsStr> = [
+        "train",
+        "--env",
+        "CartPole-v0",
+        "--method",
+        "adqn",
+        "--net",
+        "bootstrap",
+        "--expert",
+        "web",
+        "--listen",
+        "127.0.0.1:0",
+        "--set",
+        "train_steps=1500",
+        "--set",
+        "budget=30",
+        "--set",
+        "eval_period=500",
+        "-o",
+    ]
+    .iter()
+    .map(std::ffi::OsStr::new)
+    .collect();
+    args.push(&run_arg);
+    let (mut arld, url) = start_arld(&args, Stdio::piped());
+
+    // The person answers three questions and leaves the fourth open; then a SIGTERM stops the run.
+    let before = run_person(
+        &url,
+        &shots_dir("stop"),
+        &["--answer", "3"],
+        "the stopped run",
+    );
+    let answered: Vec<usize> = before["answers"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|a| a.as_u64().unwrap() as usize)
+        .collect();
+    assert_eq!(answered.len(), 3);
+    let open = &before["open"];
+    assert!(
+        open.is_object(),
+        "the person saw no fourth question: {before}"
+    );
+    let killed = Command::new("kill")
+        .args(["-TERM", &arld.id().to_string()])
+        .status()
+        .expect("kill");
+    assert!(killed.success());
+    let status = wait(&mut arld, Duration::from_secs(20), "arld after SIGTERM");
+    let mut stderr = String::new();
+    std::io::Read::read_to_string(&mut arld.stderr.take().unwrap(), &mut stderr).unwrap();
+    assert_eq!(
+        status.code(),
+        Some(143),
+        "exit status after SIGTERM; stderr: {stderr}"
+    );
+    assert!(
+        stderr.contains("while a question was open")
+            && stderr.contains(&format!("arld train --resume {}", run.display())),
+        "the stop does not say where the run stands and how to continue: {stderr}"
+    );
+    assert!(run.join("snapshot.safetensors").is_file(), "no snapshot");
+    let csv_before = std::fs::read_to_string(run.join("queries.csv")).unwrap();
+    let rows = queries(&run);
+    assert_eq!(
+        rows.iter().map(|r| r.expert_action).collect::<Vec<_>>(),
+        answered.iter().map(|&a| Some(a)).collect::<Vec<_>>(),
+        "queries.csv after the stop does not hold the person's answers"
+    );
+    assert!(std::fs::metadata(run.join("episodes.csv")).unwrap().len() > 0);
+
+    // Resumed, the run asks the open question again; the person answers to the end.
+    let (mut arld, url) = start_arld(
+        &[
+            std::ffi::OsStr::new("train"),
+            std::ffi::OsStr::new("--resume"),
+            run.as_os_str(),
+        ],
+        Stdio::inherit(),
+    );
+    let after = run_person(&url, &shots_dir("resumed"), &[], "the resumed run");
+    let status = wait(&mut arld, Duration::from_secs(120), "the resumed arld");
+    assert!(status.success(), "the resumed run failed");
+    let first = &after["first"];
+    assert_eq!(
+        floats(&first["obs"]),
+        floats(&open["obs"]),
+        "the resumed run did not ask the open question again"
+    );
+    assert_eq!(first["agent_action"], open["agent_action"]);
+    assert_eq!(first["steps_left"], open["steps_left"]);
+    let csv_after = std::fs::read_to_string(run.join("queries.csv")).unwrap();
+    assert!(
+        csv_after.starts_with(&csv_before),
+        "the answers before the stop changed:\n{csv_before}\n---\n{csv_after}"
+    );
+    let rows = queries(&run);
+    let later: Vec<usize> = after["answers"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|a| a.as_u64().unwrap() as usize)
+        .collect();
+    assert_eq!(
+        rows.iter()
+            .filter(|r| r.answered)
+            .map(|r| r.expert_action.unwrap())
+            .collect::<Vec<_>>(),
+        [answered, later].concat()
+    );
+    assert_eq!(summary(&run)["train_steps"], 1500);
+}
+
+/// One HTTP GET of `url` (`http://IP:PORT/PATH`) with plain sockets; the status code.
+fn http_status(url: &str) -> u16 {
+    use std::io::{Read, Write};
+    let rest = url.strip_prefix("http://").expect("an http URL");
+    let (host, path) = rest.split_at(rest.find('/').unwrap_or(rest.len()));
+    let mut stream = std::net::TcpStream::connect(host).expect("connect to the printed address");
+    stream
+        .set_read_timeout(Some(Duration::from_secs(5)))
+        .unwrap();
+    write!(
+        stream,
+        "GET {path} HTTP/1.1\r\nHost: {host}\r\nConnection: close\r\n\r\n"
+    )
+    .unwrap();
+    let mut response = String::new();
+    let _ = stream.read_to_string(&mut response);
+    response
+        .split_whitespace()
+        .nth(1)
+        .and_then(|c| c.parse().ok())
+        .unwrap_or_else(|| panic!("no HTTP status in {response:?}"))
+}
+
+/// Listening on every interface, the printed URL names an address other machines can reach (not 127.0.0.1
+/// or 0.0.0.0), and the page answers there; the run waits for the page, and a stop before it opens says so.
+#[test]
+fn listening_everywhere_prints_a_reachable_url_and_waits_for_the_page() {
+    let run = tempfile::tempdir().unwrap().keep().join("run");
+    let mut args: Vec<&std::ffi::OsStr> = [
+        "train",
+        "--env",
+        "CartPole-v0",
+        "--method",
+        "adqn",
+        "--expert",
+        "web",
+        "--listen",
+        "0.0.0.0:0",
+        "-o",
+    ]
+    .iter()
+    .map(std::ffi::OsStr::new)
+    .collect();
+    args.push(run.as_os_str());
+    let mut arld = Command::new(env!("CARGO_BIN_EXE_arld"))
+        .args(&args)
+        .arg("--quiet")
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("start arld");
+    let mut lines = BufReader::new(arld.stdout.take().unwrap()).lines();
+    let url = loop {
+        let line = lines.next().expect("arld printed no URL").unwrap();
+        if let Some(i) = line.find("http://") {
+            break line[i..].trim().to_string();
+        }
+    };
+    let ip: std::net::IpAddr = url["http://".len()..]
+        .rsplit_once(':')
+        .unwrap()
+        .0
+        .trim_matches(['[', ']'])
+        .parse()
+        .unwrap_or_else(|e| panic!("{url}: {e}"));
+    let has_outward = std::net::UdpSocket::bind("0.0.0.0:0")
+        .and_then(|s| s.connect("192.0.2.1:9").and_then(|()| s.local_addr()))
+        .is_ok_and(|a| !a.ip().is_loopback());
+    assert!(!ip.is_unspecified(), "the URL names no address: {url}");
+    if has_outward {
+        assert!(!ip.is_loopback(), "the URL names this machine only: {url}");
+    }
+    assert_eq!(
+        http_status(&url),
+        200,
+        "the printed URL does not serve the page"
+    );
+    // The page was fetched, but no tab is open (no WebSocket): the run waits for one.
+    std::thread::sleep(Duration::from_millis(500));
+    let killed = Command::new("kill")
+        .args(["-TERM", &arld.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(killed.success());
+    let status = wait(&mut arld, Duration::from_secs(20), "arld after SIGTERM");
+    let mut stderr = String::new();
+    std::io::Read::read_to_string(&mut arld.stderr.take().unwrap(), &mut stderr).unwrap();
+    assert_eq!(status.code(), Some(143), "{stderr}");
+    assert!(
+        stderr.contains("before the page was opened"),
+        "the run did not wait for the page: {stderr}"
+    );
+    assert!(!run.join("queries.csv").is_file() || queries(&run).is_empty());
 }

@@ -29,7 +29,11 @@ from . import _arld
 
 __version__ = _arld.__version__
 
-__all__ = ["Agent", "make", "preset", "config_keys", "collect_demos", "METHODS", "NETS", "__version__"]
+__all__ = ["Agent", "WebExpert", "make", "preset", "config_keys", "collect_demos", "METHODS", "NETS", "__version__"]
+
+# A person answering in the browser: arld.WebExpert(listen="127.0.0.1:0", fps=None, timeout=None, keys=None,
+# wait=True) prints the page's URL (also .url); pass it as expert= (one run per WebExpert).
+WebExpert = _arld.WebExpert
 
 METHODS = ("dqn", "dqfd", "gdqn", "bdqn", "adqn", "adqnp")
 NETS = ("plain", "bootstrap", "noisy")
@@ -238,6 +242,8 @@ def _expert_callable(expert: Any) -> Tuple[Optional[Callable[[Any], int]], str]:
     """(callable obs list -> int, name) for a Python expert, or (None, spec) for an arld expert spec."""
     if isinstance(expert, str):
         return None, expert
+    if isinstance(expert, WebExpert):
+        return expert, "web"
     if isinstance(expert, Agent):
         agent = expert
 

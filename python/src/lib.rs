@@ -29,6 +29,8 @@ use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::sync::mpsc::{Receiver, RecvTimeoutError, Sender, channel};
 use std::sync::{Arc, Mutex};
 
+mod web;
+
 /// The first Python exception raised during a call into the library, kept until the call returns.
 #[derive(Clone, Default)]
 struct ErrorSlot(Arc<Mutex<Option<PyErr>>>);
@@ -166,6 +168,9 @@ impl Env for PyEnv {
                 }
             });
         }
+    }
+    fn geometry(&self) -> Option<env::Geometry> {
+        self.inner.geometry()
     }
 }
 
@@ -776,6 +781,7 @@ fn start_run(
                 None => env::make(&cfg.env)?,
             })
         };
+        let web_env = env.as_ref().map(|e| e.clone_ref(py));
         let mut env = make(env)?;
         let test_envs = match test_envs {
             Some(objs) => objs
@@ -786,13 +792,25 @@ fn start_run(
                 .map(|_| make(None))
                 .collect::<anyhow::Result<Vec<_>>>()?,
         };
+        let keep = {
+            let errors = errors.clone();
+            move |e| errors.keep(e)
+        };
         let mut expert: Option<Box<dyn Expert>> = match expert {
-            Some(call) => Some(Box::new(PyExpert {
-                call,
-                name: expert_name,
-                n_actions: spec.n_actions,
-                errors: errors.clone(),
-            })),
+            Some(call) => match web::expert(
+                call.bind(py),
+                web_env.as_ref().map(|e| e.bind(py)),
+                spec,
+                keep,
+            )? {
+                Some(web) => Some(web),
+                None => Some(Box::new(PyExpert {
+                    call,
+                    name: expert_name,
+                    n_actions: spec.n_actions,
+                    errors: errors.clone(),
+                })),
+            },
             None if cfg.method.needs_expert() => Some(expert::from_spec(
                 &cfg.expert,
                 &cfg.env,
@@ -952,5 +970,6 @@ fn _arld(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<Run>()?;
     m.add_class::<Policy>()?;
     m.add_class::<BuiltinEnv>()?;
+    m.add_class::<web::PyWebExpert>()?;
     Ok(())
 }

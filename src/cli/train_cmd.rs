@@ -55,6 +55,9 @@ pub struct TrainArgs {
     /// and not charged to the budget [default: the run waits].
     #[arg(long, value_name = "S")]
     web_timeout: Option<String>,
+    /// Web expert: start training at once instead of waiting for the page to be opened.
+    #[arg(long)]
+    web_no_wait: bool,
     /// Demonstration file for pre-training (DQfD, ADQNP); by default demonstrations are collected from the expert.
     #[arg(long)]
     demos: Option<PathBuf>,
@@ -129,15 +132,17 @@ pub fn resolve(args: &TrainArgs) -> anyhow::Result<TrainConfig> {
         input.set("demo_file", d.display().to_string())?;
     }
     // The web expert's flags complete its spec (`web:listen=...,fps=...,timeout=...`).
+    let no = Some("no".to_string()).filter(|_| args.web_no_wait);
     let web = [
         ("listen", &args.listen),
         ("fps", &args.web_fps),
         ("timeout", &args.web_timeout),
+        ("wait", &no),
     ];
     if web.iter().any(|(_, v)| v.is_some()) {
         let expert = input.resolve()?.expert;
         let Some(rest) = expert.strip_prefix("web") else {
-            anyhow::bail!("--listen, --web-fps and --web-timeout need --expert web");
+            anyhow::bail!("--listen, --web-fps, --web-timeout and --web-no-wait need --expert web");
         };
         let mut options = rest.trim_start_matches(':').to_string();
         for (key, value) in web {

@@ -53,6 +53,12 @@ pub trait Expert: Send {
     /// Called by the training loop after every step, so that an interactive expert can show the run as it goes.
     /// It must be cheap and must not change anything the run depends on.
     fn observe(&mut self, _progress: &Progress) {}
+    /// Seconds a person spent answering (recorded in the run's summary); `None` for programs.
+    fn person_seconds(&self) -> Option<f64> {
+        None
+    }
+    /// Called once when the run has finished, with its outcome (an interactive expert shows it).
+    fn finish(&mut self, _end: &RunEnd) {}
     /// The state that changes as the expert answers (a generator), as text for a run's snapshot; `None` for
     /// an expert whose answers depend only on the observation.
     fn state(&self) -> Option<String> {
@@ -77,6 +83,19 @@ pub struct Query<'a> {
     pub agent_action: Option<usize>,
     /// Expert steps left in the segment, this one included.
     pub steps_left: usize,
+}
+
+/// How a run ended, for [`Expert::finish`].
+#[derive(Clone, Debug)]
+pub struct RunEnd {
+    pub solved: bool,
+    /// The first evaluation step that reached the solve threshold (`train_steps` when none did).
+    pub steps_to_solve: usize,
+    pub train_steps: usize,
+    /// The mean test return of the last evaluation.
+    pub final_score: f64,
+    /// The run directory, when the run writes one.
+    pub dir: Option<PathBuf>,
 }
 
 /// An expert's reply to a [`Query`].

@@ -351,6 +351,24 @@ struct LoopState {
     elapsed_s: f64,
     #[serde(default)]
     cpu_s: f64,
+    /// The question that was open when the run stopped (the agent had decided to ask, the expert had not
+    /// answered): a resumed run asks it again instead of deciding anew. Absent from other snapshots.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pending: Option<OpenQuestion>,
+}
+
+/// A query the agent decided on at the step in progress, before the expert's answer.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+struct OpenQuestion {
+    agent_action: usize,
+    score: Option<f32>,
+    threshold: Option<f32>,
+}
+
+/// Whether `err` is a stop request (an expert that was waiting for an answer when the stop came returns one).
+fn is_stop(err: &anyhow::Error) -> bool {
+    err.chain()
+        .any(|cause| cause.is::<crate::interrupt::Interrupted>())
 }
 
 /// The time a run has taken: wall-clock seconds, and CPU seconds of the thread that trains it (which a paused
@@ -477,10 +495,7 @@ fn train_run(
 /// run is then interrupted, not failed). The run's own error matters more than this file: a write that fails
 /// is only warned about.
 pub fn record_failure(dir: &std::path::Path, err: &anyhow::Error, phase: &str, step: usize) {
-    if err
-        .chain()
-        .any(|cause| cause.is::<crate::interrupt::Interrupted>())
-    {
+    if is_stop(err) {
         return;
     }
     let failure = run_dir::Failure::new(err, phase, step);
@@ -648,60 +663,113 @@ fn train_loop(
     while driver.is_some() || st.step < cfg.train_steps {
         let step = st.step;
         let learning = step + 1 >= cfg.learning_starts;
-        // 1. Who acts: the agent, or the expert when a query is running or the rule asks for one now.
+        // 1. Who acts: the agent, or the expert when a query is running or the rule asks for one now (or a
+        // resumed run asks again the question that was open when it stopped).
         let mut step_uncertainty = None;
-        let action = if queries.expert_in_control() {
-            match ask_expert(&mut expert, &obs, &*env, None, &queries)? {
-                Answer::Action { action, .. } => action,
-                // Nobody answered mid-segment: the agent takes the rest of it back.
-                Answer::Unanswered { .. } => {
-                    queries.withdraw();
-                    agent.act(&obs, epsilon_at(cfg, step), Needs::NOTHING).0
+        let mut open = st.pending.take();
+        let mut agent_pick = None;
+        if open.is_none() && !queries.expert_in_control() {
+            if cfg.queries_from_learning_starts && !learning {
+                // Ablation: no queries before the first update; the rule does not see these steps.
+                agent_pick = Some(agent.act(&obs, epsilon_at(cfg, step), Needs::NOTHING).0);
+            } else {
+                let want = queries.signals_wanted_now();
+                let (agent_action, signals) = agent.act(&obs, epsilon_at(cfg, step), want);
+                step_uncertainty = signals.uncertainty;
+                let oracle = if want.oracle {
+                    Some(peek_expert(&mut expert, &obs, queries.rule().name())?)
+                } else {
+                    None
+                };
+                let input = DecisionInput {
+                    step,
+                    train_steps: cfg.train_steps,
+                    agent_action,
+                    signals: &signals,
+                    oracle: oracle.as_ref(),
+                };
+                let decision = queries.decide(&input, &mut query_rng);
+                if decision.query {
+                    open = Some(OpenQuestion {
+                        agent_action,
+                        score: decision.score,
+                        threshold: decision.threshold,
+                    });
+                } else {
+                    agent_pick = Some(agent_action);
                 }
             }
-        } else if cfg.queries_from_learning_starts && !learning {
-            // Ablation: no queries before the first update; the rule does not see these steps.
-            agent.act(&obs, epsilon_at(cfg, step), Needs::NOTHING).0
-        } else {
-            let want = queries.signals_wanted_now();
-            let (agent_action, signals) = agent.act(&obs, epsilon_at(cfg, step), want);
-            step_uncertainty = signals.uncertainty;
-            let oracle = if want.oracle {
-                Some(peek_expert(&mut expert, &obs, queries.rule().name())?)
-            } else {
-                None
+        }
+        // A stop while the expert is asked (a person who has not answered yet): the snapshot holds the run as
+        // it stands, with the open question, so that a resumed run asks it again.
+        macro_rules! stop_while_asking {
+            ($err:expr) => {{
+                let err: anyhow::Error = $err;
+                if let Some((ck, _)) = snapshots.as_mut() {
+                    snapshot_point!(
+                        ck,
+                        st.step,
+                        format!(
+                            "stopped at step {} of {} while a question was open",
+                            st.step, cfg.train_steps
+                        )
+                    );
+                }
+                return Err(err);
+            }};
+        }
+        let action = if let Some(a) = agent_pick {
+            a
+        } else if let Some(question) = open {
+            let agent_action = question.agent_action;
+            let answer = match ask_expert(&mut expert, &obs, &*env, Some(agent_action), &queries) {
+                Err(err) if is_stop(&err) => {
+                    st.pending = Some(question);
+                    stop_while_asking!(err)
+                }
+                other => other?,
             };
-            let input = DecisionInput {
+            let (expert_action, response_s) = match answer {
+                Answer::Action { action, response_s } => (Some(action), response_s),
+                Answer::Unanswered { waited_s } => {
+                    queries.withdraw();
+                    (None, Some(waited_s))
+                }
+            };
+            log.query(&QueryEvent {
                 step,
-                train_steps: cfg.train_steps,
+                episode: st.episode,
+                uncertainty: question.score,
+                threshold: question.threshold,
+                expert_action,
                 agent_action,
-                signals: &signals,
-                oracle: oracle.as_ref(),
-            };
-            let decision = queries.decide(&input, &mut query_rng);
-            if decision.query {
-                let answer = ask_expert(&mut expert, &obs, &*env, Some(agent_action), &queries)?;
-                let (expert_action, response_s) = match answer {
-                    Answer::Action { action, response_s } => (Some(action), response_s),
-                    Answer::Unanswered { waited_s } => {
-                        queries.withdraw();
-                        (None, Some(waited_s))
-                    }
-                };
-                log.query(&QueryEvent {
-                    step,
-                    episode: st.episode,
-                    uncertainty: decision.score,
-                    threshold: decision.threshold,
-                    expert_action,
-                    agent_action,
-                    expert: expert.as_deref().map(|e| e.kind()).unwrap_or_default(),
-                    response_s,
-                    answered: expert_action.is_some(),
-                })?;
-                expert_action.unwrap_or(agent_action)
-            } else {
-                agent_action
+                expert: expert.as_deref().map(|e| e.kind()).unwrap_or_default(),
+                response_s,
+                answered: expert_action.is_some(),
+            })?;
+            expert_action.unwrap_or(agent_action)
+        } else {
+            match ask_expert(&mut expert, &obs, &*env, None, &queries) {
+                Err(err) if is_stop(&err) => stop_while_asking!(err),
+                Err(err) => return Err(err),
+                Ok(Answer::Action { action, .. }) => action,
+                // Nobody answered mid-segment: the agent takes the rest of it back, and the log says so.
+                Ok(Answer::Unanswered { waited_s }) => {
+                    queries.withdraw();
+                    let agent_action = agent.act(&obs, epsilon_at(cfg, step), Needs::NOTHING).0;
+                    log.query(&QueryEvent {
+                        step,
+                        episode: st.episode,
+                        uncertainty: None,
+                        threshold: None,
+                        expert_action: None,
+                        agent_action,
+                        expert: expert.as_deref().map(|e| e.kind()).unwrap_or_default(),
+                        response_s: Some(waited_s),
+                        answered: false,
+                    })?;
+                    agent_action
+                }
             }
         };
         let by_expert = queries.expert_in_control();
@@ -817,7 +885,8 @@ fn train_loop(
             };
             let mut control = d.after_step(&view)?;
             if control == Control::Pause {
-                let summary = summarize(cfg, &*env, log, st, &queries, &clock, pretrain_demos);
+                let mut summary = summarize(cfg, &*env, log, st, &queries, &clock, pretrain_demos);
+                summary.person_s = expert.as_deref().and_then(|e| e.person_seconds());
                 finish_log(cfg, &agent, log, &summary, st.step)?;
                 clock.stamp(st);
                 let mut paused = PausedRun {
@@ -845,7 +914,17 @@ fn train_loop(
         }
     }
 
-    let summary = summarize(cfg, &*env, log, st, &queries, &clock, pretrain_demos);
+    let mut summary = summarize(cfg, &*env, log, st, &queries, &clock, pretrain_demos);
+    if let Some(expert) = expert.as_deref_mut() {
+        summary.person_s = expert.person_seconds();
+        expert.finish(&crate::expert::RunEnd {
+            solved: summary.solved,
+            steps_to_solve: summary.steps_to_solve,
+            train_steps: cfg.train_steps,
+            final_score: summary.final_score,
+            dir: log.dir().map(|d| d.to_path_buf()),
+        });
+    }
     finish_log(cfg, &agent, log, &summary, st.step)?;
     if let Some(ck) = checkpointer {
         ck.remove()?;
@@ -886,6 +965,7 @@ fn summarize(
         arld_version: Some(crate::build_info::VERSION.to_string()),
         git_commit: Some(crate::build_info::GIT_COMMIT.to_string()),
         expert: cfg.expert_used().map(str::to_string),
+        person_s: None,
     }
 }
 

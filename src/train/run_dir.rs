@@ -269,6 +269,10 @@ pub struct Summary {
     /// absent when the method uses none, and from older summaries.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub expert: Option<String>,
+    /// Seconds a person spent answering the queries (a web expert), over all the run's sessions; absent for
+    /// programs.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub person_s: Option<f64>,
 }
 
 /// Whether the complete run in `dir` was computed with other elementary functions than this arld's
@@ -771,6 +775,7 @@ mod tests {
             arld_version: Some(crate::build_info::VERSION.to_string()),
             git_commit: Some(crate::build_info::GIT_COMMIT.to_string()),
             expert: Some("shipped:weak".into()),
+            person_s: None,
         };
         write_summary(dir.path(), &summary).unwrap();
         assert!(is_complete(dir.path()));

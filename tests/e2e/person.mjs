@@ -2,7 +2,10 @@
 // questions by pressing keys with a simple controller that reads the state the page received, saves screenshots
 // (training, asking, mid-segment) and checks that the drawing is not blank and that requests without the token
 // are refused. Usage:
-//   node person.mjs --url URL --shots DIR [--skip N] [--realtime] [--after STEP] [--reload]
+//   node person.mjs --url URL --shots DIR [--skip N] [--realtime] [--after STEP] [--reload] [--answer N]
+// (--policy ENV: answer with the controller of ENV, e.g. CartPole-v0 for a CartPole registered under another id.)
+// (--expect-image: the page must show frames the environment rendered, not a drawing of its geometry.)
+// (--answer: answer N opening questions, then leave as soon as the next one is open, reporting it as "open".)
 // (--reload: open a second, watching tab, and reload the answering tab once while training runs.)
 // (--after: take the screenshots only once the run has passed STEP, e.g. to show a learning curve.)
 // Prints one JSON line: {"answers": [actions answered to opening questions, in order], "skipped": N, ...}.
@@ -23,6 +26,8 @@ const skip = Number(args.skip || 0);
 const realtime = !!args.realtime;
 const after = Number(args.after || 0);
 const reload = !!args.reload;
+const answerLimit = Number(args.answer || 0);
+const expectImage = !!args["expect-image"];
 fs.mkdirSync(shots, { recursive: true });
 const fail = (msg) => { console.error(`person: ${msg}`); process.exit(1); };
 
@@ -67,6 +72,21 @@ const refused = {
   other: await status("/../../etc/passwd"),
 };
 for (const [what, code] of Object.entries(refused)) if (code !== 403) fail(`a request without the token (${what}) got ${code}, not 403`);
+// With the token, but naming another host or origin (DNS rebinding, another site's page), or the token twice.
+const token = url.searchParams.get("token");
+const withToken = `/?token=${token}`;
+Object.assign(refused, {
+  foreignHost: await status(withToken, { Host: `rebound.example:${url.port}` }),
+  foreignOrigin: await status(`/ws?token=${token}`, { ...upgrade, Origin: "http://evil.example" }),
+  otherPort: await status(withToken, { Host: `127.0.0.1:${Number(url.port) + 1}` }),
+  repeatedToken: await status(`/?token=${token}&token=${token}`),
+});
+for (const what of ["foreignHost", "foreignOrigin", "otherPort", "repeatedToken"])
+  if (refused[what] !== 403) fail(`a request with the token but ${what} got ${refused[what]}, not 403`);
+const csp = await new Promise((resolve, reject) =>
+  http.get({ host: url.hostname, port: url.port, path: withToken }, (res) => { res.resume(); resolve(res.headers["content-security-policy"]); }).on("error", reject));
+if (!csp || !csp.includes("default-src 'none'")) fail(`the page has no Content-Security-Policy: ${csp}`);
+refused.csp = csp;
 if ((await status(`/ws?token=${url.searchParams.get("token")}`, upgrade)) !== 101) fail("the WebSocket with the token was not accepted");
 
 // ---- the browser ------------------------------------------------------------------------------------------
@@ -87,7 +107,7 @@ const controlling = () =>
 await page.goto(url.href);
 await controlling();
 const hello = await page.evaluate(() => arld.hello);
-const policy = policies[hello.env] || fail(`no controller for ${hello.env}`);
+const policy = policies[args.policy || hello.env] || fail(`no controller for ${args.policy || hello.env}`);
 const keyOf = (a) => hello.actions[a].keys[0];
 
 // A second tab watches: its keys are refused, malformed messages get error frames, and the run goes on.
@@ -105,6 +125,11 @@ const watcher = await page.evaluate(async () => {
 if (watcher.length !== 4) fail(`the watching tab got ${watcher.length} error frames for 4 bad messages: ${JSON.stringify(watcher)}`);
 
 async function blankCheck(name) {
+  if (expectImage) {
+    // A rendered frame arrives as a PNG and is drawn once decoded.
+    await page.waitForFunction(() => arld.frame && arld.frame.image, null, { timeout: 10000 })
+      .catch(() => fail(`no rendered frame on the page at "${name}"`));
+  }
   const d = await page.evaluate(() => {
     const c = document.getElementById("env");
     const px = c.getContext("2d").getImageData(0, 0, c.width, c.height).data;
@@ -132,6 +157,8 @@ async function shot(name) {
 // ---- answering ------------------------------------------------------------------------------------------
 const answers = [];
 let skipped = 0, steps = 0, lastId = 0, held = null, reloaded = false, watching = null;
+// The first opening question this person saw, and the one left open (with --answer).
+let first = null, open = null, budgetSpentSeen = false;
 const state = () => page.evaluate(() => ({ prompt: arld.prompt, status: arld.status, ended: arld.ended }));
 async function holdKey(a) {
   if (held === a) return;
@@ -151,6 +178,13 @@ for (;;) {
   if (s.ended) break;
   const p = s.prompt;
   if (!p) {
+    if (s.status && s.status.budget_used >= s.status.budget && !s.ended) {
+      const text = await page.evaluate(() => document.getElementById("prompt-text").textContent);
+      // The budget may have run out between the two reads; the page must never promise questions once it has.
+      const still = await page.evaluate(() => !arld.prompt && arld.status.budget_used >= arld.status.budget && !arld.ended);
+      if (still && !text.startsWith("No questions left")) fail(`with the budget spent the page says: "${text}"`);
+      budgetSpentSeen = true;
+    }
     if (s.status && s.status.step > 0) await shot("training");
     if (reload && taken.training && !reloaded) {
       // A second tab watches; the answering tab reloads and must get control back, the run going on.
@@ -161,9 +195,17 @@ for (;;) {
         arld.controller !== arld.hello.client && document.getElementById("role").textContent.includes("watching"));
       await page.reload();
       await page.waitForFunction(() => window.arld && arld.hello, null, { timeout: 30000 });
-      // Control went to the watching tab when this one closed; take it back with the button.
+      // Control went to the watching tab when this one closed; take it back with the button while a question
+      // is open: the panel must be answerable at once, not greyed until the next question.
+      await page.waitForFunction(() => arld.ended || (arld.prompt && arld.prompt.waits), null, { timeout: 0, polling: 5 });
       await page.click("#take-control");
       await controlling();
+      const panel = await page.evaluate(() => ({
+        open: !!(arld.prompt && arld.prompt.waits),
+        disabled: [...document.querySelectorAll("#buttons button")].some((b) => b.disabled),
+        text: document.getElementById("prompt-text").textContent,
+      }));
+      if (panel.open && (panel.disabled || panel.text.includes("Another tab"))) fail(`after taking control back the panel stays greyed: ${JSON.stringify(panel)}`);
       await page.waitForFunction(() => arld.status !== null);
       continue;
     }
@@ -175,6 +217,9 @@ for (;;) {
   if (p.agent_action !== null && p.waits) {
     if (p.id <= lastId) continue;
     lastId = p.id;
+    const question = { obs: p.obs, agent_action: p.agent_action, steps_left: p.steps_left };
+    if (first === null) first = question;
+    if (answerLimit && answers.length >= answerLimit) { open = question; break; }
     if (skipped < skip) {
       // Nobody answers this one: it must go back to the agent.
       skipped++;
@@ -201,12 +246,24 @@ for (;;) {
   else if (p.waits && p.id > lastId) { lastId = p.id; steps++; await page.keyboard.press(keyOf(a)); }
 }
 await holdKey(null);
-if (reload) {
+if (reload && !open) {
   if (!reloaded) fail("the run ended before the page could be reloaded");
   if (!(await watching.evaluate(() => arld.ended))) fail("the watching tab did not see the end of the run");
 }
+const endScreen = open ? null : await page.evaluate(() => ({
+  shown: !document.getElementById("end").hidden,
+  title: document.getElementById("end-title").textContent,
+  rows: [...document.querySelectorAll("#end-table tr")].map((r) => [r.cells[0].textContent, r.cells[1].textContent]),
+  xlabels: [document.getElementById("uchart").dataset.xlabels, document.getElementById("curve").dataset.xlabels],
+  outcome: arld.outcome,
+}));
+if (!open) await page.screenshot({ path: path.join(shots, "end.png") });
 await browser.close();
 fs.rmSync(userDataDir, { recursive: true, force: true });
 if (pageErrors.length) fail(`the page threw: ${pageErrors.join("; ")}`);
-for (const name of ["training", "asking", "mid-segment"]) if (!taken[name]) fail(`no "${name}" screenshot: the run never showed that state`);
-console.log(JSON.stringify({ env: hello.env, answers, skipped, steps, reloaded, refused, watcherErrors: watcher, drawn: taken }));
+if (endScreen) {
+  if (!endScreen.shown || !endScreen.outcome) fail(`no end screen at the end of the run: ${JSON.stringify(endScreen)}`);
+  if (!endScreen.xlabels.every((l) => l && /\d/.test(l))) fail(`the charts have no x-axis labels: ${JSON.stringify(endScreen.xlabels)}`);
+}
+if (!answerLimit) for (const name of ["training", "asking", "mid-segment"]) if (!taken[name]) fail(`no "${name}" screenshot: the run never showed that state`);
+console.log(JSON.stringify({ env: hello.env, answers, skipped, steps, reloaded, refused, watcherErrors: watcher, drawn: taken, first, open, budgetSpentSeen, endScreen }));

@@ -14,16 +14,17 @@
 //! The training thread never waits for the server except while a question is open: it publishes to a shared
 //! board (throttled to about 15 updates a second) and reads keys from a channel.
 
+pub mod frames;
 pub mod protocol;
 pub mod server;
 
-use super::{Answer, Expert, Progress, Query};
-use crate::env::Env;
+use super::{Answer, Expert, Progress, Query, RunEnd};
 use anyhow::{Context, Result, bail, ensure};
-use protocol::{Hello, Prompt, ServerMsg, Status};
+use frames::FrameSource;
+use protocol::{ActionKeys, EndScreen, Hello, Prompt, ServerMsg, Status};
 use server::{KeyInput, Shared};
 use std::io::Write;
-use std::net::SocketAddr;
+use std::net::{IpAddr, SocketAddr};
 use std::sync::{Arc, mpsc};
 use std::time::{Duration, Instant};
 
@@ -31,9 +32,11 @@ use std::time::{Duration, Instant};
 pub const DEFAULT_LISTEN: &str = "127.0.0.1:8765";
 /// Live updates per second while training runs.
 const UPDATES_PER_S: f64 = 15.0;
+/// How often a wait for the person looks for a stop request.
+const STOP_POLL: Duration = Duration::from_millis(50);
 
-/// How the web expert listens and how the person answers. Written as the spec `web:listen=ADDR,fps=N,timeout=S`
-/// (every part optional, e.g. `web` or `web:fps=10`).
+/// How the web expert listens and how the person answers. Written as the spec
+/// `web:listen=ADDR,fps=N,timeout=S,wait=no` (every part optional, e.g. `web` or `web:fps=10`).
 #[derive(Clone, Debug, PartialEq)]
 pub struct WebOptions {
     pub listen: SocketAddr,
@@ -41,6 +44,9 @@ pub struct WebOptions {
     pub fps: Option<f64>,
     /// Seconds a question waits before it goes back to the agent; `None`: it waits for ever.
     pub timeout: Option<f64>,
+    /// Whether the run waits for the page to be opened before it starts (so that the first question is not
+    /// timed against opening a browser).
+    pub wait: bool,
 }
 
 impl Default for WebOptions {
@@ -49,6 +55,7 @@ impl Default for WebOptions {
             listen: DEFAULT_LISTEN.parse().expect("valid default address"),
             fps: None,
             timeout: None,
+            wait: true,
         }
     }
 }
@@ -80,7 +87,14 @@ impl std::str::FromStr for WebOptions {
                 })?,
                 "fps" => o.fps = Some(positive("fps", 1000.0)?),
                 "timeout" => o.timeout = Some(positive("timeout", 1e6)?),
-                _ => bail!("unknown web expert option '{key}'; known: listen, fps, timeout"),
+                "wait" => {
+                    o.wait = match value {
+                        "yes" | "true" => true,
+                        "no" | "false" => false,
+                        _ => bail!("web expert wait must be yes or no, got '{value}'"),
+                    }
+                }
+                _ => bail!("unknown web expert option '{key}'; known: listen, fps, timeout, wait"),
             }
         }
         Ok(o)
@@ -93,33 +107,27 @@ impl WebOptions {
         let mut parts = vec![format!("listen={}", self.listen)];
         parts.extend(self.fps.map(|v| format!("fps={v}")));
         parts.extend(self.timeout.map(|v| format!("timeout={v}")));
+        if !self.wait {
+            parts.push("wait=no".into());
+        }
         format!("web:{}", parts.join(","))
     }
 }
 
-/// A person in a browser, as an [`Expert`].
-pub struct WebExpert {
+/// The web server and the address to open: started before the run knows its environment (a Python user creates
+/// it first and passes it as the expert), it shows "waiting for the run" until a [`WebExpert`] takes it.
+pub struct WebServer {
     shared: Arc<Shared>,
     keys: mpsc::Receiver<KeyInput>,
     options: WebOptions,
     url: String,
-    noop: usize,
-    next_prompt: u64,
-    prompt_open: bool,
-    last_update: Option<Instant>,
-    last_eval: Option<u64>,
-    /// When the last real-time step was taken.
-    last_tick: Instant,
     stop: Option<tokio::sync::oneshot::Sender<()>>,
     thread: Option<std::thread::JoinHandle<()>>,
 }
 
-impl WebExpert {
-    /// Starts the server for `env_id` and prints the URL to open on standard output.
-    pub fn start(options: &WebOptions, env_id: &str) -> Result<Self> {
-        let spec = crate::env::spec(env_id)?;
-        let (actions, noop) = protocol::action_keys(env_id)
-            .with_context(|| format!("the web expert cannot show {env_id}"))?;
+impl WebServer {
+    /// Binds `options.listen`, starts serving and prints the URL to open on standard output.
+    pub fn start(options: &WebOptions) -> Result<Self> {
         let listener = std::net::TcpListener::bind(options.listen).with_context(|| {
             format!(
                 "the web expert cannot listen on {} (choose another with --listen)",
@@ -137,25 +145,11 @@ impl WebExpert {
         getrandom::fill(&mut bytes)
             .map_err(|e| anyhow::anyhow!("no random token from the operating system: {e}"))?;
         let token: String = bytes.iter().map(|b| format!("{b:02x}")).collect();
-        let hello = Hello {
-            env: env_id.to_string(),
-            actions,
-            noop,
-            fps: options.fps,
-            timeout: options.timeout,
-            solve_threshold: spec.solve_threshold,
-            client: 0,
-        };
         let (keys_tx, keys) = mpsc::channel();
-        let shared = Arc::new(Shared::new(token.clone(), hello, spec.n_actions, keys_tx));
+        let shared = Arc::new(Shared::new(token.clone(), addr, keys_tx));
         let (stop, stop_rx) = tokio::sync::oneshot::channel();
         let thread = server::spawn(listener, Arc::clone(&shared), stop_rx)?;
-        let host = if addr.ip().is_unspecified() {
-            SocketAddr::new([127, 0, 0, 1].into(), addr.port())
-        } else {
-            addr
-        };
-        let url = format!("http://{host}/?token={token}");
+        let url = format!("http://{}/?token={token}", reachable(addr));
         let mut out = std::io::stdout().lock();
         writeln!(out, "The agent asks a person: open {url}")?;
         out.flush()?;
@@ -164,12 +158,6 @@ impl WebExpert {
             keys,
             options: options.clone(),
             url,
-            noop,
-            next_prompt: 0,
-            prompt_open: false,
-            last_update: None,
-            last_eval: None,
-            last_tick: Instant::now(),
             stop: Some(stop),
             thread: Some(thread),
         })
@@ -180,56 +168,312 @@ impl WebExpert {
         &self.url
     }
 
-    fn publish_frame(&self, env: &dyn Env, obs: &[f32]) {
-        let geometry = env.geometry();
-        let msg = ServerMsg::Frame {
-            geometry: geometry.as_ref(),
-            obs,
+    pub fn options(&self) -> &WebOptions {
+        &self.options
+    }
+}
+
+/// The address to print for a server bound to `addr`: itself, or for every interface (`0.0.0.0`, `::`) this
+/// machine's address on its default route (what another machine reaches), else the loopback address.
+pub fn reachable(addr: SocketAddr) -> SocketAddr {
+    if !addr.ip().is_unspecified() {
+        return addr;
+    }
+    // Connecting a UDP socket sends nothing: it only picks the interface the route goes through.
+    let outward = |probe: SocketAddr| {
+        let local = if probe.is_ipv4() {
+            "0.0.0.0:0"
+        } else {
+            "[::]:0"
+        };
+        std::net::UdpSocket::bind(local)
+            .and_then(|s| s.connect(probe).and_then(|()| s.local_addr()))
+            .ok()
+            .map(|a| a.ip())
+            .filter(|ip| !ip.is_unspecified() && !ip.is_loopback())
+    };
+    let ip = if addr.is_ipv4() {
+        outward(SocketAddr::from(([192, 0, 2, 1], 9)))
+    } else {
+        outward("[2001:db8::1]:9".parse().expect("an address"))
+    };
+    let loopback: IpAddr = if addr.is_ipv4() {
+        [127, 0, 0, 1].into()
+    } else {
+        std::net::Ipv6Addr::LOCALHOST.into()
+    };
+    SocketAddr::new(ip.unwrap_or(loopback), addr.port())
+}
+
+impl Drop for WebServer {
+    /// Tells the open tabs that the run is over (unless the expert already did), gives them a moment to receive
+    /// it, and stops the server.
+    fn drop(&mut self) {
+        if !self.shared.ended() {
+            let message = if crate::interrupt::requested() {
+                "The run was stopped. Your answers are saved; resumed, it continues where it stopped."
+            } else {
+                "The run is over."
+            };
+            let msg = ServerMsg::End {
+                message: message.into(),
+                outcome: None,
+            }
+            .to_json();
+            self.shared.publish(msg, |b, m| {
+                b.end = Some(m.clone());
+                b.prompt = None;
+            });
         }
-        .to_json();
-        self.shared.publish(msg, |b, m| b.frame = Some(m.clone()));
+        let started = Instant::now();
+        while self.shared.open_tabs() > 0 && started.elapsed() < Duration::from_secs(2) {
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        if let Some(stop) = self.stop.take() {
+            let _ = stop.send(());
+        }
+        if let Some(thread) = self.thread.take() {
+            let _ = thread.join();
+        }
+    }
+}
+
+/// What the page shows of an environment and how the person acts in it.
+pub struct Page {
+    pub env: String,
+    pub actions: Vec<ActionKeys>,
+    /// The action taken in real time when no key is held.
+    pub noop: usize,
+    pub solve_threshold: f64,
+    pub frames: Box<dyn FrameSource>,
+}
+
+impl Page {
+    /// A built-in task: drawn from its geometry, with arrow and WASD keys.
+    pub fn builtin(env_id: &str) -> Result<Self> {
+        let spec = crate::env::spec(env_id)?;
+        let (actions, noop) = protocol::action_keys(env_id)
+            .with_context(|| format!("the web expert has no keys for {env_id}"))?;
+        Ok(Self {
+            env: env_id.to_string(),
+            actions,
+            noop,
+            solve_threshold: spec.solve_threshold,
+            frames: Box::new(frames::GeometryFrames),
+        })
+    }
+}
+
+/// What the person gave: the counts shown on the page and in the summary, carried across a resume in the
+/// run's snapshot.
+#[derive(Clone, Debug, Default, serde::Serialize, serde::Deserialize)]
+struct Effort {
+    /// Seconds the run waited for the person (questions open, real-time segments), pauses excluded.
+    person_s: f64,
+    /// Keys (or buttons) that answered a question or a step.
+    keys: usize,
+    /// Opening questions answered, and handed back or timed out.
+    answered: usize,
+    unanswered: usize,
+}
+
+/// A person in a browser, as an [`Expert`].
+pub struct WebExpert {
+    server: WebServer,
+    frames: Box<dyn FrameSource>,
+    noop: usize,
+    next_prompt: u64,
+    prompt_open: bool,
+    last_update: Option<Instant>,
+    last_eval: Option<u64>,
+    /// When the last real-time step was taken.
+    last_tick: Instant,
+    effort: Effort,
+    /// Whether a stop was requested (Ctrl-C, SIGTERM): [`crate::interrupt::requested`] unless the program
+    /// that owns the signals says otherwise ([`WebExpert::set_stop_check`]).
+    stop_requested: Box<dyn FnMut() -> bool + Send>,
+}
+
+impl WebExpert {
+    /// Starts the server for the built-in task `env_id`, prints the URL and (unless `options.wait` is off)
+    /// waits for the page to be opened.
+    pub fn start(options: &WebOptions, env_id: &str) -> Result<Self> {
+        let page = Page::builtin(env_id)?;
+        let mut expert = Self::new(WebServer::start(options)?, page);
+        expert.wait_for_page()?;
+        Ok(expert)
+    }
+
+    /// The expert of `server` for a run on the environment `page` describes; the open tabs learn of it at once.
+    pub fn new(server: WebServer, page: Page) -> Self {
+        let hello = Hello {
+            env: page.env,
+            actions: page.actions,
+            noop: page.noop,
+            fps: server.options.fps,
+            timeout: server.options.timeout,
+            solve_threshold: page.solve_threshold,
+        };
+        let n_actions = hello.actions.len();
+        let msg = ServerMsg::Hello(&hello).to_json();
+        server.shared.publish(msg, |b, m| {
+            b.hello = Some(m.clone());
+            b.n_actions = n_actions;
+        });
+        Self {
+            server,
+            frames: page.frames,
+            noop: page.noop,
+            next_prompt: 0,
+            prompt_open: false,
+            last_update: None,
+            last_eval: None,
+            last_tick: Instant::now(),
+            effort: Effort::default(),
+            stop_requested: Box::new(crate::interrupt::requested),
+        }
+    }
+
+    /// Replaces the check for a stop request (a Python program: its own signal handling).
+    pub fn set_stop_check(&mut self, check: Box<dyn FnMut() -> bool + Send>) {
+        self.stop_requested = check;
+    }
+
+    /// The page's URL with its token.
+    pub fn url(&self) -> &str {
+        self.server.url()
+    }
+
+    fn stopped(&mut self, what: &str) -> Result<()> {
+        if (self.stop_requested)() {
+            return Err(crate::interrupt::Interrupted(format!("stopped {what}")).into());
+        }
+        Ok(())
+    }
+
+    /// Waits until a page is open (unless the options say not to), so that the run starts with the person.
+    pub fn wait_for_page(&mut self) -> Result<()> {
+        if !self.server.options.wait || self.server.shared.open_tabs() > 0 {
+            return Ok(());
+        }
+        eprintln!("arld: the run starts when the page is open");
+        while self.server.shared.open_tabs() == 0 {
+            self.stopped("before the page was opened")?;
+            std::thread::sleep(STOP_POLL);
+        }
+        Ok(())
+    }
+
+    /// Publishes what the page shows of the environment, when it changed.
+    fn publish_frame(&mut self, env: &dyn crate::env::Env, obs: &[f32]) -> Result<()> {
+        if let Some(msg) = self.frames.frame(env, obs)? {
+            self.server
+                .shared
+                .publish(msg, |b, m| b.frame = Some(m.clone()));
+        }
+        Ok(())
     }
 
     fn publish_prompt(&mut self, prompt: Option<&Prompt>) {
         self.prompt_open = prompt.is_some();
         let msg = ServerMsg::Prompt { prompt }.to_json();
-        self.shared
+        self.server
+            .shared
             .publish(msg, |b, m| b.prompt = prompt.map(|_| m.clone()));
     }
 
-    /// Waits for the key that answers prompt `id`, until the timeout if there is one.
+    /// Waits while the person has paused the run (the clock waits too).
+    fn wait_while_paused(&mut self) -> Result<Duration> {
+        let started = Instant::now();
+        while self.server.shared.paused() {
+            self.stopped("while the run was paused")?;
+            std::thread::sleep(STOP_POLL);
+        }
+        Ok(started.elapsed())
+    }
+
+    /// Waits for the key that answers prompt `id`, until the timeout if there is one (pauses do not count).
     fn wait_for_key(&mut self, id: u64) -> Result<Answer> {
         let asked = Instant::now();
-        let deadline = self
-            .options
-            .timeout
-            .map(|t| asked + Duration::from_secs_f64(t));
+        let mut paused = Duration::ZERO;
+        let timeout = self.server.options.timeout.map(Duration::from_secs_f64);
         loop {
-            let wait = match deadline {
-                Some(d) => d.saturating_duration_since(Instant::now()),
-                None => Duration::from_secs(3600),
-            };
-            match self.keys.recv_timeout(wait) {
+            // A stop request (Ctrl-C, SIGTERM) ends the wait within a poll: the run snapshots with the question
+            // open and asks it again when resumed.
+            self.stopped("while the person had a question open")?;
+            paused += self.wait_while_paused()?;
+            let waited = asked.elapsed().saturating_sub(paused);
+            if timeout.is_some_and(|t| waited >= t) {
+                self.publish_prompt(None);
+                return Ok(Answer::Unanswered {
+                    waited_s: waited.as_secs_f64(),
+                });
+            }
+            let wait = timeout.map_or(STOP_POLL, |t| t.saturating_sub(waited).min(STOP_POLL));
+            match self.server.keys.recv_timeout(wait) {
                 // Keys meant for an earlier prompt (pressed twice, or late) are dropped.
                 Ok(key) if key.id != id => {}
-                Ok(key) => {
-                    self.last_tick = Instant::now();
-                    return Ok(Answer::Action {
-                        action: key.action,
-                        response_s: Some(asked.elapsed().as_secs_f64()),
+                Ok(KeyInput { action: None, .. }) => {
+                    // Handed back: the agent acts; nothing is charged.
+                    self.publish_prompt(None);
+                    return Ok(Answer::Unanswered {
+                        waited_s: asked.elapsed().saturating_sub(paused).as_secs_f64(),
                     });
                 }
-                Err(mpsc::RecvTimeoutError::Timeout) => {
-                    if deadline.is_some_and(|d| Instant::now() >= d) {
-                        self.publish_prompt(None);
-                        return Ok(Answer::Unanswered {
-                            waited_s: asked.elapsed().as_secs_f64(),
-                        });
-                    }
+                Ok(KeyInput {
+                    action: Some(action),
+                    ..
+                }) => {
+                    self.last_tick = Instant::now();
+                    self.effort.keys += 1;
+                    return Ok(Answer::Action {
+                        action,
+                        response_s: Some(asked.elapsed().saturating_sub(paused).as_secs_f64()),
+                    });
                 }
+                Err(mpsc::RecvTimeoutError::Timeout) => {}
                 Err(mpsc::RecvTimeoutError::Disconnected) => {
                     bail!("the web expert's server stopped while a question was open")
                 }
+            }
+        }
+    }
+
+    /// One step of a question: shows it and waits for the person (turn-based, or the first step of a real-time
+    /// segment) or takes the held key at the set rate.
+    fn ask(&mut self, query: &Query) -> Result<Answer> {
+        // In real time only the segment's first step waits for the person; the others run at the set rate.
+        let realtime = self
+            .server
+            .options
+            .fps
+            .filter(|_| query.agent_action.is_none());
+        self.next_prompt += 1;
+        let id = self.next_prompt;
+        self.publish_frame(query.env, query.obs)?;
+        self.publish_prompt(Some(&Prompt {
+            id,
+            agent_action: query.agent_action,
+            steps_left: query.steps_left,
+            waits: realtime.is_none(),
+            obs: query.obs.to_vec(),
+        }));
+        match realtime {
+            None => self.wait_for_key(id),
+            Some(fps) => {
+                self.stopped("during a real-time segment")?;
+                self.wait_while_paused()?;
+                let period = Duration::from_secs_f64(1.0 / fps);
+                let next = self.last_tick + period;
+                std::thread::sleep(next.saturating_duration_since(Instant::now()));
+                // Keep the rate, but do not race to catch up after a slow step (or a pause).
+                self.last_tick = Instant::now()
+                    .checked_sub(period)
+                    .map_or(next, |late| next.max(late));
+                Ok(Answer::Action {
+                    action: self.server.shared.held().unwrap_or(self.noop),
+                    response_s: None,
+                })
             }
         }
     }
@@ -244,50 +488,53 @@ impl Expert for WebExpert {
     }
 
     fn describe(&self) -> String {
-        self.options.to_spec()
+        self.server.options.to_spec()
     }
 
     fn answer(&mut self, query: &Query) -> Result<Answer> {
-        // In real time only the segment's first step waits for the person; the others run at the set rate.
-        let realtime = self.options.fps.filter(|_| query.agent_action.is_none());
-        self.next_prompt += 1;
-        let id = self.next_prompt;
-        self.publish_frame(query.env, query.obs);
-        self.publish_prompt(Some(&Prompt {
-            id,
-            agent_action: query.agent_action,
-            steps_left: query.steps_left,
-            waits: realtime.is_none(),
-            obs: query.obs.to_vec(),
-        }));
-        match realtime {
-            None => self.wait_for_key(id),
-            Some(fps) => {
-                let period = Duration::from_secs_f64(1.0 / fps);
-                let next = self.last_tick + period;
-                std::thread::sleep(next.saturating_duration_since(Instant::now()));
-                // Keep the rate, but do not race to catch up after a slow step.
-                self.last_tick = Instant::now()
-                    .checked_sub(period)
-                    .map_or(next, |late| next.max(late));
-                Ok(Answer::Action {
-                    action: self.shared.held().unwrap_or(self.noop),
-                    response_s: None,
-                })
+        let started = Instant::now();
+        let result = self.ask(query);
+        // The person's time: the whole wait, pauses excepted (they are waited out before and inside).
+        self.effort.person_s += started.elapsed().as_secs_f64();
+        if query.agent_action.is_some() {
+            match result {
+                Ok(Answer::Action { .. }) => self.effort.answered += 1,
+                Ok(Answer::Unanswered { .. }) => self.effort.unanswered += 1,
+                Err(_) => {}
             }
         }
+        result
+    }
+
+    fn person_seconds(&self) -> Option<f64> {
+        Some(self.effort.person_s)
+    }
+
+    fn state(&self) -> Option<String> {
+        Some(serde_json::to_string(&self.effort).expect("counts serialise"))
+    }
+
+    fn restore(&mut self, state: &str) -> Result<()> {
+        self.effort = serde_json::from_str(state)
+            .map_err(|e| anyhow::anyhow!("the snapshot's web expert state is damaged: {e}"))?;
+        Ok(())
     }
 
     fn observe(&mut self, p: &Progress) {
         if self.prompt_open && !p.queries.expert_in_control() {
             self.publish_prompt(None);
         }
+        // A pause holds the run between steps too. (A stop request during it is seen by the loop's next
+        // snapshot point.)
+        let _ = self.wait_while_paused();
         if let Some((step, mean)) = p.last_eval
             && self.last_eval != Some(step)
         {
             self.last_eval = Some(step);
             let msg = ServerMsg::Eval { step, mean }.to_json();
-            self.shared.publish(msg, |b, _| b.curve.push((step, mean)));
+            self.server
+                .shared
+                .publish(msg, |b, _| b.curve.push((step, mean)));
         }
         let now = Instant::now();
         let due = self
@@ -300,47 +547,61 @@ impl Expert for WebExpert {
         self.last_update = Some(now);
         let threshold = p.queries.rule().threshold();
         if let Some(u) = p.uncertainty {
-            self.shared.push_uncertainty((p.step, u, threshold));
+            self.server.shared.push_uncertainty((p.step, u, threshold));
         }
+        let (budget, used) = (p.queries.budget(), p.queries.budget_spent());
+        let left = budget.saturating_sub(used);
         let status = Status {
             step: p.step,
             train_steps: p.train_steps,
             episode: p.episode,
-            budget: p.queries.budget(),
-            budget_used: p.queries.budget_spent(),
+            budget,
+            budget_used: used,
             queries: p.queries.queries(),
             uncertainty: p.uncertainty,
             threshold,
             last_eval: p.last_eval,
+            person_s: self.effort.person_s,
+            keys: self.effort.keys,
+            answered: self.effort.answered,
+            // Each question takes at least one unit of the budget.
+            questions_left_max: left,
+            // This person's pace so far: their seconds per unit of budget spent.
+            time_left_s: (used > 0 && self.effort.person_s > 0.0)
+                .then(|| self.effort.person_s / used as f64 * left as f64),
         };
         let msg = ServerMsg::Status(&status).to_json();
-        self.shared.publish(msg, |b, m| b.status = Some(m.clone()));
-        // The frame shows the state the agent acts in next (the observation is not needed for drawing).
-        self.publish_frame(p.env, &[]);
+        self.server
+            .shared
+            .publish(msg, |b, m| b.status = Some(m.clone()));
+        // The frame shows the state the agent acts in next (a table source needs no observation here: it
+        // shows the one of the last question).
+        if let Err(err) = self.publish_frame(p.env, &[]) {
+            eprintln!("warning: the web expert cannot show the environment: {err:#}");
+        }
     }
-}
 
-impl Drop for WebExpert {
-    /// Tells the open tabs that the run is over, gives them a moment to receive it, and stops the server.
-    fn drop(&mut self) {
+    fn finish(&mut self, end: &RunEnd) {
+        let outcome = EndScreen {
+            solved: end.solved,
+            steps_to_solve: end.steps_to_solve,
+            train_steps: end.train_steps,
+            final_score: end.final_score,
+            run_dir: end.dir.as_ref().map(|d| d.display().to_string()),
+            answered: self.effort.answered,
+            unanswered: self.effort.unanswered,
+            keys: self.effort.keys,
+            person_s: self.effort.person_s,
+        };
         let msg = ServerMsg::End {
             message: "The run is over.".into(),
+            outcome: Some(&outcome),
         }
         .to_json();
-        self.shared.publish(msg, |b, m| {
+        self.server.shared.publish(msg, |b, m| {
             b.end = Some(m.clone());
             b.prompt = None;
         });
-        let started = Instant::now();
-        while self.shared.open_tabs() > 0 && started.elapsed() < Duration::from_secs(2) {
-            std::thread::sleep(Duration::from_millis(20));
-        }
-        if let Some(stop) = self.stop.take() {
-            let _ = stop.send(());
-        }
-        if let Some(thread) = self.thread.take() {
-            let _ = thread.join();
-        }
     }
 }
 
@@ -351,7 +612,10 @@ mod tests {
     #[test]
     fn options_parse_and_round_trip() {
         assert_eq!("".parse::<WebOptions>().unwrap(), WebOptions::default());
-        let o: WebOptions = "fps=12.5,listen=0.0.0.0:9000,timeout=30".parse().unwrap();
+        let o: WebOptions = "fps=12.5,listen=0.0.0.0:9000,timeout=30,wait=no"
+            .parse()
+            .unwrap();
+        assert!(!o.wait);
         assert_eq!(o.listen, "0.0.0.0:9000".parse().unwrap());
         assert_eq!((o.fps, o.timeout), (Some(12.5), Some(30.0)));
         assert_eq!(
@@ -371,6 +635,7 @@ mod tests {
             "listen=1.2.3.4",
             "speed=3",
             "fps",
+            "wait=maybe",
         ] {
             assert!(bad.parse::<WebOptions>().is_err(), "{bad} accepted");
         }

@@ -1,30 +1,41 @@
 //! The messages between the server and the page, as JSON objects with a `type` field.
 //!
-//! Server to page: `hello` (once per connection: the environment, its actions and keys, the answering mode, the
-//! tab's id), `roles` (which tab controls), `status` (step, episode, budget, uncertainty and threshold), `frame`
-//! (the environment's [`Geometry`] and observation), `eval` (a point of the test-return curve), `history` (the
+//! Server to page: `welcome` (the tab's id), `hello` (once the run has started: the environment, its actions and
+//! keys, the answering mode), `roles` (which tab controls), `status` (step, episode, budget, uncertainty and threshold), `frame`
+//! (the environment's [`Geometry`] and observation), `image` (a frame the environment rendered), `table` (the
+//! observation, labelled, of an environment without a picture), `eval` (a point of the test-return curve), `history` (the
 //! recent uncertainty samples and the curve, for a tab that joins late), `prompt` (the agent asks; `null` when no
 //! question is open), `error` (a message was rejected) and `end` (the run is over).
 //!
-//! Page to server: `key` (answer prompt `id` with `action`), `hold` (real time: the action held down, or `null`),
-//! `control` (this tab takes control). Anything else, or an action out of range, gets an `error` frame and
+//! Page to server: `key` (answer prompt `id` with `action`), `pass` (hand prompt `id` back to the agent),
+//! `hold` (real time: the action held down, or `null`), `pause` (the run waits, or goes on), `control` (this
+//! tab takes control). Anything else, or an action out of range, gets an `error` frame and
 //! changes nothing.
 
 use crate::env::Geometry;
 use serde::{Deserialize, Serialize};
 
 /// One action as the page shows it: what it does and the keys that give it.
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct ActionKeys {
-    pub label: &'static str,
+    pub label: String,
     /// `KeyboardEvent.key` values (lower case for letters).
-    pub keys: &'static [&'static str],
+    pub keys: Vec<String>,
 }
 
-/// The actions of an environment with their keys (arrows and WASD), and the action taken in real time when no
-/// key is held.
+impl ActionKeys {
+    pub fn new(label: impl Into<String>, keys: &[&str]) -> Self {
+        Self {
+            label: label.into(),
+            keys: keys.iter().map(|k| k.to_string()).collect(),
+        }
+    }
+}
+
+/// The actions of a built-in environment with their keys (arrows and WASD), and the action taken in real time
+/// when no key is held. Keys that move something move it the way the arrow points.
 pub fn action_keys(env_id: &str) -> Option<(Vec<ActionKeys>, usize)> {
-    let a = |label, keys| ActionKeys { label, keys };
+    let a = ActionKeys::new;
     const LEFT: &[&str] = &["ArrowLeft", "a"];
     const RIGHT: &[&str] = &["ArrowRight", "d"];
     const DOWN: &[&str] = &["ArrowDown", "s"];
@@ -48,12 +59,14 @@ pub fn action_keys(env_id: &str) -> Option<(Vec<ActionKeys>, usize)> {
             ],
             1,
         ),
+        // Each arrow fires the engine that moves the lander its way (measured in the test below: as in
+        // Gymnasium, the left engine's impulse sends the lander left).
         "LunarLander-v2" | "LunarLander-v3" => (
             vec![
                 a("do nothing", DOWN),
-                a("fire left engine", LEFT),
-                a("fire main engine", UP),
-                a("fire right engine", RIGHT),
+                a("fire left engine (moves left)", LEFT),
+                a("fire main engine (moves up)", UP),
+                a("fire right engine (moves right)", RIGHT),
             ],
             0,
         ),
@@ -61,7 +74,7 @@ pub fn action_keys(env_id: &str) -> Option<(Vec<ActionKeys>, usize)> {
     })
 }
 
-/// Sent once to each tab when it connects.
+/// What the page needs to know of the run, sent to each tab once the run has started.
 #[derive(Clone, Debug, Serialize)]
 pub struct Hello {
     pub env: String,
@@ -72,8 +85,6 @@ pub struct Hello {
     /// Seconds a question stays open; `None`: the run waits.
     pub timeout: Option<f64>,
     pub solve_threshold: f64,
-    /// This tab's id (compare with [`ServerMsg::Roles`]).
-    pub client: u64,
 }
 
 /// Where the run stands.
@@ -90,6 +101,28 @@ pub struct Status {
     pub threshold: Option<f32>,
     /// The last test return and its step.
     pub last_eval: Option<(u64, f64)>,
+    /// The person's seconds so far, keys pressed and questions answered.
+    pub person_s: f64,
+    pub keys: usize,
+    pub answered: usize,
+    /// The questions that can still come, at most (0: the agent trains on its own from here).
+    pub questions_left_max: usize,
+    /// The person's time still needed at their pace so far, if the budget were spent (`None` before any).
+    pub time_left_s: Option<f64>,
+}
+
+/// The end screen: how the run ended and what the person gave.
+#[derive(Clone, Debug, Serialize)]
+pub struct EndScreen {
+    pub solved: bool,
+    pub steps_to_solve: usize,
+    pub train_steps: usize,
+    pub final_score: f64,
+    pub run_dir: Option<String>,
+    pub answered: usize,
+    pub unanswered: usize,
+    pub keys: usize,
+    pub person_s: f64,
 }
 
 /// An open question to the person.
@@ -110,12 +143,25 @@ pub struct Prompt {
 #[serde(tag = "type", rename_all = "lowercase")]
 pub enum ServerMsg<'a> {
     Hello(&'a Hello),
+    /// This tab's id (compare with [`ServerMsg::Roles`]).
+    Welcome {
+        client: u64,
+    },
     Roles {
         controller: Option<u64>,
     },
     Status(&'a Status),
     Frame {
         geometry: Option<&'a Geometry>,
+        obs: &'a [f32],
+    },
+    /// A frame the environment rendered, as PNG in base64.
+    Image {
+        png: &'a str,
+    },
+    /// The observation of an environment that has no picture, with a label per value.
+    Table {
+        labels: &'a [String],
         obs: &'a [f32],
     },
     Eval {
@@ -130,11 +176,16 @@ pub enum ServerMsg<'a> {
     Prompt {
         prompt: Option<&'a Prompt>,
     },
+    /// Whether the run is paused.
+    Paused {
+        paused: bool,
+    },
     Error {
         message: String,
     },
     End {
         message: String,
+        outcome: Option<&'a EndScreen>,
     },
 }
 
@@ -148,8 +199,21 @@ impl ServerMsg<'_> {
 #[derive(Clone, Debug, PartialEq, Deserialize)]
 #[serde(tag = "type", rename_all = "lowercase", deny_unknown_fields)]
 pub enum ClientMsg {
-    Key { id: u64, action: usize },
-    Hold { action: Option<usize> },
+    Key {
+        id: u64,
+        action: usize,
+    },
+    /// Hand question `id` back to the agent (logged unanswered, nothing charged).
+    Pass {
+        id: u64,
+    },
+    /// Pause (or resume) the run: it and the person's clock wait.
+    Pause {
+        paused: bool,
+    },
+    Hold {
+        action: Option<usize>,
+    },
     Control,
 }
 
@@ -161,7 +225,7 @@ impl ClientMsg {
         let action = match &msg {
             ClientMsg::Key { action, .. } => Some(*action),
             ClientMsg::Hold { action } => *action,
-            ClientMsg::Control => None,
+            ClientMsg::Control | ClientMsg::Pass { .. } | ClientMsg::Pause { .. } => None,
         };
         if let Some(a) = action
             && a >= n_actions
@@ -212,11 +276,41 @@ mod tests {
             let (actions, noop) = action_keys(spec.id).expect("keys for a built-in environment");
             assert_eq!(actions.len(), spec.n_actions, "{}", spec.id);
             assert!(noop < spec.n_actions);
-            let mut keys: Vec<_> = actions.iter().flat_map(|a| a.keys).collect();
+            let mut keys: Vec<_> = actions.iter().flat_map(|a| &a.keys).collect();
             let n = keys.len();
             keys.sort();
             keys.dedup();
             assert_eq!(keys.len(), n, "{}: a key gives two actions", spec.id);
         }
+    }
+
+    /// The arrow keys move the lander the way they point: from rest, a few steps of the left arrow's action
+    /// leave it moving left, and of the right arrow's, moving right (the side engines push the other way).
+    #[test]
+    fn lander_arrows_move_the_lander_their_way() {
+        let (actions, _) = action_keys("LunarLander-v2").unwrap();
+        let of = |key: &str| {
+            actions
+                .iter()
+                .position(|a| a.keys.iter().any(|k| k == key))
+                .unwrap()
+        };
+        let vx_after = |action: usize| {
+            let mut env = crate::env::make("LunarLander-v2").unwrap();
+            let mut obs = env.reset(Some(7));
+            for _ in 0..8 {
+                env.step_into(action, &mut obs).unwrap();
+            }
+            obs[2]
+        };
+        let rest = vx_after(0);
+        assert!(
+            vx_after(of("ArrowLeft")) < rest - 1e-3,
+            "the left arrow does not move the lander left"
+        );
+        assert!(
+            vx_after(of("ArrowRight")) > rest + 1e-3,
+            "the right arrow does not move the lander right"
+        );
     }
 }

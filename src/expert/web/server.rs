@@ -6,7 +6,7 @@
 //! once; every change is also broadcast to the open tabs. One tab controls (the first one, or the one that took
 //! control); its keys go to the training thread over a channel, the others watch.
 
-use super::protocol::{ClientMsg, Hello, ServerMsg};
+use super::protocol::{ClientMsg, ServerMsg};
 use axum::Router;
 use axum::extract::ws::{Message, WebSocket, WebSocketUpgrade};
 use axum::extract::{Request, State};
@@ -22,21 +22,29 @@ const INDEX_HTML: &str = include_str!("page/index.html");
 const APP_JS: &str = include_str!("page/app.js");
 const STYLE_CSS: &str = include_str!("page/style.css");
 
+/// The page's Content-Security-Policy: its own script, style and WebSocket only; images from `data:` (the
+/// rendered frames).
+const CSP: &str = "default-src 'none'; script-src 'self'; style-src 'self'; img-src 'self' data:; \
+                   connect-src 'self'; base-uri 'none'; form-action 'none'; frame-ancestors 'none'";
+
 /// Uncertainty samples kept for the live chart.
 pub const UNCERTAINTY_HISTORY: usize = 300;
 /// The longest message a page may send (bytes); its messages are a few dozen bytes.
 const MAX_CLIENT_MESSAGE: usize = 1024;
 
-/// A key from the controlling tab: the answer `action` to prompt `id`.
+/// A key from the controlling tab: the answer `action` to prompt `id` (`None`: the question is handed back).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct KeyInput {
     pub id: u64,
-    pub action: usize,
+    pub action: Option<usize>,
 }
 
 /// What the training thread last published, for tabs that connect later.
 #[derive(Default)]
 pub struct Board {
+    /// The run's `hello` message and its number of actions, once the run has started.
+    pub hello: Option<String>,
+    pub n_actions: usize,
     pub status: Option<String>,
     pub frame: Option<String>,
     pub prompt: Option<String>,
@@ -48,13 +56,16 @@ pub struct Board {
     controller: Option<u64>,
     /// The action held down in the controlling tab (real time).
     pub held: Option<usize>,
+    /// Whether the controlling tab paused the run.
+    pub paused: bool,
 }
 
 impl Board {
-    /// The messages that bring a new tab up to date.
-    fn snapshot(&self, hello: &str) -> Vec<String> {
-        let mut msgs = vec![
-            hello.to_string(),
+    /// The messages that bring tab `client` up to date.
+    fn snapshot(&self, client: u64) -> Vec<String> {
+        let mut msgs = vec![ServerMsg::Welcome { client }.to_json()];
+        msgs.extend(self.hello.clone());
+        msgs.extend([
             ServerMsg::Roles {
                 controller: self.controller,
             }
@@ -64,7 +75,7 @@ impl Board {
                 curve: &self.curve,
             }
             .to_json(),
-        ];
+        ]);
         msgs.extend(
             [&self.status, &self.frame, &self.prompt, &self.end]
                 .into_iter()
@@ -74,6 +85,12 @@ impl Board {
         if self.prompt.is_none() {
             msgs.push(ServerMsg::Prompt { prompt: None }.to_json());
         }
+        msgs.push(
+            ServerMsg::Paused {
+                paused: self.paused,
+            }
+            .to_json(),
+        );
         msgs
     }
 
@@ -92,8 +109,8 @@ impl Board {
 /// State shared by the training thread and the server.
 pub struct Shared {
     token: String,
-    n_actions: usize,
-    hello: Hello,
+    /// The address served (`Host` and `Origin` must name it).
+    served: std::net::SocketAddr,
     pub board: Mutex<Board>,
     updates: broadcast::Sender<Arc<str>>,
     keys: Mutex<mpsc::Sender<KeyInput>>,
@@ -101,16 +118,10 @@ pub struct Shared {
 }
 
 impl Shared {
-    pub fn new(
-        token: String,
-        hello: Hello,
-        n_actions: usize,
-        keys: mpsc::Sender<KeyInput>,
-    ) -> Self {
+    pub fn new(token: String, served: std::net::SocketAddr, keys: mpsc::Sender<KeyInput>) -> Self {
         Self {
             token,
-            n_actions,
-            hello,
+            served,
             board: Mutex::new(Board::default()),
             updates: broadcast::channel(256).0,
             keys: Mutex::new(keys),
@@ -143,17 +154,74 @@ impl Shared {
         self.board().held
     }
 
+    pub fn paused(&self) -> bool {
+        self.board().paused
+    }
+
+    /// Whether the end of the run was published.
+    pub fn ended(&self) -> bool {
+        self.board().end.is_some()
+    }
+
     pub fn open_tabs(&self) -> usize {
         self.board().open_tabs()
     }
 
+    /// Whether the query string holds the token, exactly once.
     fn token_ok(&self, query: Option<&str>) -> bool {
-        query.is_some_and(|q| {
-            q.split('&').any(|kv| {
-                kv.strip_prefix("token=")
-                    .is_some_and(|t| constant_time_eq(t.as_bytes(), self.token.as_bytes()))
-            })
-        })
+        let mut tokens = query
+            .unwrap_or_default()
+            .split('&')
+            .filter_map(|kv| kv.strip_prefix("token="));
+        match (tokens.next(), tokens.next()) {
+            (Some(t), None) => constant_time_eq(t.as_bytes(), self.token.as_bytes()),
+            _ => false,
+        }
+    }
+
+    /// Whether `host` (a `Host` header, or an `Origin` without its scheme) names the served address: an IP
+    /// literal of it (any of this machine's when it serves every interface) or `localhost`, with its port. A
+    /// name that some DNS resolves to this machine is refused: the page of another site could otherwise reach
+    /// the server by DNS rebinding.
+    fn host_ok(&self, host: &str) -> bool {
+        let Some((name, port)) = host.rsplit_once(':') else {
+            return false;
+        };
+        if port.parse::<u16>() != Ok(self.served.port()) {
+            return false;
+        }
+        let ip = name
+            .trim_start_matches('[')
+            .trim_end_matches(']')
+            .parse::<std::net::IpAddr>();
+        match ip {
+            Ok(ip) if self.served.ip().is_unspecified() => {
+                !ip.is_unspecified() && !ip.is_multicast()
+            }
+            Ok(ip) => {
+                ip == self.served.ip() || (ip.is_loopback() && self.served.ip().is_loopback())
+            }
+            Err(_) => {
+                name.eq_ignore_ascii_case("localhost") && self.served.ip().is_loopback()
+                    || name.eq_ignore_ascii_case("localhost") && self.served.ip().is_unspecified()
+            }
+        }
+    }
+
+    /// Whether a request's `Host` and `Origin` (when it has one) name the served address, and agree.
+    fn origin_ok(&self, headers: &axum::http::HeaderMap) -> bool {
+        let host = headers.get(header::HOST).and_then(|h| h.to_str().ok());
+        let Some(host) = host.filter(|h| self.host_ok(h)) else {
+            return false;
+        };
+        match headers.get(header::ORIGIN) {
+            None => true,
+            Some(origin) => origin
+                .to_str()
+                .ok()
+                .and_then(|o| o.strip_prefix("http://"))
+                .is_some_and(|o| o.eq_ignore_ascii_case(host)),
+        }
     }
 }
 
@@ -215,8 +283,15 @@ fn router(shared: Arc<Shared>) -> Router {
         .with_state(shared)
 }
 
-/// Every request, whatever its path, needs the token.
+/// Every request, whatever its path, needs the token (once), and a `Host` and `Origin` naming the served address.
 async fn require_token(State(shared): State<Arc<Shared>>, req: Request, next: Next) -> Response {
+    if !shared.origin_ok(req.headers()) {
+        return (
+            StatusCode::FORBIDDEN,
+            "forbidden: open the URL that arld printed (this request names another host or origin)\n",
+        )
+            .into_response();
+    }
     if !shared.token_ok(req.uri().query()) {
         return (
             StatusCode::FORBIDDEN,
@@ -246,6 +321,7 @@ async fn index(State(shared): State<Arc<Shared>>) -> Response {
             (header::CACHE_CONTROL, "no-store"),
             (header::X_FRAME_OPTIONS, "DENY"),
             (header::REFERRER_POLICY, "no-referrer"),
+            (header::CONTENT_SECURITY_POLICY, CSP),
         ],
         INDEX_HTML.replace("__TOKEN__", &shared.token),
     )
@@ -260,11 +336,6 @@ async fn websocket(State(shared): State<Arc<Shared>>, ws: WebSocketUpgrade) -> R
 /// One open tab: catch it up, then forward updates to it and its keys to the training thread.
 async fn tab(mut socket: WebSocket, shared: Arc<Shared>) {
     let id = shared.next_client.fetch_add(1, Ordering::Relaxed);
-    let hello = ServerMsg::Hello(&Hello {
-        client: id,
-        ..shared.hello.clone()
-    })
-    .to_json();
     let (mut updates, snapshot) = {
         let mut board = shared.board();
         board.clients.push(id);
@@ -272,7 +343,7 @@ async fn tab(mut socket: WebSocket, shared: Arc<Shared>) {
             board.controller = Some(id);
             let _ = shared.updates.send(Arc::from(board.roles()));
         }
-        (shared.updates.subscribe(), board.snapshot(&hello))
+        (shared.updates.subscribe(), board.snapshot(id))
     };
     let mut open = true;
     for msg in snapshot {
@@ -290,7 +361,7 @@ async fn tab(mut socket: WebSocket, shared: Arc<Shared>) {
                 }
                 // The tab fell behind: send it the whole picture again.
                 Err(broadcast::error::RecvError::Lagged(_)) => {
-                    let snapshot = shared.board().snapshot(&hello);
+                    let snapshot = shared.board().snapshot(id);
                     for msg in snapshot {
                         if socket.send(Message::Text(msg.into())).await.is_err() {
                             open = false;
@@ -323,14 +394,21 @@ async fn tab(mut socket: WebSocket, shared: Arc<Shared>) {
     if board.controller == Some(id) {
         board.controller = board.clients.first().copied();
         board.held = None;
+        // Nobody is left to lift a pause of the tab that closed.
+        if board.paused {
+            board.paused = false;
+            let _ = shared
+                .updates
+                .send(Arc::from(ServerMsg::Paused { paused: false }.to_json()));
+        }
         let _ = shared.updates.send(Arc::from(board.roles()));
     }
 }
 
 /// Applies one message of tab `id`; an error is the message of the error frame sent back.
 fn handle(shared: &Shared, id: u64, text: &str) -> Result<(), String> {
-    let msg = ClientMsg::parse(text, shared.n_actions)?;
     let mut board = shared.board();
+    let msg = ClientMsg::parse(text, board.n_actions)?;
     let controls = board.controller == Some(id);
     match msg {
         ClientMsg::Control => {
@@ -348,14 +426,35 @@ fn handle(shared: &Shared, id: u64, text: &str) -> Result<(), String> {
             board.held = action;
             Ok(())
         }
-        ClientMsg::Key { id, action } => {
-            drop(board);
-            shared
-                .keys
-                .lock()
-                .unwrap_or_else(|e| e.into_inner())
-                .send(KeyInput { id, action })
-                .map_err(|_| "the run is over".to_string())
+        ClientMsg::Pause { paused } => {
+            board.paused = paused;
+            let _ = shared
+                .updates
+                .send(Arc::from(ServerMsg::Paused { paused }.to_json()));
+            Ok(())
         }
+        ClientMsg::Key { id, action } => send_key(
+            shared,
+            board,
+            KeyInput {
+                id,
+                action: Some(action),
+            },
+        ),
+        ClientMsg::Pass { id } => send_key(shared, board, KeyInput { id, action: None }),
     }
+}
+
+fn send_key(
+    shared: &Shared,
+    board: std::sync::MutexGuard<'_, Board>,
+    key: KeyInput,
+) -> Result<(), String> {
+    drop(board);
+    shared
+        .keys
+        .lock()
+        .unwrap_or_else(|e| e.into_inner())
+        .send(key)
+        .map_err(|_| "the run is over".to_string())
 }

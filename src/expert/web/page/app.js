@@ -1,12 +1,13 @@
-// The web expert's page: draws the environment from the geometry the server sends, shows the run's status and
-// charts, and answers the agent's questions with the keyboard (arrows or WASD) or the buttons.
+// The web expert's page: shows the environment (drawn from the geometry the server sends, or the frames the
+// environment rendered, or its observation as a table), the run's status, the person's time and the charts,
+// and answers the agent's questions with the keyboard or the buttons.
 "use strict";
 
 const token = new URLSearchParams(location.search).get("token") || "";
 // Everything the page knows, readable from the console (and by automated tests).
 const arld = (window.arld = {
-  hello: null, controller: null, status: null, frame: null, prompt: null,
-  uncertainty: [], curve: [], ended: null, errors: [], connected: false,
+  client: null, hello: null, controller: null, status: null, frame: null, prompt: null, paused: false,
+  uncertainty: [], curve: [], ended: null, outcome: null, errors: [], connected: false, obsHistory: [],
 });
 let socket = null;
 let answered = null; // id of the prompt this tab already answered
@@ -16,7 +17,7 @@ const $ = (id) => document.getElementById(id);
 function send(msg) {
   if (socket && socket.readyState === WebSocket.OPEN) socket.send(JSON.stringify(msg));
 }
-const controls = () => arld.hello && arld.controller === arld.hello.client;
+const controls = () => arld.client !== null && arld.controller === arld.client;
 
 function connect() {
   const scheme = location.protocol === "https:" ? "wss" : "ws";
@@ -33,7 +34,11 @@ function connect() {
 
 function receive(m) {
   switch (m.type) {
-    case "hello": arld.hello = m; setup(); break;
+    case "welcome": arld.client = m.client; break;
+    case "hello": arld.hello = { ...m, client: arld.client }; setup(); break;
+    case "paused": arld.paused = m.paused; showPaused(); break;
+    case "image": showImage(m.png); break;
+    case "table": showTable(m.labels, m.obs); break;
     case "roles": arld.controller = m.controller; showRole(); break;
     case "status": arld.status = m; showStatus(); break;
     case "frame": arld.frame = m; draw(); break;
@@ -41,7 +46,7 @@ function receive(m) {
     case "history": arld.uncertainty = m.uncertainty.slice(); arld.curve = m.curve.slice(); drawCharts(); break;
     case "prompt": arld.prompt = m.prompt; showPrompt(); break;
     case "error": arld.errors.push(m.message); banner(m.message, 3000); break;
-    case "end": arld.ended = m.message; arld.prompt = null; showPrompt(); banner(m.message); break;
+    case "end": arld.ended = m.message; arld.outcome = m.outcome; arld.prompt = null; showPrompt(); showEnd(); banner(m.message); break;
   }
 }
 
@@ -86,13 +91,26 @@ function showRole() {
   r.textContent = controls() ? "you answer" : "watching (another tab answers)";
   r.className = "badge " + (controls() ? "control" : "watch");
   $("take-control").hidden = controls();
+  // The panel follows the role at once (an open question is answerable as soon as control is taken).
+  showPrompt();
 }
 $("take-control").addEventListener("click", () => send({ type: "control" }));
 
 function fmt(x, d = 3) { return x === null || x === undefined ? "–" : Number(x).toFixed(d); }
 
+// Seconds as "1 min 05 s" (or "42 s").
+function duration(t) {
+  if (t === null || t === undefined) return "–";
+  t = Math.round(t);
+  return t >= 60 ? `${Math.floor(t / 60)} min ${String(t % 60).padStart(2, "0")} s` : `${t} s`;
+}
+const noneLeft = () => arld.status && arld.status.questions_left_max === 0;
+
 function showStatus() {
   const s = arld.status;
+  $("s-questions").textContent = s.questions_left_max === 0 ? "none left: the agent trains on its own" : `at most ${s.questions_left_max}`;
+  $("s-person").textContent = `${duration(s.person_s)} (${s.answered} answered, ${s.keys} keys)`;
+  $("s-time-left").textContent = s.questions_left_max === 0 ? "0 s" : s.time_left_s === null ? "after your first answer" : `about ${duration(s.time_left_s)}`;
   $("s-step").textContent = `${s.step} / ${s.train_steps}`;
   $("s-episode").textContent = s.episode;
   $("s-budget").textContent = `${s.budget_used} / ${s.budget}`;
@@ -104,13 +122,16 @@ function showStatus() {
     if (arld.uncertainty.length > 300) arld.uncertainty.shift();
   }
   drawUncertainty();
+  // The panel says whether questions can still come.
+  if (!arld.prompt) showPrompt();
 }
 
 function showPrompt() {
   const p = arld.prompt, h = arld.hello, box = $("prompt");
   if (!h) return;
   let text;
-  if (arld.ended) { text = "The run is over."; box.className = "idle"; }
+  if (arld.ended) { text = arld.ended; box.className = "idle"; }
+  else if (!p && noneLeft()) { text = "No questions left: the agent trains on its own."; box.className = "idle"; }
   else if (!p) { text = "Training runs. When the agent is unsure it asks you here."; box.className = "idle"; }
   else if (p.agent_action !== null) {
     text = `The agent asks: what would you do? It would "${h.actions[p.agent_action].label}". ` +
@@ -127,7 +148,47 @@ function showPrompt() {
     b.classList.toggle("proposed", !!p && p.agent_action === Number(b.dataset.action));
     b.classList.toggle("held", held === Number(b.dataset.action));
   });
+  $("pass").disabled = !p || !p.waits || !controls() || arld.ended !== null;
   $("obs").textContent = p ? "observation: " + p.obs.map((v) => v.toFixed(3)).join("  ") : "";
+  // A question waiting for this tab shows in the tab's title, also when the tab is in the background.
+  document.title = p && p.waits && controls() && !arld.ended ? "● Your turn: the agent asks" : "arld: the agent asks";
+}
+$("pass").addEventListener("click", () => pass());
+
+// Hands the open question back to the agent.
+function pass() {
+  const p = arld.prompt;
+  if (!p || !p.waits || !controls() || answered === p.id) return;
+  answered = p.id;
+  send({ type: "pass", id: p.id });
+}
+function showPaused() {
+  $("pause").textContent = arld.paused ? "Go on" : "Pause";
+  document.body.classList.toggle("paused", arld.paused);
+  if (arld.paused) banner("Paused: the run and your clock wait."); else banner(null);
+}
+$("pause").addEventListener("click", () => { if (controls()) send({ type: "pause", paused: !arld.paused }); });
+
+// The end screen: how the run ended and what the person gave.
+function showEnd() {
+  const o = arld.outcome, box = $("end");
+  if (!o) return;
+  box.hidden = false;
+  box.className = o.solved ? "solved" : "unsolved";
+  $("end-title").textContent = o.solved ? `Solved at step ${o.steps_to_solve} of ${o.train_steps}` : `Not solved in ${o.train_steps} steps`;
+  const rows = [
+    ["Final score", fmt(o.final_score, 1)],
+    ["Questions answered", `${o.answered}` + (o.unanswered ? ` (${o.unanswered} left to the agent)` : "")],
+    ["Keys pressed", o.keys],
+    ["Your time", `${duration(o.person_s)} (${o.person_s.toFixed(1)} s)`],
+    ["Run directory", o.run_dir || "– (not saved)"],
+  ];
+  const t = $("end-table");
+  t.textContent = "";
+  for (const [k, v] of rows) {
+    const tr = t.insertRow(), th = document.createElement("th");
+    th.textContent = k; tr.appendChild(th); tr.insertCell().textContent = v;
+  }
 }
 
 // Answers the open prompt with `action` (once per prompt).
@@ -147,10 +208,13 @@ function actionOfKey(key) {
   return i < 0 ? null : i;
 }
 document.addEventListener("keydown", (e) => {
+  if (e.key === "Escape") { pass(); return; }
+  if ((e.key === "p" || e.key === "P") && actionOfKey(e.key) === null) { $("pause").click(); return; }
   const a = actionOfKey(e.key);
   if (a === null) return;
   e.preventDefault();
-  if (arld.hello.fps) { if (held !== a) hold(a); press(a); } else press(a);
+  // Only a fresh press answers: a key held from before the question (or its auto-repeat) never does.
+  if (arld.hello.fps) { if (held !== a) hold(a); if (!e.repeat) press(a); } else if (!e.repeat) press(a);
 });
 document.addEventListener("keyup", (e) => {
   const a = actionOfKey(e.key);
@@ -161,8 +225,42 @@ window.addEventListener("blur", () => { if (held !== null) release(held); });
 // ---- drawing the environment ------------------------------------------------------------------------------
 const cv = $("env"), ctx = cv.getContext("2d");
 
+// A frame the environment rendered (PNG), drawn to fit the canvas.
+let imageSeq = 0;
+function showImage(png) {
+  const img = new Image(), seq = ++imageSeq;
+  img.onload = () => {
+    if (seq !== imageSeq) return; // a newer frame came meanwhile
+    arld.frame = { image: [img.width, img.height] };
+    ctx.setTransform(1, 0, 0, 1, 0, 0);
+    ctx.fillStyle = "#ffffff"; ctx.fillRect(0, 0, cv.width, cv.height);
+    const k = Math.min(cv.width / img.width, cv.height / img.height);
+    const w = img.width * k, h = img.height * k;
+    ctx.drawImage(img, (cv.width - w) / 2, (cv.height - h) / 2, w, h);
+  };
+  img.src = "data:image/png;base64," + png;
+}
+
+// An environment without a picture: its observation as a table, and a chart of its recent values.
+function showTable(labels, obs) {
+  arld.frame = { table: labels };
+  const t = $("obs-table");
+  t.hidden = false;
+  t.textContent = "";
+  labels.forEach((label, i) => {
+    const tr = t.insertRow(), th = document.createElement("th");
+    th.textContent = label; tr.appendChild(th); tr.insertCell().textContent = obs[i].toFixed(4);
+  });
+  arld.obsHistory.push(obs);
+  if (arld.obsHistory.length > 200) arld.obsHistory.shift();
+  const colours = ["#2563eb", "#dc2626", "#16a34a", "#ca8a04", "#7c3aed", "#0891b2", "#db2777", "#4b5563"];
+  chart(cv, labels.map((_, i) => ({ color: colours[i % colours.length], points: arld.obsHistory.map((o, k) => [k, o[i]]) })),
+    { empty: "no observation yet", xname: "question" });
+}
+
 function draw() {
   const g = arld.frame && arld.frame.geometry;
+  if (arld.frame && (arld.frame.image || arld.frame.table)) return;
   ctx.setTransform(1, 0, 0, 1, 0, 0);
   ctx.fillStyle = "#ffffff";
   ctx.fillRect(0, 0, cv.width, cv.height);
@@ -269,7 +367,7 @@ function chart(canvas, series, opts) {
   if (opts.zero) y0 = Math.min(0, y0);
   if (x1 <= x0) x1 = x0 + 1;
   if (y1 <= y0) { y1 += 1; y0 -= 1; }
-  const X = (x) => pad + ((x - x0) / (x1 - x0)) * (W - 2 * pad), Y = (y) => H - pad - ((y - y0) / (y1 - y0)) * (H - 2 * pad);
+  const X = (x) => pad + ((x - x0) / (x1 - x0)) * (W - 2 * pad), Y = (y) => H - pad - 10 - ((y - y0) / (y1 - y0)) * (H - 2 * pad - 10);
   for (const s of series) {
     c.strokeStyle = s.color; c.lineWidth = 1.5; c.setLineDash(s.dash || []); c.beginPath();
     let started = false;
@@ -282,7 +380,13 @@ function chart(canvas, series, opts) {
   }
   c.setLineDash([]); c.fillStyle = "#6b7280"; c.font = "10px system-ui";
   const label = (y) => (Math.abs(y) >= 100 || y === 0 ? y.toFixed(0) : y.toPrecision(3));
-  c.fillText(label(y1), pad + 2, pad + 8); c.fillText(label(y0), pad + 2, H - pad - 2);
+  c.fillText(label(y1), pad + 2, pad + 8); c.fillText(label(y0), pad + 2, H - pad - 12);
+  // The x axis: its first and last values and what it counts.
+  const xl = [`${opts.xname || "step"} ${Math.round(x0)}`, `${Math.round(x1)}`];
+  c.textAlign = "left"; c.fillText(xl[0], pad + 2, H - 1);
+  c.textAlign = "right"; c.fillText(xl[1], W - pad, H - 1);
+  c.textAlign = "left";
+  canvas.dataset.xlabels = xl.join(" … ");
 }
 function drawUncertainty() {
   const u = arld.uncertainty;

@@ -1,0 +1,287 @@
+//! `arld.WebExpert`: a person answering in the browser, as the expert of a run from Python.
+//!
+//! [`PyWebExpert`] starts the web server when it is created (it prints the URL and keeps it as `.url`), before
+//! any environment is known; [`expert`] then turns it into the library's [`WebExpert`] for the run's
+//! environment. A built-in task is drawn from its geometry; a Gymnasium environment made with
+//! `render_mode="rgb_array"` is shown from its `render()` frames; any other one as its observation in a table.
+//! The keys: the environment's `get_keys_to_action()` where it has one (Gymnasium's `play` convention), else
+//! the `keys=` mapping, else a number key per action, labelled from `get_action_meanings()` where the
+//! environment has it.
+
+use arld::expert::Expert;
+use arld::expert::web::frames::{FrameSource, ObservationTable, RenderedFrames, RgbImage};
+use arld::expert::web::protocol::ActionKeys;
+use arld::expert::web::{Page, WebExpert, WebOptions, WebServer};
+use pyo3::exceptions::{PyRuntimeError, PyValueError};
+use pyo3::prelude::*;
+use pyo3::types::{PyDict, PyString, PyTuple};
+use std::collections::BTreeMap;
+use std::sync::Mutex;
+
+/// Keys the page keeps for itself: Escape hands a question back.
+const RESERVED_KEYS: &[&str] = &["Escape"];
+
+/// `arld.WebExpert(listen="127.0.0.1:0", fps=None, timeout=None, keys=None, wait=True)`: starts the page's server
+/// and prints its URL (also `.url`). Pass it as `expert=` to `arld.Agent`; it serves one run. `fps`: real time
+/// at that many steps a second (default: turn-based, one step per key); `timeout`: seconds a question waits
+/// before it goes back to the agent; `keys`: `{"ArrowLeft": 0, "d": 1, ...}` (`KeyboardEvent.key` names) for an
+/// environment without `get_keys_to_action()`; `wait`: whether training starts only once the page is open.
+#[pyclass(name = "WebExpert", module = "arld._arld")]
+pub struct PyWebExpert {
+    server: Mutex<Option<WebServer>>,
+    url: String,
+    keys: Option<BTreeMap<String, usize>>,
+}
+
+#[pymethods]
+impl PyWebExpert {
+    #[new]
+    #[pyo3(signature = (listen="127.0.0.1:0", fps=None, timeout=None, keys=None, wait=true))]
+    fn new(
+        listen: &str,
+        fps: Option<f64>,
+        timeout: Option<f64>,
+        keys: Option<BTreeMap<String, usize>>,
+        wait: bool,
+    ) -> PyResult<Self> {
+        let mut spec = format!("listen={listen},wait={}", if wait { "yes" } else { "no" });
+        spec.extend(fps.map(|v| format!(",fps={v}")));
+        spec.extend(timeout.map(|v| format!(",timeout={v}")));
+        let options: WebOptions = spec
+            .parse()
+            .map_err(|e: anyhow::Error| PyValueError::new_err(format!("{e:#}")))?;
+        if let Some(k) = keys
+            .as_ref()
+            .and_then(|k| k.keys().find(|k| RESERVED_KEYS.contains(&k.as_str())))
+        {
+            return Err(PyValueError::new_err(format!(
+                "keys: {k} is the page's own key (it hands a question back to the agent); choose another"
+            )));
+        }
+        let server =
+            WebServer::start(&options).map_err(|e| PyRuntimeError::new_err(format!("{e:#}")))?;
+        Ok(Self {
+            url: server.url().to_string(),
+            server: Mutex::new(Some(server)),
+            keys,
+        })
+    }
+
+    /// The address to open, with its access token.
+    #[getter]
+    fn url(&self) -> String {
+        self.url.clone()
+    }
+
+    fn __repr__(&self) -> String {
+        format!("arld.WebExpert(url={:?})", self.url)
+    }
+}
+
+/// The library's web expert for a run, when `obj` is an `arld.WebExpert` (`None` otherwise). `env` is the run's
+/// environment bridge (its Gymnasium environment as `.env`), or `None` for a built-in task; `keep` keeps a
+/// Python exception (a Ctrl-C) to raise when the run returns.
+pub fn expert(
+    obj: &Bound<'_, PyAny>,
+    env: Option<&Bound<'_, PyAny>>,
+    spec: &arld::env::EnvSpec,
+    keep: impl Fn(PyErr) -> String + Send + Sync + Clone + 'static,
+) -> anyhow::Result<Option<Box<dyn Expert>>> {
+    let Ok(web) = obj.cast::<PyWebExpert>() else {
+        return Ok(None);
+    };
+    let web = web.borrow();
+    let server = web
+        .server
+        .lock()
+        .unwrap_or_else(|e| e.into_inner())
+        .take()
+        .ok_or_else(|| {
+            anyhow::anyhow!(
+                "this arld.WebExpert served a run already: create a new one for each run"
+            )
+        })?;
+    let page = match env {
+        None => Page::builtin(spec.id)?,
+        Some(bridge) => {
+            let gym = bridge.getattr("env").map_err(|e| anyhow::anyhow!("{e}"))?;
+            gym_page(&gym, spec, web.keys.as_ref(), keep.clone())
+                .map_err(|e| anyhow::anyhow!("arld.WebExpert cannot show {}: {e}", spec.id))?
+        }
+    };
+    let mut expert = WebExpert::new(server, page);
+    // Ctrl-C in Python: the signal handler runs when asked, and its KeyboardInterrupt is raised after the run
+    // stopped.
+    expert.set_stop_check(Box::new(move || {
+        Python::attach(|py| match py.check_signals() {
+            Ok(()) => false,
+            Err(err) => {
+                keep(err);
+                true
+            }
+        })
+    }));
+    expert.wait_for_page()?;
+    Ok(Some(Box::new(expert)))
+}
+
+/// The page of a Gymnasium environment: its frames or its observation, and its keys.
+fn gym_page(
+    gym: &Bound<'_, PyAny>,
+    spec: &arld::env::EnvSpec,
+    keys: Option<&BTreeMap<String, usize>>,
+    keep: impl Fn(PyErr) -> String + Send + Sync + 'static,
+) -> PyResult<Page> {
+    let (actions, noop) = gym_actions(gym, spec.n_actions, keys)?;
+    let render_mode: Option<String> = gym.getattr("render_mode")?.extract().unwrap_or(None);
+    let frames: Box<dyn FrameSource> = if render_mode.as_deref() == Some("rgb_array") {
+        let gym: Py<PyAny> = gym.clone().unbind();
+        Box::new(RenderedFrames::new(Box::new(move || {
+            Python::attach(|py| rgb_frame(gym.bind(py)))
+                .map_err(|e| anyhow::anyhow!("render() failed: {}", keep(e)))
+        })))
+    } else {
+        Box::new(ObservationTable::new(spec.obs_dim, None))
+    };
+    Ok(Page {
+        env: spec.id.to_string(),
+        actions,
+        noop,
+        solve_threshold: spec.solve_threshold,
+        frames,
+    })
+}
+
+/// The environment's current frame from `render()`: a height x width x 3 (or 4: the alpha is dropped) array of
+/// bytes.
+fn rgb_frame(gym: &Bound<'_, PyAny>) -> PyResult<RgbImage> {
+    let frame = gym.call_method0("render")?;
+    let shape: Vec<usize> = frame.getattr("shape")?.extract()?;
+    let dtype: String = frame.getattr("dtype")?.str()?.extract()?;
+    let [height, width, channels] = shape[..] else {
+        return Err(PyValueError::new_err(format!(
+            "render() returned an array of shape {shape:?}, not height x width x 3"
+        )));
+    };
+    if dtype != "uint8" || !(channels == 3 || channels == 4) {
+        return Err(PyValueError::new_err(format!(
+            "render() returned {dtype} of shape {shape:?}; rgb_array frames are uint8, height x width x 3"
+        )));
+    }
+    let bytes: Vec<u8> = frame.call_method0("tobytes")?.extract()?;
+    let pixels = if channels == 3 {
+        bytes
+    } else {
+        bytes
+            .chunks_exact(4)
+            .flat_map(|p| [p[0], p[1], p[2]])
+            .collect()
+    };
+    Ok(RgbImage {
+        width: width as u32,
+        height: height as u32,
+        pixels,
+    })
+}
+
+/// The actions' labels and keys, and the no-op action (taken in real time when no key is held).
+fn gym_actions(
+    gym: &Bound<'_, PyAny>,
+    n_actions: usize,
+    keys: Option<&BTreeMap<String, usize>>,
+) -> PyResult<(Vec<ActionKeys>, usize)> {
+    let unwrapped = gym.getattr("unwrapped")?;
+    let meanings: Option<Vec<String>> = unwrapped
+        .call_method0("get_action_meanings")
+        .ok()
+        .and_then(|m| m.extract().ok())
+        .filter(|m: &Vec<String>| m.len() == n_actions);
+    let mut noop = meanings
+        .as_ref()
+        .and_then(|m| m.iter().position(|s| s == "NOOP"))
+        .unwrap_or(0);
+    let mut per_action: Vec<Vec<String>> = vec![Vec::new(); n_actions];
+    let out_of_range = |a: usize, whose: &str| {
+        PyValueError::new_err(format!(
+            "{whose} maps a key to action {a}, but the environment has {n_actions} actions"
+        ))
+    };
+    let env_keys = [gym, &unwrapped]
+        .into_iter()
+        .find_map(|o| o.call_method0("get_keys_to_action").ok())
+        .and_then(|m| m.cast_into::<PyDict>().ok());
+    if let Some(map) = env_keys {
+        for (combo, action) in map.iter() {
+            let action: usize = action.extract()?;
+            if action >= n_actions {
+                return Err(out_of_range(action, "get_keys_to_action()"));
+            }
+            let combo: Vec<Bound<'_, PyAny>> = match combo.cast::<PyTuple>() {
+                Ok(t) => t.iter().collect(),
+                Err(_) => vec![combo.clone()],
+            };
+            match combo.as_slice() {
+                [] => noop = action,
+                // One key per action on the page: combinations of keys are left out.
+                [key] => per_action[action].extend(key_name(key)),
+                _ => {}
+            }
+        }
+    } else if let Some(keys) = keys {
+        for (key, &action) in keys {
+            if action >= n_actions {
+                return Err(out_of_range(action, "keys="));
+            }
+            let key = if key.chars().count() == 1 {
+                key.to_lowercase()
+            } else {
+                key.clone()
+            };
+            per_action[action].push(key);
+        }
+    }
+    // An action left without a key gets its number (1-9, then 0).
+    let mut used: Vec<String> = per_action.iter().flatten().cloned().collect();
+    for (i, keys) in per_action.iter_mut().enumerate() {
+        let digit = ((i + 1) % 10).to_string();
+        if keys.is_empty() && i < 10 && !used.contains(&digit) {
+            used.push(digit.clone());
+            keys.push(digit);
+        }
+    }
+    let actions = per_action
+        .into_iter()
+        .enumerate()
+        .map(|(i, keys)| ActionKeys {
+            label: meanings.as_ref().map_or_else(
+                || format!("action {i}"),
+                |m| m[i].to_lowercase().replace('_', " "),
+            ),
+            keys,
+        })
+        .collect();
+    Ok((actions, noop))
+}
+
+/// A key of Gymnasium's `play` convention (a character, or a pygame key code) as `KeyboardEvent.key`.
+fn key_name(key: &Bound<'_, PyAny>) -> Option<String> {
+    if let Ok(s) = key.cast::<PyString>() {
+        let s = s.to_string();
+        return Some(if s.chars().count() == 1 {
+            s.to_lowercase()
+        } else {
+            s
+        });
+    }
+    let code: i64 = key.extract().ok()?;
+    // pygame's arrow keys (SDL2 scancode-based codes).
+    Some(match code {
+        1_073_741_904 => "ArrowLeft".into(),
+        1_073_741_903 => "ArrowRight".into(),
+        1_073_741_906 => "ArrowUp".into(),
+        1_073_741_905 => "ArrowDown".into(),
+        32 => " ".into(),
+        33..=126 => char::from(code as u8).to_lowercase().to_string(),
+        _ => return None,
+    })
+}

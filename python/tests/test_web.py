@@ -1,0 +1,102 @@
+"""A person as the expert of a Gymnasium environment arld does not build in, in a real headless Chromium:
+`arld.WebExpert` serves the page, the scripted person (tests/e2e/person.mjs, Playwright) answers from what the
+page shows, and the run's files must hold the person's answers and time.
+
+Needs Debian's chromium, node, playwright-core in tests/e2e/node_modules and pygame (Gymnasium's
+classic-control rendering); without them the test fails, naming `scripts/test --setup`."""
+
+import csv
+import json
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[2]
+E2E = REPO / "tests" / "e2e"
+
+# The run: Gymnasium's own CartPole under an id arld does not know, rendered as RGB frames.
+RUN = r"""
+import json, sys
+import gymnasium as gym
+import arld
+
+gym.register("PersonCartPole-v0", entry_point="gymnasium.envs.classic_control.cartpole:CartPoleEnv",
+             max_episode_steps=200, reward_threshold=195.0)
+env = gym.make("PersonCartPole-v0", render_mode="rgb_array")
+web = arld.WebExpert(listen="127.0.0.1:0")
+assert web.url.startswith("http://127.0.0.1:") and "token=" in web.url, web.url
+model = arld.Agent("adqn", env, net="bootstrap", expert=web, seed=0, budget=30, eval_period=500, eval_episodes=3)
+model.learn(total_timesteps=1500, log_dir=sys.argv[1])
+print(json.dumps({"summary": model.summary}), flush=True)
+"""
+
+
+def missing_prerequisites():
+    missing = []
+    chromium = os.environ.get("CHROMIUM", "/usr/bin/chromium")
+    if not Path(chromium).is_file():
+        missing.append(f"Chromium at {chromium} (Debian's chromium)")
+    if shutil.which("node") is None:
+        missing.append("node (Debian's nodejs)")
+    if not (E2E / "node_modules" / "playwright-core").is_dir():
+        missing.append("playwright-core (in tests/e2e/node_modules)")
+    try:
+        import pygame  # noqa: F401
+    except ImportError:
+        missing.append("pygame (gymnasium[classic-control])")
+    return missing
+
+
+def test_a_person_answers_a_gymnasium_environment_from_its_rendered_frames(tmp_path):
+    missing = missing_prerequisites()
+    assert not missing, (
+        f"the web expert's browser test cannot run; missing: {', '.join(missing)}; "
+        "`scripts/test --setup` installs them"
+    )
+    run = tmp_path / "run"
+    train = subprocess.Popen(
+        [sys.executable, "-c", RUN, str(run)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+    )
+    try:
+        url = None
+        for line in train.stdout:
+            if "http://" in line:
+                url = line[line.index("http://") :].strip()
+                break
+        assert url, f"the run printed no URL: {train.stderr.read()}"
+        person = subprocess.run(
+            ["node", "person.mjs", "--url", url, "--shots", str(tmp_path / "shots"), "--policy", "CartPole-v0",
+             "--expect-image"],
+            cwd=E2E, capture_output=True, text=True, timeout=300,
+        )
+        assert person.returncode == 0, f"the scripted person failed: {person.stderr}{person.stdout}"
+        out, err = train.communicate(timeout=120)
+    finally:
+        if train.poll() is None:
+            train.kill()
+    assert train.returncode == 0, f"the run failed: {err}"
+    report = json.loads([l for l in person.stdout.splitlines() if l.startswith("{")][-1])
+    assert report["env"] == "PersonCartPole-v0"
+    # The page showed the environment's own frames, not blank (the person checked the canvas at each shot).
+    for name in ("training", "asking", "mid-segment"):
+        drawn = report["drawn"][name]
+        assert drawn["share"] > 0.005 and drawn["colours"] >= 3, (name, drawn)
+        assert (tmp_path / "shots" / f"{name}.png").is_file()
+
+    with open(run / "queries.csv") as f:
+        rows = list(csv.DictReader(f))
+    answered = [r for r in rows if r["answered"] == "true"]
+    assert [int(r["expert_action"]) for r in answered] == report["answers"], "queries.csv lacks the answers"
+    assert all(r["expert"] == "web" and float(r["response_s"]) > 0 for r in answered)
+    summary = json.loads((run / "summary.json").read_text())
+    assert summary["train_steps"] == 1500 and summary["env"] == "PersonCartPole-v0"
+    assert 0 < summary["queries_used"] <= 30
+    # The person's time: at least the sum of their response times to opening questions, and what the end
+    # screen showed.
+    assert summary["person_s"] >= sum(float(r["response_s"]) for r in answered) - 1e-6
+    outcome = report["endScreen"]["outcome"]
+    assert outcome["answered"] == len(answered) and outcome["keys"] == report["steps"]
+    assert abs(outcome["person_s"] - summary["person_s"]) < 1e-6
+    assert json.loads(out.strip().splitlines()[-1])["summary"]["person_s"] == summary["person_s"]
