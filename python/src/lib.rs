@@ -169,9 +169,6 @@ impl Env for PyEnv {
             });
         }
     }
-    fn geometry(&self) -> Option<env::Geometry> {
-        self.inner.geometry()
-    }
 }
 
 /// A Python callable `obs -> int` as an [`Expert`].
@@ -757,6 +754,20 @@ fn start_run(
         step: step.clone(),
         errors: errors.clone(),
     };
+    // A person's page is built here, where Python can be asked about the environment (its frames, its keys),
+    // and the run waits for the page to open before its thread starts.
+    let spec = env::spec(&cfg.env).map_err(|e| value_error(e.to_string()))?;
+    let web_expert = match &expert {
+        Some(call) => {
+            let keep = {
+                let errors = errors.clone();
+                move |e| errors.keep(e)
+            };
+            web::expert(call.bind(py), env.as_ref().map(|e| e.bind(py)), spec, keep)
+                .map_err(|e| errors.raise(py, e, runtime_error))?
+        }
+        None => None,
+    };
     let thread_cfg = cfg.clone();
     let thread_errors = errors.clone();
     let body = move || -> anyhow::Result<()> {
@@ -769,7 +780,6 @@ fn start_run(
             }
             _ => return Ok(()),
         }
-        let spec = env::spec(&cfg.env)?;
         let make = |obj: Option<Py<PyAny>>| -> anyhow::Result<Box<dyn Env>> {
             Ok(match obj {
                 Some(obj) => Box::new(PyEnv {
@@ -781,7 +791,6 @@ fn start_run(
                 None => env::make(&cfg.env)?,
             })
         };
-        let web_env = env.as_ref().map(|e| e.clone_ref(py));
         let mut env = make(env)?;
         let test_envs = match test_envs {
             Some(objs) => objs
@@ -792,32 +801,21 @@ fn start_run(
                 .map(|_| make(None))
                 .collect::<anyhow::Result<Vec<_>>>()?,
         };
-        let keep = {
-            let errors = errors.clone();
-            move |e| errors.keep(e)
-        };
-        let mut expert: Option<Box<dyn Expert>> = match expert {
-            Some(call) => match web::expert(
-                call.bind(py),
-                web_env.as_ref().map(|e| e.bind(py)),
-                spec,
-                keep,
-            )? {
-                Some(web) => Some(web),
-                None => Some(Box::new(PyExpert {
-                    call,
-                    name: expert_name,
-                    n_actions: spec.n_actions,
-                    errors: errors.clone(),
-                })),
-            },
-            None if cfg.method.needs_expert() => Some(expert::from_spec(
+        let mut expert: Option<Box<dyn Expert>> = match (web_expert, expert) {
+            (Some(web), _) => Some(web),
+            (None, Some(call)) => Some(Box::new(PyExpert {
+                call,
+                name: expert_name,
+                n_actions: spec.n_actions,
+                errors: errors.clone(),
+            })),
+            (None, None) if cfg.method.needs_expert() => Some(expert::from_spec(
                 &cfg.expert,
                 &cfg.env,
                 seed_for(cfg.seed, SeedPurpose::Expert),
                 cfg.expert_timeout,
             )?),
-            None => None,
+            (None, None) => None,
         };
         let resume_state = match &resume {
             None => None,
@@ -875,7 +873,6 @@ fn start_run(
             }
         })
         .map_err(|e| runtime_error(e.to_string()))?;
-    let _ = py;
     Ok(Run {
         commands: commands_tx,
         reports: Mutex::new(reports_rx),

@@ -705,7 +705,7 @@ fn train_loop(
         macro_rules! stop_while_asking {
             ($err:expr) => {{
                 let err: anyhow::Error = $err;
-                if let Some((ck, _)) = snapshots.as_mut() {
+                if let Some(ck) = checkpointer.as_deref_mut() {
                     snapshot_point!(
                         ck,
                         st.step,
@@ -915,7 +915,7 @@ fn train_loop(
     }
 
     let mut summary = summarize(cfg, &*env, log, st, &queries, &clock, pretrain_demos);
-    if let Some(expert) = expert.as_deref_mut() {
+    if let Some(expert) = expert {
         summary.person_s = expert.person_seconds();
         expert.finish(&crate::expert::RunEnd {
             solved: summary.solved,
