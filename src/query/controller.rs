@@ -613,7 +613,7 @@ mod tests {
     }
 
     #[test]
-    #[should_panic(expected = "needs an uncertainty")]
+    #[should_panic(expected = "the adaptive rule reads the uncertainty")]
     fn adaptive_rule_without_uncertainty_is_a_programming_error() {
         let mut controller = QueryController::new(rule("adaptive(n_r=10)"), 10, 5).unwrap();
         let _ = decide_with(&mut controller, None, &mut Pcg64::seed_from_u64(5));

@@ -178,10 +178,7 @@ impl QueryRule for CalibratedRule {
         Needs::UNCERTAINTY
     }
     fn decide(&mut self, ctx: &QueryContext<'_>, _rng: &mut dyn RngCore) -> Verdict {
-        let u = ctx
-            .signals
-            .uncertainty
-            .expect("calibrated reads the uncertainty");
+        let u = ctx.uncertainty("calibrated");
         self.history.push(u);
         Verdict {
             query: self.threshold.is_some_and(|t| u > t),
@@ -221,10 +218,7 @@ impl QueryRule for BudgetPacedRule {
         Needs::UNCERTAINTY
     }
     fn decide(&mut self, ctx: &QueryContext<'_>, _rng: &mut dyn RngCore) -> Verdict {
-        let u = ctx
-            .signals
-            .uncertainty
-            .expect("budget_paced reads the uncertainty");
+        let u = ctx.uncertainty("budget_paced");
         let verdict = self.window.observe(u);
         Verdict {
             query: verdict.query && (ctx.budget_spent as f64) < ctx.pro_rata(self.horizon),
@@ -260,10 +254,7 @@ impl QueryRule for VariableThresholdRule {
         Needs::UNCERTAINTY
     }
     fn decide(&mut self, ctx: &QueryContext<'_>, _rng: &mut dyn RngCore) -> Verdict {
-        let u = ctx
-            .signals
-            .uncertainty
-            .expect("variable reads the uncertainty");
+        let u = ctx.uncertainty("variable");
         let Some(threshold) = self.threshold.filter(|_| !u.is_nan()) else {
             if !u.is_nan() {
                 self.threshold = Some(u);

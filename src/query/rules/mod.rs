@@ -173,6 +173,14 @@ pub struct QueryContext<'a> {
 }
 
 impl QueryContext<'_> {
+    /// The uncertainty signal, for a rule whose `needs` asked for it (the agent computes every declared
+    /// signal; its absence is a bug in the rule's `needs`, named by `rule`).
+    pub fn uncertainty(&self, rule: &str) -> f32 {
+        self.signals.uncertainty.unwrap_or_else(|| {
+            panic!("the {rule} rule reads the uncertainty: its needs must declare it")
+        })
+    }
+
     /// Budget left, in its unit.
     pub fn budget_left(&self) -> usize {
         self.budget - self.budget_spent

@@ -29,10 +29,7 @@ impl QueryRule for RankedPacedRule {
         Needs::UNCERTAINTY
     }
     fn decide(&mut self, ctx: &QueryContext<'_>, rng: &mut dyn RngCore) -> Verdict {
-        let u = ctx
-            .signals
-            .uncertainty
-            .expect("ranked reads the uncertainty");
+        let u = ctx.uncertainty("ranked");
         let rank = self.window.rank(u);
         self.window.push(u);
         if (ctx.step as f64) < self.start * ctx.train_steps as f64 || u.is_nan() {

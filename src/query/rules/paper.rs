@@ -213,10 +213,7 @@ impl QueryRule for AdaptiveQuantileRule {
         Needs::UNCERTAINTY
     }
     fn decide(&mut self, ctx: &QueryContext<'_>, _rng: &mut dyn RngCore) -> Verdict {
-        let uncertainty = ctx
-            .signals
-            .uncertainty
-            .expect("the adaptive query rule needs an uncertainty at every decision");
+        let uncertainty = ctx.uncertainty("adaptive");
         self.observe(uncertainty)
     }
     fn threshold(&self) -> Option<f32> {
