@@ -610,6 +610,12 @@ class Agent:
         except ValueError as e:
             if "net_arch" in self.policy_kwargs and "hidden" in str(e):
                 raise ValueError(f"policy_kwargs net_arch (arld's hidden): {e}") from None
+            message = str(e)
+            for key in list(given) + list(other):  # the names the caller used, where arld's differ
+                if key in SB3_NAMES and given.get(key, other.get(key)) is not None:
+                    message = message.replace(f"`{SB3_NAMES[key]}`", f"`{key}` (arld's `{SB3_NAMES[key]}`)")
+            if message != str(e):
+                raise ValueError(message) from None
             raise
         self._policy: Any = None
         self._run: Any = None

@@ -190,8 +190,9 @@ impl Expert for PyExpert {
         .map_err(|msg| anyhow::anyhow!("it raised {msg}"))?;
         if !(0..self.n_actions as i64).contains(&answer) {
             let msg = format!(
-                "it answered action {answer}, but the environment has {} actions (0..{})",
-                self.n_actions, self.n_actions
+                "it answered action {answer}, but the environment has {} actions (0 to {})",
+                self.n_actions,
+                self.n_actions.saturating_sub(1)
             );
             // Raised as a ValueError from `learn` (a bad value from the caller's code).
             self.errors.keep(PyValueError::new_err(msg.clone()));

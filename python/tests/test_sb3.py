@@ -298,6 +298,10 @@ def test_errors_speak_python_not_rust():
         with pytest.raises(ValueError, match=words) as err:
             cartpole_agent("dqn", **kw)
         assert not re.search(r"\b(usize|u64|i64|f64|f32)\b|floating point|\d\.\.\d", str(err.value)), err.value
+    with pytest.raises(ValueError, match="`learning_rate` \\(arld's `lr`\\)"):
+        cartpole_agent("dqn", learning_rate="fast")
+    with pytest.raises(ValueError, match=r"2 actions \(0 to 1\)"):
+        arld.Agent("dqfd", gym.make("CartPole-v1"), expert=lambda obs: 7, n_demo=10, pretrain_steps=1).learn(10)
     with pytest.raises(TypeError, match="did you mean 'exploration_fraction'"):
         cartpole_agent("dqn", exploration_fractoin=0.2)
 

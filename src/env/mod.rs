@@ -55,7 +55,8 @@ pub enum EnvError {
     #[error("unknown environment id '{id}'; known ids: {}", known_ids().join(", "))]
     UnknownId { id: String },
     #[error(
-        "action {action} is out of range for {env}: it has {n_actions} actions (0..{n_actions})"
+        "action {action} is out of range for {env}: it has {n_actions} actions (0 to {})",
+        n_actions.saturating_sub(1)
     )]
     ActionOutOfRange {
         env: &'static str,

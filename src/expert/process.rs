@@ -165,8 +165,9 @@ impl ProcessExpert {
         };
         if action >= self.n_actions as u64 {
             return Err(self.failure(&format!(
-                "answered action {action}, but the environment has {} actions (0..{})",
-                self.n_actions, self.n_actions
+                "answered action {action}, but the environment has {} actions (0 to {})",
+                self.n_actions,
+                self.n_actions.saturating_sub(1)
             )));
         }
         Ok(action as usize)

@@ -231,7 +231,8 @@ impl ClientMsg {
             && a >= n_actions
         {
             return Err(format!(
-                "action {a} is out of range: the environment has {n_actions} actions (0..{n_actions})"
+                "action {a} is out of range: the environment has {n_actions} actions (0 to {})",
+                n_actions.saturating_sub(1)
             ));
         }
         Ok(msg)
