@@ -91,6 +91,19 @@ pub const EFFORT_RULES: [&str; 14] = [
     "ranked(horizon=0.1,start=0.01)",
 ];
 
+/// The own rule's candidates among [`EFFORT_RULES`]: the held-out test runs the one with the highest median
+/// normalised AUC on the design seeds, averaged over [`EFFORT_SCREEN_TASKS`] (effort.md states which).
+pub const OWN_RULE_CANDIDATES: [&str; 5] = [
+    "ranked",
+    "ranked(horizon=0.1)",
+    "ranked(horizon=0.03)",
+    "ranked(horizon=0.3)",
+    "ranked(horizon=0.1,start=0.01)",
+];
+
+/// The tasks of the design screen (LunarLander-v2, the costliest, is for the rules that survive it).
+pub const EFFORT_SCREEN_TASKS: [&str; 3] = ["CartPole-v0", "Acrobot-v1", "MountainCar-v0"];
+
 /// The budgets of the effort benchmark beside the paper's (the methods part's runs), as multiples of it.
 pub const EFFORT_BUDGET_SCALES: [f64; 4] = [0.25, 0.5, 2.0, 4.0];
 
