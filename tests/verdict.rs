@@ -218,7 +218,14 @@ fn committed_tables_regenerate_from_the_per_run_files() {
     assert_same(out.path(), &VERDICT_TABLES);
     assert_same(
         out.path(),
-        &["table.md", "table.csv", "evaluations.csv", "report.md"],
+        &[
+            "table.md",
+            "table.csv",
+            "evaluations.csv",
+            "report.md",
+            "effort.md",
+            "effort.csv",
+        ],
     );
 }
 

@@ -17,7 +17,10 @@
 //! (the held-out test), reported in a section of their own with the verdict of the goal.
 
 use super::plot::{Band, Curve, FigureContent, Panel};
-use super::protocol::{HELD_OUT_SEEDS, env_order, is_effort_variant, paper_budget};
+use super::protocol::{
+    EFFORT_NET, EFFORT_SCREEN_TASKS, HELD_OUT_SEEDS, OWN_RULE_CANDIDATES, env_order,
+    is_effort_variant, paper_budget,
+};
 use super::stats::{bootstrap_median_interval, final_score, mann_whitney, median, sustained};
 use super::verdict::{ALPHA, FINAL_EVALUATIONS};
 use crate::train::run_dir::{DEFAULT_VARIANT, RunRecord};
@@ -248,7 +251,7 @@ pub fn effort(runs: &[RunRecord], k: usize) -> Result<Option<EffortReport>> {
     let mut csv = String::from(
         "env,rule,net,budget,budget_scale,seeds,held_out,auc_median,auc_lo,auc_hi,first_hit_median,first_hit_lo,\
          first_hit_hi,sustained_median,sustained_lo,sustained_hi,final_median,final_lo,final_hi,p_vs_gdqn,\
-         p_vs_bdqn,p_vs_adqn,transitions_median,questions_median,last_question_median\n",
+         p_vs_bdqn,p_vs_adqn,transitions_median,questions_median,last_question_median,random_return,expert_return\n",
     );
     writeln!(
         md,
@@ -337,7 +340,7 @@ pub fn effort(runs: &[RunRecord], k: usize) -> Result<Option<EffortReport>> {
                 let pv = |p: Option<f64>| p.map_or(String::new(), |p| format!("{p}"));
                 writeln!(
                     csv,
-                    "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
+                    "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
                     key.0,
                     csv_field(&key.1),
                     key.2,
@@ -363,11 +366,14 @@ pub fn effort(runs: &[RunRecord], k: usize) -> Result<Option<EffortReport>> {
                     transitions,
                     questions,
                     last.map_or(String::new(), |s| format!("{s}")),
+                    random,
+                    expert,
                 )?;
             }
             writeln!(md)?;
         }
     }
+    writeln!(md, "{}", design_choice(&cells))?;
     writeln!(md, "{}", goal_verdict(&cells, &envs))?;
     let figures = figures(&cells, &envs);
     Ok(Some(EffortReport {
@@ -391,6 +397,61 @@ fn csv_field(s: &str) -> String {
     } else {
         s.to_string()
     }
+}
+
+/// The own rule's choice on the design seeds: each candidate's median AUC on every screening task at the
+/// paper's budget with the screen's network, their mean, and the candidate with the highest mean.
+fn design_choice(cells: &BTreeMap<CellKey, Vec<RunMetrics>>) -> String {
+    let mut out = format!(
+        "## The own rule's design choice\n\nMedian normalised AUC on the design seeds at the paper's budget with \
+         the {} network; the held-out test runs the candidate with the highest mean over the screening tasks.\n\n\
+         | candidate | {} | mean |\n|---|{}---|\n",
+        EFFORT_NET.name(),
+        EFFORT_SCREEN_TASKS.join(" | "),
+        "---|".repeat(EFFORT_SCREEN_TASKS.len())
+    );
+    let mut best: Option<(f64, &str)> = None;
+    for candidate in OWN_RULE_CANDIDATES {
+        let medians: Vec<Option<f64>> = EFFORT_SCREEN_TASKS
+            .iter()
+            .map(|env| {
+                let key = (
+                    env.to_string(),
+                    candidate.to_string(),
+                    EFFORT_NET.name().to_string(),
+                    paper_budget(env),
+                    false,
+                );
+                cells
+                    .get(&key)
+                    .and_then(|c| median(&c.iter().map(|m| m.auc).collect::<Vec<_>>()))
+            })
+            .collect();
+        let complete: Option<Vec<f64>> = medians.iter().copied().collect();
+        let mean = complete.map(|v| v.iter().sum::<f64>() / v.len() as f64);
+        let cell = |v: Option<f64>| v.map_or("–".to_string(), |v| format!("{v:.3}"));
+        let row: Vec<String> = medians.iter().map(|&m| cell(m)).collect();
+        let _ = writeln!(
+            out,
+            "| {candidate} | {} | {} |",
+            row.join(" | "),
+            cell(mean)
+        );
+        if let Some(mean) = mean
+            && best.is_none_or(|(b, _)| mean > b)
+        {
+            best = Some((mean, candidate));
+        }
+    }
+    let _ = writeln!(
+        out,
+        "\n{}",
+        match best {
+            Some((_, candidate)) => format!("The highest mean: **{candidate}**."),
+            None => "No candidate has run on every screening task yet.".to_string(),
+        }
+    );
+    out
 }
 
 /// The goal of the benchmark, read on the held-out cells at the paper's budget: a rule whose AUC is

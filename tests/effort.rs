@@ -1,0 +1,185 @@
+//! The effort benchmark's readings recomputed from the committed per-run files, independently of
+//! `src/experiment/effort.rs`: each run's normalised AUC from its `eval.csv` and the reference returns that
+//! `effort.csv` states, the cell's median over seeds, and the own rule's design choice (the candidate with the
+//! highest mean, over the screening tasks, of its median AUC on the design seeds).
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+fn results() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("results")
+}
+
+/// The rows of results/effort.csv as maps from column name to text (no field here holds a quoted comma except
+/// the rule, which is the second column).
+fn effort_rows() -> Vec<BTreeMap<String, String>> {
+    let text = std::fs::read_to_string(results().join("effort.csv")).unwrap();
+    let mut lines = text.lines();
+    let header: Vec<String> = lines.next().unwrap().split(',').map(String::from).collect();
+    lines
+        .map(|line| {
+            let (env, rest) = line.split_once(',').unwrap();
+            let (rule, rest) = if let Some(quoted) = rest.strip_prefix('"') {
+                let (rule, rest) = quoted.split_once("\",").unwrap();
+                (rule.to_string(), rest)
+            } else {
+                let (rule, rest) = rest.split_once(',').unwrap();
+                (rule.to_string(), rest)
+            };
+            let mut fields = vec![env.to_string(), rule];
+            fields.extend(rest.split(',').map(String::from));
+            assert_eq!(fields.len(), header.len(), "effort.csv row {line}");
+            header.iter().cloned().zip(fields).collect()
+        })
+        .collect()
+}
+
+/// The mean over a run's evaluations of (return - random) / (expert - random).
+fn run_auc(dir: &Path, random: f64, expert: f64) -> f64 {
+    let text = std::fs::read_to_string(dir.join("eval.csv")).unwrap();
+    let means: Vec<f64> = text
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').nth(1).unwrap().parse::<f64>().unwrap())
+        .collect();
+    assert!(!means.is_empty(), "{}: no evaluation", dir.display());
+    means
+        .iter()
+        .map(|m| (m - random) / (expert - random))
+        .sum::<f64>()
+        / means.len() as f64
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(|a, b| a.partial_cmp(b).unwrap());
+    let n = v.len();
+    if n % 2 == 1 {
+        v[n / 2]
+    } else {
+        (v[n / 2 - 1] + v[n / 2]) / 2.0
+    }
+}
+
+/// The directory of a rule's runs at the paper's budget with bootstrapped heads: the paper's methods in their
+/// own directories, every other rule as ADQN with `query_rule` set (the variant's name spells the spec).
+fn rule_dir(env: &str, rule: &str) -> PathBuf {
+    let runs = results().join("runs").join(env);
+    match rule {
+        "greedy (GDQN)" => runs.join("gdqn-bootstrap"),
+        "bernoulli (BDQN)" => runs.join("bdqn-bootstrap"),
+        "adaptive (ADQN)" => runs.join("adqn-bootstrap"),
+        spec => {
+            let name: String = spec
+                .chars()
+                .map(|c| {
+                    if c.is_ascii_alphanumeric() || c == '_' || c == '.' {
+                        c
+                    } else {
+                        '-'
+                    }
+                })
+                .collect();
+            runs.join("adqn-bootstrap")
+                .join(format!("query_rule-{name}"))
+        }
+    }
+}
+
+/// The median AUC over the design seeds (0-9) of a rule's runs, recomputed.
+fn design_median(env: &str, rule: &str, random: f64, expert: f64) -> Option<f64> {
+    let dir = rule_dir(env, rule);
+    let aucs: Vec<f64> = (0..10)
+        .map(|s| dir.join(format!("seed{s}")))
+        .filter(|d| d.join("summary.json").is_file())
+        .map(|d| run_auc(&d, random, expert))
+        .collect();
+    (!aucs.is_empty()).then(|| median(aucs))
+}
+
+fn paper_budget_rows(rows: &[BTreeMap<String, String>]) -> Vec<&BTreeMap<String, String>> {
+    rows.iter()
+        .filter(|r| r["net"] == "bootstrap" && r["held_out"] == "false" && r["budget_scale"] == "1")
+        .collect()
+}
+
+#[test]
+fn every_cell_at_the_paper_budget_has_the_median_auc_of_its_runs() {
+    let rows = effort_rows();
+    let cells = paper_budget_rows(&rows);
+    assert!(
+        cells.len() >= 40,
+        "only {} cells at the paper's budget",
+        cells.len()
+    );
+    for row in cells {
+        let (env, rule) = (&row["env"], &row["rule"]);
+        let random: f64 = row["random_return"].parse().unwrap();
+        let expert: f64 = row["expert_return"].parse().unwrap();
+        let seeds: usize = row["seeds"].parse().unwrap();
+        let dir = rule_dir(env, rule);
+        let aucs: Vec<f64> = (0..100)
+            .map(|s| dir.join(format!("seed{s}")))
+            .filter(|d| d.join("summary.json").is_file())
+            .map(|d| run_auc(&d, random, expert))
+            .collect();
+        assert_eq!(
+            aucs.len(),
+            seeds,
+            "{env} {rule}: runs found in {}",
+            dir.display()
+        );
+        let ours = median(aucs);
+        let theirs: f64 = row["auc_median"].parse().unwrap();
+        assert!(
+            (ours - theirs).abs() < 1e-9,
+            "{env} {rule}: median AUC {theirs} in effort.csv, {ours} recomputed"
+        );
+    }
+}
+
+#[test]
+fn the_design_choice_is_the_candidate_with_the_highest_mean_median_auc() {
+    let rows = effort_rows();
+    let screen = ["CartPole-v0", "Acrobot-v1", "MountainCar-v0"];
+    let refs: BTreeMap<String, (f64, f64)> = rows
+        .iter()
+        .map(|r| {
+            (
+                r["env"].clone(),
+                (
+                    r["random_return"].parse().unwrap(),
+                    r["expert_return"].parse().unwrap(),
+                ),
+            )
+        })
+        .collect();
+    let candidates = [
+        "ranked",
+        "ranked(horizon=0.1)",
+        "ranked(horizon=0.03)",
+        "ranked(horizon=0.3)",
+        "ranked(horizon=0.1,start=0.01)",
+    ];
+    let mut best: Option<(f64, &str)> = None;
+    for candidate in candidates {
+        let medians: Option<Vec<f64>> = screen
+            .iter()
+            .map(|env| {
+                let (random, expert) = refs[*env];
+                design_median(env, candidate, random, expert)
+            })
+            .collect();
+        if let Some(m) = medians {
+            let mean = m.iter().sum::<f64>() / m.len() as f64;
+            if best.is_none_or(|(b, _)| mean > b) {
+                best = Some((mean, candidate));
+            }
+        }
+    }
+    let md = std::fs::read_to_string(results().join("effort.md")).unwrap();
+    let expected = match best {
+        Some((_, c)) => format!("The highest mean: **{c}**."),
+        None => "No candidate has run on every screening task yet.".to_string(),
+    };
+    assert!(md.contains(&expected), "effort.md does not say: {expected}");
+}
