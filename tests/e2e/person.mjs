@@ -159,6 +159,7 @@ const answers = [];
 let skipped = 0, steps = 0, lastId = 0, held = null, reloaded = false, watching = null;
 // The first opening question this person saw, and the one left open (with --answer).
 let first = null, open = null, budgetSpentSeen = false;
+const latencies = [];
 const state = () => page.evaluate(() => ({ prompt: arld.prompt, status: arld.status, ended: arld.ended }));
 async function holdKey(a) {
   if (held === a) return;
@@ -243,7 +244,18 @@ for (;;) {
   if (p.steps_left <= 3) await shot("mid-segment");
   const a = policy(p.obs);
   if (realtime) await holdKey(a === hello.noop ? null : a);
-  else if (p.waits && p.id > lastId) { lastId = p.id; steps++; await page.keyboard.press(keyOf(a)); }
+  else if (p.waits && p.id > lastId) {
+    lastId = p.id; steps++;
+    // Key-to-answer latency, timed in the page: from the key press to the next question (or the end of the
+    // segment) arriving over the WebSocket.
+    await page.evaluate(() => { window.__keyAt = performance.now(); });
+    await page.keyboard.press(keyOf(a));
+    const ms = await page.evaluate((id) => new Promise((resolve) => {
+      const check = () => (arld.ended || !arld.prompt || arld.prompt.id !== id ? resolve(performance.now() - window.__keyAt) : setTimeout(check, 0));
+      check();
+    }), p.id);
+    latencies.push(ms);
+  }
 }
 await holdKey(null);
 if (reload && !open) {
@@ -266,4 +278,5 @@ if (endScreen) {
   if (!endScreen.xlabels.every((l) => l && /\d/.test(l))) fail(`the charts have no x-axis labels: ${JSON.stringify(endScreen.xlabels)}`);
 }
 if (!answerLimit) for (const name of ["training", "asking", "mid-segment"]) if (!taken[name]) fail(`no "${name}" screenshot: the run never showed that state`);
-console.log(JSON.stringify({ env: hello.env, answers, skipped, steps, reloaded, refused, watcherErrors: watcher, drawn: taken, first, open, budgetSpentSeen, endScreen }));
+console.log(JSON.stringify({ env: hello.env, answers, skipped, steps, reloaded, refused, watcherErrors: watcher, drawn: taken, first, open, budgetSpentSeen, endScreen,
+  keyLatencyMs: latencies.length ? { n: latencies.length, median: latencies.sort((x, y) => x - y)[latencies.length >> 1], max: latencies[latencies.length - 1] } : null }));

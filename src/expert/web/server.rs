@@ -252,6 +252,11 @@ pub fn spawn(
                         return;
                     }
                 };
+                // Small messages leave at once: Nagle's algorithm with delayed acknowledgements would hold each
+                // step's update for tens of milliseconds.
+                let listener = axum::serve::ListenerExt::tap_io(listener, |tcp| {
+                    let _ = tcp.set_nodelay(true);
+                });
                 let app = router(shared);
                 tokio::select! {
                     result = axum::serve(listener, app) => {
