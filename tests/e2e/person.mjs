@@ -154,6 +154,33 @@ async function shot(name) {
   taken[name] = drawn;
 }
 
+// A second tab watches; the answering tab reloads and must get control back, the run going on. Done while a
+// question is open and budget is left, so that the run cannot end meanwhile.
+async function reloadAndTakeBack() {
+  // A second tab watches; the answering tab reloads and must get control back, the run going on.
+  reloaded = true;
+  watching = await browser.newPage();
+  await watching.goto(url.href);
+  await watching.waitForFunction(() => window.arld && arld.hello && arld.controller !== null &&
+    arld.controller !== arld.hello.client && document.getElementById("role").textContent.includes("watching"));
+  await page.reload();
+  await page.waitForFunction(() => window.arld && arld.hello, null, { timeout: 30000 });
+  // Control went to the watching tab when this one closed; take it back with the button while a question
+  // is open: the panel must be answerable at once, not greyed until the next question.
+  await page.waitForFunction(() => arld.ended || (arld.prompt && arld.prompt.waits), null, { timeout: 0, polling: 5 });
+  await page.click("#take-control");
+  await controlling().catch(async () => fail(`control did not come back: ${JSON.stringify(await page.evaluate(() =>
+    ({ ended: arld.ended, connected: arld.connected, controller: arld.controller, client: arld.client, prompt: arld.prompt, status: arld.status, errors: arld.errors, hidden: document.getElementById("take-control").hidden })))}`));
+  const panel = await page.evaluate(() => ({
+    open: !!(arld.prompt && arld.prompt.waits),
+    disabled: [...document.querySelectorAll("#buttons button")].some((b) => b.disabled),
+    text: document.getElementById("prompt-text").textContent,
+  }));
+  if (!panel.open) fail("no question was open when control was taken back");
+  if (panel.open && (panel.disabled || panel.text.includes("Another tab"))) fail(`after taking control back the panel stays greyed: ${JSON.stringify(panel)}`);
+  await page.waitForFunction(() => arld.status !== null);
+}
+
 // ---- answering ------------------------------------------------------------------------------------------
 const answers = [];
 let skipped = 0, steps = 0, lastId = 0, held = null, reloaded = false, watching = null;
@@ -187,29 +214,6 @@ for (;;) {
       budgetSpentSeen = true;
     }
     if (s.status && s.status.step > 0) await shot("training");
-    if (reload && taken.training && !reloaded) {
-      // A second tab watches; the answering tab reloads and must get control back, the run going on.
-      reloaded = true;
-      watching = await browser.newPage();
-      await watching.goto(url.href);
-      await watching.waitForFunction(() => window.arld && arld.hello && arld.controller !== null &&
-        arld.controller !== arld.hello.client && document.getElementById("role").textContent.includes("watching"));
-      await page.reload();
-      await page.waitForFunction(() => window.arld && arld.hello, null, { timeout: 30000 });
-      // Control went to the watching tab when this one closed; take it back with the button while a question
-      // is open: the panel must be answerable at once, not greyed until the next question.
-      await page.waitForFunction(() => arld.ended || (arld.prompt && arld.prompt.waits), null, { timeout: 0, polling: 5 });
-      await page.click("#take-control");
-      await controlling();
-      const panel = await page.evaluate(() => ({
-        open: !!(arld.prompt && arld.prompt.waits),
-        disabled: [...document.querySelectorAll("#buttons button")].some((b) => b.disabled),
-        text: document.getElementById("prompt-text").textContent,
-      }));
-      if (panel.open && (panel.disabled || panel.text.includes("Another tab"))) fail(`after taking control back the panel stays greyed: ${JSON.stringify(panel)}`);
-      await page.waitForFunction(() => arld.status !== null);
-      continue;
-    }
     if (realtime) await holdKey(null);
     else await page.waitForFunction((a) => arld.ended || arld.prompt || (arld.status && arld.status.step >= a),
       taken.training ? Infinity : after, { timeout: 0, polling: 5 });
@@ -225,6 +229,10 @@ for (;;) {
       // Nobody answers this one: it must go back to the agent.
       skipped++;
       await page.waitForFunction((id) => arld.ended || !arld.prompt || arld.prompt.id !== id, p.id, { timeout: 0, polling: 20 });
+      continue;
+    }
+    if (reload && !reloaded) {
+      await reloadAndTakeBack();
       continue;
     }
     await shot("asking");
