@@ -34,7 +34,10 @@ function connect() {
 
 function receive(m) {
   switch (m.type) {
-    case "welcome": arld.client = m.client; break;
+    case "welcome":
+      arld.client = m.client;
+      if (!arld.hello) $("prompt-text").textContent = "Waiting for the run to start…";
+      break;
     case "hello": arld.hello = { ...m, client: arld.client }; setup(); break;
     case "paused": arld.paused = m.paused; showPaused(); break;
     case "image": showImage(m.png); break;
