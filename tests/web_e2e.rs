@@ -216,7 +216,7 @@ fn a_scripted_person_answers_in_headless_chromium() {
     let cart = run_with_person(
         "CartPole-v0",
         &["--web-timeout", "3"],
-        &["train_steps=2500", "budget=30", "eval_period=500"],
+        &["train_steps=10000", "budget=30", "eval_period=2500"],
         &["--skip", "1", "--reload"],
     );
     let rows = queries(&cart.run);
@@ -239,7 +239,7 @@ fn a_scripted_person_answers_in_headless_chromium() {
     );
     assert!(answered.iter().all(|r| r.response_s.is_some()));
     let s = summary(&cart.run);
-    assert_eq!(s["train_steps"], 2500);
+    assert_eq!(s["train_steps"], 10000);
     // The unanswered question cost nothing: the budget was spent on answered segments only.
     assert!(s["queries_used"].as_u64().unwrap() <= 5 * answered.len() as u64);
     assert!(s["queries_used"].as_u64().unwrap() > 0);

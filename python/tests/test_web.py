@@ -100,3 +100,32 @@ def test_a_person_answers_a_gymnasium_environment_from_its_rendered_frames(tmp_p
     assert outcome["answered"] == len(answered) and outcome["keys"] == report["steps"]
     assert abs(outcome["person_s"] - summary["person_s"]) < 1e-6
     assert json.loads(out.strip().splitlines()[-1])["summary"]["person_s"] == summary["person_s"]
+
+
+def test_web_expert_arguments_are_checked_and_a_run_nobody_answers_completes(tmp_path):
+    import gymnasium as gym
+    import pytest
+
+    import arld
+
+    with pytest.raises(ValueError, match="listen"):
+        arld.WebExpert(listen="not-an-address")
+    with pytest.raises(ValueError, match="fps"):
+        arld.WebExpert(fps=-1)
+    with pytest.raises(ValueError, match="Escape"):
+        arld.WebExpert(keys={"Escape": 0})
+    # Without rendering, the observation is shown as a table; nobody opens the page (wait=False) and every
+    # question times out: the run completes on the agent's own, each question logged unanswered at no cost.
+    web = arld.WebExpert(timeout=0.05, wait=False, keys={"ArrowLeft": 0, "ArrowRight": 1})
+    assert web.url.startswith("http://127.0.0.1:") and repr(web).startswith("arld.WebExpert(")
+    model = arld.Agent("adqn", gym.make("CartPole-v1"), net="bootstrap", expert=web, seed=1, eval_period=300)
+    model.learn(total_timesteps=600, log_dir=tmp_path / "run")
+    with open(tmp_path / "run" / "queries.csv") as f:
+        rows = list(csv.DictReader(f))
+    assert rows and all(r["answered"] == "false" and r["expert_action"] == "" for r in rows)
+    assert all(float(r["response_s"]) >= 0.05 for r in rows)
+    assert model.summary["queries_used"] == 0
+    assert model.summary["person_s"] >= 0.05 * len(rows)
+    # One run per WebExpert.
+    with pytest.raises(RuntimeError, match="create a new one"):
+        arld.Agent("adqn", gym.make("CartPole-v1"), expert=web, seed=1).learn(total_timesteps=100)

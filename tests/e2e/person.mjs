@@ -154,11 +154,39 @@ async function shot(name) {
   taken[name] = drawn;
 }
 
+// A second tab watches; the answering tab reloads and must get control back, the run going on. Done while a
+// question is open and budget is left, so that the run cannot end meanwhile.
+async function reloadAndTakeBack() {
+  // A second tab watches; the answering tab reloads and must get control back, the run going on.
+  reloaded = true;
+  watching = await browser.newPage();
+  await watching.goto(url.href);
+  await watching.waitForFunction(() => window.arld && arld.hello && arld.controller !== null &&
+    arld.controller !== arld.hello.client && document.getElementById("role").textContent.includes("watching"));
+  await page.reload();
+  await page.waitForFunction(() => window.arld && arld.hello, null, { timeout: 30000 });
+  // Control went to the watching tab when this one closed; take it back with the button while a question
+  // is open: the panel must be answerable at once, not greyed until the next question.
+  await page.waitForFunction(() => arld.ended || (arld.prompt && arld.prompt.waits), null, { timeout: 0, polling: 5 });
+  await page.click("#take-control");
+  await controlling().catch(async () => fail(`control did not come back: ${JSON.stringify(await page.evaluate(() =>
+    ({ ended: arld.ended, connected: arld.connected, controller: arld.controller, client: arld.client, prompt: arld.prompt, status: arld.status, errors: arld.errors, hidden: document.getElementById("take-control").hidden })))}`));
+  const panel = await page.evaluate(() => ({
+    open: !!(arld.prompt && arld.prompt.waits),
+    disabled: [...document.querySelectorAll("#buttons button")].some((b) => b.disabled),
+    text: document.getElementById("prompt-text").textContent,
+  }));
+  if (!panel.open) fail("no question was open when control was taken back");
+  if (panel.open && (panel.disabled || panel.text.includes("Another tab"))) fail(`after taking control back the panel stays greyed: ${JSON.stringify(panel)}`);
+  await page.waitForFunction(() => arld.status !== null);
+}
+
 // ---- answering ------------------------------------------------------------------------------------------
 const answers = [];
 let skipped = 0, steps = 0, lastId = 0, held = null, reloaded = false, watching = null;
 // The first opening question this person saw, and the one left open (with --answer).
 let first = null, open = null, budgetSpentSeen = false;
+const latencies = [];
 const state = () => page.evaluate(() => ({ prompt: arld.prompt, status: arld.status, ended: arld.ended }));
 async function holdKey(a) {
   if (held === a) return;
@@ -186,29 +214,6 @@ for (;;) {
       budgetSpentSeen = true;
     }
     if (s.status && s.status.step > 0) await shot("training");
-    if (reload && taken.training && !reloaded) {
-      // A second tab watches; the answering tab reloads and must get control back, the run going on.
-      reloaded = true;
-      watching = await browser.newPage();
-      await watching.goto(url.href);
-      await watching.waitForFunction(() => window.arld && arld.hello && arld.controller !== null &&
-        arld.controller !== arld.hello.client && document.getElementById("role").textContent.includes("watching"));
-      await page.reload();
-      await page.waitForFunction(() => window.arld && arld.hello, null, { timeout: 30000 });
-      // Control went to the watching tab when this one closed; take it back with the button while a question
-      // is open: the panel must be answerable at once, not greyed until the next question.
-      await page.waitForFunction(() => arld.ended || (arld.prompt && arld.prompt.waits), null, { timeout: 0, polling: 5 });
-      await page.click("#take-control");
-      await controlling();
-      const panel = await page.evaluate(() => ({
-        open: !!(arld.prompt && arld.prompt.waits),
-        disabled: [...document.querySelectorAll("#buttons button")].some((b) => b.disabled),
-        text: document.getElementById("prompt-text").textContent,
-      }));
-      if (panel.open && (panel.disabled || panel.text.includes("Another tab"))) fail(`after taking control back the panel stays greyed: ${JSON.stringify(panel)}`);
-      await page.waitForFunction(() => arld.status !== null);
-      continue;
-    }
     if (realtime) await holdKey(null);
     else await page.waitForFunction((a) => arld.ended || arld.prompt || (arld.status && arld.status.step >= a),
       taken.training ? Infinity : after, { timeout: 0, polling: 5 });
@@ -224,6 +229,10 @@ for (;;) {
       // Nobody answers this one: it must go back to the agent.
       skipped++;
       await page.waitForFunction((id) => arld.ended || !arld.prompt || arld.prompt.id !== id, p.id, { timeout: 0, polling: 20 });
+      continue;
+    }
+    if (reload && !reloaded) {
+      await reloadAndTakeBack();
       continue;
     }
     await shot("asking");
@@ -243,7 +252,18 @@ for (;;) {
   if (p.steps_left <= 3) await shot("mid-segment");
   const a = policy(p.obs);
   if (realtime) await holdKey(a === hello.noop ? null : a);
-  else if (p.waits && p.id > lastId) { lastId = p.id; steps++; await page.keyboard.press(keyOf(a)); }
+  else if (p.waits && p.id > lastId) {
+    lastId = p.id; steps++;
+    // Key-to-answer latency, timed in the page: from the key press to the next question (or the end of the
+    // segment) arriving over the WebSocket.
+    await page.evaluate(() => { window.__keyAt = performance.now(); });
+    await page.keyboard.press(keyOf(a));
+    const ms = await page.evaluate((id) => new Promise((resolve) => {
+      const check = () => (arld.ended || !arld.prompt || arld.prompt.id !== id ? resolve(performance.now() - window.__keyAt) : setTimeout(check, 0));
+      check();
+    }), p.id);
+    latencies.push(ms);
+  }
 }
 await holdKey(null);
 if (reload && !open) {
@@ -266,4 +286,5 @@ if (endScreen) {
   if (!endScreen.xlabels.every((l) => l && /\d/.test(l))) fail(`the charts have no x-axis labels: ${JSON.stringify(endScreen.xlabels)}`);
 }
 if (!answerLimit) for (const name of ["training", "asking", "mid-segment"]) if (!taken[name]) fail(`no "${name}" screenshot: the run never showed that state`);
-console.log(JSON.stringify({ env: hello.env, answers, skipped, steps, reloaded, refused, watcherErrors: watcher, drawn: taken, first, open, budgetSpentSeen, endScreen }));
+console.log(JSON.stringify({ env: hello.env, answers, skipped, steps, reloaded, refused, watcherErrors: watcher, drawn: taken, first, open, budgetSpentSeen, endScreen,
+  keyLatencyMs: latencies.length ? { n: latencies.length, median: latencies.sort((x, y) => x - y)[latencies.length >> 1], max: latencies[latencies.length - 1] } : null }));

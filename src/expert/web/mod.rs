@@ -1,18 +1,26 @@
 //! The web expert: a person answers the agent's queries in a browser.
 //!
-//! [`WebExpert::start`] binds a local web server ([`server`], axum on a tokio runtime thread of its own) and
+//! [`WebServer::start`] binds a local web server ([`server`], axum on a tokio runtime thread of its own) and
 //! prints the URL to open, with a random access token from the operating system (not from the run's seed, so
-//! the run's own random draws are untouched). Training runs at full speed while the page shows it: the
-//! environment drawn from its [`Geometry`](crate::env::Geometry), step, episode, budget, the uncertainty against
-//! the adaptive threshold, the test-return curve. When the agent asks, the run waits for the person, who answers
-//! with the keyboard (arrows or WASD) or the buttons for the whole segment, either turn-based (one step per key)
-//! or in real time (`fps`: the environment advances at that rate with the held key, or the no-op action when none
-//! is held). With a `timeout`, a question nobody answers in time goes back to the agent
-//! ([`Answer::Unanswered`]). The page ([`protocol`] describes its messages) is plain HTML, CSS and JavaScript
-//! embedded in the binary.
+//! the run's own random draws are untouched). It can start before the environment is known (a Python program
+//! creates it first); [`WebExpert::new`] then gives it the run's [`Page`]: the environment's name, its actions
+//! with their keys, and the [`FrameSource`] that shows it ([`frames`]: the built-in tasks drawn from their
+//! geometry, rendered frames of any other environment, or its observation as a table). The run starts once a
+//! page is open ([`WebExpert::wait_for_page`], unless `wait=no`).
 //!
-//! The training thread never waits for the server except while a question is open: it publishes to a shared
-//! board (throttled to about 15 updates a second) and reads keys from a channel.
+//! Training runs at full speed while the page shows it: the environment, step, episode, budget, the uncertainty
+//! against the adaptive threshold, the test-return curve, and the person's own time (questions left at most,
+//! seconds spent, an estimate of the time still needed at their pace). When the agent asks, the run waits for
+//! the person, who answers with the keyboard or the buttons for the whole segment, either turn-based (one step
+//! per key) or in real time (`fps`: the environment advances at that rate with the held key, or the no-op
+//! action when none is held). A question goes back to the agent ([`Answer::Unanswered`]) when the person hands
+//! it back or, with a `timeout`, when nobody answers in time. The person may pause the run. A stop request
+//! (Ctrl-C, SIGTERM) ends any wait at once with [`crate::interrupt::Interrupted`], so that the run snapshots with
+//! the question open. The page ([`protocol`] describes its messages) is plain HTML, CSS and JavaScript embedded
+//! in the binary; at the end it shows how the run ended and what the person gave ([`Expert::finish`]).
+//!
+//! The training thread never waits for the server except while a question is open (or the run is paused): it
+//! publishes to a shared board (throttled to about 15 updates a second) and reads keys from a channel.
 
 pub mod frames;
 pub mod protocol;

@@ -1,7 +1,8 @@
 //! The web server of the web expert: an axum application on its own tokio runtime thread.
 //!
 //! It serves only the embedded page (`/`, `/app.js`, `/style.css`) and one WebSocket (`/ws`), all behind the
-//! access token (`?token=...`, 403 without it). The training thread and the server share a [`Board`]: the latest
+//! access token (`?token=...`, exactly once, 403 otherwise) and behind a `Host` and `Origin` that name the served
+//! address (so that the page of another site cannot reach the server by DNS rebinding). The training thread and the server share a [`Board`]: the latest
 //! status, frame and prompt and the history, so that a tab that connects (or reloads) late sees everything at
 //! once; every change is also broadcast to the open tabs. One tab controls (the first one, or the one that took
 //! control); its keys go to the training thread over a channel, the others watch.
@@ -251,6 +252,11 @@ pub fn spawn(
                         return;
                     }
                 };
+                // Small messages leave at once: Nagle's algorithm with delayed acknowledgements would hold each
+                // step's update for tens of milliseconds.
+                let listener = axum::serve::ListenerExt::tap_io(listener, |tcp| {
+                    let _ = tcp.set_nodelay(true);
+                });
                 let app = router(shared);
                 tokio::select! {
                     result = axum::serve(listener, app) => {

@@ -34,7 +34,10 @@ function connect() {
 
 function receive(m) {
   switch (m.type) {
-    case "welcome": arld.client = m.client; break;
+    case "welcome":
+      arld.client = m.client;
+      if (!arld.hello) $("prompt-text").textContent = "Waiting for the run to start…";
+      break;
     case "hello": arld.hello = { ...m, client: arld.client }; setup(); break;
     case "paused": arld.paused = m.paused; showPaused(); break;
     case "image": showImage(m.png); break;
@@ -154,6 +157,17 @@ function showPrompt() {
   document.title = p && p.waits && controls() && !arld.ended ? "● Your turn: the agent asks" : "arld: the agent asks";
 }
 $("pass").addEventListener("click", () => pass());
+
+// With a timeout, the seconds left to answer the open question (paused time does not count).
+let asked = { id: null, left: 0, last: 0 };
+setInterval(() => {
+  const p = arld.prompt, h = arld.hello, el = $("countdown"), now = performance.now();
+  if (!p || !p.waits || !h || !h.timeout || arld.ended) { el.textContent = ""; return; }
+  if (asked.id !== p.id) asked = { id: p.id, left: h.timeout, last: now };
+  if (!arld.paused) asked.left -= (now - asked.last) / 1000;
+  asked.last = now;
+  el.textContent = ` ${Math.max(0, Math.ceil(asked.left))} s left to answer`;
+}, 200);
 
 // Hands the open question back to the agent.
 function pass() {
