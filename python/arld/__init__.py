@@ -600,11 +600,16 @@ class Agent:
                 raise ValueError("dqn never asks an expert; drop expert=")
         else:
             self._expert, self._expert_name = None, ""
-            if method != "dqn":
-                raise ValueError(f"{method} needs an expert: pass expert=")
+            if method != "dqn" and not (method == "dqfd" and demos is not None):
+                raise ValueError(f"{method} needs an expert: pass expert= (or demos= for dqfd)")
         if demos is not None and method not in ("dqfd", "adqnp"):
             raise ValueError(f"{method} does not pre-train on demonstrations; demos= is for dqfd and adqnp")
         self._demos = None if demos is None else _demos(demos)
+        if demos is not None and method == "dqfd":
+            # DQfD never asks during training: with demos= no expert runs, and the records say where the
+            # demonstrations came from instead of naming one.
+            self._hyper["demo_file"] = "python: demos="
+            self._expert, self._expert_name = None, ""
         try:
             self.config = self._resolve(self._hyper)  # fails early on a bad value
         except ValueError as e:

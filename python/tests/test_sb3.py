@@ -158,6 +158,30 @@ def test_dqfd_demonstrations_come_through_the_wrapper():
         arld.Agent("adqn", gym.make("CartPole-v1"), expert=expert, demos=demos)
 
 
+def test_dqfd_on_given_demonstrations_runs_no_expert_and_records_none(tmp_path):
+    demos = arld.collect_demos(gym.make("CartPole-v1"), expert, 200, seed=0)
+    calls = []
+
+    def never(obs):
+        calls.append(obs)
+        return 0
+
+    # Without expert=: the demonstrations are all DQfD needs.
+    model = arld.Agent("dqfd", gym.make("CartPole-v1"), demos=demos, seed=0, pretrain_steps=20)
+    model.learn(600, log_dir=tmp_path / "a")
+    summary = json.loads((tmp_path / "a" / "summary.json").read_text())
+    assert summary["demos_pretrain"] == 200 and "expert" not in summary
+    config = (tmp_path / "a" / "config.toml").read_text()
+    assert 'demo_file = "python: demos="' in config
+    # With an expert= beside demos=, the expert is never asked and not named.
+    arld.Agent("dqfd", gym.make("CartPole-v1"), expert=never, demos=demos, seed=0,
+               pretrain_steps=20).learn(600, log_dir=tmp_path / "b")
+    assert calls == []
+    assert "expert" not in json.loads((tmp_path / "b" / "summary.json").read_text())
+    with pytest.raises(ValueError, match="needs an expert"):
+        arld.Agent("adqnp", gym.make("CartPole-v1"), demos=demos)
+
+
 def test_callbacks_see_the_run_and_stop_it():
     from stable_baselines3.common.callbacks import BaseCallback
 
