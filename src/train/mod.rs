@@ -560,6 +560,22 @@ fn train_loop(
     let mut obs = Vec::new();
     let mut next_obs = Vec::new();
 
+    // The parts of the run a snapshot (or a paused run) holds, borrowed from the loop's state.
+    macro_rules! run_parts {
+        () => {
+            RunParts {
+                agent: &agent,
+                replay: &replay,
+                queries: &queries,
+                replay_rng: &replay_rng,
+                query_rng: &query_rng,
+                evaluator: &evaluator,
+                expert_state: expert.as_deref().and_then(|e| e.state()),
+                obs: &obs,
+            }
+        };
+    }
+
     // A snapshot point of the loop: snapshots the run in `$ck` when `$at` is due or a stop was asked for, and on
     // a stop ends the run with `$stopped` (what was done) and where the snapshot is.
     macro_rules! snapshot_point {
@@ -567,16 +583,7 @@ fn train_loop(
             let ck: &mut Checkpointer = $ck;
             let stop = crate::interrupt::requested();
             if stop || ck.due($at) {
-                let parts = RunParts {
-                    agent: &agent,
-                    replay: &replay,
-                    queries: &queries,
-                    replay_rng: &replay_rng,
-                    query_rng: &query_rng,
-                    evaluator: &evaluator,
-                    expert_state: expert.as_deref().and_then(|e| e.state()),
-                    obs: &obs,
-                };
+                let parts = run_parts!();
                 clock.stamp(st);
                 snapshot(ck, st, parts, log, stop)?;
             }
@@ -895,16 +902,7 @@ fn train_loop(
                     log,
                     cfg,
                     st,
-                    parts: RunParts {
-                        agent: &agent,
-                        replay: &replay,
-                        queries: &queries,
-                        replay_rng: &replay_rng,
-                        query_rng: &query_rng,
-                        evaluator: &evaluator,
-                        expert_state: expert.as_deref().and_then(|e| e.state()),
-                        obs: &obs,
-                    },
+                    parts: run_parts!(),
                 };
                 control = d.paused(&mut paused)?;
             }
