@@ -182,4 +182,9 @@ fn the_design_choice_is_the_candidate_with_the_highest_mean_median_auc() {
         None => "No candidate has run on every screening task yet.".to_string(),
     };
     assert!(md.contains(&expected), "effort.md does not say: {expected}");
+    assert_eq!(
+        best.map(|(_, c)| c),
+        Some(arld::experiment::protocol::HELD_OUT_RULE),
+        "the rule fixed for the held-out test is not the design seeds' choice"
+    );
 }
