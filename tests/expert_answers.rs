@@ -3,7 +3,7 @@
 //! time; an action out of range is an error, not a panic.
 
 use anyhow::Result;
-use arld::expert::{Answer, Expert, Query};
+use arld::expert::{Answer, Expert, Progress, Query};
 use arld::train::{ConfigInput, Method, NetKind, RunLog, TrainConfig, train};
 
 /// Leaves every other opening question unanswered and answers everything else with action 1.
@@ -134,4 +134,63 @@ fn pre_training_from_a_web_expert_is_refused_up_front() {
     assert!(format!("{err:#}").contains("--demos"), "{err:#}");
     input.set("demo_file", "demos.jsonl").unwrap();
     assert!(input.resolve().is_ok());
+}
+
+/// Answers with action 0 and records, after every step, whether the step's uncertainty was computed.
+struct Watching {
+    shows: bool,
+    computed: Vec<(usize, bool)>,
+}
+
+impl Expert for Watching {
+    fn act(&mut self, _obs: &[f32]) -> Result<usize> {
+        Ok(0)
+    }
+    fn describe(&self) -> String {
+        "watching:test".into()
+    }
+    fn shows_uncertainty(&self) -> bool {
+        self.shows
+    }
+    fn observe(&mut self, p: &Progress) {
+        let in_segment = p.queries.expert_in_control();
+        if !in_segment {
+            self.computed.push((p.step, p.uncertainty.is_some()));
+        }
+    }
+}
+
+#[test]
+fn an_expert_that_shows_the_uncertainty_sees_it_after_the_budget_is_spent() {
+    let mut input = ConfigInput::new("CartPole-v0", Method::Adqn, NetKind::Bootstrap, 5);
+    for o in [
+        "budget=10",
+        "train_steps=400",
+        "learning_starts=100",
+        "eval_period=400",
+        "eval_episodes=1",
+    ] {
+        input.apply_override(o).unwrap();
+    }
+    let cfg = input.resolve().unwrap();
+    for shows in [false, true] {
+        let mut expert = Watching {
+            shows,
+            computed: Vec::new(),
+        };
+        let (summary, _) = train(&cfg, Some(&mut expert), None, &mut RunLog::in_memory()).unwrap();
+        assert_eq!(summary.queries_used, 10, "the budget is spent");
+        let late: Vec<bool> = expert
+            .computed
+            .iter()
+            .filter(|(s, _)| *s >= 350)
+            .map(|(_, c)| *c)
+            .collect();
+        assert!(!late.is_empty());
+        // A program's run computes no uncertainty once no rule reads it; a person's page gets it to the end.
+        assert!(
+            late.iter().all(|&c| c == shows),
+            "shows_uncertainty = {shows}: {late:?}"
+        );
+    }
 }

@@ -53,6 +53,12 @@ pub trait Expert: Send {
     /// Called by the training loop after every step, so that an interactive expert can show the run as it goes.
     /// It must be cheap and must not change anything the run depends on.
     fn observe(&mut self, _progress: &Progress) {}
+    /// Whether the expert shows the agent's uncertainty at every step (a person's page): the agent then
+    /// computes it even where no query rule reads it (a segment aside), so that it goes on after the budget is
+    /// spent. Programs say no: the agent computes only what its rule needs.
+    fn shows_uncertainty(&self) -> bool {
+        false
+    }
     /// Seconds a person spent answering (recorded in the run's summary); `None` for programs.
     fn person_seconds(&self) -> Option<f64> {
         None

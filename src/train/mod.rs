@@ -680,7 +680,8 @@ fn train_loop(
                 // Ablation: no queries before the first update; the rule does not see these steps.
                 agent_pick = Some(agent.act(&obs, epsilon_at(cfg, step), Needs::NOTHING).0);
             } else {
-                let want = queries.signals_wanted_now();
+                let mut want = queries.signals_wanted_now();
+                want.uncertainty |= expert.as_deref().is_some_and(|e| e.shows_uncertainty());
                 let (agent_action, signals) = agent.act(&obs, epsilon_at(cfg, step), want);
                 step_uncertainty = signals.uncertainty;
                 let oracle = if want.oracle {

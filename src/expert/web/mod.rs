@@ -528,6 +528,9 @@ impl Expert for WebExpert {
         Ok(())
     }
 
+    fn shows_uncertainty(&self) -> bool {
+        true
+    }
     fn observe(&mut self, p: &Progress) {
         if self.prompt_open && !p.queries.expert_in_control() {
             self.publish_prompt(None);
