@@ -192,6 +192,36 @@ pub fn effort_grids(seeds: &[u64]) -> Vec<SweepGrid> {
     grids
 }
 
+/// The held-out test of [`HELD_OUT_RULE`] (docs/algorithm.md section 14): on the four tasks with both networks
+/// and the seeds [`HELD_OUT_SEEDS`] (whatever the sweep's seed count), GDQN, BDQN and ADQN and the rule, each
+/// at the paper's budget. Every run varies `budget` (to the paper's own value), so that the held-out seeds live
+/// in variants of their own and never join the paper's tables.
+pub fn held_out_grids() -> Vec<SweepGrid> {
+    let nets = vec![NetKind::Bootstrap, NetKind::Noisy];
+    let seeds: Vec<u64> = HELD_OUT_SEEDS.collect();
+    let mut grids = Vec::new();
+    for task in crate::paper::PAPER_TASKS {
+        let budget = format!("budget={}", paper_budget(task.gym_id));
+        grids.push(SweepGrid {
+            envs: vec![task.gym_id.to_string()],
+            methods: vec![Method::Gdqn, Method::Bdqn, Method::Adqn],
+            nets: nets.clone(),
+            seeds: seeds.clone(),
+            vary: vec![budget.clone()],
+            ..SweepGrid::default()
+        });
+        grids.push(SweepGrid {
+            envs: vec![task.gym_id.to_string()],
+            methods: vec![Method::Adqn],
+            nets: nets.clone(),
+            seeds: seeds.clone(),
+            vary: vec![format!("{budget};query_rule={HELD_OUT_RULE}")],
+            ..SweepGrid::default()
+        });
+    }
+    grids
+}
+
 /// Number of seeds the paper used per configuration.
 pub const PAPER_SEEDS: u64 = 20;
 
@@ -201,6 +231,7 @@ pub const PAPER_SEEDS: u64 = 20;
 /// - `experts`: ADQN and DQfD on Lunar Lander x both nets x three experts (Figure 4);
 /// - `n_r`: ADQN on Acrobot x both nets x N_r in {100, 10000} (1000 is the methods part's);
 /// - `effort`: the effort benchmark ([`effort_grids`]);
+/// - `held_out`: the effort benchmark's held-out test ([`held_out_grids`], on seeds of its own);
 /// - `ablations`: [`ABLATIONS`] on Acrobot and [`CARTPOLE_TARGET_ABLATION`] on CartPole, for DQN, BDQN and ADQN
 ///   x both nets (the methods part's runs are the baseline), then [`HARDER_ABLATIONS`] on [`HARDER_TASKS`].
 ///
@@ -281,6 +312,9 @@ pub fn paper_grids(seeds: u64) -> Vec<(&'static str, SweepGrid)> {
     for grid in effort_grids(&seed_list) {
         grids.push(("effort", grid));
     }
+    for grid in held_out_grids() {
+        grids.push(("held_out", grid));
+    }
     grids
 }
 
@@ -328,6 +362,14 @@ mod tests {
                 8 * 20,
                 2 * 4 * 20,
                 8 * 20,
+                3 * 2 * 20,
+                2 * 20,
+                3 * 2 * 20,
+                2 * 20,
+                3 * 2 * 20,
+                2 * 20,
+                3 * 2 * 20,
+                2 * 20,
             ]
         );
         assert_eq!(
@@ -338,7 +380,8 @@ mod tests {
                 "experts",
                 "n_r",
                 "ablations",
-                "effort"
+                "effort",
+                "held_out"
             ]
         );
         assert_eq!(paper_budget("CartPole-v0"), 200);
