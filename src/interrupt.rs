@@ -67,3 +67,8 @@ pub fn request() {
 #[derive(Debug, Clone, thiserror::Error)]
 #[error("interrupted: {0}")]
 pub struct Interrupted(pub String);
+
+/// Whether `err` is a stop request (an expert that was waiting for an answer when the stop came returns one).
+pub fn is_stop(err: &anyhow::Error) -> bool {
+    err.chain().any(|cause| cause.is::<Interrupted>())
+}

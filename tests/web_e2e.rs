@@ -60,6 +60,8 @@ struct Outcome {
     answers: Vec<usize>,
     skipped: usize,
     run: PathBuf,
+    /// The scripted person's whole report.
+    report: serde_json::Value,
 }
 
 /// Starts `arld` with `args` (stdout piped, `--quiet` added) and returns it with the URL it printed.
@@ -184,6 +186,7 @@ fn run_with_person(env: &str, web_args: &[&str], sets: &[&str], person_args: &[&
             .collect(),
         skipped: report["skipped"].as_u64().unwrap() as usize,
         run,
+        report,
     }
 }
 
@@ -217,8 +220,17 @@ fn a_scripted_person_answers_in_headless_chromium() {
         "CartPole-v0",
         &["--web-timeout", "3"],
         &["train_steps=10000", "budget=30", "eval_period=2500"],
-        &["--skip", "1", "--reload"],
+        &["--skip", "1", "--reload", "--undo"],
     );
+    // The person undid a wrong key (the page showed the state after it, then the question's own state again:
+    // person.mjs checks both) and answered; the agent's steps before questions were replayed to them, ending at
+    // the question's state (checked by person.mjs), watched once and skipped with a key afterwards.
+    let undo = &cart.report["undo"];
+    assert!(undo.is_object(), "no undo was tried: {}", cart.report);
+    assert_ne!(undo["ahead"], undo["asked"]);
+    assert_eq!(undo["back"], undo["asked"]);
+    assert_eq!(cart.report["replaysWatched"], 1, "{}", cart.report);
+    assert!(cart.report["replaysSkipped"].as_u64().unwrap() >= 1);
     let rows = queries(&cart.run);
     assert!(rows.iter().all(|r| r.expert == "web"));
     let (answered, unanswered): (Vec<_>, Vec<_>) = rows.iter().partition(|r| r.answered);
@@ -258,6 +270,8 @@ fn a_scripted_person_answers_in_headless_chromium() {
     );
     let rows = queries(&lander.run);
     assert!(!rows.is_empty() && rows.iter().all(|r| r.answered && r.expert == "web"));
+    // Each real-time segment began with a countdown after the person's key.
+    assert!(lander.report["countdownsSeen"].as_u64().unwrap() > 0);
     assert_eq!(
         rows.iter()
             .map(|r| r.expert_action.unwrap())

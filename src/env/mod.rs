@@ -363,6 +363,36 @@ pub fn make(id: &str) -> Result<Box<dyn Env>, EnvError> {
     }
 }
 
+/// How an episode began: with the run's seed (its first episode) or from the generator the reset drew from.
+/// With the episode's actions it puts an environment back where it was ([`replay_episode`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum EpisodeStart {
+    Seed(u64),
+    Generator([u64; 6]),
+}
+
+/// Puts `env` where an episode that began at `start` stands after `actions`: resets it the same way and takes the
+/// same actions (our environments are deterministic given both). Writes the last observation into `obs`.
+pub fn replay_episode(
+    env: &mut dyn Env,
+    start: EpisodeStart,
+    actions: &[usize],
+    obs: &mut Vec<f32>,
+) -> Result<(), EnvError> {
+    obs.resize(env.obs_dim(), 0.0);
+    match start {
+        EpisodeStart::Seed(seed) => env.reset_into(Some(seed), obs),
+        EpisodeStart::Generator(words) => {
+            env.set_generator(Some(NumpyRng::from_words(words)));
+            env.reset_into(None, obs);
+        }
+    }
+    for &a in actions {
+        env.step_into(a, obs)?;
+    }
+    Ok(())
+}
+
 /// The physics of a built-in task, which [`Simulated`] makes an [`Env`]: the initial state, a step with a valid
 /// action, and what the viewer and the conformance `set` case need.
 pub trait Dynamics: Send {

@@ -85,10 +85,20 @@ pub struct Query<'a> {
     pub obs: &'a [f32],
     /// The environment in the state `obs` comes from (to draw it; never stepped by the expert).
     pub env: &'a dyn Env,
+    /// How the episode in progress began and its actions so far: with them an expert can rebuild the state
+    /// (to replay the agent's steps to a person, or let them undo a key on a copy).
+    pub episode: EpisodeTrace<'a>,
     /// The agent's own proposal, on the step that opens the segment (`None` on the later steps).
     pub agent_action: Option<usize>,
     /// Expert steps left in the segment, this one included.
     pub steps_left: usize,
+}
+
+/// The episode in progress: how it began and the actions taken since.
+#[derive(Clone, Copy, Debug)]
+pub struct EpisodeTrace<'a> {
+    pub start: crate::env::EpisodeStart,
+    pub actions: &'a [usize],
 }
 
 /// How a run ended, for [`Expert::finish`].

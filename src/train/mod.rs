@@ -17,7 +17,7 @@ pub use snapshot::Checkpointer;
 use crate::agent::{Agent, test_policy_actions};
 use crate::env::{self, Env};
 use crate::expert::demos::Demonstrations;
-use crate::expert::{Answer, Expert, Progress, Query};
+use crate::expert::{Answer, EpisodeTrace, Expert, Progress, Query};
 use crate::nn::{QNet, Workspace};
 use crate::query::{DecisionInput, Needs, OracleView, QueryController};
 use crate::replay::{Batch, Replay, ReplayConfig, Transition};
@@ -357,18 +357,22 @@ struct LoopState {
     pending: Option<OpenQuestion>,
 }
 
+impl LoopState {
+    /// How the episode in progress began (the first with the run's environment seed).
+    fn episode_start(&self, env_seed: u64) -> crate::env::EpisodeStart {
+        self.ep_generator.map_or(
+            crate::env::EpisodeStart::Seed(env_seed),
+            crate::env::EpisodeStart::Generator,
+        )
+    }
+}
+
 /// A query the agent decided on at the step in progress, before the expert's answer.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 struct OpenQuestion {
     agent_action: usize,
     score: Option<f32>,
     threshold: Option<f32>,
-}
-
-/// Whether `err` is a stop request (an expert that was waiting for an answer when the stop came returns one).
-fn is_stop(err: &anyhow::Error) -> bool {
-    err.chain()
-        .any(|cause| cause.is::<crate::interrupt::Interrupted>())
 }
 
 /// The time a run has taken: wall-clock seconds, and CPU seconds of the thread that trains it (which a paused
@@ -495,7 +499,7 @@ fn train_run(
 /// run is then interrupted, not failed). The run's own error matters more than this file: a write that fails
 /// is only warned about.
 pub fn record_failure(dir: &std::path::Path, err: &anyhow::Error, phase: &str, step: usize) {
-    if is_stop(err) {
+    if crate::interrupt::is_stop(err) {
         return;
     }
     let failure = run_dir::Failure::new(err, phase, step);
@@ -615,16 +619,12 @@ fn train_loop(
         clock.carry(st);
         if st.training {
             // The environment: the generator its episode's reset drew from, the reset, the actions taken.
-            obs = match st.ep_generator {
-                None => env.reset(Some(env_seed)),
-                Some(words) => {
-                    env.set_generator(Some(crate::rng::NumpyRng::from_words(words)));
-                    env.reset(None)
-                }
-            };
-            for &a in &st.ep_actions {
-                env.step_into(a, &mut obs)?;
-            }
+            crate::env::replay_episode(
+                &mut *env,
+                st.episode_start(env_seed),
+                &st.ep_actions,
+                &mut obs,
+            )?;
             ensure!(
                 obs == state.f32s("obs")?,
                 "replaying the episode in progress did not reach the snapshot's observation"
@@ -730,8 +730,18 @@ fn train_loop(
             a
         } else if let Some(question) = open {
             let agent_action = question.agent_action;
-            let answer = match ask_expert(&mut expert, &obs, &*env, Some(agent_action), &queries) {
-                Err(err) if is_stop(&err) => {
+            let answer = match ask_expert(
+                &mut expert,
+                &obs,
+                &*env,
+                EpisodeTrace {
+                    start: st.episode_start(env_seed),
+                    actions: &st.ep_actions,
+                },
+                Some(agent_action),
+                &queries,
+            ) {
+                Err(err) if crate::interrupt::is_stop(&err) => {
                     st.pending = Some(question);
                     stop_while_asking!(err)
                 }
@@ -757,8 +767,18 @@ fn train_loop(
             })?;
             expert_action.unwrap_or(agent_action)
         } else {
-            match ask_expert(&mut expert, &obs, &*env, None, &queries) {
-                Err(err) if is_stop(&err) => stop_while_asking!(err),
+            match ask_expert(
+                &mut expert,
+                &obs,
+                &*env,
+                EpisodeTrace {
+                    start: st.episode_start(env_seed),
+                    actions: &st.ep_actions,
+                },
+                None,
+                &queries,
+            ) {
+                Err(err) if crate::interrupt::is_stop(&err) => stop_while_asking!(err),
                 Err(err) => return Err(err),
                 Ok(Answer::Action { action, .. }) => action,
                 // Nobody answered mid-segment: the agent takes the rest of it back, and the log says so.
@@ -1124,6 +1144,7 @@ fn ask_expert(
     expert: &mut Option<&mut dyn Expert>,
     obs: &[f32],
     env: &dyn Env,
+    episode: EpisodeTrace<'_>,
     agent_action: Option<usize>,
     queries: &QueryController,
 ) -> Result<Answer> {
@@ -1133,6 +1154,7 @@ fn ask_expert(
     let query = Query {
         obs,
         env,
+        episode,
         agent_action,
         steps_left: queries.segment_left(),
     };

@@ -8,6 +8,10 @@
 // (--answer: answer N opening questions, then leave as soon as the next one is open, reporting it as "open".)
 // (--reload: open a second, watching tab, and reload the answering tab once while training runs.)
 // (--after: take the screenshots only once the run has passed STEP, e.g. to show a learning curve.)
+// (--undo: turn-based; at the first question with steps to come press a wrong key, check the page shows the state
+//  after it, undo it with Backspace, check the question's own state is back, then answer.)
+// Replays of the agent's steps before a question: the first is watched to its end, later ones are skipped with a
+// key; each must end at the state the question shows.
 // Prints one JSON line: {"answers": [actions answered to opening questions, in order], "skipped": N, ...}.
 import { chromium } from "playwright-core";
 import http from "node:http";
@@ -28,6 +32,7 @@ const after = Number(args.after || 0);
 const reload = !!args.reload;
 const answerLimit = Number(args.answer || 0);
 const expectImage = !!args["expect-image"];
+const undoTest = !!args.undo;
 fs.mkdirSync(shots, { recursive: true });
 const fail = (msg) => { console.error(`person: ${msg}`); process.exit(1); };
 
@@ -187,7 +192,26 @@ let skipped = 0, steps = 0, lastId = 0, held = null, reloaded = false, watching 
 // The first opening question this person saw, and the one left open (with --answer).
 let first = null, open = null, budgetSpentSeen = false;
 const latencies = [];
-const state = () => page.evaluate(() => ({ prompt: arld.prompt, status: arld.status, ended: arld.ended }));
+const state = () => page.evaluate(() => ({ prompt: arld.prompt, status: arld.status, ended: arld.ended, replaying: arld.replaying }));
+let undoReport = null, replaysWatched = 0, replaysSkipped = 0, countdownsSeen = 0;
+const sameObs = (a, b) => a.length === b.length && a.every((x, i) => x === b[i]);
+// A replay before a question: watched (the first) or skipped with a key that is no action's; either way it must
+// end at the question's state, and no key may answer the question meanwhile.
+async function handleReplay() {
+  const shown = await page.evaluate(() => arld.replays.length);
+  if (replaysWatched === 0) {
+    await shot("replay");
+    await page.waitForFunction(() => !arld.replaying, null, { timeout: 10000 }).catch(() => fail("a replay did not end within 10 s"));
+    replaysWatched++;
+  } else {
+    await page.keyboard.press("Shift");
+    await page.waitForFunction(() => !arld.replaying, null, { timeout: 2000 }).catch(() => fail("a key did not skip the replay"));
+    replaysSkipped++;
+  }
+  const r = await page.evaluate(() => ({ last: arld.replays[arld.replays.length - 1], prompt: arld.prompt }));
+  if (shown && r.prompt && r.last.last.obs && !sameObs(r.last.last.obs, r.prompt.obs))
+    fail(`the replay ended at ${JSON.stringify(r.last.last.obs)}, not at the question's state ${JSON.stringify(r.prompt.obs)}`);
+}
 async function holdKey(a) {
   if (held === a) return;
   if (held !== null) await page.keyboard.up(keyOf(held));
@@ -197,14 +221,16 @@ async function holdKey(a) {
 
 for (;;) {
   if (!realtime) {
-    await page.waitForFunction((last) => arld.ended || (arld.prompt && arld.prompt.waits && arld.prompt.id > last) ||
+    await page.waitForFunction((last) => arld.ended || (arld.prompt && arld.prompt.waits && arld.prompt.id > last) || arld.replaying ||
       (!arld.prompt && arld.status && arld.status.step > 0), lastId, { timeout: 0, polling: 5 });
   } else {
     await page.waitForTimeout(5);
   }
-  const s = await state();
+  let s = await state();
   if (s.ended) break;
+  if (s.replaying) { await handleReplay(); s = await state(); if (s.ended) break; }
   const p = s.prompt;
+  if (p && p.starts_in) { countdownsSeen++; await shot("countdown"); }
   if (!p) {
     if (s.status && s.status.budget_used >= s.status.budget && !s.ended) {
       const text = await page.evaluate(() => document.getElementById("prompt-text").textContent);
@@ -239,6 +265,23 @@ for (;;) {
     const a = policy(p.obs);
     answers.push(a);
     steps++;
+    if (undoTest && !undoReport && !realtime && p.steps_left > 1) {
+      // A wrong key first: the page shows the state after it, one step ahead of the run, with undo offered.
+      const wrong = (a + 1) % hello.actions.length;
+      await page.keyboard.press(keyOf(wrong));
+      await page.waitForFunction((id) => arld.ended || (arld.prompt && arld.prompt.id > id), p.id, { timeout: 10000 });
+      const ahead = await page.evaluate(() => arld.prompt);
+      if (!ahead || !ahead.undo || ahead.agent_action !== null) fail(`after a key mid-segment no undo was offered: ${JSON.stringify(ahead)}`);
+      if (sameObs(ahead.obs, p.obs)) fail("the page did not show the state after the key");
+      await shot("undo-offered");
+      await page.keyboard.press("Backspace");
+      await page.waitForFunction((id) => arld.ended || (arld.prompt && arld.prompt.id > id && arld.prompt.waits), ahead.id, { timeout: 10000 });
+      const back = await page.evaluate(() => arld.prompt);
+      if (!back || back.undo || back.agent_action !== p.agent_action || !sameObs(back.obs, p.obs))
+        fail(`after undo the question's own state did not come back: ${JSON.stringify({ asked: p, back })}`);
+      lastId = back.id;
+      undoReport = { wrong, answer: a, asked: p.obs, ahead: ahead.obs, back: back.obs };
+    }
     if (realtime) {
       // A fresh key press opens the segment; then the key stays held (none for the no-op action).
       await holdKey(null);
@@ -286,5 +329,7 @@ if (endScreen) {
   if (!endScreen.xlabels.every((l) => l && /\d/.test(l))) fail(`the charts have no x-axis labels: ${JSON.stringify(endScreen.xlabels)}`);
 }
 if (!answerLimit) for (const name of ["training", "asking", "mid-segment"]) if (!taken[name]) fail(`no "${name}" screenshot: the run never showed that state`);
+if (undoTest && !undoReport) fail("no question with steps to come was asked: undo was not tried");
 console.log(JSON.stringify({ env: hello.env, answers, skipped, steps, reloaded, refused, watcherErrors: watcher, drawn: taken, first, open, budgetSpentSeen, endScreen,
+  undo: undoReport, replaysWatched, replaysSkipped, countdownsSeen,
   keyLatencyMs: latencies.length ? { n: latencies.length, median: latencies.sort((x, y) => x - y)[latencies.length >> 1], max: latencies[latencies.length - 1] } : null }));

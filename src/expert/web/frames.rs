@@ -20,12 +20,21 @@ pub trait FrameSource: Send {
     /// The message that shows the state of `env` (observation `obs`; empty when the caller has none at hand),
     /// or `None` when it would show what the page already has.
     fn frame(&mut self, env: &dyn Env, obs: &[f32]) -> Result<Option<String>>;
+    /// Whether the source draws the environment and observation it is given, so that it can show a copy of
+    /// the environment (a replay of the agent's steps, the state after a key that may be undone). A source that
+    /// asks the live environment for its picture cannot.
+    fn shows_copies(&self) -> bool {
+        false
+    }
 }
 
 /// The built-in tasks: their geometry, drawn by the page.
 pub struct GeometryFrames;
 
 impl FrameSource for GeometryFrames {
+    fn shows_copies(&self) -> bool {
+        true
+    }
     fn frame(&mut self, env: &dyn Env, obs: &[f32]) -> Result<Option<String>> {
         let geometry = env.geometry();
         Ok(Some(
@@ -124,6 +133,9 @@ impl ObservationTable {
 }
 
 impl FrameSource for ObservationTable {
+    fn shows_copies(&self) -> bool {
+        true
+    }
     fn frame(&mut self, _env: &dyn Env, obs: &[f32]) -> Result<Option<String>> {
         if obs.is_empty() || obs == self.last.as_slice() {
             return Ok(None);

@@ -27,10 +27,11 @@ pub mod protocol;
 pub mod server;
 
 use super::{Answer, Expert, Progress, Query, RunEnd};
+use crate::env::{Env, EpisodeStart};
 use anyhow::{Context, Result, bail, ensure};
 use frames::FrameSource;
 use protocol::{ActionKeys, EndScreen, Hello, Prompt, ServerMsg, Status};
-use server::{KeyInput, Shared};
+use server::{Input, KeyInput, Shared};
 use std::io::Write;
 use std::net::{IpAddr, SocketAddr};
 use std::sync::{Arc, mpsc};
@@ -42,6 +43,10 @@ pub const DEFAULT_LISTEN: &str = "127.0.0.1:8765";
 const UPDATES_PER_S: f64 = 15.0;
 /// How often a wait for the person looks for a stop request.
 const STOP_POLL: Duration = Duration::from_millis(50);
+/// The agent's steps replayed to the person before a question, at most (the page plays them within 2 s).
+pub const REPLAY_MAX_STEPS: usize = 200;
+/// Real time: the countdown between the person's key and the start of their segment.
+pub const REALTIME_COUNTDOWN: Duration = Duration::from_millis(1500);
 
 /// How the web expert listens and how the person answers. Written as the spec
 /// `web:listen=ADDR,fps=N,timeout=S,wait=no` (every part optional, e.g. `web` or `web:fps=10`).
@@ -283,6 +288,9 @@ struct Effort {
     /// Opening questions answered, and handed back or timed out.
     answered: usize,
     unanswered: usize,
+    /// Keys taken back (turn-based).
+    #[serde(default)]
+    undone: usize,
 }
 
 /// A person in a browser, as an [`Expert`].
@@ -296,6 +304,13 @@ pub struct WebExpert {
     last_eval: Option<u64>,
     /// When the last real-time step was taken.
     last_tick: Instant,
+    /// The person's next answer, given while the page showed the state after their previous key (which the
+    /// run takes only now, so that the key could still be undone).
+    carried: Option<Answer>,
+    /// Where the person's last step left the episode: how it began and the number of its steps.
+    last_person: Option<(EpisodeStart, usize)>,
+    /// The run's latest status when it was not published yet (updates are throttled).
+    unsent: Option<Status>,
     effort: Effort,
     /// Whether a stop was requested (Ctrl-C, SIGTERM): [`crate::interrupt::requested`] unless the program
     /// that owns the signals says otherwise ([`WebExpert::set_stop_check`]).
@@ -337,6 +352,9 @@ impl WebExpert {
             last_update: None,
             last_eval: None,
             last_tick: Instant::now(),
+            carried: None,
+            last_person: None,
+            unsent: None,
             effort: Effort::default(),
             stop_requested: Box::new(crate::interrupt::requested),
         }
@@ -390,6 +408,30 @@ impl WebExpert {
             .publish(msg, |b, m| b.prompt = prompt.map(|_| m.clone()));
     }
 
+    /// Shows `obs` of `env` and opens a prompt for it; returns the prompt's id.
+    fn show_question(
+        &mut self,
+        env: &dyn Env,
+        obs: &[f32],
+        agent_action: Option<usize>,
+        steps_left: usize,
+        undo: bool,
+    ) -> Result<u64> {
+        self.next_prompt += 1;
+        let id = self.next_prompt;
+        self.publish_frame(env, obs)?;
+        self.publish_prompt(Some(&Prompt {
+            id,
+            agent_action,
+            steps_left,
+            waits: true,
+            undo,
+            starts_in: None,
+            obs: obs.to_vec(),
+        }));
+        Ok(id)
+    }
+
     /// Waits while the person has paused the run (the clock waits too).
     fn wait_while_paused(&mut self) -> Result<Duration> {
         let started = Instant::now();
@@ -400,8 +442,9 @@ impl WebExpert {
         Ok(started.elapsed())
     }
 
-    /// Waits for the key that answers prompt `id`, until the timeout if there is one (pauses do not count).
-    fn wait_for_key(&mut self, id: u64) -> Result<Answer> {
+    /// Waits for the person's answer to prompt `id`, until the timeout if there is one (pauses do not count).
+    /// `None`: the person took their last key back (only accepted when `undo` is).
+    fn wait_for_key(&mut self, id: u64, undo: bool) -> Result<Option<Answer>> {
         let asked = Instant::now();
         let mut paused = Duration::ZERO;
         let timeout = self.server.options.timeout.map(Duration::from_secs_f64);
@@ -412,79 +455,267 @@ impl WebExpert {
             paused += self.wait_while_paused()?;
             let waited = asked.elapsed().saturating_sub(paused);
             if timeout.is_some_and(|t| waited >= t) {
-                self.publish_prompt(None);
-                return Ok(Answer::Unanswered {
+                return Ok(Some(Answer::Unanswered {
                     waited_s: waited.as_secs_f64(),
-                });
+                }));
             }
             let wait = timeout.map_or(STOP_POLL, |t| t.saturating_sub(waited).min(STOP_POLL));
-            match self.server.keys.recv_timeout(wait) {
+            let input = match self.server.keys.recv_timeout(wait) {
                 // Keys meant for an earlier prompt (pressed twice, or late) are dropped.
-                Ok(key) if key.id != id => {}
-                Ok(KeyInput { action: None, .. }) => {
-                    // Handed back: the agent acts; nothing is charged.
-                    self.publish_prompt(None);
-                    return Ok(Answer::Unanswered {
-                        waited_s: asked.elapsed().saturating_sub(paused).as_secs_f64(),
-                    });
-                }
-                Ok(KeyInput {
-                    action: Some(action),
-                    ..
-                }) => {
-                    self.last_tick = Instant::now();
-                    self.effort.keys += 1;
-                    return Ok(Answer::Action {
-                        action,
-                        response_s: Some(asked.elapsed().saturating_sub(paused).as_secs_f64()),
-                    });
-                }
-                Err(mpsc::RecvTimeoutError::Timeout) => {}
+                Ok(key) if key.id != id => continue,
+                Ok(key) => key.input,
+                Err(mpsc::RecvTimeoutError::Timeout) => continue,
                 Err(mpsc::RecvTimeoutError::Disconnected) => {
                     bail!("the web expert's server stopped while a question was open")
+                }
+            };
+            let waited_s = asked.elapsed().saturating_sub(paused).as_secs_f64();
+            match input {
+                // Handed back: the agent acts; nothing is charged.
+                Input::HandBack => return Ok(Some(Answer::Unanswered { waited_s })),
+                Input::Undo if undo => return Ok(None),
+                Input::Undo => {}
+                Input::Action(action) => {
+                    self.last_tick = Instant::now();
+                    self.effort.keys += 1;
+                    return Ok(Some(Answer::Action {
+                        action,
+                        response_s: Some(waited_s),
+                    }));
                 }
             }
         }
     }
 
-    /// One step of a question: shows it and waits for the person (turn-based, or the first step of a real-time
-    /// segment) or takes the held key at the set rate.
-    fn ask(&mut self, query: &Query) -> Result<Answer> {
-        // In real time only the segment's first step waits for the person; the others run at the set rate.
-        let realtime = self
-            .server
-            .options
-            .fps
-            .filter(|_| query.agent_action.is_none());
+    /// A copy of the environment the query shows, rebuilt from its episode, when the page can show such a copy
+    /// (its frames are drawn from the environment they are given) and the copy reaches the query's observation.
+    fn copy_of(&self, query: &Query) -> Option<(Box<dyn Env>, Vec<f32>)> {
+        if !self.frames.shows_copies() {
+            return None;
+        }
+        let mut env = crate::env::make(query.env.id()).ok()?;
+        let mut obs = Vec::new();
+        crate::env::replay_episode(
+            &mut *env,
+            query.episode.start,
+            query.episode.actions,
+            &mut obs,
+        )
+        .ok()?;
+        (obs == query.obs).then_some((env, obs))
+    }
+
+    /// Before a question: shows the person the agent's own steps since their last one in this episode (or since
+    /// the episode began), at most [`REPLAY_MAX_STEPS`].
+    fn replay_agent_steps(&mut self, query: &Query) -> Result<()> {
+        let actions = query.episode.actions;
+        let from = replay_from(
+            self.last_person,
+            query.episode.start,
+            actions.len(),
+            REPLAY_MAX_STEPS,
+        );
+        if from >= actions.len() || !self.frames.shows_copies() {
+            return Ok(());
+        }
+        let Some(mut env) = crate::env::make(query.env.id()).ok() else {
+            return Ok(());
+        };
+        let mut obs = Vec::new();
+        if crate::env::replay_episode(&mut *env, query.episode.start, &actions[..from], &mut obs)
+            .is_err()
+        {
+            return Ok(());
+        }
+        // The state the person left, then the state after each of the agent's steps: the last is the question's.
+        let mut frames = Vec::with_capacity(actions.len() - from + 1);
+        frames.extend(self.frames.frame(&*env, &obs)?);
+        for &a in &actions[from..] {
+            if env.step_into(a, &mut obs).is_err() {
+                return Ok(());
+            }
+            frames.extend(self.frames.frame(&*env, &obs)?);
+        }
+        if obs != query.obs {
+            // Not the state the question shows (an environment arld cannot rebuild exactly): no replay.
+            return Ok(());
+        }
+        let frames = frames
+            .iter()
+            .map(|f| serde_json::from_str(f))
+            .collect::<Result<Vec<serde_json::Value>, _>>()?;
+        let msg = ServerMsg::Replay { frames }.to_json();
+        self.server.shared.publish(msg, |_, _| {});
+        Ok(())
+    }
+
+    /// Turn-based: the person's key for the query's state, with the chance to undo it. Where the environment can
+    /// be copied and the segment goes on, the page shows the state after the key on a copy and waits for the
+    /// next key: a key there is carried to the next step (the run takes this one), an undo asks this step again.
+    fn ask_turn(&mut self, query: &Query) -> Result<Answer> {
+        let mut carried = self.carried.take();
+        loop {
+            let answer = match carried.take() {
+                Some(answer) => answer,
+                None => {
+                    let id = self.show_question(
+                        query.env,
+                        query.obs,
+                        query.agent_action,
+                        query.steps_left,
+                        false,
+                    )?;
+                    match self.wait_for_key(id, false)? {
+                        Some(answer) => answer,
+                        None => continue,
+                    }
+                }
+            };
+            let Answer::Action { action, .. } = answer else {
+                return Ok(answer);
+            };
+            if query.steps_left <= 1 {
+                return Ok(answer);
+            }
+            let Some((mut copy, mut obs)) = self.copy_of(query) else {
+                return Ok(answer);
+            };
+            let ended = copy
+                .step_into(action, &mut obs)
+                .map(|o| o.terminated || o.truncated)
+                .unwrap_or(true);
+            if ended {
+                return Ok(answer);
+            }
+            let shown = self.show_question(&*copy, &obs, None, query.steps_left - 1, true);
+            let next = shown.and_then(|id| self.wait_for_key(id, true));
+            match next {
+                // Undone: this step is asked again from its own state.
+                Ok(None) => {
+                    self.effort.undone += 1;
+                    self.effort.keys = self.effort.keys.saturating_sub(1);
+                }
+                // The next key (or a hand-back): the run takes this step now and that answer next.
+                Ok(Some(next)) => {
+                    self.carried = Some(next);
+                    return Ok(answer);
+                }
+                // A stop: the run takes this key first (the person's answers are never lost), then stops.
+                Err(err) if crate::interrupt::is_stop(&err) => return Ok(answer),
+                Err(err) => return Err(err),
+            }
+        }
+    }
+
+    /// Real time: only the segment's opening question waits for a fresh key, then a countdown; the later steps
+    /// take the held key (or the no-op action) at the set rate.
+    fn ask_realtime(&mut self, query: &Query, fps: f64) -> Result<Answer> {
+        let period = Duration::from_secs_f64(1.0 / fps);
+        if query.agent_action.is_some() {
+            let id = self.show_question(
+                query.env,
+                query.obs,
+                query.agent_action,
+                query.steps_left,
+                false,
+            )?;
+            let answer = loop {
+                if let Some(answer) = self.wait_for_key(id, false)? {
+                    break answer;
+                }
+            };
+            let Answer::Action { response_s, .. } = answer else {
+                return Ok(answer);
+            };
+            self.publish_prompt(Some(&Prompt {
+                id,
+                agent_action: query.agent_action,
+                steps_left: query.steps_left,
+                waits: false,
+                undo: false,
+                starts_in: Some(REALTIME_COUNTDOWN.as_secs_f64()),
+                obs: query.obs.to_vec(),
+            }));
+            let started = Instant::now();
+            let mut paused = Duration::ZERO;
+            while started.elapsed().saturating_sub(paused) < REALTIME_COUNTDOWN {
+                self.stopped("during the countdown to a real-time segment")?;
+                paused += self.wait_while_paused()?;
+                std::thread::sleep(STOP_POLL.min(REALTIME_COUNTDOWN / 10));
+            }
+            self.last_tick = Instant::now();
+            return Ok(Answer::Action {
+                action: self.server.shared.held().unwrap_or(self.noop),
+                response_s,
+            });
+        }
         self.next_prompt += 1;
         let id = self.next_prompt;
         self.publish_frame(query.env, query.obs)?;
         self.publish_prompt(Some(&Prompt {
             id,
-            agent_action: query.agent_action,
+            agent_action: None,
             steps_left: query.steps_left,
-            waits: realtime.is_none(),
+            waits: false,
+            undo: false,
+            starts_in: None,
             obs: query.obs.to_vec(),
         }));
-        match realtime {
-            None => self.wait_for_key(id),
-            Some(fps) => {
-                self.stopped("during a real-time segment")?;
-                self.wait_while_paused()?;
-                let period = Duration::from_secs_f64(1.0 / fps);
-                let next = self.last_tick + period;
-                std::thread::sleep(next.saturating_duration_since(Instant::now()));
-                // Keep the rate, but do not race to catch up after a slow step (or a pause).
-                self.last_tick = Instant::now()
-                    .checked_sub(period)
-                    .map_or(next, |late| next.max(late));
-                Ok(Answer::Action {
-                    action: self.server.shared.held().unwrap_or(self.noop),
-                    response_s: None,
-                })
-            }
-        }
+        self.stopped("during a real-time segment")?;
+        self.wait_while_paused()?;
+        let next = self.last_tick + period;
+        std::thread::sleep(next.saturating_duration_since(Instant::now()));
+        // Keep the rate, but do not race to catch up after a slow step (or a pause).
+        self.last_tick = Instant::now()
+            .checked_sub(period)
+            .map_or(next, |late| next.max(late));
+        Ok(Answer::Action {
+            action: self.server.shared.held().unwrap_or(self.noop),
+            response_s: None,
+        })
     }
+
+    /// One step of a question: the agent's steps since the person's last one replayed first (on the step that
+    /// opens a segment), then the person's answer.
+    fn ask(&mut self, query: &Query) -> Result<Answer> {
+        if query.agent_action.is_some() {
+            // A segment opens: nothing can be carried over from the last one (it ended with its last step).
+            self.carried = None;
+            if let Some(status) = self.unsent.take() {
+                let msg = ServerMsg::Status(&status).to_json();
+                self.server
+                    .shared
+                    .publish(msg, |b, m| b.status = Some(m.clone()));
+            }
+            self.replay_agent_steps(query)?;
+        }
+        let answer = match self.server.options.fps {
+            None => self.ask_turn(query)?,
+            Some(fps) => self.ask_realtime(query, fps)?,
+        };
+        match answer {
+            Answer::Action { .. } => {
+                self.last_person = Some((query.episode.start, query.episode.actions.len() + 1));
+            }
+            Answer::Unanswered { .. } => self.publish_prompt(None),
+        }
+        Ok(answer)
+    }
+}
+
+/// Where the replay before a question starts, in the episode's steps (`len` so far, begun at `start`): at the
+/// person's last step when it was in this episode, else at the episode's start; the last `cap` steps at most.
+fn replay_from(
+    last_person: Option<(EpisodeStart, usize)>,
+    start: EpisodeStart,
+    len: usize,
+    cap: usize,
+) -> usize {
+    let from = match last_person {
+        Some((episode, at)) if episode == start && at <= len => at,
+        _ => 0,
+    };
+    from.max(len.saturating_sub(cap))
 }
 
 impl Expert for WebExpert {
@@ -532,7 +763,7 @@ impl Expert for WebExpert {
         true
     }
     fn observe(&mut self, p: &Progress) {
-        if self.prompt_open && !p.queries.expert_in_control() {
+        if self.prompt_open && !p.queries.expert_in_control() && self.carried.is_none() {
             self.publish_prompt(None);
         }
         // A pause holds the run between steps too. (A stop request during it is seen by the loop's next
@@ -547,19 +778,7 @@ impl Expert for WebExpert {
                 .shared
                 .publish(msg, |b, _| b.curve.push((step, mean)));
         }
-        let now = Instant::now();
-        let due = self
-            .last_update
-            .is_none_or(|t| now.duration_since(t).as_secs_f64() >= 1.0 / UPDATES_PER_S);
-        // While a segment runs the steps are slow (the person's pace): show each one.
-        if !due && !p.queries.expert_in_control() && p.step < p.train_steps {
-            return;
-        }
-        self.last_update = Some(now);
         let threshold = p.queries.rule().threshold();
-        if let Some(u) = p.uncertainty {
-            self.server.shared.push_uncertainty((p.step, u, threshold));
-        }
         let (budget, used) = (p.queries.budget(), p.queries.budget_spent());
         let left = budget.saturating_sub(used);
         let status = Status {
@@ -581,12 +800,31 @@ impl Expert for WebExpert {
             time_left_s: (used > 0 && self.effort.person_s > 0.0)
                 .then(|| self.effort.person_s / used as f64 * left as f64),
         };
+        let now = Instant::now();
+        let due = self
+            .last_update
+            .is_none_or(|t| now.duration_since(t).as_secs_f64() >= 1.0 / UPDATES_PER_S);
+        // While a segment runs the steps are slow (the person's pace): show each one. Otherwise the latest
+        // status waits for the next update, or for a question (which shows where the run stands).
+        if !due && !p.queries.expert_in_control() && p.step < p.train_steps {
+            self.unsent = Some(status);
+            return;
+        }
+        self.last_update = Some(now);
+        if let Some(u) = p.uncertainty {
+            self.server.shared.push_uncertainty((p.step, u, threshold));
+        }
+        self.unsent = None;
         let msg = ServerMsg::Status(&status).to_json();
         self.server
             .shared
             .publish(msg, |b, m| b.status = Some(m.clone()));
         // The frame shows the state the agent acts in next (a table source needs no observation here: it
-        // shows the one of the last question).
+        // shows the one of the last question), unless the page is a step ahead, showing the state after the
+        // person's next key (carried to the next step).
+        if self.carried.is_some() {
+            return;
+        }
         if let Err(err) = self.publish_frame(p.env, &[]) {
             eprintln!("warning: the web expert cannot show the environment: {err:#}");
         }
@@ -602,6 +840,7 @@ impl Expert for WebExpert {
             answered: self.effort.answered,
             unanswered: self.effort.unanswered,
             keys: self.effort.keys,
+            undone: self.effort.undone,
             person_s: self.effort.person_s,
         };
         let msg = ServerMsg::End {
@@ -619,6 +858,31 @@ impl Expert for WebExpert {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_replay_starts_where_the_person_left_this_episode_and_keeps_the_last_steps() {
+        let (a, b) = (
+            EpisodeStart::Seed(7),
+            EpisodeStart::Generator([1, 2, 3, 4, 5, 6]),
+        );
+        // Each case: where the person left (episode, steps), the episode now (start, steps), the cap; and the
+        // first step to replay, counted by hand.
+        for (last, start, len, cap, from) in [
+            (None, a, 30, 200, 0),
+            (None, a, 300, 200, 100),
+            (Some((a, 12)), a, 30, 200, 12),
+            (Some((a, 12)), a, 12, 200, 12),
+            (Some((a, 12)), a, 500, 200, 300),
+            (Some((a, 12)), b, 30, 200, 0),
+            (Some((b, 40)), b, 30, 200, 0),
+        ] {
+            assert_eq!(
+                replay_from(last, start, len, cap),
+                from,
+                "{last:?} {start:?} {len}"
+            );
+        }
+    }
 
     #[test]
     fn options_parse_and_round_trip() {

@@ -122,6 +122,8 @@ pub struct EndScreen {
     pub answered: usize,
     pub unanswered: usize,
     pub keys: usize,
+    /// Keys taken back.
+    pub undone: usize,
     pub person_s: f64,
 }
 
@@ -135,6 +137,11 @@ pub struct Prompt {
     pub steps_left: usize,
     /// Whether the run waits for a key (turn-based, or the first step in real time).
     pub waits: bool,
+    /// Whether the person's last key can be undone now (turn-based, within a segment, where the environment
+    /// can be restored): the page shows the state after it, not yet taken by the run.
+    pub undo: bool,
+    /// Real time: the segment starts after this many seconds (a countdown once the person pressed a key).
+    pub starts_in: Option<f64>,
     pub obs: Vec<f32>,
 }
 
@@ -176,6 +183,11 @@ pub enum ServerMsg<'a> {
     Prompt {
         prompt: Option<&'a Prompt>,
     },
+    /// The agent's own steps since the person's last one (their frames, oldest first), sent before a question
+    /// so that the person sees how the state they are handed came about.
+    Replay {
+        frames: Vec<serde_json::Value>,
+    },
     /// Whether the run is paused.
     Paused {
         paused: bool,
@@ -207,6 +219,10 @@ pub enum ClientMsg {
     Pass {
         id: u64,
     },
+    /// Undo the last key (prompt `id` shows the state after it; see [`Prompt::undo`]).
+    Undo {
+        id: u64,
+    },
     /// Pause (or resume) the run: it and the person's clock wait.
     Pause {
         paused: bool,
@@ -225,7 +241,10 @@ impl ClientMsg {
         let action = match &msg {
             ClientMsg::Key { action, .. } => Some(*action),
             ClientMsg::Hold { action } => *action,
-            ClientMsg::Control | ClientMsg::Pass { .. } | ClientMsg::Pause { .. } => None,
+            ClientMsg::Control
+            | ClientMsg::Pass { .. }
+            | ClientMsg::Undo { .. }
+            | ClientMsg::Pause { .. } => None,
         };
         if let Some(a) = action
             && a >= n_actions

@@ -33,11 +33,21 @@ pub const UNCERTAINTY_HISTORY: usize = 300;
 /// The longest message a page may send (bytes); its messages are a few dozen bytes.
 const MAX_CLIENT_MESSAGE: usize = 1024;
 
-/// A key from the controlling tab: the answer `action` to prompt `id` (`None`: the question is handed back).
+/// What the controlling tab answered to prompt `id`.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct KeyInput {
     pub id: u64,
-    pub action: Option<usize>,
+    pub input: Input,
+}
+
+/// An answer of the person.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Input {
+    Action(usize),
+    /// The question goes back to the agent.
+    HandBack,
+    /// Take back the last key.
+    Undo,
 }
 
 /// What the training thread last published, for tabs that connect later.
@@ -439,28 +449,23 @@ fn handle(shared: &Shared, id: u64, text: &str) -> Result<(), String> {
                 .send(Arc::from(ServerMsg::Paused { paused }.to_json()));
             Ok(())
         }
-        ClientMsg::Key { id, action } => send_key(
-            shared,
-            board,
-            KeyInput {
-                id,
-                action: Some(action),
-            },
-        ),
-        ClientMsg::Pass { id } => send_key(shared, board, KeyInput { id, action: None }),
+        ClientMsg::Key { id, action } => send_key(shared, board, id, Input::Action(action)),
+        ClientMsg::Pass { id } => send_key(shared, board, id, Input::HandBack),
+        ClientMsg::Undo { id } => send_key(shared, board, id, Input::Undo),
     }
 }
 
 fn send_key(
     shared: &Shared,
     board: std::sync::MutexGuard<'_, Board>,
-    key: KeyInput,
+    id: u64,
+    input: Input,
 ) -> Result<(), String> {
     drop(board);
     shared
         .keys
         .lock()
         .unwrap_or_else(|e| e.into_inner())
-        .send(key)
+        .send(KeyInput { id, input })
         .map_err(|_| "the run is over".to_string())
 }

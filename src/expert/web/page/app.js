@@ -8,8 +8,10 @@ const token = new URLSearchParams(location.search).get("token") || "";
 const arld = (window.arld = {
   client: null, hello: null, controller: null, status: null, frame: null, prompt: null, paused: false,
   uncertainty: [], curve: [], ended: null, outcome: null, errors: [], connected: false, obsHistory: [],
+  replaying: false, replays: [], countdowns: 0, undos: 0,
 });
 let socket = null;
+let replay = null; // the replay being played: {frames, at, timer, live}
 let answered = null; // id of the prompt this tab already answered
 let held = null; // the action whose key or button is held down (real time)
 const $ = (id) => document.getElementById(id);
@@ -33,6 +35,8 @@ function connect() {
 }
 
 function receive(m) {
+  // While the agent's steps are replayed, the live picture waits (the last one is drawn when the replay ends).
+  if (replay && (m.type === "frame" || m.type === "image" || m.type === "table")) { replay.live = m; return; }
   switch (m.type) {
     case "welcome":
       arld.client = m.client;
@@ -44,6 +48,7 @@ function receive(m) {
     case "table": showTable(m.labels, m.obs); break;
     case "roles": arld.controller = m.controller; showRole(); break;
     case "status": arld.status = m; showStatus(); break;
+    case "replay": startReplay(m.frames); break;
     case "frame": arld.frame = m; draw(); break;
     case "eval": arld.curve.push([m.step, m.mean]); drawCurve(); break;
     case "history": arld.uncertainty = m.uncertainty.slice(); arld.curve = m.curve.slice(); drawCharts(); break;
@@ -73,15 +78,15 @@ function setup() {
     const b = document.createElement("button");
     b.textContent = `${a.label} [${a.keys.map(keyName).join(" / ")}]`;
     b.dataset.action = i;
-    b.addEventListener("click", () => { if (!h.fps) press(i); });
-    b.addEventListener("pointerdown", () => { if (h.fps) { hold(i); press(i); } });
+    b.addEventListener("click", () => { if (replay) stopReplay(); else if (!h.fps) press(i); });
+    b.addEventListener("pointerdown", () => { if (h.fps && !replay) { hold(i); press(i); } });
     b.addEventListener("pointerup", () => { if (h.fps) release(i); });
     b.addEventListener("pointerleave", () => { if (h.fps) release(i); });
     box.appendChild(b);
   });
   $("keys-help").textContent = h.fps
-    ? `Hold a key to act; with no key held the environment takes "${h.actions[h.noop].label}".`
-    : "Each key (or button) takes one step.";
+    ? `A fresh key press starts your segment after a short countdown; then hold a key to act (with no key held the environment takes "${h.actions[h.noop].label}"). P pauses.`
+    : "Each key (or button) takes one step; Backspace undoes your last key of the segment. P pauses, Esc lets the agent decide.";
   showRole();
   showPrompt();
 }
@@ -136,15 +141,23 @@ function showPrompt() {
   if (arld.ended) { text = arld.ended; box.className = "idle"; }
   else if (!p && noneLeft()) { text = "No questions left: the agent trains on its own."; box.className = "idle"; }
   else if (!p) { text = "Training runs. When the agent is unsure it asks you here."; box.className = "idle"; }
+  else if (p.starts_in) {
+    text = `Get ready: your ${p.steps_left} step${p.steps_left > 1 ? "s" : ""} start in a moment. Hold the key you want.`;
+    box.className = "running";
+  }
   else if (p.agent_action !== null) {
     text = `The agent asks: what would you do? It would "${h.actions[p.agent_action].label}". ` +
       `You act for ${p.steps_left} step${p.steps_left > 1 ? "s" : ""}.`;
+    box.className = "asking";
+  } else if (p.undo) {
+    text = `Your turn: ${p.steps_left} step${p.steps_left > 1 ? "s" : ""} left in this segment. Backspace undoes your last key.`;
     box.className = "asking";
   } else {
     text = `Your turn: ${p.steps_left} step${p.steps_left > 1 ? "s" : ""} left in this segment.`;
     box.className = p.waits ? "asking" : "running";
   }
   if (p && !controls()) text += " (Another tab answers.)";
+  if (replay) text = `Replaying the agent's ${replay.frames.length - 1} steps since your last one… (any key skips)`;
   $("prompt-text").textContent = text;
   document.querySelectorAll("#buttons button").forEach((b) => {
     b.disabled = !p || !controls() || arld.ended !== null;
@@ -152,11 +165,63 @@ function showPrompt() {
     b.classList.toggle("held", held === Number(b.dataset.action));
   });
   $("pass").disabled = !p || !p.waits || !controls() || arld.ended !== null;
+  $("undo").disabled = !p || !p.undo || !controls() || arld.ended !== null || !!replay;
+  $("undo").hidden = !!h.fps;
+  if (p && p.starts_in && startsAt.id !== p.id) startsAt = { id: p.id, at: performance.now() + p.starts_in * 1000 };
   $("obs").textContent = p ? "observation: " + p.obs.map((v) => v.toFixed(3)).join("  ") : "";
   // A question waiting for this tab shows in the tab's title, also when the tab is in the background.
   document.title = p && p.waits && controls() && !arld.ended ? "● Your turn: the agent asks" : "arld: the agent asks";
 }
 $("pass").addEventListener("click", () => pass());
+$("undo").addEventListener("click", () => undo());
+
+// Real time: the countdown between the person's key and the start of their segment.
+let startsAt = { id: null, at: 0 };
+setInterval(() => {
+  const p = arld.prompt, el = $("start-countdown");
+  const left = p && p.starts_in && startsAt.id === p.id ? (startsAt.at - performance.now()) / 1000 : 0;
+  el.hidden = !(left > 0) || arld.ended !== null;
+  if (left > 0) { el.textContent = `${Math.ceil(left * 2) / 2 >= 1 ? Math.ceil(left) : "Go"}`; arld.countdowns = Math.max(arld.countdowns, p.id); }
+}, 50);
+
+// The agent's own steps since the person's last one, played fast (within 2 s) before the question; a key skips.
+function startReplay(frames) {
+  if (!frames.length) return;
+  if (replay) stopReplay();
+  arld.replaying = true;
+  arld.replays.push({ steps: frames.length - 1, last: frames[frames.length - 1] });
+  const interval = Math.max(4, Math.min(1000 / 60, 2000 / frames.length));
+  replay = { frames, at: 0, live: null, timer: null };
+  const tick = () => {
+    if (!replay) return;
+    if (replay.at >= replay.frames.length) { stopReplay(); return; }
+    const f = replay.frames[replay.at++], saved = replay;
+    replay = null; // draw it as a live frame
+    receive(f);
+    replay = saved;
+    replay.timer = setTimeout(tick, interval);
+  };
+  showPrompt();
+  tick();
+}
+function stopReplay() {
+  if (!replay) return;
+  clearTimeout(replay.timer);
+  const live = replay.live;
+  replay = null;
+  arld.replaying = false;
+  if (live) receive(live);
+  showPrompt();
+}
+
+// Takes back the last key (turn-based, within a segment): the run asks that step again.
+function undo() {
+  const p = arld.prompt;
+  if (!p || !p.undo || !controls() || answered === p.id || replay) return;
+  answered = p.id;
+  arld.undos++;
+  send({ type: "undo", id: p.id });
+}
 
 // With a timeout, the seconds left to answer the open question (paused time does not count).
 let asked = { id: null, left: 0, last: 0 };
@@ -193,7 +258,7 @@ function showEnd() {
   const rows = [
     ["Final score", fmt(o.final_score, 1)],
     ["Questions answered", `${o.answered}` + (o.unanswered ? ` (${o.unanswered} left to the agent)` : "")],
-    ["Keys pressed", o.keys],
+    ["Keys pressed", `${o.keys}` + (o.undone ? ` (and ${o.undone} undone)` : "")],
     ["Your time", `${duration(o.person_s)} (${o.person_s.toFixed(1)} s)`],
     ["Run directory", o.run_dir || "– (not saved)"],
   ];
@@ -208,7 +273,7 @@ function showEnd() {
 // Answers the open prompt with `action` (once per prompt).
 function press(action) {
   const p = arld.prompt;
-  if (!p || !p.waits || !controls() || answered === p.id) return;
+  if (!p || !p.waits || !controls() || answered === p.id || replay) return;
   answered = p.id;
   send({ type: "key", id: p.id, action });
 }
@@ -222,7 +287,10 @@ function actionOfKey(key) {
   return i < 0 ? null : i;
 }
 document.addEventListener("keydown", (e) => {
+  // A key during a replay only skips it: it never answers a question the person has not seen yet.
+  if (replay) { if (!e.repeat) { e.preventDefault(); stopReplay(); } return; }
   if (e.key === "Escape") { pass(); return; }
+  if (e.key === "Backspace" || ((e.ctrlKey || e.metaKey) && (e.key === "z" || e.key === "Z"))) { e.preventDefault(); undo(); return; }
   if ((e.key === "p" || e.key === "P") && actionOfKey(e.key) === null) { $("pause").click(); return; }
   const a = actionOfKey(e.key);
   if (a === null) return;
