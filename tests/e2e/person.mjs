@@ -33,6 +33,11 @@ const reload = !!args.reload;
 const answerLimit = Number(args.answer || 0);
 const expectImage = !!args["expect-image"];
 const undoTest = !!args.undo;
+// (--think MS: wait MS milliseconds before each key, as a person reading the state would; --watch: watch every
+//  replay to its end instead of skipping all but the first.)
+const think = Number(args.think || 0);
+const watchAll = !!args.watch;
+const thinkPause = () => (think ? page.waitForTimeout(think) : null);
 fs.mkdirSync(shots, { recursive: true });
 const fail = (msg) => { console.error(`person: ${msg}`); process.exit(1); };
 
@@ -199,7 +204,7 @@ const sameObs = (a, b) => a.length === b.length && a.every((x, i) => x === b[i])
 // end at the question's state, and no key may answer the question meanwhile.
 async function handleReplay() {
   const shown = await page.evaluate(() => arld.replays.length);
-  if (replaysWatched === 0) {
+  if (replaysWatched === 0 || watchAll) {
     await shot("replay");
     await page.waitForFunction(() => !arld.replaying, null, { timeout: 10000 }).catch(() => fail("a replay did not end within 10 s"));
     replaysWatched++;
@@ -288,7 +293,7 @@ for (;;) {
       if (a === hello.noop) await page.keyboard.press(keyOf(a));
       else await holdKey(a);
     }
-    else await page.keyboard.press(keyOf(a));
+    else { await thinkPause(); await page.keyboard.press(keyOf(a)); }
     continue;
   }
   // Later steps of a segment.
@@ -299,6 +304,7 @@ for (;;) {
     lastId = p.id; steps++;
     // Key-to-answer latency, timed in the page: from the key press to the next question (or the end of the
     // segment) arriving over the WebSocket.
+    await thinkPause();
     await page.evaluate(() => { window.__keyAt = performance.now(); });
     await page.keyboard.press(keyOf(a));
     const ms = await page.evaluate((id) => new Promise((resolve) => {
