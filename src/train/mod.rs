@@ -365,6 +365,14 @@ impl LoopState {
             crate::env::EpisodeStart::Generator,
         )
     }
+
+    /// The episode in progress, for an expert that rebuilds its state.
+    fn episode(&self, env_seed: u64) -> EpisodeTrace<'_> {
+        EpisodeTrace {
+            start: self.episode_start(env_seed),
+            actions: &self.ep_actions,
+        }
+    }
 }
 
 /// A query the agent decided on at the step in progress, before the expert's answer.
@@ -734,10 +742,7 @@ fn train_loop(
                 &mut expert,
                 &obs,
                 &*env,
-                EpisodeTrace {
-                    start: st.episode_start(env_seed),
-                    actions: &st.ep_actions,
-                },
+                st.episode(env_seed),
                 Some(agent_action),
                 &queries,
             ) {
@@ -771,10 +776,7 @@ fn train_loop(
                 &mut expert,
                 &obs,
                 &*env,
-                EpisodeTrace {
-                    start: st.episode_start(env_seed),
-                    actions: &st.ep_actions,
-                },
+                st.episode(env_seed),
                 None,
                 &queries,
             ) {

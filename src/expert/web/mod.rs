@@ -432,6 +432,17 @@ impl WebExpert {
         Ok(id)
     }
 
+    /// Shows the query's own state and opens its prompt.
+    fn show_query(&mut self, query: &Query) -> Result<u64> {
+        self.show_question(
+            query.env,
+            query.obs,
+            query.agent_action,
+            query.steps_left,
+            false,
+        )
+    }
+
     /// Waits while the person has paused the run (the clock waits too).
     fn wait_while_paused(&mut self) -> Result<Duration> {
         let started = Instant::now();
@@ -558,13 +569,7 @@ impl WebExpert {
             let answer = match carried.take() {
                 Some(answer) => answer,
                 None => {
-                    let id = self.show_question(
-                        query.env,
-                        query.obs,
-                        query.agent_action,
-                        query.steps_left,
-                        false,
-                    )?;
+                    let id = self.show_query(query)?;
                     match self.wait_for_key(id, false)? {
                         Some(answer) => answer,
                         None => continue,
@@ -612,13 +617,7 @@ impl WebExpert {
     fn ask_realtime(&mut self, query: &Query, fps: f64) -> Result<Answer> {
         let period = Duration::from_secs_f64(1.0 / fps);
         if query.agent_action.is_some() {
-            let id = self.show_question(
-                query.env,
-                query.obs,
-                query.agent_action,
-                query.steps_left,
-                false,
-            )?;
+            let id = self.show_query(query)?;
             let answer = loop {
                 if let Some(answer) = self.wait_for_key(id, false)? {
                     break answer;
