@@ -74,6 +74,26 @@ def preset(method: str, env: str, net: str = "bootstrap", seed: int = 0) -> Dict
 # --------------------------------------------------------------------------------------------- environments
 
 
+class _stop_on_sigterm:
+    """During learn: SIGTERM stops the run as Ctrl-C does (a KeyboardInterrupt once the run has paused whole),
+    where the program keeps Python's default for it (a handler of its own is left alone)."""
+
+    def __enter__(self) -> None:
+        import signal
+        import threading
+
+        self.previous: Any = None
+        if threading.current_thread() is threading.main_thread() and \
+                signal.getsignal(signal.SIGTERM) == signal.SIG_DFL:
+            def stop(signum: int, frame: Any) -> None:
+                raise KeyboardInterrupt("SIGTERM")
+            self.previous = signal.signal(signal.SIGTERM, stop)
+
+    def __exit__(self, *exc: Any) -> None:
+        if self.previous is not None:
+            import signal
+            signal.signal(signal.SIGTERM, self.previous)
+
 class _EnvBridge:
     """A Gymnasium environment seen through arld's environment interface: reset(seed) -> obs list,
     step(action) -> (obs list, reward, terminated, truncated), and its generator (NumPy's PCG64) as words."""
@@ -625,6 +645,7 @@ class Agent:
         self._policy: Any = None
         self._run: Any = None
         self._resume: Optional[str] = None
+        self._run_dir: Optional[str] = None
         self._live_step = 0
         self.evaluations: List[Dict[str, Any]] = []
         self.queries: List[Dict[str, Any]] = []
@@ -721,6 +742,7 @@ class Agent:
             demo_env = _EnvBridge(self.env)
         # The run writes its directory until it ends, maybe after the working directory changed: fix it now.
         log_dir = None if log_dir is None else os.path.abspath(log_dir)
+        self._run_dir = log_dir
         return _arld.start_run(
             json.dumps(self.config), env=env, test_envs=test_envs, expert=self._expert,
             expert_name=self._expert_name, demos=self._demos, log_dir=log_dir, resume=resume, demo_env=demo_env,
@@ -776,7 +798,19 @@ class Agent:
         if callbacks is not None:
             callbacks.start()
         try:
-            self._live_step = self._run.advance(until, callbacks, bar)
+            with _stop_on_sigterm():
+                self._live_step = self._run.advance(until, callbacks, bar)
+        except KeyboardInterrupt:
+            # A stop (Ctrl-C, SIGTERM), also while a person's question is open: the run paused whole (a question
+            # open is asked again by the next learn). With a run directory, its snapshot goes there too.
+            if self._run is not None:
+                self._live_step = self._run.num_timesteps
+            if self._run is not None and self._run_dir is not None:
+                path = os.path.join(self._run_dir, "snapshot.safetensors")
+                self.save(path)
+                print(f"arld: stopped; the run's snapshot is in {path} (learn(..., reset_num_timesteps=False) goes "
+                      f"on in this process, Agent.load({path!r}) in another)", file=sys.stderr, flush=True)
+            raise
         finally:
             if self._run is not None:
                 try:

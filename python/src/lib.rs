@@ -764,8 +764,14 @@ fn start_run(
                 let errors = errors.clone();
                 move |e| errors.keep(e)
             };
-            web::expert(call.bind(py), env.as_ref().map(|e| e.bind(py)), spec, keep)
-                .map_err(|e| errors.raise(py, e, runtime_error))?
+            web::expert(
+                call.bind(py),
+                env.as_ref().map(|e| e.bind(py)),
+                spec,
+                keep,
+                interrupt.clone(),
+            )
+            .map_err(|e| errors.raise(py, e, runtime_error))?
         }
         None => None,
     };

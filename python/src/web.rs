@@ -80,12 +80,13 @@ impl PyWebExpert {
 
 /// The library's web expert for a run, when `obj` is an `arld.WebExpert` (`None` otherwise). `env` is the run's
 /// environment bridge (its Gymnasium environment as `.env`), or `None` for a built-in task; `keep` keeps a
-/// Python exception (a Ctrl-C) to raise when the run returns.
+/// Python exception (a Ctrl-C) to raise when the run returns; `stop` is set when the run is asked to stop.
 pub fn expert(
     obj: &Bound<'_, PyAny>,
     env: Option<&Bound<'_, PyAny>>,
     spec: &arld::env::EnvSpec,
     keep: impl Fn(PyErr) -> String + Send + Sync + Clone + 'static,
+    stop: std::sync::Arc<std::sync::atomic::AtomicBool>,
 ) -> anyhow::Result<Option<Box<dyn Expert>>> {
     let Ok(web) = obj.cast::<PyWebExpert>() else {
         return Ok(None);
@@ -110,16 +111,18 @@ pub fn expert(
         }
     };
     let mut expert = WebExpert::new(server, page);
-    // Ctrl-C in Python: the signal handler runs when asked, and its KeyboardInterrupt is raised after the run
-    // stopped.
+    // A stop in Python (Ctrl-C, or SIGTERM during `learn`): the main thread, which alone runs Python's signal
+    // handlers, sets `stop` while the run trains in its own thread; the wait for the page, on the main thread,
+    // asks Python itself. The KeyboardInterrupt is raised once the run has paused with the question open.
     expert.set_stop_check(Box::new(move || {
-        Python::attach(|py| match py.check_signals() {
-            Ok(()) => false,
-            Err(err) => {
-                keep(err);
-                true
-            }
-        })
+        stop.load(std::sync::atomic::Ordering::Relaxed)
+            || Python::attach(|py| match py.check_signals() {
+                Ok(()) => false,
+                Err(err) => {
+                    keep(err);
+                    true
+                }
+            })
     }));
     expert.wait_for_page()?;
     Ok(Some(Box::new(expert)))

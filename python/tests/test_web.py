@@ -129,3 +129,84 @@ def test_web_expert_arguments_are_checked_and_a_run_nobody_answers_completes(tmp
     # One run per WebExpert.
     with pytest.raises(RuntimeError, match="create a new one"):
         arld.Agent("adqn", gym.make("CartPole-v1"), expert=web, seed=1).learn(total_timesteps=100)
+
+
+# The same run, stopped by SIGTERM while a question is open, then continued in the same process.
+STOPPED = r"""
+import csv, json, os, sys
+import gymnasium as gym
+import arld
+
+gym.register("PersonCartPole-v0", entry_point="gymnasium.envs.classic_control.cartpole:CartPoleEnv",
+             max_episode_steps=200, reward_threshold=195.0)
+env = gym.make("PersonCartPole-v0", render_mode="rgb_array")
+model = arld.Agent("adqn", env, net="bootstrap", expert=arld.WebExpert(listen="127.0.0.1:0"), seed=0, budget=30,
+                   eval_period=500, eval_episodes=3)
+try:
+    model.learn(total_timesteps=1500, log_dir=sys.argv[1])
+    sys.exit("learn returned: the stop did not stop it")
+except KeyboardInterrupt:
+    pass
+with open(os.path.join(sys.argv[1], "queries.csv")) as f:
+    rows = list(csv.DictReader(f))
+print(json.dumps({"stopped_at": model.num_timesteps, "answers": [int(r["expert_action"]) for r in rows
+                  if r["answered"] == "true"], "snapshot": os.path.isfile(os.path.join(sys.argv[1],
+                  "snapshot.safetensors"))}), flush=True)
+model.learn(total_timesteps=1500 - model.num_timesteps, reset_num_timesteps=False)
+print(json.dumps({"summary": model.summary}), flush=True)
+"""
+
+
+def test_a_stop_while_a_question_is_open_pauses_the_run_whole_and_learn_asks_it_again(tmp_path):
+    import signal
+
+    missing = missing_prerequisites()
+    assert not missing, (
+        f"the web expert's browser test cannot run; missing: {', '.join(missing)}; "
+        "`scripts/test --setup` installs them"
+    )
+    run = tmp_path / "run"
+    train = subprocess.Popen(
+        [sys.executable, "-c", STOPPED, str(run)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+    )
+
+    def person(*extra):
+        out = subprocess.run(
+            ["node", "person.mjs", "--url", url, "--shots", str(tmp_path / "shots"), "--policy", "CartPole-v0",
+             "--expect-image", *extra],
+            cwd=E2E, capture_output=True, text=True, timeout=300,
+        )
+        assert out.returncode == 0, f"the scripted person failed: {out.stderr}{out.stdout}"
+        return json.loads([l for l in out.stdout.splitlines() if l.startswith("{")][-1])
+
+    try:
+        url = None
+        for line in train.stdout:
+            if "http://" in line:
+                url = line[line.index("http://") :].strip()
+                break
+        assert url, f"the run printed no URL: {train.stderr.read()}"
+        # Two questions answered; the person leaves with the third open, and the program gets SIGTERM.
+        first = person("--answer", "2")
+        assert first["open"] is not None and len(first["answers"]) == 2
+        train.send_signal(signal.SIGTERM)
+        stopped = json.loads(train.stdout.readline())
+        # Nothing given before the stop is lost: the answers are in queries.csv, the snapshot is in the run
+        # directory, and the process lives on.
+        assert stopped["answers"] == first["answers"] and stopped["snapshot"], stopped
+        assert train.poll() is None
+        # learn goes on: the open question is asked again, the person answers to the end.
+        second = person()
+        assert second["first"]["obs"] == first["open"]["obs"], (second["first"], first["open"])
+        out, err = train.communicate(timeout=120)
+    finally:
+        if train.poll() is None:
+            train.kill()
+    assert train.returncode == 0, f"the run failed: {err}"
+    assert "stopped; the run's snapshot is in" in err
+    with open(run / "queries.csv") as f:
+        rows = list(csv.DictReader(f))
+    answered = [int(r["expert_action"]) for r in rows if r["answered"] == "true"]
+    assert answered == first["answers"] + second["answers"], "queries.csv lost answers across the stop"
+    summary = json.loads(out.strip().splitlines()[-1])["summary"]
+    assert summary["train_steps"] == 1500

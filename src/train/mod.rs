@@ -716,11 +716,36 @@ fn train_loop(
                 }
             }
         }
+        // Hands the live run to the driver (its logs whole) until it says go on or stop.
+        macro_rules! pause {
+            ($driver:expr) => {{
+                let mut summary = summarize(cfg, &*env, log, st, &queries, &clock, pretrain_demos);
+                summary.person_s = expert.as_deref().and_then(|e| e.person_seconds());
+                finish_log(cfg, &agent, log, &summary, st.step)?;
+                clock.stamp(st);
+                let mut paused = PausedRun {
+                    summary,
+                    agent: &agent,
+                    log,
+                    cfg,
+                    st,
+                    parts: run_parts!(),
+                };
+                $driver.paused(&mut paused)?
+            }};
+        }
         // A stop while the expert is asked (a person who has not answered yet): the snapshot holds the run as
-        // it stands, with the open question, so that a resumed run asks it again.
+        // it stands, with the open question, so that a resumed run asks it again. A driven run (Python) pauses
+        // there instead: its driver raises the stop, and when it goes on the same question is asked again.
         macro_rules! stop_while_asking {
             ($err:expr) => {{
                 let err: anyhow::Error = $err;
+                if let Some(d) = driver.as_deref_mut() {
+                    if pause!(d) == Control::Continue {
+                        continue;
+                    }
+                    break;
+                }
                 if let Some(ck) = checkpointer.as_deref_mut() {
                     snapshot_point!(
                         ck,
@@ -915,19 +940,7 @@ fn train_loop(
             };
             let mut control = d.after_step(&view)?;
             if control == Control::Pause {
-                let mut summary = summarize(cfg, &*env, log, st, &queries, &clock, pretrain_demos);
-                summary.person_s = expert.as_deref().and_then(|e| e.person_seconds());
-                finish_log(cfg, &agent, log, &summary, st.step)?;
-                clock.stamp(st);
-                let mut paused = PausedRun {
-                    summary,
-                    agent: &agent,
-                    log,
-                    cfg,
-                    st,
-                    parts: run_parts!(),
-                };
-                control = d.paused(&mut paused)?;
+                control = pause!(d);
             }
             if control != Control::Continue {
                 break;
