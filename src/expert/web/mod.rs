@@ -12,8 +12,12 @@
 //! against the adaptive threshold, the test-return curve, and the person's own time (questions left at most,
 //! seconds spent, an estimate of the time still needed at their pace). When the agent asks, the run waits for
 //! the person, who answers with the keyboard or the buttons for the whole segment, either turn-based (one step
-//! per key) or in real time (`fps`: the environment advances at that rate with the held key, or the no-op
-//! action when none is held). A question goes back to the agent ([`Answer::Unanswered`]) when the person hands
+//! per key) or in real time (`fps`: after a fresh key and a countdown, the environment advances at that rate
+//! with the held key, or the no-op action when none is held). Before a question the page replays the agent's
+//! own steps since the person's last one, and in turn-based mode the person can undo their last key: both
+//! rebuild the environment from the query's episode ([`crate::env::replay_episode`]) where the frame source
+//! can show such a copy. Undo works one key ahead: the page shows the state after a key on a copy, and the run
+//! takes that key only when the next one comes, so an undone key never reaches the training loop. A question goes back to the agent ([`Answer::Unanswered`]) when the person hands
 //! it back or, with a `timeout`, when nobody answers in time. The person may pause the run. A stop request
 //! (Ctrl-C, SIGTERM) ends any wait at once with [`crate::interrupt::Interrupted`], so that the run snapshots with
 //! the question open. The page ([`protocol`] describes its messages) is plain HTML, CSS and JavaScript embedded
