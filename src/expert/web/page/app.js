@@ -117,7 +117,7 @@ const noneLeft = () => arld.status && arld.status.questions_left_max === 0;
 function showStatus() {
   const s = arld.status;
   $("s-questions").textContent = s.questions_left_max === 0 ? "none left: the agent trains on its own" : `at most ${s.questions_left_max}`;
-  $("s-person").textContent = `${duration(s.person_s)} (${s.answered} answered, ${s.keys} keys)`;
+  showPersonTime();
   $("s-time-left").textContent = s.questions_left_max === 0 ? "0 s" : s.time_left_s === null ? "after your first answer" : `about ${duration(s.time_left_s)}`;
   $("s-step").textContent = `${s.step} / ${s.train_steps}`;
   $("s-episode").textContent = s.episode;
@@ -222,6 +222,24 @@ function undo() {
   arld.undos++;
   send({ type: "undo", id: p.id });
 }
+
+// The person's time: the run's count, and while a question waits (the run is blocked, so no status comes) the
+// seconds since it opened, paused time excepted.
+let waiting = { id: null, s: 0, last: 0 };
+function showPersonTime() {
+  const s = arld.status;
+  if (!s) return;
+  const extra = arld.prompt && waiting.id === arld.prompt.id ? waiting.s : 0;
+  $("s-person").textContent = `${duration(s.person_s + extra)} (${s.answered} answered, ${s.keys} keys)`;
+}
+setInterval(() => {
+  const p = arld.prompt, now = performance.now();
+  if (!p || !p.waits || arld.ended) { waiting = { id: null, s: 0, last: now }; return; }
+  if (waiting.id !== p.id) waiting = { id: p.id, s: 0, last: now };
+  if (!arld.paused) waiting.s += (now - waiting.last) / 1000;
+  waiting.last = now;
+  showPersonTime();
+}, 250);
 
 // With a timeout, the seconds left to answer the open question (paused time does not count).
 let asked = { id: null, left: 0, last: 0 };
