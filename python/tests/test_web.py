@@ -49,35 +49,45 @@ def missing_prerequisites():
     return missing
 
 
-def test_a_person_answers_a_gymnasium_environment_from_its_rendered_frames(tmp_path):
+def start_run(script, run):
+    """Starts the Python program `script` (its run directory `run`) after checking the prerequisites; returns
+    the process and the URL it printed."""
     missing = missing_prerequisites()
     assert not missing, (
         f"the web expert's browser test cannot run; missing: {', '.join(missing)}; "
         "`scripts/test --setup` installs them"
     )
-    run = tmp_path / "run"
     train = subprocess.Popen(
-        [sys.executable, "-c", RUN, str(run)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+        [sys.executable, "-c", script, str(run)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
     )
+    for line in train.stdout:
+        if "http://" in line:
+            return train, line[line.index("http://") :].strip()
+    train.kill()
+    raise AssertionError(f"the run printed no URL: {train.stderr.read()}")
+
+
+def scripted_person(url, tmp_path, *extra):
+    """The scripted person answering at `url` from the rendered frames; returns its report."""
+    out = subprocess.run(
+        ["node", "person.mjs", "--url", url, "--shots", str(tmp_path / "shots"), "--policy", "CartPole-v0",
+         "--expect-image", *extra],
+        cwd=E2E, capture_output=True, text=True, timeout=300,
+    )
+    assert out.returncode == 0, f"the scripted person failed: {out.stderr}{out.stdout}"
+    return json.loads([l for l in out.stdout.splitlines() if l.startswith("{")][-1])
+
+
+def test_a_person_answers_a_gymnasium_environment_from_its_rendered_frames(tmp_path):
+    run = tmp_path / "run"
+    train, url = start_run(RUN, run)
     try:
-        url = None
-        for line in train.stdout:
-            if "http://" in line:
-                url = line[line.index("http://") :].strip()
-                break
-        assert url, f"the run printed no URL: {train.stderr.read()}"
-        person = subprocess.run(
-            ["node", "person.mjs", "--url", url, "--shots", str(tmp_path / "shots"), "--policy", "CartPole-v0",
-             "--expect-image"],
-            cwd=E2E, capture_output=True, text=True, timeout=300,
-        )
-        assert person.returncode == 0, f"the scripted person failed: {person.stderr}{person.stdout}"
+        report = scripted_person(url, tmp_path)
         out, err = train.communicate(timeout=120)
     finally:
         if train.poll() is None:
             train.kill()
     assert train.returncode == 0, f"the run failed: {err}"
-    report = json.loads([l for l in person.stdout.splitlines() if l.startswith("{")][-1])
     assert report["env"] == "PersonCartPole-v0"
     # The page showed the environment's own frames, not blank (the person checked the canvas at each shot).
     for name in ("training", "asking", "mid-segment"):
@@ -160,34 +170,11 @@ print(json.dumps({"summary": model.summary}), flush=True)
 def test_a_stop_while_a_question_is_open_pauses_the_run_whole_and_learn_asks_it_again(tmp_path):
     import signal
 
-    missing = missing_prerequisites()
-    assert not missing, (
-        f"the web expert's browser test cannot run; missing: {', '.join(missing)}; "
-        "`scripts/test --setup` installs them"
-    )
     run = tmp_path / "run"
-    train = subprocess.Popen(
-        [sys.executable, "-c", STOPPED, str(run)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
-    )
-
-    def person(*extra):
-        out = subprocess.run(
-            ["node", "person.mjs", "--url", url, "--shots", str(tmp_path / "shots"), "--policy", "CartPole-v0",
-             "--expect-image", *extra],
-            cwd=E2E, capture_output=True, text=True, timeout=300,
-        )
-        assert out.returncode == 0, f"the scripted person failed: {out.stderr}{out.stdout}"
-        return json.loads([l for l in out.stdout.splitlines() if l.startswith("{")][-1])
-
+    train, url = start_run(STOPPED, run)
     try:
-        url = None
-        for line in train.stdout:
-            if "http://" in line:
-                url = line[line.index("http://") :].strip()
-                break
-        assert url, f"the run printed no URL: {train.stderr.read()}"
         # Two questions answered; the person leaves with the third open, and the program gets SIGTERM.
-        first = person("--answer", "2")
+        first = scripted_person(url, tmp_path, "--answer", "2")
         assert first["open"] is not None and len(first["answers"]) == 2
         train.send_signal(signal.SIGTERM)
         stopped = json.loads(train.stdout.readline())
@@ -196,7 +183,7 @@ def test_a_stop_while_a_question_is_open_pauses_the_run_whole_and_learn_asks_it_
         assert stopped["answers"] == first["answers"] and stopped["snapshot"], stopped
         assert train.poll() is None
         # learn goes on: the open question is asked again, the person answers to the end.
-        second = person()
+        second = scripted_person(url, tmp_path)
         assert second["first"]["obs"] == first["open"]["obs"], (second["first"], first["open"])
         out, err = train.communicate(timeout=120)
     finally:
