@@ -98,6 +98,17 @@ fn format_steps(value: f64) -> String {
     }
 }
 
+/// A y-axis label for `value` on an axis spanning `span`: as [`format_steps`] where the ticks are a unit or more
+/// apart, else with the decimals that tell neighbouring ticks (about a seventh of the span) apart.
+fn format_axis(value: f64, span: f64) -> String {
+    let tick = span / 7.0;
+    if !(tick.is_finite() && tick > 0.0) || tick >= 1.0 {
+        return format_steps(value);
+    }
+    let decimals = (-tick.log10()).ceil().clamp(1.0, 6.0) as usize;
+    format!("{value:.decimals$}")
+}
+
 /// Axis ranges of a panel: x from 0 to the last step, y covering bands and threshold with 5% padding.
 fn panel_ranges(panel: &Panel) -> (f64, (f64, f64)) {
     let points = panel.curves.iter().flat_map(|c| c.points.iter());
@@ -287,7 +298,7 @@ fn draw_on<DB: DrawingBackend>(
             .x_labels(6)
             .y_labels(7)
             .x_label_formatter(&|x| format_steps(*x))
-            .y_label_formatter(&|y| format_steps(*y))
+            .y_label_formatter(&|y| format_axis(*y, y_max - y_min))
             .label_style((FONT_FAMILY, 14))
             .axis_desc_style((FONT_FAMILY, 16))
             .bold_line_style(RGBColor(225, 225, 225))
@@ -416,6 +427,18 @@ pub fn draw_figure(figure: &FigureContent, out_dir: &Path, name: &str) -> Result
 
 #[cfg(test)]
 mod tests {
+
+    #[test]
+    fn axis_labels_keep_the_decimals_that_tell_ticks_apart() {
+        // Returns from -500 to -80: whole numbers, as step counts are written.
+        assert_eq!(format_axis(-250.0, 420.0), "-250");
+        assert_eq!(format_axis(2500.0, 20000.0), "2.5k");
+        // A normalised AUC from 0.85 to 1.05: ticks 0.03 apart need two decimals, not "1" for 0.95 and 1.0.
+        assert_eq!(format_axis(0.95, 0.2), "0.95");
+        assert_eq!(format_axis(1.0, 0.2), "1.00");
+        assert_eq!(format_axis(0.5, 3.0), "0.5");
+    }
+
     use super::*;
 
     #[test]
