@@ -502,22 +502,23 @@ impl WebExpert {
         }
     }
 
-    /// A copy of the environment the query shows, rebuilt from its episode, when the page can show such a copy
-    /// (its frames are drawn from the environment they are given) and the copy reaches the query's observation.
-    fn copy_of(&self, query: &Query) -> Option<(Box<dyn Env>, Vec<f32>)> {
+    /// The query's environment rebuilt from the start of its episode through `actions` (a prefix of the
+    /// episode's), when the page can show such a copy (its frames are drawn from the environment they are given)
+    /// and arld can build the environment.
+    fn rebuild(&self, query: &Query, actions: &[usize]) -> Option<(Box<dyn Env>, Vec<f32>)> {
         if !self.frames.shows_copies() {
             return None;
         }
         let mut env = crate::env::make(query.env.id()).ok()?;
         let mut obs = Vec::new();
-        crate::env::replay_episode(
-            &mut *env,
-            query.episode.start,
-            query.episode.actions,
-            &mut obs,
-        )
-        .ok()?;
-        (obs == query.obs).then_some((env, obs))
+        crate::env::replay_episode(&mut *env, query.episode.start, actions, &mut obs).ok()?;
+        Some((env, obs))
+    }
+
+    /// A copy of the environment the query shows, when it can be rebuilt and reaches the query's observation.
+    fn copy_of(&self, query: &Query) -> Option<(Box<dyn Env>, Vec<f32>)> {
+        self.rebuild(query, query.episode.actions)
+            .filter(|(_, obs)| obs == query.obs)
     }
 
     /// Before a question: shows the person the agent's own steps since their last one in this episode (or since
@@ -530,18 +531,12 @@ impl WebExpert {
             actions.len(),
             REPLAY_MAX_STEPS,
         );
-        if from >= actions.len() || !self.frames.shows_copies() {
+        if from >= actions.len() {
             return Ok(());
         }
-        let Some(mut env) = crate::env::make(query.env.id()).ok() else {
+        let Some((mut env, mut obs)) = self.rebuild(query, &actions[..from]) else {
             return Ok(());
         };
-        let mut obs = Vec::new();
-        if crate::env::replay_episode(&mut *env, query.episode.start, &actions[..from], &mut obs)
-            .is_err()
-        {
-            return Ok(());
-        }
         // The state the person left, then the state after each of the agent's steps: the last is the question's.
         let mut frames = Vec::with_capacity(actions.len() - from + 1);
         frames.extend(self.frames.frame(&*env, &obs)?);
