@@ -60,6 +60,19 @@ fn median(mut v: Vec<f64>) -> f64 {
     }
 }
 
+/// A rule spec as a directory name spells it.
+fn spelled(spec: &str) -> String {
+    spec.chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || c == '_' || c == '.' {
+                c
+            } else {
+                '-'
+            }
+        })
+        .collect()
+}
+
 /// The directory of a rule's runs at the paper's budget with bootstrapped heads: the paper's methods in their
 /// own directories, every other rule as ADQN with `query_rule` set (the variant's name spells the spec).
 fn rule_dir(env: &str, rule: &str) -> PathBuf {
@@ -68,26 +81,32 @@ fn rule_dir(env: &str, rule: &str) -> PathBuf {
         "greedy (GDQN)" => runs.join("gdqn-bootstrap"),
         "bernoulli (BDQN)" => runs.join("bdqn-bootstrap"),
         "adaptive (ADQN)" => runs.join("adqn-bootstrap"),
-        spec => {
-            let name: String = spec
-                .chars()
-                .map(|c| {
-                    if c.is_ascii_alphanumeric() || c == '_' || c == '.' {
-                        c
-                    } else {
-                        '-'
-                    }
-                })
-                .collect();
-            runs.join("adqn-bootstrap")
-                .join(format!("query_rule-{name}"))
-        }
+        spec => runs
+            .join("adqn-bootstrap")
+            .join(format!("query_rule-{}", spelled(spec))),
+    }
+}
+
+/// The directory of a rule's runs with bootstrapped heads at a budget other than the paper's: the variant
+/// `budget-B`, with `-query_rule-SPEC` for a rule that is not one of the paper's methods.
+fn budget_dir(env: &str, rule: &str, budget: &str) -> PathBuf {
+    let runs = results().join("runs").join(env);
+    match rule {
+        "bernoulli (BDQN)" => runs.join("bdqn-bootstrap").join(format!("budget-{budget}")),
+        "adaptive (ADQN)" => runs.join("adqn-bootstrap").join(format!("budget-{budget}")),
+        spec => runs
+            .join("adqn-bootstrap")
+            .join(format!("budget-{budget}-query_rule-{}", spelled(spec))),
     }
 }
 
 /// The median AUC over the design seeds (0-9) of a rule's runs, recomputed.
 fn design_median(env: &str, rule: &str, random: f64, expert: f64) -> Option<f64> {
-    let dir = rule_dir(env, rule);
+    design_median_in(&rule_dir(env, rule), random, expert)
+}
+
+/// The median AUC over the design seeds (0-9) of the runs in `dir`, recomputed.
+fn design_median_in(dir: &Path, random: f64, expert: f64) -> Option<f64> {
     let aucs: Vec<f64> = (0..10)
         .map(|s| dir.join(format!("seed{s}")))
         .filter(|d| d.join("summary.json").is_file())
@@ -186,5 +205,77 @@ fn the_design_choice_is_the_candidate_with_the_highest_mean_median_auc() {
         best.map(|(_, c)| c),
         Some(arld::experiment::protocol::HELD_OUT_RULE),
         "the rule fixed for the held-out test is not the design seeds' choice"
+    );
+}
+
+/// Every entry of effort.md's "What the expert's effort buys" tables is the median AUC of that rule's runs at
+/// that budget on the design seeds, recomputed from their eval.csv.
+#[test]
+fn what_the_effort_buys_is_the_median_auc_of_the_runs_at_each_budget() {
+    let rows = effort_rows();
+    let refs: BTreeMap<String, (f64, f64, String)> = rows
+        .iter()
+        .filter(|r| r["budget_scale"] == "1")
+        .map(|r| {
+            (
+                r["env"].clone(),
+                (
+                    r["random_return"].parse().unwrap(),
+                    r["expert_return"].parse().unwrap(),
+                    r["budget"].clone(),
+                ),
+            )
+        })
+        .collect();
+    let md = std::fs::read_to_string(results().join("effort.md")).unwrap();
+    let section = md
+        .split("## What the expert's effort buys")
+        .nth(1)
+        .and_then(|rest| rest.split("\n## ").next())
+        .expect("effort.md has no section \"What the expert's effort buys\"");
+    let mut checked = 0;
+    for table in section.split("\n### ").skip(1) {
+        let env = table.lines().next().unwrap().trim();
+        let (random, expert, paper_budget) = &refs[env];
+        let mut lines = table.lines().filter(|l| l.starts_with('|'));
+        let header: Vec<&str> = lines.next().unwrap().split('|').map(str::trim).collect();
+        // Columns "1/4 (50)": the budget in parentheses.
+        let budgets: Vec<Option<&str>> = header
+            .iter()
+            .map(|h| h.split_once('(').map(|(_, b)| b.trim_end_matches(')')))
+            .collect();
+        for row in lines.skip(1) {
+            let fields: Vec<&str> = row.split('|').map(str::trim).collect();
+            let (rule, net) = (fields[1], fields[2]);
+            assert_eq!(
+                net, "bootstrap",
+                "{env} {rule}: only bootstrap runs vary the budget"
+            );
+            for (field, budget) in fields.iter().zip(&budgets) {
+                let Some(budget) = budget else { continue };
+                if *field == "–" {
+                    continue;
+                }
+                let dir = if budget == paper_budget {
+                    rule_dir(env, rule)
+                } else {
+                    budget_dir(env, rule, budget)
+                };
+                let ours = design_median_in(&dir, *random, *expert).unwrap_or_else(|| {
+                    panic!("{env} {rule} at {budget}: no run in {}", dir.display())
+                });
+                let theirs = field.split_whitespace().next().unwrap();
+                assert_eq!(
+                    format!("{ours:.3}"),
+                    theirs,
+                    "{env} {rule} at budget {budget}: effort.md says {theirs}, the runs {ours:.3}"
+                );
+                checked += 1;
+            }
+        }
+    }
+    assert!(
+        checked >= 20,
+        "only {checked} budget cells in effort.md's effort table"
     );
 }

@@ -18,7 +18,7 @@
 
 use super::plot::{Band, Curve, FigureContent, Panel};
 use super::protocol::{
-    EFFORT_NET, EFFORT_SCREEN_TASKS, HELD_OUT_SEEDS, OWN_RULE_CANDIDATES, env_order,
+    DESIGN_SEEDS, EFFORT_NET, EFFORT_SCREEN_TASKS, HELD_OUT_SEEDS, OWN_RULE_CANDIDATES, env_order,
     is_effort_variant, paper_budget,
 };
 use super::stats::{bootstrap_median_interval, final_score, mann_whitney, median, sustained};
@@ -185,6 +185,14 @@ fn reading(values: &[f64], digits: usize) -> (f64, (f64, f64), String) {
     (m, (lo, hi), format!("{} [{}, {}]", f(m), f(lo), f(hi)))
 }
 
+/// "p = 0.473" or "p < 0.001", for prose.
+fn p_phrase(p: Option<f64>) -> String {
+    match fmt_p(p).strip_prefix('<') {
+        Some(bound) => format!("p < {bound}"),
+        None => format!("p = {}", fmt_p(p)),
+    }
+}
+
 fn fmt_p(p: Option<f64>) -> String {
     match p {
         None => "–".into(),
@@ -279,7 +287,7 @@ pub fn effort(runs: &[RunRecord], k: usize) -> Result<Option<EffortReport>> {
                 continue;
             }
             if held_out {
-                writeln!(md, "### Held-out seeds ({HELD_OUT_SEEDS:?})\n")?;
+                writeln!(md, "### Held-out seeds ({})\n", seed_span(&HELD_OUT_SEEDS))?;
             }
             writeln!(
                 md,
@@ -373,6 +381,7 @@ pub fn effort(runs: &[RunRecord], k: usize) -> Result<Option<EffortReport>> {
             writeln!(md)?;
         }
     }
+    writeln!(md, "{}", effort_buys(&cells, &envs))?;
     writeln!(md, "{}", design_choice(&cells))?;
     writeln!(md, "{}", goal_verdict(&cells, &envs))?;
     let figures = figures(&cells, &envs);
@@ -399,6 +408,109 @@ fn csv_field(s: &str) -> String {
     }
 }
 
+/// The AUCs of a cell's runs on the design seeds ([`DESIGN_SEEDS`]): the own rule is chosen, and budgets are
+/// compared, on these only, whatever other seeds a cell has.
+fn design_aucs(cell: &[RunMetrics]) -> Vec<f64> {
+    cell.iter()
+        .filter(|m| DESIGN_SEEDS.contains(&m.seed))
+        .map(|m| m.auc)
+        .collect()
+}
+
+/// Seeds `a..b` as "a-(b-1)", for prose and headings.
+fn seed_span(seeds: &std::ops::Range<u64>) -> String {
+    format!("{}-{}", seeds.start, seeds.end.saturating_sub(1))
+}
+
+/// A budget as a multiple of the paper's for `env`: "1/4", "1/2", "1", "2", "4" (or a decimal).
+fn budget_multiple(env: &str, budget: usize) -> String {
+    let scale = budget as f64 / paper_budget(env).max(1) as f64;
+    let fractions = [(0.25, "1/4"), (0.5, "1/2")];
+    match fractions.iter().find(|(v, _)| (scale - v).abs() < 1e-9) {
+        Some((_, text)) => text.to_string(),
+        None if scale.fract() == 0.0 => format!("{scale:.0}"),
+        None => format!("{scale:.2}"),
+    }
+}
+
+/// What more or less of the expert's effort bought, task by task: for every rule run at two budgets or more
+/// (design seeds only), its median AUC and first hit at each budget, and the AUC at the largest budget against
+/// the smallest (Mann–Whitney).
+fn effort_buys(cells: &BTreeMap<CellKey, Vec<RunMetrics>>, envs: &[String]) -> String {
+    let mut out = format!(
+        "## What the expert's effort buys\n\nFor each rule run at two budgets or more, on the design seeds \
+         {} that every budget has: the median AUC and, in parentheses, the median first hit at each \
+         budget, as a multiple of the paper's; then the largest budget against the smallest (Mann-Whitney).\n",
+        seed_span(&DESIGN_SEEDS)
+    );
+    for env in envs {
+        let mut per_rule: BTreeMap<(usize, String, String), BTreeMap<usize, Vec<RunMetrics>>> =
+            BTreeMap::new();
+        for (key, cell) in cells.iter().filter(|(k, _)| &k.0 == env && !k.4) {
+            let design: Vec<RunMetrics> = cell
+                .iter()
+                .filter(|m| DESIGN_SEEDS.contains(&m.seed))
+                .cloned()
+                .collect();
+            if !design.is_empty() {
+                per_rule
+                    .entry((rank_rule(&key.1), key.1.clone(), key.2.clone()))
+                    .or_default()
+                    .insert(key.3, design);
+            }
+        }
+        per_rule.retain(|_, by_budget| by_budget.len() >= 2);
+        if per_rule.is_empty() {
+            continue;
+        }
+        let budgets: std::collections::BTreeSet<usize> = per_rule
+            .values()
+            .flat_map(|by_budget| by_budget.keys().copied())
+            .collect();
+        let header: Vec<String> = budgets
+            .iter()
+            .map(|&b| format!("{} ({b})", budget_multiple(env, b)))
+            .collect();
+        let _ = writeln!(
+            out,
+            "\n### {env}\n\n| rule | net | {} | largest vs smallest |\n|---|---|{}---|",
+            header.join(" | "),
+            "---|".repeat(budgets.len())
+        );
+        for ((_, rule, net), by_budget) in &per_rule {
+            let row: Vec<String> = budgets
+                .iter()
+                .map(|b| {
+                    by_budget.get(b).map_or("–".to_string(), |cell| {
+                        let auc = median(&design_aucs(cell));
+                        let hit = median(&cell.iter().map(|m| m.first_hit).collect::<Vec<_>>());
+                        format!(
+                            "{:.3} ({:.0})",
+                            auc.unwrap_or(f64::NAN),
+                            hit.unwrap_or(f64::NAN)
+                        )
+                    })
+                })
+                .collect();
+            let (smallest, largest) = (by_budget.first_key_value(), by_budget.last_key_value());
+            let change = match (smallest, largest) {
+                (Some((&lo, lo_cell)), Some((&hi, hi_cell))) => {
+                    let (p, diff) = compare(hi_cell, Some(lo_cell));
+                    format!(
+                        "{} vs {}: AUC {diff:+.3}, {}",
+                        budget_multiple(env, hi),
+                        budget_multiple(env, lo),
+                        p_phrase(p)
+                    )
+                }
+                _ => "–".to_string(),
+            };
+            let _ = writeln!(out, "| {rule} | {net} | {} | {change} |", row.join(" | "));
+        }
+    }
+    out
+}
+
 /// The own rule's choice on the design seeds: each candidate's median AUC on every screening task at the
 /// paper's budget with the screen's network, their mean, and the candidate with the highest mean.
 fn design_choice(cells: &BTreeMap<CellKey, Vec<RunMetrics>>) -> String {
@@ -422,9 +534,7 @@ fn design_choice(cells: &BTreeMap<CellKey, Vec<RunMetrics>>) -> String {
                     paper_budget(env),
                     false,
                 );
-                cells
-                    .get(&key)
-                    .and_then(|c| median(&c.iter().map(|m| m.auc).collect::<Vec<_>>()))
+                cells.get(&key).and_then(|c| median(&design_aucs(c)))
             })
             .collect();
         let complete: Option<Vec<f64>> = medians.iter().copied().collect();
@@ -467,8 +577,9 @@ fn goal_verdict(cells: &BTreeMap<CellKey, Vec<RunMetrics>>, envs: &[String]) -> 
     if candidates.is_empty() {
         let _ = writeln!(
             out,
-            "Not run yet: the held-out seeds {HELD_OUT_SEEDS:?} are fixed in src/experiment/protocol.rs and no \
-             run of them exists. A rule is chosen on the design seeds first."
+            "Not run yet: the held-out seeds {} are fixed in src/experiment/protocol.rs and no \
+             run of them exists. A rule is chosen on the design seeds first.",
+            seed_span(&HELD_OUT_SEEDS)
         );
         return out;
     }
@@ -505,8 +616,8 @@ fn goal_verdict(cells: &BTreeMap<CellKey, Vec<RunMetrics>>, envs: &[String]) -> 
                     losses += 1;
                 }
                 lines.push(format!(
-                    "{env} vs {label}: p = {}, AUC difference {diff:+.3}",
-                    fmt_p(p)
+                    "{env} vs {label}: {}, AUC difference {diff:+.3}",
+                    p_phrase(p)
                 ));
             }
             wins += usize::from(all_higher);
