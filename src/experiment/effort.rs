@@ -16,7 +16,7 @@
 //! Seeds in [`super::protocol::HELD_OUT_SEEDS`] are never pooled with the others: they form cells of their own
 //! (the held-out test), reported in a section of their own with the verdict of the goal.
 
-use super::plot::{Band, Curve, FigureContent, Panel};
+use super::plot::{Band, Curve, FigureContent, Panel, XScale};
 use super::protocol::{
     DESIGN_SEEDS, EFFORT_NET, EFFORT_SCREEN_TASKS, HELD_OUT_SEEDS, OWN_RULE_CANDIDATES, env_order,
     is_effort_variant, paper_budget,
@@ -650,8 +650,9 @@ fn goal_verdict(cells: &BTreeMap<CellKey, Vec<RunMetrics>>, envs: &[String]) -> 
     out
 }
 
-/// AUC against effort (one panel per task, a line per rule over budgets) and cumulative questions against
-/// training step at the paper's budget (a line per rule).
+/// AUC against effort (one panel per task, a line per rule over budgets, on the design seeds as the table
+/// "What the expert's effort buys") and cumulative questions against training step at the paper's budget (a line
+/// per rule).
 fn figures(
     cells: &BTreeMap<CellKey, Vec<RunMetrics>>,
     envs: &[String],
@@ -676,12 +677,15 @@ fn figures(
         let mut by_rule: BTreeMap<(String, String), PerX> = BTreeMap::new();
         let mut questions: BTreeMap<(String, String), PerX> = BTreeMap::new();
         for (key, cell) in cells.iter().filter(|(k, _)| &k.0 == env && !k.4) {
-            by_rule
-                .entry((key.1.clone(), key.2.clone()))
-                .or_default()
-                .entry(key.3 as u64)
-                .or_default()
-                .extend(cell.iter().map(|m| m.auc));
+            let design = design_aucs(cell);
+            if !design.is_empty() {
+                by_rule
+                    .entry((key.1.clone(), key.2.clone()))
+                    .or_default()
+                    .entry(key.3 as u64)
+                    .or_default()
+                    .extend(design);
+            }
             if key.3 == paper_budget(env) {
                 let per_step = questions.entry((key.1.clone(), key.2.clone())).or_default();
                 for m in cell {
@@ -703,7 +707,12 @@ fn figures(
                 })
                 .collect()
         };
-        let auc = curves(&by_rule, 2);
+        // Budgets as log2 of the multiple of the paper's: 1/4 .. 4 evenly spaced.
+        let paper = paper_budget(env).max(1) as f64;
+        let mut auc = curves(&by_rule, 2);
+        for point in auc.iter_mut().flat_map(|c| c.points.iter_mut()) {
+            point.x = (point.x / paper).log2();
+        }
         if !auc.is_empty() {
             auc_panels.push(Panel::new(env.clone(), None, auc));
         }
@@ -718,7 +727,8 @@ fn figures(
             "effort_auc".to_string(),
             FigureContent {
                 title: "What the expert's effort buys: normalised AUC against the budget".into(),
-                x_label: "budget (demonstrated transitions)".into(),
+                x_label: "budget (multiple of the paper's, log scale)".into(),
+                x_scale: XScale::Log2Multiple,
                 y_label: "normalised AUC (median, IQR over seeds)".into(),
                 panels: auc_panels,
             },
@@ -730,6 +740,7 @@ fn figures(
             FigureContent {
                 title: "When each rule asks: questions asked so far, at the paper's budget".into(),
                 x_label: "training step".into(),
+                x_scale: XScale::Steps,
                 y_label: "questions asked (median, IQR over seeds)".into(),
                 panels: question_panels,
             },

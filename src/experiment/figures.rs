@@ -6,7 +6,7 @@
 //!   (one panel per environment, one line per method or setting), or says why a figure is skipped;
 //!   [`super::plot`] draws it.
 
-use super::plot::{Band, Curve, FigureContent, PALETTE, Panel};
+use super::plot::{Band, Curve, FigureContent, PALETTE, Panel, XScale};
 use super::protocol::{self, env_order};
 use super::stats::quantile;
 use crate::paper::TABLE5_METHODS;
@@ -220,6 +220,7 @@ fn steps_figure(title: String, y_label: &str, panels: Vec<Panel>) -> Option<Figu
     (!panels.is_empty()).then(|| FigureContent {
         title,
         x_label: STEPS_LABEL.to_string(),
+        x_scale: XScale::Steps,
         y_label: y_label.to_string(),
         panels,
     })

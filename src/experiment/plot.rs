@@ -64,11 +64,51 @@ impl Panel {
     }
 }
 
+/// How a figure's x values read.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum XScale {
+    /// Environment steps from 0 to the last x, ticks as 2.5k, 200k, 1.5M.
+    #[default]
+    Steps,
+    /// The base-2 logarithm of a multiple (of a budget, say): ticks at whole powers of two read 1/4, 1/2, 1, 2, 4.
+    Log2Multiple,
+}
+
+impl XScale {
+    /// The x range a panel spans, from the largest and smallest x of its points.
+    fn range(self, x_min: f64, x_max: f64) -> (f64, f64) {
+        match self {
+            XScale::Steps => (0.0, if x_max > 0.0 { x_max } else { 1.0 }),
+            XScale::Log2Multiple if x_min <= x_max => (x_min - 0.25, x_max + 0.25),
+            XScale::Log2Multiple => (-1.0, 1.0),
+        }
+    }
+
+    /// Tick text at `x`.
+    fn label(self, x: f64) -> String {
+        match self {
+            XScale::Steps => format_steps(x),
+            XScale::Log2Multiple if (x - x.round()).abs() > 1e-9 => String::new(),
+            XScale::Log2Multiple if x < 0.0 => format!("1/{}", 2f64.powf(-x.round())),
+            XScale::Log2Multiple => format!("{}", 2f64.powf(x.round())),
+        }
+    }
+
+    /// How many x ticks to ask for over `span`.
+    fn ticks(self, span: f64) -> usize {
+        match self {
+            XScale::Steps => 6,
+            XScale::Log2Multiple => (span.floor() as usize + 1).max(2),
+        }
+    }
+}
+
 /// A figure: a row (or grid) of panels sharing axis labels and one legend.
 #[derive(Debug, Clone)]
 pub struct FigureContent {
     pub title: String,
     pub x_label: String,
+    pub x_scale: XScale,
     pub y_label: String,
     pub panels: Vec<Panel>,
 }
@@ -109,10 +149,14 @@ fn format_axis(value: f64, span: f64) -> String {
     format!("{value:.decimals$}")
 }
 
-/// Axis ranges of a panel: x from 0 to the last step, y covering bands and threshold with 5% padding.
-fn panel_ranges(panel: &Panel) -> (f64, (f64, f64)) {
+/// Axis ranges of a panel: x as `x_scale` spans its points, y covering bands and threshold with 5% padding.
+fn panel_ranges(panel: &Panel, x_scale: XScale) -> ((f64, f64), (f64, f64)) {
     let points = panel.curves.iter().flat_map(|c| c.points.iter());
-    let x_max = points.clone().map(|p| p.x).fold(0.0, f64::max);
+    let x_max = points
+        .clone()
+        .map(|p| p.x)
+        .fold(f64::NEG_INFINITY, f64::max);
+    let x_min = points.clone().map(|p| p.x).fold(f64::INFINITY, f64::min);
     let mut y_min = points
         .clone()
         .map(|p| p.lower_quartile.min(p.median))
@@ -132,10 +176,7 @@ fn panel_ranges(panel: &Panel) -> (f64, (f64, f64)) {
     } else {
         1.0
     };
-    (
-        if x_max > 0.0 { x_max } else { 1.0 },
-        (y_min - pad, y_max + pad),
-    )
+    (x_scale.range(x_min, x_max), (y_min - pad, y_max + pad))
 }
 
 const PANEL_WIDTH: u32 = 560;
@@ -280,7 +321,7 @@ fn draw_on<DB: DrawingBackend>(
         .iter()
         .zip(&figure.panels)
     {
-        let (x_max, (y_min, y_max)) = panel_ranges(panel);
+        let ((x_min, x_max), (y_min, y_max)) = panel_ranges(panel, figure.x_scale);
         let mut chart = ChartBuilder::on(area)
             .caption(&panel.title, (FONT_FAMILY, 19))
             .margin_top(6)
@@ -289,15 +330,15 @@ fn draw_on<DB: DrawingBackend>(
             .margin_bottom(6)
             .x_label_area_size(52)
             .y_label_area_size(74)
-            .build_cartesian_2d(0.0..x_max, y_min..y_max)
+            .build_cartesian_2d(x_min..x_max, y_min..y_max)
             .map_err(plot_error)?;
         chart
             .configure_mesh()
             .x_desc(figure.x_label.as_str())
             .y_desc(figure.y_label.as_str())
-            .x_labels(6)
+            .x_labels(figure.x_scale.ticks(x_max - x_min))
             .y_labels(7)
-            .x_label_formatter(&|x| format_steps(*x))
+            .x_label_formatter(&|x| figure.x_scale.label(*x))
             .y_label_formatter(&|y| format_axis(*y, y_max - y_min))
             .label_style((FONT_FAMILY, 14))
             .axis_desc_style((FONT_FAMILY, 16))
@@ -332,7 +373,7 @@ fn draw_on<DB: DrawingBackend>(
         if let Some(threshold) = panel.threshold {
             chart
                 .draw_series(DashedLineSeries::new(
-                    vec![(0.0, threshold), (x_max, threshold)],
+                    vec![(x_min, threshold), (x_max, threshold)],
                     9,
                     6,
                     BLACK.stroke_width(1),
@@ -440,6 +481,20 @@ mod tests {
     }
 
     use super::*;
+
+    #[test]
+    fn budget_multiples_read_as_fractions_and_whole_numbers() {
+        let scale = XScale::Log2Multiple;
+        let labels: Vec<String> = [-2.0, -1.0, 0.0, 1.0, 2.0, 0.5]
+            .iter()
+            .map(|&x| scale.label(x))
+            .collect();
+        assert_eq!(labels, ["1/4", "1/2", "1", "2", "4", ""]);
+        // Whole powers of two from 1/4 to 4 get a tick each, with a quarter step of room on either side.
+        let (lo, hi) = scale.range(-2.0, 2.0);
+        assert_eq!((lo, hi), (-2.25, 2.25));
+        assert_eq!(scale.ticks(hi - lo), 5);
+    }
 
     #[test]
     fn step_ticks_are_short() {
