@@ -652,7 +652,7 @@ fn goal_verdict(cells: &BTreeMap<CellKey, Vec<RunMetrics>>, envs: &[String]) -> 
 
 /// AUC against effort (one panel per task, a line per rule over budgets, on the design seeds as the table
 /// "What the expert's effort buys") and cumulative questions against training step at the paper's budget (a line
-/// per rule).
+/// per rule), both with the benchmark's network ([`EFFORT_NET`]); a rule keeps its line style in both.
 fn figures(
     cells: &BTreeMap<CellKey, Vec<RunMetrics>>,
     envs: &[String],
@@ -670,13 +670,28 @@ fn figures(
             })
             .collect()
     };
+    // One style per rule across tasks and both figures: the paper's rules first, then the others alphabetically.
+    let mut lines: Vec<(usize, String, String)> = cells
+        .keys()
+        .filter(|k| !k.4 && k.2 == EFFORT_NET.name())
+        .map(|k| (rank_rule(&k.1), k.1.clone(), k.2.clone()))
+        .collect();
+    lines.sort();
+    lines.dedup();
+    let style_of = |rule: &str, net: &str| {
+        lines
+            .iter()
+            .position(|(_, r, n)| r == rule && n == net)
+            .unwrap_or(lines.len())
+    };
     let mut auc_panels = Vec::new();
     let mut question_panels = Vec::new();
     for env in envs {
         type PerX = BTreeMap<u64, Vec<f64>>;
         let mut by_rule: BTreeMap<(String, String), PerX> = BTreeMap::new();
         let mut questions: BTreeMap<(String, String), PerX> = BTreeMap::new();
-        for (key, cell) in cells.iter().filter(|(k, _)| &k.0 == env && !k.4) {
+        let in_figures = |k: &CellKey| &k.0 == env && !k.4 && k.2 == EFFORT_NET.name();
+        for (key, cell) in cells.iter().filter(|(k, _)| in_figures(k)) {
             let design = design_aucs(cell);
             if !design.is_empty() {
                 by_rule
@@ -696,16 +711,18 @@ fn figures(
             }
         }
         let curves = |lines: &BTreeMap<(String, String), PerX>, min_points: usize| -> Vec<Curve> {
-            lines
+            let mut curves = lines
                 .iter()
                 .filter(|(_, per)| per.len() >= min_points)
-                .enumerate()
-                .map(|(i, ((rule, net), per))| Curve {
-                    label: format!("{rule} {net}"),
-                    color: i % super::plot::PALETTE.len(),
+                .map(|((rule, net), per)| Curve {
+                    label: rule.clone(),
+                    color: style_of(rule, net),
                     points: band_of(per),
                 })
-                .collect()
+                .collect::<Vec<_>>();
+            // The legend lists rules in the order of their styles.
+            curves.sort_by_key(|c| c.color);
+            curves
         };
         // Budgets as log2 of the multiple of the paper's: 1/4 .. 4 evenly spaced.
         let paper = paper_budget(env).max(1) as f64;
@@ -726,7 +743,10 @@ fn figures(
         out.push((
             "effort_auc".to_string(),
             FigureContent {
-                title: "What the expert's effort buys: normalised AUC against the budget".into(),
+                title: format!(
+                    "What the expert's effort buys: normalised AUC against the budget ({} network)",
+                    EFFORT_NET.name()
+                ),
                 x_label: "budget (multiple of the paper's, log scale)".into(),
                 x_scale: XScale::Log2Multiple,
                 y_label: "normalised AUC (median, IQR over seeds)".into(),
@@ -738,7 +758,10 @@ fn figures(
         out.push((
             "effort_questions".to_string(),
             FigureContent {
-                title: "When each rule asks: questions asked so far, at the paper's budget".into(),
+                title: format!(
+                    "When each rule asks: questions asked so far, at the paper's budget ({} network)",
+                    EFFORT_NET.name()
+                ),
                 x_label: "training step".into(),
                 x_scale: XScale::Steps,
                 y_label: "questions asked (median, IQR over seeds)".into(),

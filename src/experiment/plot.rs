@@ -37,7 +37,8 @@ pub struct Band {
     pub upper_quartile: f64,
 }
 
-/// One line of a panel with its interquartile band; `color` indexes [`PALETTE`].
+/// One line of a panel with its interquartile band; `color` indexes [`PALETTE`] and, past its length, the same
+/// colours again dashed, then dotted ([`line_style`]).
 #[derive(Debug, Clone)]
 pub struct Curve {
     pub label: String,
@@ -124,6 +125,16 @@ pub const PALETTE: [RGBColor; 8] = [
     RGBColor(204, 121, 167), // reddish purple
     RGBColor(0, 0, 0),       // black
 ];
+
+/// The colour of style `index` and its dash pattern (dash, gap in pixels; `None`: solid): the palette's colours
+/// solid, then dashed, then dotted, then solid again.
+fn line_style(index: usize) -> (RGBColor, Option<(u32, u32)>) {
+    const PATTERNS: [Option<(u32, u32)>; 3] = [None, Some((10, 6)), Some((2, 4))];
+    (
+        PALETTE[index % PALETTE.len()],
+        PATTERNS[(index / PALETTE.len()) % PATTERNS.len()],
+    )
+}
 
 /// Axis tick text for environment steps: 500, 2.5k, 200k, 1.5M.
 fn format_steps(value: f64) -> String {
@@ -347,7 +358,7 @@ fn draw_on<DB: DrawingBackend>(
             .draw()
             .map_err(plot_error)?;
         for curve in &panel.curves {
-            let color = PALETTE[curve.color % PALETTE.len()];
+            let (color, pattern) = line_style(curve.color);
             // The interquartile band: upper quartiles left to right, then lower quartiles back.
             let band: Vec<(f64, f64)> = curve
                 .points
@@ -363,12 +374,21 @@ fn draw_on<DB: DrawingBackend>(
                     )))
                     .map_err(plot_error)?;
             }
-            chart
-                .draw_series(LineSeries::new(
-                    curve.points.iter().map(|p| (p.x, p.median)),
-                    color.stroke_width(2),
-                ))
-                .map_err(plot_error)?;
+            let medians = curve.points.iter().map(|p| (p.x, p.median));
+            if let Some((dash, gap)) = pattern {
+                chart
+                    .draw_series(DashedLineSeries::new(
+                        medians,
+                        dash,
+                        gap,
+                        color.stroke_width(2),
+                    ))
+                    .map_err(plot_error)?;
+            } else {
+                chart
+                    .draw_series(LineSeries::new(medians, color.stroke_width(2)))
+                    .map_err(plot_error)?;
+            }
         }
         if let Some(threshold) = panel.threshold {
             chart
@@ -402,16 +422,23 @@ fn draw_legend<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, layout: &Layou
         for entry in row {
             match entry.color {
                 Some(index) => {
-                    let color = PALETTE[index % PALETTE.len()];
+                    let (color, pattern) = line_style(index);
                     area.draw(&Rectangle::new(
                         [(x, y - 7), (x + swatch, y + 7)],
                         color.mix(0.18).filled(),
                     ))
                     .map_err(plot_error)?;
-                    area.draw(&PathElement::new(
-                        vec![(x, y), (x + swatch, y)],
-                        color.stroke_width(3),
-                    ))
+                    let line = vec![(x, y), (x + swatch, y)];
+                    if let Some((dash, gap)) = pattern {
+                        area.draw(&DashedPathElement::new(
+                            line,
+                            dash,
+                            gap,
+                            color.stroke_width(3),
+                        ))
+                    } else {
+                        area.draw(&PathElement::new(line, color.stroke_width(3)))
+                    }
                     .map_err(plot_error)?;
                 }
                 None => {
