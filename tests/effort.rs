@@ -279,3 +279,86 @@ fn what_the_effort_buys_is_the_median_auc_of_the_runs_at_each_budget() {
         "only {checked} budget cells in effort.md's effort table"
     );
 }
+
+/// effort.md's screen table, recomputed from effort.csv (p-values of the Mann-Whitney test that
+/// `stats::mann_whitney_agrees_with_scipy` checks, and the AUC medians checked above): per task, the rules
+/// significantly higher than all three paper rules, higher than some, and lower than some.
+#[test]
+fn the_screen_lists_the_rules_that_differ_from_the_paper_rules() {
+    let rows = effort_rows();
+    let cells = paper_budget_rows(&rows);
+    let md = std::fs::read_to_string(results().join("effort.md")).unwrap();
+    let section = md
+        .split("## The screen at the paper's budget")
+        .nth(1)
+        .and_then(|rest| rest.split("\n## ").next())
+        .expect("effort.md has no section \"The screen at the paper's budget\"");
+    let baselines = [
+        ("greedy (GDQN)", "GDQN", "p_vs_gdqn"),
+        ("bernoulli (BDQN)", "BDQN", "p_vs_bdqn"),
+        ("adaptive (ADQN)", "ADQN", "p_vs_adqn"),
+    ];
+    let mut envs: Vec<&str> = cells.iter().map(|r| r["env"].as_str()).collect();
+    envs.dedup();
+    let mut checked = 0;
+    for env in envs {
+        let of_env: Vec<_> = cells.iter().filter(|r| r["env"] == env).collect();
+        let auc = |rule: &str| -> f64 {
+            of_env.iter().find(|r| r["rule"] == rule).unwrap()["auc_median"]
+                .parse()
+                .unwrap()
+        };
+        let (mut all, mut some, mut lower) = (Vec::new(), Vec::new(), Vec::new());
+        let mut rules: Vec<&str> = of_env
+            .iter()
+            .map(|r| r["rule"].as_str())
+            .filter(|rule| !baselines.iter().any(|b| b.0 == *rule))
+            .collect();
+        rules.sort();
+        for rule in rules {
+            let row = of_env.iter().find(|r| r["rule"] == rule).unwrap();
+            let (mut above, mut below) = (Vec::new(), Vec::new());
+            for (label, name, column) in baselines {
+                let p: f64 = match row[column].as_str() {
+                    "" => continue,
+                    text => text.parse().unwrap(),
+                };
+                if p < 0.05 {
+                    if auc(rule) > auc(label) {
+                        above.push(name);
+                    } else {
+                        below.push(name);
+                    }
+                }
+            }
+            let named = |v: &[&str]| format!("{rule} ({})", v.join(", "));
+            if above.len() == 3 {
+                all.push(rule.to_string());
+            } else if !above.is_empty() {
+                some.push(named(&above));
+            }
+            if !below.is_empty() {
+                lower.push(named(&below));
+            }
+        }
+        let list = |v: &[String]| {
+            if v.is_empty() {
+                "none".to_string()
+            } else {
+                v.join("; ")
+            }
+        };
+        let line = section
+            .lines()
+            .find(|l| l.starts_with(&format!("| {env} |")))
+            .unwrap_or_else(|| panic!("no screen row for {env}"));
+        let fields: Vec<&str> = line.split('|').map(str::trim).collect();
+        assert_eq!(
+            &fields[3..6],
+            &[list(&all), list(&some), list(&lower)],
+            "{env}: effort.md's screen row against effort.csv"
+        );
+        checked += 1;
+    }
+    assert!(checked >= 4, "the screen covers {checked} tasks");
+}

@@ -381,6 +381,7 @@ pub fn effort(runs: &[RunRecord], k: usize) -> Result<Option<EffortReport>> {
             writeln!(md)?;
         }
     }
+    writeln!(md, "{}", screen(&cells, &envs))?;
     writeln!(md, "{}", effort_buys(&cells, &envs))?;
     writeln!(md, "{}", design_choice(&cells))?;
     writeln!(md, "{}", goal_verdict(&cells, &envs))?;
@@ -415,6 +416,85 @@ fn design_aucs(cell: &[RunMetrics]) -> Vec<f64> {
         .filter(|m| DESIGN_SEEDS.contains(&m.seed))
         .map(|m| m.auc)
         .collect()
+}
+
+/// The rule screen read at the paper's budget with the benchmark's network, on every seed that is not held out:
+/// per task, the rules whose AUC is significantly higher than each of GDQN, BDQN and ADQN, higher than some of
+/// them, and lower than some of them (two-sided Mann–Whitney, p < [`ALPHA`]).
+fn screen(cells: &BTreeMap<CellKey, Vec<RunMetrics>>, envs: &[String]) -> String {
+    let mut out = format!(
+        "## The screen at the paper's budget\n\nEvery rule against GDQN, BDQN and ADQN at the paper's budget with \
+         the {} network, on its seeds outside the held-out ones (p < {ALPHA}, two-sided Mann-Whitney of the AUC; \
+         in parentheses, the paper's rules it differs from).\n\n| task | seeds per rule | higher than all three | \
+         higher than some | lower than some |\n|---|---|---|---|---|",
+        EFFORT_NET.name()
+    );
+    let net = EFFORT_NET.name();
+    for env in envs {
+        let key = |label: &str| {
+            (
+                env.clone(),
+                label.to_string(),
+                net.to_string(),
+                paper_budget(env),
+                false,
+            )
+        };
+        let rules: Vec<&CellKey> = cells
+            .keys()
+            .filter(|k| k.0 == *env && !k.4 && k.2 == net && k.3 == paper_budget(env))
+            .filter(|k| rank_rule(&k.1) == BASELINES.len())
+            .collect();
+        if rules.is_empty() {
+            continue;
+        }
+        let counts: Vec<usize> = rules.iter().map(|k| cells[*k].len()).collect();
+        let (fewest, most) = (
+            counts.iter().min().unwrap_or(&0),
+            counts.iter().max().unwrap_or(&0),
+        );
+        let (mut all, mut some, mut lower) = (Vec::new(), Vec::new(), Vec::new());
+        for rule in rules {
+            let (mut above, mut below) = (Vec::new(), Vec::new());
+            for (label, method) in BASELINES {
+                let (p, diff) = compare(&cells[rule], cells.get(&key(label)));
+                if p.is_some_and(|p| p < ALPHA) {
+                    let side = if diff > 0.0 { &mut above } else { &mut below };
+                    side.push(method.to_uppercase());
+                }
+            }
+            let named = |against: &[String]| format!("{} ({})", rule.1, against.join(", "));
+            if above.len() == BASELINES.len() {
+                all.push(rule.1.clone());
+            } else if !above.is_empty() {
+                some.push(named(&above));
+            }
+            if !below.is_empty() {
+                lower.push(named(&below));
+            }
+        }
+        let list = |v: &[String]| {
+            if v.is_empty() {
+                "none".to_string()
+            } else {
+                v.join("; ")
+            }
+        };
+        let seeds = if fewest == most {
+            format!("{most}")
+        } else {
+            format!("{fewest}-{most}")
+        };
+        let _ = write!(
+            out,
+            "\n| {env} | {seeds} | {} | {} | {} |",
+            list(&all),
+            list(&some),
+            list(&lower)
+        );
+    }
+    out.push('\n');
+    out
 }
 
 /// Seeds `a..b` as "a-(b-1)", for prose and headings.
