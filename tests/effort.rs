@@ -34,6 +34,16 @@ fn effort_rows() -> Vec<BTreeMap<String, String>> {
         .collect()
 }
 
+/// The text of effort.md's section `title` (a `## ` heading), up to the next section.
+fn effort_md_section(title: &str) -> String {
+    let md = std::fs::read_to_string(results().join("effort.md")).unwrap();
+    md.split(&format!("## {title}\n"))
+        .nth(1)
+        .and_then(|rest| rest.split("\n## ").next())
+        .unwrap_or_else(|| panic!("effort.md has no section \"{title}\""))
+        .to_string()
+}
+
 /// The mean over a run's evaluations of (return - random) / (expert - random).
 fn run_auc(dir: &Path, random: f64, expert: f64) -> f64 {
     let text = std::fs::read_to_string(dir.join("eval.csv")).unwrap();
@@ -227,12 +237,7 @@ fn what_the_effort_buys_is_the_median_auc_of_the_runs_at_each_budget() {
             )
         })
         .collect();
-    let md = std::fs::read_to_string(results().join("effort.md")).unwrap();
-    let section = md
-        .split("## What the expert's effort buys")
-        .nth(1)
-        .and_then(|rest| rest.split("\n## ").next())
-        .expect("effort.md has no section \"What the expert's effort buys\"");
+    let section = effort_md_section("What the expert's effort buys");
     let mut checked = 0;
     for table in section.split("\n### ").skip(1) {
         let env = table.lines().next().unwrap().trim();
@@ -287,12 +292,7 @@ fn what_the_effort_buys_is_the_median_auc_of_the_runs_at_each_budget() {
 fn the_screen_lists_the_rules_that_differ_from_the_paper_rules() {
     let rows = effort_rows();
     let cells = paper_budget_rows(&rows);
-    let md = std::fs::read_to_string(results().join("effort.md")).unwrap();
-    let section = md
-        .split("## The screen at the paper's budget")
-        .nth(1)
-        .and_then(|rest| rest.split("\n## ").next())
-        .expect("effort.md has no section \"The screen at the paper's budget\"");
+    let section = effort_md_section("The screen at the paper's budget");
     let baselines = [
         ("greedy (GDQN)", "GDQN", "p_vs_gdqn"),
         ("bernoulli (BDQN)", "BDQN", "p_vs_bdqn"),

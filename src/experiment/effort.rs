@@ -61,6 +61,17 @@ struct RunMetrics {
 /// One cell's key: task, rule label, network, budget, held out or not.
 type CellKey = (String, String, String, usize, bool);
 
+/// The key of `rule`'s cell at the paper's budget for `env` with network `net`, held out or not.
+fn paper_cell(env: &str, rule: &str, net: &str, held_out: bool) -> CellKey {
+    (
+        env.to_string(),
+        rule.to_string(),
+        net.to_string(),
+        paper_budget(env),
+        held_out,
+    )
+}
+
 /// The rule and budget of a benchmark run, from its `config.toml`; `None` for runs outside the benchmark.
 fn rule_and_budget(run: &RunRecord) -> Result<Option<(String, usize)>> {
     let method = run.id.method.name();
@@ -431,15 +442,7 @@ fn screen(cells: &BTreeMap<CellKey, Vec<RunMetrics>>, envs: &[String]) -> String
     );
     let net = EFFORT_NET.name();
     for env in envs {
-        let key = |label: &str| {
-            (
-                env.clone(),
-                label.to_string(),
-                net.to_string(),
-                paper_budget(env),
-                false,
-            )
-        };
+        let key = |label: &str| paper_cell(env, label, net, false);
         let rules: Vec<&CellKey> = cells
             .keys()
             .filter(|k| k.0 == *env && !k.4 && k.2 == net && k.3 == paper_budget(env))
@@ -607,13 +610,7 @@ fn design_choice(cells: &BTreeMap<CellKey, Vec<RunMetrics>>) -> String {
         let medians: Vec<Option<f64>> = EFFORT_SCREEN_TASKS
             .iter()
             .map(|env| {
-                let key = (
-                    env.to_string(),
-                    candidate.to_string(),
-                    EFFORT_NET.name().to_string(),
-                    paper_budget(env),
-                    false,
-                );
+                let key = paper_cell(env, candidate, EFFORT_NET.name(), false);
                 cells.get(&key).and_then(|c| median(&design_aucs(c)))
             })
             .collect();
@@ -669,15 +666,7 @@ fn goal_verdict(cells: &BTreeMap<CellKey, Vec<RunMetrics>>, envs: &[String]) -> 
         let mut lines = Vec::new();
         let mut incomplete = Vec::new();
         for env in envs {
-            let key = |label: &str| {
-                (
-                    env.clone(),
-                    label.to_string(),
-                    net.clone(),
-                    paper_budget(env),
-                    true,
-                )
-            };
+            let key = |label: &str| paper_cell(env, label, &net, true);
             // A task counts once the rule and the three paper rules have every held-out seed.
             let complete = std::iter::once(rule.as_str())
                 .chain(BASELINES.iter().map(|(label, _)| *label))
