@@ -2,18 +2,19 @@
 //! directory), sweeps over grids of runs ([`sweep`]) and their submission to Slurm as job arrays ([`slurm`]),
 //! the paper's experiment grids ([`protocol`]), statistics over seeds ([`stats`]), and reports with the paper's
 //! table and figures ([`report`]; which figures and what they show in [`figures`], how one is drawn in
-//! [`plot`]). Sweeps and reports read runs through [`crate::train::run_dir`], the owner of the run
-//! directory's format.
+//! [`plot`]; hand-written documents that quote its tables in [`quote`]). Sweeps and reports read runs through
+//! [`crate::train::run_dir`], the owner of the run directory's format.
 //!
 //! Within this layer imports go one way: `dir_lock` <- `sweep`; `stats`, `sweep` <- `protocol`;
-//! `protocol`, `plot` <- `figures`; `protocol`, `plot`, `stats`, `verdict` <- `effort`; `effort`, `figures`, `plot`
-//! <- `report`; `slurm` <- the CLI.
+//! `protocol`, `plot` <- `figures`; `protocol`, `plot`, `stats`, `verdict` <- `effort`; `effort`, `figures`, `plot`,
+//! `quote` <- `report`; `slurm` <- the CLI.
 
 pub mod dir_lock;
 pub mod effort;
 pub mod figures;
 pub mod plot;
 pub mod protocol;
+pub mod quote;
 pub mod report;
 pub mod slurm;
 pub mod stats;

@@ -383,6 +383,7 @@ pub fn report(dir: &Path, out_dir: &Path, sustain: usize) -> Result<ReportSummar
     let report_path = out_dir.join("report.md");
     write_atomic(&report_path, md.as_bytes())?;
     files.push(report_path);
+    files.extend(super::quote::render_documents(out_dir)?);
     if !failed.is_empty() {
         notes.push(format!(
             "{} runs failed and are left out (listed with their errors in report.md)",
