@@ -15,7 +15,8 @@
 //! After these, in any order:
 //! - a part of the cell: `value` (the text before a ` [` or ` (`), `interval` (the `[...]`) or `paren` (what
 //!   is inside the `(...)`) or `nth:K` (the cell's K-th number, counting from 1, for a cell of prose); the
-//!   whole cell without one;
+//!   whole cell without one; `hide` writes nothing, for a quote that is there for its checks; `as-p` writes a
+//!   p-value as a sentence says it, `p = 0.047` or `p < 0.001`;
 //! - checks the text around the quote relies on: `<0.05`, `<=X`, `>X`, `>=X` on the quoted number (`<0.001`
 //!   in a table counts as below 0.001), `=TEXT` on the quoted text.
 //!
@@ -90,6 +91,29 @@ enum Part {
     Interval,
     Paren,
     Nth(usize),
+}
+
+/// How the quoted text is written.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Shown {
+    Written,
+    /// Not at all: the quote is there for its checks.
+    Hidden,
+    /// As a p-value in a sentence: `p = 0.047`, `p < 0.001`.
+    AsP,
+}
+
+impl Shown {
+    fn write(self, value: &str) -> String {
+        match self {
+            Shown::Written => value.to_string(),
+            Shown::Hidden => String::new(),
+            Shown::AsP => match value.strip_prefix('<') {
+                Some(bound) => format!("p < {bound}"),
+                None => format!("p = {value}"),
+            },
+        }
+    }
 }
 
 impl Part {
@@ -216,6 +240,7 @@ struct Quote {
     row: String,
     column: String,
     part: Part,
+    shown: Shown,
     checks: Vec<Check>,
 }
 
@@ -231,6 +256,7 @@ impl Quote {
             row: fields[2].to_string(),
             column: fields[3].to_string(),
             part: Part::Whole,
+            shown: Shown::Written,
             checks: Vec::new(),
         };
         for field in &fields[4..] {
@@ -238,6 +264,8 @@ impl Quote {
                 "value" => quote.part = Part::Value,
                 "interval" => quote.part = Part::Interval,
                 "paren" => quote.part = Part::Paren,
+                "hide" => quote.shown = Shown::Hidden,
+                "as-p" => quote.shown = Shown::AsP,
                 nth if nth.starts_with("nth:") => {
                     let k = nth[4..]
                         .parse()
@@ -354,10 +382,10 @@ fn render(text: &str, dir: &Path) -> Result<(String, Vec<String>)> {
                 .into_iter()
                 .flatten()
                 .collect();
-            Ok((value, failed))
+            Ok((value, failed, quote.shown))
         });
         match outcome {
-            Ok((value, failed)) => {
+            Ok((value, failed, shown)) => {
                 if !failed.is_empty() {
                     failures.push(format!(
                         "line {line_number}: {{{{{inner}}}}} is now {value:?}, and the text relies on {}: read \
@@ -365,7 +393,7 @@ fn render(text: &str, dir: &Path) -> Result<(String, Vec<String>)> {
                         failed.join(" and ")
                     ));
                 }
-                out.push_str(&value);
+                out.push_str(&shown.write(&value));
             }
             Err(err) => {
                 failures.push(format!("line {line_number}: {{{{{inner}}}}}: {err:#}"));
@@ -444,25 +472,33 @@ mod tests {
     fn quotes_name_cells_and_their_parts() {
         let (text, failures) = rendered(
             "GDQN-B {{readings.md|Acrobot-v1|GDQN-B|first hit|value}} {{readings.md|Acrobot-v1|GDQN-B|p}} \
-             {{readings.md|Acrobot-v1|GDQN-B|final score|nth:3}} {{readings.md|Acrobot-v1|GDQN-B;2000...|p}} {{readings.md|Acrobot-v1|GDQN-B|first hit|interval}}, \
+             {{readings.md|Acrobot-v1|GDQN-B|final score|nth:3}} {{readings.md|Acrobot-v1|GDQN-B;2000...|p}}\
+             {{readings.md|Acrobot-v1|GDQN-B|p|hide|<0.05}} {{readings.md|Acrobot-v1|GDQN-B|first hit|interval}}, \
              p = {{readings.md|Acrobot-v1|GDQN-B|first hit/p|<0.05}}, final p {{readings.md|Acrobot-v1|GDQN-B|final score/p}}; \
+             {{readings.md|Acrobot-v1|GDQN-B|p|as-p}}, {{readings.md|Acrobot-v1|DQfD-N|p|as-p}}; \
              {{readings.md|Acrobot-v1|ADQN...|first hit|paren}}; CartPole {{readings.md|CartPole-v0|GDQN-B|first hit}}",
         );
         assert_eq!(failures, Vec::<String>::new());
         assert_eq!(
             text,
-            "GDQN-B 2000 0.047 -85.6 0.047 [2000, 34000], p = 0.047, final p 0.409; 19/20; CartPole 8000"
+            "GDQN-B 2000 0.047 -85.6 0.047 [2000, 34000], p = 0.047, final p 0.409; p = 0.047, p < 0.001; 19/20; \
+             CartPole 8000"
         );
     }
 
     #[test]
     fn a_check_that_no_longer_holds_is_reported_with_its_line() {
         let (text, failures) = rendered(
-            "first\n{{readings.md|Acrobot-v1|GDQN-B|final score/p|<0.05}} and {{readings.md|Acrobot-v1|DQfD-N|first hit/p|<0.001}}",
+            "first\n{{readings.md|Acrobot-v1|GDQN-B|final score/p|<0.05}} and {{readings.md|Acrobot-v1|DQfD-N|first hit/p|<0.001}}.\
+             {{readings.md|Acrobot-v1|GDQN-B|final score/p|hide|<0.05}}",
         );
-        assert_eq!(text, "first\n0.409 and <0.001");
-        assert_eq!(failures.len(), 1, "{failures:?}");
+        assert_eq!(text, "first\n0.409 and <0.001.");
+        assert_eq!(failures.len(), 2, "{failures:?}");
         assert!(failures[0].starts_with("line 2:") && failures[0].contains("< 0.05"));
+        assert!(
+            failures[1].contains("is now \"0.409\""),
+            "a hidden quote's failure shows its value"
+        );
     }
 
     #[test]
