@@ -91,6 +91,14 @@ pub struct SweepArgs {
 }
 
 #[derive(Args)]
+#[command(
+    after_help = "Your own analysis can quote the report: a file NAME.in.md in the output directory is written \
+out as NAME.md with every {{FILE|SECTION|ROW|COLUMN}} replaced by that cell of a table the report wrote, e.g. \
+{{readings.md|Acrobot-v1|ADQN-B|first hit|value}}. A quote may check what its sentence relies on \
+({{readings.md|Acrobot-v1|GDQN-B|first hit/p|<0.05|as-p}} writes \"p = 0.031\"); when the runs move a checked \
+value across, the report fails and names the line to read again. The syntax: src/experiment/quote.rs; an example: \
+results/VERDICT.in.md. Not with --from-evaluations."
+)]
 pub struct ReportArgs {
     /// A sweep directory (any directory holding run directories), or with --from-evaluations an
     /// evaluations.csv written by an earlier report (e.g. results/evaluations.csv).
