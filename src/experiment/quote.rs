@@ -10,7 +10,8 @@
 //! - `ROW`: the row's first cell, whole, or its beginning followed by `...`; `a;b` names a row by its first two
 //!   cells (report.md's "All configurations": `LunarLander-v2;DQfD;bootstrap;expert-weak`);
 //! - `COLUMN`: the header of the column; `A/B` is the first column named `B` after the column named `A` (a
-//!   table with several `p` columns: `first hit/p`).
+//!   table with several `p` columns: `first hit/p`). Under a heading with several tables, the rows are those of
+//!   the tables that have the column.
 //!
 //! After these, in any order:
 //! - a part of the cell: `value` (the text before a ` [` or ` (`), `interval` (the `[...]`) or `paren` (what
@@ -18,7 +19,7 @@
 //!   whole cell without one; `hide` writes nothing, for a quote that is there for its checks; `as-p` writes a
 //!   p-value as a sentence says it, `p = 0.047` or `p < 0.001`;
 //! - checks the text around the quote relies on: `<0.05`, `<=X`, `>X`, `>=X` on the quoted number (`<0.001`
-//!   in a table counts as below 0.001), `=TEXT` on the quoted text.
+//!   in a table counts as below 0.001), `=TEXT` (the quoted text is TEXT) and `~TEXT` (it contains TEXT).
 //!
 //! A quote that names nothing, or names two things, is an error; so is a check that no longer holds, which is
 //! how a regenerated table tells the writer which sentence to read again. Every failed quote of a document is
@@ -173,6 +174,7 @@ enum Check {
     Above(f64),
     AtLeast(f64),
     Equals(String),
+    Contains(String),
 }
 
 impl Check {
@@ -192,32 +194,45 @@ impl Check {
             Check::Above(number(rest)?)
         } else if let Some(rest) = text.strip_prefix('=') {
             Check::Equals(rest.to_string())
+        } else if let Some(rest) = text.strip_prefix('~') {
+            Check::Contains(rest.to_string())
         } else {
             bail!(
-                "{text:?} is neither a part (value, interval, paren) nor a check (<X, <=X, >X, >=X, =TEXT)"
+                "{text:?} is neither a part (value, interval, paren) nor a check (<X, <=X, >X, >=X, =TEXT, ~TEXT)"
             )
         })
     }
 
     /// Whether `quoted` passes; a table's `<0.001` is a number below 0.001.
     fn holds(&self, quoted: &str) -> Result<bool> {
-        if let Check::Equals(expected) = self {
-            return Ok(quoted == expected);
-        }
-        let (below, number) = match quoted.strip_prefix('<') {
-            Some(rest) => (true, rest),
-            None => (false, quoted),
+        // The quoted number, and whether the table gave it as a bound (`<0.001`).
+        let number = || -> Result<(f64, bool)> {
+            let (below, text) = match quoted.strip_prefix('<') {
+                Some(rest) => (true, rest),
+                None => (false, quoted),
+            };
+            let x = text
+                .trim()
+                .parse()
+                .with_context(|| format!("the quoted {quoted:?} is not a number to check"))?;
+            Ok((x, below))
         };
-        let x: f64 = number
-            .trim()
-            .parse()
-            .with_context(|| format!("the quoted {quoted:?} is not a number to check"))?;
-        Ok(match *self {
-            Check::Below(c) => x < c || (below && x <= c),
-            Check::AtMost(c) => x <= c,
-            Check::Above(c) => !below && x > c,
-            Check::AtLeast(c) => !below && x >= c,
-            Check::Equals(_) => unreachable!("handled above"),
+        Ok(match self {
+            Check::Equals(expected) => quoted == expected,
+            Check::Contains(part) => quoted.contains(part.as_str()),
+            Check::Below(c) => {
+                let (x, below) = number()?;
+                x < *c || (below && x <= *c)
+            }
+            Check::AtMost(c) => number()?.0 <= *c,
+            Check::Above(c) => {
+                let (x, below) = number()?;
+                !below && x > *c
+            }
+            Check::AtLeast(c) => {
+                let (x, below) = number()?;
+                !below && x >= *c
+            }
         })
     }
 
@@ -228,6 +243,7 @@ impl Check {
             Check::Above(c) => format!("> {c}"),
             Check::AtLeast(c) => format!(">= {c}"),
             Check::Equals(t) => format!("= {t:?}"),
+            Check::Contains(t) => format!("containing {t:?}"),
         }
     }
 }
@@ -325,7 +341,17 @@ impl Quote {
             row.len() >= keys.len() && row.iter().zip(&keys).all(|(c, k)| key_matches(c, k))
         };
         let mut found = Vec::new();
-        for table in in_section {
+        // A heading can stand over several tables (effort.md's task sections): the rows are looked for in those
+        // that have the column, and a column no table has is named in the error.
+        let with_column: Vec<&Table> = in_section
+            .iter()
+            .copied()
+            .filter(|t| self.column_index(&t.header).is_ok())
+            .collect();
+        if with_column.is_empty() {
+            self.column_index(&in_section[0].header)?;
+        }
+        for table in with_column {
             for row in &table.rows {
                 if row_matches(row) {
                     found.push((table, row));
@@ -460,7 +486,7 @@ mod tests {
     const READINGS: &str = "intro\n\n### Acrobot-v1\n\n| method | first hit | p | final score | p |\n|---|---|---|---|---|\n\
         | GDQN-B | 2000 [2000, 34000] | 0.047 | -87.4 [-89.8, -85.6] | 0.409 |\n\
         | ADQN-B | 39000 (19/20) | - | -86.1 | - |\n\
-        | DQfD-N | 50000 | <0.001 | -89.8 | 0.239 |\n\n### CartPole-v0\n\n| method | first hit |\n|---|---|\n| GDQN-B | 8000 |\n";
+        | DQfD-N | 50000 | <0.001 | -89.8 | 0.239 |\n\n| method | AUC |\n|---|---|\n| GDQN-B | 0.9 |\n\n### CartPole-v0\n\n| method | first hit |\n|---|---|\n| GDQN-B | 8000 |\n";
 
     fn rendered(template: &str) -> (String, Vec<String>) {
         let dir = tempfile::tempdir().unwrap();
@@ -476,13 +502,13 @@ mod tests {
              {{readings.md|Acrobot-v1|GDQN-B|p|hide|<0.05}} {{readings.md|Acrobot-v1|GDQN-B|first hit|interval}}, \
              p = {{readings.md|Acrobot-v1|GDQN-B|first hit/p|<0.05}}, final p {{readings.md|Acrobot-v1|GDQN-B|final score/p}}; \
              {{readings.md|Acrobot-v1|GDQN-B|p|as-p}}, {{readings.md|Acrobot-v1|DQfD-N|p|as-p}}; \
-             {{readings.md|Acrobot-v1|ADQN...|first hit|paren}}; CartPole {{readings.md|CartPole-v0|GDQN-B|first hit}}",
+             {{readings.md|Acrobot-v1|ADQN...|first hit|paren}}; {{readings.md|Acrobot-v1|GDQN-B|AUC}}; CartPole {{readings.md|CartPole-v0|GDQN-B|first hit}}",
         );
         assert_eq!(failures, Vec::<String>::new());
         assert_eq!(
             text,
             "GDQN-B 2000 0.047 -85.6 0.047 [2000, 34000], p = 0.047, final p 0.409; p = 0.047, p < 0.001; 19/20; \
-             CartPole 8000"
+             0.9; CartPole 8000"
         );
     }
 
@@ -507,6 +533,7 @@ mod tests {
         assert!(below("<0.001", "<0.001") && below("<0.001", "<0.05") && below("0.047", "<0.05"));
         assert!(!below("<0.001", ">=0.001") && !below("0.05", "<0.05") && below("0.05", ">=0.05"));
         assert!(below("0.108", ">0.05") && below("**reproduced**", "=**reproduced**"));
+        assert!(below("a (GDQN); b (BDQN)", "~b (BDQN)") && !below("a (GDQN)", "~b"));
     }
 
     #[test]
