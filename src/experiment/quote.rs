@@ -94,6 +94,19 @@ enum Part {
     Nth(usize),
 }
 
+impl std::fmt::Display for Part {
+    /// The part as a template spells it.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Part::Whole => write!(f, "whole"),
+            Part::Value => write!(f, "value"),
+            Part::Interval => write!(f, "interval"),
+            Part::Paren => write!(f, "paren"),
+            Part::Nth(k) => write!(f, "nth:{k}"),
+        }
+    }
+}
+
 /// How the quoted text is written.
 #[derive(Debug, Clone, Copy, PartialEq)]
 enum Shown {
@@ -374,7 +387,7 @@ impl Quote {
         })?;
         self.part
             .take(cell)
-            .with_context(|| format!("the cell {cell:?} has no {:?} part", self.part))
+            .with_context(|| format!("the cell {cell:?} has no {} part", self.part))
     }
 }
 
@@ -548,7 +561,7 @@ mod tests {
             ("{{readings.md|Acrobot-v1|GDQN-B;2|p}}", "no row"),
             (
                 "{{readings.md|Acrobot-v1|GDQN-B|first hit|nth:4}}",
-                "no Nth(4) part",
+                "has no nth:4 part",
             ),
             (
                 "{{readings.md|Acrobot-v1|GDQN-B|first hit|nth:0}}",
