@@ -609,29 +609,6 @@ fn runs_of_the_c_librarys_elementary_functions_are_run_again() {
     std::fs::write(&summary_path, serde_json::to_string(&summary).unwrap()).unwrap();
     assert!(run_dir::is_stale(&old));
 
-    // Kept as complete when asked: only a missing run is computed.
-    let missing = dir.path().join(specs[5].dir_name());
-    std::fs::remove_dir_all(&missing).unwrap();
-    let ran = std::sync::Mutex::new(Vec::new());
-    let outcome = sweep::run_grid_shard(
-        &grid,
-        dir.path(),
-        1,
-        None,
-        sweep::OlderRuns::Keep,
-        &|spec, d| {
-            ran.lock().unwrap().push(d.to_path_buf());
-            write_fake_run(spec, d, false)
-        },
-    )
-    .unwrap();
-    assert_eq!(ran.into_inner().unwrap(), vec![missing]);
-    assert_eq!(
-        (outcome.already_complete, outcome.completed),
-        (total - 1, 1)
-    );
-    assert!(run_dir::is_stale(&old));
-
     let rerun = std::sync::Mutex::new(Vec::new());
     let outcome = sweep::run_grid(&grid, dir.path(), 2, &|spec, d| {
         rerun.lock().unwrap().push(d.to_path_buf());

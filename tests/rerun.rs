@@ -2,9 +2,9 @@
 //! every committed CartPole-v0 and Acrobot-v1 run of today's numerics, are computed again from their own
 //! `config.toml` and must give `eval.csv` and `queries.csv` byte for byte.
 //!
-//! The draw's seed is `DRAW_SEED`, or `ARLD_RERUN_DRAW` when set: another seed checks another sample. Runs of the
-//! older numerics (their summary.json has no `"numerics": "correctly-rounded"`) depended on the CPU's elementary
-//! functions and are not drawn; `results/report.md` counts them.
+//! The draw's seed is `DRAW_SEED`, or `ARLD_RERUN_DRAW` when set: another seed checks another sample. Every
+//! committed run, of every task, must be of today's numerics (its summary.json says `"numerics":
+//! "correctly-rounded"`): a run of the older numerics depended on the CPU's elementary functions.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -39,6 +39,30 @@ fn draw(runs: &[PathBuf], count: usize, rng: &mut NumpyRng) -> Vec<PathBuf> {
     chosen
 }
 
+/// `results/report.md` counts 0 runs of older numerics because there are none: checked here over every committed
+/// run, independently of the report.
+#[test]
+fn every_committed_run_is_of_todays_numerics() {
+    let all = run_dir::find_runs(&repo().join("results/runs"), |_| {}).unwrap();
+    let older: Vec<&PathBuf> = all.iter().filter(|r| !is_current_numerics(r)).collect();
+    assert!(
+        older.is_empty(),
+        "{} of {} committed runs are of the older numerics, such as {}",
+        older.len(),
+        all.len(),
+        older
+            .first()
+            .map(|r| r.display().to_string())
+            .unwrap_or_default()
+    );
+    let report = std::fs::read_to_string(repo().join("results/report.md")).unwrap();
+    assert!(
+        report.contains(&format!("- 0 of {} runs are of older numerics", all.len())),
+        "results/report.md does not count 0 of the {} committed runs as older numerics",
+        all.len()
+    );
+}
+
 #[test]
 fn committed_short_runs_compute_again_byte_for_byte() {
     let seed = match std::env::var("ARLD_RERUN_DRAW") {
@@ -52,18 +76,12 @@ fn committed_short_runs_compute_again_byte_for_byte() {
     for (env, count) in DRAWS {
         let root = repo().join("results/runs").join(env);
         let all = run_dir::find_runs(&root, |_| {}).unwrap();
-        let current: Vec<PathBuf> = all
-            .iter()
-            .filter(|r| is_current_numerics(r))
-            .cloned()
-            .collect();
         assert!(
-            current.len() >= count,
-            "{env}: only {} of {} committed runs are of today's numerics",
-            current.len(),
+            all.len() >= count,
+            "{env}: only {} committed runs",
             all.len()
         );
-        for (k, run) in draw(&current, count, &mut rng).iter().enumerate() {
+        for (k, run) in draw(&all, count, &mut rng).iter().enumerate() {
             let fresh = out.path().join(format!("{env}-{k}"));
             let status = Command::new(env!("CARGO_BIN_EXE_arld"))
                 .current_dir(repo())

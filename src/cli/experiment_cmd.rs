@@ -5,7 +5,7 @@ use arld::experiment::report::report;
 use arld::experiment::run_spec;
 use arld::experiment::slurm::{self, SlurmOptions};
 use arld::experiment::sweep::{
-    OlderRuns, RunState, Shard, SweepGrid, SweepOutcome, run_grid_shard, sweep_status,
+    RunState, Shard, SweepGrid, SweepOutcome, run_grid_shard, sweep_status,
 };
 use arld::experiment::verdict;
 use clap::Args;
@@ -60,8 +60,6 @@ pub struct SweepArgs {
     /// Run only shard I of N of the sweep's runs (0 <= I < N; runs dealt round-robin), e.g. --shard 3/8.
     #[arg(long, value_name = "I/N")]
     shard: Option<Shard>,
-    #[command(flatten)]
-    older: OlderRunsArg,
 
     /// Show which runs of the sweep in DIR are done, running, failed (with the first line of the error in their
     /// failed.json) or pending, and where; runs nothing.
@@ -144,8 +142,6 @@ pub struct ReproduceArgs {
     /// Where the report goes [default: OUT/report].
     #[arg(long, value_name = "DIR")]
     report: Option<PathBuf>,
-    #[command(flatten)]
-    older: OlderRunsArg,
 }
 
 pub fn run_sweep(args: SweepArgs) -> Result<ExitCode> {
@@ -179,12 +175,7 @@ pub fn run_sweep(args: SweepArgs) -> Result<ExitCode> {
     }
     arld::interrupt::install()?;
     let Some(outcome) = interruptible(run_grid_shard(
-        &grid,
-        &out,
-        args.jobs,
-        args.shard,
-        args.older.policy(),
-        &run_spec,
+        &grid, &out, args.jobs, args.shard, &run_spec,
     ))?
     else {
         return Ok(ExitCode::from(slurm::EXIT_INTERRUPTED));
@@ -212,7 +203,6 @@ fn submit_slurm(args: &SweepArgs, grid: &SweepGrid, out: &std::path::Path) -> Re
         shards: args.shards.unwrap_or(runs).min(runs),
         cpus_per_task: args.jobs.max(1),
         signal_lead_s: args.signal_lead,
-        keep_older: args.older.keep_older,
     };
     let arld = std::env::current_exe()?;
     let script = slurm::job_script(out, &arld, &opts)?;
@@ -272,8 +262,7 @@ fn print_status(dir: &std::path::Path) -> Result<ExitCode> {
     }
     let older = if older > 0 {
         format!(
-            " ({older} by an older arld with the C library's elementary functions: the sweep computes them again \
-             unless given --keep-older)"
+            " ({older} by an older arld with the C library's elementary functions: the sweep computes them again)"
         )
     } else {
         String::new()
@@ -372,10 +361,8 @@ pub fn run_reproduce(args: ReproduceArgs) -> Result<ExitCode> {
         }
         ran_any = true;
         eprintln!("== {name}: {} runs", grid.specs()?.len());
-        let older = args.older.policy();
-        let Some(outcome) = interruptible(run_grid_shard(
-            &grid, &args.out, args.jobs, None, older, &run_spec,
-        ))?
+        let Some(outcome) =
+            interruptible(run_grid_shard(&grid, &args.out, args.jobs, None, &run_spec))?
         else {
             return Ok(ExitCode::from(slurm::EXIT_INTERRUPTED));
         };
@@ -393,24 +380,4 @@ pub fn run_reproduce(args: ReproduceArgs) -> Result<ExitCode> {
         &report_dir,
         arld::experiment::verdict::DEFAULT_SUSTAIN,
     )
-}
-
-/// `--keep-older` of `arld sweep` and `arld reproduce`.
-#[derive(Args)]
-pub struct OlderRunsArg {
-    /// Count complete runs of an older arld (computed with the C library's elementary functions, whose results
-    /// depend on the CPU) as complete instead of running them again: only missing runs are computed.
-    #[arg(long)]
-    keep_older: bool,
-}
-
-impl OlderRunsArg {
-    /// The sweep's policy for the runs of an older arld.
-    fn policy(&self) -> OlderRuns {
-        if self.keep_older {
-            OlderRuns::Keep
-        } else {
-            OlderRuns::RunAgain
-        }
-    }
 }

@@ -274,14 +274,23 @@ pub fn report(dir: &Path, out_dir: &Path, sustain: usize) -> Result<ReportSummar
         .iter()
         .filter(|run| run.numerics.as_deref() != Some(crate::math::NUMERICS))
         .count();
-    if older > 0 {
-        notes.push(format!(
+    // Stated even when none are: a reader learns that every number regenerates on their own CPU.
+    notes.push(if older > 0 {
+        format!(
             "{older} of {} runs were computed by an older arld with the C library's elementary functions (no \
              `numerics` in summary.json), whose rounding depends on the CPU: they regenerate byte for byte only \
              with that arld on a CPU with FMA; `arld reproduce` computes them again",
             runs.len()
-        ));
-    }
+        )
+    } else {
+        format!(
+            "0 of {} runs are of older numerics: every run was computed with the correctly rounded elementary \
+             functions (`\"numerics\": \"{}\"` in summary.json) and regenerates byte for byte with this arld on \
+             any x86-64 CPU",
+            runs.len(),
+            crate::math::NUMERICS
+        )
+    });
     let cells = super::verdict::cells(&runs, sustain);
     let mut files = Vec::new();
     let (table_md, table_csv) = table5(&cells)?;

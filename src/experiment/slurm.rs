@@ -30,8 +30,6 @@ pub struct SlurmOptions {
     pub cpus_per_task: usize,
     /// Seconds before the time limit at which runs are told to snapshot and stop (`--signal`).
     pub signal_lead_s: u64,
-    /// `arld sweep --keep-older`: an older arld's complete runs count as complete.
-    pub keep_older: bool,
 }
 
 impl SlurmOptions {
@@ -122,7 +120,7 @@ near_limit=0\n\
 trap 'near_limit=1; kill -TERM \"$child\" 2>/dev/null' USR1\n\
 # A scheduler's requeue or cancel sends SIGTERM to the whole job: arld snapshots its runs and stops.\n\
 trap 'kill -TERM \"$child\" 2>/dev/null' TERM\n\
-{arld} sweep --grid {grid} -o {out} --shard \"${{SLURM_ARRAY_TASK_ID}}/{shards}\" --jobs {jobs}{keep_older} &\n\
+{arld} sweep --grid {grid} -o {out} --shard \"${{SLURM_ARRAY_TASK_ID}}/{shards}\" --jobs {jobs} &\n\
 child=$!\n\
 status=0\n\
 while true; do\n\
@@ -137,7 +135,6 @@ exit \"$status\"\n",
         out = shell_quote(dir_text),
         shards = opts.shards,
         jobs = opts.cpus_per_task,
-        keep_older = if opts.keep_older { " --keep-older" } else { "" },
         interrupted = EXIT_INTERRUPTED,
     ));
     Ok(s)
@@ -178,7 +175,6 @@ mod tests {
             shards: 10,
             cpus_per_task: 2,
             signal_lead_s: 300,
-            keep_older: false,
         }
     }
 

@@ -10,7 +10,7 @@
 //!   code writes it last, atomically). That makes the sweep resumable: complete runs are skipped, incomplete
 //!   ones are cleared and run again (or continue from their snapshot). A complete run of an older arld that
 //!   used the C library's elementary functions ([`run_dir::is_stale`]) is run again, so that every run of a
-//!   sweep regenerates byte for byte with this arld on any CPU (unless [`OlderRuns::Keep`] is asked for). A pending run whose resolved
+//!   sweep regenerates byte for byte with this arld on any CPU. A pending run whose resolved
 //!   configuration equals that of a finished variant of the same environment, method, network and seed takes
 //!   its files instead of running: runs are deterministic.
 //! - [`collect_results`] reads every complete run under a directory and writes `results.csv`, one row per
@@ -515,18 +515,7 @@ pub struct SweepOutcome {
 /// A directory that already holds a sweep may be resumed or extended (more seeds, environments, ...), but not
 /// with different `set` overrides: its complete runs would silently mix two configurations.
 pub fn run_grid(grid: &SweepGrid, dir: &Path, jobs: usize, run_fn: &RunFn) -> Result<SweepOutcome> {
-    run_grid_shard(grid, dir, jobs, None, OlderRuns::RunAgain, run_fn)
-}
-
-/// What a sweep does with the complete runs an older arld computed with the C library's elementary functions
-/// ([`run_dir::is_stale`]).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum OlderRuns {
-    /// Run them again, so that every run of the sweep regenerates byte for byte on any CPU (the default).
-    RunAgain,
-    /// Count them as complete: only missing runs are computed (to finish a sweep's grid first, and refresh its
-    /// older runs later).
-    Keep,
+    run_grid_shard(grid, dir, jobs, None, run_fn)
 }
 
 /// [`run_grid`] for one shard of the grid's runs (all of them when `shard` is `None`). Several shards may run
@@ -537,7 +526,6 @@ pub fn run_grid_shard(
     dir: &Path,
     jobs: usize,
     shard: Option<Shard>,
-    older: OlderRuns,
     run_fn: &RunFn,
 ) -> Result<SweepOutcome> {
     let all_specs = grid.specs()?;
@@ -551,10 +539,10 @@ pub fn run_grid_shard(
     let _lock = super::dir_lock::DirLock::acquire(dir, &lock_name)?;
     prepare_sweep_dir(grid, dir)?;
     let Some(shard) = shard else {
-        return run_sweep_inner(&all_specs, dir, jobs, run_fn, true, older);
+        return run_sweep_inner(&all_specs, dir, jobs, run_fn, true);
     };
     let specs = shard.select(&all_specs);
-    let mut outcome = run_sweep_inner(&specs, dir, jobs, run_fn, false, older)?;
+    let mut outcome = run_sweep_inner(&specs, dir, jobs, run_fn, false)?;
     let all_complete = all_specs
         .iter()
         .all(|spec| run_dir::is_complete(&dir.join(spec.dir_name())));
@@ -642,7 +630,7 @@ pub fn run_sweep(
     jobs: usize,
     run_fn: &RunFn,
 ) -> Result<SweepOutcome> {
-    run_sweep_inner(specs, dir, jobs, run_fn, true, OlderRuns::RunAgain)
+    run_sweep_inner(specs, dir, jobs, run_fn, true)
 }
 
 fn run_sweep_inner(
@@ -651,7 +639,6 @@ fn run_sweep_inner(
     jobs: usize,
     run_fn: &RunFn,
     collect: bool,
-    older: OlderRuns,
 ) -> Result<SweepOutcome> {
     let names: BTreeSet<PathBuf> = specs.iter().map(RunSpec::dir_name).collect();
     if names.len() != specs.len() {
@@ -672,7 +659,7 @@ fn run_sweep_inner(
             match run_dir::check_complete(&path) {
                 Ok(()) if run_dir::is_stale(&path) => {
                     stale.push(path);
-                    older == OlderRuns::RunAgain
+                    true
                 }
                 Ok(()) => false,
                 Err(err) => {
@@ -689,13 +676,9 @@ fn run_sweep_inner(
     if let Some(first) = stale.first() {
         eprintln!(
             "{} complete runs (such as {}) were computed by an older arld with the C library's elementary \
-             functions, whose results depend on the CPU; {}",
+             functions, whose results depend on the CPU; running them again",
             stale.len(),
             first.display(),
-            match older {
-                OlderRuns::RunAgain => "running them again",
-                OlderRuns::Keep => "kept as they are (--keep-older)",
-            }
         );
     }
     // Seed by seed: every configuration gets its first seeds early, so a partial sweep already reports on all.
