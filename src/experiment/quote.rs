@@ -94,6 +94,11 @@ enum Part {
     Nth(usize),
 }
 
+impl Part {
+    /// The parts a template names by a word (`nth:K` carries a number).
+    const NAMED: [Part; 3] = [Part::Value, Part::Interval, Part::Paren];
+}
+
 impl std::fmt::Display for Part {
     /// The part as a template spells it.
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
@@ -289,10 +294,12 @@ impl Quote {
             checks: Vec::new(),
         };
         for field in &fields[4..] {
+            // A part named by a word is spelled as `Part`'s Display writes it (one owner of the spelling).
+            if let Some(part) = Part::NAMED.into_iter().find(|p| p.to_string() == *field) {
+                quote.part = part;
+                continue;
+            }
             match *field {
-                "value" => quote.part = Part::Value,
-                "interval" => quote.part = Part::Interval,
-                "paren" => quote.part = Part::Paren,
                 "hide" => quote.shown = Shown::Hidden,
                 "as-p" => quote.shown = Shown::AsP,
                 nth if nth.starts_with("nth:") => {
