@@ -293,9 +293,14 @@ fn floats(v: &serde_json::Value) -> Vec<f64> {
 #[test]
 fn a_stop_while_a_question_is_open_loses_nothing_and_resume_asks_it_again() {
     check_prerequisites();
+    // The budget runs out near step 60; the steps after it train without questions, long enough for the page
+    // to show (and the person to screenshot) the training state even on a loaded machine (at 1500 steps, about
+    // 0.2 s of training, a loaded CI machine once reached the end first).
+    const TRAIN_STEPS: u64 = 10_000;
+    let train_steps = format!("train_steps={TRAIN_STEPS}");
     let run = tempfile::tempdir().unwrap().keep().join("run");
     let run_arg = run.clone().into_os_string();
-    let mut args: Vec<&std::ffi::OsStr> = [
+    let words = [
         "train",
         "--env",
         "CartPole-v0",
@@ -308,16 +313,14 @@ fn a_stop_while_a_question_is_open_loses_nothing_and_resume_asks_it_again() {
         "--listen",
         "127.0.0.1:0",
         "--set",
-        "train_steps=1500",
+        train_steps.as_str(),
         "--set",
         "budget=30",
         "--set",
         "eval_period=500",
         "-o",
-    ]
-    .iter()
-    .map(std::ffi::OsStr::new)
-    .collect();
+    ];
+    let mut args: Vec<&std::ffi::OsStr> = words.iter().map(std::ffi::OsStr::new).collect();
     args.push(&run_arg);
     let (mut arld, url) = start_arld(&args, Stdio::piped());
 
@@ -407,7 +410,7 @@ fn a_stop_while_a_question_is_open_loses_nothing_and_resume_asks_it_again() {
             .collect::<Vec<_>>(),
         [answered, later].concat()
     );
-    assert_eq!(summary(&run)["train_steps"], 1500);
+    assert_eq!(summary(&run)["train_steps"], TRAIN_STEPS);
 }
 
 /// One HTTP GET of `url` (`http://IP:PORT/PATH`) with plain sockets; the status code.

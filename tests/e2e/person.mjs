@@ -334,7 +334,8 @@ if (endScreen) {
   if (!endScreen.shown || !endScreen.outcome) fail(`no end screen at the end of the run: ${JSON.stringify(endScreen)}`);
   if (!endScreen.xlabels.every((l) => l && /\d/.test(l))) fail(`the charts have no x-axis labels: ${JSON.stringify(endScreen.xlabels)}`);
 }
-if (!answerLimit) for (const name of ["training", "asking", "mid-segment"]) if (!taken[name]) fail(`no "${name}" screenshot: the run never showed that state`);
+if (!answerLimit) for (const name of ["training", "asking", "mid-segment"]) if (!taken[name])
+  fail(`no "${name}" screenshot: the run never showed that state (${answers.length} answers, ${steps} steps answered, budget spent seen: ${budgetSpentSeen})`);
 if (undoTest && !undoReport) fail("no question with steps to come was asked: undo was not tried");
 console.log(JSON.stringify({ env: hello.env, answers, skipped, steps, reloaded, refused, watcherErrors: watcher, drawn: taken, first, open, budgetSpentSeen, endScreen,
   undo: undoReport, replaysWatched, replaysSkipped, countdownsSeen,
