@@ -10,7 +10,8 @@
 //! - `ROW`: the row's first cell, whole, or its beginning followed by `...`; `a;b` names a row by its first two
 //!   cells (report.md's "All configurations": `LunarLander-v2;DQfD;bootstrap;expert-weak`);
 //! - `COLUMN`: the header of the column; `A/B` is the first column named `B` after the column named `A` (a
-//!   table with several `p` columns: `first hit/p`). Under a heading with several tables, the rows are those of
+//!   table with several `p` columns: `first hit/p`); a header that holds a slash itself (`1/4 (750)`) is named
+//!   whole. Under a heading with several tables, the rows are those of
 //!   the tables that have the column.
 //!
 //! After these, in any order:
@@ -160,7 +161,7 @@ impl Part {
 }
 
 /// The numbers of a text, in order: an optional `-` (not after a letter: `ADQN-B` has none), digits, and a
-/// fractional part.
+/// fractional part. A number after `<` keeps it, as a table writes a bound (`p < 0.001` gives `<0.001`).
 fn numbers(text: &str) -> Vec<String> {
     let chars: Vec<char> = text.chars().collect();
     let mut found = Vec::new();
@@ -176,7 +177,9 @@ fn numbers(text: &str) -> Vec<String> {
             {
                 i += 1;
             }
-            found.push(chars[start..i].iter().collect());
+            let before = chars[..start].iter().rev().find(|c| **c != ' ');
+            let bound = if before == Some(&'<') { "<" } else { "" };
+            found.push(format!("{bound}{}", chars[start..i].iter().collect::<String>()));
         } else {
             i += 1;
         }
@@ -318,6 +321,10 @@ impl Quote {
 
     /// The column index `self.column` names in `header`.
     fn column_index(&self, header: &[String]) -> Result<usize> {
+        // A header that holds a slash itself (effort.md's `1/4 (750)`) is named whole.
+        if let Some(whole) = header.iter().position(|h| *h == self.column) {
+            return Ok(whole);
+        }
         let (after, name) = match self.column.split_once('/') {
             Some((a, n)) => (Some(a.trim()), n.trim()),
             None => (None, self.column.as_str()),
@@ -595,10 +602,32 @@ mod tests {
     }
 
     #[test]
+    fn a_header_holding_a_slash_is_named_whole() {
+        let dir = tempfile::tempdir().unwrap();
+        std::fs::write(
+            dir.path().join("effort.md"),
+            "### LunarLander-v2\n\n| rule | 1/4 (750) | 4 (12000) | 4 |\n|---|---|---|---|\n| paced | 0.868 (172500) | 0.885 (127500) | 7 |\n",
+        )
+        .unwrap();
+        let (text, failures) = render(
+            "{{effort.md|LunarLander-v2|paced|1/4 (750)|paren}} -> {{effort.md|LunarLander-v2|paced|4 (12000)|paren}}; \
+             {{effort.md|LunarLander-v2|paced|4 (12000)/4}}",
+            dir.path(),
+        )
+        .unwrap();
+        assert_eq!(failures, Vec::<String>::new());
+        assert_eq!(text, "172500 -> 127500; 7");
+    }
+
+    #[test]
     fn numbers_of_prose_keep_their_sign_but_not_a_names_hyphen() {
         assert_eq!(
             numbers("ADQN-B: final -202.2 vs 222.4 (p = 0.114); x2 -B 3."),
             ["-202.2", "222.4", "0.114", "3"]
+        );
+        assert_eq!(
+            numbers("4 vs 1/4: AUC +0.167, p < 0.001"),
+            ["4", "1", "4", "0.167", "<0.001"]
         );
     }
 
