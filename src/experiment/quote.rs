@@ -179,7 +179,10 @@ fn numbers(text: &str) -> Vec<String> {
             }
             let before = chars[..start].iter().rev().find(|c| **c != ' ');
             let bound = if before == Some(&'<') { "<" } else { "" };
-            found.push(format!("{bound}{}", chars[start..i].iter().collect::<String>()));
+            found.push(format!(
+                "{bound}{}",
+                chars[start..i].iter().collect::<String>()
+            ));
         } else {
             i += 1;
         }
