@@ -362,3 +362,28 @@ fn the_screen_lists_the_rules_that_differ_from_the_paper_rules() {
     }
     assert!(checked >= 4, "the screen covers {checked} tasks");
 }
+
+/// The committed runs are what `arld reproduce` computes for the effort benchmark at its default seed count (the
+/// paper's 20): every run of the benchmark's grids and of the held-out test is under results/runs, finished.
+#[test]
+fn every_run_of_the_effort_protocol_is_committed() {
+    use arld::experiment::protocol::{PAPER_SEEDS, effort_grids, held_out_grids};
+    let seeds: Vec<u64> = (0..PAPER_SEEDS).collect();
+    let mut expected = 0;
+    let mut missing = Vec::new();
+    for grid in effort_grids(&seeds).into_iter().chain(held_out_grids()) {
+        for spec in grid.specs().unwrap() {
+            expected += 1;
+            let dir = results().join("runs").join(spec.dir_name());
+            if !dir.join("summary.json").is_file() {
+                missing.push(dir);
+            }
+        }
+    }
+    assert!(
+        missing.is_empty(),
+        "{} of the effort protocol's {expected} runs are not committed (finished), e.g. {}",
+        missing.len(),
+        missing[0].display()
+    );
+}
