@@ -258,11 +258,13 @@ fn a_scripted_person_answers_in_headless_chromium() {
 
     // LunarLander-v2, real time at 40 steps per second. The budget runs out near step 170; the steps after it
     // train without questions long enough for the page to show the training state on a loaded machine.
+    const LANDER_STEPS: u64 = 6000;
+    let lander_steps = format!("train_steps={LANDER_STEPS}");
     let lander = run_with_person(
         "LunarLander-v2",
         &["--web-fps", "40"],
         &[
-            "train_steps=6000",
+            lander_steps.as_str(),
             "budget=40",
             "eval_period=3000",
             "eval_episodes=2",
@@ -279,7 +281,7 @@ fn a_scripted_person_answers_in_headless_chromium() {
             .collect::<Vec<_>>(),
         lander.answers
     );
-    assert_eq!(summary(&lander.run)["train_steps"], 6000);
+    assert_eq!(summary(&lander.run)["train_steps"], LANDER_STEPS);
 }
 
 /// The floats of a JSON array.

@@ -11,8 +11,7 @@
 //!   cells (report.md's "All configurations": `LunarLander-v2;DQfD;bootstrap;expert-weak`);
 //! - `COLUMN`: the header of the column; `A/B` is the first column named `B` after the column named `A` (a
 //!   table with several `p` columns: `first hit/p`); a header that holds a slash itself (`1/4 (750)`) is named
-//!   whole. Under a heading with several tables, the rows are those of
-//!   the tables that have the column.
+//!   whole. Under a heading with several tables, the rows are those of the tables that have the column.
 //!
 //! After these, in any order:
 //! - a part of the cell: `value` (the text before a ` [` or ` (`), `interval` (the `[...]`) or `paren` (what
