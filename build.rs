@@ -36,7 +36,7 @@ fn main() {
         .and_then(Path::parent)
         .expect("src/math.rs is in a package");
     println!("cargo:rustc-env=ARLD_GIT_COMMIT={}", git_commit(root));
-    let box2d = compile_box2d();
+    let box2d = compile_box2d(root);
     let target_os = std::env::var("CARGO_CFG_TARGET_OS").unwrap_or_default();
     if target_os != "linux" {
         // `--wrap` is a GNU ld / lld option; elsewhere the platform's C library computes these functions.
@@ -115,11 +115,11 @@ fn git_commit(root: &Path) -> String {
 /// Compiles Box2D's sources from the `wrapped2d` package into `OUT_DIR/libarld_box2d.a`; returns its path. The
 /// archive of an earlier run of this script is kept when it was compiled from the same sources the same way
 /// (the script runs again on every commit, and Box2D's sources do not change with arld's).
-fn compile_box2d() -> PathBuf {
+fn compile_box2d(root: &Path) -> PathBuf {
     let out = std::env::var("OUT_DIR").expect("cargo sets OUT_DIR");
     let archive = Path::new(&out).join("libarld_box2d.a");
     let stamp_path = Path::new(&out).join("arld_box2d.stamp");
-    let wrapped2d = wrapped2d_dir();
+    let wrapped2d = wrapped2d_dir(root);
     let stamp = format!("{}\n-O3 -DNDEBUG v1\n", wrapped2d.display());
     if archive.is_file() && std::fs::read_to_string(&stamp_path).is_ok_and(|s| s == stamp) {
         return archive;
@@ -159,18 +159,71 @@ fn collect_cpp(dir: &Path, into: &mut Vec<PathBuf>) {
     }
 }
 
-/// Where Cargo unpacked the `wrapped2d` package this build uses (registry, vendored or git), from `cargo metadata`.
-fn wrapped2d_dir() -> PathBuf {
+/// Where Cargo unpacked the `wrapped2d` package this build uses. In this order:
+/// 1. `ARLD_BOX2D_SRC`, when set (a directory holding wrapped2d's package);
+/// 2. Cargo's registry (`$CARGO_HOME/registry/src/*/wrapped2d-<version>`), at the version `Cargo.lock` pins: Cargo
+///    downloads and unpacks every package a build compiles before it runs any build script;
+/// 3. `cargo metadata`, for vendored or git sources. It is asked last because it resolves the whole workspace,
+///    dev-dependencies included, which a plain `cargo build` never downloads: on a machine with an empty registry
+///    `--offline` would fail there, so it runs online.
+fn wrapped2d_dir(root: &Path) -> PathBuf {
+    println!("cargo:rerun-if-env-changed=ARLD_BOX2D_SRC");
+    if let Some(given) = std::env::var_os("ARLD_BOX2D_SRC").filter(|v| !v.is_empty()) {
+        let dir = PathBuf::from(given);
+        assert!(
+            dir.join("Box2D/Box2D/Box2D").is_dir(),
+            "ARLD_BOX2D_SRC={} holds no Box2D/Box2D/Box2D folder (it should name wrapped2d's package)",
+            dir.display()
+        );
+        return dir;
+    }
+    if let Some(dir) = locked_version(root).and_then(|version| registry_dir(&version)) {
+        return dir;
+    }
+    metadata_dir()
+}
+
+/// The version of `wrapped2d` that the workspace's `Cargo.lock` pins, if there is a lock file naming it.
+fn locked_version(root: &Path) -> Option<String> {
+    let lock = std::fs::read_to_string(root.join("Cargo.lock")).ok()?;
+    let mut lines = lock.lines();
+    while let Some(line) = lines.next() {
+        if line.trim() == "name = \"wrapped2d\"" {
+            let version = lines.next()?.trim().strip_prefix("version = ")?;
+            return Some(version.trim_matches('"').to_string());
+        }
+    }
+    None
+}
+
+/// `wrapped2d-<version>` in Cargo's registry sources, if it is unpacked there.
+fn registry_dir(version: &str) -> Option<PathBuf> {
+    let home = std::env::var_os("CARGO_HOME")
+        .map(PathBuf::from)
+        .or_else(|| std::env::var_os("HOME").map(|h| PathBuf::from(h).join(".cargo")))?;
+    let mut found: Vec<PathBuf> = std::fs::read_dir(home.join("registry/src"))
+        .ok()?
+        .filter_map(|entry| entry.ok())
+        .map(|entry| entry.path().join(format!("wrapped2d-{version}")))
+        .filter(|dir| dir.join("Box2D/Box2D/Box2D").is_dir())
+        .collect();
+    found.sort();
+    found.into_iter().next()
+}
+
+/// Where `cargo metadata` says the `wrapped2d` package is (registry, vendored or git).
+fn metadata_dir() -> PathBuf {
     let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
     let manifest = std::env::var("CARGO_MANIFEST_DIR").expect("cargo sets CARGO_MANIFEST_DIR");
     let out = Command::new(&cargo)
-        .args(["metadata", "--format-version", "1", "--offline"])
+        .args(["metadata", "--format-version", "1"])
         .current_dir(&manifest)
         .output()
         .unwrap_or_else(|e| panic!("cannot run `{cargo} metadata` to find Box2D's sources: {e}"));
     assert!(
         out.status.success(),
-        "`cargo metadata` failed while looking for Box2D's sources: {}",
+        "`cargo metadata` failed while looking for Box2D's sources (set ARLD_BOX2D_SRC to wrapped2d's package \
+         to skip it): {}",
         String::from_utf8_lossy(&out.stderr)
     );
     let meta: serde_json::Value =
