@@ -32,6 +32,11 @@ enum Command {
     Report(cli::experiment_cmd::ReportArgs),
     /// The paper's experimental protocol, sweep plus report, with one command (--quick: a few minutes).
     Reproduce(cli::experiment_cmd::ReproduceArgs),
+    /// Runs as a compact dataset: pack run directories into tables per task, and unpack them byte for byte.
+    Runs {
+        #[command(subcommand)]
+        cmd: cli::experiment_cmd::RunsCommand,
+    },
     /// Demonstrations: collect expert episodes into a file that DQfD pre-training reads.
     Demo {
         #[command(subcommand)]
@@ -54,6 +59,7 @@ fn main() -> std::process::ExitCode {
         Command::Sweep(args) => cli::experiment_cmd::run_sweep(*args),
         Command::Report(args) => cli::experiment_cmd::run_report(args),
         Command::Reproduce(args) => cli::experiment_cmd::run_reproduce(args),
+        Command::Runs { cmd } => cli::experiment_cmd::run_runs(cmd),
     };
     match result {
         Ok(code) => code,

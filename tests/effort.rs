@@ -3,6 +3,8 @@
 //! `effort.csv` states, the cell's median over seeds, and the own rule's design choice (the candidate with the
 //! highest mean, over the screening tasks, of its median AUC on the design seeds).
 
+mod common;
+
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
@@ -86,7 +88,7 @@ fn spelled(spec: &str) -> String {
 /// The directory of a rule's runs at the paper's budget with bootstrapped heads: the paper's methods in their
 /// own directories, every other rule as ADQN with `query_rule` set (the variant's name spells the spec).
 fn rule_dir(env: &str, rule: &str) -> PathBuf {
-    let runs = results().join("runs").join(env);
+    let runs = common::committed_runs().join(env);
     match rule {
         "greedy (GDQN)" => runs.join("gdqn-bootstrap"),
         "bernoulli (BDQN)" => runs.join("bdqn-bootstrap"),
@@ -100,7 +102,7 @@ fn rule_dir(env: &str, rule: &str) -> PathBuf {
 /// The directory of a rule's runs with bootstrapped heads at a budget other than the paper's: the variant
 /// `budget-B`, with `-query_rule-SPEC` for a rule that is not one of the paper's methods.
 fn budget_dir(env: &str, rule: &str, budget: &str) -> PathBuf {
-    let runs = results().join("runs").join(env);
+    let runs = common::committed_runs().join(env);
     match rule {
         "bernoulli (BDQN)" => runs.join("bdqn-bootstrap").join(format!("budget-{budget}")),
         "adaptive (ADQN)" => runs.join("adqn-bootstrap").join(format!("budget-{budget}")),
@@ -374,7 +376,7 @@ fn every_run_of_the_effort_protocol_is_committed() {
     for grid in effort_grids(&seeds).into_iter().chain(held_out_grids()) {
         for spec in grid.specs().unwrap() {
             expected += 1;
-            let dir = results().join("runs").join(spec.dir_name());
+            let dir = common::committed_runs().join(spec.dir_name());
             if !dir.join("summary.json").is_file() {
                 missing.push(dir);
             }

@@ -6,6 +6,8 @@
 //! committed run, of every task, must be of today's numerics (its summary.json says `"numerics":
 //! "correctly-rounded"`): a run of the older numerics depended on the CPU's elementary functions.
 
+mod common;
+
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
@@ -43,7 +45,7 @@ fn draw(runs: &[PathBuf], count: usize, rng: &mut NumpyRng) -> Vec<PathBuf> {
 /// run, independently of the report.
 #[test]
 fn every_committed_run_is_of_todays_numerics() {
-    let all = run_dir::find_runs(&repo().join("results/runs"), |_| {}).unwrap();
+    let all = run_dir::find_runs(common::committed_runs(), |_| {}).unwrap();
     let older: Vec<&PathBuf> = all.iter().filter(|r| !is_current_numerics(r)).collect();
     assert!(
         older.is_empty(),
@@ -74,7 +76,7 @@ fn committed_short_runs_compute_again_byte_for_byte() {
     let mut rng = NumpyRng::new(seed);
     let out = tempfile::tempdir().unwrap();
     for (env, count) in DRAWS {
-        let root = repo().join("results/runs").join(env);
+        let root = common::committed_runs().join(env);
         let all = run_dir::find_runs(&root, |_| {}).unwrap();
         assert!(
             all.len() >= count,

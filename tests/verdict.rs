@@ -1,8 +1,10 @@
 //! The committed results regenerate from the committed per-run files (`results/runs/`): one cell of
 //! `results/readings.csv` and one row of `results/ablations.csv` recomputed directly from the runs' `eval.csv`
 //! files with code independent of the library's statistics, every committed table rebuilt by
-//! `arld report results/runs`, the verdict tables rebuilt again from `results/evaluations.csv` alone, and the
+//! `arld report results/runs`, the verdict tables rebuilt again from `results/evaluations.csv.gz` alone, and the
 //! README's results table the committed one.
+
+mod common;
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -19,8 +21,7 @@ fn run_dirs(env: &str, method: &str, net: &str) -> BTreeMap<u64, PathBuf> {
 
 /// The run directories of one configuration: `results/runs/ENV/METHOD-NET/VARIANT/seedN` (`""`: the default).
 fn variant_run_dirs(env: &str, method: &str, net: &str, variant: &str) -> BTreeMap<u64, PathBuf> {
-    let dir = results()
-        .join("runs")
+    let dir = common::committed_runs()
         .join(env)
         .join(format!("{method}-{net}"))
         .join(variant);
@@ -229,7 +230,7 @@ fn committed_tables_regenerate_from_the_per_run_files() {
         &[
             "table.md",
             "table.csv",
-            "evaluations.csv",
+            "evaluations.csv.gz",
             "report.md",
             "effort.md",
             "effort.csv",
@@ -262,7 +263,7 @@ fn the_readmes_results_table_is_the_committed_table() {
 #[test]
 fn committed_verdict_tables_regenerate_from_the_evaluations_alone() {
     let out = tempfile::tempdir().unwrap();
-    let evaluations = results().join("evaluations.csv");
+    let evaluations = results().join("evaluations.csv.gz");
     arld(
         &[
             "report",

@@ -99,7 +99,7 @@ results/VERDICT.in.md. Not with --from-evaluations."
 )]
 pub struct ReportArgs {
     /// A sweep directory (any directory holding run directories), or with --from-evaluations an
-    /// evaluations.csv written by an earlier report (e.g. results/evaluations.csv).
+    /// evaluations.csv.gz written by an earlier report (e.g. results/evaluations.csv.gz; or that file decompressed).
     dir: PathBuf,
     /// Where tables and figures go [default: DIR/report, or the CSV's directory with --from-evaluations].
     #[arg(long, short)]
@@ -107,7 +107,7 @@ pub struct ReportArgs {
     /// Evaluations a sustained solve must hold for after reaching the target (the "sustained" reading).
     #[arg(long, default_value_t = arld::experiment::verdict::DEFAULT_SUSTAIN)]
     sustain: usize,
-    /// Read DIR as an evaluations.csv and write only the readings, claims and ablations tables (no figures).
+    /// Read DIR as an evaluations.csv.gz and write only the readings, claims and ablations tables (no figures).
     #[arg(long)]
     from_evaluations: bool,
 }
@@ -380,4 +380,63 @@ pub fn run_reproduce(args: ReproduceArgs) -> Result<ExitCode> {
         &report_dir,
         arld::experiment::verdict::DEFAULT_SUSTAIN,
     )
+}
+
+/// `arld runs`: a directory of runs as a compact dataset and back.
+#[derive(clap::Subcommand)]
+pub enum RunsCommand {
+    /// Pack every finished run below DIR into gzip-compressed CSV tables per task (DIR/TASK/*.csv.gz), merged
+    /// with the runs already packed there. Checks that every run comes back byte for byte before writing.
+    #[command(
+        after_help = "The tables: runs.csv.gz (the index), configs.csv.gz and summaries.csv.gz (one column per \
+key), eval.csv.gz, queries.csv.gz and episodes.csv.gz (the logs' rows after a `run` column), verbatim.csv.gz (a \
+file the tables cannot give back exactly) and layout.json. In pandas:\n  \
+pd.concat(pd.read_csv(f) for f in glob.glob(\"DIR/*/eval.csv.gz\"))\n\n\
+Binary files (weights, snapshots, event files) are not packed; the run directories are left as they are."
+    )]
+    Pack {
+        /// A directory of runs (`TASK/METHOD-NET[/VARIANT]/seedN`), such as results/runs.
+        dir: PathBuf,
+    },
+    /// Write every packed run of DIR as a run directory below OUT, byte for byte as it was packed. Only missing
+    /// files are written; a file that is there with other bytes stops the command and is not replaced.
+    Unpack {
+        /// A packed dataset, such as results/runs.
+        dir: PathBuf,
+        /// Where the run directories go [default: DIR itself].
+        #[arg(long, short)]
+        out: Option<PathBuf>,
+    },
+}
+
+pub fn run_runs(cmd: RunsCommand) -> Result<ExitCode> {
+    use arld::experiment::pack;
+    match cmd {
+        RunsCommand::Pack { dir } => {
+            let s = pack::pack(&dir)?;
+            for path in &s.left_out {
+                eprintln!("not packed (not a text file of a run): {}", path.display());
+            }
+            println!(
+                "{} runs packed in {} ({} new; {} tables written, {} files kept verbatim)",
+                s.runs,
+                dir.display(),
+                s.added,
+                s.tables_written,
+                s.verbatim
+            );
+        }
+        RunsCommand::Unpack { dir, out } => {
+            let out = out.unwrap_or_else(|| dir.clone());
+            let s = pack::unpack(&dir, &out)?;
+            println!(
+                "{} runs unpacked into {}: {} files written, {} already there",
+                s.runs,
+                out.display(),
+                s.written,
+                s.present
+            );
+        }
+    }
+    Ok(ExitCode::SUCCESS)
 }

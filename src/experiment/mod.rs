@@ -7,11 +7,12 @@
 //!
 //! Within this layer imports go one way: `dir_lock` <- `sweep`; `stats`, `sweep` <- `protocol`;
 //! `protocol`, `plot` <- `figures`; `protocol`, `plot`, `stats`, `verdict` <- `effort`; `effort`, `figures`, `plot`,
-//! `quote` <- `report`; `slurm` <- the CLI.
+//! `quote`, `pack` <- `report`; `pack` <- `sweep`; `slurm` <- the CLI.
 
 pub mod dir_lock;
 pub mod effort;
 pub mod figures;
+pub mod pack;
 pub mod plot;
 pub mod protocol;
 pub mod quote;

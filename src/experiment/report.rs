@@ -7,7 +7,7 @@
 //! - [`super::verdict::cells`] applies the paper's measure per (env, method, net, variant): the first evaluation
 //!   that reaches the threshold ([`stats::first_hit`]), and the median over seeds ([`stats::median`];
 //!   docs/algorithm.md section 11), beside the other readings.
-//! - [`report`] writes `table.md`, `table.csv`, `evaluations.csv`, the figures of [`super::figures`] and
+//! - [`report`] writes `table.md`, `table.csv`, `evaluations.csv.gz`, the figures of [`super::figures`] and
 //!   `report.md`.
 
 use super::protocol::env_order;
@@ -21,6 +21,9 @@ use crate::train::run_dir::{
     self, DEFAULT_VARIANT, EvalPoint, RunRecord, SUMMARY_FILE, load_runs, write_atomic,
 };
 use anyhow::{Context, Result, bail};
+
+/// The file of every evaluation of every run (gzip-compressed CSV), which `arld report --from-evaluations` reads.
+pub const EVALUATIONS_FILE: &str = "evaluations.csv.gz";
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
@@ -238,7 +241,15 @@ fn sweep_completion_notes(root: &Path) -> Result<Vec<String>> {
 /// Reads every complete run under `dir` and writes into `out_dir`: `table.md` and `table.csv` (Table 5 layout,
 /// ours beside the paper's), the paper's figures as PNG and SVG (see [`figures::paper_figures`]; a figure whose
 /// runs are absent is skipped with a note), and `report.md` linking everything with the notes.
+///
+/// A packed dataset ([`super::pack`]) is first brought up to date: runs finished since it was packed are packed
+/// into it, and its packed runs are unpacked where their directories are missing; the report then reads the run
+/// directories as for any sweep.
 pub fn report(dir: &Path, out_dir: &Path, sustain: usize) -> Result<ReportSummary> {
+    if super::pack::is_packed(dir) {
+        super::pack::pack(dir).context("cannot pack the dataset's new runs")?;
+        super::pack::unpack(dir, dir)?;
+    }
     let (runs, mut notes) = load_runs(dir)?;
     let failed = run_dir::find_failed_runs(dir)?;
     if runs.is_empty() {
@@ -299,8 +310,12 @@ pub fn report(dir: &Path, out_dir: &Path, sustain: usize) -> Result<ReportSummar
     let table_csv_path = out_dir.join("table.csv");
     write_atomic(&table_csv_path, table_csv.as_bytes())?;
     files.extend([table_md_path, table_csv_path]);
-    let evaluations_path = out_dir.join("evaluations.csv");
-    write_atomic(&evaluations_path, evaluations_csv(&runs).as_bytes())?;
+    // Compressed: the committed one holds every evaluation of thousands of runs (40 MB as text).
+    let evaluations_path = out_dir.join(EVALUATIONS_FILE);
+    write_atomic(
+        &evaluations_path,
+        &super::pack::gzip(evaluations_csv(&runs).as_bytes())?,
+    )?;
     files.push(evaluations_path);
 
     let (verdict_files, verdict_md) = super::verdict::write_verdict(&cells, out_dir, sustain)?;

@@ -537,6 +537,10 @@ pub fn run_grid_shard(
         |s| format!("{LOCK_FILE}-shard-{}-of-{}", s.index, s.count),
     );
     let _lock = super::dir_lock::DirLock::acquire(dir, &lock_name)?;
+    // A packed dataset's runs are finished runs: unpacked first, the sweep skips them as it skips any other.
+    if super::pack::is_packed(dir) {
+        super::pack::unpack(dir, dir)?;
+    }
     prepare_sweep_dir(grid, dir)?;
     let Some(shard) = shard else {
         return run_sweep_inner(&all_specs, dir, jobs, run_fn, true);

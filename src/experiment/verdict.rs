@@ -5,7 +5,7 @@
 //! default of the same method and network).
 //!
 //! Everything here is computed from [`RunRecord`]s, so the tables regenerate from the run directories or from
-//! `results/evaluations.csv` alone ([`runs_from_evaluations_csv`]). The paper's own numbers come from
+//! `results/evaluations.csv.gz` alone ([`runs_from_evaluations_csv`]). The paper's own numbers come from
 //! [`super::paper`]; nothing is typed in by hand.
 
 use super::protocol::env_order;
@@ -807,12 +807,19 @@ pub fn write_verdict(cells: &[Cell], out_dir: &Path, k: usize) -> Result<(Vec<Pa
     Ok((files, section))
 }
 
-/// Rebuilds run records from an `evaluations.csv` (as `arld report` writes it: one row per evaluation point).
+/// Rebuilds run records from an `evaluations.csv.gz` (as `arld report` writes it: one row per evaluation point;
+/// the same CSV decompressed is read too).
 /// The target comes from the environment's registration and the training length from the method's preset, so
 /// the committed file alone regenerates every table.
 pub fn runs_from_evaluations_csv(path: &Path) -> Result<Vec<RunRecord>> {
-    let mut reader =
-        csv::Reader::from_path(path).with_context(|| format!("cannot read {}", path.display()))?;
+    let bytes = std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
+    // As `arld report` writes it (gzip), or decompressed.
+    let text = if bytes.starts_with(&[0x1f, 0x8b]) {
+        super::pack::gunzip(&bytes).with_context(|| format!("cannot read {}", path.display()))?
+    } else {
+        bytes
+    };
+    let mut reader = csv::Reader::from_reader(text.as_slice());
     let headers = reader.headers()?.clone();
     let expected = [
         "env", "method", "net", "variant", "seed", "step", "mean", "std", "min", "max",
