@@ -12,8 +12,11 @@ pub mod acrobot;
 pub mod cartpole;
 pub mod classic;
 pub mod conformance;
+pub mod continuous;
 pub mod lunar_lander;
 pub mod mountain_car;
+pub mod mountain_car_continuous;
+pub mod pendulum;
 pub mod rollout;
 
 pub use acrobot::Acrobot;

@@ -48,6 +48,8 @@ const MAX_TABLE_BYTES: u64 = 4 << 30;
 
 /// The files of one run, by name.
 type RunFiles = BTreeMap<String, Vec<u8>>;
+/// A key file as its keys and the text of each value, in the file's order.
+type KeyValues = Vec<(String, String)>;
 /// Runs by their path below a task directory (`adqn-bootstrap/budget-125/seed0`).
 type TaskRuns = BTreeMap<String, RunFiles>;
 
@@ -662,7 +664,7 @@ fn toml_string(text: &str) -> Option<String> {
 }
 
 /// `config.toml` as keys and value texts, or `None` when it is not of the form a run writes.
-fn split_toml(text: &str) -> Option<Vec<(String, String)>> {
+fn split_toml(text: &str) -> Option<KeyValues> {
     let mut pairs: Vec<(String, String)> = Vec::new();
     let mut lines = text.split_inclusive('\n');
     while let Some(line) = lines.next() {
@@ -688,7 +690,7 @@ fn split_toml(text: &str) -> Option<Vec<(String, String)>> {
 }
 
 /// `summary.json` as keys and value texts, or `None` when it is not of the form a run writes.
-fn split_json(text: &str) -> Option<Vec<(String, String)>> {
+fn split_json(text: &str) -> Option<KeyValues> {
     let body = text.strip_prefix("{\n")?.strip_suffix("\n}")?;
     let mut pairs = Vec::new();
     for line in body.split('\n') {
@@ -709,9 +711,9 @@ fn split_json(text: &str) -> Option<Vec<(String, String)>> {
 fn split_all(
     runs: &TaskRuns,
     file: &str,
-    split: fn(&str) -> Option<Vec<(String, String)>>,
+    split: fn(&str) -> Option<KeyValues>,
     verbatim: &mut Vec<[String; 3]>,
-) -> BTreeMap<String, Vec<(String, String)>> {
+) -> BTreeMap<String, KeyValues> {
     let mut out = BTreeMap::new();
     for (run, files) in runs {
         let Some(bytes) = files.get(file) else {
@@ -738,7 +740,7 @@ struct KeyTable {
 impl KeyTable {
     /// Builds the table; a run whose file would not come back exactly goes to `verbatim`.
     fn build(
-        split: &BTreeMap<String, Vec<(String, String)>>,
+        split: &BTreeMap<String, KeyValues>,
         runs: &TaskRuns,
         file: &str,
         verbatim: &mut Vec<[String; 3]>,
@@ -831,7 +833,7 @@ impl KeyTable {
 
 /// The union of the runs' key sequences, in an order that keeps each run's order where the runs agree (a key
 /// comes after every key that precedes it in some run; ties in order of first appearance).
-fn key_order<'a>(runs: impl Iterator<Item = &'a Vec<(String, String)>>) -> Vec<String> {
+fn key_order<'a>(runs: impl Iterator<Item = &'a KeyValues>) -> Vec<String> {
     let mut first_seen: Vec<String> = Vec::new();
     let mut before: BTreeMap<String, BTreeSet<String>> = BTreeMap::new();
     for pairs in runs {

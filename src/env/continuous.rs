@@ -1,0 +1,174 @@
+//! Gymnasium-exact tasks whose action is a vector of float32 in a box: `Pendulum-v1` and
+//! `MountainCarContinuous-v0`, found by id in [`make_continuous`].
+//!
+//! They share with the discrete tasks the reset generator ([`EnvRng`]: NumPy's `PCG64(SeedSequence(seed))`),
+//! Gymnasium's `TimeLimit` (truncated on the limit step) and the outcome of a step ([`Outcome`]); an action is a
+//! slice of `f32` of the task's action dimension, as Gymnasium passes a float32 array. Each task's arithmetic
+//! follows NumPy's types step for step, float32 where NumPy computes in float32 (see each task's docs), so the
+//! conformance traces recorded from Gymnasium 1.4.0 are reproduced bit for bit (`tests/continuous_conformance.rs`).
+
+use super::{EnvError, EnvRng, Outcome};
+use crate::rng::NumpyRng;
+
+/// The registered facts of a continuous-action task.
+#[derive(Debug, Clone, PartialEq)]
+pub struct BoxSpec {
+    /// Gymnasium id.
+    pub id: &'static str,
+    /// Length of the observation vector.
+    pub obs_dim: usize,
+    /// The action box's lower bounds, one per action dimension.
+    pub action_low: &'static [f32],
+    /// The action box's upper bounds.
+    pub action_high: &'static [f32],
+    /// Gymnasium's `max_episode_steps`.
+    pub max_episode_steps: usize,
+    /// Gymnasium's `reward_threshold`, where the task has one (Pendulum-v1 has none).
+    pub solve_threshold: Option<f64>,
+}
+
+impl BoxSpec {
+    /// Number of action dimensions.
+    pub fn action_dim(&self) -> usize {
+        self.action_low.len()
+    }
+}
+
+/// Every continuous-action task, in the order `known_continuous_ids` lists them.
+pub static CONTINUOUS_SPECS: [BoxSpec; 2] = [
+    BoxSpec {
+        id: "Pendulum-v1",
+        obs_dim: 3,
+        action_low: &[-2.0],
+        action_high: &[2.0],
+        max_episode_steps: 200,
+        solve_threshold: None,
+    },
+    BoxSpec {
+        id: "MountainCarContinuous-v0",
+        obs_dim: 2,
+        action_low: &[-1.0],
+        action_high: &[1.0],
+        max_episode_steps: 999,
+        solve_threshold: Some(90.0),
+    },
+];
+
+/// The ids of the continuous-action tasks.
+pub fn known_continuous_ids() -> Vec<&'static str> {
+    CONTINUOUS_SPECS.iter().map(|s| s.id).collect()
+}
+
+/// The physics of one continuous-action task.
+pub trait ContinuousDynamics: Send {
+    /// Draws the initial state from the reset's generator.
+    fn reset(&mut self, rng: &mut NumpyRng);
+    /// One step with a finite action of the task's dimension (not yet clipped to the box: each task clips as
+    /// Gymnasium does); returns the reward and whether the task terminated.
+    fn step(&mut self, action: &[f32]) -> (f64, bool);
+    /// Writes the observation of the current state into `obs`.
+    fn observe(&self, obs: &mut [f32]);
+    /// Overwrites the internal float64 state as Gymnasium's `env.unwrapped.state = ...` does.
+    fn set_state(&mut self, state: &[f64]) -> Result<(), String>;
+}
+
+/// An episodic task with a box of float32 actions: a task's physics, its reset generator and its time limit.
+pub struct ContinuousEnv {
+    spec: &'static BoxSpec,
+    rng: EnvRng,
+    physics: Box<dyn ContinuousDynamics>,
+    elapsed_steps: usize,
+    running: bool,
+}
+
+/// The continuous-action task registered as `id` (Gymnasium's spelling).
+pub fn make_continuous(id: &str) -> Result<ContinuousEnv, EnvError> {
+    let spec = CONTINUOUS_SPECS
+        .iter()
+        .find(|s| s.id == id)
+        .ok_or_else(|| EnvError::UnknownId { id: id.to_string() })?;
+    let physics: Box<dyn ContinuousDynamics> = match spec.id {
+        "Pendulum-v1" => Box::new(super::pendulum::Pendulum::default()),
+        _ => Box::new(super::mountain_car_continuous::MountainCarContinuous::default()),
+    };
+    Ok(ContinuousEnv {
+        spec,
+        rng: EnvRng::default(),
+        physics,
+        elapsed_steps: 0,
+        running: false,
+    })
+}
+
+impl ContinuousEnv {
+    /// The task's registered facts.
+    pub fn spec(&self) -> &'static BoxSpec {
+        self.spec
+    }
+
+    /// Starts an episode and writes its first observation into `obs` (`reset(seed=seed)` in Gymnasium; `None`
+    /// continues the current generator).
+    pub fn reset_into(&mut self, seed: Option<u64>, obs: &mut [f32]) {
+        self.physics.reset(self.rng.reseed(seed));
+        self.elapsed_steps = 0;
+        self.running = true;
+        self.physics.observe(obs);
+    }
+
+    /// Advances one step with `action` and writes the observation after it into `obs`. An action of another
+    /// length or with a value that is not finite is an error naming it, and so is a step outside an episode.
+    pub fn step_into(&mut self, action: &[f32], obs: &mut [f32]) -> Result<Outcome, EnvError> {
+        let env = self.spec.id;
+        if !self.running {
+            return Err(EnvError::NeedsReset { env });
+        }
+        if action.len() != self.spec.action_dim() {
+            return Err(EnvError::BadState {
+                env,
+                msg: format!(
+                    "an action has {} values, not {} (the task's action dimension)",
+                    action.len(),
+                    self.spec.action_dim()
+                ),
+            });
+        }
+        if let Some(bad) = action.iter().find(|a| !a.is_finite()) {
+            return Err(EnvError::BadState {
+                env,
+                msg: format!("an action holds {bad}, which is not a finite number"),
+            });
+        }
+        let (reward, terminated) = self.physics.step(action);
+        self.elapsed_steps += 1;
+        let truncated = self.elapsed_steps >= self.spec.max_episode_steps;
+        self.running = !(terminated || truncated);
+        self.physics.observe(obs);
+        Ok(Outcome {
+            reward,
+            terminated,
+            truncated,
+        })
+    }
+
+    /// Overwrites the internal float64 state (a new episode starts at it) and returns its observation.
+    pub fn set_state(&mut self, state: &[f64]) -> Result<Vec<f32>, EnvError> {
+        self.physics
+            .set_state(state)
+            .map_err(|msg| EnvError::BadState {
+                env: self.spec.id,
+                msg,
+            })?;
+        self.elapsed_steps = 0;
+        self.running = true;
+        let mut obs = vec![0.0; self.spec.obs_dim];
+        self.physics.observe(&mut obs);
+        Ok(obs)
+    }
+}
+
+/// Checks the length of a state given to [`ContinuousDynamics::set_state`].
+pub(super) fn state_of_len<const N: usize>(state: &[f64]) -> Result<[f64; N], String> {
+    state
+        .try_into()
+        .map_err(|_| format!("a state has {N} values, not {}", state.len()))
+}
