@@ -430,10 +430,20 @@ impl Policy {
     }
 }
 
-/// A built-in environment (`arld.make`), stepped from Python.
-#[pyclass(module = "arld._arld", unsendable)]
+/// A built-in environment (`arld.make`), stepped from Python (also from a run's thread, when wrapped).
+#[pyclass(module = "arld._arld")]
 struct BuiltinEnv {
-    env: Box<dyn Env>,
+    /// In a mutex only to be shared between threads (Python's and a run's); the methods take `&mut self`.
+    env: Mutex<Box<dyn Env>>,
+}
+
+impl BuiltinEnv {
+    fn env_mut(&mut self) -> &mut dyn Env {
+        self.env
+            .get_mut()
+            .unwrap_or_else(|e| e.into_inner())
+            .as_mut()
+    }
 }
 
 #[pymethods]
@@ -441,15 +451,17 @@ impl BuiltinEnv {
     #[new]
     fn new(id: &str) -> PyResult<Self> {
         let env = env::make(id).map_err(|e| value_error(e.to_string()))?;
-        Ok(Self { env })
+        Ok(Self {
+            env: Mutex::new(env),
+        })
     }
     #[pyo3(signature = (seed=None))]
     fn reset(&mut self, seed: Option<u64>) -> Vec<f32> {
-        self.env.reset(seed)
+        self.env_mut().reset(seed)
     }
     fn step(&mut self, action: usize) -> PyResult<(Vec<f32>, f64, bool, bool)> {
         let s = self
-            .env
+            .env_mut()
             .step(action)
             .map_err(|e| value_error(e.to_string()))?;
         Ok((s.obs, s.reward, s.terminated, s.truncated))
@@ -457,7 +469,7 @@ impl BuiltinEnv {
     /// (id, obs_dim, n_actions, max_episode_steps, reward_threshold)
     #[getter]
     fn spec(&self) -> (&'static str, usize, usize, usize, f64) {
-        let s = self.env.spec();
+        let s = self.env.lock().unwrap_or_else(|e| e.into_inner()).spec();
         (
             s.id,
             s.obs_dim,
