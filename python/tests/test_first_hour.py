@@ -9,7 +9,8 @@ import gymnasium as gym
 import numpy as np
 import pytest
 from stable_baselines3.common.callbacks import (BaseCallback, CallbackList, CheckpointCallback, EvalCallback,
-                                                StopTrainingOnMaxEpisodes, StopTrainingOnRewardThreshold)
+                                                StopTrainingOnMaxEpisodes, StopTrainingOnNoModelImprovement,
+                                                StopTrainingOnRewardThreshold)
 
 import arld
 
@@ -94,6 +95,28 @@ def test_eval_callback_with_a_reward_threshold_stops_the_run_and_saves_the_best_
     best = arld.Agent.load(tmp_path / "best" / "best_model", gym.make("CartPole-v1"), expert=expert)
     assert best.num_timesteps == 400 and same_params(params(best), params(ref))
     assert np.array_equal(best.predict(OBS)[0], ref.predict(OBS)[0])
+
+
+def test_stop_training_on_no_model_improvement_stops_at_the_first_evaluation_without_a_new_best(tmp_path):
+    stop = StopTrainingOnNoModelImprovement(max_no_improvement_evals=1, min_evals=1)
+    evaluate = EvalCallback(gym.make("CartPole-v1"), eval_freq=300, n_eval_episodes=3, callback_after_eval=stop,
+                            log_path=str(tmp_path))
+    model = agent().learn(4500, callback=evaluate)
+    # Independently, from the evaluations EvalCallback recorded and SB3's documented rule: stop after more than
+    # max_no_improvement_evals evaluations in a row without a new best, counted after min_evals of them.
+    log = np.load(tmp_path / "evaluations.npz")
+    means = log["results"].mean(axis=1)
+    best, last_best, without, stop_at = -np.inf, -np.inf, 0, None
+    for i, mean in enumerate(means):
+        best = max(best, mean)
+        if i + 1 > 1:
+            without = 0 if best > last_best else without + 1
+            if without > 1:
+                stop_at = i
+                break
+        last_best = best
+    expected = 4500 if stop_at is None else int(log["timesteps"][stop_at])
+    assert model.num_timesteps == expected and len(means) == (15 if stop_at is None else stop_at + 1)
 
 
 def test_a_checkpoint_written_in_a_callback_is_the_whole_run_at_that_step(tmp_path):
