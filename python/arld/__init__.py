@@ -399,7 +399,7 @@ class Agent:
         net: str = "bootstrap",
         expert: Any = None,
         *,
-        seed: int = 0,
+        seed: Optional[int] = 0,
         eval_env: Any = None,
         demos: Any = None,
         policy_kwargs: Optional[Dict[str, Any]] = None,
@@ -492,6 +492,11 @@ class Agent:
             raise ValueError(f"unknown method {method!r}; known: {', '.join(METHODS)}")
         if net not in NETS:
             raise ValueError(f"unknown net {net!r}; known: {', '.join(NETS)}")
+        if seed is None:
+            # As SB3: a seed drawn from the operating system's entropy, recorded in `seed` and config.toml.
+            import secrets
+
+            seed = secrets.randbits(62)
         self.method, self.net, self.seed = method, net, int(seed)
         self.verbose = int(verbose)
         self.tensorboard_log = None if tensorboard_log is None else str(tensorboard_log)
@@ -855,7 +860,10 @@ class Agent:
             params = load_path_or_dict.get("policy", load_path_or_dict)
             with tempfile.TemporaryDirectory() as tmp:
                 path = os.path.join(tmp, "w.safetensors")
-                _write_safetensors(path, params)
+                # The network's description (kind, heads, widths) from the current weights' file.
+                self._require_policy().save(path, {})
+                metadata = _read_safetensors_metadata(path)
+                _write_safetensors(path, params, metadata)
                 policy, _meta = _arld.Policy.load(path)
         if self._policy is not None and (policy.obs_dim, policy.n_actions) != (
                 self._policy.obs_dim, self._policy.n_actions):
@@ -954,8 +962,14 @@ def _read_safetensors(path: str) -> Dict[str, np.ndarray]:
     return out
 
 
-def _write_safetensors(path: str, params: Dict[str, Any]) -> None:
-    header: Dict[str, Any] = {}
+def _read_safetensors_metadata(path: str) -> Dict[str, str]:
+    data = Path(path).read_bytes()
+    n = int.from_bytes(data[:8], "little")
+    return dict(json.loads(data[8:8 + n]).get("__metadata__", {}))
+
+
+def _write_safetensors(path: str, params: Dict[str, Any], metadata: Optional[Dict[str, str]] = None) -> None:
+    header: Dict[str, Any] = {} if not metadata else {"__metadata__": metadata}
     blobs = []
     offset = 0
     for name in sorted(params):

@@ -359,3 +359,13 @@ def test_continuing_a_loaded_run_in_its_log_dir_keeps_its_records(tmp_path):
     agent().learn(1500, log_dir=tmp_path / "whole")
     for f in ("queries.csv", "eval.csv", "episodes.csv"):
         assert (tmp_path / "run" / f).read_bytes() == (tmp_path / "whole" / f).read_bytes(), f
+
+
+def test_seed_none_draws_a_seed_and_parameters_set_back_are_the_same_network():
+    drawn = arld.Agent("dqn", gym.make("CartPole-v1"), seed=None)
+    assert isinstance(drawn.seed, int) and drawn.config["seed"] == drawn.seed
+    model = agent().learn(600)
+    other = agent().learn(300)
+    other.set_parameters(model.get_parameters())
+    assert same_params(params(other), params(model))
+    assert np.array_equal(other.predict(OBS)[0], model.predict(OBS)[0])
