@@ -21,7 +21,7 @@ import sys
 import tempfile
 import time
 from pathlib import Path
-from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple, Union
+from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple, Union, cast
 
 import numpy as np
 
@@ -115,7 +115,8 @@ def _expert_callable(expert: Any) -> Tuple[Optional[Callable[[Any], int]], str]:
     if isinstance(expert, str):
         return None, expert
     if isinstance(expert, WebExpert):
-        return expert, "web"
+        # Not called from Python: the compiled part recognises it and drives the person's page.
+        return cast(Callable[[Any], int], expert), "web"
     if isinstance(expert, Agent):
         agent = expert
 

@@ -2,6 +2,9 @@
 
 from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 
+__version__: str
+git_commit: str
+
 def register_env(id: str, obs_dim: int, n_actions: int, max_episode_steps: int,
                  reward_threshold: Optional[float] = None) -> None: ...
 def builtin_env_ids() -> List[str]: ...
@@ -44,3 +47,9 @@ class BuiltinEnv:
     def __init__(self, id: str) -> None: ...
     def reset(self, seed: Optional[int] = None) -> List[float]: ...
     def step(self, action: int) -> Tuple[List[float], float, bool, bool]: ...
+
+class WebExpert:
+    """A person answering in the browser; pass it as expert= (one run per WebExpert)."""
+    url: str
+    def __init__(self, listen: str = "127.0.0.1:0", fps: Optional[float] = None, timeout: Optional[float] = None,
+                 keys: Optional[Any] = None, wait: bool = True) -> None: ...

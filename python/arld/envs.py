@@ -67,8 +67,10 @@ class ObsCodec:
     def flat(self, obs: Any) -> List[float]:
         """One observation as arld's vector."""
         if self.flat_box:
-            return np.asarray(obs, dtype=np.float32).reshape(-1).tolist()  # type: ignore[no-any-return]
-        return np.asarray(spaces.flatten(self.space, obs), dtype=np.float32).tolist()  # type: ignore[no-any-return]
+            flat: List[float] = np.asarray(obs, dtype=np.float32).reshape(-1).tolist()
+        else:
+            flat = np.asarray(spaces.flatten(self.space, obs), dtype=np.float32).tolist()
+        return flat
 
     def raw(self, flat: Sequence[float]) -> Any:
         """arld's vector as the environment gives the observation (what experts are shown)."""
@@ -217,8 +219,8 @@ def env_name(env: Any) -> str:
 def env_facts(env: Any) -> Facts:
     """(id, obs_dim, n_actions, max_episode_steps, reward_threshold) of a Gymnasium environment, or ValueError."""
     if isinstance(env, BuiltinEnv):
-        return env._core.spec  # type: ignore[no-any-return]
-    act_space = getattr(env, "action_space", None)
+        return env._core.spec
+    act_space: Any = getattr(env, "action_space", None)
     name = env_name(env)
     if type(act_space).__name__ != "Discrete" or getattr(act_space, "start", 0) != 0:
         raise ValueError(f"arld needs a Discrete action space starting at 0; {name} has {act_space!r}")
@@ -268,7 +270,7 @@ def copy_env(env: Any) -> Any:
         ) from e
 
 
-class BuiltinEnv(gym.Env):  # type: ignore[type-arg]
+class BuiltinEnv(gym.Env[np.ndarray, np.int64]):
     """A built-in arld task as a Gymnasium environment (`arld.make`): stepped in Rust; when arld trains on it
     unwrapped, the whole run stays in Rust. It pickles (and copies) by id: a copy is a new environment."""
 
