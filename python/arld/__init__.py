@@ -363,8 +363,13 @@ class Agent:
 
     method: dqn, dqfd, gdqn, bdqn, adqn, adqnp (DQfD and ADQNP pre-train on demonstrations; GDQN, BDQN, ADQN,
     ADQNP ask the expert during training). net: plain, bootstrap (10 heads), noisy. env: a Gymnasium environment
-    with a flat Box observation space and a Discrete action space, exactly as given (wrappers, time limits), an
-    id string (made with gym.make), or `arld.make(id)` (the built-in one: trained entirely in Rust).
+    with a Discrete action space, exactly as given (wrappers, time limits), an id string (made with gym.make), or
+    `arld.make(id)` (the built-in one: trained entirely in Rust). Observations reach the network as SB3's policies
+    see them (a vector Box as it is, Discrete one-hot, MultiDiscrete/MultiBinary/Dict/Tuple flattened; images are
+    refused: see arld.envs); experts and `predict` take them as the environment gives them. The time limit is the
+    tightest TimeLimit wrapper, else the spec's, else what an environment that truncates itself declares
+    (`max_steps`); `max_episode_steps=N` wraps the environment (and eval_env) in a TimeLimit of N steps.
+    seed=None draws a seed (recorded in `seed` and config.toml).
 
     Queries: when the query rule fires, the expert takes over for a segment of up to `segment_len` (5) steps; the
     budget (`budget`) counts the demonstrated transitions (environment steps the expert acted), or the queries

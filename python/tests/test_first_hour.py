@@ -369,3 +369,12 @@ def test_seed_none_draws_a_seed_and_parameters_set_back_are_the_same_network():
     other.set_parameters(model.get_parameters())
     assert same_params(params(other), params(model))
     assert np.array_equal(other.predict(OBS)[0], model.predict(OBS)[0])
+
+
+def test_verbose_with_no_evaluation_yet_and_bad_observations_for_predict(capsys):
+    agent(verbose=1).learn(100)
+    assert "last evaluation none yet" in capsys.readouterr().out
+    model = agent().learn(100)
+    for bad in (np.zeros((2, 2)), np.zeros((1, 1, 4)), np.array([0.0, np.nan, 0.0, 0.0])):
+        with pytest.raises(ValueError, match="shape|NaN"):
+            model.predict(bad)
