@@ -739,7 +739,8 @@ class Agent:
         callbacks = None
         if callback is not None or episode_log is not None:
             callbacks = _Callbacks(callback, self, int(total_timesteps), episode_log)
-            callbacks.episode = None if self.summary is None or start == 0 else int(self.summary["episodes"])
+            # Episodes finished before this learn (unknown for a loaded run until its first step).
+            callbacks.episode = 0 if start == 0 else None if self.summary is None else int(self.summary["episodes"])
         bar = _ProgressBar(start, int(total_timesteps), label) if progress_bar else None
         if callbacks is not None:
             callbacks.start()
