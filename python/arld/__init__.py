@@ -21,11 +21,13 @@ import sys
 import tempfile
 import time
 from pathlib import Path
-from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple, Union
+from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple, Union, cast
 
 import numpy as np
 
 from . import _arld
+from .envs import (BuiltinEnv, EnvBridge, ObsCodec, as_env as _as_env, codec_of as _codec_of,
+                   copy_env as _copy_env, env_facts as _env_facts, make, register as _register)
 
 __version__ = _arld.__version__
 
@@ -94,159 +96,8 @@ class _stop_on_sigterm:
             import signal
             signal.signal(signal.SIGTERM, self.previous)
 
-class _EnvBridge:
-    """A Gymnasium environment seen through arld's environment interface: reset(seed) -> obs list,
-    step(action) -> (obs list, reward, terminated, truncated), and its generator (NumPy's PCG64) as words."""
-
-    def __init__(self, env: Any) -> None:
-        self.env = env
-
-    def reset(self, seed: Optional[int]) -> List[float]:
-        obs, _info = self.env.reset() if seed is None else self.env.reset(seed=int(seed))
-        return np.asarray(obs, dtype=np.float32).reshape(-1).tolist()  # type: ignore[no-any-return]
-
-    def step(self, action: int) -> Tuple[List[float], float, bool, bool]:
-        obs, reward, terminated, truncated, _info = self.env.step(action)
-        return (
-            np.asarray(obs, dtype=np.float32).reshape(-1).tolist(),
-            float(reward),
-            bool(terminated),
-            bool(truncated),
-        )
-
-    def _bit_generator(self) -> Any:
-        rng = getattr(getattr(self.env, "unwrapped", self.env), "_np_random", None)
-        bg = getattr(rng, "bit_generator", None)
-        return bg if type(bg).__name__ == "PCG64" else None
-
-    def generator(self) -> Optional[List[int]]:
-        bg = self._bit_generator()
-        if bg is None:
-            return None
-        st = bg.state
-        mask = (1 << 64) - 1
-        s, inc = st["state"]["state"], st["state"]["inc"]
-        return [s >> 64, s & mask, inc >> 64, inc & mask, int(st["has_uint32"]), int(st["uinteger"])]
-
-    def set_generator(self, words: Sequence[int]) -> None:
-        import numpy.random as npr
-
-        unwrapped = getattr(self.env, "unwrapped", self.env)
-        if self._bit_generator() is None:
-            unwrapped._np_random = npr.Generator(npr.PCG64())
-        bg = self._bit_generator()
-        bg.state = {
-            "bit_generator": "PCG64",
-            "state": {"state": (words[0] << 64) | words[1], "inc": (words[2] << 64) | words[3]},
-            "has_uint32": int(words[4]),
-            "uinteger": int(words[5]),
-        }
-
-
-def _is_vector_env(env: Any) -> bool:
-    return hasattr(env, "num_envs") and (hasattr(env, "step_async") or hasattr(env, "single_action_space"))
-
-
-def _as_env(env: Any) -> Any:
-    """An environment as given: an id string is made with gym.make (as SB3 does); vector environments are refused."""
-    if isinstance(env, str):
-        import gymnasium as gym
-
-        return gym.make(env)
-    if _is_vector_env(env):
-        raise TypeError(
-            f"arld trains on one environment, not a vector of {env.num_envs} ({type(env).__name__}): pass a single "
-            "environment, e.g. gym.make(\"CartPole-v1\") instead of gym.make_vec(...) or DummyVecEnv([...])"
-        )
-    return env
-
-
-def _env_facts(env: Any) -> Tuple[str, int, int, int, Optional[float]]:
-    """(id, obs_dim, n_actions, max_episode_steps, reward_threshold) of a Gymnasium environment, or ValueError."""
-    if isinstance(env, _BuiltinEnv):
-        return env._core.spec  # type: ignore[no-any-return]
-    obs_space = getattr(env, "observation_space", None)
-    act_space = getattr(env, "action_space", None)
-    spec = getattr(env, "spec", None)
-    name = getattr(spec, "id", None) or type(getattr(env, "unwrapped", env)).__name__
-    if type(act_space).__name__ != "Discrete" or getattr(act_space, "start", 0) != 0:
-        raise ValueError(f"arld needs a Discrete action space starting at 0; {name} has {act_space!r}")
-    shape = getattr(obs_space, "shape", None)
-    if type(obs_space).__name__ != "Box" or shape is None or len(shape) != 1:
-        raise ValueError(f"arld needs a flat Box observation space (one dimension); {name} has {obs_space!r}")
-    limit = getattr(spec, "max_episode_steps", None)
-    if limit is None:
-        raise ValueError(
-            f"{name} has no time limit; arld needs one (gym.make(..., max_episode_steps=N) gives it one)"
-        )
-    threshold = getattr(spec, "reward_threshold", None)
-    return (name, int(shape[0]), int(act_space.n), int(limit), threshold)
-
-
-def _register(facts: Tuple[str, int, int, int, Optional[float]]) -> str:
-    """Registers a Python environment's facts; returns the id arld knows it by (the Gymnasium id, or that id with
-    its time limit and threshold when a built-in environment of that id has other ones)."""
-    name, obs_dim, n_actions, limit, threshold = facts
-    try:
-        _arld.register_env(*facts)
-        return name
-    except ValueError:
-        derived = f"{name}[max_episode_steps={limit},reward_threshold={threshold}]"
-        _arld.register_env(derived, obs_dim, n_actions, limit, threshold)
-        return derived
-
-
-def _copy_env(env: Any) -> Any:
-    """A second instance of an environment, wrappers included (a deep copy), for evaluation."""
-    try:
-        return copy.deepcopy(env)
-    except Exception as e:
-        raise ValueError(
-            f"cannot copy {env!r} for the test episodes ({e}); pass eval_env= a list with one environment per "
-            "test episode (eval_episodes)"
-        ) from e
-
-
-class _BuiltinEnv:
-    """A built-in arld environment with Gymnasium's API (`arld.make`)."""
-
-    metadata: Dict[str, Any] = {"render_modes": []}
-
-    def __init__(self, env_id: str) -> None:
-        self._core = _arld.BuiltinEnv(env_id)
-        env_id, obs_dim, n_actions, limit, threshold = self._core.spec
-        self.id = env_id
-        self.spec = None
-        try:
-            import gymnasium as gym
-
-            self.observation_space: Any = gym.spaces.Box(-np.inf, np.inf, (obs_dim,), np.float32)
-            self.action_space: Any = gym.spaces.Discrete(n_actions)
-        except ImportError:
-            self.observation_space = None
-            self.action_space = None
-        self.max_episode_steps = limit
-        self.reward_threshold = threshold
-        self.render_mode = None
-
-    def reset(self, seed: Optional[int] = None, options: Optional[Dict[str, Any]] = None) -> Tuple[Any, Dict[str, Any]]:
-        return np.asarray(self._core.reset(seed), dtype=np.float32), {}
-
-    def step(self, action: int) -> Tuple[Any, float, bool, bool, Dict[str, Any]]:
-        obs, reward, terminated, truncated = self._core.step(int(action))
-        return np.asarray(obs, dtype=np.float32), reward, terminated, truncated, {}
-
-    def close(self) -> None:
-        pass
-
-    def __repr__(self) -> str:
-        return f"arld.make({self.id!r})"
-
-
-def make(env_id: str) -> Any:
-    """A built-in environment (CartPole-v0/v1, Acrobot-v1, MountainCar-v0, LunarLander-v2/v3) with
-    Gymnasium's reset/step API; training on it runs entirely in Rust, without the GIL."""
-    return _BuiltinEnv(env_id)
+# The environments' part (observation spaces, time limits, registration, arld.make) is in envs.py.
+_BuiltinEnv = BuiltinEnv
 
 
 # ---------------------------------------------------------------------------------------------------- experts
@@ -259,35 +110,50 @@ def _qualified(obj: Any) -> str:
 
 
 def _expert_callable(expert: Any) -> Tuple[Optional[Callable[[Any], int]], str]:
-    """(callable obs list -> int, name) for a Python expert, or (None, spec) for an arld expert spec."""
+    """(callable obs -> int, name) for a Python expert (given observations as the environment gives them), or
+    (None, spec) for an arld expert spec."""
     if isinstance(expert, str):
         return None, expert
     if isinstance(expert, WebExpert):
-        return expert, "web"
+        # Not called from Python: the compiled part recognises it and drives the person's page.
+        return cast(Callable[[Any], int], expert), "web"
     if isinstance(expert, Agent):
         agent = expert
 
         def ask_agent(obs: Any) -> int:
-            return int(agent.predict(np.asarray(obs, dtype=np.float32))[0])
+            return int(agent.predict(obs)[0])
 
         return ask_agent, "arld.Agent"
     if hasattr(expert, "predict") and callable(expert.predict):
         # Stable-Baselines3's predict(obs, deterministic=True) -> (action, state).
         def ask(obs: Any) -> int:
-            action, _state = expert.predict(np.asarray(obs, dtype=np.float32), deterministic=True)
+            action, _state = expert.predict(obs, deterministic=True)
             return _as_action(action)
 
         return ask, _qualified(type(expert))
     if callable(expert):
 
         def ask_callable(obs: Any) -> int:
-            return _as_action(expert(np.asarray(obs, dtype=np.float32)))
+            return _as_action(expert(obs))
 
         return ask_callable, _qualified(expert)
     raise TypeError(
         "expert must be a callable obs -> action, an object with predict(obs, deterministic=True) "
         f"(a Stable-Baselines3 model), an arld.Agent or an arld expert spec string; got {type(expert).__name__}"
     )
+
+
+def gym_spaces() -> Any:
+    from gymnasium import spaces
+
+    return spaces
+
+
+def _shown_raw(ask: Callable[[Any], int], codec: ObsCodec) -> Callable[[Any], int]:
+    """`ask` given arld's flat vector as the environment gives the observation."""
+    if codec.flat_box:
+        return lambda flat: ask(np.asarray(flat, dtype=np.float32))
+    return lambda flat: ask(codec.raw(flat))
 
 
 def _as_action(action: Any) -> int:
@@ -336,15 +202,17 @@ def collect_demos(env: Any, expert: Any, n: int, seed: int = 0) -> Dict[str, np.
     """`n` demonstration transitions of `expert` on `env` as given (wrappers applied): the first episode reset with
     `seed`, the next ones without; a dict of columns for `demos=`."""
     env = _as_env(env)
+    codec = _codec_of(env)
     ask, _name = _expert_callable(expert)
-    if ask is None:
+    if ask is None or isinstance(expert, WebExpert):
         raise TypeError("collect_demos needs a Python expert (a callable, an SB3 model or an arld.Agent)")
     cols: Dict[str, List[Any]] = {k: [] for k in ("obs", "actions", "rewards", "next_obs", "terminated", "truncated")}
     obs, _ = env.reset(seed=int(seed))
     while len(cols["actions"]) < n:
-        a = ask(np.asarray(obs, dtype=np.float32).reshape(-1))
+        flat = codec.flat(obs)
+        a = ask(codec.raw(flat))  # what the expert sees during training
         nxt, r, te, tr, _ = env.step(a)
-        for k, v in zip(cols, (obs, a, r, nxt, te, tr)):
+        for k, v in zip(cols, (flat, a, r, codec.flat(nxt), te, tr)):
             cols[k].append(v)
         obs = env.reset()[0] if te or tr else nxt
     return {
@@ -374,15 +242,27 @@ class _Logger:
 
 
 class _Callbacks:
-    """SB3-style callbacks (objects with on_training_start/on_step/on_training_end, e.g. BaseCallback
-    subclasses, or lists of them) or a plain callable `callback(locals, globals) -> bool`, called by the run."""
+    """SB3-style callbacks (BaseCallback subclasses, CallbackList, lists of them, or objects with the same
+    methods) or a plain callable `callback(locals, globals) -> bool`, called by the run after every step on the
+    run's thread, with the live model: `predict`, `get_parameters`, `evaluations` and `queries` are those of that
+    step, and `save` writes the run as it stands at that step (when the callback returns).
 
-    def __init__(self, callback: Any, model: "Agent", episode_log: Optional[_EpisodeLog] = None) -> None:
+    Moments, as SB3's DQN has them: on_training_start, then on_rollout_start, when learn begins; on_step after
+    every environment step (`n_calls`, `num_timesteps`; the locals hold `dones`, `infos`, `rewards` is not
+    given, `step`, `episode`, `budget_used`, `queries`, `last_eval`, `total_timesteps`); one learn is one rollout:
+    on_rollout_end, then on_training_end, when learn returns (also after an exception or a stop)."""
+
+    def __init__(self, callback: Any, model: "Agent", total_timesteps: int,
+                 episode_log: Optional[_EpisodeLog] = None) -> None:
         self.items = [] if callback is None else list(callback) if isinstance(callback, (list, tuple)) else [
             callback]
         self.episode_log = episode_log
         self.model = model
-        self.locals: Dict[str, Any] = {"self": model}
+        self.episode: Optional[int] = None
+        self.locals: Dict[str, Any] = {
+            "self": model, "total_timesteps": total_timesteps, "callback": self, "log_interval": None,
+            "dones": np.zeros(1, dtype=bool), "infos": [{}], "last_eval": None,
+        }
         for cb in self.items:
             if hasattr(cb, "init_callback"):
                 cb.init_callback(model)
@@ -391,11 +271,18 @@ class _Callbacks:
         for cb in self.items:
             if hasattr(cb, "on_training_start"):
                 cb.on_training_start(self.locals, {})
+        for cb in self.items:
+            if hasattr(cb, "on_rollout_start"):
+                cb.on_rollout_start()
 
     def __call__(self, step: int, episode: int, budget_used: int, queries: int, last_eval: Any) -> bool:
-        self.model._live_step = step
+        model = self.model
+        model._live_step = step
+        done = self.episode is not None and episode > self.episode
+        self.episode = episode
         self.locals.update(
             step=step, num_timesteps=step, episode=episode, budget_used=budget_used, queries=queries,
+            dones=np.array([done]), infos=[{}],
             last_eval=None if last_eval is None else {"step": last_eval[0], "mean": last_eval[1]},
         )
         if self.episode_log is not None:
@@ -413,6 +300,9 @@ class _Callbacks:
         return go_on
 
     def end(self) -> None:
+        for cb in self.items:
+            if hasattr(cb, "on_rollout_end"):
+                cb.on_rollout_end()
         for cb in self.items:
             if hasattr(cb, "on_training_end"):
                 cb.on_training_end()
@@ -473,8 +363,13 @@ class Agent:
 
     method: dqn, dqfd, gdqn, bdqn, adqn, adqnp (DQfD and ADQNP pre-train on demonstrations; GDQN, BDQN, ADQN,
     ADQNP ask the expert during training). net: plain, bootstrap (10 heads), noisy. env: a Gymnasium environment
-    with a flat Box observation space and a Discrete action space, exactly as given (wrappers, time limits), an
-    id string (made with gym.make), or `arld.make(id)` (the built-in one: trained entirely in Rust).
+    with a Discrete action space, exactly as given (wrappers, time limits), an id string (made with gym.make), or
+    `arld.make(id)` (the built-in one: trained entirely in Rust). Observations reach the network as SB3's policies
+    see them (a vector Box as it is, Discrete one-hot, MultiDiscrete/MultiBinary/Dict/Tuple flattened; images are
+    refused: see arld.envs); experts and `predict` take them as the environment gives them. The time limit is the
+    tightest TimeLimit wrapper, else the spec's, else what an environment that truncates itself declares
+    (`max_steps`); `max_episode_steps=N` wraps the environment (and eval_env) in a TimeLimit of N steps.
+    seed=None draws a seed (recorded in `seed` and config.toml).
 
     Queries: when the query rule fires, the expert takes over for a segment of up to `segment_len` (5) steps; the
     budget (`budget`) counts the demonstrated transitions (environment steps the expert acted), or the queries
@@ -510,7 +405,7 @@ class Agent:
         net: str = "bootstrap",
         expert: Any = None,
         *,
-        seed: int = 0,
+        seed: Optional[int] = 0,
         eval_env: Any = None,
         demos: Any = None,
         policy_kwargs: Optional[Dict[str, Any]] = None,
@@ -559,12 +454,13 @@ class Agent:
         eval_episodes: Optional[int] = None,  # test episodes per evaluation [20]
         checkpoint_every: Optional[int] = None,  # save weights every this many steps in the run dir [0: off]
         snapshot_every: Optional[int] = None,  # unused from Python (the run stays alive between learn calls)
+        max_episode_steps: Optional[int] = None,
         **other: Any,
     ) -> None:
         given = {k: v for k, v in locals().items() if k not in ("self", "method", "env", "net", "expert", "seed",
                                                                   "eval_env", "demos", "policy_kwargs",
                                                                   "tensorboard_log", "verbose", "other",
-                                                                  "__class__")}
+                                                                  "max_episode_steps", "__class__")}
         hyper: Dict[str, Any] = {}
         valid = set(config_keys())
         for key, value in list(given.items()) + list(other.items()):
@@ -602,18 +498,28 @@ class Agent:
             raise ValueError(f"unknown method {method!r}; known: {', '.join(METHODS)}")
         if net not in NETS:
             raise ValueError(f"unknown net {net!r}; known: {', '.join(NETS)}")
+        if seed is None:
+            # As SB3: a seed drawn from the operating system's entropy, recorded in `seed` and config.toml.
+            import secrets
+
+            seed = secrets.randbits(62)
         self.method, self.net, self.seed = method, net, int(seed)
         self.verbose = int(verbose)
         self.tensorboard_log = None if tensorboard_log is None else str(tensorboard_log)
         self.policy_kwargs = dict(policy_kwargs or {})
         self.logger = _Logger()
         self._hyper = hyper
+        self._max_episode_steps = max_episode_steps
+        self._vec_env: Any = None
         self._set_env(env)
-        self.eval_env = None if eval_env is None else _as_env(eval_env)
+        self.eval_env = None if eval_env is None else _as_env(eval_env, max_episode_steps)
         self._check_eval_env()
         if expert is not None:
             self._expert, name = _expert_callable(expert)
             self._expert_name = name
+            if self._expert is not None and not isinstance(expert, WebExpert):
+                # Asked with the observation as the environment gives it (arld's loop holds flat vectors).
+                self._expert = _shown_raw(self._expert, self._codec)
             if self._expert is None:
                 self._hyper["expert"] = name
             elif method == "dqn":
@@ -647,20 +553,22 @@ class Agent:
         self._resume: Optional[str] = None
         self._run_dir: Optional[str] = None
         self._live_step = 0
-        self.evaluations: List[Dict[str, Any]] = []
-        self.queries: List[Dict[str, Any]] = []
+        self._evaluations: List[Dict[str, Any]] = []
+        self._queries: List[Dict[str, Any]] = []
         self.summary: Optional[Dict[str, Any]] = None
 
     # --- environments
 
     def _set_env(self, env: Any) -> None:
-        env = _as_env(env)
+        env = _as_env(env, getattr(self, "_max_episode_steps", None))
         facts = _env_facts(env)
         self._builtin = isinstance(env, _BuiltinEnv)
         self.env_id = facts[0] if self._builtin else _register(facts)
         self._base_id = facts[0]
         self._facts = facts
+        self._codec = _codec_of(env)
         self.env = env
+        self._vec_env = None
 
     def _check_eval_env(self) -> None:
         given = self.eval_env if isinstance(self.eval_env, (list, tuple)) else [] if self.eval_env is None else [
@@ -669,12 +577,46 @@ class Agent:
             raise ValueError("eval_env must have the same spaces as env")
 
     def get_env(self) -> Any:
-        """The training environment."""
-        return self.env
+        """The training environment as SB3 gives it: a DummyVecEnv of one environment (the one arld steps; a
+        callback that steps it changes the run), or the environment itself when SB3 is not installed."""
+        if self._vec_env is None:
+            try:
+                from stable_baselines3.common.vec_env import DummyVecEnv
+            except ImportError:
+                return self.env
+            env = self.env
+            self._vec_env = DummyVecEnv([lambda: env])
+        return self._vec_env
+
+    def get_vec_normalize_env(self) -> Any:
+        """None: arld normalises no observations (SB3's VecNormalize is not used)."""
+        return None
+
+    @property
+    def observation_space(self) -> Any:
+        """The training environment's observation space (as it gives observations; arld flattens them)."""
+        return self.env.observation_space
+
+    @property
+    def action_space(self) -> Any:
+        """The training environment's action space."""
+        return self.env.action_space
+
+    @property
+    def exploration_rate(self) -> float:
+        """ε of the run's exploration at its current step (the preset's start before any run)."""
+        if self._run is not None:
+            return float(self._run.exploration_rate)
+        return float(self.config.get("eps_start", 0.0))
+
+    @property
+    def n_envs(self) -> int:
+        """1: arld trains on one environment."""
+        return 1
 
     def set_env(self, env: Any, force_reset: bool = True) -> None:
         """Trains on `env` from the next `learn` that starts a run (same spaces; a live run keeps its own)."""
-        env = _as_env(env)
+        env = _as_env(env, self._max_episode_steps)
         if _env_facts(env)[1:3] != self._facts[1:3]:
             raise ValueError("the new environment must have the same observation size and actions")
         self._set_env(env)
@@ -683,16 +625,12 @@ class Agent:
     # --- configuration
 
     def _resolve(self, hyper: Dict[str, Any]) -> Dict[str, Any]:
-        values = dict(hyper)
-        if self.env_id != self._base_id and self._base_id in _arld.builtin_env_ids():
-            # A re-limited or wrapped built-in task keeps the paper's values for that task.
-            ours = preset(self.method, self._base_id, self.net, self.seed)
-            general = json.loads(_arld.resolve_config(self.env_id, self.method, self.net, self.seed, []))
-            for k, v in ours.items():
-                if k not in _IDENTITY and general.get(k) != v and k not in values:
-                    values[k] = v
-        pairs = [(k, json.dumps(v, default=_json_default)) for k, v in values.items()]
-        cfg = dict(json.loads(_arld.resolve_config(self.env_id, self.method, self.net, self.seed, pairs)))
+        # A re-limited or wrapped built-in task keeps the paper's values for that task (resolved as for it).
+        preset_of = self._base_id if (self.env_id != self._base_id
+                                      and self._base_id in _arld.builtin_env_ids()) else None
+        pairs = [(k, json.dumps(v, default=_json_default)) for k, v in hyper.items()]
+        cfg = dict(json.loads(_arld.resolve_config(self.env_id, self.method, self.net, self.seed, pairs,
+                                                   preset_of)))
         if self._expert_name and getattr(self, "_expert", None) is not None:
             cfg["expert"] = f"python:{self._expert_name}"  # what was asked, for config.toml
         return cfg
@@ -735,11 +673,11 @@ class Agent:
             if all(e is None or (isinstance(e, _BuiltinEnv) and e.id == self.env_id) for e in given):
                 test_envs = None
             else:
-                test_envs = [_EnvBridge(e) for e in self._test_envs(self.config["eval_episodes"])]
+                test_envs = [EnvBridge(e, _codec_of(e)) for e in self._test_envs(self.config["eval_episodes"])]
         else:
-            env = _EnvBridge(self.env)
-            test_envs = [_EnvBridge(e) for e in self._test_envs(self.config["eval_episodes"])]
-            demo_env = _EnvBridge(self.env)
+            env = EnvBridge(self.env, self._codec)
+            test_envs = [EnvBridge(e, _codec_of(e)) for e in self._test_envs(self.config["eval_episodes"])]
+            demo_env = EnvBridge(self.env, self._codec)
         # The run writes its directory until it ends, maybe after the working directory changed: fix it now.
         log_dir = None if log_dir is None else os.path.abspath(log_dir)
         self._run_dir = log_dir
@@ -764,9 +702,14 @@ class Agent:
         current one (network, optimiser, replay, schedules, budget, generators), so learn(a) then
         learn(b, reset_num_timesteps=False) equals learn(a + b) byte for byte. An agent from `Agent.load` of a
         full save continues its run on the first learn either way. callback: SB3-style callback objects
-        (on_training_start, on_step -> bool, on_training_end; BaseCallback subclasses work) or a callable
-        (locals, globals) -> bool; their locals hold step, episode, last_eval, budget_used and queries, and
-        returning False stops training there (the run can be continued). log_dir (or tensorboard_log= of the
+        (BaseCallback subclasses, CallbackList, EvalCallback, CheckpointCallback, StopTrainingOn...) or a callable
+        (locals, globals) -> bool, called after every step with the live model (predict, get_parameters, save,
+        evaluations and queries are those of that step; a save is written when the callback returns); returning
+        False stops training there (the run can be continued). One learn is one rollout: on_rollout_start when it
+        begins, on_rollout_end when it returns. An exception from a callback or a Python expert pauses the run
+        whole (num_timesteps, weights, replay, queries and budget kept; the expert's open question is asked
+        again): learn raises it with a note, and learn(..., reset_num_timesteps=False) goes on as if it had not
+        happened. An exception from the environment ends the run. log_dir (or tensorboard_log= of the
         agent, in numbered folders <tb_log_name>_<n>) writes the run directory: config.toml, CSVs, TensorBoard
         events, weights, summary.json. log_interval: with verbose >= 1, a line on standard output every
         log_interval finished episodes (as SB3's DQN); None or a verbose of 0 prints none (the run directory and
@@ -793,19 +736,26 @@ class Agent:
         until = start + int(total_timesteps)
         label = f"{self.method.upper()}-{self.net}"
         episode_log = _EpisodeLog(int(log_interval), label) if self.verbose >= 1 and log_interval else None
-        callbacks = None if callback is None and episode_log is None else _Callbacks(callback, self, episode_log)
+        callbacks = None
+        if callback is not None or episode_log is not None:
+            callbacks = _Callbacks(callback, self, int(total_timesteps), episode_log)
+            # Episodes finished before this learn (unknown for a loaded run until its first step).
+            callbacks.episode = 0 if start == 0 else None if self.summary is None else int(self.summary["episodes"])
         bar = _ProgressBar(start, int(total_timesteps), label) if progress_bar else None
         if callbacks is not None:
             callbacks.start()
         try:
             with _stop_on_sigterm():
                 self._live_step = self._run.advance(until, callbacks, bar)
-        except KeyboardInterrupt:
+        except BaseException as e:
+            # The run paused whole (an exception from a callback or an expert, Ctrl-C) or ended (the
+            # environment's exception): it stands where its last step left it.
+            self._live_step = self._run.num_timesteps
+            if not isinstance(e, KeyboardInterrupt):
+                raise
             # A stop (Ctrl-C, SIGTERM), also while a person's question is open: the run paused whole (a question
             # open is asked again by the next learn). With a run directory, its snapshot goes there too.
-            if self._run is not None:
-                self._live_step = self._run.num_timesteps
-            if self._run is not None and self._run_dir is not None:
+            if self._run_dir is not None:
                 path = os.path.join(self._run_dir, "snapshot.safetensors")
                 self.save(path)
                 print(f"arld: stopped; the run's snapshot is in {path} (learn(..., reset_num_timesteps=False) goes "
@@ -822,21 +772,52 @@ class Agent:
             if callbacks is not None:
                 callbacks.end()
         if self.verbose >= 1 and self.summary is not None:
+            score = self.summary.get("final_score")
+            shown = "none yet" if score is None else f"{score:.1f}"
             print(f"arld {self.method}-{self.net} on {self.env_id}: {self._live_step} steps, last evaluation "
-                  f"{self.summary['final_score']:.1f}, budget used {self.summary['queries_used']}")
+                  f"{shown}, budget used {self.summary['queries_used']}")
         return self
 
     def _refresh(self) -> None:
         run = self._run
         self._policy = run.policy()
-        self.evaluations = list(run.evaluations())
-        self.queries = list(run.queries())
+        self._evaluations = list(run.evaluations())
+        self._queries = list(run.queries())
         # Its `expert` is the one that ran (python:<qualified name> for a Python expert), as in summary.json.
         self.summary = json.loads(run.summary())
 
     # --- acting
 
+    def _in_callback(self) -> bool:
+        """Whether this run's callback is running (on this thread): the live run is lent to it."""
+        return self._run is not None and bool(self._run.in_callback)
+
+    @property
+    def evaluations(self) -> List[Dict[str, Any]]:
+        """The run's evaluations (step, mean, std, min, max of the test returns), live inside a callback."""
+        if self._in_callback():
+            return list(self._run.evaluations())
+        return self._evaluations
+
+    @evaluations.setter
+    def evaluations(self, value: List[Dict[str, Any]]) -> None:
+        self._evaluations = value
+
+    @property
+    def queries(self) -> List[Dict[str, Any]]:
+        """The run's queries (step, episode, uncertainty, threshold, expert and agent action), live inside a
+        callback."""
+        if self._in_callback():
+            return list(self._run.queries())
+        return self._queries
+
+    @queries.setter
+    def queries(self, value: List[Dict[str, Any]]) -> None:
+        self._queries = value
+
     def _require_policy(self) -> Any:
+        if self._in_callback():
+            return self._run.live_policy()
         if self._policy is None:
             raise RuntimeError("the agent has not been trained or loaded yet: call learn() or Agent.load()")
         return self._policy
@@ -852,17 +833,18 @@ class Agent:
         deterministic=True: the test policy (greedy, bootstrap heads voting, mean noisy weights);
         False: the exploration policy of training at the run's current step (ε-greedy with the current ε, the
         episode's bootstrap head, sampled noise; `episode_start` begins a new episode)."""
-        policy = self._require_policy()
-        obs = np.asarray(observation, dtype=np.float32)
-        d = policy.obs_dim
-        batch = obs.ndim == 2 and obs.shape[1] == d
-        rows = obs.reshape(-1, d) if batch else obs.reshape(1, -1)
-        starts = np.zeros(len(rows), dtype=bool) if episode_start is None else np.broadcast_to(
-            np.asarray(episode_start, dtype=bool).reshape(-1), (len(rows),))
-        if deterministic:
-            actions = [policy.act(r.tolist()) for r in rows]
+        rows, batch = self._codec.rows(observation)
+        live = self._run.live_actions(rows) if deterministic and self._in_callback() else None
+        if live is not None:
+            actions = live
         else:
-            actions = [policy.explore(r.tolist(), bool(s)) for r, s in zip(rows, starts)]
+            policy = self._require_policy()
+            if deterministic:
+                actions = [policy.act(r) for r in rows]
+            else:
+                starts = np.zeros(len(rows), dtype=bool) if episode_start is None else np.broadcast_to(
+                    np.asarray(episode_start, dtype=bool).reshape(-1), (len(rows),))
+                actions = [policy.explore(r, bool(s)) for r, s in zip(rows, starts)]
         out = np.asarray(actions, dtype=np.int64)
         return (out if batch else out.reshape(())), None
 
@@ -885,7 +867,10 @@ class Agent:
             params = load_path_or_dict.get("policy", load_path_or_dict)
             with tempfile.TemporaryDirectory() as tmp:
                 path = os.path.join(tmp, "w.safetensors")
-                _write_safetensors(path, params)
+                # The network's description (kind, heads, widths) from the current weights' file.
+                self._require_policy().save(path, {})
+                metadata = _read_safetensors_metadata(path)
+                _write_safetensors(path, params, metadata)
                 policy, _meta = _arld.Policy.load(path)
         if self._policy is not None and (policy.obs_dim, policy.n_actions) != (
                 self._policy.obs_dim, self._policy.n_actions):
@@ -894,8 +879,12 @@ class Agent:
 
     def save(self, path: Union[str, os.PathLike]) -> None:  # type: ignore[type-arg]
         """Writes the run's full state (network, optimiser, replay, query state, generators: arld's run snapshot
-        format) to `path`, so that `Agent.load(path, env).learn(n)` continues the run; an agent loaded from plain
-        weights writes its weights."""
+        format) to `path` (".zip" added when it has no suffix, as SB3 does), so that `Agent.load(path,
+        env).learn(n)` continues the run; an agent loaded from plain weights writes its weights. Inside a
+        callback the file is written when the callback returns, with the run as it stands at that step."""
+        path = str(path)
+        if not Path(path).suffix:
+            path += ".zip"
         if self._run is None:
             if self._resume is not None:
                 shutil.copyfile(self._resume, path)
@@ -903,9 +892,7 @@ class Agent:
             meta = {"env": self.env_id, "method": self.method, "net": self.net, "seed": str(self.seed)}
             self._require_policy().save(str(path), meta)
             return
-        with tempfile.TemporaryDirectory() as tmp:
-            self._run.snapshot(tmp)
-            shutil.copyfile(os.path.join(tmp, "snapshot.safetensors"), path)
+        self._run.save(os.path.abspath(path))
 
     @classmethod
     def load(cls, path: Union[str, os.PathLike], env: Any = None, expert: Any = None,  # type: ignore[type-arg]
@@ -913,6 +900,8 @@ class Agent:
         """An agent from `save` (the run's full state: `learn` continues it; pass the environment, and the expert
         when it was a Python one) or from plain weights (`arld train`'s weights.safetensors: it acts only)."""
         path = str(path)
+        if not os.path.exists(path) and os.path.exists(path + ".zip"):
+            path += ".zip"
         if env is not None:
             env = _as_env(env)
             facts = _env_facts(env)
@@ -932,6 +921,9 @@ class Agent:
             agent.net = policy.net
             agent.seed = int(meta.get("seed", 0))
             agent.env = env
+            agent._codec = _codec_of(env) if env is not None else ObsCodec(
+                gym_spaces().Box(-np.inf, np.inf, (policy.obs_dim,), np.float32), path)
+            agent._max_episode_steps, agent._vec_env = None, None
             agent.env_id = meta.get("env", "")
             agent.eval_env = eval_env
             agent._policy, agent._run, agent._resume, agent._live_step = policy, None, None, 0
@@ -977,8 +969,14 @@ def _read_safetensors(path: str) -> Dict[str, np.ndarray]:
     return out
 
 
-def _write_safetensors(path: str, params: Dict[str, Any]) -> None:
-    header: Dict[str, Any] = {}
+def _read_safetensors_metadata(path: str) -> Dict[str, str]:
+    data = Path(path).read_bytes()
+    n = int.from_bytes(data[:8], "little")
+    return dict(json.loads(data[8:8 + n]).get("__metadata__", {}))
+
+
+def _write_safetensors(path: str, params: Dict[str, Any], metadata: Optional[Dict[str, str]] = None) -> None:
+    header: Dict[str, Any] = {} if not metadata else {"__metadata__": metadata}
     blobs = []
     offset = 0
     for name in sorted(params):

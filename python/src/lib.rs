@@ -5,13 +5,22 @@
 //! The training loop is the library's ([`arld::train::train_in`]). Python is called back only to step an
 //! environment ([`PyEnv`]: any object with `reset(seed) -> list[float]` and `step(action) -> (obs, reward,
 //! terminated, truncated)`) and to ask an expert ([`PyExpert`]: a callable `obs -> int`). An exception raised
-//! there is kept in an [`ErrorSlot`] while the error travels up through the loop as a Rust error with its
-//! context; `train` then raises the original exception with that context added as a note. Ctrl-C is noticed at
+//! there is kept in an [`ErrorSlot`]. An exception from an expert or a callback pauses the run whole (the
+//! expert's question stays open and is asked again when the run goes on); `advance` then raises the original
+//! exception with a note saying where the run paused. An exception from the environment ends the run (its state
+//! in the middle of a step is unknown) and is raised with the loop's context as a note. Ctrl-C is noticed at
 //! every environment step (`check_signals`), so it interrupts training as a `KeyboardInterrupt`.
+//!
+//! A callback runs on the run's thread after a step; while it runs, the live agent and log are lent to it
+//! ([`Lent`]), so `Run.live_actions`, `Run.live_policy` and the evaluations and queries it reads are those of that
+//! step, without a copy per step. A `save` inside a callback is written at a pause right after the callback
+//! returns (the run's replay and generators are reachable only there); the run then goes on by itself.
 
+use arld::agent::Agent;
 use arld::env::{self, Env, EnvError, EnvSpec, Outcome};
 use arld::expert::demos::{DemoColumns, Demonstrations};
 use arld::expert::{self, Expert};
+use arld::interrupt::Interrupted;
 use arld::nn::QNet;
 use arld::rng::NumpyRng;
 use arld::state::Persist;
@@ -24,8 +33,10 @@ use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
 use rand::SeedableRng;
 use rand_pcg::Pcg64;
+use std::cell::Cell;
 use std::path::Path;
-use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
 use std::sync::mpsc::{Receiver, RecvTimeoutError, Sender, channel};
 use std::sync::{Arc, Mutex};
 
@@ -44,6 +55,13 @@ impl ErrorSlot {
             *slot = Some(err);
         }
         text
+    }
+
+    /// The kept exception with `note` added (Python 3.11 on), if one is kept.
+    fn take_with_note(&self, py: Python<'_>, note: &str) -> Option<PyErr> {
+        let original = self.0.lock().unwrap_or_else(|e| e.into_inner()).take()?;
+        let _ = original.value(py).call_method1("add_note", (note,));
+        Some(original)
     }
 
     /// The Python exception to raise for a library error: the kept exception with the Rust context as a note,
@@ -181,22 +199,28 @@ struct PyExpert {
 
 impl Expert for PyExpert {
     fn act(&mut self, obs: &[f32]) -> anyhow::Result<usize> {
+        // An exception pauses the run whole with the question open (a stop, for the loop), so that the next
+        // `learn` asks the same question again; `advance` raises the exception.
         let answer = Python::attach(|py| {
             self.call
                 .call1(py, (obs.to_vec(),))
                 .and_then(|a| a.extract::<i64>(py))
-                .map_err(|e| self.errors.keep(e))
+                .map_err(|e| {
+                    let note = format!("arld: raised by the expert python:{}", self.name);
+                    let _ = e.value(py).call_method1("add_note", (note,));
+                    self.errors.keep(e)
+                })
         })
-        .map_err(|msg| anyhow::anyhow!("it raised {msg}"))?;
+        .map_err(|msg| Interrupted(format!("the expert raised {msg}")))?;
         if !(0..self.n_actions as i64).contains(&answer) {
             let msg = format!(
                 "it answered action {answer}, but the environment has {} actions (0 to {})",
                 self.n_actions,
                 self.n_actions.saturating_sub(1)
             );
-            // Raised as a ValueError from `learn` (a bad value from the caller's code).
+            // Raised as a ValueError from `learn` (a bad value from the caller's code); the run pauses.
             self.errors.keep(PyValueError::new_err(msg.clone()));
-            anyhow::bail!(msg);
+            return Err(Interrupted(msg).into());
         }
         Ok(answer as usize)
     }
@@ -233,16 +257,20 @@ fn config_keys() -> Vec<String> {
 }
 
 /// Resolves a configuration (the paper's preset, then `values` as JSON texts) and returns it as JSON text.
+/// `preset_of`: the built-in task whose preset a wrapped or re-limited copy of it (`env`) takes; the values are
+/// resolved as for that task, then the run is named `env`.
 #[pyfunction]
+#[pyo3(signature = (env, method, net, seed, values, preset_of=None))]
 fn resolve_config(
     env: &str,
     method: &str,
     net: &str,
     seed: u64,
     values: Vec<(String, String)>,
+    preset_of: Option<&str>,
 ) -> PyResult<String> {
-    let cfg =
-        resolve(env, method, net, seed, &values).map_err(|e| value_error(format!("{e:#}")))?;
+    let cfg = resolve(env, method, net, seed, &values, preset_of)
+        .map_err(|e| value_error(format!("{e:#}")))?;
     serde_json::to_string(&cfg).map_err(|e| runtime_error(e.to_string()))
 }
 
@@ -252,13 +280,24 @@ fn resolve(
     net: &str,
     seed: u64,
     values: &[(String, String)],
+    preset_of: Option<&str>,
 ) -> anyhow::Result<TrainConfig> {
-    let mut input = ConfigInput::new(env, method.parse()?, net.parse()?, seed);
+    let mut input = ConfigInput::new(
+        preset_of.unwrap_or(env),
+        method.parse()?,
+        net.parse()?,
+        seed,
+    );
     for (key, json) in values {
         let value: serde_json::Value = serde_json::from_str(json)?;
         input.set(key, toml_value(key, value)?)?;
     }
-    input.resolve()
+    let mut cfg = input.resolve()?;
+    if preset_of.is_some() {
+        cfg.env = env.to_string();
+        cfg.validate()?;
+    }
+    Ok(cfg)
 }
 
 /// A Python value (as JSON) as the configuration's TOML value: a number, boolean, string, or a list of them.
@@ -391,10 +430,20 @@ impl Policy {
     }
 }
 
-/// A built-in environment (`arld.make`), stepped from Python.
-#[pyclass(module = "arld._arld", unsendable)]
+/// A built-in environment (`arld.make`), stepped from Python (also from a run's thread, when wrapped).
+#[pyclass(module = "arld._arld")]
 struct BuiltinEnv {
-    env: Box<dyn Env>,
+    /// In a mutex only to be shared between threads (Python's and a run's); the methods take `&mut self`.
+    env: Mutex<Box<dyn Env>>,
+}
+
+impl BuiltinEnv {
+    fn env_mut(&mut self) -> &mut dyn Env {
+        self.env
+            .get_mut()
+            .unwrap_or_else(|e| e.into_inner())
+            .as_mut()
+    }
 }
 
 #[pymethods]
@@ -402,15 +451,17 @@ impl BuiltinEnv {
     #[new]
     fn new(id: &str) -> PyResult<Self> {
         let env = env::make(id).map_err(|e| value_error(e.to_string()))?;
-        Ok(Self { env })
+        Ok(Self {
+            env: Mutex::new(env),
+        })
     }
     #[pyo3(signature = (seed=None))]
     fn reset(&mut self, seed: Option<u64>) -> Vec<f32> {
-        self.env.reset(seed)
+        self.env_mut().reset(seed)
     }
     fn step(&mut self, action: usize) -> PyResult<(Vec<f32>, f64, bool, bool)> {
         let s = self
-            .env
+            .env_mut()
             .step(action)
             .map_err(|e| value_error(e.to_string()))?;
         Ok((s.obs, s.reward, s.terminated, s.truncated))
@@ -418,7 +469,7 @@ impl BuiltinEnv {
     /// (id, obs_dim, n_actions, max_episode_steps, reward_threshold)
     #[getter]
     fn spec(&self) -> (&'static str, usize, usize, usize, f64) {
-        let s = self.env.spec();
+        let s = self.env.lock().unwrap_or_else(|e| e.into_inner()).spec();
         (
             s.id,
             s.obs_dim,
@@ -436,8 +487,8 @@ enum Command {
         until: usize,
         callback: Option<Py<PyAny>>,
     },
-    /// Write the run's snapshot into this directory.
-    Snapshot(std::path::PathBuf),
+    /// Write the run's snapshot into this file.
+    Snapshot(PathBuf),
     /// End the run.
     Stop,
 }
@@ -459,9 +510,73 @@ enum Report {
     Failed(anyhow::Error),
 }
 
+/// What `Run::wait` saw: a pause at a step, or a snapshot written (or why not).
+enum Waited {
+    Paused(usize),
+    Saved(Result<(), String>),
+}
+
+/// The live run lent to a callback while it runs on the run's thread: which run, its agent and its log.
+type LentRun = (u64, *const Agent, *const RunLog);
+
+thread_local! {
+    /// Set only by [`Lent`], for the length of one callback call on the run's thread.
+    static LENT: Cell<Option<LentRun>> = const { Cell::new(None) };
+}
+
+/// Lends a step's agent and log to the callback called while it lives (on this thread only).
+struct Lent;
+
+impl Lent {
+    fn new(run: u64, at: &StepView<'_>) -> Self {
+        LENT.with(|l| {
+            l.set(Some((
+                run,
+                at.agent as *const Agent,
+                at.log as *const RunLog,
+            )))
+        });
+        Lent
+    }
+}
+
+impl Drop for Lent {
+    fn drop(&mut self) {
+        LENT.with(|l| l.set(None));
+    }
+}
+
+/// `f` of the live agent and log of run `run`, when called from inside that run's callback; `None` otherwise.
+fn with_lent<R>(run: u64, f: impl FnOnce(&Agent, &RunLog) -> R) -> Option<R> {
+    let (id, agent, log) = LENT.with(|l| l.get())?;
+    if id != run {
+        return None;
+    }
+    // SAFETY: the pointers are set by `Lent` from the `StepView` of the callback call that is running on this
+    // thread (thread-local, so no other thread sees them) and cleared when it returns; the loop holds only shared
+    // borrows of the agent and the log meanwhile, so both are alive and unchanged while `f` reads them.
+    Some(unsafe { f(&*agent, &*log) })
+}
+
+/// Whether this thread is inside a callback of any run (a run's thread, waiting for it).
+fn in_callback() -> bool {
+    LENT.with(|l| l.get()).is_some()
+}
+
+/// Writes a paused run's snapshot into the file `path` (through a directory of its own, the snapshot's format).
+fn write_snapshot(run: &mut PausedRun<'_>, path: &Path) -> anyhow::Result<()> {
+    let dir = tempfile::tempdir()?;
+    run.snapshot(dir.path())?;
+    std::fs::copy(dir.path().join(train::snapshot::SNAPSHOT_FILE), path)
+        .map_err(|e| anyhow::anyhow!("cannot write {}: {e}", path.display()))?;
+    Ok(())
+}
+
 /// The driver of a run in its own thread: trains until the step Python asked for, then pauses and waits there
 /// (the whole run alive) for the next command.
 struct Remote {
+    /// Which run (the key of what is lent to its callbacks).
+    id: u64,
     until: usize,
     callback: Option<Py<PyAny>>,
     commands: Receiver<Command>,
@@ -469,15 +584,21 @@ struct Remote {
     interrupt: Arc<AtomicBool>,
     step: Arc<AtomicUsize>,
     errors: ErrorSlot,
+    /// Files a callback asked the run's snapshot to be written to (`save` inside a callback).
+    saves: Arc<Mutex<Vec<PathBuf>>>,
+    /// The pause under way only writes `saves`: the run goes on by itself afterwards.
+    only_saving: bool,
 }
 
 impl Remote {
-    /// Python's callback after a step: anything but `False` goes on.
-    fn call_back(&self, at: &StepView<'_>) -> anyhow::Result<bool> {
+    /// Python's callback after a step, with the live run lent to it: anything but `False` goes on. An exception
+    /// is kept (with a note of the step) and pauses the run.
+    fn call_back(&self, at: &StepView<'_>) -> bool {
         let Some(cb) = &self.callback else {
-            return Ok(true);
+            return true;
         };
         let last_eval = at.log.curve().last().map(|p| (p.step, p.mean));
+        let _lent = Lent::new(self.id, at);
         Python::attach(|py| {
             let answer = cb.call1(
                 py,
@@ -488,26 +609,60 @@ impl Remote {
                     at.log.query_events().len(),
                     last_eval,
                 ),
-            )?;
-            let stop = answer
-                .bind(py)
-                .is(pyo3::types::PyBool::new(py, false).to_owned());
-            Ok(!stop)
+            );
+            match answer {
+                Ok(answer) => !answer
+                    .bind(py)
+                    .is(pyo3::types::PyBool::new(py, false).to_owned()),
+                Err(e) => {
+                    let note = format!("arld: raised by a callback after step {}", at.step);
+                    let _ = e.value(py).call_method1("add_note", (note,));
+                    self.errors.keep(e);
+                    false
+                }
+            }
         })
-        .map_err(|e: PyErr| anyhow::anyhow!("the callback raised {}", self.errors.keep(e)))
+    }
+
+    fn pending_saves(&self) -> Vec<PathBuf> {
+        std::mem::take(&mut *self.saves.lock().unwrap_or_else(|e| e.into_inner()))
     }
 }
 
 impl Driver for Remote {
     fn after_step(&mut self, at: &StepView<'_>) -> anyhow::Result<Control> {
         self.step.store(at.step, Ordering::Relaxed);
-        if !self.call_back(at)? || self.interrupt.load(Ordering::Relaxed) || at.step >= self.until {
+        let pause =
+            !self.call_back(at) || self.interrupt.load(Ordering::Relaxed) || at.step >= self.until;
+        if !pause
+            && !self
+                .saves
+                .lock()
+                .unwrap_or_else(|e| e.into_inner())
+                .is_empty()
+        {
+            self.only_saving = true;
             return Ok(Control::Pause);
         }
-        Ok(Control::Continue)
+        Ok(if pause {
+            Control::Pause
+        } else {
+            Control::Continue
+        })
     }
 
     fn paused(&mut self, run: &mut PausedRun<'_>) -> anyhow::Result<Control> {
+        let mut failed = false;
+        for path in self.pending_saves() {
+            if let Err(e) = write_snapshot(run, &path) {
+                let msg = format!("save() in a callback: {e:#}");
+                Python::attach(|_| self.errors.keep(runtime_error(msg)));
+                failed = true;
+            }
+        }
+        if std::mem::take(&mut self.only_saving) && !failed {
+            return Ok(Control::Continue);
+        }
         let pause = Pause {
             net: run.agent.network().clone(),
             curve: run.log.curve().to_vec(),
@@ -524,8 +679,8 @@ impl Driver for Remote {
                     (self.until, self.callback) = (until, callback);
                     return Ok(Control::Continue);
                 }
-                Ok(Command::Snapshot(dir)) => {
-                    let saved = run.snapshot(&dir).map_err(|e| format!("{e:#}"));
+                Ok(Command::Snapshot(path)) => {
+                    let saved = write_snapshot(run, &path).map_err(|e| format!("{e:#}"));
                     if self.reports.send(Report::Saved(saved)).is_err() {
                         return Ok(Control::Stop);
                     }
@@ -536,19 +691,25 @@ impl Driver for Remote {
     }
 }
 
+/// The next run's key.
+static NEXT_RUN: AtomicU64 = AtomicU64::new(1);
+
 /// One training run, alive in its own thread between `learn` calls: `advance` trains it to a step and returns
-/// where it stands; the run goes on from there at the next `advance`, exactly as if it had not paused.
+/// where it stands; the run goes on from there at the next `advance`, exactly as if it had not paused. Every
+/// method takes `&self`, so a callback may call them while `advance` waits.
 #[pyclass(module = "arld._arld")]
 struct Run {
+    id: u64,
     commands: Sender<Command>,
     reports: Mutex<Receiver<Report>>,
     interrupt: Arc<AtomicBool>,
     step: Arc<AtomicUsize>,
     errors: ErrorSlot,
+    saves: Arc<Mutex<Vec<PathBuf>>>,
     cfg: TrainConfig,
-    last: Option<Box<Pause>>,
-    started: bool,
-    thread: Option<std::thread::JoinHandle<()>>,
+    last: Mutex<Option<Box<Pause>>>,
+    started: AtomicBool,
+    thread: Mutex<Option<std::thread::JoinHandle<()>>>,
 }
 
 impl Drop for Run {
@@ -559,8 +720,9 @@ impl Drop for Run {
 
 impl Run {
     /// Waits for the thread's next report, with the GIL released; Ctrl-C pauses the run and is raised once it
-    /// has paused. `progress(step)` is called every tenth of a second.
-    fn wait(&mut self, py: Python<'_>, progress: Option<&Py<PyAny>>) -> PyResult<Report> {
+    /// has paused, as is an exception an expert or a callback raised. `progress(step)` is called every tenth of
+    /// a second.
+    fn wait(&self, py: Python<'_>, progress: Option<&Py<PyAny>>) -> PyResult<Waited> {
         let mut interrupted: Option<PyErr> = None;
         loop {
             let got = py.detach(|| {
@@ -569,19 +731,31 @@ impl Run {
             });
             match got {
                 Ok(Report::Failed(e)) => {
-                    if let Some(p) = self.last.as_mut() {
+                    if let Some(p) = self.last().as_mut() {
                         p.finished = true;
                     }
                     return Err(self.errors.raise(py, e, runtime_error));
                 }
-                Ok(report) => {
-                    if let Some(e) = interrupted {
-                        if let Report::Paused(p) = report {
-                            self.last = Some(p);
-                        }
+                Ok(Report::Paused(p)) => {
+                    let step = p.summary.train_steps;
+                    *self.last() = Some(p);
+                    let note = format!(
+                        "arld: the run paused whole after step {step} (network, replay, queries and budget kept; \
+                         an open question is asked again): learn(..., reset_num_timesteps=False) goes on from there"
+                    );
+                    if let Some(e) = self.errors.take_with_note(py, &note) {
                         return Err(e);
                     }
-                    return Ok(report);
+                    return match interrupted {
+                        Some(e) => Err(e),
+                        None => Ok(Waited::Paused(step)),
+                    };
+                }
+                Ok(Report::Saved(saved)) => {
+                    return match interrupted {
+                        Some(e) => Err(e),
+                        None => Ok(Waited::Saved(saved)),
+                    };
                 }
                 Err(RecvTimeoutError::Disconnected) => {
                     return Err(runtime_error("the run's thread ended unexpectedly".into()));
@@ -598,22 +772,66 @@ impl Run {
             }
         }
     }
+
+    fn last(&self) -> std::sync::MutexGuard<'_, Option<Box<Pause>>> {
+        self.last.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    /// `f` of the last pause, or the error that the run has not trained yet.
+    fn with_last<R>(&self, f: impl FnOnce(&Pause) -> R) -> PyResult<R> {
+        self.last()
+            .as_deref()
+            .map(f)
+            .ok_or_else(|| runtime_error("the run has not trained yet: call learn() first".into()))
+    }
+
+    fn refuse_in_callback(&self, what: &str) -> PyResult<()> {
+        if in_callback() {
+            return Err(runtime_error(format!(
+                "{what} cannot be called from inside a callback (the run is waiting for it to return); return \
+                 False to stop training there"
+            )));
+        }
+        Ok(())
+    }
+}
+
+fn eval_dict<'py>(py: Python<'py>, p: &EvalPoint) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    d.set_item("step", p.step)?;
+    d.set_item("mean", p.mean)?;
+    d.set_item("std", p.std)?;
+    d.set_item("min", p.min)?;
+    d.set_item("max", p.max)?;
+    Ok(d)
+}
+
+fn query_dict<'py>(py: Python<'py>, q: &QueryEvent) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    d.set_item("step", q.step)?;
+    d.set_item("episode", q.episode)?;
+    d.set_item("uncertainty", q.uncertainty)?;
+    d.set_item("threshold", q.threshold)?;
+    d.set_item("expert_action", q.expert_action)?;
+    d.set_item("agent_action", q.agent_action)?;
+    Ok(d)
 }
 
 #[pymethods]
 impl Run {
     /// Trains until environment step `until` (at least one step), calling `callback(step, episode, budget_used,
     /// queries, last_eval)` after every step (`False` pauses the run there) and `progress(step)` every tenth of
-    /// a second. Returns `(steps_done, paused_by_callback)`.
+    /// a second. Returns the steps done.
     #[pyo3(signature = (until, callback=None, progress=None))]
     fn advance(
-        &mut self,
+        &self,
         py: Python<'_>,
         until: usize,
         callback: Option<Py<PyAny>>,
         progress: Option<Py<PyAny>>,
     ) -> PyResult<usize> {
-        if self.last.as_ref().is_some_and(|p| p.finished) {
+        self.refuse_in_callback("learn()")?;
+        if self.last().as_ref().is_some_and(|p| p.finished) {
             return Err(runtime_error(
                 "this run has ended (an error stopped it); start a new one with learn(...)".into(),
             ));
@@ -622,87 +840,134 @@ impl Run {
         self.commands
             .send(Command::Advance { until, callback })
             .map_err(|_| runtime_error("the run's thread has ended".into()))?;
-        self.started = true;
+        self.started.store(true, Ordering::Relaxed);
         match self.wait(py, progress.as_ref())? {
-            Report::Paused(p) => {
-                let steps = p.summary.train_steps;
-                self.last = Some(p);
-                Ok(steps)
-            }
-            _ => Err(runtime_error("unexpected report from the run".into())),
+            Waited::Paused(step) => Ok(step),
+            Waited::Saved(_) => Err(runtime_error("unexpected report from the run".into())),
         }
     }
 
-    /// Writes the run's full snapshot (network, optimiser, replay, query state, generators) into `dir`.
-    fn snapshot(&mut self, py: Python<'_>, dir: &str) -> PyResult<()> {
-        if !self.started {
+    /// Writes the run's full snapshot (network, optimiser, replay, query state, generators) to the file `path`;
+    /// inside a callback, at a pause right after the callback returns.
+    fn save(&self, py: Python<'_>, path: &str) -> PyResult<()> {
+        if with_lent(self.id, |_, _| ()).is_some() {
+            self.saves
+                .lock()
+                .unwrap_or_else(|e| e.into_inner())
+                .push(path.into());
+            return Ok(());
+        }
+        self.refuse_in_callback("save() of another run")?;
+        if !self.started.load(Ordering::Relaxed) {
             return Err(runtime_error(
                 "the run has not started: call learn() first".into(),
             ));
         }
         self.commands
-            .send(Command::Snapshot(dir.into()))
+            .send(Command::Snapshot(path.into()))
             .map_err(|_| runtime_error("the run's thread has ended".into()))?;
         match self.wait(py, None)? {
-            Report::Saved(r) => r.map_err(runtime_error),
-            _ => Err(runtime_error("unexpected report from the run".into())),
+            Waited::Saved(r) => r.map_err(runtime_error),
+            Waited::Paused(_) => Err(runtime_error("unexpected report from the run".into())),
         }
     }
 
     /// Ends the run (its thread finishes the log) and waits for the thread.
-    fn close(&mut self, py: Python<'_>) {
+    fn close(&self, py: Python<'_>) -> PyResult<()> {
+        self.refuse_in_callback("a learn() that starts a new run")?;
         let _ = self.commands.send(Command::Stop);
-        if let Some(t) = self.thread.take() {
+        let thread = self.thread.lock().unwrap_or_else(|e| e.into_inner()).take();
+        if let Some(t) = thread {
             py.detach(|| {
                 let _ = t.join();
             });
         }
+        Ok(())
     }
 
-    /// The current policy (a copy of the network, with the exploration of training at step `step`).
+    /// The current policy (a copy of the network, with the exploration of training at its step): the live one
+    /// inside a callback, the last pause's otherwise.
     fn policy(&self) -> PyResult<Policy> {
-        let p = self.require()?;
-        Ok(Policy::exploring(
-            p.net.clone(),
-            &self.cfg,
-            p.summary.train_steps,
-        ))
+        if let Some(p) = self.live_policy() {
+            return Ok(p);
+        }
+        let (net, step) = self.with_last(|p| (p.net.clone(), p.summary.train_steps))?;
+        Ok(Policy::exploring(net, &self.cfg, step))
     }
 
-    /// The evaluations so far: dicts of step, mean, std, min, max.
+    /// The live network as a policy, inside this run's callback; `None` elsewhere.
+    fn live_policy(&self) -> Option<Policy> {
+        let step = self.step.load(Ordering::Relaxed);
+        with_lent(self.id, |agent, _| {
+            Policy::exploring(agent.network().clone(), &self.cfg, step)
+        })
+    }
+
+    /// The live network's test-policy actions for rows of observations, inside this run's callback; `None`
+    /// elsewhere.
+    fn live_actions(&self, rows: Vec<Vec<f32>>) -> PyResult<Option<Vec<usize>>> {
+        with_lent(self.id, |agent, _| {
+            let net = agent.network();
+            let mut q = vec![0.0; net.heads() * net.n_actions()];
+            rows.iter()
+                .map(|obs| {
+                    if obs.len() != net.obs_dim() {
+                        return Err(value_error(format!(
+                            "the observation has {} values, but the network takes {}",
+                            obs.len(),
+                            net.obs_dim()
+                        )));
+                    }
+                    Ok(arld::agent::test_policy_action(net, &mut q, obs))
+                })
+                .collect()
+        })
+        .transpose()
+    }
+
+    /// The evaluations so far (live inside a callback): dicts of step, mean, std, min, max.
     fn evaluations(&self, py: Python<'_>) -> PyResult<Py<PyList>> {
         let list = PyList::empty(py);
-        for p in &self.require()?.curve {
-            let d = PyDict::new(py);
-            d.set_item("step", p.step)?;
-            d.set_item("mean", p.mean)?;
-            d.set_item("std", p.std)?;
-            d.set_item("min", p.min)?;
-            d.set_item("max", p.max)?;
-            list.append(d)?;
+        let live = with_lent(self.id, |_, log| {
+            log.curve()
+                .iter()
+                .try_for_each(|p| list.append(eval_dict(py, p)?))
+        });
+        match live {
+            Some(r) => r?,
+            None => self.with_last(|last| {
+                last.curve
+                    .iter()
+                    .try_for_each(|p| list.append(eval_dict(py, p)?))
+            })??,
         }
         Ok(list.unbind())
     }
 
-    /// The queries so far: dicts of step, episode, uncertainty, threshold, expert_action, agent_action.
+    /// The queries so far (live inside a callback): dicts of step, episode, uncertainty, threshold,
+    /// expert_action, agent_action.
     fn queries(&self, py: Python<'_>) -> PyResult<Py<PyList>> {
         let list = PyList::empty(py);
-        for q in &self.require()?.queries {
-            let d = PyDict::new(py);
-            d.set_item("step", q.step)?;
-            d.set_item("episode", q.episode)?;
-            d.set_item("uncertainty", q.uncertainty)?;
-            d.set_item("threshold", q.threshold)?;
-            d.set_item("expert_action", q.expert_action)?;
-            d.set_item("agent_action", q.agent_action)?;
-            list.append(d)?;
+        let live = with_lent(self.id, |_, log| {
+            log.query_events()
+                .iter()
+                .try_for_each(|q| list.append(query_dict(py, q)?))
+        });
+        match live {
+            Some(r) => r?,
+            None => self.with_last(|last| {
+                last.queries
+                    .iter()
+                    .try_for_each(|q| list.append(query_dict(py, q)?))
+            })??,
         }
         Ok(list.unbind())
     }
 
-    /// The summary so far, as JSON text.
+    /// The summary at the last pause, as JSON text.
     fn summary(&self) -> PyResult<String> {
-        serde_json::to_string(&self.require()?.summary).map_err(|e| runtime_error(e.to_string()))
+        self.with_last(|p| serde_json::to_string(&p.summary))?
+            .map_err(|e| runtime_error(e.to_string()))
     }
 
     /// Environment steps done.
@@ -710,13 +975,17 @@ impl Run {
     fn num_timesteps(&self) -> usize {
         self.step.load(Ordering::Relaxed)
     }
-}
 
-impl Run {
-    fn require(&self) -> PyResult<&Pause> {
-        self.last
-            .as_deref()
-            .ok_or_else(|| runtime_error("the run has not trained yet: call learn() first".into()))
+    /// ε of the run's exploration at its current step.
+    #[getter]
+    fn exploration_rate(&self) -> f64 {
+        train::epsilon_at(&self.cfg, self.step.load(Ordering::Relaxed))
+    }
+
+    /// Whether this run's callback is running on this thread (the live run is lent to it).
+    #[getter]
+    fn in_callback(&self) -> bool {
+        with_lent(self.id, |_, _| ()).is_some()
     }
 }
 
@@ -746,7 +1015,12 @@ fn start_run(
     let (reports_tx, reports_rx) = channel();
     let interrupt = Arc::new(AtomicBool::new(false));
     let step = Arc::new(AtomicUsize::new(0));
+    let saves = Arc::new(Mutex::new(Vec::new()));
+    let id = NEXT_RUN.fetch_add(1, Ordering::Relaxed);
     let mut remote = Remote {
+        id,
+        saves: saves.clone(),
+        only_saving: false,
         until: 0,
         callback: None,
         commands: commands_rx,
@@ -851,14 +1125,33 @@ fn start_run(
                 )?)
             }
         };
-        let mut log = match &log_dir {
-            Some(dir) => RunLog::create(
+        let mut log = match (&log_dir, &resume_state) {
+            // Continuing a run in its own directory continues its logs (the CLI's --resume does the same).
+            (Some(dir), Some(state)) if Path::new(dir).join("config.toml").is_file() => {
+                let dir = Path::new(dir);
+                let recorded: TrainConfig =
+                    toml::from_str(&std::fs::read_to_string(dir.join("config.toml"))?)?;
+                let differences = recorded.differences(&cfg);
+                anyhow::ensure!(
+                    differences.is_empty(),
+                    "{} holds another run (its config.toml differs: {}); give another log_dir",
+                    dir.display(),
+                    differences.join(", ")
+                );
+                RunLog::resume(
+                    dir,
+                    &train::resume_position(state)?,
+                    cfg.train_steps as u64,
+                    false,
+                )?
+            }
+            (Some(dir), _) => RunLog::create(
                 Path::new(dir),
                 &cfg.to_toml(),
                 cfg.train_steps as u64,
                 false,
             )?,
-            None => RunLog::in_memory(),
+            (None, _) => RunLog::in_memory(),
         };
         train::train_driven(
             &cfg,
@@ -881,15 +1174,17 @@ fn start_run(
         })
         .map_err(|e| runtime_error(e.to_string()))?;
     Ok(Run {
+        id,
         commands: commands_tx,
         reports: Mutex::new(reports_rx),
         interrupt,
         step,
         errors,
+        saves,
         cfg,
-        last: None,
-        started: false,
-        thread: Some(thread),
+        last: Mutex::new(None),
+        started: AtomicBool::new(false),
+        thread: Mutex::new(Some(thread)),
     })
 }
 

@@ -83,8 +83,8 @@ def test_spaces_arld_cannot_use_are_value_errors():
     with pytest.raises(ValueError, match="Discrete action space.*MountainCarContinuous-v0.*Box"):
         arld.Agent("adqn", gym.make("MountainCarContinuous-v0"), expert=lambda obs: 0)
     env = gym.make("CartPole-v1")
-    env.observation_space = gym.spaces.Box(0, 1, (4, 4))
-    with pytest.raises(ValueError, match="flat Box observation"):
+    env.observation_space = gym.spaces.Box(0, 255, (84, 84, 3), np.uint8)
+    with pytest.raises(ValueError, match="are images .*FlattenObservation"):
         arld.Agent("dqn", env)
 
 

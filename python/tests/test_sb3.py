@@ -240,6 +240,10 @@ def test_mypy_strict_accepts_a_user_script():
     script = Path(__file__).with_name("typing_user.py")
     out = subprocess.run([sys.executable, "-m", "mypy", "--strict", str(script)], capture_output=True, text=True)
     assert out.returncode == 0, out.stdout + out.stderr
+    # The package itself, with the compiled part's stubs.
+    package = Path(arld.__file__).parent
+    out = subprocess.run([sys.executable, "-m", "mypy", "--strict", str(package)], capture_output=True, text=True)
+    assert out.returncode == 0, out.stdout + out.stderr
 
 
 def _safetensors_shapes(path):
