@@ -31,7 +31,8 @@ from .envs import (BuiltinEnv, EnvBridge, ObsCodec, as_env as _as_env, codec_of 
 
 __version__ = _arld.__version__
 
-__all__ = ["Agent", "WebExpert", "make", "preset", "config_keys", "collect_demos", "METHODS", "NETS", "__version__"]
+__all__ = ["Agent", "WebExpert", "make", "preset", "config_keys", "collect_demos", "METHODS", "NETS", "SB3_DEFAULTS",
+           "__version__"]
 
 # A person answering in the browser: arld.WebExpert(listen="127.0.0.1:0", fps=None, timeout=None, keys=None,
 # wait=True) prints the page's URL (also .url); pass it as expert= (one run per WebExpert).
@@ -52,6 +53,28 @@ SB3_NAMES = {
     "max_grad_norm": "grad_clip",
     "lambda_margin": "lambda",
 }
+# defaults="sb3": Stable-Baselines3's DQN defaults in arld's keys. SB3 trains once num_timesteps > learning_starts
+# (arld: >=), so its 100 is arld's 101; its target_update_interval of 10,000 environment steps is 2,500 updates at
+# train_freq=4. `train_steps` (the ε schedule's horizon) is each new run's learn(total_timesteps) unless given.
+SB3_DEFAULTS: Dict[str, Any] = {
+    "lr": 1e-4,
+    "replay_size": 1_000_000,
+    "learning_starts": 101,
+    "batch_size": 32,
+    "gamma": 0.99,
+    "train_freq": 4,
+    "target_period": 2_500,
+    "eps_start": 1.0,
+    "eps_end": 0.05,
+    "eps_fraction": 0.1,
+    "grad_clip": 10.0,
+    "loss": "huber",
+    "double_q": False,
+    "prioritized": False,
+    "hidden": [64, 64],
+    "timeout_as_terminal": False,
+}
+DEFAULTS = ("arld", "sb3")
 
 
 def _json_default(value: Any) -> Any:
@@ -394,6 +417,15 @@ class Agent:
     target_update_interval=target_period, counted in updates, i.e. steps when train_freq=1,
     max_grad_norm=grad_clip).
 
+    defaults="sb3": Stable-Baselines3's DQN defaults instead of the paper's preset (`arld.SB3_DEFAULTS`): a plain
+    network (unless net= is given), learning_rate 1e-4, buffer_size 1M, batch 32, gamma 0.99, train_freq 4, the
+    first update after step 100 (arld's learning_starts 101: SB3 starts when num_timesteps > learning_starts, arld
+    when >=), a target copy every 10,000 steps (target_update_interval 2,500 updates), Huber loss, max_grad_norm
+    10, no double Q, no prioritized replay, ε from 1.0 to 0.05 over the first 10% of each new run's
+    `learn(total_timesteps)` (unless train_steps= is given). Keywords given still win (in arld's units). Unlike
+    SB3, ε-greedy also acts before learning_starts (SB3 samples uniformly there), and `learn(n,
+    reset_num_timesteps=False)` keeps the run's horizon (SB3 stretches it to the new total).
+
     Network: two hidden layers, 64 and 64 wide as in the paper; `hidden=[256, 256]` (or SB3's
     `policy_kwargs=dict(net_arch=[256, 256])`) sets their widths.
     """
@@ -402,9 +434,10 @@ class Agent:
         self,
         method: str,
         env: Any,
-        net: str = "bootstrap",
+        net: Optional[str] = None,
         expert: Any = None,
         *,
+        defaults: str = "arld",
         seed: Optional[int] = 0,
         eval_env: Any = None,
         demos: Any = None,
@@ -459,7 +492,7 @@ class Agent:
     ) -> None:
         given = {k: v for k, v in locals().items() if k not in ("self", "method", "env", "net", "expert", "seed",
                                                                   "eval_env", "demos", "policy_kwargs",
-                                                                  "tensorboard_log", "verbose", "other",
+                                                                  "defaults", "tensorboard_log", "verbose", "other",
                                                                   "max_episode_steps", "__class__")}
         hyper: Dict[str, Any] = {}
         valid = set(config_keys())
@@ -496,6 +529,16 @@ class Agent:
                 hyper["hidden"] = arch
         if method not in METHODS:
             raise ValueError(f"unknown method {method!r}; known: {', '.join(METHODS)}")
+        if defaults not in DEFAULTS:
+            raise ValueError(f"unknown defaults {defaults!r}; known: {', '.join(DEFAULTS)}")
+        self.defaults = defaults
+        self._horizon_from_learn = defaults == "sb3" and "train_steps" not in hyper
+        if defaults == "sb3":
+            hyper = {**{k: v for k, v in SB3_DEFAULTS.items() if k not in hyper}, **hyper}
+            if net is None:
+                net = "plain"
+        if net is None:
+            net = "bootstrap"
         if net not in NETS:
             raise ValueError(f"unknown net {net!r}; known: {', '.join(NETS)}")
         if seed is None:
@@ -554,6 +597,8 @@ class Agent:
         self._run_dir: Optional[str] = None
         self._live_step = 0
         self._evaluations: List[Dict[str, Any]] = []
+        # A loaded run's evaluations before its snapshot (the continued run reports those after it).
+        self._prior_evaluations: List[Dict[str, Any]] = []
         self._queries: List[Dict[str, Any]] = []
         self.summary: Optional[Dict[str, Any]] = None
 
@@ -730,7 +775,11 @@ class Agent:
         else:
             if self._run is not None:
                 self._run.close()
+            self._prior_evaluations = []
             directory = str(log_dir) if log_dir is not None else self._log_dir(tb_log_name, True)
+            if self._horizon_from_learn:
+                # As SB3: the ε schedule runs over this learn's total_timesteps.
+                self.config = self._resolve({**self._hyper, "train_steps": int(total_timesteps)})
             self._run = self._start_run(directory, None)
             self._live_step = 0
         until = start + int(total_timesteps)
@@ -781,7 +830,7 @@ class Agent:
     def _refresh(self) -> None:
         run = self._run
         self._policy = run.policy()
-        self._evaluations = list(run.evaluations())
+        self._evaluations = self._with_prior(run.evaluations())
         self._queries = list(run.queries())
         # Its `expert` is the one that ran (python:<qualified name> for a Python expert), as in summary.json.
         self.summary = json.loads(run.summary())
@@ -792,11 +841,16 @@ class Agent:
         """Whether this run's callback is running (on this thread): the live run is lent to it."""
         return self._run is not None and bool(self._run.in_callback)
 
+    def _with_prior(self, evaluations: Any) -> List[Dict[str, Any]]:
+        prior = self._prior_evaluations
+        last = prior[-1]["step"] if prior else -1
+        return prior + [e for e in evaluations if e["step"] > last]
+
     @property
     def evaluations(self) -> List[Dict[str, Any]]:
         """The run's evaluations (step, mean, std, min, max of the test returns), live inside a callback."""
         if self._in_callback():
-            return list(self._run.evaluations())
+            return self._with_prior(self._run.evaluations())
         return self._evaluations
 
     @evaluations.setter
@@ -929,6 +983,7 @@ class Agent:
             agent._policy, agent._run, agent._resume, agent._live_step = policy, None, None, 0
             agent._hyper, agent.config = {}, {}
             agent.evaluations, agent.queries, agent.summary = [], [], None
+            agent._prior_evaluations = []
             agent.verbose, agent.tensorboard_log, agent.policy_kwargs = 0, None, {}
             agent.logger = _Logger()
             return agent
@@ -946,8 +1001,11 @@ class Agent:
                 raise ValueError(f"{path} was trained with the Python expert {spec[7:]}: pass it as expert=")
             expert = spec
         agent = cls(cfg["method"], env, cfg["net"], expert, seed=cfg["seed"], eval_env=eval_env, **kwargs)
-        policy, _cfg, step = _arld.snapshot_policy(path)
+        policy, _cfg, step, curve = _arld.snapshot_policy(path)
         agent.config = cfg
+        # The evaluations travel in the snapshot; the query events do not (queries.csv of its run directory).
+        agent._evaluations = list(json.loads(curve))
+        agent._prior_evaluations = list(agent._evaluations)
         agent.policy_kwargs = {"net_arch": list(cfg["hidden"])}
         agent._policy, agent._resume, agent._live_step = policy, path, step
         return agent

@@ -1189,10 +1189,11 @@ fn start_run(
 }
 
 /// The network of a run's snapshot file, acting (and exploring) as the run did at its step; returns the policy,
-/// the configuration as JSON text and the step.
+/// the configuration as JSON text, the step and the run's evaluations so far (JSON text: step, mean, std, min,
+/// max of each). The snapshot does not hold the query events (only how far queries.csv had been written).
 #[pyfunction]
-fn snapshot_policy(path: &str) -> PyResult<(Policy, String, usize)> {
-    let read = || -> anyhow::Result<(Policy, String, usize)> {
+fn snapshot_policy(path: &str) -> PyResult<(Policy, String, usize, String)> {
+    let read = || -> anyhow::Result<(Policy, String, usize, String)> {
         let text = train::snapshot::recorded_config(Path::new(path))?;
         let cfg: TrainConfig = toml::from_str(&text)?;
         let spec = env::spec(&cfg.env)?;
@@ -1207,7 +1208,13 @@ fn snapshot_policy(path: &str) -> PyResult<(Policy, String, usize)> {
         let st: serde_json::Value = state.value("loop")?;
         let step = st["step"].as_u64().unwrap_or(0) as usize;
         let policy = Policy::exploring(agent.network().clone(), &cfg, step);
-        Ok((policy, serde_json::to_string(&cfg)?, step))
+        let curve = train::resume_position(&state)?.curve;
+        Ok((
+            policy,
+            serde_json::to_string(&cfg)?,
+            step,
+            serde_json::to_string(&curve)?,
+        ))
     };
     read().map_err(|e| value_error(format!("cannot load {path}: {e:#}")))
 }

@@ -7,6 +7,7 @@ import json
 import re
 import subprocess
 import sys
+import warnings
 from pathlib import Path
 
 import gymnasium as gym
@@ -69,9 +70,11 @@ def test_load_continues_the_saved_run(tmp_path):
     model.save(tmp_path / "run.arld")
     loaded = arld.Agent.load(tmp_path / "run.arld", gym.make("CartPole-v1"), expert=expert)
     assert loaded.num_timesteps == 1000 and loaded.net == "bootstrap"
+    # The evaluations travel in the file (the query events do not).
+    assert len(model.evaluations) == 2 and loaded.evaluations == model.evaluations
     loaded.learn(1000)
     whole = cartpole_agent().learn(2000)
-    assert loaded.evaluations == [e for e in whole.evaluations if e["step"] > 1000]
+    assert len(whole.evaluations) == 4 and loaded.evaluations == whole.evaluations
     assert loaded.summary["queries_used"] == whole.summary["queries_used"]
     # A Python expert is not in the file: loading without it says so.
     with pytest.raises(ValueError, match="pass it as expert="):
@@ -340,3 +343,63 @@ def test_a_builtin_env_evaluates_on_the_eval_env_given():
     assert model.evaluations and all(e["max"] <= 5 for e in model.evaluations)
     plain = cartpole_agent("dqn", env=arld.make("CartPole-v1")).learn(1000)
     assert any(e["max"] > 5 for e in plain.evaluations)
+
+
+def test_defaults_sb3_are_those_of_stable_baselines3_dqn():
+    import inspect
+
+    import torch
+    from stable_baselines3 import DQN
+    from stable_baselines3.common.buffers import ReplayBuffer
+    from stable_baselines3.common.utils import get_linear_fn
+
+    sb3 = DQN("MlpPolicy", gym.make("CartPole-v1"), device="cpu")
+    agent = arld.Agent("dqn", gym.make("CartPole-v1"), defaults="sb3", seed=3, eval_period=100, eval_episodes=2)
+    cfg = agent.config
+    assert agent.net == "plain" and cfg["net"] == "plain"
+    assert cfg["lr"] == sb3.learning_rate and cfg["replay_size"] == sb3.buffer_size
+    assert cfg["batch_size"] == sb3.batch_size and cfg["gamma"] == sb3.gamma
+    assert cfg["train_freq"] == sb3.train_freq.frequency and sb3.gradient_steps == 1 and sb3.tau == 1.0
+    assert cfg["target_period"] * cfg["train_freq"] == sb3.target_update_interval
+    assert cfg["grad_clip"] == sb3.max_grad_norm
+    assert (cfg["eps_start"], cfg["eps_end"], cfg["eps_fraction"]) == (
+        sb3.exploration_initial_eps, sb3.exploration_final_eps, sb3.exploration_fraction)
+    # SB3 trains after a rollout of train_freq steps once num_timesteps > learning_starts; arld at the steps
+    # (multiples of train_freq) >= its learning_starts: the first update falls on the same step.
+    first_sb3 = next(t for t in range(1, 10_000) if t % sb3.train_freq.frequency == 0 and t > sb3.learning_starts)
+    first_arld = next(t for t in range(1, 10_000) if t % cfg["train_freq"] == 0 and t >= cfg["learning_starts"])
+    assert first_sb3 == first_arld
+    assert list(cfg["hidden"]) == list(sb3.policy.net_arch) and isinstance(sb3.policy.q_net.q_net[1], torch.nn.ReLU)
+    assert cfg["loss"] == "huber" and "smooth_l1_loss" in inspect.getsource(DQN.train)
+    assert cfg["double_q"] is False and "q_net_target(replay_data.next_observations)" in inspect.getsource(DQN.train)
+    assert "q_net(replay_data.next_observations)" not in inspect.getsource(DQN.train)  # no double Q in SB3
+    assert cfg["prioritized"] is False and type(sb3.replay_buffer) is ReplayBuffer
+    # A keyword given wins over the SB3 defaults; net= too.
+    assert arld.Agent("dqn", "CartPole-v1", defaults="sb3", learning_rate=5e-4).config["lr"] == 5e-4
+    with pytest.raises(ValueError, match="unknown defaults 'sb4'"):
+        arld.Agent("dqn", "CartPole-v1", defaults="sb4")
+
+    # ε over the first learn's total_timesteps, as SB3's schedule over its learn.
+    total = 400
+    with warnings.catch_warnings():  # deprecated in favour of LinearSchedule, the same line
+        warnings.simplefilter("ignore")
+        schedule = get_linear_fn(sb3.exploration_initial_eps, sb3.exploration_final_eps, sb3.exploration_fraction)
+    seen = []
+
+    def record(local_vars, global_vars):
+        model = local_vars["self"]
+        seen.append((model.num_timesteps, model.exploration_rate))
+        return True
+
+    agent.learn(total, callback=record)
+    assert agent.config["train_steps"] == total and len(seen) == total
+    for step, eps in seen:
+        assert eps == pytest.approx(schedule(1.0 - step / total), abs=1e-12), step
+    # SB3's own model after learning the same number of steps has the same ε as the arld run's last step.
+    sb3.learn(total)
+    assert agent.exploration_rate == pytest.approx(sb3.exploration_rate, abs=1e-12)
+    # A new run takes its own learn's horizon; train_steps= fixes it.
+    agent.learn(200)
+    assert agent.config["train_steps"] == 200
+    fixed = arld.Agent("dqn", "CartPole-v1", defaults="sb3", train_steps=1000, eval_period=100, eval_episodes=2)
+    assert fixed.learn(100).config["train_steps"] == 1000
