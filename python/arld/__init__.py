@@ -21,7 +21,7 @@ import sys
 import tempfile
 import time
 from pathlib import Path
-from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple, Union, cast
+from typing import Any, Callable, Dict, List, Literal, Optional, Protocol, Sequence, Tuple, Union, cast
 
 import numpy as np
 
@@ -32,14 +32,43 @@ from .envs import (BuiltinEnv, EnvBridge, ObsCodec, as_env as _as_env, codec_of 
 __version__ = _arld.__version__
 
 __all__ = ["Agent", "WebExpert", "make", "preset", "config_keys", "collect_demos", "METHODS", "NETS", "SB3_DEFAULTS",
+           "Method", "Net", "EnvLike", "Predicts",
            "__version__"]
 
 # A person answering in the browser: arld.WebExpert(listen="127.0.0.1:0", fps=None, timeout=None, keys=None,
 # wait=True) prints the page's URL (also .url); pass it as expert= (one run per WebExpert).
 WebExpert = _arld.WebExpert
 
-METHODS = ("dqn", "dqfd", "gdqn", "bdqn", "adqn", "adqnp")
-NETS = ("plain", "bootstrap", "noisy")
+Method = Literal["dqn", "dqfd", "gdqn", "bdqn", "adqn", "adqnp"]
+Net = Literal["plain", "bootstrap", "noisy"]
+METHODS: Tuple[Method, ...] = ("dqn", "dqfd", "gdqn", "bdqn", "adqn", "adqnp")
+NETS: Tuple[Net, ...] = ("plain", "bootstrap", "noisy")
+
+
+class EnvLike(Protocol):
+    """What arld needs of an environment: Gymnasium's spaces, reset and step (gymnasium.Env has them)."""
+
+    @property
+    def observation_space(self) -> Any: ...
+
+    @property
+    def action_space(self) -> Any: ...
+
+    def reset(self, *, seed: Optional[int] = None, options: Optional[Dict[str, Any]] = None) -> Tuple[Any, Any]: ...
+
+    def step(self, action: Any) -> Tuple[Any, Any, Any, Any, Any]: ...
+
+
+class Predicts(Protocol):
+    """An expert with Stable-Baselines3's predict (asked with deterministic=True)."""
+
+    def predict(self, observation: Any, *, deterministic: bool = ...) -> Tuple[Any, Any]: ...
+
+
+# An environment: a Gymnasium one, or the id for gym.make. An expert: a callable obs -> action, a model with SB3's
+# predict, an arld.Agent or WebExpert (both have predict or are taken as they are), or an expert spec string.
+Env = Union[str, EnvLike]
+ExpertLike = Union[str, Callable[[Any], Any], Predicts, _arld.WebExpert]
 # Keys that name the run rather than tune it: given as arguments of Agent, not as keyword hyperparameters.
 _IDENTITY = ("env", "method", "net", "seed")
 # Stable-Baselines3's names for arld's keys of the same meaning.
@@ -91,7 +120,7 @@ def config_keys() -> List[str]:
     return [k for k in _arld.config_keys() if k not in _IDENTITY]
 
 
-def preset(method: str, env: str, net: str = "bootstrap", seed: int = 0) -> Dict[str, Any]:
+def preset(method: Method, env: str, net: Net = "bootstrap", seed: int = 0) -> Dict[str, Any]:
     """The paper's configuration for `method` with `net` on `env` (a Gymnasium id), as a dict."""
     return dict(json.loads(_arld.resolve_config(env, method, net, seed, [])))
 
@@ -428,65 +457,116 @@ class Agent:
 
     Network: two hidden layers, 64 and 64 wide as in the paper; `hidden=[256, 256]` (or SB3's
     `policy_kwargs=dict(net_arch=[256, 256])`) sets their widths.
+
+    Hyperparameters (keywords; [default], "preset" when it depends on the task and method):
+
+    - learning_rate: Adam's step size (lr) [preset: 1e-3 CartPole, 1e-4 others]
+    - buffer_size: agent part of the replay memory (replay_size) [preset]
+    - batch_size: minibatch size [32]
+    - gamma: discount factor [preset]
+    - exploration_fraction: fraction of train_steps over which ε anneals [0.1]
+    - exploration_initial_eps: ε at the start (eps_start) [0.9]
+    - exploration_final_eps: ε at the end (eps_end) [0.01]
+    - target_update_interval: updates between target copies (target_period) [preset]
+    - learning_starts: environment steps before the first update [500/1000]
+    - train_freq: environment steps per update [1]
+    - max_grad_norm: global gradient-norm clip (grad_clip) [10]
+    - train_steps: the run's length: the schedules' horizon [preset]
+    - budget: expert transitions (or queries) allowed during training [preset]
+    - budget_unit: "transitions" or "queries" [transitions]
+    - segment_len: expert steps per query [5]
+    - t_query: ADQN's query fraction; BDQN's query probability [preset]
+    - query_rule: when to ask, as a rule spec, e.g. "paced(horizon=0.1)" (docs/algorithm.md) [the method's own]
+    - n_r: window of recent uncertainties [1000]
+    - heads: bootstrapped heads [10]
+    - hidden: widths of the two hidden layers (net_arch) [64, 64]
+    - loss: TD loss: "mse" or "huber" [mse]
+    - double_q: double DQN targets [True]
+    - timeout_as_terminal: treat truncation as terminal [False]
+    - eps_greedy_on_top: ε-greedy also for bootstrap/noisy nets [True]
+    - prioritized: prioritized replay [True]
+    - alpha: priority exponent [0.6]
+    - beta0: initial importance-sampling exponent [0.4]
+    - eps_agent: priority bonus of agent transitions [0.001]
+    - eps_demo: priority bonus of demonstrations [1.0]
+    - margin: large-margin loss margin [0.8]
+    - lambda_margin: weight of the margin loss (config key `lambda`) [preset]
+    - lambda_n: weight of DQfD's n-step loss [0]
+    - n_step: horizon of the n-step loss [10]
+    - l2: L2 weight [0]
+    - n_demo: demonstrations collected before training (dqfd, adqnp) [preset]
+    - pretrain_steps: pre-training updates (dqfd, adqnp) [preset]
+    - queries_from_learning_starts: no queries before learning_starts [False]
+    - exact_factorised_var: exact noisy-net variance [False]
+    - expert_timeout: seconds an expert process may take per answer [30]
+    - demo_file: demonstration file for pre-training [none]
+    - eval_period: environment steps between evaluations [preset]
+    - eval_episodes: test episodes per evaluation [20]
+    - checkpoint_every: save weights every this many steps in the run dir [0: off]
+    - snapshot_every: unused from Python (the run stays alive between learn calls)
+    - max_episode_steps: wraps env and eval_env in a TimeLimit of this many steps [none]
+    - policy_kwargs: SB3's dict(net_arch=[...]) (only net_arch); tensorboard_log: a folder for numbered run
+      directories; verbose: 1 prints a line every log_interval episodes [0]; eval_env, demos, defaults: above
     """
 
     def __init__(
         self,
-        method: str,
-        env: Any,
-        net: Optional[str] = None,
-        expert: Any = None,
+        method: Method,
+        env: Env,
+        net: Optional[Net] = None,
+        expert: Optional[ExpertLike] = None,
         *,
         defaults: str = "arld",
         seed: Optional[int] = 0,
-        eval_env: Any = None,
+        eval_env: Union[Env, Sequence[Env], None] = None,
         demos: Any = None,
         policy_kwargs: Optional[Dict[str, Any]] = None,
         tensorboard_log: Optional[Union[str, os.PathLike]] = None,  # type: ignore[type-arg]
         verbose: int = 0,
-        learning_rate: Optional[float] = None,  # Adam's step size (lr) [preset: 1e-3 CartPole, 1e-4 others]
-        buffer_size: Optional[int] = None,  # agent part of the replay memory (replay_size)
-        batch_size: Optional[int] = None,  # minibatch size [32]
-        gamma: Optional[float] = None,  # discount factor [preset]
-        exploration_fraction: Optional[float] = None,  # fraction of train_steps over which ε anneals [0.1]
-        exploration_initial_eps: Optional[float] = None,  # ε at the start (eps_start) [0.9]
-        exploration_final_eps: Optional[float] = None,  # ε at the end (eps_end) [0.01]
-        target_update_interval: Optional[int] = None,  # updates between target copies (target_period)
-        learning_starts: Optional[int] = None,  # environment steps before the first update [500/1000]
-        train_freq: Optional[int] = None,  # environment steps per update [1]
-        max_grad_norm: Optional[float] = None,  # global gradient-norm clip (grad_clip) [10]
-        train_steps: Optional[int] = None,  # the run's length: the schedules' horizon [preset]
-        budget: Optional[int] = None,  # expert transitions (or queries) allowed during training [preset]
-        budget_unit: Optional[str] = None,  # "transitions" or "queries" [transitions]
-        segment_len: Optional[int] = None,  # expert steps per query [5]
-        t_query: Optional[float] = None,  # ADQN's query fraction; BDQN's query probability [preset]
-        n_r: Optional[int] = None,  # window of recent uncertainties [1000]
-        heads: Optional[int] = None,  # bootstrapped heads [10]
-        hidden: Optional[Sequence[int]] = None,  # widths of the two hidden layers (net_arch) [64, 64]
-        loss: Optional[str] = None,  # TD loss: "mse" or "huber" [mse]
-        double_q: Optional[bool] = None,  # double DQN targets [True]
-        timeout_as_terminal: Optional[bool] = None,  # treat truncation as terminal [False]
-        eps_greedy_on_top: Optional[bool] = None,  # ε-greedy also for bootstrap/noisy nets [True]
-        prioritized: Optional[bool] = None,  # prioritized replay [True]
-        alpha: Optional[float] = None,  # priority exponent [0.6]
-        beta0: Optional[float] = None,  # initial importance-sampling exponent [0.4]
-        eps_agent: Optional[float] = None,  # priority bonus of agent transitions [0.001]
-        eps_demo: Optional[float] = None,  # priority bonus of demonstrations [1.0]
-        margin: Optional[float] = None,  # large-margin loss margin [0.8]
-        lambda_margin: Optional[float] = None,  # weight of the margin loss (config key `lambda`) [preset]
-        lambda_n: Optional[float] = None,  # weight of DQfD's n-step loss [0]
-        n_step: Optional[int] = None,  # horizon of the n-step loss [10]
-        l2: Optional[float] = None,  # L2 weight [0]
-        n_demo: Optional[int] = None,  # demonstrations collected before training (dqfd, adqnp) [preset]
-        pretrain_steps: Optional[int] = None,  # pre-training updates (dqfd, adqnp) [preset]
-        queries_from_learning_starts: Optional[bool] = None,  # no queries before learning_starts [False]
-        exact_factorised_var: Optional[bool] = None,  # exact noisy-net variance [False]
-        expert_timeout: Optional[float] = None,  # seconds an expert process may take per answer [30]
-        demo_file: Optional[str] = None,  # demonstration file for pre-training [none]
-        eval_period: Optional[int] = None,  # environment steps between evaluations [preset]
-        eval_episodes: Optional[int] = None,  # test episodes per evaluation [20]
-        checkpoint_every: Optional[int] = None,  # save weights every this many steps in the run dir [0: off]
-        snapshot_every: Optional[int] = None,  # unused from Python (the run stays alive between learn calls)
+        learning_rate: Optional[float] = None,
+        buffer_size: Optional[int] = None,
+        batch_size: Optional[int] = None,
+        gamma: Optional[float] = None,
+        exploration_fraction: Optional[float] = None,
+        exploration_initial_eps: Optional[float] = None,
+        exploration_final_eps: Optional[float] = None,
+        target_update_interval: Optional[int] = None,
+        learning_starts: Optional[int] = None,
+        train_freq: Optional[int] = None,
+        max_grad_norm: Optional[float] = None,
+        train_steps: Optional[int] = None,
+        budget: Optional[int] = None,
+        budget_unit: Optional[str] = None,
+        segment_len: Optional[int] = None,
+        t_query: Optional[float] = None,
+        query_rule: Optional[str] = None,
+        n_r: Optional[int] = None,
+        heads: Optional[int] = None,
+        hidden: Optional[Sequence[int]] = None,
+        loss: Optional[str] = None,
+        double_q: Optional[bool] = None,
+        timeout_as_terminal: Optional[bool] = None,
+        eps_greedy_on_top: Optional[bool] = None,
+        prioritized: Optional[bool] = None,
+        alpha: Optional[float] = None,
+        beta0: Optional[float] = None,
+        eps_agent: Optional[float] = None,
+        eps_demo: Optional[float] = None,
+        margin: Optional[float] = None,
+        lambda_margin: Optional[float] = None,
+        lambda_n: Optional[float] = None,
+        n_step: Optional[int] = None,
+        l2: Optional[float] = None,
+        n_demo: Optional[int] = None,
+        pretrain_steps: Optional[int] = None,
+        queries_from_learning_starts: Optional[bool] = None,
+        exact_factorised_var: Optional[bool] = None,
+        expert_timeout: Optional[float] = None,
+        demo_file: Optional[str] = None,
+        eval_period: Optional[int] = None,
+        eval_episodes: Optional[int] = None,
+        checkpoint_every: Optional[int] = None,
+        snapshot_every: Optional[int] = None,
         max_episode_steps: Optional[int] = None,
         **other: Any,
     ) -> None:
@@ -971,8 +1051,8 @@ class Agent:
                         f"{obs_dim} and {n_actions}"
                     )
             agent = cls.__new__(cls)
-            agent.method = meta.get("method", "dqn")
-            agent.net = policy.net
+            agent.method = cast(Method, meta.get("method", "dqn"))
+            agent.net = cast(Net, policy.net)
             agent.seed = int(meta.get("seed", 0))
             agent.env = env
             agent._codec = _codec_of(env) if env is not None else ObsCodec(

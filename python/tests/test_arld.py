@@ -3,6 +3,7 @@ every kind, and every way an environment or expert can fail."""
 
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -223,3 +224,17 @@ def test_ctrl_c_interrupts_learn():
         killer.kill()
         killer.wait()
         signal.signal(signal.SIGINT, previous)
+
+
+def test_help_of_agent_documents_every_keyword():
+    import inspect
+
+    doc = arld.Agent.__doc__ or ""
+    names = [n for n, p in inspect.signature(arld.Agent.__init__).parameters.items()
+             if n != "self" and p.kind is not inspect.Parameter.VAR_KEYWORD]
+    assert len(names) > 50
+    missing = [n for n in names if not re.search(rf"(^|[\s`(]){n}[:=`\s]", doc)]
+    assert missing == []
+    # Every configuration key is reachable by a documented keyword (arld's name or SB3's).
+    documented = {arld.SB3_NAMES.get(n, n) for n in names}
+    assert set(arld.config_keys()) - documented - {"env", "method", "net", "seed", "expert"} == set()

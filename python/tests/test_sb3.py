@@ -239,7 +239,7 @@ def test_the_readme_python_example_runs(tmp_path, monkeypatch):
     exec(compile(code, "README.md", "exec"), {})
 
 
-def test_mypy_strict_accepts_a_user_script():
+def test_mypy_strict_accepts_a_user_script(tmp_path):
     script = Path(__file__).with_name("typing_user.py")
     out = subprocess.run([sys.executable, "-m", "mypy", "--strict", str(script)], capture_output=True, text=True)
     assert out.returncode == 0, out.stdout + out.stderr
@@ -247,6 +247,19 @@ def test_mypy_strict_accepts_a_user_script():
     package = Path(arld.__file__).parent
     out = subprocess.run([sys.executable, "-m", "mypy", "--strict", str(package)], capture_output=True, text=True)
     assert out.returncode == 0, out.stdout + out.stderr
+    # A misspelt method or network, an expert or environment of the wrong kind: mypy says so before any run.
+    wrong = tmp_path / "wrong.py"
+    wrong.write_text(
+        "import arld\n"
+        "arld.Agent('dqm', 'CartPole-v1')\n"
+        "arld.Agent('dqn', 'CartPole-v1', net='boot')\n"
+        "arld.Agent('adqn', 3, expert='shipped:weak')\n"
+        "arld.Agent('adqn', 'CartPole-v1', expert=3)\n"
+    )
+    out = subprocess.run([sys.executable, "-m", "mypy", "--strict", str(wrong)], capture_output=True, text=True)
+    lines = [line for line in out.stdout.splitlines() if ": error:" in line]
+    assert [line.split(":")[1] for line in lines] == ["2", "3", "4", "5"], out.stdout
+    assert "'dqm'" in lines[0] and "Literal" in lines[0] and "'boot'" in lines[1], out.stdout
 
 
 def _safetensors_shapes(path):

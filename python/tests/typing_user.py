@@ -36,6 +36,9 @@ def main() -> None:
     model.save("/tmp/arld_typing_user.arld")
     again = arld.Agent.load("/tmp/arld_typing_user.arld", env, expert=my_expert)
     print(again.num_timesteps)
+    sb3_like = arld.Agent("dqn", "CartPole-v1", defaults="sb3").learn(200)
+    student = arld.Agent("gdqn", arld.make("CartPole-v1"), expert=sb3_like, eval_env=[env, env])
+    print(student.method, student.net, arld.SB3_DEFAULTS["lr"])
 
 
 if __name__ == "__main__":
