@@ -1,0 +1,825 @@
+"""The Agent: arld's training loop (Rust) with Stable-Baselines3's shape; its configuration (the paper's presets or
+SB3's DQN defaults), environments given as Gymnasium ones, saving and loading."""
+
+from __future__ import annotations
+
+import copy
+import difflib
+import json
+import os
+import shutil
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any, Callable, Dict, List, Literal, Optional, Protocol, Sequence, Tuple, Union, cast
+
+import numpy as np
+
+from . import _arld
+from .callbacks import _Callbacks, _EpisodeLog, _Logger, _ProgressBar, _stop_on_sigterm
+from .experts import ExpertLike, WebExpert, _demos, _expert_callable, _shown_raw, gym_spaces
+from .envs import (BuiltinEnv, EnvBridge, ObsCodec, as_env as _as_env, codec_of as _codec_of,
+                   copy_env as _copy_env, env_facts as _env_facts, make, register as _register)
+
+Method = Literal["dqn", "dqfd", "gdqn", "bdqn", "adqn", "adqnp"]
+Net = Literal["plain", "bootstrap", "noisy"]
+METHODS: Tuple[Method, ...] = ("dqn", "dqfd", "gdqn", "bdqn", "adqn", "adqnp")
+NETS: Tuple[Net, ...] = ("plain", "bootstrap", "noisy")
+
+
+class EnvLike(Protocol):
+    """What arld needs of an environment: Gymnasium's spaces, reset and step (gymnasium.Env has them)."""
+
+    @property
+    def observation_space(self) -> Any: ...
+
+    @property
+    def action_space(self) -> Any: ...
+
+    def reset(self, *, seed: Optional[int] = None, options: Optional[Dict[str, Any]] = None) -> Tuple[Any, Any]: ...
+
+    def step(self, action: Any) -> Tuple[Any, Any, Any, Any, Any]: ...
+
+
+# An environment: a Gymnasium one, or the id for gym.make.
+Env = Union[str, EnvLike]
+# Keys that name the run rather than tune it: given as arguments of Agent, not as keyword hyperparameters.
+_IDENTITY = ("env", "method", "net", "seed")
+# Stable-Baselines3's names for arld's keys of the same meaning.
+SB3_NAMES = {
+    "learning_rate": "lr",
+    "buffer_size": "replay_size",
+    "exploration_fraction": "eps_fraction",
+    "exploration_initial_eps": "eps_start",
+    "exploration_final_eps": "eps_end",
+    "target_update_interval": "target_period",
+    "max_grad_norm": "grad_clip",
+    "lambda_margin": "lambda",
+}
+# defaults="sb3": Stable-Baselines3's DQN defaults in arld's keys. SB3 trains once num_timesteps > learning_starts
+# (arld: >=), so its 100 is arld's 101; its target_update_interval of 10,000 environment steps is 2,500 updates at
+# train_freq=4. `train_steps` (the ε schedule's horizon) is each new run's learn(total_timesteps) unless given.
+SB3_DEFAULTS: Dict[str, Any] = {
+    "lr": 1e-4,
+    "replay_size": 1_000_000,
+    "learning_starts": 101,
+    "batch_size": 32,
+    "gamma": 0.99,
+    "train_freq": 4,
+    "target_period": 2_500,
+    "eps_start": 1.0,
+    "eps_end": 0.05,
+    "eps_fraction": 0.1,
+    "grad_clip": 10.0,
+    "loss": "huber",
+    "double_q": False,
+    "prioritized": False,
+    "hidden": [64, 64],
+    "timeout_as_terminal": False,
+}
+DEFAULTS = ("arld", "sb3")
+
+
+def _json_default(value: Any) -> Any:
+    """NumPy numbers and arrays, and other sequences, as JSON sees them (for hyperparameters)."""
+    if hasattr(value, "tolist"):
+        return value.tolist()
+    if isinstance(value, (tuple, range)):
+        return list(value)
+    raise TypeError(f"{value!r} ({type(value).__name__}) is not a number, boolean, string or list")
+
+
+def config_keys() -> List[str]:
+    """Every hyperparameter keyword (the CLI's `--set` keys) that `Agent` accepts."""
+    return [k for k in _arld.config_keys() if k not in _IDENTITY]
+
+
+def preset(method: Method, env: str, net: Net = "bootstrap", seed: int = 0) -> Dict[str, Any]:
+    """The paper's configuration for `method` with `net` on `env` (a Gymnasium id), as a dict."""
+    return dict(json.loads(_arld.resolve_config(env, method, net, seed, [])))
+
+
+# --------------------------------------------------------------------------------------------- environments
+
+
+# The environments' part (observation spaces, time limits, registration, arld.make) is in envs.py.
+_BuiltinEnv = BuiltinEnv
+
+
+class Agent:
+    """An arld agent with Stable-Baselines3's shape: `Agent(method, env, net=..., expert=..., **hyperparameters)`.
+
+    method: dqn, dqfd, gdqn, bdqn, adqn, adqnp (DQfD and ADQNP pre-train on demonstrations; GDQN, BDQN, ADQN,
+    ADQNP ask the expert during training). net: plain, bootstrap (10 heads), noisy. env: a Gymnasium environment
+    with a Discrete action space, exactly as given (wrappers, time limits), an id string (made with gym.make), or
+    `arld.make(id)` (the built-in one: trained entirely in Rust). Observations reach the network as SB3's policies
+    see them (a vector Box as it is, Discrete one-hot, MultiDiscrete/MultiBinary/Dict/Tuple flattened; images are
+    refused: see arld.envs); experts and `predict` take them as the environment gives them. The time limit is the
+    tightest TimeLimit wrapper, else the spec's, else what an environment that truncates itself declares
+    (`max_steps`); `max_episode_steps=N` wraps the environment (and eval_env) in a TimeLimit of N steps.
+    seed=None draws a seed (recorded in `seed` and config.toml).
+
+    Queries: when the query rule fires, the expert takes over for a segment of up to `segment_len` (5) steps; the
+    budget (`budget`) counts the demonstrated transitions (environment steps the expert acted), or the queries
+    when `budget_unit="queries"`. `queries` lists every query (step, episode, uncertainty, threshold, actions).
+    Evaluations: every `eval_period` environment steps, `eval_episodes` (20) test episodes with the test policy
+    (no exploration) run on `eval_env` (copies of it, or of `env`); `evaluations` lists their returns.
+
+    expert: a callable obs -> action, an object with SB3's predict(obs, deterministic=True), an arld.Agent, or
+    an arld expert spec ("shipped:weak", "checkpoint:PATH", "cmd:python my_expert.py"). demos (dqfd, adqnp): a
+    dict of columns (obs, actions, rewards, next_obs, terminated[, truncated]), imitation's transitions with
+    rewards, or `arld.collect_demos(env, expert, n, seed)`; by default collected from the expert on `env`.
+
+    Run length and schedules: `train_steps` is the run's length, the horizon of the schedules (ε anneals from
+    `exploration_initial_eps` to `exploration_final_eps` over `exploration_fraction × train_steps` steps; PER's
+    β anneals to 1 over `train_steps`), fixed when the agent is made (the paper's preset for its tasks, 100k
+    otherwise). `learn(n)` trains n environment steps of that run; past `train_steps` ε and β keep their final
+    values. So `learn(a)` then `learn(b, reset_num_timesteps=False)` is exactly `learn(a + b)`.
+
+    Every hyperparameter is a keyword (None: the preset's value; `arld.preset(method, env_id)` shows them).
+    SB3's names are accepted where the meaning is the same (learning_rate=lr, buffer_size=replay_size,
+    exploration_fraction=eps_fraction, exploration_initial_eps=eps_start, exploration_final_eps=eps_end,
+    target_update_interval=target_period, counted in updates, i.e. steps when train_freq=1,
+    max_grad_norm=grad_clip).
+
+    defaults="sb3": Stable-Baselines3's DQN defaults instead of the paper's preset (`arld.SB3_DEFAULTS`): a plain
+    network (unless net= is given), learning_rate 1e-4, buffer_size 1M, batch 32, gamma 0.99, train_freq 4, the
+    first update after step 100 (arld's learning_starts 101: SB3 starts when num_timesteps > learning_starts, arld
+    when >=), a target copy every 10,000 steps (target_update_interval 2,500 updates), Huber loss, max_grad_norm
+    10, no double Q, no prioritized replay, ε from 1.0 to 0.05 over the first 10% of each new run's
+    `learn(total_timesteps)` (unless train_steps= is given). Keywords given still win (in arld's units). Unlike
+    SB3, ε-greedy also acts before learning_starts (SB3 samples uniformly there), and `learn(n,
+    reset_num_timesteps=False)` keeps the run's horizon (SB3 stretches it to the new total).
+
+    Network: two hidden layers, 64 and 64 wide as in the paper; `hidden=[256, 256]` (or SB3's
+    `policy_kwargs=dict(net_arch=[256, 256])`) sets their widths.
+
+    Hyperparameters (keywords; [default], "preset" when it depends on the task and method):
+
+    - learning_rate: Adam's step size (lr) [preset: 1e-3 CartPole, 1e-4 others]
+    - buffer_size: agent part of the replay memory (replay_size) [preset]
+    - batch_size: minibatch size [32]
+    - gamma: discount factor [preset]
+    - exploration_fraction: fraction of train_steps over which ε anneals [0.1]
+    - exploration_initial_eps: ε at the start (eps_start) [0.9]
+    - exploration_final_eps: ε at the end (eps_end) [0.01]
+    - target_update_interval: updates between target copies (target_period) [preset]
+    - learning_starts: environment steps before the first update [500/1000]
+    - train_freq: environment steps per update [1]
+    - max_grad_norm: global gradient-norm clip (grad_clip) [10]
+    - train_steps: the run's length: the schedules' horizon [preset]
+    - budget: expert transitions (or queries) allowed during training [preset]
+    - budget_unit: "transitions" or "queries" [transitions]
+    - segment_len: expert steps per query [5]
+    - t_query: ADQN's query fraction; BDQN's query probability [preset]
+    - query_rule: when to ask, as a rule spec, e.g. "paced(horizon=0.1)" (docs/algorithm.md) [the method's own]
+    - n_r: window of recent uncertainties [1000]
+    - heads: bootstrapped heads [10]
+    - hidden: widths of the two hidden layers (net_arch) [64, 64]
+    - loss: TD loss: "mse" or "huber" [mse]
+    - double_q: double DQN targets [True]
+    - timeout_as_terminal: treat truncation as terminal [False]
+    - eps_greedy_on_top: ε-greedy also for bootstrap/noisy nets [True]
+    - prioritized: prioritized replay [True]
+    - alpha: priority exponent [0.6]
+    - beta0: initial importance-sampling exponent [0.4]
+    - eps_agent: priority bonus of agent transitions [0.001]
+    - eps_demo: priority bonus of demonstrations [1.0]
+    - margin: large-margin loss margin [0.8]
+    - lambda_margin: weight of the margin loss (config key `lambda`) [preset]
+    - lambda_n: weight of DQfD's n-step loss [0]
+    - n_step: horizon of the n-step loss [10]
+    - l2: L2 weight [0]
+    - n_demo: demonstrations collected before training (dqfd, adqnp) [preset]
+    - pretrain_steps: pre-training updates (dqfd, adqnp) [preset]
+    - queries_from_learning_starts: no queries before learning_starts [False]
+    - exact_factorised_var: exact noisy-net variance [False]
+    - expert_timeout: seconds an expert process may take per answer [30]
+    - demo_file: demonstration file for pre-training [none]
+    - eval_period: environment steps between evaluations [preset]
+    - eval_episodes: test episodes per evaluation [20]
+    - checkpoint_every: save weights every this many steps in the run dir [0: off]
+    - snapshot_every: unused from Python (the run stays alive between learn calls)
+    - max_episode_steps: wraps env and eval_env in a TimeLimit of this many steps [none]
+    - policy_kwargs: SB3's dict(net_arch=[...]) (only net_arch); tensorboard_log: a folder for numbered run
+      directories; verbose: 1 prints a line every log_interval episodes [0]; eval_env, demos, defaults: above
+    """
+
+    def __init__(
+        self,
+        method: Method,
+        env: Env,
+        net: Optional[Net] = None,
+        expert: Optional[ExpertLike] = None,
+        *,
+        defaults: str = "arld",
+        seed: Optional[int] = 0,
+        eval_env: Union[Env, Sequence[Env], None] = None,
+        demos: Any = None,
+        policy_kwargs: Optional[Dict[str, Any]] = None,
+        tensorboard_log: Optional[Union[str, os.PathLike]] = None,  # type: ignore[type-arg]
+        verbose: int = 0,
+        learning_rate: Optional[float] = None,
+        buffer_size: Optional[int] = None,
+        batch_size: Optional[int] = None,
+        gamma: Optional[float] = None,
+        exploration_fraction: Optional[float] = None,
+        exploration_initial_eps: Optional[float] = None,
+        exploration_final_eps: Optional[float] = None,
+        target_update_interval: Optional[int] = None,
+        learning_starts: Optional[int] = None,
+        train_freq: Optional[int] = None,
+        max_grad_norm: Optional[float] = None,
+        train_steps: Optional[int] = None,
+        budget: Optional[int] = None,
+        budget_unit: Optional[str] = None,
+        segment_len: Optional[int] = None,
+        t_query: Optional[float] = None,
+        query_rule: Optional[str] = None,
+        n_r: Optional[int] = None,
+        heads: Optional[int] = None,
+        hidden: Optional[Sequence[int]] = None,
+        loss: Optional[str] = None,
+        double_q: Optional[bool] = None,
+        timeout_as_terminal: Optional[bool] = None,
+        eps_greedy_on_top: Optional[bool] = None,
+        prioritized: Optional[bool] = None,
+        alpha: Optional[float] = None,
+        beta0: Optional[float] = None,
+        eps_agent: Optional[float] = None,
+        eps_demo: Optional[float] = None,
+        margin: Optional[float] = None,
+        lambda_margin: Optional[float] = None,
+        lambda_n: Optional[float] = None,
+        n_step: Optional[int] = None,
+        l2: Optional[float] = None,
+        n_demo: Optional[int] = None,
+        pretrain_steps: Optional[int] = None,
+        queries_from_learning_starts: Optional[bool] = None,
+        exact_factorised_var: Optional[bool] = None,
+        expert_timeout: Optional[float] = None,
+        demo_file: Optional[str] = None,
+        eval_period: Optional[int] = None,
+        eval_episodes: Optional[int] = None,
+        checkpoint_every: Optional[int] = None,
+        snapshot_every: Optional[int] = None,
+        max_episode_steps: Optional[int] = None,
+        **other: Any,
+    ) -> None:
+        given = {k: v for k, v in locals().items() if k not in ("self", "method", "env", "net", "expert", "seed",
+                                                                  "eval_env", "demos", "policy_kwargs",
+                                                                  "defaults", "tensorboard_log", "verbose", "other",
+                                                                  "max_episode_steps", "__class__")}
+        hyper: Dict[str, Any] = {}
+        valid = set(config_keys())
+        for key, value in list(given.items()) + list(other.items()):
+            name = SB3_NAMES.get(key, key)
+            if name not in valid:
+                close = difflib.get_close_matches(key, sorted(valid | set(SB3_NAMES)), n=1)
+                hint = f"; did you mean {close[0]!r}?" if close else ""
+                if key == "net_arch":
+                    hint = "; pass it as policy_kwargs=dict(net_arch=[...]), or as hidden=[...]"
+                raise TypeError(
+                    f"Agent() got an unexpected keyword argument {key!r}{hint} (valid hyperparameters: "
+                    + ", ".join(sorted(valid | set(SB3_NAMES))) + ")"
+                )
+            if value is None:
+                continue
+            if name in hyper:
+                raise TypeError(f"{key!r} and another name for {name!r} were both given")
+            hyper[name] = value
+        if policy_kwargs:
+            unknown = set(policy_kwargs) - {"net_arch"}
+            if unknown:
+                raise TypeError(f"policy_kwargs: only net_arch is understood, not {', '.join(sorted(unknown))}")
+            if "net_arch" in policy_kwargs:
+                arch = policy_kwargs["net_arch"]
+                if isinstance(arch, (dict, str, bytes)) or not hasattr(arch, "__iter__"):
+                    raise TypeError(
+                        f"policy_kwargs: net_arch is the list of the two hidden layers' widths, e.g. [256, 256]; "
+                        f"got {arch!r}"
+                    )
+                arch = list(arch)
+                if "hidden" in hyper and list(hyper["hidden"]) != arch:
+                    raise TypeError("policy_kwargs net_arch and hidden= give different widths: give one of them")
+                hyper["hidden"] = arch
+        if method not in METHODS:
+            raise ValueError(f"unknown method {method!r}; known: {', '.join(METHODS)}")
+        if defaults not in DEFAULTS:
+            raise ValueError(f"unknown defaults {defaults!r}; known: {', '.join(DEFAULTS)}")
+        self.defaults = defaults
+        self._horizon_from_learn = defaults == "sb3" and "train_steps" not in hyper
+        if defaults == "sb3":
+            hyper = {**{k: v for k, v in SB3_DEFAULTS.items() if k not in hyper}, **hyper}
+            if net is None:
+                net = "plain"
+        if net is None:
+            net = "bootstrap"
+        if net not in NETS:
+            raise ValueError(f"unknown net {net!r}; known: {', '.join(NETS)}")
+        if seed is None:
+            # As SB3: a seed drawn from the operating system's entropy, recorded in `seed` and config.toml.
+            import secrets
+
+            seed = secrets.randbits(62)
+        self.method, self.net, self.seed = method, net, int(seed)
+        self.verbose = int(verbose)
+        self.tensorboard_log = None if tensorboard_log is None else str(tensorboard_log)
+        self.policy_kwargs = dict(policy_kwargs or {})
+        self.logger = _Logger()
+        self._hyper = hyper
+        self._max_episode_steps = max_episode_steps
+        self._vec_env: Any = None
+        self._set_env(env)
+        self.eval_env = None if eval_env is None else _as_env(eval_env, max_episode_steps)
+        self._check_eval_env()
+        if expert is not None:
+            self._expert, name = _expert_callable(expert)
+            self._expert_name = name
+            if self._expert is not None and not isinstance(expert, WebExpert):
+                # Asked with the observation as the environment gives it (arld's loop holds flat vectors).
+                self._expert = _shown_raw(self._expert, self._codec)
+            if self._expert is None:
+                self._hyper["expert"] = name
+            elif method == "dqn":
+                raise ValueError("dqn never asks an expert; drop expert=")
+        else:
+            self._expert, self._expert_name = None, ""
+            if method != "dqn" and not (method == "dqfd" and demos is not None):
+                raise ValueError(f"{method} needs an expert: pass expert= (or demos= for dqfd)")
+        if demos is not None and method not in ("dqfd", "adqnp"):
+            raise ValueError(f"{method} does not pre-train on demonstrations; demos= is for dqfd and adqnp")
+        self._demos = None if demos is None else _demos(demos)
+        if demos is not None and method == "dqfd":
+            # DQfD never asks during training: with demos= no expert runs, and the records say where the
+            # demonstrations came from instead of naming one.
+            self._hyper["demo_file"] = "python: demos="
+            self._expert, self._expert_name = None, ""
+        try:
+            self.config = self._resolve(self._hyper)  # fails early on a bad value
+        except ValueError as e:
+            if "net_arch" in self.policy_kwargs and "hidden" in str(e):
+                raise ValueError(f"policy_kwargs net_arch (arld's hidden): {e}") from None
+            message = str(e)
+            for key in list(given) + list(other):  # the names the caller used, where arld's differ
+                if key in SB3_NAMES and given.get(key, other.get(key)) is not None:
+                    message = message.replace(f"`{SB3_NAMES[key]}`", f"`{key}` (arld's `{SB3_NAMES[key]}`)")
+            if message != str(e):
+                raise ValueError(message) from None
+            raise
+        self._policy: Any = None
+        self._run: Any = None
+        self._resume: Optional[str] = None
+        self._run_dir: Optional[str] = None
+        self._live_step = 0
+        self._evaluations: List[Dict[str, Any]] = []
+        # A loaded run's evaluations before its snapshot (the continued run reports those after it).
+        self._prior_evaluations: List[Dict[str, Any]] = []
+        self._queries: List[Dict[str, Any]] = []
+        self.summary: Optional[Dict[str, Any]] = None
+
+    # --- environments
+
+    def _set_env(self, env: Any) -> None:
+        env = _as_env(env, getattr(self, "_max_episode_steps", None))
+        facts = _env_facts(env)
+        self._builtin = isinstance(env, _BuiltinEnv)
+        self.env_id = facts[0] if self._builtin else _register(facts)
+        self._base_id = facts[0]
+        self._facts = facts
+        self._codec = _codec_of(env)
+        self.env = env
+        self._vec_env = None
+
+    def _check_eval_env(self) -> None:
+        given = self.eval_env if isinstance(self.eval_env, (list, tuple)) else [] if self.eval_env is None else [
+            self.eval_env]
+        if any(_env_facts(e)[1:3] != self._facts[1:3] for e in given):
+            raise ValueError("eval_env must have the same spaces as env")
+
+    def get_env(self) -> Any:
+        """The training environment as SB3 gives it: a DummyVecEnv of one environment (the one arld steps; a
+        callback that steps it changes the run), or the environment itself when SB3 is not installed."""
+        if self._vec_env is None:
+            try:
+                from stable_baselines3.common.vec_env import DummyVecEnv
+            except ImportError:
+                return self.env
+            env = self.env
+            self._vec_env = DummyVecEnv([lambda: env])
+        return self._vec_env
+
+    def get_vec_normalize_env(self) -> Any:
+        """None: arld normalises no observations (SB3's VecNormalize is not used)."""
+        return None
+
+    @property
+    def observation_space(self) -> Any:
+        """The training environment's observation space (as it gives observations; arld flattens them)."""
+        return self.env.observation_space
+
+    @property
+    def action_space(self) -> Any:
+        """The training environment's action space."""
+        return self.env.action_space
+
+    @property
+    def exploration_rate(self) -> float:
+        """ε of the run's exploration at its current step (the preset's start before any run)."""
+        if self._run is not None:
+            return float(self._run.exploration_rate)
+        return float(self.config.get("eps_start", 0.0))
+
+    @property
+    def n_envs(self) -> int:
+        """1: arld trains on one environment."""
+        return 1
+
+    def set_env(self, env: Any, force_reset: bool = True) -> None:
+        """Trains on `env` from the next `learn` that starts a run (same spaces; a live run keeps its own)."""
+        env = _as_env(env, self._max_episode_steps)
+        if _env_facts(env)[1:3] != self._facts[1:3]:
+            raise ValueError("the new environment must have the same observation size and actions")
+        self._set_env(env)
+        self.config = self._resolve(self._hyper)
+
+    # --- configuration
+
+    def _resolve(self, hyper: Dict[str, Any]) -> Dict[str, Any]:
+        # A re-limited or wrapped built-in task keeps the paper's values for that task (resolved as for it).
+        preset_of = self._base_id if (self.env_id != self._base_id
+                                      and self._base_id in _arld.builtin_env_ids()) else None
+        pairs = [(k, json.dumps(v, default=_json_default)) for k, v in hyper.items()]
+        cfg = dict(json.loads(_arld.resolve_config(self.env_id, self.method, self.net, self.seed, pairs,
+                                                   preset_of)))
+        if self._expert_name and getattr(self, "_expert", None) is not None:
+            cfg["expert"] = f"python:{self._expert_name}"  # what was asked, for config.toml
+        return cfg
+
+    # --- training
+
+    @property
+    def num_timesteps(self) -> int:
+        """Environment steps of the current run so far."""
+        return int(self._live_step)
+
+    def _test_envs(self, episodes: int) -> List[Any]:
+        """One environment per test episode (the test episodes run in lockstep): `eval_env` when it is a list of
+        that length; otherwise `eval_env` (or a copy of `env`) and copies of it."""
+        if isinstance(self.eval_env, (list, tuple)):
+            if len(self.eval_env) != episodes:
+                raise ValueError(
+                    f"eval_env is a list of {len(self.eval_env)} environments, but there are {episodes} test "
+                    "episodes (eval_episodes): give one environment per episode, or one to copy"
+                )
+            return list(self.eval_env)
+        first = self.eval_env if self.eval_env is not None else _copy_env(self.env)
+        return [first] + [_copy_env(first) for _ in range(episodes - 1)]
+
+    def _log_dir(self, tb_log_name: Optional[str], reset: bool) -> Optional[str]:
+        if self.tensorboard_log is None:
+            return None
+        name = tb_log_name or self.method.upper()
+        root = Path(self.tensorboard_log)
+        root.mkdir(parents=True, exist_ok=True)
+        numbers = [int(p.name[len(name) + 1:]) for p in root.glob(f"{name}_*") if p.name[len(name) + 1:].isdigit()]
+        n = max(numbers, default=0) + 1
+        return str(root / f"{name}_{n}")
+
+    def _start_run(self, log_dir: Optional[str], resume: Optional[str]) -> Any:
+        if self._builtin:
+            # Trained entirely in Rust; the test episodes too, unless eval_env is another environment.
+            env = demo_env = None
+            given = self.eval_env if isinstance(self.eval_env, (list, tuple)) else [self.eval_env]
+            if all(e is None or (isinstance(e, _BuiltinEnv) and e.id == self.env_id) for e in given):
+                test_envs = None
+            else:
+                test_envs = [EnvBridge(e, _codec_of(e)) for e in self._test_envs(self.config["eval_episodes"])]
+        else:
+            env = EnvBridge(self.env, self._codec)
+            test_envs = [EnvBridge(e, _codec_of(e)) for e in self._test_envs(self.config["eval_episodes"])]
+            demo_env = EnvBridge(self.env, self._codec)
+        # The run writes its directory until it ends, maybe after the working directory changed: fix it now.
+        log_dir = None if log_dir is None else os.path.abspath(log_dir)
+        self._run_dir = log_dir
+        return _arld.start_run(
+            json.dumps(self.config), env=env, test_envs=test_envs, expert=self._expert,
+            expert_name=self._expert_name, demos=self._demos, log_dir=log_dir, resume=resume, demo_env=demo_env,
+        )
+
+    def learn(
+        self,
+        total_timesteps: int,
+        callback: Any = None,
+        log_interval: Optional[int] = 4,
+        tb_log_name: Optional[str] = None,
+        reset_num_timesteps: bool = True,
+        progress_bar: bool = False,
+        log_dir: Optional[Union[str, os.PathLike]] = None,  # type: ignore[type-arg]
+    ) -> "Agent":
+        """Trains `total_timesteps` environment steps with arld's loop and returns self.
+
+        reset_num_timesteps=True starts a new run (a fresh network, replay and budget); False continues the
+        current one (network, optimiser, replay, schedules, budget, generators), so learn(a) then
+        learn(b, reset_num_timesteps=False) equals learn(a + b) byte for byte. An agent from `Agent.load` of a
+        full save continues its run on the first learn either way. callback: SB3-style callback objects
+        (BaseCallback subclasses, CallbackList, EvalCallback, CheckpointCallback, StopTrainingOn...) or a callable
+        (locals, globals) -> bool, called after every step with the live model (predict, get_parameters, save,
+        evaluations and queries are those of that step; a save is written when the callback returns); returning
+        False stops training there (the run can be continued). One learn is one rollout: on_rollout_start when it
+        begins, on_rollout_end when it returns. An exception from a callback or a Python expert pauses the run
+        whole (num_timesteps, weights, replay, queries and budget kept; the expert's open question is asked
+        again): learn raises it with a note, and learn(..., reset_num_timesteps=False) goes on as if it had not
+        happened. An exception from the environment ends the run. log_dir (or tensorboard_log= of the
+        agent, in numbered folders <tb_log_name>_<n>) writes the run directory: config.toml, CSVs, TensorBoard
+        events, weights, summary.json. log_interval: with verbose >= 1, a line on standard output every
+        log_interval finished episodes (as SB3's DQN); None or a verbose of 0 prints none (the run directory and
+        TensorBoard get every value either way).
+        """
+        if total_timesteps < 1:
+            raise ValueError(f"total_timesteps must be at least 1, got {total_timesteps}")
+        if log_interval is not None and (not isinstance(log_interval, (int, np.integer)) or log_interval < 1):
+            raise ValueError(f"log_interval must be a whole number of episodes, 1 or more (or None); got "
+                             f"{log_interval!r}")
+        start = 0
+        if self._run is not None and not reset_num_timesteps:
+            start = self._run.num_timesteps
+        elif self._run is None and self._resume is not None:
+            start = self._live_step
+            self._run = self._start_run(None if log_dir is None else str(log_dir), self._resume)
+            self._resume = None
+        else:
+            if self._run is not None:
+                self._run.close()
+            self._prior_evaluations = []
+            directory = str(log_dir) if log_dir is not None else self._log_dir(tb_log_name, True)
+            if self._horizon_from_learn:
+                # As SB3: the ε schedule runs over this learn's total_timesteps.
+                self.config = self._resolve({**self._hyper, "train_steps": int(total_timesteps)})
+            self._run = self._start_run(directory, None)
+            self._live_step = 0
+        until = start + int(total_timesteps)
+        label = f"{self.method.upper()}-{self.net}"
+        episode_log = _EpisodeLog(int(log_interval), label) if self.verbose >= 1 and log_interval else None
+        callbacks = None
+        if callback is not None or episode_log is not None:
+            callbacks = _Callbacks(callback, self, int(total_timesteps), episode_log)
+            # Episodes finished before this learn (unknown for a loaded run until its first step).
+            callbacks.episode = 0 if start == 0 else None if self.summary is None else int(self.summary["episodes"])
+        bar = _ProgressBar(start, int(total_timesteps), label) if progress_bar else None
+        if callbacks is not None:
+            callbacks.start()
+        try:
+            with _stop_on_sigterm():
+                self._live_step = self._run.advance(until, callbacks, bar)
+        except BaseException as e:
+            # The run paused whole (an exception from a callback or an expert, Ctrl-C) or ended (the
+            # environment's exception): it stands where its last step left it.
+            self._live_step = self._run.num_timesteps
+            if not isinstance(e, KeyboardInterrupt):
+                raise
+            # A stop (Ctrl-C, SIGTERM), also while a person's question is open: the run paused whole (a question
+            # open is asked again by the next learn). With a run directory, its snapshot goes there too.
+            if self._run_dir is not None:
+                path = os.path.join(self._run_dir, "snapshot.safetensors")
+                self.save(path)
+                print(f"arld: stopped; the run's snapshot is in {path} (learn(..., reset_num_timesteps=False) goes "
+                      f"on in this process, Agent.load({path!r}) in another)", file=sys.stderr, flush=True)
+            raise
+        finally:
+            if self._run is not None:
+                try:
+                    self._refresh()
+                except RuntimeError:
+                    pass
+            if bar is not None:
+                bar.close(self._live_step)
+            if callbacks is not None:
+                callbacks.end()
+        if self.verbose >= 1 and self.summary is not None:
+            score = self.summary.get("final_score")
+            shown = "none yet" if score is None else f"{score:.1f}"
+            print(f"arld {self.method}-{self.net} on {self.env_id}: {self._live_step} steps, last evaluation "
+                  f"{shown}, budget used {self.summary['queries_used']}")
+        return self
+
+    def _refresh(self) -> None:
+        run = self._run
+        self._policy = run.policy()
+        self._evaluations = self._with_prior(run.evaluations())
+        self._queries = list(run.queries())
+        # Its `expert` is the one that ran (python:<qualified name> for a Python expert), as in summary.json.
+        self.summary = json.loads(run.summary())
+
+    # --- acting
+
+    def _in_callback(self) -> bool:
+        """Whether this run's callback is running (on this thread): the live run is lent to it."""
+        return self._run is not None and bool(self._run.in_callback)
+
+    def _with_prior(self, evaluations: Any) -> List[Dict[str, Any]]:
+        prior = self._prior_evaluations
+        last = prior[-1]["step"] if prior else -1
+        return prior + [e for e in evaluations if e["step"] > last]
+
+    @property
+    def evaluations(self) -> List[Dict[str, Any]]:
+        """The run's evaluations (step, mean, std, min, max of the test returns), live inside a callback."""
+        if self._in_callback():
+            return self._with_prior(self._run.evaluations())
+        return self._evaluations
+
+    @evaluations.setter
+    def evaluations(self, value: List[Dict[str, Any]]) -> None:
+        self._evaluations = value
+
+    @property
+    def queries(self) -> List[Dict[str, Any]]:
+        """The run's queries (step, episode, uncertainty, threshold, expert and agent action), live inside a
+        callback."""
+        if self._in_callback():
+            return list(self._run.queries())
+        return self._queries
+
+    @queries.setter
+    def queries(self, value: List[Dict[str, Any]]) -> None:
+        self._queries = value
+
+    def _require_policy(self) -> Any:
+        if self._in_callback():
+            return self._run.live_policy()
+        if self._policy is None:
+            raise RuntimeError("the agent has not been trained or loaded yet: call learn() or Agent.load()")
+        return self._policy
+
+    def predict(
+        self,
+        observation: Any,
+        state: Any = None,
+        episode_start: Any = None,
+        deterministic: bool = True,
+    ) -> Tuple[np.ndarray, None]:
+        """(action, None) for one observation, or (array of actions, None) for a batch of them (rows).
+        deterministic=True: the test policy (greedy, bootstrap heads voting, mean noisy weights);
+        False: the exploration policy of training at the run's current step (ε-greedy with the current ε, the
+        episode's bootstrap head, sampled noise; `episode_start` begins a new episode)."""
+        rows, batch = self._codec.rows(observation)
+        live = self._run.live_actions(rows) if deterministic and self._in_callback() else None
+        if live is not None:
+            actions = live
+        else:
+            policy = self._require_policy()
+            if deterministic:
+                actions = [policy.act(r) for r in rows]
+            else:
+                starts = np.zeros(len(rows), dtype=bool) if episode_start is None else np.broadcast_to(
+                    np.asarray(episode_start, dtype=bool).reshape(-1), (len(rows),))
+                actions = [policy.explore(r, bool(s)) for r, s in zip(rows, starts)]
+        out = np.asarray(actions, dtype=np.int64)
+        return (out if batch else out.reshape(())), None
+
+    # --- parameters, saving, loading
+
+    def get_parameters(self) -> Dict[str, Dict[str, np.ndarray]]:
+        """The network's weights: {"policy": {name: array}} (PyTorch's layout and names, as in saved files)."""
+        policy = self._require_policy()
+        with tempfile.TemporaryDirectory() as tmp:
+            path = os.path.join(tmp, "w.safetensors")
+            policy.save(path, {})
+            return {"policy": _read_safetensors(path)}
+
+    def set_parameters(self, load_path_or_dict: Any, exact_match: bool = True) -> None:
+        """Sets the weights `predict` (and a weights-only `save`) use, from `get_parameters()`'s dict or a weights
+        file. A live run keeps training its own network: this changes what the agent acts with, not the run."""
+        if isinstance(load_path_or_dict, (str, os.PathLike)):
+            policy, _meta = _arld.Policy.load(str(load_path_or_dict))
+        else:
+            params = load_path_or_dict.get("policy", load_path_or_dict)
+            with tempfile.TemporaryDirectory() as tmp:
+                path = os.path.join(tmp, "w.safetensors")
+                # The network's description (kind, heads, widths) from the current weights' file.
+                self._require_policy().save(path, {})
+                metadata = _read_safetensors_metadata(path)
+                _write_safetensors(path, params, metadata)
+                policy, _meta = _arld.Policy.load(path)
+        if self._policy is not None and (policy.obs_dim, policy.n_actions) != (
+                self._policy.obs_dim, self._policy.n_actions):
+            raise ValueError("the parameters are for another observation size or number of actions")
+        self._policy = policy
+
+    def save(self, path: Union[str, os.PathLike]) -> None:  # type: ignore[type-arg]
+        """Writes the run's full state (network, optimiser, replay, query state, generators: arld's run snapshot
+        format) to `path` (".zip" added when it has no suffix, as SB3 does), so that `Agent.load(path,
+        env).learn(n)` continues the run; an agent loaded from plain weights writes its weights. Inside a
+        callback the file is written when the callback returns, with the run as it stands at that step."""
+        path = str(path)
+        if not Path(path).suffix:
+            path += ".zip"
+        if self._run is None:
+            if self._resume is not None:
+                shutil.copyfile(self._resume, path)
+                return
+            meta = {"env": self.env_id, "method": self.method, "net": self.net, "seed": str(self.seed)}
+            self._require_policy().save(str(path), meta)
+            return
+        self._run.save(os.path.abspath(path))
+
+    @classmethod
+    def load(cls, path: Union[str, os.PathLike], env: Any = None, expert: Any = None,  # type: ignore[type-arg]
+             eval_env: Any = None, **kwargs: Any) -> "Agent":
+        """An agent from `save` (the run's full state: `learn` continues it; pass the environment, and the expert
+        when it was a Python one) or from plain weights (`arld train`'s weights.safetensors: it acts only)."""
+        path = str(path)
+        if not os.path.exists(path) and os.path.exists(path + ".zip"):
+            path += ".zip"
+        if env is not None:
+            env = _as_env(env)
+            facts = _env_facts(env)
+            env_id = facts[0] if isinstance(env, _BuiltinEnv) else _register(facts)
+        config = _arld.snapshot_config(path)
+        if config is None:
+            policy, meta = _arld.Policy.load(path)
+            if env is not None:
+                _id, obs_dim, n_actions, _limit, _thr = _env_facts(env)
+                if (obs_dim, n_actions) != (policy.obs_dim, policy.n_actions):
+                    raise ValueError(
+                        f"{path} has {policy.obs_dim} inputs and {policy.n_actions} actions, the environment "
+                        f"{obs_dim} and {n_actions}"
+                    )
+            agent = cls.__new__(cls)
+            agent.method = cast(Method, meta.get("method", "dqn"))
+            agent.net = cast(Net, policy.net)
+            agent.seed = int(meta.get("seed", 0))
+            agent.env = env
+            agent._codec = _codec_of(env) if env is not None else ObsCodec(
+                gym_spaces().Box(-np.inf, np.inf, (policy.obs_dim,), np.float32), path)
+            agent._max_episode_steps, agent._vec_env = None, None
+            agent.env_id = meta.get("env", "")
+            agent.eval_env = eval_env
+            agent._policy, agent._run, agent._resume, agent._live_step = policy, None, None, 0
+            agent._hyper, agent.config = {}, {}
+            agent.evaluations, agent.queries, agent.summary = [], [], None
+            agent._prior_evaluations = []
+            agent.verbose, agent.tensorboard_log, agent.policy_kwargs = 0, None, {}
+            agent.logger = _Logger()
+            return agent
+        cfg = json.loads(config)
+        if env is None:
+            env = make(cfg["env"]) if cfg["env"] in _arld.builtin_env_ids() else None
+            if env is None:
+                raise ValueError(f"{path} trained on {cfg['env']}: pass that environment as env=")
+            env_id = cfg["env"]
+        if env_id != cfg["env"]:
+            raise ValueError(f"{path} trained on {cfg['env']}, not {env_id}")
+        spec = str(cfg.get("expert", ""))
+        if expert is None and cfg["method"] != "dqn":
+            if spec.startswith("python:"):
+                raise ValueError(f"{path} was trained with the Python expert {spec[7:]}: pass it as expert=")
+            expert = spec
+        agent = cls(cfg["method"], env, cfg["net"], expert, seed=cfg["seed"], eval_env=eval_env, **kwargs)
+        policy, _cfg, step, curve = _arld.snapshot_policy(path)
+        agent.config = cfg
+        # The evaluations travel in the snapshot; the query events do not (queries.csv of its run directory).
+        agent._evaluations = list(json.loads(curve))
+        agent._prior_evaluations = list(agent._evaluations)
+        agent.policy_kwargs = {"net_arch": list(cfg["hidden"])}
+        agent._policy, agent._resume, agent._live_step = policy, path, step
+        return agent
+
+    def __repr__(self) -> str:
+        return f"arld.Agent({self.method!r}, {self.env_id!r}, net={self.net!r}, seed={self.seed})"
+
+
+def _read_safetensors(path: str) -> Dict[str, np.ndarray]:
+    data = Path(path).read_bytes()
+    n = int.from_bytes(data[:8], "little")
+    header = json.loads(data[8:8 + n])
+    out: Dict[str, np.ndarray] = {}
+    for name, info in header.items():
+        if name == "__metadata__":
+            continue
+        start, end = info["data_offsets"]
+        out[name] = np.frombuffer(data[8 + n + start:8 + n + end], dtype="<f4").reshape(info["shape"]).copy()
+    return out
+
+
+def _read_safetensors_metadata(path: str) -> Dict[str, str]:
+    data = Path(path).read_bytes()
+    n = int.from_bytes(data[:8], "little")
+    return dict(json.loads(data[8:8 + n]).get("__metadata__", {}))
+
+
+def _write_safetensors(path: str, params: Dict[str, Any], metadata: Optional[Dict[str, str]] = None) -> None:
+    header: Dict[str, Any] = {} if not metadata else {"__metadata__": metadata}
+    blobs = []
+    offset = 0
+    for name in sorted(params):
+        arr = np.ascontiguousarray(np.asarray(params[name], dtype="<f4"))
+        raw = arr.tobytes()
+        header[name] = {"dtype": "F32", "shape": list(arr.shape), "data_offsets": [offset, offset + len(raw)]}
+        blobs.append(raw)
+        offset += len(raw)
+    text = json.dumps(header).encode()
+    text += b" " * (-len(text) % 8)
+    Path(path).write_bytes(len(text).to_bytes(8, "little") + text + b"".join(blobs))
