@@ -362,6 +362,38 @@ mod tests {
     }
 
     #[test]
+    fn lines_and_files_are_read_with_a_bound_and_own_files_never_through_a_link() {
+        let mut input = std::io::Cursor::new(b"ab\r\ncde\nxyz".to_vec());
+        let mut line = Vec::new();
+        let mut lines = Vec::new();
+        while read_line_bounded(&mut input, &mut line, 3).unwrap() {
+            lines.push(String::from_utf8(line.clone()).unwrap());
+        }
+        assert_eq!(lines, ["ab", "cde", "xyz"]);
+        let mut long = std::io::Cursor::new(b"abcd\n".to_vec());
+        let err = read_line_bounded(&mut long, &mut line, 3).unwrap_err();
+        assert!(err.to_string().contains("longer than 3 bytes"), "{err}");
+        let dir = tempfile::tempdir().unwrap();
+        let file = dir.path().join("f.txt");
+        std::fs::write(&file, b"12345").unwrap();
+        assert_eq!(read_bounded(&file, 5).unwrap(), b"12345");
+        assert!(read_bounded(&file, 4).is_err());
+        let err = read_bounded(Path::new("/dev/zero"), 1 << 20).unwrap_err();
+        assert!(err.to_string().contains("a device"), "{err}");
+        let link = dir.path().join("link.txt");
+        std::os::unix::fs::symlink(&file, &link).unwrap();
+        assert!(own_file_exists(&file).unwrap());
+        assert!(!own_file_exists(&dir.path().join("none")).unwrap());
+        for err in [
+            own_file_exists(&link).unwrap_err(),
+            open_own_file(&link, true).unwrap_err(),
+        ] {
+            assert!(err.to_string().contains("symbolic link"), "{err}");
+        }
+        assert_eq!(std::fs::read(&file).unwrap(), b"12345");
+    }
+
+    #[test]
     fn a_target_that_is_not_a_regular_file_is_refused_and_left_alone() {
         let dir = tempfile::tempdir().unwrap();
         let real = dir.path().join("real.txt");

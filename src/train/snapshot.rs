@@ -593,6 +593,31 @@ mod tests {
             err.contains("the C library's elementary functions"),
             "{err}"
         );
+        // Format 1 (no checksum) is still read; in format 2 one changed byte anywhere is refused as damage.
+        let mut format_1 = metadata(Some(crate::math::NUMERICS), &config(0).to_toml());
+        format_1[0].1 = "1".to_string();
+        write_with(&format_1);
+        let written = std::fs::read(&path).unwrap();
+        let n = u64::from_le_bytes(written[..8].try_into().unwrap()) as usize;
+        let mut header: serde_json::Value = serde_json::from_slice(&written[8..8 + n]).unwrap();
+        header["__metadata__"]
+            .as_object_mut()
+            .unwrap()
+            .remove(CHECKSUM_KEY);
+        let mut text = serde_json::to_vec(&header).unwrap();
+        text.resize(text.len().next_multiple_of(8), b' ');
+        let mut old = (text.len() as u64).to_le_bytes().to_vec();
+        old.extend(&text);
+        old.extend(&written[8 + n..]);
+        std::fs::write(&path, &old).unwrap();
+        assert_eq!(ck.load().unwrap().unwrap(), state);
+        write_with(&metadata(Some(crate::math::NUMERICS), &config(0).to_toml()));
+        let mut changed = std::fs::read(&path).unwrap();
+        let last = changed.len() - 1;
+        changed[last] ^= 1;
+        std::fs::write(&path, &changed).unwrap();
+        let err = format!("{:#}", ck.load().unwrap_err());
+        assert!(err.contains("damaged") && err.contains("CRC-32C"), "{err}");
         std::fs::write(ck.path(), b"not a snapshot").unwrap();
         assert!(format!("{:#}", ck.load().unwrap_err()).contains("not a readable safetensors"));
         ck.remove().unwrap();
