@@ -174,6 +174,11 @@ pub fn run(args: TrainArgs) -> anyhow::Result<ExitCode> {
         .or_else(|| args.out.clone())
         .unwrap_or_else(|| PathBuf::from("runs").join(cfg.run_name()));
     // One process per run directory: the lock is taken before anything in it is removed or written.
+    anyhow::ensure!(
+        !dir.exists() || dir.is_dir(),
+        "the run directory {} exists and is not a directory",
+        dir.display()
+    );
     std::fs::create_dir_all(&dir)
         .map_err(|e| anyhow::anyhow!("cannot create the run directory {}: {e}", dir.display()))?;
     let _lock =

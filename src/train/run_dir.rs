@@ -203,7 +203,7 @@ pub fn prepare_new_run(dir: &Path, overwrite: bool) -> Result<()> {
             .with_context(|| format!("cannot inspect {}", path.display()))?
             .file_type();
         if !is_run_entry(name) {
-            refuse(&path, "is no file a run writes")?;
+            refuse(&path, "is something no run writes")?;
         } else if name == CHECKPOINTS_DIR && kind.is_dir() {
             let mut inside = Vec::new();
             for entry in std::fs::read_dir(&path)
@@ -212,7 +212,7 @@ pub fn prepare_new_run(dir: &Path, overwrite: bool) -> Result<()> {
                 let entry = entry.with_context(|| format!("cannot read {}", path.display()))?;
                 let file = entry.path();
                 if !is_checkpoint_entry(&entry.file_name().to_string_lossy()) {
-                    refuse(&file, "is no checkpoint a run writes")?;
+                    refuse(&file, "is no checkpoint, something no run writes")?;
                 } else if !entry.file_type()?.is_file() {
                     refuse(
                         &file,
