@@ -336,7 +336,17 @@ impl Persist for Agent {
         self.target.load_state(&format!("{prefix}.target"), state)?;
         self.adam.load_state(&format!("{prefix}.adam"), state)?;
         self.rng = state.text(&format!("{prefix}.rng"))?;
-        self.active_head = state.value(&format!("{prefix}.active_head"))?;
+        let active_head: usize = state.value(&format!("{prefix}.active_head"))?;
+        if active_head >= self.online.heads() {
+            return Err(StateError::Value {
+                name: format!("{prefix}.active_head"),
+                msg: format!(
+                    "head {active_head}, but the network has {} heads",
+                    self.online.heads()
+                ),
+            });
+        }
+        self.active_head = active_head;
         for (name, noise) in [
             ("act", &mut self.noise_act),
             ("online", &mut self.noise_online),
