@@ -18,6 +18,7 @@
 //! - [`files`]: the one atomic file write every saved file goes through.
 //! - [`state`]: a component's state as named raw arrays and small values (what snapshots are made of).
 //! - [`math`]: the correctly rounded elementary functions every computation uses (one result on every CPU).
+//! - [`errors`]: an error and its causes on one line, as the command line and Python show it.
 //! - [`interrupt`]: SIGTERM/SIGINT as a stop request that the training loop polls.
 //! - [`tboard`]: a minimal TensorBoard event-file writer for scalar curves.
 //!
@@ -26,6 +27,7 @@
 pub mod agent;
 pub mod build_info;
 pub mod env;
+pub mod errors;
 pub mod experiment;
 pub mod expert;
 pub mod files;
