@@ -1,9 +1,8 @@
 //! Evaluation of a run: the test episodes of every evaluation, run in lockstep under the network's test policy.
 
 use super::EvalPoint;
-use crate::agent::test_policy_actions;
+use crate::agent::Learner;
 use crate::env::Env;
-use crate::nn::{QNet, Workspace};
 use anyhow::{Result, ensure};
 
 /// The test episodes of every evaluation (no exploration), run in lockstep: one environment per episode,
@@ -11,10 +10,11 @@ use anyhow::{Result, ensure};
 ///
 /// Environment `i` is seeded once with `seed + i` and then continues its own generator from one evaluation
 /// to the next. The batched forward computes each row exactly as a single-state forward would
-/// ([`crate::agent::test_policy_actions`]), so lockstep changes the cost, not the actions.
+/// ([`Learner::test_actions`]), so lockstep changes the cost, not the actions.
 pub struct Evaluator {
     envs: Vec<Box<dyn Env>>,
-    ws: Workspace,
+    /// The length of an observation.
+    obs_dim: usize,
     returns: Vec<f64>,
     /// Indices of the environments whose episode is still running, and their observations (row-major).
     running: Vec<usize>,
@@ -23,9 +23,9 @@ pub struct Evaluator {
 }
 
 impl Evaluator {
-    /// One test episode per environment of `envs`, environment `i` seeded `seed + i`, for networks shaped like
-    /// `net`.
-    pub fn new(mut envs: Vec<Box<dyn Env>>, seed: u64, net: &QNet) -> Result<Self> {
+    /// One test episode per environment of `envs`, environment `i` seeded `seed + i`, for observations of
+    /// `obs_dim` values.
+    pub fn new(mut envs: Vec<Box<dyn Env>>, seed: u64, obs_dim: usize) -> Result<Self> {
         ensure!(
             !envs.is_empty(),
             "evaluation needs at least one test environment"
@@ -36,10 +36,10 @@ impl Evaluator {
         let episodes = envs.len();
         Ok(Self {
             envs,
-            ws: Workspace::new(net, episodes),
+            obs_dim,
             returns: Vec::with_capacity(episodes),
             running: Vec::with_capacity(episodes),
-            obs: Vec::with_capacity(episodes * net.obs_dim()),
+            obs: Vec::with_capacity(episodes * obs_dim),
             actions: Vec::with_capacity(episodes),
         })
     }
@@ -67,10 +67,10 @@ impl Evaluator {
     }
 
     /// One episode per environment under `net`'s test policy; the returns' summary at training step `step`.
-    pub fn evaluate(&mut self, net: &QNet, step: usize) -> Result<EvalPoint> {
+    pub fn evaluate(&mut self, agent: &mut impl Learner, step: usize) -> Result<EvalPoint> {
         self.returns.clear();
         self.running.clear();
-        let d = net.obs_dim();
+        let d = self.obs_dim;
         self.obs.clear();
         self.obs.resize(self.envs.len() * d, 0.0);
         for (i, env) in self.envs.iter_mut().enumerate() {
@@ -80,7 +80,7 @@ impl Evaluator {
         }
         while !self.running.is_empty() {
             self.actions.resize(self.running.len(), 0);
-            test_policy_actions(net, &mut self.ws, &self.obs, &mut self.actions);
+            agent.test_actions(&self.obs, &mut self.actions);
             // Step every running environment; compact the finished ones out, keeping the order (row `kept` is
             // at or before row `row`, so the running environment's new observation moves up in place).
             let mut kept = 0;

@@ -19,7 +19,7 @@ pub use run_dir::{EvalPoint, QueryEvent, Summary, steps_to_solve};
 pub use seeds::{SeedPurpose, seed_for};
 pub use snapshot::Checkpointer;
 
-use crate::agent::Agent;
+use crate::agent::Learner;
 use crate::expert::demos::Demonstrations;
 use crate::replay::{Batch, Replay};
 use crate::state::StateDict;
@@ -58,7 +58,7 @@ pub fn record_failure(dir: &std::path::Path, err: &anyhow::Error, phase: &str, s
 /// from them alone (TD plus margin loss, prioritized among demonstrations), with the usual target copies.
 pub fn pretrain(
     cfg: &TrainConfig,
-    agent: &mut Agent,
+    agent: &mut impl Learner,
     replay: &mut Replay,
     demos: &Demonstrations,
     rng: &mut Pcg64,
@@ -68,7 +68,7 @@ pub fn pretrain(
     for update in 1..=cfg.pretrain_steps {
         pretrain_update(cfg, agent, replay, rng, batch, update)?;
     }
-    agent.sync_target();
+    agent.end_target_period();
     Ok(())
 }
 
@@ -100,7 +100,7 @@ pub(super) fn push_demos(
 /// Pre-training update number `update` (from 1): demonstrations only, prioritized among them.
 pub(super) fn pretrain_update(
     cfg: &TrainConfig,
-    agent: &mut Agent,
+    agent: &mut impl Learner,
     replay: &mut Replay,
     rng: &mut Pcg64,
     batch: &mut Batch,
@@ -111,7 +111,7 @@ pub(super) fn pretrain_update(
         format!("pre-training update {update}")
     })?;
     if update.is_multiple_of(cfg.target_period) {
-        agent.sync_target();
+        agent.end_target_period();
     }
     Ok(())
 }
@@ -135,12 +135,12 @@ pub struct Diverged {
 /// the update spoiled are never saved, since the run ends there.
 pub(super) fn update_checked(
     cfg: &TrainConfig,
-    agent: &mut Agent,
+    agent: &mut impl Learner,
     replay: &mut Replay,
     batch: &Batch,
     at: impl FnOnce() -> String,
 ) -> Result<crate::agent::UpdateStats> {
-    let (stats, priorities) = agent.update(batch);
+    let (stats, priorities) = agent.learn(batch);
     let checked = [
         ("TD loss", stats.td_loss),
         ("margin loss", stats.margin_loss),

@@ -11,7 +11,7 @@ use super::{
     Checkpointer, QueryEvent, RunLog, SeedPurpose, Summary, TrainConfig, epsilon_at,
     pretrain_update, push_demos, record_failure, run_dir, seed_for, steps_to_solve, update_checked,
 };
-use crate::agent::Agent;
+use crate::agent::{Agent, Learner};
 use crate::env::{self, Env};
 use crate::expert::demos::Demonstrations;
 use crate::expert::{Answer, EpisodeTrace, Expert, Progress, Query, RunEnd};
@@ -45,23 +45,46 @@ use std::time::Instant;
 ///   `cfg.train_steps` is then the horizon of the schedules (ε, β) and of the last evaluation, not a limit: past
 ///   it ε stays at `eps_end` and β at 1. Pausing and going on changes nothing in the run: it is the same loop,
 ///   so two stretches equal one of their total length.
-pub struct RunBuilder<'a> {
+pub struct RunBuilder<'a, A: Learner = Agent> {
     cfg: &'a TrainConfig,
+    /// Builds the agent for an environment of `obs_dim` inputs and `n_actions` actions, from the run's seed.
+    make_agent: fn(&TrainConfig, usize, usize) -> A,
     env: Option<Box<dyn Env>>,
     test_envs: Option<Vec<Box<dyn Env>>>,
     expert: Option<&'a mut dyn Expert>,
     demos: Option<&'a Demonstrations>,
     checkpointer: Option<&'a mut Checkpointer>,
     resume_from: Option<&'a StateDict<'a>>,
-    driver: Option<&'a mut dyn Driver>,
+    driver: Option<&'a mut dyn Driver<A>>,
 }
 
 impl<'a> RunBuilder<'a> {
     /// A run of `cfg` in the configuration's own environments, with no expert, demonstrations, snapshots or
     /// driver.
     pub fn new(cfg: &'a TrainConfig) -> Self {
+        RunBuilder::with_agent(cfg, dqn_agent)
+    }
+}
+
+/// The DQN-family agent of `cfg` ([`TrainConfig::agent_config`]), seeded from the run's seed.
+fn dqn_agent(cfg: &TrainConfig, obs_dim: usize, n_actions: usize) -> Agent {
+    Agent::new(
+        &cfg.agent_config(),
+        obs_dim,
+        n_actions,
+        seed_for(cfg.seed, SeedPurpose::Agent),
+    )
+}
+
+impl<'a, A: Learner> RunBuilder<'a, A> {
+    /// A run of `cfg` whose agent `make_agent` builds (any [`Learner`]), otherwise as [`RunBuilder::new`].
+    pub fn with_agent(
+        cfg: &'a TrainConfig,
+        make_agent: fn(&TrainConfig, usize, usize) -> A,
+    ) -> Self {
         Self {
             cfg,
+            make_agent,
             env: None,
             test_envs: None,
             expert: None,
@@ -109,7 +132,7 @@ impl<'a> RunBuilder<'a> {
     }
 
     /// Drives the run from outside: it ends when `driver` stops it.
-    pub fn driver(mut self, driver: &'a mut dyn Driver) -> Self {
+    pub fn driver(mut self, driver: &'a mut dyn Driver<A>) -> Self {
         self.driver = Some(driver);
         self
     }
@@ -117,7 +140,7 @@ impl<'a> RunBuilder<'a> {
     /// Trains, logging into `log`, and returns the run's summary and the trained agent. When the run ends with
     /// an error (other than a stop request) and writes a run directory, `failed.json` records the error, the
     /// phase and the step ([`run_dir::Failure`]).
-    pub fn train(mut self, log: &'a mut RunLog) -> Result<(Summary, Agent)> {
+    pub fn train(mut self, log: &'a mut RunLog) -> Result<(Summary, A)> {
         match self.prepare() {
             Ok((env, parts)) => Run::new(self, env, parts, log).execute(),
             Err(err) => {
@@ -130,7 +153,7 @@ impl<'a> RunBuilder<'a> {
     }
 
     /// The environment and the parts of the run a snapshot holds, each from the run's seed.
-    fn prepare(&mut self) -> Result<(Box<dyn Env>, Parts)> {
+    fn prepare(&mut self) -> Result<(Box<dyn Env>, Parts<A>)> {
         let cfg = self.cfg;
         ensure!(
             !cfg.method.queries() || self.expert.is_some(),
@@ -154,17 +177,9 @@ impl<'a> RunBuilder<'a> {
             cfg.eval_episodes
         );
         let (obs_dim, n_actions) = (env.obs_dim(), env.n_actions());
-        let agent = Agent::new(
-            &cfg.agent_config(),
-            obs_dim,
-            n_actions,
-            seed_for(cfg.seed, SeedPurpose::Agent),
-        );
-        let evaluator = Evaluator::new(
-            test_envs,
-            seed_for(cfg.seed, SeedPurpose::EvalEnv),
-            agent.network(),
-        )?;
+        let agent = (self.make_agent)(cfg, obs_dim, n_actions);
+        let evaluator =
+            Evaluator::new(test_envs, seed_for(cfg.seed, SeedPurpose::EvalEnv), obs_dim)?;
         let pretrain_demos = self.demos.map(|d| d.transitions.len()).unwrap_or(0);
         let replay = Replay::new(
             obs_dim,
@@ -187,8 +202,8 @@ impl<'a> RunBuilder<'a> {
 }
 
 /// The parts of a run that learn or draw: with the [`LoopState`] and the expert's state, what a snapshot holds.
-struct Parts {
-    agent: Agent,
+struct Parts<A> {
+    agent: A,
     replay: Replay,
     queries: QueryController,
     replay_rng: Pcg64,
@@ -200,7 +215,7 @@ struct Parts {
 }
 
 /// A run in progress: what it was given, its parts, and where its loop stands.
-struct Run<'a> {
+struct Run<'a, A: Learner> {
     cfg: &'a TrainConfig,
     env: Box<dyn Env>,
     expert: Option<&'a mut dyn Expert>,
@@ -208,8 +223,8 @@ struct Run<'a> {
     log: &'a mut RunLog,
     checkpointer: Option<&'a mut Checkpointer>,
     resume_from: Option<&'a StateDict<'a>>,
-    driver: Option<&'a mut dyn Driver>,
-    parts: Parts,
+    driver: Option<&'a mut dyn Driver<A>>,
+    parts: Parts<A>,
     st: LoopState,
     clock: RunClock,
     batch: Batch,
@@ -248,8 +263,13 @@ enum Turn {
     Ask(OpenQuestion),
 }
 
-impl<'a> Run<'a> {
-    fn new(given: RunBuilder<'a>, env: Box<dyn Env>, parts: Parts, log: &'a mut RunLog) -> Self {
+impl<'a, A: Learner> Run<'a, A> {
+    fn new(
+        given: RunBuilder<'a, A>,
+        env: Box<dyn Env>,
+        parts: Parts<A>,
+        log: &'a mut RunLog,
+    ) -> Self {
         let cfg = given.cfg;
         Self {
             cfg,
@@ -275,7 +295,7 @@ impl<'a> Run<'a> {
     }
 
     /// The whole run; a failure is recorded in the run directory with the phase and step it happened at.
-    fn execute(mut self) -> Result<(Summary, Agent)> {
+    fn execute(mut self) -> Result<(Summary, A)> {
         match self.steps() {
             Ok(summary) => Ok((summary, self.parts.agent)),
             Err(err) => {
@@ -380,7 +400,7 @@ impl<'a> Run<'a> {
                 format!("stopped after {done} pre-training updates")
             })?;
         }
-        self.parts.agent.sync_target();
+        self.parts.agent.end_target_period();
         Ok(())
     }
 
@@ -623,7 +643,7 @@ impl<'a> Run<'a> {
         })?;
         self.st.updates += 1;
         if self.st.updates.is_multiple_of(cfg.target_period) {
-            parts.agent.sync_target();
+            parts.agent.end_target_period();
         }
         if self.st.updates.is_multiple_of(1000) {
             let log = &mut *self.log;
@@ -647,7 +667,7 @@ impl<'a> Run<'a> {
     fn report(&mut self, uncertainty: Option<f32>) -> Result<()> {
         let (cfg, done, parts) = (self.cfg, self.st.step + 1, &mut self.parts);
         if done.is_multiple_of(cfg.eval_period) || done == cfg.train_steps {
-            let point = parts.evaluator.evaluate(parts.agent.network(), done)?;
+            let point = parts.evaluator.evaluate(&mut parts.agent, done)?;
             self.log.eval(point)?;
         }
         if let Some(expert) = self.expert.as_deref_mut() {
@@ -673,7 +693,7 @@ impl<'a> Run<'a> {
                 std::fs::create_dir_all(parent)?;
             }
             let metadata = weights_metadata(cfg, done);
-            parts.agent.network().save(&path, &metadata)?;
+            parts.agent.save_weights(&path, &metadata)?;
         }
         Ok(())
     }
@@ -823,7 +843,7 @@ pub enum Control {
 }
 
 /// Where a run stands after a step, for a [`Driver`].
-pub struct StepView<'a> {
+pub struct StepView<'a, A = Agent> {
     /// Environment steps done.
     pub step: usize,
     /// Episodes finished.
@@ -831,31 +851,31 @@ pub struct StepView<'a> {
     /// Demonstrated transitions asked for so far (or queries, as `budget_unit` says).
     pub budget_used: usize,
     pub log: &'a RunLog,
-    pub agent: &'a Agent,
+    pub agent: &'a A,
 }
 
 /// Steers a run from outside ([`RunBuilder::driver`]) (e.g. a Python `learn` call that trains for a while, returns,
 /// and is called again).
-pub trait Driver {
+pub trait Driver<A = Agent> {
     /// Called after every environment step.
-    fn after_step(&mut self, at: &StepView<'_>) -> Result<Control>;
+    fn after_step(&mut self, at: &StepView<'_, A>) -> Result<Control>;
     /// Called when `after_step` paused the run; returns [`Control::Continue`] or [`Control::Stop`] (a pause
     /// again is a stop).
-    fn paused(&mut self, run: &mut PausedRun<'_>) -> Result<Control>;
+    fn paused(&mut self, run: &mut PausedRun<'_, A>) -> Result<Control>;
 }
 
 /// A paused run, whole: its summary so far, the agent, the log, and a snapshot of everything on request.
-pub struct PausedRun<'a> {
+pub struct PausedRun<'a, A = Agent> {
     pub summary: Summary,
-    pub agent: &'a Agent,
+    pub agent: &'a A,
     pub log: &'a mut RunLog,
     cfg: &'a TrainConfig,
     st: &'a LoopState,
-    parts: &'a Parts,
+    parts: &'a Parts<A>,
     expert_state: Option<String>,
 }
 
-impl PausedRun<'_> {
+impl<A: Learner> PausedRun<'_, A> {
     /// Writes a snapshot of the run (the format of [`Checkpointer`]) into `dir` and waits until it is there.
     pub fn snapshot(&mut self, dir: &Path) -> Result<()> {
         let mut ck = Checkpointer::new(dir, self.cfg);
@@ -963,7 +983,7 @@ impl RunClock {
 fn snapshot(
     checkpointer: &mut Checkpointer,
     st: &LoopState,
-    parts: &Parts,
+    parts: &Parts<impl Learner>,
     expert_state: Option<String>,
     log: &mut RunLog,
     stopping: bool,
@@ -1035,13 +1055,13 @@ fn summarize(
 /// The run directory's results after `step` steps: the weights, then `summary.json`.
 fn finish_log(
     cfg: &TrainConfig,
-    agent: &Agent,
+    agent: &impl Learner,
     log: &mut RunLog,
     summary: &Summary,
     step: usize,
 ) -> Result<()> {
     if let Some(dir) = log.dir() {
-        agent.network().save(
+        agent.save_weights(
             &dir.join(run_dir::WEIGHTS_FILE),
             &weights_metadata(cfg, step),
         )?;
