@@ -7,7 +7,8 @@ use std::path::Path;
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-const ARLD: &str = env!("CARGO_BIN_EXE_arld");
+mod common;
+use common::ARLD;
 
 fn train_args(args: &[&str], out: &Path) -> Vec<String> {
     let mut v: Vec<String> = ["train", "--quiet"].iter().map(|s| s.to_string()).collect();

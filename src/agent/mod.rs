@@ -7,6 +7,10 @@
 //! `δ_kb = Q_k(s_b, a_b) − (r_b + γ(1 − d_b) Q⁻_k(s'_b, argmax_a Q_k(s'_b, a)))` and
 //! `L_E = max_a [Q(s, a) + M·1(a ≠ a_E)] − Q(s, a_E)`.
 
+mod learner;
+
+pub use learner::Learner;
+
 use crate::nn::{Adam, Grads, NoiseSample, OutputKind, QNet, Workspace, argmax, clip_grad_norm};
 use crate::query::{Needs, Signals, head_variance, js_divergence, noisy_variance, q_gap};
 use crate::replay::Batch;
@@ -77,6 +81,8 @@ pub struct Agent {
     /// Workspaces of the n-step targets (used only when `lambda_n > 0`).
     ws_nstep_online: Workspace,
     ws_nstep_target: Workspace,
+    /// The workspace of the batched test-time forward, grown to the largest batch of observations asked.
+    ws_test: Workspace,
     /// Independent noise samples for acting, the online Q(s, ·), the double-Q argmax and the target (§5).
     noise_act: NoiseSample,
     noise_online: NoiseSample,
@@ -129,6 +135,7 @@ impl Agent {
             ws_next_target: Workspace::new(&online, batch),
             ws_nstep_online: Workspace::new(&online, if cfg.lambda_n > 0.0 { batch } else { 1 }),
             ws_nstep_target: Workspace::new(&online, if cfg.lambda_n > 0.0 { batch } else { 1 }),
+            ws_test: Workspace::new(&online, 0),
             noise_act,
             noise_online,
             noise_argmax,
@@ -307,6 +314,41 @@ impl Agent {
     /// The agent's own generator (ε draws, head sampling, noise), for callers that need a draw in sequence.
     pub fn rng(&mut self) -> &mut Pcg64 {
         &mut self.rng
+    }
+}
+
+/// The DQN family as a [`Learner`]: the methods above, and the batched test-time policy
+/// ([`test_policy_actions`]).
+impl Learner for Agent {
+    fn begin_episode(&mut self) {
+        Agent::begin_episode(self);
+    }
+
+    fn act(&mut self, obs: &[f32], epsilon: f64, want: Needs) -> (usize, Signals) {
+        Agent::act(self, obs, epsilon, want)
+    }
+
+    fn learn(&mut self, batch: &Batch) -> (UpdateStats, &[f32]) {
+        self.update(batch)
+    }
+
+    fn end_target_period(&mut self) {
+        self.sync_target();
+    }
+
+    fn test_actions(&mut self, obs: &[f32], actions: &mut [usize]) {
+        if self.ws_test.max_batch() < actions.len() {
+            self.ws_test = Workspace::new(&self.online, actions.len());
+        }
+        test_policy_actions(&self.online, &mut self.ws_test, obs, actions);
+    }
+
+    fn save_weights(
+        &self,
+        path: &std::path::Path,
+        metadata: &std::collections::BTreeMap<String, String>,
+    ) -> anyhow::Result<()> {
+        self.online.save(path, metadata)
     }
 }
 

@@ -230,7 +230,7 @@ pub fn run(args: TrainArgs) -> anyhow::Result<ExitCode> {
         }
         Err(err) => {
             // Whatever ended it, the run stays incomplete: no summary.json, its logs whole up to here.
-            eprintln!("error: {}", super::error_line(&err));
+            eprintln!("error: {}", arld::errors::error_line(&err));
             if !dir.join(arld::train::run_dir::CONFIG_FILE).is_file() {
                 return Ok(ExitCode::FAILURE);
             }
