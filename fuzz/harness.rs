@@ -73,3 +73,29 @@ pub fn checkpoint(data: &[u8]) -> bool {
 pub fn trace(data: &[u8]) -> bool {
     arld::env::conformance::check_reader(data, "fuzz.jsonl").is_ok()
 }
+
+/// A run's snapshot (safetensors with a checksum), read as `arld train --resume` reads it, for the run of the
+/// configuration the seed snapshot recorded (fuzz/seeds/snapshot/).
+pub fn snapshot(data: &[u8]) -> bool {
+    let mut input = arld::train::ConfigInput::new(
+        "CartPole-v0",
+        arld::train::Method::Dqn,
+        arld::train::NetKind::Bootstrap,
+        0,
+    );
+    for assignment in SNAPSHOT_SEED_CONFIG {
+        input
+            .apply_override(assignment)
+            .expect("the seed's configuration");
+    }
+    let cfg = input.resolve().expect("the seed's configuration resolves");
+    arld::train::snapshot::read_snapshot(data, &cfg).is_ok()
+}
+
+/// The `--set` overrides of the run whose snapshot is fuzz/seeds/snapshot/'s seed.
+pub const SNAPSHOT_SEED_CONFIG: [&str; 4] = [
+    "train_steps=2000",
+    "snapshot_every=300",
+    "replay_size=400",
+    "learning_starts=100",
+];

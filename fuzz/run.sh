@@ -8,9 +8,27 @@ set -euo pipefail
 cd "$(dirname "$0")"
 seconds="${SECONDS_PER_TARGET:-60}"
 targets=("$@")
-[ "${#targets[@]}" -gt 0 ] || targets=(config demos checkpoint trace)
+[ "${#targets[@]}" -gt 0 ] || targets=(config demos checkpoint trace snapshot)
 export RUSTC_BOOTSTRAP=1
 cargo fuzz build -O
+# The snapshot target's seed is a snapshot of this arld (a snapshot records the version that wrote it, so none
+# is committed): a run of the harness's configuration, killed after its first snapshot.
+if [[ " ${targets[*]} " == *" snapshot "* ]]; then
+  (cd .. && cargo build --release --bin arld)
+  run=$(mktemp -d)
+  sets=$(sed -n '/SNAPSHOT_SEED_CONFIG/,/];/p' harness.rs | grep -o '"[a-z_]*=[0-9]*"' | tr -d '"' |
+    sed 's/^/--set /' | tr '\n' ' ')
+  # shellcheck disable=SC2086
+  ../target/release/arld train --quiet --env CartPole-v0 --method dqn --net bootstrap --seed 0 $sets \
+    -o "$run/run" &
+  pid=$!
+  while [ ! -e "$run/run/snapshot.json" ]; do sleep 0.05; done
+  kill -KILL "$pid"
+  wait "$pid" || true
+  mkdir -p seeds/snapshot
+  cp "$run/run/snapshot.safetensors" seeds/snapshot/run.safetensors
+  rm -rf "$run"
+fi
 status=0
 for t in "${targets[@]}"; do
   corpus="corpus/$t"

@@ -138,8 +138,18 @@ fn check_replaceable(path: &Path) -> std::io::Result<()> {
     if kind.is_file() {
         return Ok(());
     }
+    Err(std::io::Error::other(format!(
+        "it is {}; arld writes its outputs only to new or regular files",
+        kind_name(kind)
+    )))
+}
+
+/// What a file system entry is, for messages: "a symbolic link", "a directory", "a device", ...
+pub fn kind_name(kind: std::fs::FileType) -> &'static str {
     use std::os::unix::fs::FileTypeExt;
-    let what = if kind.is_symlink() {
+    if kind.is_file() {
+        "a regular file"
+    } else if kind.is_symlink() {
         "a symbolic link"
     } else if kind.is_dir() {
         "a directory"
@@ -151,10 +161,123 @@ fn check_replaceable(path: &Path) -> std::io::Result<()> {
         "a socket"
     } else {
         "not a regular file"
-    };
-    Err(std::io::Error::other(format!(
-        "it is {what}; arld writes its outputs only to new or regular files"
-    )))
+    }
+}
+
+/// Whether a regular file is at `path` (`false`: nothing is), without following a symbolic link: anything else
+/// there (a link, a directory, a device, a pipe) is an error naming the path and what it is. For the files a
+/// program owns in its own directory, which it must never read or write through a link.
+pub fn own_file_exists(path: &Path) -> std::io::Result<bool> {
+    match std::fs::symlink_metadata(path) {
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(false),
+        Err(e) => Err(std::io::Error::new(
+            e.kind(),
+            format!("cannot inspect {}: {e}", path.display()),
+        )),
+        Ok(meta) if meta.file_type().is_file() => Ok(true),
+        Ok(meta) => Err(std::io::Error::other(format!(
+            "{} is {}, where arld keeps a regular file of its own; move it away",
+            path.display(),
+            kind_name(meta.file_type())
+        ))),
+    }
+}
+
+/// Opens a file the program owns for writing (see [`own_file_exists`]): created (and emptied) when `create`,
+/// else it must exist. Never through a symbolic link, never a device or a pipe.
+pub fn open_own_file(path: &Path, create: bool) -> std::io::Result<File> {
+    use std::os::unix::fs::OpenOptionsExt;
+    own_file_exists(path)?;
+    let file = std::fs::OpenOptions::new()
+        .write(true)
+        .create(create)
+        .truncate(create)
+        // A link or pipe put there between the check and the open is refused too (no blocking on a pipe).
+        .custom_flags(libc::O_NOFOLLOW | libc::O_NONBLOCK)
+        .open(path)
+        .map_err(|e| std::io::Error::new(e.kind(), format!("{}: {e}", path.display())))?;
+    if !file.metadata()?.is_file() {
+        return Err(std::io::Error::other(format!(
+            "{} is not a regular file",
+            path.display()
+        )));
+    }
+    Ok(file)
+}
+
+/// Reads a whole file of at most `max_bytes` (a file, or what a link names, that is no regular file, or is
+/// longer, is an error naming it): every whole-file read of input has a bound, so that `/dev/zero` or a pipe
+/// that never ends cannot exhaust the memory.
+pub fn read_bounded(path: &Path, max_bytes: u64) -> std::io::Result<Vec<u8>> {
+    use std::io::Read;
+    use std::os::unix::fs::OpenOptionsExt;
+    let named =
+        |e: std::io::Error| std::io::Error::new(e.kind(), format!("{}: {e}", path.display()));
+    let file = std::fs::OpenOptions::new()
+        .read(true)
+        .custom_flags(libc::O_NONBLOCK)
+        .open(path)
+        .map_err(named)?;
+    let meta = file.metadata().map_err(named)?;
+    if !meta.is_file() {
+        return Err(std::io::Error::other(format!(
+            "{} is {}, not a regular file",
+            path.display(),
+            kind_name(meta.file_type())
+        )));
+    }
+    if meta.len() > max_bytes {
+        return Err(too_long(path, max_bytes));
+    }
+    let mut bytes = Vec::with_capacity(meta.len() as usize);
+    file.take(max_bytes + 1)
+        .read_to_end(&mut bytes)
+        .map_err(named)?;
+    if bytes.len() as u64 > max_bytes {
+        return Err(too_long(path, max_bytes));
+    }
+    Ok(bytes)
+}
+
+fn too_long(path: &Path, max_bytes: u64) -> std::io::Error {
+    std::io::Error::new(
+        std::io::ErrorKind::InvalidData,
+        format!(
+            "{} is longer than {max_bytes} bytes, more than arld reads from such a file",
+            path.display()
+        ),
+    )
+}
+
+/// Reads one line (without its `\n`, and a `\r` before it) of at most `max_bytes` into `line`; `false` at the
+/// end of the input. A longer line is an error ([`std::io::ErrorKind::InvalidData`]): a stream that never
+/// sends a line break cannot exhaust the memory.
+pub fn read_line_bounded(
+    reader: &mut impl std::io::BufRead,
+    line: &mut Vec<u8>,
+    max_bytes: usize,
+) -> std::io::Result<bool> {
+    use std::io::{BufRead, Read};
+    line.clear();
+    let read = reader
+        .by_ref()
+        .take(max_bytes as u64 + 1)
+        .read_until(b'\n', line)?;
+    if read == 0 {
+        return Ok(false);
+    }
+    if line.last() == Some(&b'\n') {
+        line.pop();
+        if line.last() == Some(&b'\r') {
+            line.pop();
+        }
+    } else if line.len() > max_bytes {
+        return Err(std::io::Error::new(
+            std::io::ErrorKind::InvalidData,
+            format!("a line is longer than {max_bytes} bytes"),
+        ));
+    }
+    Ok(true)
 }
 
 /// Every temporary file's name begins with this (then the target's name), so that what a killed process left
@@ -236,6 +359,38 @@ mod tests {
         assert_eq!(left, [".s.bin.other", "other.bin", "s.bin"]);
         assert_eq!(std::fs::read(&path).unwrap(), b"old");
         remove_leftovers(&dir.path().join("missing/s.bin")).unwrap();
+    }
+
+    #[test]
+    fn lines_and_files_are_read_with_a_bound_and_own_files_never_through_a_link() {
+        let mut input = std::io::Cursor::new(b"ab\r\ncde\nxyz".to_vec());
+        let mut line = Vec::new();
+        let mut lines = Vec::new();
+        while read_line_bounded(&mut input, &mut line, 3).unwrap() {
+            lines.push(String::from_utf8(line.clone()).unwrap());
+        }
+        assert_eq!(lines, ["ab", "cde", "xyz"]);
+        let mut long = std::io::Cursor::new(b"abcd\n".to_vec());
+        let err = read_line_bounded(&mut long, &mut line, 3).unwrap_err();
+        assert!(err.to_string().contains("longer than 3 bytes"), "{err}");
+        let dir = tempfile::tempdir().unwrap();
+        let file = dir.path().join("f.txt");
+        std::fs::write(&file, b"12345").unwrap();
+        assert_eq!(read_bounded(&file, 5).unwrap(), b"12345");
+        assert!(read_bounded(&file, 4).is_err());
+        let err = read_bounded(Path::new("/dev/zero"), 1 << 20).unwrap_err();
+        assert!(err.to_string().contains("a device"), "{err}");
+        let link = dir.path().join("link.txt");
+        std::os::unix::fs::symlink(&file, &link).unwrap();
+        assert!(own_file_exists(&file).unwrap());
+        assert!(!own_file_exists(&dir.path().join("none")).unwrap());
+        for err in [
+            own_file_exists(&link).unwrap_err(),
+            open_own_file(&link, true).unwrap_err(),
+        ] {
+            assert!(err.to_string().contains("symbolic link"), "{err}");
+        }
+        assert_eq!(std::fs::read(&file).unwrap(), b"12345");
     }
 
     #[test]

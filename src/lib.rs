@@ -8,16 +8,19 @@
 //! - [`env`]: the [`env::Env`] trait and Gymnasium-exact environments; [`rng`]: NumPy-compatible seeding.
 //! - [`nn`]: the fixed-shape Q-network (plain, K heads or noisy output), forward, backward, Adam, safetensors.
 //! - [`replay`]: sum-tree prioritized replay with a permanent demonstration part.
-//! - [`agent`]: acting (exploration, head sampling, noise), the learner (losses, target network), evaluation.
+//! - [`agent`]: the [`agent::Learner`] interface a run trains through, and the DQN family implementing it: acting
+//!   (exploration, head sampling, noise), the learner (losses, target network), the test-time policy.
 //! - [`query`]: uncertainty measures, query rules and budget accounting.
 //! - [`expert`]: the [`expert::Expert`] trait and its kinds.
-//! - [`train`]: the training loop of one run, top to bottom, and its full-state snapshots.
-//! - [`experiment`]: presets, run directories, sweeps (local and on Slurm), steps to solve, tables and figures.
+//! - [`train`]: one run: [`train::RunBuilder`], its one entry point, the loop as named steps, the run
+//!   directory's format and its full-state snapshots.
+//! - [`experiment`]: configured runs end to end, sweeps (local and on Slurm), the paper's grids, tables and figures.
 //! - [`paper`]: the paper's tables (tasks, parameters, expert statistics, steps to solve) as data.
 //! - [`build_info`]: the version and the git commit this arld was built from ([`VERSION`], [`GIT_COMMIT`]).
 //! - [`files`]: the one atomic file write every saved file goes through.
 //! - [`state`]: a component's state as named raw arrays and small values (what snapshots are made of).
 //! - [`math`]: the correctly rounded elementary functions every computation uses (one result on every CPU).
+//! - [`errors`]: an error and its causes on one line, as the command line and Python show it.
 //! - [`interrupt`]: SIGTERM/SIGINT as a stop request that the training loop polls.
 //! - [`tboard`]: a minimal TensorBoard event-file writer for scalar curves.
 //!
@@ -26,6 +29,7 @@
 pub mod agent;
 pub mod build_info;
 pub mod env;
+pub mod errors;
 pub mod experiment;
 pub mod expert;
 pub mod files;

@@ -64,7 +64,7 @@ fn main() -> std::process::ExitCode {
     match result {
         Ok(code) => code,
         Err(err) => {
-            eprintln!("error: {}", cli::error_line(&err));
+            eprintln!("error: {}", arld::errors::error_line(&err));
             std::process::ExitCode::FAILURE
         }
     }

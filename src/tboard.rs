@@ -26,7 +26,7 @@ impl EventWriter {
             .unwrap_or(0);
         let path = dir.join(format!("events.out.tfevents.{secs}.arld"));
         let mut writer = Self {
-            out: BufWriter::new(File::create(&path)?),
+            out: BufWriter::new(crate::files::open_own_file(&path, true)?),
             path,
         };
         let mut event = Vec::with_capacity(32);
@@ -39,7 +39,7 @@ impl EventWriter {
     /// Continues the event file at `path` from byte `len` (what was written before a snapshot); anything after
     /// it is cut off.
     pub fn reopen(path: &Path, len: u64) -> std::io::Result<Self> {
-        let file = std::fs::OpenOptions::new().write(true).open(path)?;
+        let file = crate::files::open_own_file(path, false)?;
         file.set_len(len)?;
         let mut out = BufWriter::new(file);
         out.seek(std::io::SeekFrom::Start(len))?;

@@ -10,6 +10,9 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
+mod common;
+use common::ARLD;
+
 /// How one probe ended.
 #[derive(Debug, PartialEq)]
 enum Outcome {
@@ -22,7 +25,7 @@ enum Outcome {
 
 /// Runs the binary with `args` (within `dir`), at most `limit`, and classifies the exit.
 fn probe(dir: &Path, args: &[String], limit: Duration) -> Outcome {
-    let mut child = Command::new(env!("CARGO_BIN_EXE_arld"))
+    let mut child = Command::new(ARLD)
         .args(args)
         .current_dir(dir)
         .env("RUST_BACKTRACE", "0")
@@ -252,7 +255,7 @@ fn every_bad_input_is_a_clean_error() {
     // Configurations: every key with every wrong value, and malformed documents.
     let mut configs = Tally::default();
     let keys: Vec<String> = String::from_utf8(
-        Command::new(env!("CARGO_BIN_EXE_arld"))
+        Command::new(ARLD)
             .args("train --env CartPole-v0 --method adqn --print-config".split(' '))
             .output()
             .unwrap()
@@ -311,7 +314,7 @@ fn every_bad_input_is_a_clean_error() {
     let mut demos = Tally::default();
     let demo_file = work.join("real.jsonl");
     assert!(
-        Command::new(env!("CARGO_BIN_EXE_arld"))
+        Command::new(ARLD)
             .args([
                 "demo",
                 "collect",

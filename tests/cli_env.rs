@@ -2,22 +2,10 @@
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::Output;
 
-fn arld(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_arld"))
-        .args(args)
-        .output()
-        .expect("the arld binary runs")
-}
-
-fn stdout(output: &Output) -> String {
-    String::from_utf8_lossy(&output.stdout).into_owned()
-}
-
-fn stderr(output: &Output) -> String {
-    String::from_utf8_lossy(&output.stderr).into_owned()
-}
+mod common;
+use common::{arld, stderr, stdout};
 
 /// A failed run: non-zero exit, no panic, and `needles` in the error message.
 fn assert_clean_failure(output: &Output, needles: &[&str]) {

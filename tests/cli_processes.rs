@@ -6,7 +6,8 @@ use std::path::Path;
 use std::process::{Child, Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
-const ARLD: &str = env!("CARGO_BIN_EXE_arld");
+mod common;
+use common::ARLD;
 
 fn sweep_args<'a>(out: &'a str, train_steps: &'a str) -> Vec<&'a str> {
     vec![

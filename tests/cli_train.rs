@@ -2,14 +2,10 @@
 //! a non-zero exit, no panic, and nothing written.
 
 use std::path::Path;
-use std::process::{Command, Output};
+use std::process::Command;
 
-fn arld(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_arld"))
-        .args(args)
-        .output()
-        .expect("runs")
-}
+mod common;
+use common::{ARLD, arld};
 
 /// Asserts failure with a message containing every needle, without a panic, and returns stderr.
 fn fails_with(args: &[&str], needles: &[&str]) -> String {
@@ -352,7 +348,7 @@ fn expert_train_reuses_only_a_run_of_the_same_configuration_and_writes_into_the_
 {
     let work = tempfile::tempdir().unwrap();
     let expert_train = |extra: &[&str]| {
-        Command::new(env!("CARGO_BIN_EXE_arld"))
+        Command::new(ARLD)
             .current_dir(work.path())
             .args(["expert", "train", "--env", "CartPole-v0", "--episodes", "2"])
             .args(["--set", "train_steps=2000"])

@@ -287,14 +287,15 @@ fn what_the_effort_buys_is_the_median_auc_of_the_runs_at_each_budget() {
     );
 }
 
-/// effort.md's screen table, recomputed from effort.csv (p-values of the Mann-Whitney test that
-/// `stats::mann_whitney_agrees_with_scipy` checks, and the AUC medians checked above): per task, the rules
-/// significantly higher than all three paper rules, higher than some, and lower than some.
+/// effort.md's screen table, recomputed from effort_comparisons.csv (the Holm-adjusted p-values and shifts that
+/// `every_comparison_is_recomputed_from_the_runs` checks): per task, the rules significantly higher than all three
+/// paper rules, higher than some, and lower than some.
 #[test]
 fn the_screen_lists_the_rules_that_differ_from_the_paper_rules() {
     let rows = effort_rows();
     let cells = paper_budget_rows(&rows);
     let section = effort_md_section("The screen at the paper's budget");
+    let comparisons = comparison_rows();
     let baselines = [
         ("greedy (GDQN)", "GDQN", "p_vs_gdqn"),
         ("bernoulli (BDQN)", "BDQN", "p_vs_bdqn"),
@@ -305,11 +306,6 @@ fn the_screen_lists_the_rules_that_differ_from_the_paper_rules() {
     let mut checked = 0;
     for env in envs {
         let of_env: Vec<_> = cells.iter().filter(|r| r["env"] == env).collect();
-        let auc = |rule: &str| -> f64 {
-            of_env.iter().find(|r| r["rule"] == rule).unwrap()["auc_median"]
-                .parse()
-                .unwrap()
-        };
         let (mut all, mut some, mut lower) = (Vec::new(), Vec::new(), Vec::new());
         let mut rules: Vec<&str> = of_env
             .iter()
@@ -320,13 +316,26 @@ fn the_screen_lists_the_rules_that_differ_from_the_paper_rules() {
         for rule in rules {
             let row = of_env.iter().find(|r| r["rule"] == rule).unwrap();
             let (mut above, mut below) = (Vec::new(), Vec::new());
-            for (label, name, column) in baselines {
-                let p: f64 = match row[column].as_str() {
+            for (label, name, _) in baselines {
+                // The Holm-adjusted p of the task's screen family (recomputed from the runs by
+                // `every_comparison_is_recomputed_from_the_runs`) and the sign of the shift.
+                let Some(c) = comparisons.iter().find(|c| {
+                    c["env"] == env
+                        && c["rule"] == rule
+                        && c["against"] == label
+                        && c["net"] == "bootstrap"
+                        && c["held_out"] == "false"
+                        && c["budget"] == row["budget"]
+                        && c["against_budget"] == row["budget"]
+                }) else {
+                    continue;
+                };
+                let p: f64 = match c["p_holm"].as_str() {
                     "" => continue,
                     text => text.parse().unwrap(),
                 };
                 if p < 0.05 {
-                    if auc(rule) > auc(label) {
+                    if c["shift"].parse::<f64>().unwrap() > 0.0 {
                         above.push(name);
                     } else {
                         below.push(name);
@@ -388,4 +397,302 @@ fn every_run_of_the_effort_protocol_is_committed() {
         missing.len(),
         missing[0].display()
     );
+}
+
+/// A line of a CSV file split into fields (double-quoted fields may hold commas and doubled quotes).
+fn csv_fields(line: &str) -> Vec<String> {
+    let (mut fields, mut field, mut quoted, mut chars) =
+        (Vec::new(), String::new(), false, line.chars().peekable());
+    while let Some(c) = chars.next() {
+        match (c, quoted) {
+            ('"', true) if chars.peek() == Some(&'"') => {
+                field.push('"');
+                chars.next();
+            }
+            ('"', _) => quoted = !quoted,
+            (',', false) => fields.push(std::mem::take(&mut field)),
+            _ => field.push(c),
+        }
+    }
+    fields.push(field);
+    fields
+}
+
+/// The exactly rounded sum of `values`, in 128-bit fixed point at 2^-80 (every evaluation mean of these runs is a
+/// multiple of 2^-80 well inside the range), rounded to f64 once at the end.
+fn fixed_point_sum(values: &[f64]) -> f64 {
+    const SCALE: f64 = (1u128 << 80) as f64;
+    let total: i128 = values
+        .iter()
+        .map(|&v| {
+            let scaled = v * SCALE;
+            assert!(
+                scaled.fract() == 0.0 && scaled.abs() < 1e38,
+                "{v} is not a multiple of 2^-80"
+            );
+            scaled as i128
+        })
+        .sum();
+    total as f64 / SCALE
+}
+
+/// The AUC of a run as effort.md defines it: the mean evaluation return (summed exactly), normalised.
+fn exact_run_auc(dir: &Path, random: f64, expert: f64) -> f64 {
+    let text = std::fs::read_to_string(dir.join("eval.csv")).unwrap();
+    let means: Vec<f64> = text
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').nth(1).unwrap().parse::<f64>().unwrap())
+        .collect();
+    (fixed_point_sum(&means) / means.len() as f64 - random) / (expert - random)
+}
+
+/// P(Z > z) for the standard normal.
+fn upper_tail(z: f64) -> f64 {
+    0.5 * libm::erfc(z / std::f64::consts::SQRT_2)
+}
+
+/// Two-sided Mann-Whitney p (normal approximation with tie and continuity corrections), by counting pairs.
+fn mw_p(a: &[f64], b: &[f64]) -> Option<f64> {
+    let (n1, n2) = (a.len() as f64, b.len() as f64);
+    let u: f64 = a
+        .iter()
+        .map(|x| {
+            b.iter()
+                .map(|y| {
+                    if x > y {
+                        1.0
+                    } else if x == y {
+                        0.5
+                    } else {
+                        0.0
+                    }
+                })
+                .sum::<f64>()
+        })
+        .sum();
+    let mut all: Vec<f64> = a.iter().chain(b).copied().collect();
+    all.sort_by(|x, y| x.partial_cmp(y).unwrap());
+    let mut ties = 0.0;
+    for group in all.chunk_by(|x, y| x == y) {
+        let t = group.len() as f64;
+        ties += t * t * t - t;
+    }
+    let n = n1 + n2;
+    let var = n1 * n2 / 12.0 * ((n + 1.0) - ties / (n * (n - 1.0)));
+    if var <= 0.0 {
+        return None;
+    }
+    let z = ((u - n1 * n2 / 2.0).abs() - 0.5) / var.sqrt();
+    Some((2.0 * upper_tail(z)).min(1.0))
+}
+
+/// The Hodges-Lehmann shift of a over b and its 95% interval from the normal approximation of U's critical value.
+fn hl(a: &[f64], b: &[f64]) -> (f64, f64, f64) {
+    let mut d: Vec<f64> = a
+        .iter()
+        .flat_map(|x| b.iter().map(move |y| x - y))
+        .collect();
+    d.sort_by(|x, y| x.partial_cmp(y).unwrap());
+    let (n1, n2) = (a.len() as f64, b.len() as f64);
+    let k = (n1 * n2 / 2.0 - 1.959963984540054 * (n1 * n2 * (n1 + n2 + 1.0) / 12.0).sqrt()).floor();
+    let k = k.max(0.0) as usize;
+    (median(d.clone()), d[k], d[d.len() - 1 - k])
+}
+
+/// The runs of a cell: the directories that may hold a rule's runs at a budget (the default variant at the
+/// paper's budget, `budget-B` otherwise or for held-out seeds), the seeds of the cell's group only.
+fn cell_dirs(
+    env: &str,
+    rule: &str,
+    net: &str,
+    budget: &str,
+    group: &str,
+) -> BTreeMap<u64, PathBuf> {
+    let runs = results().join("runs").join(env);
+    let paper = arld::experiment::protocol::paper_budget(env).to_string();
+    let (method_dir, spec) = match rule {
+        "greedy (GDQN)" => (format!("gdqn-{net}"), None),
+        "bernoulli (BDQN)" => (format!("bdqn-{net}"), None),
+        "adaptive (ADQN)" => (format!("adqn-{net}"), None),
+        spec => (format!("adqn-{net}"), Some(spelled(spec))),
+    };
+    let base = runs.join(method_dir);
+    let mut variants = vec![match &spec {
+        None => base.join(format!("budget-{budget}")),
+        Some(s) => base.join(format!("budget-{budget}-query_rule-{s}")),
+    }];
+    if budget == paper {
+        variants.push(match &spec {
+            None => base.clone(),
+            Some(s) => base.join(format!("query_rule-{s}")),
+        });
+    }
+    let in_group = |seed: u64| match group {
+        "true" => (100..120).contains(&seed),
+        "second" => (120..140).contains(&seed),
+        _ => !(100..140).contains(&seed),
+    };
+    let mut out = BTreeMap::new();
+    for dir in variants {
+        let Ok(entries) = std::fs::read_dir(&dir) else {
+            continue;
+        };
+        for entry in entries.flatten() {
+            let name = entry.file_name().to_string_lossy().to_string();
+            let Some(seed) = name
+                .strip_prefix("seed")
+                .and_then(|s| s.parse::<u64>().ok())
+            else {
+                continue;
+            };
+            if in_group(seed) && entry.path().join("summary.json").is_file() {
+                out.insert(seed, entry.path());
+            }
+        }
+    }
+    out
+}
+
+/// Every comparison of a rule with a paper rule in effort_comparisons.csv, recomputed from the runs' eval.csv with
+/// this file's own code: the seeds both share, the Hodges-Lehmann shift and interval, the Mann-Whitney p, and
+/// Holm's adjustment within each family.
+#[test]
+fn every_comparison_is_recomputed_from_the_runs() {
+    let refs: BTreeMap<String, (f64, f64)> = effort_rows()
+        .iter()
+        .map(|r| {
+            (
+                r["env"].clone(),
+                (
+                    r["random_return"].parse().unwrap(),
+                    r["expert_return"].parse().unwrap(),
+                ),
+            )
+        })
+        .collect();
+    let rows = comparison_rows();
+    let mut auc_cache: BTreeMap<PathBuf, f64> = BTreeMap::new();
+    let mut families: BTreeMap<String, Vec<(f64, f64)>> = BTreeMap::new();
+    let mut checked = 0;
+    for row in &rows {
+        if row["budget"] != row["against_budget"] {
+            continue; // the budget comparisons read the design seeds only; the screen's test covers them
+        }
+        let (env, group) = (row["env"].as_str(), row["held_out"].as_str());
+        let (random, expert) = refs[env];
+        let mut auc = |dir: &PathBuf| {
+            *auc_cache
+                .entry(dir.clone())
+                .or_insert_with(|| exact_run_auc(dir, random, expert))
+        };
+        let a = cell_dirs(env, &row["rule"], &row["net"], &row["budget"], group);
+        let b = cell_dirs(env, &row["against"], &row["net"], &row["budget"], group);
+        let shared: Vec<u64> = a.keys().filter(|s| b.contains_key(s)).copied().collect();
+        assert_eq!(shared.len().to_string(), row["seeds"], "{row:?}");
+        let xs: Vec<f64> = shared.iter().map(|s| auc(&a[s])).collect();
+        let ys: Vec<f64> = shared.iter().map(|s| auc(&b[s])).collect();
+        let close = |ours: f64, column: &str| {
+            let theirs: f64 = row[column].parse().unwrap();
+            assert!(
+                (ours - theirs).abs() < 1e-9,
+                "{column}: {ours} recomputed, {theirs} in the file: {row:?}"
+            );
+        };
+        let (shift, lo, hi) = hl(&xs, &ys);
+        close(shift, "shift");
+        close(lo, "shift_lo");
+        close(hi, "shift_hi");
+        let p = mw_p(&xs, &ys);
+        if let Some(p) = p {
+            close(p, "p");
+            let holm: f64 = row["p_holm"].parse().unwrap();
+            families
+                .entry(row["family"].clone())
+                .or_default()
+                .push((p, holm));
+        } else {
+            assert_eq!(row["p"], "", "{row:?}");
+        }
+        checked += 1;
+    }
+    // Holm within each family: the i-th smallest of m p-values times (m - i + 1), made monotone, capped at 1.
+    for (family, mut tests) in families {
+        tests.sort_by(|x, y| x.0.partial_cmp(&y.0).unwrap());
+        // The second held-out test's family is fixed at its nine comparisons; those not run yet count as p = 1.
+        let fixed = if family.starts_with("the second held-out test") {
+            9
+        } else {
+            0
+        };
+        let m = tests.len().max(fixed);
+        let mut running: f64 = 0.0;
+        for (i, (p, holm)) in tests.iter().enumerate() {
+            running = running.max(((m - i) as f64 * p).min(1.0));
+            assert!(
+                (running - holm).abs() < 1e-9,
+                "{family}: Holm {running} recomputed, {holm} in the file"
+            );
+        }
+    }
+    assert!(checked >= 300, "{checked} comparisons checked");
+}
+
+/// A NaN mean in a run's eval.csv is refused by name before any file is written (it used to panic in the
+/// bootstrap).
+#[test]
+fn a_nan_mean_is_a_named_error() {
+    let tmp = tempfile::tempdir().unwrap();
+    let runs = tmp.path().join("runs");
+    for method in ["bdqn", "adqn"] {
+        for seed in 0..3 {
+            let from = results().join(format!(
+                "runs/Acrobot-v1/{method}-bootstrap/budget-25/seed{seed}"
+            ));
+            let to = runs.join(format!(
+                "Acrobot-v1/{method}-bootstrap/budget-25/seed{seed}"
+            ));
+            std::fs::create_dir_all(&to).unwrap();
+            for file in ["config.toml", "eval.csv", "summary.json", "queries.csv"] {
+                if from.join(file).is_file() {
+                    std::fs::copy(from.join(file), to.join(file)).unwrap();
+                }
+            }
+        }
+    }
+    let eval = runs.join("Acrobot-v1/bdqn-bootstrap/budget-25/seed1/eval.csv");
+    let text = std::fs::read_to_string(&eval).unwrap();
+    let mut lines: Vec<String> = text.lines().map(String::from).collect();
+    let mut fields: Vec<String> = lines[2].split(',').map(String::from).collect();
+    fields[1] = "NaN".into();
+    lines[2] = fields.join(",");
+    std::fs::write(&eval, lines.join("\n") + "\n").unwrap();
+    let out = tmp.path().join("report");
+    let output = std::process::Command::new(env!("CARGO_BIN_EXE_arld"))
+        .args([
+            "report",
+            runs.to_str().unwrap(),
+            "-o",
+            out.to_str().unwrap(),
+        ])
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(!output.status.success(), "{stderr}");
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    assert!(
+        stderr.contains("seed1: eval.csv has a mean of NaN at step"),
+        "{stderr}"
+    );
+    assert!(!out.join("effort.md").exists() && !out.join("table.md").exists());
+}
+
+/// The rows of results/effort_comparisons.csv as maps from column name to text.
+fn comparison_rows() -> Vec<BTreeMap<String, String>> {
+    let text = std::fs::read_to_string(results().join("effort_comparisons.csv")).unwrap();
+    let mut lines = text.lines();
+    let header = csv_fields(lines.next().unwrap());
+    lines
+        .map(|l| header.iter().cloned().zip(csv_fields(l)).collect())
+        .collect()
 }

@@ -4,7 +4,7 @@
 
 use anyhow::Result;
 use arld::expert::{Answer, Expert, Progress, Query};
-use arld::train::{ConfigInput, Method, NetKind, RunLog, TrainConfig, train};
+use arld::train::{ConfigInput, Method, NetKind, RunBuilder, RunLog, TrainConfig};
 
 /// Leaves every other opening question unanswered and answers everything else with action 1.
 struct Flaky {
@@ -56,7 +56,10 @@ fn unanswered_questions_cost_no_budget_and_are_logged() {
         openings: 0,
         answer: 1,
     };
-    let (summary, _) = train(&cfg, Some(&mut expert), None, &mut log).unwrap();
+    let (summary, _) = RunBuilder::new(&cfg)
+        .expert(Some(&mut expert))
+        .train(&mut log)
+        .unwrap();
     // Greedy queries ask until the budget is spent: 4 answered segments of 5 steps, each after a question that
     // went back to the agent (segments are cut by episode ends, so there may be more).
     assert_eq!(summary.queries_used, 20);
@@ -97,7 +100,9 @@ fn an_answer_out_of_range_is_an_error() {
         openings: 1,
         answer: 7,
     };
-    let err = train(&cfg, Some(&mut expert), None, &mut log)
+    let err = RunBuilder::new(&cfg)
+        .expert(Some(&mut expert))
+        .train(&mut log)
         .err()
         .expect("an out-of-range answer must fail the run");
     assert!(format!("{err:#}").contains("action 7"), "{err:#}");
@@ -110,7 +115,10 @@ fn program_experts_report_their_kind_and_no_response_time() {
     cfg.expert = "scripted".into();
     let mut log = RunLog::create(dir.path(), &cfg.to_toml(), 300, false).unwrap();
     let mut expert = arld::expert::from_spec("scripted", "CartPole-v0", 0, 30.0).unwrap();
-    train(&cfg, Some(expert.as_mut()), None, &mut log).unwrap();
+    RunBuilder::new(&cfg)
+        .expert(Some(expert.as_mut()))
+        .train(&mut log)
+        .unwrap();
     let text = std::fs::read_to_string(dir.path().join("queries.csv")).unwrap();
     for line in text.lines().skip(1) {
         let row: Vec<&str> = line.split(',').collect();
@@ -178,7 +186,10 @@ fn an_expert_that_shows_the_uncertainty_sees_it_after_the_budget_is_spent() {
             shows,
             computed: Vec::new(),
         };
-        let (summary, _) = train(&cfg, Some(&mut expert), None, &mut RunLog::in_memory()).unwrap();
+        let (summary, _) = RunBuilder::new(&cfg)
+            .expert(Some(&mut expert))
+            .train(&mut RunLog::in_memory())
+            .unwrap();
         assert_eq!(summary.queries_used, 10, "the budget is spent");
         let late: Vec<bool> = expert
             .computed

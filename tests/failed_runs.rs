@@ -7,19 +7,8 @@
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
-const ARLD: &str = env!("CARGO_BIN_EXE_arld");
-
-fn arld(args: &[&str]) -> Output {
-    Command::new(ARLD).args(args).output().expect("arld runs")
-}
-
-fn stderr(out: &Output) -> String {
-    String::from_utf8_lossy(&out.stderr).into_owned()
-}
-
-fn stdout(out: &Output) -> String {
-    String::from_utf8_lossy(&out.stdout).into_owned()
-}
+mod common;
+use common::{arld, stderr, stdout};
 
 /// The run's `failed.json`, parsed.
 fn failure(dir: &Path) -> serde_json::Value {

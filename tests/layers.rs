@@ -20,7 +20,15 @@ use std::path::{Path, PathBuf};
 
 /// The layers, bottom first. Modules of one layer may not use each other.
 const LAYERS: [&[&str]; 7] = [
-    &["build_info", "files", "paper", "state", "interrupt", "math"],
+    &[
+        "build_info",
+        "errors",
+        "files",
+        "paper",
+        "state",
+        "interrupt",
+        "math",
+    ],
     &["rng", "nn", "replay", "query"],
     &["env", "agent"],
     &["expert"],

@@ -13,6 +13,9 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
+mod common;
+use common::ARLD;
+
 /// glibc's switch for its AVX2/FMA function builds (names of glibc 2.33 on, and the older `_Usable` ones).
 const NO_AVX2_FMA: &str = "glibc.cpu.hwcaps=-AVX2,-FMA,-AVX2_Usable,-FMA_Usable";
 
@@ -111,7 +114,7 @@ fn the_executable_takes_no_elementary_function_from_the_c_library() {
         exported.contains("sin") && exported.contains("powf"),
         "{libm:?} does not look like the C math library"
     );
-    let binary = Path::new(env!("CARGO_BIN_EXE_arld"));
+    let binary = Path::new(ARLD);
     let imported: Vec<String> = nm(&["-D", "--undefined-only"], binary)
         .lines()
         .filter_map(|l| l.split_whitespace().last())
@@ -127,7 +130,7 @@ fn the_executable_takes_no_elementary_function_from_the_c_library() {
 
 /// One short training run; returns the bytes that must not depend on the CPU.
 fn run(env: &str, net: &str, steps: u32, baseline_cpu: bool, out: &Path) -> Vec<(String, Vec<u8>)> {
-    let mut cmd = Command::new(env!("CARGO_BIN_EXE_arld"));
+    let mut cmd = Command::new(ARLD);
     if baseline_cpu {
         cmd.env("GLIBC_TUNABLES", NO_AVX2_FMA)
             .env("ARLD_SIMD", "scalar");

@@ -14,6 +14,8 @@ use std::process::Command;
 use arld::rng::NumpyRng;
 use arld::train::run_dir;
 
+use common::ARLD;
+
 /// The draw's seed when `ARLD_RERUN_DRAW` is not set.
 const DRAW_SEED: u64 = 20261124;
 /// How many runs of each task are computed again (CartPole-v0 runs take about 2 s, Acrobot-v1 about 10 s).
@@ -85,7 +87,7 @@ fn committed_short_runs_compute_again_byte_for_byte() {
         );
         for (k, run) in draw(&all, count, &mut rng).iter().enumerate() {
             let fresh = out.path().join(format!("{env}-{k}"));
-            let status = Command::new(env!("CARGO_BIN_EXE_arld"))
+            let status = Command::new(ARLD)
                 .current_dir(repo())
                 .args(["train", "--quiet", "--config"])
                 .arg(run.join("config.toml"))

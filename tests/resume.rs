@@ -7,7 +7,8 @@ use std::path::Path;
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-const ARLD: &str = env!("CARGO_BIN_EXE_arld");
+mod common;
+use common::ARLD;
 
 fn train_args(args: &[&str], out: &Path) -> Vec<String> {
     let mut v: Vec<String> = ["train", "--quiet"].iter().map(|s| s.to_string()).collect();
@@ -339,7 +340,8 @@ fn a_snapshot_of_another_configuration_is_refused() {
     assert!(String::from_utf8_lossy(&out.stderr).contains("holds no run to resume"));
 }
 
-/// A safetensors file's bytes with one `__metadata__` entry changed (the header rewritten, the data kept).
+/// A safetensors file's bytes with one `__metadata__` entry changed (the header rewritten with its checksum, the
+/// data kept).
 fn with_metadata(file: &[u8], key: &str, value: &str) -> Vec<u8> {
     let n = u64::from_le_bytes(file[..8].try_into().unwrap()) as usize;
     let mut header: serde_json::Value = serde_json::from_slice(&file[8..8 + n]).unwrap();
@@ -348,8 +350,24 @@ fn with_metadata(file: &[u8], key: &str, value: &str) -> Vec<u8> {
         "no {key} in the header"
     );
     header["__metadata__"][key] = value.into();
+    // The checksum (format 2: CRC-32C of the arrays, then of the header with its digits as 00000000) made
+    // again, so that the change is refused for what it says, not as damage.
+    let checksummed = header["__metadata__"].get("crc32c").is_some();
+    if checksummed {
+        header["__metadata__"]["crc32c"] = "00000000".into();
+    }
     let mut text = serde_json::to_vec(&header).unwrap();
     text.resize(text.len().next_multiple_of(8), b' ');
+    if checksummed {
+        let crc = crc32c::crc32c_append(crc32c::crc32c(&file[8 + n..]), &text);
+        let placeholder = b"\"crc32c\":\"00000000\"";
+        let at = text
+            .windows(placeholder.len())
+            .position(|w| w == placeholder)
+            .unwrap();
+        let digits = at + placeholder.len() - 9;
+        text[digits..digits + 8].copy_from_slice(format!("{crc:08x}").as_bytes());
+    }
     let mut out = (text.len() as u64).to_le_bytes().to_vec();
     out.extend_from_slice(&text);
     out.extend_from_slice(&file[8 + n..]);

@@ -6,8 +6,11 @@ use std::process::Command;
 
 use arld::nn::{QNet, SimdLevel};
 
+mod common;
+use common::ARLD;
+
 fn train(level: SimdLevel, net: &str, out: &Path) {
-    let status = Command::new(env!("CARGO_BIN_EXE_arld"))
+    let status = Command::new(ARLD)
         .env("ARLD_SIMD", level.name())
         .args([
             "train",
@@ -68,7 +71,7 @@ fn every_simd_level_gives_byte_identical_runs() {
 
 #[test]
 fn an_unknown_level_is_a_clear_error() {
-    let output = Command::new(env!("CARGO_BIN_EXE_arld"))
+    let output = Command::new(ARLD)
         .env("ARLD_SIMD", "sse9")
         .args(["train", "--env", "CartPole-v0", "--print-config"])
         .output()

@@ -8,7 +8,8 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 use std::time::{Duration, Instant};
 
-const ARLD: &str = env!("CARGO_BIN_EXE_arld");
+mod common;
+use common::ARLD;
 
 /// One cluster at a time: the tests' clusters share the node name and ports.
 static ONE_CLUSTER: std::sync::Mutex<()> = std::sync::Mutex::new(());

@@ -9,7 +9,8 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-const ARLD: &str = env!("CARGO_BIN_EXE_arld");
+mod common;
+use common::ARLD;
 
 fn sweep_args(out: &Path) -> Vec<String> {
     [

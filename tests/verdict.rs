@@ -10,6 +10,8 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
+use common::ARLD;
+
 fn results() -> &'static Path {
     Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/results"))
 }
@@ -178,7 +180,7 @@ fn mountaincar_time_limit_ablation_row_recomputed_from_the_per_run_files() {
 
 fn arld(args: &[&str], out: &Path) {
     // From the repository's root, so that paths in the outputs read as in the committed files.
-    let status = Command::new(env!("CARGO_BIN_EXE_arld"))
+    let status = Command::new(ARLD)
         .current_dir(env!("CARGO_MANIFEST_DIR"))
         .args(args)
         .arg("-o")

@@ -14,6 +14,9 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
+mod common;
+use common::ARLD;
+
 fn e2e_dir() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/e2e")
 }
@@ -66,7 +69,7 @@ struct Outcome {
 
 /// Starts `arld` with `args` (stdout piped, `--quiet` added) and returns it with the URL it printed.
 fn start_arld(args: &[&std::ffi::OsStr], stderr: Stdio) -> (Child, String) {
-    let mut arld = Command::new(env!("CARGO_BIN_EXE_arld"))
+    let mut arld = Command::new(ARLD)
         .args(args)
         .arg("--quiet")
         .stdout(Stdio::piped())
@@ -460,7 +463,7 @@ fn listening_everywhere_prints_a_reachable_url_and_waits_for_the_page() {
     .map(std::ffi::OsStr::new)
     .collect();
     args.push(run.as_os_str());
-    let mut arld = Command::new(env!("CARGO_BIN_EXE_arld"))
+    let mut arld = Command::new(ARLD)
         .args(&args)
         .arg("--quiet")
         .stdout(Stdio::piped())

@@ -2,7 +2,7 @@
 //! the library's types and calls the library; the Python package `arld` (in `arld/__init__.py`) gives it the
 //! interface a Stable-Baselines3 user expects.
 //!
-//! The training loop is the library's ([`arld::train::train_in`]). Python is called back only to step an
+//! The training loop is the library's ([`arld::train::RunBuilder`]). Python is called back only to step an
 //! environment ([`PyEnv`]: any object with `reset(seed) -> list[float]` and `step(action) -> (obs, reward,
 //! terminated, truncated)`) and to ask an expert ([`PyExpert`]: a callable `obs -> int`). An exception raised
 //! there is kept in an [`ErrorSlot`]. An exception from an expert or a callback pauses the run whole (the
@@ -25,8 +25,8 @@ use arld::nn::QNet;
 use arld::rng::NumpyRng;
 use arld::state::Persist;
 use arld::train::{
-    self, Checkpointer, ConfigInput, Control, Driver, EvalPoint, PausedRun, QueryEvent, RunLog,
-    SeedPurpose, StepView, Summary, TrainConfig, seed_for,
+    self, Checkpointer, ConfigInput, Control, Driver, EvalPoint, PausedRun, QueryEvent, RunBuilder,
+    RunLog, SeedPurpose, StepView, Summary, TrainConfig, seed_for,
 };
 use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
@@ -67,7 +67,7 @@ impl ErrorSlot {
     /// The Python exception to raise for a library error: the kept exception with the Rust context as a note,
     /// or `fallback` carrying the context.
     fn raise(&self, py: Python<'_>, err: anyhow::Error, fallback: fn(String) -> PyErr) -> PyErr {
-        let context = format!("{err:#}");
+        let context = arld::errors::error_line(&err);
         match self.0.lock().unwrap_or_else(|e| e.into_inner()).take() {
             Some(original) => {
                 let note = format!("arld: {context}");
@@ -1072,7 +1072,7 @@ fn start_run(
                 None => env::make(&cfg.env)?,
             })
         };
-        let mut env = make(env)?;
+        let env = make(env)?;
         let test_envs = match test_envs {
             Some(objs) => objs
                 .into_iter()
@@ -1153,16 +1153,14 @@ fn start_run(
             )?,
             (None, _) => RunLog::in_memory(),
         };
-        train::train_driven(
-            &cfg,
-            env.as_mut(),
-            test_envs,
-            expert.as_mut().map(|e| &mut **e as &mut dyn Expert),
-            demos.as_ref(),
-            &mut log,
-            &mut remote,
-            resume_state.as_ref(),
-        )?;
+        RunBuilder::new(&cfg)
+            .env(env)
+            .test_envs(test_envs)
+            .expert(expert.as_mut().map(|e| &mut **e as &mut dyn Expert))
+            .demos(demos.as_ref())
+            .driver(&mut remote)
+            .resume_from(resume_state.as_ref())
+            .train(&mut log)?;
         Ok(())
     };
     let thread = std::thread::Builder::new()

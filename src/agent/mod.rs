@@ -7,6 +7,10 @@
 //! `δ_kb = Q_k(s_b, a_b) − (r_b + γ(1 − d_b) Q⁻_k(s'_b, argmax_a Q_k(s'_b, a)))` and
 //! `L_E = max_a [Q(s, a) + M·1(a ≠ a_E)] − Q(s, a_E)`.
 
+mod learner;
+
+pub use learner::Learner;
+
 use crate::nn::{Adam, Grads, NoiseSample, OutputKind, QNet, Workspace, argmax, clip_grad_norm};
 use crate::query::{Needs, Signals, head_variance, js_divergence, noisy_variance, q_gap};
 use crate::replay::Batch;
@@ -77,6 +81,8 @@ pub struct Agent {
     /// Workspaces of the n-step targets (used only when `lambda_n > 0`).
     ws_nstep_online: Workspace,
     ws_nstep_target: Workspace,
+    /// The workspace of the batched test-time forward, grown to the largest batch of observations asked.
+    ws_test: Workspace,
     /// Independent noise samples for acting, the online Q(s, ·), the double-Q argmax and the target (§5).
     noise_act: NoiseSample,
     noise_online: NoiseSample,
@@ -129,6 +135,7 @@ impl Agent {
             ws_next_target: Workspace::new(&online, batch),
             ws_nstep_online: Workspace::new(&online, if cfg.lambda_n > 0.0 { batch } else { 1 }),
             ws_nstep_target: Workspace::new(&online, if cfg.lambda_n > 0.0 { batch } else { 1 }),
+            ws_test: Workspace::new(&online, 0),
             noise_act,
             noise_online,
             noise_argmax,
@@ -310,6 +317,41 @@ impl Agent {
     }
 }
 
+/// The DQN family as a [`Learner`]: the methods above, and the batched test-time policy
+/// ([`test_policy_actions`]).
+impl Learner for Agent {
+    fn begin_episode(&mut self) {
+        Agent::begin_episode(self);
+    }
+
+    fn act(&mut self, obs: &[f32], epsilon: f64, want: Needs) -> (usize, Signals) {
+        Agent::act(self, obs, epsilon, want)
+    }
+
+    fn learn(&mut self, batch: &Batch) -> (UpdateStats, &[f32]) {
+        self.update(batch)
+    }
+
+    fn end_target_period(&mut self) {
+        self.sync_target();
+    }
+
+    fn test_actions(&mut self, obs: &[f32], actions: &mut [usize]) {
+        if self.ws_test.max_batch() < actions.len() {
+            self.ws_test = Workspace::new(&self.online, actions.len());
+        }
+        test_policy_actions(&self.online, &mut self.ws_test, obs, actions);
+    }
+
+    fn save_weights(
+        &self,
+        path: &std::path::Path,
+        metadata: &std::collections::BTreeMap<String, String>,
+    ) -> anyhow::Result<()> {
+        self.online.save(path, metadata)
+    }
+}
+
 impl Persist for Agent {
     /// Writes everything that changes while the agent learns and acts (online and target weights, Adam's
     /// moments and step, the generator, the active head, the noise samples) into `state` under `prefix`.
@@ -336,7 +378,17 @@ impl Persist for Agent {
         self.target.load_state(&format!("{prefix}.target"), state)?;
         self.adam.load_state(&format!("{prefix}.adam"), state)?;
         self.rng = state.text(&format!("{prefix}.rng"))?;
-        self.active_head = state.value(&format!("{prefix}.active_head"))?;
+        let active_head: usize = state.value(&format!("{prefix}.active_head"))?;
+        if active_head >= self.online.heads() {
+            return Err(StateError::Value {
+                name: format!("{prefix}.active_head"),
+                msg: format!(
+                    "head {active_head}, but the network has {} heads",
+                    self.online.heads()
+                ),
+            });
+        }
+        self.active_head = active_head;
         for (name, noise) in [
             ("act", &mut self.noise_act),
             ("online", &mut self.noise_online),

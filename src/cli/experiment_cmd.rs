@@ -130,7 +130,7 @@ pub struct ReproduceArgs {
     /// A few minutes on CartPole-v0: the methods comparison with 3 seeds.
     #[arg(long)]
     quick: bool,
-    /// Which parts: methods, t_query, experts, n_r, ablations, effort, held_out (repeatable) [default: all].
+    /// Which parts: methods, t_query, experts, n_r, ablations, effort, held_out, held_out_2 (repeatable) [default: all].
     #[arg(long)]
     part: Vec<String>,
     /// Parallel runs (0: one per core).

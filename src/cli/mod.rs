@@ -19,19 +19,3 @@ pub fn last_seed(seed: u64, episodes: usize) -> anyhow::Result<u64> {
     seed.checked_add(episodes as u64 - 1)
         .context("--seed plus --episodes overflows the 64-bit seed range")
 }
-
-/// An error with its causes on one line, `outer: cause: root`, leaving out a cause whose text an outer message
-/// already includes (many errors name their cause in their own message).
-pub fn error_line(err: &anyhow::Error) -> String {
-    let mut line = String::new();
-    for cause in err.chain() {
-        let part = cause.to_string();
-        if !line.contains(part.trim()) {
-            if !line.is_empty() {
-                line.push_str(": ");
-            }
-            line.push_str(part.trim());
-        }
-    }
-    line
-}

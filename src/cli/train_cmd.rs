@@ -14,7 +14,10 @@ arld train --env CartPole-v0 --method adqn --expert web     (a person answers in
 Configuration is layered: the paper's preset for the task and method, then --config FILE (TOML with any of the \
 keys), then each --set key=value. `arld train --env ID --method M --print-config` shows every key with its value.\n\n\
 A run snapshots itself every `snapshot_every` steps and when stopped (Ctrl-C, SIGTERM); `arld train --resume RUN_DIR` \
-continues it to the results an uninterrupted run gives (a run stopped before its first snapshot starts again from step 0). \
+continues it to the results an uninterrupted run gives (a run stopped before its first snapshot starts again from step 0); \
+a snapshot that cannot be read (damaged, or a link, folder or device in its place) is an error that keeps it, and \
+`arld train --resume RUN_DIR --restart` starts the run over. One process works in a run directory at a time: a second \
+`arld train` there is refused, naming the one that holds it. \
 A run that ends with an error writes failed.json in its directory: the error, the step, the time, the arld version and commit."
 )]
 pub struct TrainArgs {
@@ -75,6 +78,10 @@ pub struct TrainArgs {
     /// (its config.toml); a run stopped before its first snapshot starts again from step 0.
     #[arg(long, value_name = "RUN_DIR", conflicts_with_all = ["env", "config", "overrides", "expert", "demos", "out", "overwrite", "print_config"])]
     resume: Option<PathBuf>,
+    /// With --resume: start the run in RUN_DIR over from step 0 with its configuration, discarding its snapshot
+    /// and logs (its failed.json is kept until the run finishes).
+    #[arg(long, requires = "resume")]
+    restart: bool,
     /// Hide the progress bar.
     #[arg(long)]
     quiet: bool,
@@ -166,10 +173,35 @@ pub fn run(args: TrainArgs) -> anyhow::Result<ExitCode> {
         .clone()
         .or_else(|| args.out.clone())
         .unwrap_or_else(|| PathBuf::from("runs").join(cfg.run_name()));
+    // One process per run directory: the lock is taken before anything in it is removed or written.
+    anyhow::ensure!(
+        !dir.exists() || dir.is_dir(),
+        "the run directory {} exists and is not a directory",
+        dir.display()
+    );
+    std::fs::create_dir_all(&dir)
+        .map_err(|e| anyhow::anyhow!("cannot create the run directory {}: {e}", dir.display()))?;
+    let _lock =
+        arld::experiment::dir_lock::DirLock::acquire(&dir, arld::train::run_dir::LOCK_FILE)?;
     match &args.resume {
         None => arld::train::run_dir::prepare_new_run(&dir, args.overwrite)?,
-        // Killed before its first snapshot: nothing to continue from, so the run starts again.
-        Some(resume) if !resume.join(arld::train::snapshot::SNAPSHOT_FILE).is_file() => {
+        Some(resume) if args.restart => {
+            eprintln!(
+                "arld: starting the run in {} over from step 0 (--restart)",
+                resume.display()
+            );
+            arld::train::run_dir::prepare_restart(resume)?;
+        }
+        // Killed before its first snapshot: nothing to continue from, so the run starts again. Only a missing
+        // snapshot means that: anything else in its place is an error that keeps it.
+        Some(resume)
+            if !arld::files::own_file_exists(
+                &resume.join(arld::train::snapshot::SNAPSHOT_FILE),
+            )
+            .map_err(|e| {
+                anyhow::anyhow!("cannot resume the run: {e}; --restart starts it over")
+            })? =>
+        {
             eprintln!(
                 "arld: {} has no snapshot yet (the run stopped before its first one): starting it again from step 0",
                 resume.display()
@@ -198,7 +230,7 @@ pub fn run(args: TrainArgs) -> anyhow::Result<ExitCode> {
         }
         Err(err) => {
             // Whatever ended it, the run stays incomplete: no summary.json, its logs whole up to here.
-            eprintln!("error: {}", super::error_line(&err));
+            eprintln!("error: {}", arld::errors::error_line(&err));
             if !dir.join(arld::train::run_dir::CONFIG_FILE).is_file() {
                 return Ok(ExitCode::FAILURE);
             }

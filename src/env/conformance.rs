@@ -207,6 +207,10 @@ struct Episode {
     exact: bool,
 }
 
+/// The longest line of a trace file (a step line is a few hundred bytes; a start line with a recorded state a
+/// few kilobytes).
+pub const MAX_LINE_BYTES: usize = 1 << 20;
+
 /// Replays a trace file. See [`check_reader`].
 pub fn check_file(path: &Path) -> Result<Vec<EnvReport>, ConformanceError> {
     let file_name = path.display().to_string();
@@ -237,17 +241,25 @@ pub fn check_reader(
         error,
     };
 
-    for (index, text) in reader.lines().enumerate() {
+    let mut reader = reader;
+    let mut bytes = Vec::new();
+    for index in 0.. {
         let line = index + 1;
-        let text = text.map_err(|error| ConformanceError::Io {
-            file: file_name.to_string(),
-            error,
-        })?;
+        // Lines are bounded: an input without line breaks (`/dev/zero`) is an error, not all of the memory.
+        let more = crate::files::read_line_bounded(&mut reader, &mut bytes, MAX_LINE_BYTES)
+            .map_err(|error| ConformanceError::Io {
+                file: format!("{file_name}:{line}"),
+                error,
+            })?;
+        if !more {
+            break;
+        }
+        let text = std::str::from_utf8(&bytes).map_err(|_| malformed(line, "not UTF-8".into()))?;
         if text.trim().is_empty() {
             continue;
         }
         let parsed: TraceLine =
-            serde_json::from_str(&text).map_err(|err| malformed(line, err.to_string()))?;
+            serde_json::from_str(text).map_err(|err| malformed(line, err.to_string()))?;
         match parsed {
             TraceLine::Meta {} => {}
             TraceLine::Start {

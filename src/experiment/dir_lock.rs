@@ -1,4 +1,5 @@
-//! The lock of a sweep directory: one `arld sweep` (or one shard of it) works in a directory at a time. The lock
+//! The lock of a working directory: one `arld sweep` (or one shard of it) works in a sweep directory at a time,
+//! and one `arld train` (a new run, `--resume`, `--restart`) in a run directory. The lock
 //! is a file naming its holder (pid, host, start time), created atomically (written aside, then hard-linked into
 //! place, which fails if it exists) and removed when the holder ends. A lock whose holder is gone (a process of
 //! this host that no longer exists, e.g. after SIGKILL) is stale: it is taken over with a warning. A lock held
@@ -49,7 +50,11 @@ impl DirLock {
         let path = dir.join(name);
         let me = Holder::this_process();
         let temp = dir.join(format!("{name}.{}.tmp", me.pid));
-        std::fs::write(&temp, serde_json::to_string(&me)?)
+        // Written without following a link someone put at the temporary name.
+        crate::files::open_own_file(&temp, true)
+            .and_then(|mut f| {
+                std::io::Write::write_all(&mut f, serde_json::to_string(&me)?.as_bytes())
+            })
             .with_context(|| format!("cannot write the lock file {}", temp.display()))?;
         let result = Self::link(&temp, &path);
         let _ = std::fs::remove_file(&temp);
@@ -87,7 +92,7 @@ impl DirLock {
                     })?;
                 }
                 Some(holder) => bail!(
-                    "{} is in use by another sweep: process {} on host {} holds {} (since Unix time {}); \
+                    "{} is in use by another arld process: process {} on host {} holds {} (since Unix time {}); \
                      wait for it to finish, or remove the lock file if that process is gone",
                     path.parent().unwrap_or(path).display(),
                     holder.pid,
@@ -96,7 +101,7 @@ impl DirLock {
                     holder.since_unix
                 ),
                 None => bail!(
-                    "{} holds no readable holder (pid, host); if no sweep runs in {}, remove it",
+                    "{} holds no readable holder (pid, host); if no arld process works in {}, remove it",
                     path.display(),
                     path.parent().unwrap_or(path).display()
                 ),

@@ -13,16 +13,26 @@
 //! - medians with bootstrap 95% intervals, and two-sided Mann–Whitney p-values of the AUC against GDQN, BDQN
 //!   and ADQN at the same budget and network, on the seeds both cells have.
 //!
-//! Seeds in [`super::protocol::HELD_OUT_SEEDS`] are never pooled with the others: they form cells of their own
-//! (the held-out test), reported in a section of their own with the verdict of the goal.
+//! Seeds in [`super::protocol::HELD_OUT_SEEDS`] and [`super::protocol::SECOND_HELD_OUT_SEEDS`] are never pooled
+//! with the others: they form cells of their own (the two held-out tests), reported in sections of their own.
+//!
+//! Every comparison of a rule with a paper rule is reported with the Hodges–Lehmann shift of the AUC and its 95%
+//! interval, the raw Mann–Whitney p and the Holm-adjusted p within its family ([`Family`]), two one-sided tests of
+//! equivalence within [`EQUIVALENCE_MARGIN`], and the paired Wilcoxon test on the seeds both share (the same seed
+//! gives both rules the same initial weights, the same replay and rule random streams and the same first resets).
+//! A run's AUC is an exactly rounded sum ([`exact_sum`]), so equal curves give equal AUCs and ties stay ties.
 
 use super::plot::{Band, Curve, FigureContent, Panel, XScale};
 use super::protocol::{
-    DESIGN_SEEDS, EFFORT_NET, EFFORT_SCREEN_TASKS, HELD_OUT_SEEDS, OWN_RULE_CANDIDATES, env_order,
-    is_effort_variant, paper_budget,
+    DESIGN_SEEDS, EFFORT_NET, EFFORT_SCREEN_TASKS, EQUIVALENCE_MARGIN, HELD_OUT_SEEDS,
+    OWN_RULE_CANDIDATES, PAPER_SEEDS, SECOND_HELD_OUT_CELLS, SECOND_HELD_OUT_RULE,
+    SECOND_HELD_OUT_SEEDS, TEST_LEVEL, env_order, is_effort_variant, paper_budget, scaled_budget,
 };
-use super::stats::{bootstrap_median_interval, final_score, mann_whitney, median, sustained};
-use super::verdict::{ALPHA, FINAL_EVALUATIONS};
+use super::stats::{
+    bootstrap_median_interval, detectable_difference, equivalence_p, exact_sum, final_score,
+    hodges_lehmann, holm, mann_whitney, median, sample_sd, sustained, wilcoxon_signed_rank,
+};
+use super::verdict::FINAL_EVALUATIONS;
 use crate::train::run_dir::{DEFAULT_VARIANT, RunRecord};
 use anyhow::{Context, Result};
 use rand::{Rng, SeedableRng};
@@ -58,11 +68,40 @@ struct RunMetrics {
     questions_at: Vec<(u64, u64)>,
 }
 
-/// One cell's key: task, rule label, network, budget, held out or not.
-type CellKey = (String, String, String, usize, bool);
+/// Which seeds a cell holds: the design and screen seeds, the first held-out test's or the second's.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+enum Group {
+    Screen,
+    HeldOut,
+    SecondHeldOut,
+}
 
-/// The key of `rule`'s cell at the paper's budget for `env` with network `net`, held out or not.
-fn paper_cell(env: &str, rule: &str, net: &str, held_out: bool) -> CellKey {
+impl Group {
+    fn of(seed: u64) -> Group {
+        if HELD_OUT_SEEDS.contains(&seed) {
+            Group::HeldOut
+        } else if SECOND_HELD_OUT_SEEDS.contains(&seed) {
+            Group::SecondHeldOut
+        } else {
+            Group::Screen
+        }
+    }
+
+    /// effort.csv's `held_out` column.
+    fn csv(self) -> &'static str {
+        match self {
+            Group::Screen => "false",
+            Group::HeldOut => "true",
+            Group::SecondHeldOut => "second",
+        }
+    }
+}
+
+/// One cell's key: task, rule label, network, budget, seed group.
+type CellKey = (String, String, String, usize, Group);
+
+/// The key of `rule`'s cell at the paper's budget for `env` with network `net`, in seed group `held_out`.
+fn paper_cell(env: &str, rule: &str, net: &str, held_out: Group) -> CellKey {
     (
         env.to_string(),
         rule.to_string(),
@@ -146,17 +185,16 @@ fn references(env: &str) -> Result<(f64, f64)> {
     Ok((random_mean, stats.mean))
 }
 
+/// What `run` measured; its evaluation means are finite ([`super::report::report`] refuses a run otherwise).
 fn metrics(run: &RunRecord, reference: (f64, f64), k: usize) -> Result<RunMetrics> {
     let (random, expert) = reference;
     let span = expert - random;
     let auc = if run.eval.is_empty() {
         f64::NAN
     } else {
-        run.eval
-            .iter()
-            .map(|p| (p.mean - random) / span)
-            .sum::<f64>()
-            / run.eval.len() as f64
+        // The mean return first (an exactly rounded sum), then normalised: runs whose means have equal sums get
+        // equal AUCs, whatever the order of their evaluations.
+        (exact_sum(run.eval.iter().map(|p| p.mean)) / run.eval.len() as f64 - random) / span
     };
     let questions = run.query_steps.as_ref().map_or(0, Vec::len);
     let questions_at = run
@@ -212,25 +250,556 @@ fn fmt_p(p: Option<f64>) -> String {
     }
 }
 
+/// The AUCs of `cell` and `other` on the seeds both have, in seed order (pair i is one seed).
+fn shared(cell: &[RunMetrics], other: &[RunMetrics]) -> (Vec<f64>, Vec<f64>) {
+    let mut pairs: Vec<(u64, f64, f64)> = cell
+        .iter()
+        .filter_map(|m| {
+            let o = other.iter().find(|o| o.seed == m.seed)?;
+            Some((m.seed, m.auc, o.auc))
+        })
+        .collect();
+    pairs.sort_by_key(|p| p.0);
+    pairs.iter().map(|p| (p.1, p.2)).unzip()
+}
+
 /// The AUC p-value of `cell` against `other` on the seeds both have; with the sign of the difference of medians.
 fn compare(cell: &[RunMetrics], other: Option<&Vec<RunMetrics>>) -> (Option<f64>, f64) {
     let Some(other) = other else {
         return (None, 0.0);
     };
-    let seeds: Vec<u64> = cell.iter().map(|m| m.seed).collect();
-    let theirs: Vec<f64> = other
-        .iter()
-        .filter(|m| seeds.contains(&m.seed))
-        .map(|m| m.auc)
-        .collect();
-    let ours: Vec<f64> = cell
-        .iter()
-        .filter(|m| other.iter().any(|o| o.seed == m.seed))
-        .map(|m| m.auc)
-        .collect();
+    let (ours, theirs) = shared(cell, other);
     let p = mann_whitney(&ours, &theirs).map(|(_, p)| p);
     let diff = median(&ours).unwrap_or(f64::NAN) - median(&theirs).unwrap_or(f64::NAN);
     (p, diff)
+}
+
+/// A family of comparisons, within which Holm's adjustment runs.
+#[derive(Clone, Debug, PartialEq, Eq, PartialOrd, Ord)]
+enum Family {
+    /// One task's cells on the design and screen seeds: every rule against every paper rule at the same budget
+    /// and network, and the paper rules among themselves.
+    Screen(String),
+    /// One task's cells on the first held-out seeds.
+    HeldOut(String),
+    /// The second held-out test: its rule against each paper rule in each of its cells.
+    SecondTest,
+    /// The paper rules among themselves on the second held-out seeds.
+    SecondPaper,
+    /// One task's budget comparisons of "What the expert's effort buys" (the largest budget against the smallest).
+    Budgets(String),
+}
+
+impl Family {
+    fn describe(&self) -> String {
+        match self {
+            Family::Screen(env) => format!("{env}, seeds outside the held-out ones"),
+            Family::HeldOut(env) => format!("{env}, held-out seeds {}", seed_span(&HELD_OUT_SEEDS)),
+            Family::SecondTest => format!(
+                "the second held-out test ({SECOND_HELD_OUT_RULE} against the paper rules, seeds {})",
+                seed_span(&SECOND_HELD_OUT_SEEDS)
+            ),
+            Family::SecondPaper => format!(
+                "the paper rules among themselves, seeds {}",
+                seed_span(&SECOND_HELD_OUT_SEEDS)
+            ),
+            Family::Budgets(env) => {
+                format!("{env}, largest budget against smallest (design seeds)")
+            }
+        }
+    }
+}
+
+/// One comparison of a rule's AUC with another's on the seeds both have (`a` the rule, `b` the other).
+#[derive(Clone, Debug)]
+struct Comparison {
+    family: Family,
+    a: CellKey,
+    b: CellKey,
+    seeds: usize,
+    /// Hodges–Lehmann shift of a over b and its 95% interval.
+    shift: Option<(f64, (f64, f64))>,
+    p: Option<f64>,
+    holm: Option<f64>,
+    /// Two one-sided tests of equivalence within the margin, raw and Holm-adjusted in the family.
+    tost: Option<f64>,
+    tost_holm: Option<f64>,
+    /// Paired: Hodges–Lehmann shift of the seed-by-seed differences and the Wilcoxon p, raw and adjusted.
+    paired: Option<(f64, f64)>,
+    paired_holm: Option<f64>,
+}
+
+impl Comparison {
+    fn new(
+        family: Family,
+        a: &CellKey,
+        b: &CellKey,
+        cell_a: &[RunMetrics],
+        cell_b: &[RunMetrics],
+    ) -> Self {
+        let (ours, theirs) = shared(cell_a, cell_b);
+        Comparison {
+            family,
+            a: a.clone(),
+            b: b.clone(),
+            seeds: ours.len(),
+            shift: hodges_lehmann(&ours, &theirs, 0.95),
+            p: mann_whitney(&ours, &theirs).map(|(_, p)| p),
+            holm: None,
+            tost: equivalence_p(&ours, &theirs, EQUIVALENCE_MARGIN),
+            tost_holm: None,
+            paired: wilcoxon_signed_rank(&ours, &theirs),
+            paired_holm: None,
+        }
+    }
+
+    fn significant(&self) -> bool {
+        self.holm.is_some_and(|p| p < TEST_LEVEL)
+    }
+
+    fn level(&self) -> bool {
+        self.tost_holm.is_some_and(|p| p < TEST_LEVEL)
+    }
+
+    fn shift_value(&self) -> f64 {
+        self.shift.map_or(f64::NAN, |s| s.0)
+    }
+
+    /// "+0.012 [-0.020, +0.041]".
+    fn shift_text(&self) -> String {
+        match self.shift {
+            Some((s, (lo, hi))) => format!("{s:+.3} [{lo:+.3}, {hi:+.3}]"),
+            None => "–".into(),
+        }
+    }
+
+    /// What the comparison says in words: significantly higher or lower (adjusted p), level (adjusted TOST), or
+    /// no difference detected.
+    fn reading(&self) -> String {
+        if self.significant() {
+            if self.shift_value() > 0.0 {
+                "significantly higher"
+            } else {
+                "significantly lower"
+            }
+            .to_string()
+        } else if self.level() {
+            format!("level (within ±{EQUIVALENCE_MARGIN})")
+        } else {
+            "no difference detected".to_string()
+        }
+    }
+}
+
+/// Holm's adjustment of the unpaired, equivalence and paired p-values within each family.
+fn adjust(comparisons: &mut [Comparison]) {
+    let families: std::collections::BTreeSet<Family> =
+        comparisons.iter().map(|c| c.family.clone()).collect();
+    for family in families {
+        let idx: Vec<usize> = (0..comparisons.len())
+            .filter(|&i| comparisons[i].family == family)
+            .collect();
+        // The second held-out test's family is its fixed set of comparisons: while some have not run, they count
+        // as tests that found nothing (p = 1), so that a partial family is never adjusted more leniently.
+        let size = if family == Family::SecondTest {
+            SECOND_HELD_OUT_CELLS.len() * BASELINES.len()
+        } else {
+            0
+        };
+        let padded = |values: Vec<Option<f64>>| -> Vec<Option<f64>> {
+            let missing = size.saturating_sub(values.len());
+            values
+                .into_iter()
+                .chain(std::iter::repeat_n(Some(1.0), missing))
+                .collect()
+        };
+        let p = holm(&padded(idx.iter().map(|&i| comparisons[i].p).collect()));
+        let t = holm(&padded(idx.iter().map(|&i| comparisons[i].tost).collect()));
+        let w = holm(&padded(
+            idx.iter()
+                .map(|&i| comparisons[i].paired.map(|x| x.1))
+                .collect(),
+        ));
+        for (j, &i) in idx.iter().enumerate() {
+            comparisons[i].holm = p[j];
+            comparisons[i].tost_holm = t[j];
+            comparisons[i].paired_holm = w[j];
+        }
+    }
+}
+
+/// Every comparison of a cell with a paper rule at the same task, budget, network and seed group, each pair
+/// once (the paper rules among themselves: the later of the three against the earlier), Holm-adjusted within
+/// its family.
+fn comparisons(cells: &BTreeMap<CellKey, Vec<RunMetrics>>) -> Vec<Comparison> {
+    let mut out = Vec::new();
+    for (key, cell) in cells {
+        for (label, _) in BASELINES {
+            let rank = rank_rule(&key.1);
+            if rank <= rank_rule(label) {
+                continue;
+            }
+            let base = (
+                key.0.clone(),
+                label.to_string(),
+                key.2.clone(),
+                key.3,
+                key.4,
+            );
+            let Some(other) = cells.get(&base) else {
+                continue;
+            };
+            let family = match key.4 {
+                Group::Screen => Family::Screen(key.0.clone()),
+                Group::HeldOut => Family::HeldOut(key.0.clone()),
+                Group::SecondHeldOut if rank == BASELINES.len() => Family::SecondTest,
+                Group::SecondHeldOut => Family::SecondPaper,
+            };
+            out.push(Comparison::new(family, key, &base, cell, other));
+        }
+    }
+    out
+}
+
+/// The budget comparisons of "What the expert's effort buys": for every rule run at two budgets or more on a
+/// task, its largest budget against its smallest, on the design seeds.
+fn budget_comparisons(cells: &BTreeMap<CellKey, Vec<RunMetrics>>) -> Vec<Comparison> {
+    let mut by_rule: BTreeMap<(String, String, String), Vec<&CellKey>> = BTreeMap::new();
+    for (key, cell) in cells {
+        if key.4 == Group::Screen && cell.iter().any(|m| DESIGN_SEEDS.contains(&m.seed)) {
+            by_rule
+                .entry((key.0.clone(), key.1.clone(), key.2.clone()))
+                .or_default()
+                .push(key);
+        }
+    }
+    let design = |key: &CellKey| -> Vec<RunMetrics> {
+        cells[key]
+            .iter()
+            .filter(|m| DESIGN_SEEDS.contains(&m.seed))
+            .cloned()
+            .collect()
+    };
+    let mut out = Vec::new();
+    for ((env, _, _), keys) in by_rule {
+        let (Some(lo), Some(hi)) = (
+            keys.iter().min_by_key(|k| k.3),
+            keys.iter().max_by_key(|k| k.3),
+        ) else {
+            continue;
+        };
+        if lo.3 == hi.3 {
+            continue;
+        }
+        out.push(Comparison::new(
+            Family::Budgets(env),
+            hi,
+            lo,
+            &design(hi),
+            &design(lo),
+        ));
+    }
+    out
+}
+
+/// The comparison of cell `a` with paper rule cell `b` (in either order), with a's shift.
+fn find<'a>(comparisons: &'a [Comparison], a: &CellKey, b: &CellKey) -> Option<&'a Comparison> {
+    comparisons
+        .iter()
+        .find(|c| (&c.a == a && &c.b == b) || (&c.a == b && &c.b == a))
+}
+
+/// Whether `a` is significantly above (`Some(true)`) or below (`Some(false)`) `b` after Holm's adjustment.
+fn significant_side(comparisons: &[Comparison], a: &CellKey, b: &CellKey) -> Option<bool> {
+    let c = find(comparisons, a, b).filter(|c| c.significant())?;
+    let above = c.shift_value() > 0.0;
+    Some(if &c.a == a { above } else { !above })
+}
+
+/// "p = 0.012, Holm 0.036".
+fn adjusted_phrase(c: &Comparison) -> String {
+    format!("{}, Holm {}", p_phrase(c.p), fmt_p(c.holm))
+}
+
+/// effort.md's section "Every comparison": one table per family.
+fn comparison_tables(comparisons: &[Comparison]) -> String {
+    let mut out = format!(
+        "## Every comparison\n\nEach rule against each paper rule at the same budget and network, on the seeds \
+         both have (each pair once). Shift: the Hodges-Lehmann shift of the AUC (the rule minus the other) with \
+         its 95% interval; p: two-sided Mann-Whitney, raw and Holm-adjusted within the family of the table; \
+         equivalence: two one-sided tests that the shift lies within ±{EQUIVALENCE_MARGIN}, Holm-adjusted; paired: \
+         the Hodges-Lehmann shift of the seed-by-seed differences and the Wilcoxon signed-rank p, raw and \
+         Holm-adjusted (the same seed gives both rules the same initial weights, the same replay and rule random \
+         streams and the same first resets). The reading follows the adjusted p at {TEST_LEVEL}: significantly \
+         higher or lower, level (equivalent within the margin), or no difference detected.\n"
+    );
+    let families: std::collections::BTreeSet<Family> =
+        comparisons.iter().map(|c| c.family.clone()).collect();
+    let order = |f: &Family| match f {
+        Family::Screen(e) | Family::HeldOut(e) | Family::Budgets(e) => {
+            (crate::paper::task_index(e).unwrap_or(usize::MAX), e.clone())
+        }
+        _ => (usize::MAX, String::new()),
+    };
+    let mut families: Vec<Family> = families.into_iter().collect();
+    families.sort_by_key(|f| {
+        let kind = match f {
+            Family::Screen(_) => 0,
+            Family::HeldOut(_) => 1,
+            Family::SecondTest => 2,
+            Family::SecondPaper => 3,
+            Family::Budgets(_) => 4,
+        };
+        (kind, order(f))
+    });
+    for family in families {
+        let rows: Vec<&Comparison> = comparisons.iter().filter(|c| c.family == family).collect();
+        let _ = writeln!(
+            out,
+            "\n### {} ({} comparisons)\n\n| task | rule | net | budget | against | seeds | shift | p | Holm p | \
+             equivalence Holm p | reading | paired shift | paired p | paired Holm p |\n|---|---|---|---|---|---|\
+             ---|---|---|---|---|---|---|---|",
+            family.describe(),
+            rows.len()
+        );
+        for c in rows {
+            let _ = writeln!(
+                out,
+                "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
+                c.a.0,
+                c.a.1,
+                c.a.2,
+                if c.a.3 == c.b.3 {
+                    c.a.3.to_string()
+                } else {
+                    format!("{} vs {}", c.a.3, c.b.3)
+                },
+                if c.a.1 == c.b.1 {
+                    budget_multiple(&c.b.0, c.b.3)
+                } else {
+                    c.b.1.clone()
+                },
+                c.seeds,
+                c.shift_text(),
+                fmt_p(c.p),
+                fmt_p(c.holm),
+                fmt_p(c.tost_holm),
+                c.reading(),
+                c.paired.map_or("–".into(), |x| format!("{:+.3}", x.0)),
+                fmt_p(c.paired.map(|x| x.1)),
+                fmt_p(c.paired_holm),
+            );
+        }
+    }
+    out
+}
+
+/// effort_comparisons.csv: every comparison of [`comparison_tables`] with full precision.
+fn comparisons_csv(comparisons: &[Comparison]) -> String {
+    let mut out = String::from(
+        "family,env,rule,net,budget,held_out,against,against_budget,seeds,shift,shift_lo,shift_hi,p,p_holm,\
+         equivalence_p,equivalence_p_holm,paired_shift,paired_p,paired_p_holm,reading\n",
+    );
+    let v = |x: Option<f64>| x.map_or(String::new(), |x| format!("{x}"));
+    for c in comparisons {
+        let _ = writeln!(
+            out,
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
+            csv_field(&c.family.describe()),
+            c.a.0,
+            csv_field(&c.a.1),
+            c.a.2,
+            c.a.3,
+            c.a.4.csv(),
+            csv_field(&c.b.1),
+            c.b.3,
+            c.seeds,
+            v(c.shift.map(|s| s.0)),
+            v(c.shift.map(|s| s.1.0)),
+            v(c.shift.map(|s| s.1.1)),
+            v(c.p),
+            v(c.holm),
+            v(c.tost),
+            v(c.tost_holm),
+            v(c.paired.map(|x| x.0)),
+            v(c.paired.map(|x| x.1)),
+            v(c.paired_holm),
+            csv_field(&c.reading()),
+        );
+    }
+    out
+}
+
+/// The smallest AUC difference each task's test detects with 80% power at [`PAPER_SEEDS`] seeds a rule, from the
+/// robust standard deviation of the paper rules' AUCs at the paper's budget with [`EFFORT_NET`] (pooled over the three,
+/// seeds outside the held-out ones): for one comparison at the level, and at the first step of Holm's procedure
+/// over the task's screen family.
+fn detectable(
+    cells: &BTreeMap<CellKey, Vec<RunMetrics>>,
+    comparisons: &[Comparison],
+    envs: &[String],
+) -> String {
+    let mut out = format!(
+        "## The smallest detectable difference\n\nThe smallest shift of the AUC that a two-sided Mann-Whitney test \
+         at {TEST_LEVEL} detects with 80% power with {PAPER_SEEDS} seeds a rule (normal approximation, the \
+         test's efficiency 3/pi), from the spread of the paper rules' AUCs at the paper's budget with the {} \
+         network (the interquartile range over 1.349, a standard deviation robust to seeds that never learn, \
+         pooled over GDQN, BDQN and ADQN, seeds outside the held-out ones): for one comparison, \
+         and at the first step of Holm's procedure over the task's screen family (level divided by its size). \
+         Differences smaller than these are not ruled out by \"no difference detected\".\n\n| task | robust sd of the \
+         AUC | one comparison | screen family | first Holm step |\n|---|---|---|---|---|",
+        EFFORT_NET.name()
+    );
+    for env in envs {
+        let variances: Vec<f64> = BASELINES
+            .iter()
+            .filter_map(|(label, _)| {
+                let cell = cells.get(&paper_cell(env, label, EFFORT_NET.name(), Group::Screen))?;
+                let aucs: Vec<f64> = cell.iter().map(|m| m.auc).collect();
+                robust_sd(&aucs).map(|sd| sd * sd)
+            })
+            .collect();
+        if variances.is_empty() {
+            continue;
+        }
+        let sd = (exact_sum(variances.iter().copied()) / variances.len() as f64).sqrt();
+        let n = PAPER_SEEDS as usize;
+        let m = comparisons
+            .iter()
+            .filter(|c| c.family == Family::Screen(env.clone()) && c.p.is_some())
+            .count()
+            .max(1);
+        let _ = write!(
+            out,
+            "\n| {env} | {sd:.3} | {:.3} | {m} | {:.3} |",
+            detectable_difference(sd, n, TEST_LEVEL, 0.8),
+            detectable_difference(sd, n, TEST_LEVEL / m as f64, 0.8)
+        );
+    }
+    out.push('\n');
+    out
+}
+
+/// A scale of `values` robust to the seeds that never learn: the interquartile range over 1.349 (the standard
+/// deviation for normal data); the sample standard deviation where the quartiles coincide.
+fn robust_sd(values: &[f64]) -> Option<f64> {
+    let iqr = super::stats::quantile(values, 0.75)? - super::stats::quantile(values, 0.25)?;
+    if iqr > 0.0 {
+        Some(iqr / 1.349)
+    } else {
+        sample_sd(values)
+    }
+}
+
+/// The second held-out test: its rule against GDQN, BDQN and ADQN in each of its cells, the primary analysis
+/// (unpaired, Holm over the family) and the secondary one (paired), and what it says.
+fn second_test(cells: &BTreeMap<CellKey, Vec<RunMetrics>>, comparisons: &[Comparison]) -> String {
+    let mut out = format!(
+        "## The second held-out test\n\n`{SECOND_HELD_OUT_RULE}` against GDQN, BDQN and ADQN at a fraction of \
+         the paper's budget, {} network, seeds {} (fixed in src/experiment/protocol.rs before any of these runs). \
+         Primary analysis: two-sided Mann-Whitney of the AUC, Holm-adjusted over the test's comparisons; the rule \
+         wins a cell if it is significantly higher than all three paper rules there. Shift: the rule minus the \
+         paper rule, Hodges-Lehmann with 95% interval. Equivalence: two one-sided tests within \
+         ±{EQUIVALENCE_MARGIN}, Holm-adjusted. Paired (secondary): Wilcoxon signed-rank on the shared seeds.\n\n\
+         | cell | seeds | against | shift | p | Holm p | equivalence Holm p | reading | paired shift | paired Holm \
+         p |\n|---|---|---|---|---|---|---|---|---|---|",
+        EFFORT_NET.name(),
+        seed_span(&SECOND_HELD_OUT_SEEDS)
+    );
+    let full = SECOND_HELD_OUT_SEEDS.count();
+    let rule = SECOND_HELD_OUT_RULE
+        .parse::<crate::query::RuleSpec>()
+        .map(|s| s.to_string())
+        .unwrap_or_else(|_| SECOND_HELD_OUT_RULE.to_string());
+    let mut readings = Vec::new();
+    let mut any = false;
+    for (env, scale) in SECOND_HELD_OUT_CELLS {
+        let budget = scaled_budget(env, scale);
+        let key = |label: &str| {
+            (
+                env.to_string(),
+                label.to_string(),
+                EFFORT_NET.name().to_string(),
+                budget,
+                Group::SecondHeldOut,
+            )
+        };
+        let name = format!("{env} {} ({budget})", budget_multiple(env, budget));
+        let counts: Vec<usize> = std::iter::once(rule.as_str())
+            .chain(BASELINES.iter().map(|(l, _)| *l))
+            .map(|l| cells.get(&key(l)).map_or(0, Vec::len))
+            .collect();
+        if counts.iter().all(|&c| c == 0) {
+            readings.push(format!("{name}: not run yet."));
+            continue;
+        }
+        any = true;
+        if !counts.iter().all(|&c| c == full) {
+            readings.push(format!(
+                "{name}: incomplete ({} of {full} seeds for the slowest rule so far); no reading until every rule \
+                 has every seed.",
+                counts.iter().min().unwrap_or(&0)
+            ));
+            continue;
+        }
+        let (mut above, mut below, mut level) = (0, 0, 0);
+        let mut ruled_out = Vec::new();
+        for (label, method) in BASELINES {
+            let Some(c) = find(comparisons, &key(&rule), &key(label)) else {
+                let _ = write!(
+                    out,
+                    "\n| {name} | – | {} | – | – | – | – | not run yet | – | – |",
+                    method.to_uppercase()
+                );
+                continue;
+            };
+            let _ = write!(
+                out,
+                "\n| {name} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
+                c.seeds,
+                method.to_uppercase(),
+                c.shift_text(),
+                fmt_p(c.p),
+                fmt_p(c.holm),
+                fmt_p(c.tost_holm),
+                c.reading(),
+                c.paired.map_or("–".into(), |x| format!("{:+.3}", x.0)),
+                fmt_p(c.paired_holm),
+            );
+            if c.significant() && c.shift_value() > 0.0 {
+                above += 1;
+            } else if c.significant() {
+                below += 1;
+            } else if c.level() {
+                level += 1;
+            }
+            if let Some((_, (_, hi))) = c.shift {
+                ruled_out.push(format!("{hi:+.3} over {}", method.to_uppercase()));
+            }
+        }
+        let verdict = if above == BASELINES.len() {
+            "a win: significantly higher than all three paper rules".to_string()
+        } else {
+            format!(
+                "no win: significantly higher than {above} of the three paper rules, significantly lower than \
+                 {below}, level with {level}; gains above {} are ruled out at 95%",
+                ruled_out.join(", ")
+            )
+        };
+        readings.push(format!("{name}: {verdict}."));
+    }
+    if !any {
+        return format!(
+            "## The second held-out test\n\nNot run yet: `arld reproduce --part held_out_2` runs \
+             `{SECOND_HELD_OUT_RULE}` and the paper's rules on seeds {}.\n",
+            seed_span(&SECOND_HELD_OUT_SEEDS)
+        );
+    }
+    out.push_str("\n\n");
+    for r in readings {
+        let _ = writeln!(out, "- {r}");
+    }
+    out
 }
 
 /// What the effort benchmark wrote.
@@ -238,6 +807,8 @@ pub struct EffortReport {
     /// Markdown (also the body of effort.md).
     pub markdown: String,
     pub csv: String,
+    /// effort_comparisons.csv: every comparison with its shift, interval and raw and adjusted p-values.
+    pub comparisons_csv: String,
     pub figures: Vec<(String, FigureContent)>,
 }
 
@@ -256,7 +827,7 @@ pub fn effort(runs: &[RunRecord], k: usize) -> Result<Option<EffortReport>> {
         if !refs.contains_key(&env) {
             refs.insert(env.clone(), references(&env)?);
         }
-        let held_out = HELD_OUT_SEEDS.contains(&run.id.seed);
+        let held_out = Group::of(run.id.seed);
         cells
             .entry((env, rule, run.id.net.name().to_string(), budget, held_out))
             .or_default()
@@ -265,6 +836,9 @@ pub fn effort(runs: &[RunRecord], k: usize) -> Result<Option<EffortReport>> {
     if !beyond_paper {
         return Ok(None);
     }
+    let mut all = comparisons(&cells);
+    all.extend(budget_comparisons(&cells));
+    adjust(&mut all);
     let envs = env_order(cells.keys().map(|k| k.0.as_str()));
     let mut md = String::new();
     let mut csv = String::from(
@@ -276,9 +850,10 @@ pub fn effort(runs: &[RunRecord], k: usize) -> Result<Option<EffortReport>> {
         md,
         "AUC: the mean over evaluations of (return - random) / (expert - random), random and expert being the \
          mean returns of the uniform random policy and of the shipped weak expert over {REFERENCE_EPISODES} \
-         episodes (seeds {REFERENCE_SEED}..); medians over seeds with bootstrap 95% intervals; p: two-sided \
-         Mann-Whitney of the AUC against the paper's rule at the same budget and network, on the seeds both \
-         have; effort: demonstrated transitions, questions asked (each a segment of up to segment_len steps, a \
+         episodes (seeds {REFERENCE_SEED}..); medians over seeds with bootstrap 95% intervals; p: the raw two-sided \
+         Mann-Whitney p of the AUC against the paper's rule at the same budget and network, on the seeds both \
+         have (\"Every comparison\" gives each one's shift, interval, Holm-adjusted p and equivalence test; \
+         words such as \"significantly\" follow the adjusted p); effort: demonstrated transitions, questions asked (each a segment of up to segment_len steps, a \
          context switch for a person) and the step of the last question (medians). Sustained: {k} more \
          evaluations at the target after the first.\n"
     )?;
@@ -289,7 +864,7 @@ pub fn effort(runs: &[RunRecord], k: usize) -> Result<Option<EffortReport>> {
             "## {env}\n\nrandom {random:.2}, expert {expert:.2}, the paper's budget {}.\n",
             paper_budget(env)
         )?;
-        for held_out in [false, true] {
+        for held_out in [Group::Screen, Group::HeldOut, Group::SecondHeldOut] {
             let keys: Vec<&CellKey> = cells
                 .keys()
                 .filter(|k| &k.0 == env && k.4 == held_out)
@@ -297,8 +872,16 @@ pub fn effort(runs: &[RunRecord], k: usize) -> Result<Option<EffortReport>> {
             if keys.is_empty() {
                 continue;
             }
-            if held_out {
-                writeln!(md, "### Held-out seeds ({})\n", seed_span(&HELD_OUT_SEEDS))?;
+            match held_out {
+                Group::Screen => {}
+                Group::HeldOut => {
+                    writeln!(md, "### Held-out seeds ({})\n", seed_span(&HELD_OUT_SEEDS))?
+                }
+                Group::SecondHeldOut => writeln!(
+                    md,
+                    "### Second held-out seeds ({})\n",
+                    seed_span(&SECOND_HELD_OUT_SEEDS)
+                )?,
             }
             writeln!(
                 md,
@@ -366,7 +949,7 @@ pub fn effort(runs: &[RunRecord], k: usize) -> Result<Option<EffortReport>> {
                     key.3,
                     key.3 as f64 / paper_budget(&key.0).max(1) as f64,
                     cell.len(),
-                    key.4,
+                    key.4.csv(),
                     auc.0,
                     auc.1.0,
                     auc.1.1,
@@ -392,14 +975,18 @@ pub fn effort(runs: &[RunRecord], k: usize) -> Result<Option<EffortReport>> {
             writeln!(md)?;
         }
     }
-    writeln!(md, "{}", screen(&cells, &envs))?;
-    writeln!(md, "{}", effort_buys(&cells, &envs))?;
+    writeln!(md, "{}", screen(&cells, &all, &envs))?;
+    writeln!(md, "{}", detectable(&cells, &all, &envs))?;
+    writeln!(md, "{}", effort_buys(&cells, &all, &envs))?;
     writeln!(md, "{}", design_choice(&cells))?;
-    writeln!(md, "{}", goal_verdict(&cells, &envs))?;
+    writeln!(md, "{}", goal_verdict(&cells, &all, &envs))?;
+    writeln!(md, "{}", second_test(&cells, &all))?;
+    writeln!(md, "{}", comparison_tables(&all))?;
     let figures = figures(&cells, &envs);
     Ok(Some(EffortReport {
         markdown: md,
         csv,
+        comparisons_csv: comparisons_csv(&all),
         figures,
     }))
 }
@@ -431,21 +1018,29 @@ fn design_aucs(cell: &[RunMetrics]) -> Vec<f64> {
 
 /// The rule screen read at the paper's budget with the benchmark's network, on every seed that is not held out:
 /// per task, the rules whose AUC is significantly higher than each of GDQN, BDQN and ADQN, higher than some of
-/// them, and lower than some of them (two-sided Mann–Whitney, p < [`ALPHA`]).
-fn screen(cells: &BTreeMap<CellKey, Vec<RunMetrics>>, envs: &[String]) -> String {
+/// them, and lower than some of them (two-sided Mann–Whitney, Holm-adjusted p < [`TEST_LEVEL`] within the
+/// task's screen family).
+fn screen(
+    cells: &BTreeMap<CellKey, Vec<RunMetrics>>,
+    comparisons: &[Comparison],
+    envs: &[String],
+) -> String {
     let mut out = format!(
         "## The screen at the paper's budget\n\nEvery rule against GDQN, BDQN and ADQN at the paper's budget with \
-         the {} network, on its seeds outside the held-out ones (p < {ALPHA}, two-sided Mann-Whitney of the AUC; \
-         in parentheses, the paper's rules it differs from).\n\n| task | seeds per rule | higher than all three | \
+         the {} network, on its seeds outside the held-out ones (two-sided Mann-Whitney of the AUC, Holm-adjusted p < \
+         {TEST_LEVEL} within the task's family of \"Every comparison\"; in parentheses, the paper's rules it \
+         differs from).\n\n| task | seeds per rule | higher than all three | \
          higher than some | lower than some |\n|---|---|---|---|---|",
         EFFORT_NET.name()
     );
     let net = EFFORT_NET.name();
     for env in envs {
-        let key = |label: &str| paper_cell(env, label, net, false);
+        let key = |label: &str| paper_cell(env, label, net, Group::Screen);
         let rules: Vec<&CellKey> = cells
             .keys()
-            .filter(|k| k.0 == *env && !k.4 && k.2 == net && k.3 == paper_budget(env))
+            .filter(|k| {
+                k.0 == *env && k.4 == Group::Screen && k.2 == net && k.3 == paper_budget(env)
+            })
             .filter(|k| rank_rule(&k.1) == BASELINES.len())
             .collect();
         if rules.is_empty() {
@@ -460,9 +1055,8 @@ fn screen(cells: &BTreeMap<CellKey, Vec<RunMetrics>>, envs: &[String]) -> String
         for rule in rules {
             let (mut above, mut below) = (Vec::new(), Vec::new());
             for (label, method) in BASELINES {
-                let (p, diff) = compare(&cells[rule], cells.get(&key(label)));
-                if p.is_some_and(|p| p < ALPHA) {
-                    let side = if diff > 0.0 { &mut above } else { &mut below };
+                if let Some(higher) = significant_side(comparisons, rule, &key(label)) {
+                    let side = if higher { &mut above } else { &mut below };
                     side.push(method.to_uppercase());
                 }
             }
@@ -519,17 +1113,26 @@ fn budget_multiple(env: &str, budget: usize) -> String {
 /// What more or less of the expert's effort bought, task by task: for every rule run at two budgets or more
 /// (design seeds only), its median AUC and first hit at each budget, and the AUC at the largest budget against
 /// the smallest (Mann–Whitney).
-fn effort_buys(cells: &BTreeMap<CellKey, Vec<RunMetrics>>, envs: &[String]) -> String {
+fn effort_buys(
+    cells: &BTreeMap<CellKey, Vec<RunMetrics>>,
+    comparisons: &[Comparison],
+    envs: &[String],
+) -> String {
     let mut out = format!(
         "## What the expert's effort buys\n\nFor each rule run at two budgets or more, on the design seeds \
          {} that every budget has: the median AUC and, in parentheses, the median first hit at each \
-         budget, as a multiple of the paper's; then the largest budget against the smallest (Mann-Whitney).\n",
+         budget, as a multiple of the paper's; then the largest budget against the smallest: the Hodges-Lehmann \
+         shift of the AUC with its 95% interval, the Mann-Whitney p and the Holm-adjusted p over the task's \
+         budget comparisons.\n",
         seed_span(&DESIGN_SEEDS)
     );
     for env in envs {
         let mut per_rule: BTreeMap<(usize, String, String), BTreeMap<usize, Vec<RunMetrics>>> =
             BTreeMap::new();
-        for (key, cell) in cells.iter().filter(|(k, _)| &k.0 == env && !k.4) {
+        for (key, cell) in cells
+            .iter()
+            .filter(|(k, _)| &k.0 == env && k.4 == Group::Screen)
+        {
             let design: Vec<RunMetrics> = cell
                 .iter()
                 .filter(|m| DESIGN_SEEDS.contains(&m.seed))
@@ -577,14 +1180,18 @@ fn effort_buys(cells: &BTreeMap<CellKey, Vec<RunMetrics>>, envs: &[String]) -> S
                 .collect();
             let (smallest, largest) = (by_budget.first_key_value(), by_budget.last_key_value());
             let change = match (smallest, largest) {
-                (Some((&lo, lo_cell)), Some((&hi, hi_cell))) => {
-                    let (p, diff) = compare(hi_cell, Some(lo_cell));
-                    format!(
-                        "{} vs {}: AUC {diff:+.3}, {}",
-                        budget_multiple(env, hi),
-                        budget_multiple(env, lo),
-                        p_phrase(p)
-                    )
+                (Some((&lo, _)), Some((&hi, _))) => {
+                    let key = |b: usize| (env.clone(), rule.clone(), net.clone(), b, Group::Screen);
+                    match find(comparisons, &key(hi), &key(lo)) {
+                        Some(c) => format!(
+                            "{} vs {}: shift {}, {}",
+                            budget_multiple(env, hi),
+                            budget_multiple(env, lo),
+                            c.shift_text(),
+                            adjusted_phrase(c)
+                        ),
+                        None => "–".to_string(),
+                    }
                 }
                 _ => "–".to_string(),
             };
@@ -610,7 +1217,7 @@ fn design_choice(cells: &BTreeMap<CellKey, Vec<RunMetrics>>) -> String {
         let medians: Vec<Option<f64>> = EFFORT_SCREEN_TASKS
             .iter()
             .map(|env| {
-                let key = paper_cell(env, candidate, EFFORT_NET.name(), false);
+                let key = paper_cell(env, candidate, EFFORT_NET.name(), Group::Screen);
                 cells.get(&key).and_then(|c| median(&design_aucs(c)))
             })
             .collect();
@@ -644,11 +1251,20 @@ fn design_choice(cells: &BTreeMap<CellKey, Vec<RunMetrics>>) -> String {
 /// The goal of the benchmark, read on the held-out cells at the paper's budget: a rule whose AUC is
 /// significantly higher than each of GDQN, BDQN and ADQN on at least 3 of the 4 tasks, and never significantly
 /// lower, for each network.
-fn goal_verdict(cells: &BTreeMap<CellKey, Vec<RunMetrics>>, envs: &[String]) -> String {
-    let mut out = String::from("## The held-out test\n\n");
+fn goal_verdict(
+    cells: &BTreeMap<CellKey, Vec<RunMetrics>>,
+    comparisons: &[Comparison],
+    envs: &[String],
+) -> String {
+    let mut out = String::from(
+        "## The held-out test\n\nSignificance follows the Holm-adjusted p within each task's held-out family \
+         (\"Every comparison\"); shift: the rule minus the paper rule, Hodges-Lehmann with 95% interval.\n\n",
+    );
     let candidates: std::collections::BTreeSet<(String, String)> = cells
         .keys()
-        .filter(|k| k.4 && rank_rule(&k.1) == BASELINES.len() && k.3 == paper_budget(&k.0))
+        .filter(|k| {
+            k.4 == Group::HeldOut && rank_rule(&k.1) == BASELINES.len() && k.3 == paper_budget(&k.0)
+        })
         .map(|k| (k.1.clone(), k.2.clone()))
         .collect();
     if candidates.is_empty() {
@@ -666,7 +1282,7 @@ fn goal_verdict(cells: &BTreeMap<CellKey, Vec<RunMetrics>>, envs: &[String]) -> 
         let mut lines = Vec::new();
         let mut incomplete = Vec::new();
         for env in envs {
-            let key = |label: &str| paper_cell(env, label, &net, true);
+            let key = |label: &str| paper_cell(env, label, &net, Group::HeldOut);
             // A task counts once the rule and the three paper rules have every held-out seed.
             let complete = std::iter::once(rule.as_str())
                 .chain(BASELINES.iter().map(|(label, _)| *label))
@@ -677,17 +1293,25 @@ fn goal_verdict(cells: &BTreeMap<CellKey, Vec<RunMetrics>>, envs: &[String]) -> 
             };
             tasks += 1;
             let mut all_higher = true;
+            let _ = cell;
             for (label, _) in BASELINES {
-                let (p, diff) = compare(cell, cells.get(&key(label)));
-                let significant = p.is_some_and(|p| p < ALPHA);
-                all_higher &= significant && diff > 0.0;
-                if significant && diff < 0.0 {
+                let side = significant_side(comparisons, &key(&rule), &key(label));
+                all_higher &= side == Some(true);
+                if side == Some(false) {
                     losses += 1;
                 }
-                lines.push(format!(
-                    "{env} vs {label}: {}, AUC difference {diff:+.3}",
-                    p_phrase(p)
-                ));
+                let text = find(comparisons, &key(&rule), &key(label)).map_or(
+                    "not compared".to_string(),
+                    |c| {
+                        format!(
+                            "shift {}, {}: {}",
+                            c.shift_text(),
+                            adjusted_phrase(c),
+                            c.reading()
+                        )
+                    },
+                );
+                lines.push(format!("{env} vs {label}: {text}"));
             }
             wins += usize::from(all_higher);
         }
@@ -742,7 +1366,7 @@ fn figures(
     // One style per rule across tasks and both figures: the paper's rules first, then the others alphabetically.
     let mut lines: Vec<(usize, String, String)> = cells
         .keys()
-        .filter(|k| !k.4 && k.2 == EFFORT_NET.name())
+        .filter(|k| k.4 == Group::Screen && k.2 == EFFORT_NET.name())
         .map(|k| (rank_rule(&k.1), k.1.clone(), k.2.clone()))
         .collect();
     lines.sort();
@@ -759,7 +1383,8 @@ fn figures(
         type PerX = BTreeMap<u64, Vec<f64>>;
         let mut by_rule: BTreeMap<(String, String), PerX> = BTreeMap::new();
         let mut questions: BTreeMap<(String, String), PerX> = BTreeMap::new();
-        let in_figures = |k: &CellKey| &k.0 == env && !k.4 && k.2 == EFFORT_NET.name();
+        let in_figures =
+            |k: &CellKey| &k.0 == env && k.4 == Group::Screen && k.2 == EFFORT_NET.name();
         for (key, cell) in cells.iter().filter(|(k, _)| in_figures(k)) {
             let design = design_aucs(cell);
             if !design.is_empty() {
@@ -868,6 +1493,9 @@ pub fn write_effort(
     let csv_path = out_dir.join("effort.csv");
     crate::files::write_atomic(&csv_path, report.csv.as_bytes())?;
     files.push(csv_path);
+    let comparisons_path = out_dir.join("effort_comparisons.csv");
+    crate::files::write_atomic(&comparisons_path, report.comparisons_csv.as_bytes())?;
+    files.push(comparisons_path);
     for (name, content) in &report.figures {
         files.extend(super::plot::draw_figure(content, out_dir, name)?);
     }

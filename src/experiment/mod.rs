@@ -23,7 +23,9 @@ pub mod sweep;
 pub mod verdict;
 
 use crate::expert::{self, demos::Demonstrations};
-use crate::train::{self, Checkpointer, RunLog, SeedPurpose, Summary, TrainConfig, seed_for};
+use crate::train::{
+    self, Checkpointer, RunBuilder, RunLog, SeedPurpose, Summary, TrainConfig, seed_for,
+};
 use anyhow::{Context, Result};
 use std::path::Path;
 
@@ -47,8 +49,8 @@ pub fn run_one(cfg: &TrainConfig, out_dir: Option<&Path>, progress: bool) -> Res
     };
     let expert = expert.as_mut().map(|e| &mut **e as &mut dyn expert::Expert);
     let Some(dir) = out_dir else {
-        let (summary, _agent) =
-            train::train(cfg, expert, demos.as_ref(), &mut RunLog::in_memory())?;
+        let run = RunBuilder::new(cfg).expert(expert).demos(demos.as_ref());
+        let (summary, _agent) = run.train(&mut RunLog::in_memory())?;
         return Ok(summary);
     };
     // A run directory with a snapshot continues from it (refused if it belongs to another configuration).
@@ -77,14 +79,12 @@ pub fn run_one(cfg: &TrainConfig, out_dir: Option<&Path>, progress: bool) -> Res
     if snapshot.is_some() {
         eprintln!("{}: continuing from its snapshot", dir.display());
     }
-    let (summary, _agent) = train::train_resumable(
-        cfg,
-        expert,
-        demos.as_ref(),
-        &mut log,
-        &mut checkpointer,
-        snapshot.as_ref(),
-    )?;
+    let run = RunBuilder::new(cfg)
+        .expert(expert)
+        .demos(demos.as_ref())
+        .snapshots(&mut checkpointer)
+        .resume_from(snapshot.as_ref());
+    let (summary, _agent) = run.train(&mut log)?;
     Ok(summary)
 }
 
@@ -93,7 +93,7 @@ type Setup = (Option<Box<dyn expert::Expert>>, Option<Demonstrations>);
 
 /// The expert and the demonstrations `cfg` needs (none for a method that needs none).
 fn setup(cfg: &TrainConfig) -> Result<Setup> {
-    let mut expert = if cfg.method.needs_expert() {
+    let mut expert = if cfg.expert_used().is_some() {
         Some(expert::from_spec(
             &cfg.expert,
             &cfg.env,

@@ -267,6 +267,17 @@ pub fn report(dir: &Path, out_dir: &Path, sustain: usize) -> Result<ReportSummar
             dir.display()
         );
     }
+    // A mean that is not a number would make every statistic of its cell meaningless: refuse before writing.
+    for run in &runs {
+        if let Some(bad) = run.eval.iter().find(|p| !p.mean.is_finite()) {
+            bail!(
+                "{}: eval.csv has a mean of {} at step {}; every evaluation's mean return must be a finite number",
+                run.dir.display(),
+                bad.mean,
+                bad.step
+            );
+        }
+    }
     std::fs::create_dir_all(out_dir)
         .with_context(|| format!("cannot create {}", out_dir.display()))?;
     notes.extend(sweep_completion_notes(dir)?);

@@ -1,5 +1,9 @@
 //! Statistics for comparing methods over seeds: the readings of "steps to solve", the final score, a seeded
-//! percentile bootstrap of the median and the Mann–Whitney U test.
+//! percentile bootstrap of the median, the Mann–Whitney U test and what a comparison of two rules reports beside
+//! it: the Hodges–Lehmann shift with its distribution-free interval, two one-sided tests of equivalence within a
+//! margin, the paired Wilcoxon signed-rank test, Holm's adjustment within a family, and the smallest difference a
+//! test detects with 80% power. Sums of many floats are exactly rounded ([`exact_sum`]), so that equal values in any
+//! order give equal sums and ties between runs stay ties.
 //!
 //! Three readings of steps to solve are reported side by side because they rank methods differently
 //! (docs/algorithm.md §11): the *first hit* (the paper's reading: the first evaluation whose mean reaches the
@@ -84,6 +88,9 @@ pub fn bootstrap_median_interval(
     resamples: usize,
     seed: u64,
 ) -> Option<(f64, f64)> {
+    // NaNs are left out, as `median` leaves them out, so that a resample is never all NaN.
+    let values: Vec<f64> = values.iter().copied().filter(|v| !v.is_nan()).collect();
+    let values = values.as_slice();
     median(values)?;
     let mut rng = rand_pcg::Pcg64::seed_from_u64(seed);
     let mut draw = vec![0.0; values.len()];
@@ -92,7 +99,7 @@ pub fn bootstrap_median_interval(
             for slot in draw.iter_mut() {
                 *slot = values[rng.random_range(0..values.len())];
             }
-            median(&draw).expect("a non-empty resample of numbers")
+            median(&draw).unwrap_or(f64::NAN)
         })
         .collect();
     medians.sort_by(f64::total_cmp);
@@ -105,11 +112,105 @@ pub fn bootstrap_median_interval(
 /// (`scipy.stats.mannwhitneyu(a, b, method="asymptotic")`). Returns (U of `a`, p-value); `None` when a sample
 /// is empty or every value is tied (the test says nothing then).
 pub fn mann_whitney(a: &[f64], b: &[f64]) -> Option<(f64, f64)> {
+    let (u1, sigma) = u_statistic(a, b)?;
+    let (n1, n2) = (a.len() as f64, b.len() as f64);
+    let u = u1.max(n1 * n2 - u1);
+    let z = (u - n1 * n2 / 2.0 - 0.5) / sigma;
+    // Two-sided: 2 · P(Z > z) = erfc(z / √2).
+    Some((u1, libm::erfc(z / std::f64::consts::SQRT_2).min(1.0)))
+}
+
+/// The exactly rounded sum of `values` (Shewchuk's partial sums, as Python's `math.fsum`): the result does not
+/// depend on the order of the values, so two runs whose values are equal as multisets get equal sums. A non-finite
+/// value gives the plain sum (NaN or an infinity).
+pub fn exact_sum(values: impl IntoIterator<Item = f64>) -> f64 {
+    let mut partials: Vec<f64> = Vec::new();
+    let mut plain = 0.0;
+    for mut x in values {
+        plain += x;
+        if !x.is_finite() {
+            continue;
+        }
+        let mut kept = 0;
+        for i in 0..partials.len() {
+            let mut y = partials[i];
+            if x.abs() < y.abs() {
+                std::mem::swap(&mut x, &mut y);
+            }
+            let high = x + y;
+            let low = y - (high - x);
+            if low != 0.0 {
+                partials[kept] = low;
+                kept += 1;
+            }
+            x = high;
+        }
+        partials.truncate(kept);
+        partials.push(x);
+    }
+    if !plain.is_finite() {
+        return plain;
+    }
+    // Add the partials from the largest down, with the half-way correction of the final rounding.
+    let Some(mut high) = partials.pop() else {
+        return 0.0;
+    };
+    let mut low = 0.0;
+    while let Some(y) = partials.pop() {
+        let x = high;
+        high = x + y;
+        low = y - (high - x);
+        if low != 0.0 {
+            break;
+        }
+    }
+    if let Some(&next) = partials.last()
+        && ((low < 0.0 && next < 0.0) || (low > 0.0 && next > 0.0))
+    {
+        let y = low * 2.0;
+        let x = high + y;
+        if y == x - high {
+            high = x;
+        }
+    }
+    high
+}
+
+/// The standard normal's upper tail P(Z > z).
+pub fn normal_upper_tail(z: f64) -> f64 {
+    0.5 * libm::erfc(z / std::f64::consts::SQRT_2)
+}
+
+/// The standard normal's quantile: the z with P(Z <= z) = `p`, for p in (0, 1) (bisection to full precision).
+pub fn normal_quantile(p: f64) -> f64 {
+    let (mut lo, mut hi) = (-40.0_f64, 40.0_f64);
+    for _ in 0..200 {
+        let mid = 0.5 * (lo + hi);
+        if 1.0 - normal_upper_tail(mid) < p {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    0.5 * (lo + hi)
+}
+
+/// One-sided Mann–Whitney test of "values of `a` tend to be larger than values of `b`" with the normal
+/// approximation, tie correction and continuity correction (`scipy.stats.mannwhitneyu(a, b,
+/// alternative="greater", method="asymptotic")`). `None` when a sample is empty, holds a NaN, or every value is
+/// tied.
+pub fn mann_whitney_greater(a: &[f64], b: &[f64]) -> Option<f64> {
+    let (u1, sigma) = u_statistic(a, b)?;
+    let (n1, n2) = (a.len() as f64, b.len() as f64);
+    Some(normal_upper_tail((u1 - n1 * n2 / 2.0 - 0.5) / sigma).min(1.0))
+}
+
+/// U of `a` and the tie-corrected standard deviation of U under the null; `None` as for [`mann_whitney`].
+fn u_statistic(a: &[f64], b: &[f64]) -> Option<(f64, f64)> {
     let (n1, n2) = (a.len() as f64, b.len() as f64);
     if a.is_empty() || b.is_empty() || a.iter().chain(b).any(|v| v.is_nan()) {
         return None;
     }
-    // Mid-ranks of the pooled sample, and the tie term Σ (t³ − t).
     let mut pooled: Vec<(f64, bool)> = a
         .iter()
         .map(|&v| (v, true))
@@ -129,14 +230,124 @@ pub fn mann_whitney(a: &[f64], b: &[f64]) -> Option<(f64, f64)> {
     }
     let n = n1 + n2;
     let u1 = rank_sum_a - n1 * (n1 + 1.0) / 2.0;
-    let u = u1.max(n1 * n2 - u1);
     let sigma = (n1 * n2 / 12.0 * ((n + 1.0) - ties / (n * (n - 1.0)))).sqrt();
+    (sigma > 0.0).then_some((u1, sigma))
+}
+
+/// The Hodges–Lehmann estimate of the shift of `a` over `b` (the median of every difference `a_i - b_j`) and its
+/// distribution-free interval at `level` (e.g. 0.95): the order statistics of the differences that the
+/// Mann–Whitney test's critical value brackets, the critical value from the normal approximation rounded down
+/// (the wider interval). `None` when a sample is empty or holds a NaN.
+pub fn hodges_lehmann(a: &[f64], b: &[f64], level: f64) -> Option<(f64, (f64, f64))> {
+    if a.is_empty() || b.is_empty() || a.iter().chain(b).any(|v| v.is_nan()) {
+        return None;
+    }
+    let mut diffs: Vec<f64> = a
+        .iter()
+        .flat_map(|x| b.iter().map(move |y| x - y))
+        .collect();
+    diffs.sort_by(f64::total_cmp);
+    let (n1, n2) = (a.len() as f64, b.len() as f64);
+    let m = diffs.len();
+    let z = normal_quantile(0.5 + level / 2.0);
+    let c = (n1 * n2 / 2.0 - z * (n1 * n2 * (n1 + n2 + 1.0) / 12.0).sqrt()).floor();
+    let c = if c < 0.0 { 0 } else { c as usize };
+    let lower = diffs[c.min(m - 1)];
+    let upper = diffs[m - 1 - c.min(m - 1)];
+    Some((median(&diffs)?, (lower, upper)))
+}
+
+/// Two one-sided Mann–Whitney tests that the shift of `a` over `b` lies inside (-margin, +margin): the larger of
+/// the p-values of "a - b > -margin" and "a - b < +margin". Below the level, the two are equivalent within the
+/// margin. `None` as for [`mann_whitney`].
+pub fn equivalence_p(a: &[f64], b: &[f64], margin: f64) -> Option<f64> {
+    let raised: Vec<f64> = a.iter().map(|x| x + margin).collect();
+    let lowered: Vec<f64> = a.iter().map(|x| x - margin).collect();
+    let above = mann_whitney_greater(&raised, b)?;
+    let below = mann_whitney_greater(b, &lowered)?;
+    Some(above.max(below))
+}
+
+/// The paired comparison of `a` and `b` (equal length, pair i being one seed): the Hodges–Lehmann estimate of the
+/// paired shift (the median of the Walsh averages of the differences) and the two-sided Wilcoxon signed-rank p
+/// (zero differences dropped, mid-ranks for ties, the normal approximation with tie and continuity corrections,
+/// as `scipy.stats.wilcoxon(d, zero_method="wilcox", correction=True, method="approx")`). `None` without a
+/// non-zero difference or with a NaN.
+pub fn wilcoxon_signed_rank(a: &[f64], b: &[f64]) -> Option<(f64, f64)> {
+    if a.len() != b.len() || a.iter().chain(b).any(|v| v.is_nan()) {
+        return None;
+    }
+    let d: Vec<f64> = a.iter().zip(b).map(|(x, y)| x - y).collect();
+    let mut walsh = Vec::new();
+    for i in 0..d.len() {
+        for j in i..d.len() {
+            walsh.push((d[i] + d[j]) / 2.0);
+        }
+    }
+    let shift = median(&walsh)?;
+    let mut nonzero: Vec<f64> = d.into_iter().filter(|&x| x != 0.0).collect();
+    if nonzero.is_empty() {
+        return None;
+    }
+    nonzero.sort_by(|x, y| x.abs().total_cmp(&y.abs()));
+    let n = nonzero.len() as f64;
+    let (mut plus, mut ties, mut i) = (0.0, 0.0, 0);
+    while i < nonzero.len() {
+        let j = (i..nonzero.len())
+            .find(|&j| nonzero[j].abs() != nonzero[i].abs())
+            .unwrap_or(nonzero.len());
+        let t = (j - i) as f64;
+        let mid_rank = (i + 1 + j) as f64 / 2.0;
+        plus += mid_rank * nonzero[i..j].iter().filter(|&&x| x > 0.0).count() as f64;
+        ties += t * t * t - t;
+        i = j;
+    }
+    let mean = n * (n + 1.0) / 4.0;
+    let sigma = (n * (n + 1.0) * (2.0 * n + 1.0) / 24.0 - ties / 48.0).sqrt();
     if sigma == 0.0 {
         return None;
     }
-    let z = (u - n1 * n2 / 2.0 - 0.5) / sigma;
-    // Two-sided: 2 · P(Z > z) = erfc(z / √2).
-    Some((u1, libm::erfc(z / std::f64::consts::SQRT_2).min(1.0)))
+    let z = ((plus - mean).abs() - 0.5).max(0.0) / sigma;
+    Some((shift, (2.0 * normal_upper_tail(z)).min(1.0)))
+}
+
+/// Holm's step-down adjustment of a family of p-values: the i-th smallest becomes the largest over j <= i of
+/// `(m - j + 1) p_(j)`, capped at 1; `None`s (tests that said nothing) stay `None` and do not count in m.
+pub fn holm(p: &[Option<f64>]) -> Vec<Option<f64>> {
+    let mut order: Vec<usize> = (0..p.len()).filter(|&i| p[i].is_some()).collect();
+    order.sort_by(|&i, &j| {
+        p[i].unwrap_or(1.0)
+            .total_cmp(&p[j].unwrap_or(1.0))
+            .then(i.cmp(&j))
+    });
+    let m = order.len();
+    let mut adjusted = vec![None; p.len()];
+    let mut running: f64 = 0.0;
+    for (rank, &i) in order.iter().enumerate() {
+        let value = ((m - rank) as f64 * p[i].unwrap_or(1.0)).min(1.0);
+        running = running.max(value);
+        adjusted[i] = Some(running);
+    }
+    adjusted
+}
+
+/// The smallest shift a two-sided Mann–Whitney test at level `alpha` detects with probability `power`, for two
+/// samples of `n` with standard deviation `sd`: the t-test's `(z_{1-alpha/2} + z_power) sd sqrt(2 / n)` over the
+/// square root of the test's asymptotic relative efficiency for normal data, 3/pi.
+pub fn detectable_difference(sd: f64, n: usize, alpha: f64, power: f64) -> f64 {
+    let z = normal_quantile(1.0 - alpha / 2.0) + normal_quantile(power);
+    z * sd * (2.0 / n as f64).sqrt() / (3.0 / std::f64::consts::PI).sqrt()
+}
+
+/// The sample standard deviation (n - 1 in the denominator) of `values`; `None` for fewer than two.
+pub fn sample_sd(values: &[f64]) -> Option<f64> {
+    if values.len() < 2 {
+        return None;
+    }
+    let n = values.len() as f64;
+    let mean = exact_sum(values.iter().copied()) / n;
+    let squares = exact_sum(values.iter().map(|v| (v - mean) * (v - mean)));
+    Some((squares / (n - 1.0)).sqrt())
 }
 
 #[cfg(test)]
@@ -226,5 +437,93 @@ mod tests {
         assert_eq!(quantile(&values, 0.25), Some(2.0));
         assert_eq!(quantile(&values, 0.75), Some(4.0));
         assert_eq!(quantile(&[1.0, 2.0], 0.25), Some(1.25));
+    }
+
+    #[test]
+    fn exact_sum_is_order_free_and_exactly_rounded() {
+        let v = [0.1, 0.2, 0.3, 1e16, -1e16, 0.7];
+        let mut w = v;
+        w.reverse();
+        assert_eq!(exact_sum(v), exact_sum(w));
+        // Python: math.fsum([0.1, 0.2, 0.3, 1e16, -1e16, 0.7]) == 1.3
+        assert_eq!(exact_sum(v), 1.3);
+        assert_eq!(exact_sum([1e100, 1.0, -1e100, 1e-100]), 1.0);
+        assert_eq!(exact_sum(std::iter::empty()), 0.0);
+        assert!(exact_sum([1.0, f64::NAN]).is_nan());
+    }
+
+    #[test]
+    fn holm_steps_down_and_keeps_order() {
+        // Hand computation: sorted 0.01, 0.02, 0.04 (m = 3): 0.03, 0.04, 0.04.
+        let adjusted = holm(&[Some(0.04), Some(0.01), None, Some(0.02)]);
+        let expect = [Some(0.04), Some(0.03), None, Some(0.04)];
+        for (a, e) in adjusted.iter().zip(expect) {
+            assert!(
+                (a.unwrap_or(-1.0) - e.unwrap_or(-1.0)).abs() < 1e-12,
+                "{adjusted:?}"
+            );
+        }
+        assert_eq!(holm(&[Some(0.9), Some(0.8)]), vec![Some(1.0), Some(1.0)]);
+    }
+
+    #[test]
+    fn normal_quantile_inverts_the_tail() {
+        assert!((normal_quantile(0.975) - 1.959963984540054).abs() < 1e-9);
+        assert!((normal_quantile(0.8) - 0.8416212335729143).abs() < 1e-9);
+    }
+
+    #[test]
+    fn hodges_lehmann_brackets_the_shift_of_shifted_samples() {
+        let b: Vec<f64> = (0..20).map(|i| ((i * 7) % 20) as f64 / 20.0).collect();
+        let a: Vec<f64> = b.iter().map(|x| x + 0.3).collect();
+        let (shift, (lo, hi)) = hodges_lehmann(&a, &b, 0.95).unwrap();
+        assert!((shift - 0.3).abs() < 1e-12, "{shift}");
+        assert!(lo < 0.3 && 0.3 < hi && lo > 0.0, "{lo} {hi}");
+        // The interval is symmetric in the order statistics: swapping the samples negates it.
+        let (back, (blo, bhi)) = hodges_lehmann(&b, &a, 0.95).unwrap();
+        assert_eq!((back, blo, bhi), (-shift, -hi, -lo));
+    }
+
+    #[test]
+    fn equivalence_holds_only_for_a_small_shift() {
+        let b: Vec<f64> = (0..20).map(|i| ((i * 7) % 20) as f64 / 200.0).collect();
+        let same: Vec<f64> = b.iter().map(|x| x + 0.001).collect();
+        let far: Vec<f64> = b.iter().map(|x| x + 0.2).collect();
+        assert!(equivalence_p(&same, &b, 0.05).unwrap() < 0.05);
+        assert!(equivalence_p(&far, &b, 0.05).unwrap() > 0.5);
+        // One-sided, by hand: U = 4.5, ties 3 x 2, sigma = sqrt(22.5), z = (4.5 - 12.5 - 0.5) / sigma.
+        let p =
+            mann_whitney_greater(&[1.0, 2.0, 3.0, 4.0, 5.0], &[3.0, 4.0, 5.0, 6.0, 7.0]).unwrap();
+        assert!((p - 0.9634301001705455).abs() < 1e-9, "{p}");
+    }
+
+    #[test]
+    fn wilcoxon_matches_a_hand_computation() {
+        // d = 1, -2, 3, 4, 0: the zero is dropped; ranks 1, 2, 3, 4; W+ = 8, mean 5, sd sqrt(7.5).
+        let (shift, p) =
+            wilcoxon_signed_rank(&[1.0, 0.0, 3.0, 4.0, 5.0], &[0.0, 2.0, 0.0, 0.0, 5.0]).unwrap();
+        let z: f64 = (3.0 - 0.5) / 7.5_f64.sqrt();
+        assert!(
+            (p - libm::erfc(z / std::f64::consts::SQRT_2)).abs() < 1e-12,
+            "{p}"
+        );
+        // Walsh averages of 1, -2, 3, 4, 0: their median is 1.
+        assert_eq!(shift, 1.0);
+        assert_eq!(wilcoxon_signed_rank(&[1.0], &[1.0]), None);
+    }
+
+    #[test]
+    fn detectable_difference_follows_the_normal_formula() {
+        // (1.95996 + 0.84162) * 0.1 * sqrt(2 / 20) / sqrt(3 / pi) = 0.0906...
+        let d = detectable_difference(0.1, 20, 0.05, 0.8);
+        assert!((d - 0.090_657).abs() < 1e-4, "{d}");
+        assert!(detectable_difference(0.1, 20, 0.005, 0.8) > d);
+    }
+
+    #[test]
+    fn bootstrap_survives_nans() {
+        let values = [f64::NAN, 1.0, f64::NAN, f64::NAN, f64::NAN];
+        let interval = bootstrap_median_interval(&values, 0.95, 200, 3).unwrap();
+        assert_eq!(interval, (1.0, 1.0));
     }
 }

@@ -10,8 +10,14 @@
 //!
 //! At the end arld closes the expert's standard input (end of file); an expert should then exit. Anything the
 //! expert writes to standard error is kept (the last lines) and shown if it fails. A crash, an answer slower than
-//! the timeout, a line that is not such an object, or an action out of range is an error naming the expert: the
-//! run stops there and, lacking its summary, stays incomplete. `examples/expert.py` is a complete expert.
+//! the timeout, a line that is not such an object (or longer than [`MAX_ANSWER_BYTES`]), or an action out of
+//! range is an error naming the expert: the run stops there and, lacking its summary, stays incomplete.
+//! `examples/expert.py` is a complete expert.
+//!
+//! The expert runs in a process group of its own, and is stopped as a group (on a timeout, and at the end): a
+//! child it started that keeps its output open cannot hold the run past the timeout. A stop request (Ctrl-C,
+//! SIGTERM) ends the wait for an answer at once with [`crate::interrupt::Interrupted`], so that the run
+//! snapshots with the question open.
 
 use super::Expert;
 use crate::env::EnvSpec;
@@ -27,8 +33,21 @@ use std::time::Duration;
 /// How long an expert process may take to answer one query unless configured otherwise.
 pub const DEFAULT_TIMEOUT_S: f64 = 30.0;
 
+/// The longest timeout an expert may be given: a year (longer ones are no timeout, and overflow a clock).
+pub const MAX_TIMEOUT_S: f64 = 365.0 * 86_400.0;
+
 /// Lines of the expert's standard error kept for error messages.
 const STDERR_LINES: usize = 20;
+
+/// The longest answer line read from an expert (an answer is a few bytes; a stream without line breaks must not
+/// grow the memory without end).
+pub const MAX_ANSWER_BYTES: usize = 64 * 1024;
+
+/// The longest line of the expert's standard error kept (a longer one is kept cut at this length).
+const MAX_STDERR_LINE_BYTES: usize = 4096;
+
+/// How often a wait for an answer looks whether a stop was requested.
+const STOP_POLL: Duration = Duration::from_millis(20);
 
 /// An external expert process speaking the JSON-lines protocol of this module.
 pub struct ProcessExpert {
@@ -52,9 +71,17 @@ impl ProcessExpert {
         if command.trim().is_empty() {
             bail!("expert spec `cmd:` needs a command, e.g. cmd:\"python my_expert.py\"");
         }
+        if timeout_s > MAX_TIMEOUT_S {
+            bail!(
+                "the expert timeout must be at most {MAX_TIMEOUT_S} seconds (a year), got {timeout_s}"
+            );
+        }
+        use std::os::unix::process::CommandExt;
         let mut child = Command::new("sh")
             .arg("-c")
             .arg(format!("exec {command}"))
+            // Its own process group, so that it can be stopped with every process it started.
+            .process_group(0)
             .stdin(Stdio::piped())
             .stdout(Stdio::piped())
             .stderr(Stdio::piped())
@@ -65,8 +92,17 @@ impl ProcessExpert {
         // Reader threads: the answer is awaited with a timeout, and a chatty stderr never blocks the expert.
         let (tx, lines) = channel();
         std::thread::spawn(move || {
-            for line in BufReader::new(stdout).lines() {
-                let stop = line.is_err();
+            let mut reader = BufReader::new(stdout);
+            let mut line = Vec::new();
+            loop {
+                let read =
+                    crate::files::read_line_bounded(&mut reader, &mut line, MAX_ANSWER_BYTES)
+                        .map(|more| more.then(|| String::from_utf8_lossy(&line).into_owned()));
+                let (line, stop) = match read {
+                    Ok(Some(line)) => (Ok(line), false),
+                    Ok(None) => break,
+                    Err(e) => (Err(e), true),
+                };
                 if tx.send(line).is_err() || stop {
                     break;
                 }
@@ -75,8 +111,18 @@ impl ProcessExpert {
         let stderr = Arc::new(Mutex::new(VecDeque::new()));
         let kept = Arc::clone(&stderr);
         let stderr_thread = std::thread::spawn(move || {
-            for line in BufReader::new(stderr_pipe).lines() {
-                let Ok(line) = line else { break };
+            use std::io::Read;
+            let mut reader = BufReader::new(stderr_pipe);
+            let mut bytes = Vec::new();
+            loop {
+                // A line longer than the bound is kept cut, the rest of it read as the next lines.
+                bytes.clear();
+                let take = MAX_STDERR_LINE_BYTES as u64;
+                match reader.by_ref().take(take).read_until(b'\n', &mut bytes) {
+                    Ok(0) | Err(_) => break,
+                    Ok(_) => {}
+                }
+                let line = String::from_utf8_lossy(&bytes).trim_end().to_string();
                 let mut kept = kept.lock().unwrap_or_else(|e| e.into_inner());
                 if kept.len() == STDERR_LINES {
                     kept.pop_front();
@@ -120,11 +166,20 @@ impl ProcessExpert {
             Ok(Some(status)) => format!("; it exited with {status}"),
             _ => String::new(),
         };
-        // A process that ended has closed its stderr: wait for the reader so the last lines are all there.
+        // A process that ended has closed its stderr: wait for the reader so the last lines are all there (for
+        // a moment only: a child of the expert may still hold the pipe).
         if !status.is_empty()
             && let Some(t) = self.stderr_thread.take()
         {
-            let _ = t.join();
+            for _ in 0..25 {
+                if t.is_finished() {
+                    break;
+                }
+                std::thread::sleep(Duration::from_millis(20));
+            }
+            if t.is_finished() {
+                let _ = t.join();
+            }
         }
         let kept = self.stderr.lock().unwrap_or_else(|e| e.into_inner());
         let tail = if kept.is_empty() {
@@ -136,8 +191,46 @@ impl ProcessExpert {
         anyhow!("expert process `{}` {what}{status}{tail}", self.command)
     }
 
+    /// The next line of the expert's output, waiting at most the timeout, and ending the wait at once when a
+    /// stop is requested.
+    fn next_line(&mut self) -> Result<std::io::Result<String>, RecvTimeoutError> {
+        let deadline = std::time::Instant::now() + self.timeout;
+        loop {
+            let left = deadline.saturating_duration_since(std::time::Instant::now());
+            if left.is_zero() {
+                return Err(RecvTimeoutError::Timeout);
+            }
+            match self.lines.recv_timeout(left.min(STOP_POLL)) {
+                // Whatever arrives later belongs to the question a resumed run asks again.
+                Err(RecvTimeoutError::Timeout) if crate::interrupt::requested() => {
+                    return Err(RecvTimeoutError::Disconnected);
+                }
+                Err(RecvTimeoutError::Timeout) => {}
+                other => return other,
+            }
+        }
+    }
+
+    /// Stops the expert and every process it started (its process group).
+    fn kill_group(&mut self) {
+        if let Ok(pid) = i32::try_from(self.child.id()) {
+            // SAFETY: kill(2) has no memory effects; a negative pid names the expert's process group.
+            unsafe {
+                libc::kill(-pid, libc::SIGKILL);
+            }
+        }
+        let _ = self.child.kill();
+    }
+
     fn read_answer(&mut self) -> Result<usize> {
-        let line = match self.lines.recv_timeout(self.timeout) {
+        let line = match self.next_line() {
+            Err(RecvTimeoutError::Disconnected) if crate::interrupt::requested() => {
+                return Err(crate::interrupt::Interrupted(format!(
+                    "stopped while expert process `{}` was asked",
+                    self.command
+                ))
+                .into());
+            }
             Ok(Ok(line)) => line,
             Ok(Err(e)) => return Err(self.failure(&format!("could not be read from ({e})"))),
             Err(RecvTimeoutError::Disconnected) => {
@@ -146,7 +239,7 @@ impl ProcessExpert {
                 return Err(self.failure("closed its output without answering the query"));
             }
             Err(RecvTimeoutError::Timeout) => {
-                let _ = self.child.kill();
+                self.kill_group();
                 return Err(self.failure(&format!(
                     "did not answer within {} s (the expert timeout); it was stopped",
                     self.timeout.as_secs_f64()
@@ -206,9 +299,8 @@ impl Drop for ProcessExpert {
     fn drop(&mut self) {
         drop(self.stdin.take());
         let _ = self.child.wait_timeout_ms(1000);
-        if let Ok(None) = self.child.try_wait() {
-            let _ = self.child.kill();
-        }
+        // What it started and left running goes with it.
+        self.kill_group();
         let _ = self.child.wait();
     }
 }

@@ -812,9 +812,12 @@ impl TrainConfig {
                 self.expert
             );
         }
+        let max_timeout = crate::expert::process::MAX_TIMEOUT_S;
         ensure!(
-            self.expert_timeout.is_finite() && self.expert_timeout > 0.0,
-            "expert_timeout must be a positive number of seconds, got {}",
+            self.expert_timeout.is_finite()
+                && self.expert_timeout > 0.0
+                && self.expert_timeout <= max_timeout,
+            "expert_timeout must be a positive number of seconds, at most {max_timeout} (a year), got {}",
             self.expert_timeout
         );
         // Evaluation and checkpoints.

@@ -74,6 +74,7 @@ impl RunLog {
         progress: bool,
     ) -> Result<Self> {
         let bar = progress_bar(total_steps, progress);
+        run_dir::check_own_entries(dir)?;
         let Some(config_toml) = config_toml else {
             let _ = std::fs::remove_file(dir.join(SUMMARY_FILE));
             return Ok(Self {
@@ -102,7 +103,8 @@ impl RunLog {
         let open = |name: &str, header: &str| -> Result<BufWriter<File>> {
             let path = dir.join(name);
             let mut f = BufWriter::new(
-                File::create(&path).with_context(|| format!("cannot create {}", path.display()))?,
+                crate::files::open_own_file(&path, true)
+                    .with_context(|| format!("cannot create {}", path.display()))?,
             );
             f.write_all(header.as_bytes())?;
             Ok(f)
@@ -167,9 +169,7 @@ impl RunLog {
         let mut log = Self::create_with(dir, None, total_steps, progress)?;
         let reopen = |name: &str, len: u64| -> Result<BufWriter<File>> {
             let path = dir.join(name);
-            let file = std::fs::OpenOptions::new()
-                .write(true)
-                .open(&path)
+            let file = crate::files::open_own_file(&path, false)
                 .with_context(|| format!("cannot reopen {} to continue the run", path.display()))?;
             let actual = file.metadata()?.len();
             anyhow::ensure!(
@@ -184,7 +184,14 @@ impl RunLog {
         };
         log.episodes = Some(reopen(EPISODES_FILE, position.episodes)?);
         log.queries = Some(reopen(QUERIES_FILE, position.queries)?);
-        let events = dir.join(&position.events_file);
+        // The name comes from the snapshot, a file people copy around: it must name an event file of this
+        // directory, never a path elsewhere.
+        let name = &position.events_file;
+        anyhow::ensure!(
+            run_dir::is_events_file(name),
+            "the snapshot names {name:?} as the run's event file, which is no event file of the run directory"
+        );
+        let events = dir.join(name);
         log.events = Some(
             EventWriter::reopen(&events, position.events)
                 .with_context(|| format!("cannot reopen {}", events.display()))?,

@@ -57,9 +57,20 @@ pub fn is_complete(dir: &Path) -> bool {
     dir.join(SUMMARY_FILE).is_file()
 }
 
-/// Whether `name` is an entry a run writes into its directory (its files, checkpoints, TensorBoard events,
-/// snapshot, and the temporary files of its atomic writes).
-fn is_run_entry(name: &str) -> bool {
+/// The prefix of a TensorBoard event file's name.
+const EVENTS_PREFIX: &str = "events.out.tfevents.";
+
+/// The lock file a process running the run holds in its directory ([`crate::experiment`]'s lock: one process
+/// per run directory).
+pub const LOCK_FILE: &str = ".arld.lock";
+
+/// Whether `name` is the name of a run's TensorBoard event file (one file name, no path).
+pub fn is_events_file(name: &str) -> bool {
+    name.starts_with(EVENTS_PREFIX) && !name.contains('/') && name != ".." && name.len() < 256
+}
+
+/// The regular files a run owns in its directory, by name.
+fn own_files() -> [&'static str; 9] {
     use super::snapshot::{SNAPSHOT_FILE, SNAPSHOT_INFO_FILE};
     [
         CONFIG_FILE,
@@ -69,18 +80,69 @@ fn is_run_entry(name: &str) -> bool {
         SUMMARY_FILE,
         FAILED_FILE,
         WEIGHTS_FILE,
-        CHECKPOINTS_DIR,
         SNAPSHOT_FILE,
         SNAPSHOT_INFO_FILE,
     ]
-    .contains(&name)
-        || name.starts_with("events.out.tfevents.")
+}
+
+/// Checks that every entry of `dir` a run writes is what the run would have put there: a regular file (its
+/// files, its event files) or a real directory (`checkpoints`). A symbolic link, a device, a pipe or a
+/// directory in such a place is an error naming it: a run never writes through a link to a file elsewhere.
+pub fn check_own_entries(dir: &Path) -> Result<()> {
+    for name in own_files() {
+        crate::files::own_file_exists(&dir.join(name))?;
+    }
+    let checkpoints = dir.join(CHECKPOINTS_DIR);
+    if let Ok(meta) = std::fs::symlink_metadata(&checkpoints)
+        && !meta.is_dir()
+    {
+        bail!(
+            "{} is {}, where the run keeps its checkpoints folder; move it away",
+            checkpoints.display(),
+            crate::files::kind_name(meta.file_type())
+        );
+    }
+    let entries = match std::fs::read_dir(dir) {
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(()),
+        entries => entries.with_context(|| format!("cannot read {}", dir.display()))?,
+    };
+    for entry in entries {
+        let entry = entry.with_context(|| format!("cannot read {}", dir.display()))?;
+        if is_events_file(&entry.file_name().to_string_lossy()) {
+            crate::files::own_file_exists(&entry.path())?;
+        }
+    }
+    Ok(())
+}
+
+/// Whether `name` is an entry a run writes into its directory (its files, checkpoints, TensorBoard events,
+/// snapshot, and the temporary files of its atomic writes).
+fn is_run_entry(name: &str) -> bool {
+    own_files().contains(&name)
+        || name == CHECKPOINTS_DIR
+        || is_events_file(name)
         || name.starts_with('.') && name.contains(".tmp")
 }
 
+/// Whether `name` is an entry a run writes into its `checkpoints` folder (a checkpoint, or the temporary
+/// file of its atomic write).
+fn is_checkpoint_entry(name: &str) -> bool {
+    let is_step = |n: &str| {
+        n.strip_prefix("step_")
+            .and_then(|n| n.strip_suffix(".safetensors"))
+            .is_some_and(|digits| !digits.is_empty() && digits.bytes().all(|b| b.is_ascii_digit()))
+    };
+    is_step(name)
+        || name
+            .strip_prefix('.')
+            .is_some_and(|n| n.split(".tmp").next().is_some_and(is_step))
+}
+
 /// Makes `dir` ready for a new run, so that nothing of an earlier run is mixed into it: a missing or empty
-/// directory is fine; a non-empty one is refused, unless `overwrite`, when it is cleared, but only if it holds
-/// nothing but a run's files (`--overwrite` never deletes anything a run did not write).
+/// directory (but for the lock, [`LOCK_FILE`]) is fine; a non-empty one is refused, unless `overwrite`, when
+/// the files a run writes are removed by name, and only if it holds nothing else (`--overwrite` never deletes
+/// anything a run did not write: another file, a folder, a link, or a file of the user's inside `checkpoints`
+/// is refused, naming it, before anything is removed).
 pub fn prepare_new_run(dir: &Path, overwrite: bool) -> Result<()> {
     let meta = match std::fs::symlink_metadata(dir) {
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(()),
@@ -101,6 +163,7 @@ pub fn prepare_new_run(dir: &Path, overwrite: bool) -> Result<()> {
     let mut names: Vec<String> = std::fs::read_dir(dir)
         .with_context(|| format!("cannot read {}", dir.display()))?
         .map(|e| Ok(e?.file_name().to_string_lossy().into_owned()))
+        .filter(|n| !matches!(n, Ok(n) if n == LOCK_FILE))
         .collect::<std::io::Result<_>>()
         .with_context(|| format!("cannot read {}", dir.display()))?;
     if names.is_empty() {
@@ -125,16 +188,56 @@ pub fn prepare_new_run(dir: &Path, overwrite: bool) -> Result<()> {
             dir.display()
         );
     }
-    if let Some(other) = names.iter().find(|n| !is_run_entry(n)) {
+    // Everything to remove is checked before anything is: a refusal leaves the directory as it was.
+    let refuse = |path: &Path, why: &str| -> Result<()> {
         bail!(
-            "--overwrite clears only run directories, and {} holds {other:?}, which no run writes; choose another --out",
-            dir.display()
-        );
-    }
+            "--overwrite removes only the files a run writes, and {} {why}; move it away or choose another --out",
+            path.display()
+        )
+    };
+    let mut doomed = Vec::new();
     for name in &names {
         let path = dir.join(name);
+        let kind = path
+            .symlink_metadata()
+            .with_context(|| format!("cannot inspect {}", path.display()))?
+            .file_type();
+        if !is_run_entry(name) {
+            refuse(&path, "is something no run writes")?;
+        } else if name == CHECKPOINTS_DIR && kind.is_dir() {
+            let mut inside = Vec::new();
+            for entry in std::fs::read_dir(&path)
+                .with_context(|| format!("cannot read {}", path.display()))?
+            {
+                let entry = entry.with_context(|| format!("cannot read {}", path.display()))?;
+                let file = entry.path();
+                if !is_checkpoint_entry(&entry.file_name().to_string_lossy()) {
+                    refuse(&file, "is no checkpoint, something no run writes")?;
+                } else if !entry.file_type()?.is_file() {
+                    refuse(
+                        &file,
+                        &format!("is {}", crate::files::kind_name(entry.file_type()?)),
+                    )?;
+                }
+                inside.push(file);
+            }
+            doomed.extend(inside);
+            doomed.push(path);
+        } else if !kind.is_file() {
+            refuse(
+                &path,
+                &format!(
+                    "is {}, where a run keeps a regular file",
+                    crate::files::kind_name(kind)
+                ),
+            )?;
+        } else {
+            doomed.push(path);
+        }
+    }
+    for path in doomed {
         let removed = if path.symlink_metadata()?.is_dir() {
-            std::fs::remove_dir_all(&path)
+            std::fs::remove_dir(&path)
         } else {
             std::fs::remove_file(&path)
         };
@@ -149,7 +252,11 @@ pub fn prepare_new_run(dir: &Path, overwrite: bool) -> Result<()> {
 /// failure stays recorded until an attempt finishes the run.
 pub fn prepare_restart(dir: &Path) -> Result<()> {
     let failed = dir.join(FAILED_FILE);
-    let kept = std::fs::read(&failed).ok();
+    let kept = if crate::files::own_file_exists(&failed)? {
+        Some(std::fs::read(&failed).with_context(|| format!("cannot read {}", failed.display()))?)
+    } else {
+        None
+    };
     prepare_new_run(dir, true)?;
     if let Some(bytes) = kept {
         std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;

@@ -8,6 +8,12 @@
 //! small values as JSON in its metadata), written atomically, plus `snapshot.json` saying what it is for people
 //! and scripts. A snapshot records the format version, the arld version and the run's whole configuration; a
 //! snapshot of another configuration or version is refused with the difference named.
+//!
+//! Format 2 adds a CRC-32C of the whole file under the metadata key `crc32c` (computed over the arrays' bytes,
+//! then the header with the checksum's eight hex digits as `00000000`), checked before anything in the file is
+//! used: a snapshot changed by a bad disk, a copy cut short or an edit is refused, never half-used. Format 1
+//! snapshots (no checksum) are still read. The snapshot is the run's own file: a link, a directory or a device
+//! in its place is an error that leaves it alone, never "no snapshot yet".
 
 use super::{ConfigInput, TrainConfig};
 use crate::state::{Array, StateDict};
@@ -21,8 +27,14 @@ use std::time::Instant;
 pub const SNAPSHOT_FILE: &str = "snapshot.safetensors";
 /// The small description written next to it.
 pub const SNAPSHOT_INFO_FILE: &str = "snapshot.json";
-/// Version of the snapshot format; a snapshot of another format is refused.
-pub const FORMAT_VERSION: u32 = 1;
+/// Version of the snapshot format; a snapshot of another format is refused (format 1, before the checksum,
+/// is still read).
+pub const FORMAT_VERSION: u32 = 2;
+
+/// The metadata key of the checksum (format 2).
+const CHECKSUM_KEY: &str = "crc32c";
+/// The checksum's value while it is computed.
+const CHECKSUM_PLACEHOLDER: &str = "00000000";
 
 /// Writes and reads the snapshots of one run directory.
 pub struct Checkpointer {
@@ -135,11 +147,12 @@ impl Checkpointer {
             crate::files::remove_leftovers(&self.dir.join(file))
                 .with_context(|| format!("cannot tidy {}", self.dir.display()))?;
         }
-        if !path.is_file() {
+        // Only a missing snapshot means "none yet"; anything else in its place is kept and refused.
+        if !crate::files::own_file_exists(&path).context("cannot resume the run")? {
             return Ok(None);
         }
-        let bytes =
-            std::fs::read(&path).with_context(|| format!("cannot read {}", path.display()))?;
+        let bytes = std::fs::read(&path)
+            .with_context(|| format!("cannot read {} to resume the run", path.display()))?;
         let state = decode(&bytes, &self.config)
             .with_context(|| format!("cannot resume from {}", path.display()))?;
         Ok(Some(state))
@@ -223,12 +236,16 @@ fn encode(
     state: &StateDict<'_>,
     metadata: &[(&str, String)],
 ) -> std::io::Result<u64> {
+    // The arrays' checksum first (a pass that writes nothing), then the header's with the placeholder.
+    let mut data_crc = CrcSink(0);
+    write_arrays(&mut data_crc, state)?;
     let mut header = serde_json::Map::new();
     header.insert(
         "__metadata__".to_string(),
         metadata
             .iter()
             .map(|(k, v)| (k.to_string(), serde_json::Value::from(v.as_str())))
+            .chain([(CHECKSUM_KEY.to_string(), CHECKSUM_PLACEHOLDER.into())])
             .collect::<serde_json::Map<_, _>>()
             .into(),
     );
@@ -249,9 +266,17 @@ fn encode(
     }
     let mut header = serde_json::to_vec(&header).map_err(std::io::Error::other)?;
     header.resize(header.len().next_multiple_of(8), b' ');
+    let at = checksum_field(&header).map_err(std::io::Error::other)?;
+    let crc = crc32c::crc32c_append(data_crc.0, &header);
+    header[at..at + 8].copy_from_slice(format!("{crc:08x}").as_bytes());
     out.write_all(&(header.len() as u64).to_le_bytes())?;
     out.write_all(&header)?;
-    // Numbers go out through one small buffer, converted to little-endian on the way.
+    write_arrays(out, state)?;
+    Ok(8 + header.len() as u64 + offset as u64)
+}
+
+/// Writes every array's numbers as little-endian bytes, in the order of their names, through one small buffer.
+fn write_arrays(out: &mut impl Write, state: &StateDict<'_>) -> std::io::Result<()> {
     let mut buffer = vec![0u8; 1 << 16];
     for array in state.arrays.values() {
         match array {
@@ -261,7 +286,75 @@ fn encode(
             Array::U8(v) => out.write_all(v)?,
         }
     }
-    Ok(8 + header.len() as u64 + offset as u64)
+    Ok(())
+}
+
+/// A writer that only computes the CRC-32C of what goes through it.
+struct CrcSink(u32);
+
+impl Write for CrcSink {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        self.0 = crc32c::crc32c_append(self.0, buf);
+        Ok(buf.len())
+    }
+
+    fn flush(&mut self) -> std::io::Result<()> {
+        Ok(())
+    }
+}
+
+/// Where the checksum's eight hex digits stand in a snapshot's header (JSON text): after the one
+/// `"crc32c":"`. A JSON string escapes its quotes, so no value can hold that text; a header holding it
+/// twice, or not followed by eight characters and a quote, is damaged.
+fn checksum_field(header: &[u8]) -> Result<usize, String> {
+    let key = format!("\"{CHECKSUM_KEY}\":\"");
+    let found: Vec<usize> = header
+        .windows(key.len())
+        .enumerate()
+        .filter(|(_, w)| *w == key.as_bytes())
+        .map(|(i, _)| i + key.len())
+        .collect();
+    match found[..] {
+        [at] if header.get(at + 8) == Some(&b'"') => Ok(at),
+        [] => Err("the snapshot has no checksum".into()),
+        _ => Err("the snapshot's checksum field is damaged".into()),
+    }
+}
+
+/// Checks a format-2 snapshot's checksum (see the module's documentation) before anything else is read.
+fn verify_checksum(bytes: &[u8]) -> Result<()> {
+    let damaged = "the snapshot is damaged (changed or cut short since it was written)";
+    let header_len = bytes
+        .get(..8)
+        .map(|b| u64::from_le_bytes(b.try_into().expect("eight bytes")))
+        .with_context(|| format!("{damaged}: it is shorter than a header"))?;
+    let header_end = usize::try_from(header_len)
+        .ok()
+        .and_then(|n| n.checked_add(8))
+        .filter(|&end| end <= bytes.len())
+        .with_context(|| format!("{damaged}: its header runs past its end"))?;
+    let mut header = bytes[8..header_end].to_vec();
+    let at = checksum_field(&header).map_err(|e| anyhow::anyhow!("{damaged}: {e}"))?;
+    // Eight lowercase hex digits, as written: one number has one spelling.
+    let digits = &header[at..at + 8];
+    let recorded = std::str::from_utf8(digits)
+        .ok()
+        .filter(|_| {
+            digits
+                .iter()
+                .all(|b| matches!(b, b'0'..=b'9' | b'a'..=b'f'))
+        })
+        .and_then(|hex| u32::from_str_radix(hex, 16).ok())
+        .with_context(|| format!("{damaged}: its checksum is not eight lowercase hex digits"))?;
+    header[at..at + 8].copy_from_slice(CHECKSUM_PLACEHOLDER.as_bytes());
+    let actual = crc32c::crc32c_append(crc32c::crc32c(&bytes[header_end..]), &header);
+    if actual != recorded {
+        bail!(
+            "{damaged}: its CRC-32C is {actual:08x}, it recorded {recorded:08x}; nothing of it was used (start \
+             the run again with --restart, or restore the snapshot from a copy)"
+        );
+    }
+    Ok(())
 }
 
 /// Writes `data`'s numbers as little-endian bytes, `buffer.len()` bytes at a time.
@@ -288,6 +381,13 @@ fn fnv1a(bytes: &[u8]) -> u64 {
     })
 }
 
+/// Reads the bytes of a snapshot file of the run of `config`: its checksum, format, version and configuration
+/// are checked, then every array and value is read, and every action in it range-checked. Any damage is an
+/// error, never a panic (what `arld train --resume` reads, and the fuzz target `snapshot` exercises).
+pub fn read_snapshot(bytes: &[u8], config: &TrainConfig) -> Result<StateDict<'static>> {
+    decode(bytes, config)
+}
+
 /// Reads a snapshot file's bytes, checking format, version and configuration.
 fn decode(bytes: &[u8], config: &TrainConfig) -> Result<StateDict<'static>> {
     let (_, header) =
@@ -298,9 +398,11 @@ fn decode(bytes: &[u8], config: &TrainConfig) -> Result<StateDict<'static>> {
             .with_context(|| format!("the file is not an arld snapshot (no `{key}` in its header)"))
     };
     let format = get("format")?;
-    if format != &FORMAT_VERSION.to_string() {
+    if format == &FORMAT_VERSION.to_string() {
+        verify_checksum(bytes)?;
+    } else if format != "1" {
         bail!(
-            "the snapshot has format version {format}, this arld reads version {FORMAT_VERSION}; \
+            "the snapshot has format version {format}, this arld reads versions 1 and {FORMAT_VERSION}; \
              finish the run with the arld that started it, or start it again"
         );
     }
@@ -348,7 +450,54 @@ fn decode(bytes: &[u8], config: &TrainConfig) -> Result<StateDict<'static>> {
         };
         state.arrays.insert(name, array);
     }
+    if let Ok(spec) = crate::env::spec(&config.env) {
+        check_actions(&state, spec.n_actions)?;
+    }
     Ok(state)
+}
+
+/// Checks that every action the snapshot holds (the replay memory's, the n-step queue's, the episode in
+/// progress's, the open question's) is one of the environment's `n_actions`: an action out of range would be
+/// an index past the end of the Q-values later, where it can only panic.
+fn check_actions(state: &StateDict<'_>, n_actions: usize) -> Result<()> {
+    let in_range = |what: &str, actions: &mut dyn Iterator<Item = Option<u64>>| -> Result<()> {
+        for (i, action) in actions.enumerate() {
+            match action {
+                Some(a) if a < n_actions as u64 => {}
+                Some(a) => bail!(
+                    "the snapshot's {what} holds action {a} (entry {i}), but the environment has {n_actions} \
+                     actions; the snapshot is not this run's"
+                ),
+                None => bail!("the snapshot's {what} holds a malformed action (entry {i})"),
+            }
+        }
+        Ok(())
+    };
+    if let Ok(actions) = state.u64s("replay.actions") {
+        in_range("replay memory", &mut actions.iter().map(|&a| Some(a)))?;
+    }
+    let json_actions =
+        |value: Option<&serde_json::Value>, field: Option<&str>| -> Vec<Option<u64>> {
+            let list = value.and_then(serde_json::Value::as_array);
+            list.into_iter()
+                .flatten()
+                .map(|v| match field {
+                    Some(field) => v.get(field).and_then(serde_json::Value::as_u64),
+                    None => v.as_u64(),
+                })
+                .collect()
+        };
+    let queue = json_actions(state.values.get("replay.nstep_queue"), Some("action"));
+    in_range("n-step queue", &mut queue.into_iter())?;
+    let position = state.values.get("loop");
+    let episode = json_actions(position.and_then(|p| p.get("ep_actions")), None);
+    in_range("episode in progress", &mut episode.into_iter())?;
+    let open = position
+        .and_then(|p| p.get("pending"))
+        .filter(|p| !p.is_null())
+        .map(|p| p.get("agent_action").and_then(serde_json::Value::as_u64));
+    in_range("open question", &mut open.into_iter())?;
+    Ok(())
 }
 
 /// The numbers of little-endian `bytes` (whose length safetensors checked against the array's type).
@@ -444,6 +593,31 @@ mod tests {
             err.contains("the C library's elementary functions"),
             "{err}"
         );
+        // Format 1 (no checksum) is still read; in format 2 one changed byte anywhere is refused as damage.
+        let mut format_1 = metadata(Some(crate::math::NUMERICS), &config(0).to_toml());
+        format_1[0].1 = "1".to_string();
+        write_with(&format_1);
+        let written = std::fs::read(&path).unwrap();
+        let n = u64::from_le_bytes(written[..8].try_into().unwrap()) as usize;
+        let mut header: serde_json::Value = serde_json::from_slice(&written[8..8 + n]).unwrap();
+        header["__metadata__"]
+            .as_object_mut()
+            .unwrap()
+            .remove(CHECKSUM_KEY);
+        let mut text = serde_json::to_vec(&header).unwrap();
+        text.resize(text.len().next_multiple_of(8), b' ');
+        let mut old = (text.len() as u64).to_le_bytes().to_vec();
+        old.extend(&text);
+        old.extend(&written[8 + n..]);
+        std::fs::write(&path, &old).unwrap();
+        assert_eq!(ck.load().unwrap().unwrap(), state);
+        write_with(&metadata(Some(crate::math::NUMERICS), &config(0).to_toml()));
+        let mut changed = std::fs::read(&path).unwrap();
+        let last = changed.len() - 1;
+        changed[last] ^= 1;
+        std::fs::write(&path, &changed).unwrap();
+        let err = format!("{:#}", ck.load().unwrap_err());
+        assert!(err.contains("damaged") && err.contains("CRC-32C"), "{err}");
         std::fs::write(ck.path(), b"not a snapshot").unwrap();
         assert!(format!("{:#}", ck.load().unwrap_err()).contains("not a readable safetensors"));
         ck.remove().unwrap();

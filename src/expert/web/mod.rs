@@ -45,6 +45,8 @@ use std::time::{Duration, Instant};
 pub const DEFAULT_LISTEN: &str = "127.0.0.1:8765";
 /// Live updates per second while training runs.
 const UPDATES_PER_S: f64 = 15.0;
+/// The slowest real-time pace (one step in 100 s): the step period 1/fps stays a time a clock can hold.
+const MIN_FPS: f64 = 0.01;
 /// How often a wait for the person looks for a stop request.
 const STOP_POLL: Duration = Duration::from_millis(50);
 /// The agent's steps replayed to the person before a question, at most (the page plays them within 2 s).
@@ -86,13 +88,14 @@ impl std::str::FromStr for WebOptions {
             let (key, value) = part
                 .split_once('=')
                 .with_context(|| format!("web expert option '{part}' is not key=value"))?;
-            let positive = |what: &str, max: f64| -> Result<f64> {
+            // Bounded on both sides: a step period of 1/fps seconds must be a time a clock can hold.
+            let within = |what: &str, min: f64, max: f64| -> Result<f64> {
                 let v: f64 = value
                     .parse()
                     .with_context(|| format!("web expert {what} '{value}' is not a number"))?;
                 ensure!(
-                    v.is_finite() && v > 0.0 && v <= max,
-                    "web expert {what} must be in (0, {max}], got {value}"
+                    v.is_finite() && v >= min && v <= max,
+                    "web expert {what} must be in [{min}, {max}], got {value}"
                 );
                 Ok(v)
             };
@@ -102,8 +105,8 @@ impl std::str::FromStr for WebOptions {
                         "web expert listen address '{value}' is not IP:PORT (e.g. {DEFAULT_LISTEN})"
                     )
                 })?,
-                "fps" => o.fps = Some(positive("fps", 1000.0)?),
-                "timeout" => o.timeout = Some(positive("timeout", 1e6)?),
+                "fps" => o.fps = Some(within("fps", MIN_FPS, 1000.0)?),
+                "timeout" => o.timeout = Some(within("timeout", 0.001, 1e6)?),
                 "wait" => {
                     o.wait = match value {
                         "yes" | "true" => true,

@@ -5,7 +5,8 @@
 //! address (so that the page of another site cannot reach the server by DNS rebinding). The training thread and the server share a [`Board`]: the latest
 //! status, frame and prompt and the history, so that a tab that connects (or reloads) late sees everything at
 //! once; every change is also broadcast to the open tabs. One tab controls (the first one, or the one that took
-//! control); its keys go to the training thread over a channel, the others watch.
+//! control); its keys go to the training thread over a channel, the others watch. At most [`MAX_CONNECTIONS`]
+//! connections are open at once.
 
 use super::protocol::{ClientMsg, ServerMsg};
 use axum::Router;
@@ -267,6 +268,10 @@ pub fn spawn(
                 let listener = axum::serve::ListenerExt::tap_io(listener, |tcp| {
                     let _ = tcp.set_nodelay(true);
                 });
+                let listener = Bounded {
+                    inner: listener,
+                    permits: Arc::new(tokio::sync::Semaphore::new(MAX_CONNECTIONS)),
+                };
                 let app = router(shared);
                 tokio::select! {
                     result = axum::serve(listener, app) => {
@@ -280,6 +285,81 @@ pub fn spawn(
             // Dropping the runtime here ends every connection still open.
         })?;
     Ok(handle)
+}
+
+/// The most connections the server holds open at once. Further ones wait in the system's queue until one
+/// closes: idle connections cannot use up the process's open files (which the run needs too).
+pub const MAX_CONNECTIONS: usize = 32;
+
+/// A listener that accepts a connection only while fewer than its permits' number are open.
+struct Bounded<L> {
+    inner: L,
+    permits: Arc<tokio::sync::Semaphore>,
+}
+
+/// A connection holding its permit until it closes.
+struct Counted<T> {
+    io: T,
+    _permit: tokio::sync::OwnedSemaphorePermit,
+}
+
+impl<L: axum::serve::Listener> axum::serve::Listener for Bounded<L> {
+    type Io = Counted<L::Io>;
+    type Addr = L::Addr;
+
+    async fn accept(&mut self) -> (Self::Io, Self::Addr) {
+        // The semaphore is never closed, so acquiring only waits.
+        let permit = Arc::clone(&self.permits)
+            .acquire_owned()
+            .await
+            .expect("the connection semaphore is never closed");
+        let (io, addr) = self.inner.accept().await;
+        (
+            Counted {
+                io,
+                _permit: permit,
+            },
+            addr,
+        )
+    }
+
+    fn local_addr(&self) -> std::io::Result<Self::Addr> {
+        self.inner.local_addr()
+    }
+}
+
+impl<T: tokio::io::AsyncRead + Unpin> tokio::io::AsyncRead for Counted<T> {
+    fn poll_read(
+        mut self: std::pin::Pin<&mut Self>,
+        cx: &mut std::task::Context<'_>,
+        buf: &mut tokio::io::ReadBuf<'_>,
+    ) -> std::task::Poll<std::io::Result<()>> {
+        std::pin::Pin::new(&mut self.io).poll_read(cx, buf)
+    }
+}
+
+impl<T: tokio::io::AsyncWrite + Unpin> tokio::io::AsyncWrite for Counted<T> {
+    fn poll_write(
+        mut self: std::pin::Pin<&mut Self>,
+        cx: &mut std::task::Context<'_>,
+        buf: &[u8],
+    ) -> std::task::Poll<std::io::Result<usize>> {
+        std::pin::Pin::new(&mut self.io).poll_write(cx, buf)
+    }
+
+    fn poll_flush(
+        mut self: std::pin::Pin<&mut Self>,
+        cx: &mut std::task::Context<'_>,
+    ) -> std::task::Poll<std::io::Result<()>> {
+        std::pin::Pin::new(&mut self.io).poll_flush(cx)
+    }
+
+    fn poll_shutdown(
+        mut self: std::pin::Pin<&mut Self>,
+        cx: &mut std::task::Context<'_>,
+    ) -> std::task::Poll<std::io::Result<()>> {
+        std::pin::Pin::new(&mut self.io).poll_shutdown(cx)
+    }
 }
 
 fn router(shared: Arc<Shared>) -> Router {

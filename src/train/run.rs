@@ -1,0 +1,1169 @@
+//! One run of training, read top to bottom. [`RunBuilder`] gathers what a run is given (its environments, its
+//! expert and demonstrations, snapshots, a snapshot to continue from, a driver) and is the one entry point for the
+//! command line, sweeps, Slurm shards and Python. [`Run::execute`] is the whole algorithm of every method in the
+//! paper (DQN, DQfD, GDQN, BDQN, ADQN and ADQNP, with a plain, bootstrapped or noisy network): `resume`,
+//! `pretrain`, `begin_training`, then for each environment step `choose` (the agent acts, or the query rule asks
+//! the expert), `step_env`, `learn`, `report`, `snapshot_point` and `drive`, then `finish`. Each step returns what
+//! the loop does next ([`Choice`], [`Flow`]); none hides a `return`, `break` or `continue`.
+
+use super::eval::Evaluator;
+use super::{
+    Checkpointer, QueryEvent, RunLog, SeedPurpose, Summary, TrainConfig, epsilon_at,
+    pretrain_update, push_demos, record_failure, run_dir, seed_for, steps_to_solve, update_checked,
+};
+use crate::agent::{Agent, Learner};
+use crate::env::{self, Env};
+use crate::expert::demos::Demonstrations;
+use crate::expert::{Answer, EpisodeTrace, Expert, Progress, Query, RunEnd};
+use crate::interrupt;
+use crate::query::{DecisionInput, Needs, OracleView, QueryController};
+use crate::replay::{Batch, Replay, ReplayConfig, Transition};
+use crate::state::{Persist, StateDict};
+use anyhow::{Context, Result, ensure};
+use cpu_time::ThreadTime;
+use rand::SeedableRng;
+use rand_pcg::Pcg64;
+use std::path::Path;
+use std::time::Instant;
+
+/// What a run is given, and the one way to start it: `RunBuilder::new(&cfg)`, the parts a run needs beyond its
+/// configuration, then [`RunBuilder::train`].
+///
+/// - Environments: by default the configuration's environment, made once for training and once per test
+///   episode (the lockstep evaluation); [`Self::env`] and [`Self::test_envs`] give others (any [`Env`], e.g. one
+///   stepping a Gymnasium environment in Python).
+/// - [`Self::expert`] is asked during training by the querying methods (and observes every step: an interactive
+///   one shows the run); [`Self::demos`] are the demonstrations DQfD and ADQNP pre-train on.
+/// - [`Self::snapshots`]: every `cfg.snapshot_every` steps (and pre-training updates), and when a stop is
+///   requested ([`crate::interrupt`]: SIGTERM/SIGINT), the whole state of the run goes to the checkpointer's run
+///   directory; then a stop request ends the run with an [`crate::interrupt::Interrupted`] error.
+/// - [`Self::resume_from`]: the run continues from a snapshot, to the same results as an uninterrupted run. The
+///   log must then come from [`RunLog::resume`] at the snapshot's log position ([`super::resume_position`]).
+/// - [`Self::driver`]: the run is driven from outside and has no fixed end. After every environment step the
+///   driver says whether to go on, pause (it then holds the whole live run, [`PausedRun`], until it says to go
+///   on or stop) or stop; the run ends (its summary, weights and `summary.json`) only when the driver stops it.
+///   `cfg.train_steps` is then the horizon of the schedules (ε, β) and of the last evaluation, not a limit: past
+///   it ε stays at `eps_end` and β at 1. Pausing and going on changes nothing in the run: it is the same loop,
+///   so two stretches equal one of their total length.
+pub struct RunBuilder<'a, A: Learner = Agent> {
+    cfg: &'a TrainConfig,
+    /// Builds the agent for an environment of `obs_dim` inputs and `n_actions` actions, from the run's seed.
+    make_agent: fn(&TrainConfig, usize, usize) -> A,
+    env: Option<Box<dyn Env>>,
+    test_envs: Option<Vec<Box<dyn Env>>>,
+    expert: Option<&'a mut dyn Expert>,
+    demos: Option<&'a Demonstrations>,
+    checkpointer: Option<&'a mut Checkpointer>,
+    resume_from: Option<&'a StateDict<'a>>,
+    driver: Option<&'a mut dyn Driver<A>>,
+}
+
+impl<'a> RunBuilder<'a> {
+    /// A run of `cfg` in the configuration's own environments, with no expert, demonstrations, snapshots or
+    /// driver.
+    pub fn new(cfg: &'a TrainConfig) -> Self {
+        RunBuilder::with_agent(cfg, dqn_agent)
+    }
+}
+
+/// The DQN-family agent of `cfg` ([`TrainConfig::agent_config`]), seeded from the run's seed.
+fn dqn_agent(cfg: &TrainConfig, obs_dim: usize, n_actions: usize) -> Agent {
+    Agent::new(
+        &cfg.agent_config(),
+        obs_dim,
+        n_actions,
+        seed_for(cfg.seed, SeedPurpose::Agent),
+    )
+}
+
+impl<'a, A: Learner> RunBuilder<'a, A> {
+    /// A run of `cfg` whose agent `make_agent` builds (any [`Learner`]), otherwise as [`RunBuilder::new`].
+    pub fn with_agent(
+        cfg: &'a TrainConfig,
+        make_agent: fn(&TrainConfig, usize, usize) -> A,
+    ) -> Self {
+        Self {
+            cfg,
+            make_agent,
+            env: None,
+            test_envs: None,
+            expert: None,
+            demos: None,
+            checkpointer: None,
+            resume_from: None,
+            driver: None,
+        }
+    }
+
+    /// The environment to train in (the configuration's environment by default).
+    pub fn env(mut self, env: Box<dyn Env>) -> Self {
+        self.env = Some(env);
+        self
+    }
+
+    /// The environments of the test episodes, one per episode (`eval_episodes` of them).
+    pub fn test_envs(mut self, envs: Vec<Box<dyn Env>>) -> Self {
+        self.test_envs = Some(envs);
+        self
+    }
+
+    /// The expert the run asks (and that observes it), if any.
+    pub fn expert(mut self, expert: Option<&'a mut dyn Expert>) -> Self {
+        self.expert = expert;
+        self
+    }
+
+    /// The demonstrations the run pre-trains on, if any.
+    pub fn demos(mut self, demos: Option<&'a Demonstrations>) -> Self {
+        self.demos = demos;
+        self
+    }
+
+    /// Snapshots of the whole run into `checkpointer`'s run directory.
+    pub fn snapshots(mut self, checkpointer: &'a mut Checkpointer) -> Self {
+        self.checkpointer = Some(checkpointer);
+        self
+    }
+
+    /// The snapshot the run continues from, if any.
+    pub fn resume_from(mut self, state: Option<&'a StateDict<'a>>) -> Self {
+        self.resume_from = state;
+        self
+    }
+
+    /// Drives the run from outside: it ends when `driver` stops it.
+    pub fn driver(mut self, driver: &'a mut dyn Driver<A>) -> Self {
+        self.driver = Some(driver);
+        self
+    }
+
+    /// Trains, logging into `log`, and returns the run's summary and the trained agent. When the run ends with
+    /// an error (other than a stop request) and writes a run directory, `failed.json` records the error, the
+    /// phase and the step ([`run_dir::Failure`]).
+    pub fn train(mut self, log: &'a mut RunLog) -> Result<(Summary, A)> {
+        match self.prepare() {
+            Ok((env, parts)) => Run::new(self, env, parts, log).execute(),
+            Err(err) => {
+                if let Some(dir) = log.dir() {
+                    record_failure(dir, &err, "setup", 0);
+                }
+                Err(err)
+            }
+        }
+    }
+
+    /// The environment and the parts of the run a snapshot holds, each from the run's seed.
+    fn prepare(&mut self) -> Result<(Box<dyn Env>, Parts<A>)> {
+        let cfg = self.cfg;
+        ensure!(
+            !cfg.method.queries() || self.expert.is_some(),
+            "{} asks an expert during training, but none was given",
+            cfg.method
+        );
+        let env = match self.env.take() {
+            Some(env) => env,
+            None => env::make(&cfg.env)?,
+        };
+        let test_envs = match self.test_envs.take() {
+            Some(envs) => envs,
+            None => (0..cfg.eval_episodes)
+                .map(|_| Ok(env::make(&cfg.env)?))
+                .collect::<Result<_>>()?,
+        };
+        ensure!(
+            test_envs.len() == cfg.eval_episodes,
+            "{} test environments for {} test episodes (eval_episodes): give one per episode",
+            test_envs.len(),
+            cfg.eval_episodes
+        );
+        let (obs_dim, n_actions) = (env.obs_dim(), env.n_actions());
+        let agent = (self.make_agent)(cfg, obs_dim, n_actions);
+        let evaluator =
+            Evaluator::new(test_envs, seed_for(cfg.seed, SeedPurpose::EvalEnv), obs_dim)?;
+        let pretrain_demos = self.demos.map(|d| d.transitions.len()).unwrap_or(0);
+        let replay = Replay::new(
+            obs_dim,
+            &ReplayConfig {
+                demo_capacity: pretrain_demos + cfg.query_transitions(),
+                ..cfg.replay_config()
+            },
+        );
+        let parts = Parts {
+            agent,
+            replay,
+            queries: cfg.query_controller()?,
+            replay_rng: Pcg64::seed_from_u64(seed_for(cfg.seed, SeedPurpose::Replay)),
+            query_rng: Pcg64::seed_from_u64(seed_for(cfg.seed, SeedPurpose::Query)),
+            evaluator,
+            obs: Vec::new(),
+        };
+        Ok((env, parts))
+    }
+}
+
+/// The parts of a run that learn or draw: with the [`LoopState`] and the expert's state, what a snapshot holds.
+struct Parts<A> {
+    agent: A,
+    replay: Replay,
+    queries: QueryController,
+    replay_rng: Pcg64,
+    query_rng: Pcg64,
+    evaluator: Evaluator,
+    /// The observation the agent acts on; empty until training starts (a snapshot taken in pre-training has
+    /// none).
+    obs: Vec<f32>,
+}
+
+/// A run in progress: what it was given, its parts, and where its loop stands.
+struct Run<'a, A: Learner> {
+    cfg: &'a TrainConfig,
+    env: Box<dyn Env>,
+    expert: Option<&'a mut dyn Expert>,
+    demos: Option<&'a Demonstrations>,
+    log: &'a mut RunLog,
+    checkpointer: Option<&'a mut Checkpointer>,
+    resume_from: Option<&'a StateDict<'a>>,
+    driver: Option<&'a mut dyn Driver<A>>,
+    parts: Parts<A>,
+    st: LoopState,
+    clock: RunClock,
+    batch: Batch,
+    /// The observation a step writes (swapped with `parts.obs` after each step: no allocation).
+    next_obs: Vec<f32>,
+    /// The seed of the training environment's first reset.
+    env_seed: u64,
+    /// The last step a run can take: `train_steps`, or none for a driven run (whose `train_steps` is its
+    /// schedules' horizon, not its end).
+    last_step: usize,
+}
+
+/// Who acts at the step in progress, or what the loop does instead.
+enum Choice {
+    /// Step the environment with `action`; `uncertainty` is the agent's, when it was computed.
+    Act {
+        action: usize,
+        uncertainty: Option<f32>,
+    },
+    /// Take the same step again (a driver went on after a stop while the expert was asked).
+    Again,
+    /// End the run here.
+    End,
+}
+
+/// What the loop does after a step.
+#[derive(PartialEq, Eq)]
+enum Flow {
+    Go,
+    End,
+}
+
+/// Who acts, as the query rule decided when no question was open.
+enum Turn {
+    Agent(usize),
+    Ask(OpenQuestion),
+}
+
+impl<'a, A: Learner> Run<'a, A> {
+    fn new(
+        given: RunBuilder<'a, A>,
+        env: Box<dyn Env>,
+        parts: Parts<A>,
+        log: &'a mut RunLog,
+    ) -> Self {
+        let cfg = given.cfg;
+        Self {
+            cfg,
+            env,
+            expert: given.expert,
+            demos: given.demos,
+            log,
+            checkpointer: given.checkpointer,
+            resume_from: given.resume_from,
+            last_step: if given.driver.is_some() {
+                usize::MAX
+            } else {
+                cfg.train_steps
+            },
+            driver: given.driver,
+            parts,
+            st: LoopState::default(),
+            clock: RunClock::start(),
+            batch: Batch::default(),
+            next_obs: Vec::new(),
+            env_seed: seed_for(cfg.seed, SeedPurpose::TrainEnv),
+        }
+    }
+
+    /// The whole run; a failure is recorded in the run directory with the phase and step it happened at.
+    fn execute(mut self) -> Result<(Summary, A)> {
+        match self.steps() {
+            Ok(summary) => Ok((summary, self.parts.agent)),
+            Err(err) => {
+                self.record_failure(&err);
+                Err(err)
+            }
+        }
+    }
+
+    /// The run from where it stands to its summary.
+    fn steps(&mut self) -> Result<Summary> {
+        self.resume()?;
+        self.pretrain()?;
+        self.begin_training();
+        while self.driver.is_some() || self.st.step < self.cfg.train_steps {
+            let (action, uncertainty) = match self.choose()? {
+                Choice::Act {
+                    action,
+                    uncertainty,
+                } => (action, uncertainty),
+                Choice::Again => continue,
+                Choice::End => break,
+            };
+            self.step_env(action)?;
+            self.learn()?;
+            self.report(uncertainty)?;
+            self.st.step += 1;
+            // Not after the last step: the results follow.
+            if self.st.step < self.cfg.train_steps {
+                let (step, steps) = (self.st.step, self.cfg.train_steps);
+                self.snapshot_point(step, || format!("stopped at step {step} of {steps}"))?;
+            }
+            if self.drive()? == Flow::End {
+                break;
+            }
+        }
+        self.finish()
+    }
+
+    /// Continues from a snapshot: every part back where it was.
+    fn resume(&mut self) -> Result<()> {
+        let Some(state) = self.resume_from else {
+            return Ok(());
+        };
+        let parts = &mut self.parts;
+        parts.agent.load_state("agent", state)?;
+        parts.replay.load_state("replay", state)?;
+        parts.queries.load_state("query", state)?;
+        parts.replay_rng = state.text("rng.replay")?;
+        parts.query_rng = state.text("rng.query")?;
+        let eval_generators: Vec<Option<[u64; 6]>> = state.value("rng.eval_envs")?;
+        parts.evaluator.set_generators(&eval_generators)?;
+        let expert_state: Option<String> = state.value("expert")?;
+        if let (Some(e), Some(saved)) = (self.expert.as_deref_mut(), expert_state) {
+            e.restore(&saved)?;
+        }
+        self.st = state.value("loop")?;
+        self.clock.carry(&self.st);
+        if self.st.training {
+            // The environment: the generator its episode's reset drew from, the reset, the actions taken.
+            env::replay_episode(
+                &mut *self.env,
+                self.st.episode_start(self.env_seed),
+                &self.st.ep_actions,
+                &mut parts.obs,
+            )?;
+            ensure!(
+                parts.obs == state.f32s("obs")?,
+                "replaying the episode in progress did not reach the snapshot's observation"
+            );
+        }
+        Ok(())
+    }
+
+    /// Pre-training on demonstrations only (DQfD, ADQNP; §9), with a snapshot point after every update.
+    fn pretrain(&mut self) -> Result<()> {
+        let cfg = self.cfg;
+        if !cfg.method.pretrains() || self.st.training {
+            return Ok(());
+        }
+        let demos = self
+            .demos
+            .context("this method pre-trains on demonstrations, but none were given")?;
+        self.log
+            .set_prefix(format!("{} pre-training", cfg.run_name()));
+        if self.resume_from.is_none() {
+            push_demos(cfg, &mut self.parts.replay, demos)?;
+        }
+        while self.st.pretrain_done < cfg.pretrain_steps {
+            let parts = &mut self.parts;
+            pretrain_update(
+                cfg,
+                &mut parts.agent,
+                &mut parts.replay,
+                &mut parts.replay_rng,
+                &mut self.batch,
+                self.st.pretrain_done + 1,
+            )?;
+            self.st.pretrain_done += 1;
+            let done = self.st.pretrain_done;
+            self.snapshot_point(done, || {
+                format!("stopped after {done} pre-training updates")
+            })?;
+        }
+        self.parts.agent.end_target_period();
+        Ok(())
+    }
+
+    /// The first reset of the training environment (unless a resumed run is past it).
+    fn begin_training(&mut self) {
+        self.log.set_prefix(self.cfg.run_name());
+        if !self.st.training {
+            self.st.training = true;
+            self.parts.obs = self.env.reset(Some(self.env_seed));
+            self.parts.agent.begin_episode();
+        }
+    }
+
+    /// Who acts at this step: the agent, or the expert when a query is running or the rule asks for one now (or
+    /// a resumed run asks again the question that was open when it stopped).
+    fn choose(&mut self) -> Result<Choice> {
+        let mut uncertainty = None;
+        let mut open = self.st.pending.take();
+        if open.is_none() && !self.parts.queries.expert_in_control() {
+            let (turn, signal) = self.decide()?;
+            uncertainty = signal;
+            match turn {
+                Turn::Agent(action) => {
+                    return Ok(Choice::Act {
+                        action,
+                        uncertainty,
+                    });
+                }
+                Turn::Ask(question) => open = Some(question),
+            }
+        }
+        let asked = match open {
+            Some(question) => self.ask_open(question),
+            None => self.ask_in_segment(),
+        };
+        match asked {
+            Ok(action) => Ok(Choice::Act {
+                action,
+                uncertainty,
+            }),
+            Err(err) if interrupt::is_stop(&err) => self.stop_while_asking(err),
+            Err(err) => Err(err),
+        }
+    }
+
+    /// The agent's action and whether the query rule asks the expert instead; the agent's uncertainty when it
+    /// was computed.
+    fn decide(&mut self) -> Result<(Turn, Option<f32>)> {
+        let (cfg, step) = (self.cfg, self.st.step);
+        let parts = &mut self.parts;
+        let epsilon = epsilon_at(cfg, step);
+        if cfg.queries_from_learning_starts && step + 1 < cfg.learning_starts {
+            // Ablation: no queries before the first update; the rule does not see these steps.
+            let action = parts.agent.act(&parts.obs, epsilon, Needs::NOTHING).0;
+            return Ok((Turn::Agent(action), None));
+        }
+        let mut want = parts.queries.signals_wanted_now();
+        want.uncertainty |= self
+            .expert
+            .as_deref()
+            .is_some_and(|e| e.shows_uncertainty());
+        let (agent_action, signals) = parts.agent.act(&parts.obs, epsilon, want);
+        let oracle = if want.oracle {
+            Some(peek_expert(
+                &mut self.expert,
+                &parts.obs,
+                parts.queries.rule().name(),
+            )?)
+        } else {
+            None
+        };
+        let input = DecisionInput {
+            step,
+            train_steps: cfg.train_steps,
+            agent_action,
+            signals: &signals,
+            oracle: oracle.as_ref(),
+        };
+        let decision = parts.queries.decide(&input, &mut parts.query_rng);
+        let turn = if decision.query {
+            Turn::Ask(OpenQuestion {
+                agent_action,
+                score: decision.score,
+                threshold: decision.threshold,
+            })
+        } else {
+            Turn::Agent(agent_action)
+        };
+        Ok((turn, signals.uncertainty))
+    }
+
+    /// Asks the question that opens a segment; its answer (or the agent's action, when nobody answered) acts.
+    /// On a stop while it is asked, the question stays open for the run to ask again.
+    fn ask_open(&mut self, question: OpenQuestion) -> Result<usize> {
+        let agent_action = question.agent_action;
+        let asked = ask_expert(
+            &mut self.expert,
+            &self.parts.obs,
+            &*self.env,
+            self.st.episode(self.env_seed),
+            Some(agent_action),
+            &self.parts.queries,
+        );
+        let answer = match asked {
+            Ok(answer) => answer,
+            Err(err) => {
+                if interrupt::is_stop(&err) {
+                    self.st.pending = Some(question);
+                }
+                return Err(err);
+            }
+        };
+        let (expert_action, response_s) = match answer {
+            Answer::Action { action, response_s } => (Some(action), response_s),
+            Answer::Unanswered { waited_s } => {
+                self.parts.queries.withdraw();
+                (None, Some(waited_s))
+            }
+        };
+        self.log.query(&QueryEvent {
+            step: self.st.step,
+            episode: self.st.episode,
+            uncertainty: question.score,
+            threshold: question.threshold,
+            expert_action,
+            agent_action,
+            expert: self.expert_kind(),
+            response_s,
+            answered: expert_action.is_some(),
+        })?;
+        Ok(expert_action.unwrap_or(agent_action))
+    }
+
+    /// The expert's action at a later step of its segment; when nobody answers, the agent takes the rest of the
+    /// segment back, and the log says so.
+    fn ask_in_segment(&mut self) -> Result<usize> {
+        let answer = ask_expert(
+            &mut self.expert,
+            &self.parts.obs,
+            &*self.env,
+            self.st.episode(self.env_seed),
+            None,
+            &self.parts.queries,
+        )?;
+        let waited_s = match answer {
+            Answer::Action { action, .. } => return Ok(action),
+            Answer::Unanswered { waited_s } => waited_s,
+        };
+        let parts = &mut self.parts;
+        parts.queries.withdraw();
+        let epsilon = epsilon_at(self.cfg, self.st.step);
+        let agent_action = parts.agent.act(&parts.obs, epsilon, Needs::NOTHING).0;
+        self.log.query(&QueryEvent {
+            step: self.st.step,
+            episode: self.st.episode,
+            uncertainty: None,
+            threshold: None,
+            expert_action: None,
+            agent_action,
+            expert: self.expert_kind(),
+            response_s: Some(waited_s),
+            answered: false,
+        })?;
+        Ok(agent_action)
+    }
+
+    /// A stop while the expert is asked (a person who has not answered yet): the snapshot holds the run as it
+    /// stands, with the open question, so that a resumed run asks it again. A driven run (Python) pauses there
+    /// instead: its driver raises the stop, and when it goes on the same question is asked again.
+    fn stop_while_asking(&mut self, err: anyhow::Error) -> Result<Choice> {
+        if self.driver.is_some() {
+            return Ok(match self.pause()? {
+                Control::Continue => Choice::Again,
+                Control::Pause | Control::Stop => Choice::End,
+            });
+        }
+        let (step, steps) = (self.st.step, self.cfg.train_steps);
+        self.snapshot_point(step, || {
+            format!("stopped at step {step} of {steps} while a question was open")
+        })?;
+        Err(err)
+    }
+
+    /// Steps the environment; an expert's transition is stored as a demonstration (margin loss, bonus
+    /// priority). An episode's end logs it and resets the environment.
+    fn step_env(&mut self, action: usize) -> Result<()> {
+        let (cfg, parts, st) = (self.cfg, &mut self.parts, &mut self.st);
+        let by_expert = parts.queries.expert_in_control();
+        if by_expert {
+            parts.queries.record_expert_step();
+            st.ep_demo += 1;
+        }
+        self.next_obs.resize(parts.obs.len(), 0.0);
+        let s = self.env.step_into(action, &mut self.next_obs)?;
+        st.ep_actions.push(action);
+        parts.replay.push(Transition {
+            obs: &parts.obs,
+            action,
+            reward: s.reward as f32,
+            next_obs: &self.next_obs,
+            terminal: s.terminated || (s.truncated && cfg.timeout_as_terminal),
+            is_demo: by_expert,
+        })?;
+        st.ep_return += s.reward;
+        st.ep_len += 1;
+        std::mem::swap(&mut parts.obs, &mut self.next_obs);
+        if s.terminated || s.truncated {
+            let step = st.step;
+            self.log
+                .episode(st.episode, step + 1, st.ep_return, st.ep_len, st.ep_demo)?;
+            st.episode += 1;
+            (st.ep_return, st.ep_len, st.ep_demo) = (0.0, 0, 0);
+            parts.replay.end_episode()?;
+            st.ep_actions.clear();
+            st.ep_generator = self.env.generator().map(|g| g.to_words());
+            self.env.reset_into(None, &mut parts.obs);
+            parts.agent.begin_episode();
+            parts.queries.end_episode();
+        }
+        Ok(())
+    }
+
+    /// One prioritized double-DQN update per `train_freq` steps once learning has started, hard target copies,
+    /// and the training scalars every 1000 updates.
+    fn learn(&mut self) -> Result<()> {
+        let (cfg, step, parts) = (self.cfg, self.st.step, &mut self.parts);
+        let due = step + 1 >= cfg.learning_starts && (step + 1).is_multiple_of(cfg.train_freq);
+        if !due || parts.replay.len() < cfg.batch_size {
+            return Ok(());
+        }
+        // A driven run may go past `train_steps`, the schedule's horizon: β then stays at 1.
+        let progress = (step as f64 / cfg.train_steps as f64).min(1.0);
+        let beta = cfg.beta0 + (1.0 - cfg.beta0) * progress;
+        let (replay_rng, batch) = (&mut parts.replay_rng, &mut self.batch);
+        parts
+            .replay
+            .sample(cfg.batch_size, beta as f32, replay_rng, batch);
+        let stats = update_checked(cfg, &mut parts.agent, &mut parts.replay, batch, || {
+            format!("step {}", step + 1)
+        })?;
+        self.st.updates += 1;
+        if self.st.updates.is_multiple_of(cfg.target_period) {
+            parts.agent.end_target_period();
+        }
+        if self.st.updates.is_multiple_of(1000) {
+            let log = &mut *self.log;
+            log.scalar("train/td_loss", step + 1, stats.td_loss)?;
+            log.scalar("train/margin_loss", step + 1, stats.margin_loss)?;
+            log.scalar("train/epsilon", step + 1, epsilon_at(cfg, step) as f32)?;
+            log.scalar(
+                "query/budget_used",
+                step + 1,
+                parts.queries.budget_used() as f32,
+            )?;
+            if let Some(thr) = parts.queries.rule().threshold() {
+                log.scalar("query/threshold", step + 1, thr)?;
+            }
+        }
+        Ok(())
+    }
+
+    /// After a step: the evaluation without exploration every `eval_period` steps, the expert's view of the run,
+    /// progress, and the weights every `checkpoint_every` steps.
+    fn report(&mut self, uncertainty: Option<f32>) -> Result<()> {
+        let (cfg, done, parts) = (self.cfg, self.st.step + 1, &mut self.parts);
+        if done.is_multiple_of(cfg.eval_period) || done == cfg.train_steps {
+            let point = parts.evaluator.evaluate(&mut parts.agent, done)?;
+            self.log.eval(point)?;
+        }
+        if let Some(expert) = self.expert.as_deref_mut() {
+            expert.observe(&Progress {
+                step: done,
+                train_steps: cfg.train_steps,
+                episode: self.st.episode,
+                env: &*self.env,
+                uncertainty,
+                queries: &parts.queries,
+                last_eval: self.log.curve().last().map(|p| (p.step, p.mean)),
+            });
+        }
+        if done.is_multiple_of(500) {
+            self.log.progress(done);
+        }
+        if cfg.checkpoint_every > 0
+            && done.is_multiple_of(cfg.checkpoint_every)
+            && let Some(dir) = self.log.dir()
+        {
+            let path = run_dir::checkpoint_path(dir, done);
+            if let Some(parent) = path.parent() {
+                std::fs::create_dir_all(parent)?;
+            }
+            let metadata = weights_metadata(cfg, done);
+            parts.agent.save_weights(&path, &metadata)?;
+        }
+        Ok(())
+    }
+
+    /// A snapshot point: snapshots the run when `at` is due or a stop was asked for, and on a stop ends the run
+    /// with what was done (`stopped`) and where the snapshot is. Nothing in a run without snapshots.
+    fn snapshot_point(&mut self, at: usize, stopped: impl FnOnce() -> String) -> Result<()> {
+        let Some(ck) = self.checkpointer.as_deref_mut() else {
+            return Ok(());
+        };
+        let stop = interrupt::requested();
+        if stop || ck.due(at) {
+            self.clock.stamp(&mut self.st);
+            let expert_state = self.expert.as_deref().and_then(|e| e.state());
+            snapshot(ck, &self.st, &self.parts, expert_state, self.log, stop)?;
+        }
+        if stop {
+            let message = format!("{}; snapshot in {}", stopped(), ck.path().display());
+            return Err(interrupt::Interrupted(message).into());
+        }
+        Ok(())
+    }
+
+    /// A driven run: its driver may pause it (and hold the live run meanwhile) or stop it.
+    fn drive(&mut self) -> Result<Flow> {
+        let Some(driver) = self.driver.as_deref_mut() else {
+            return Ok(Flow::Go);
+        };
+        let view = StepView {
+            step: self.st.step,
+            episode: self.st.episode,
+            budget_used: self.parts.queries.budget_used(),
+            log: self.log,
+            agent: &self.parts.agent,
+        };
+        let mut control = driver.after_step(&view)?;
+        if control == Control::Pause {
+            control = self.pause()?;
+        }
+        Ok(if control == Control::Continue {
+            Flow::Go
+        } else {
+            Flow::End
+        })
+    }
+
+    /// Hands the live run to the driver (its logs whole) until it says go on or stop. A run without a driver
+    /// has nobody to hand it to: it stops.
+    fn pause(&mut self) -> Result<Control> {
+        let mut summary = self.summary();
+        summary.person_s = self.expert.as_deref().and_then(|e| e.person_seconds());
+        finish_log(
+            self.cfg,
+            &self.parts.agent,
+            self.log,
+            &summary,
+            self.st.step,
+        )?;
+        self.clock.stamp(&mut self.st);
+        let expert_state = self.expert.as_deref().and_then(|e| e.state());
+        let Some(driver) = self.driver.as_deref_mut() else {
+            return Ok(Control::Stop);
+        };
+        let mut paused = PausedRun {
+            summary,
+            agent: &self.parts.agent,
+            log: self.log,
+            cfg: self.cfg,
+            st: &self.st,
+            parts: &self.parts,
+            expert_state,
+        };
+        driver.paused(&mut paused)
+    }
+
+    /// The end of the run: its summary, the expert told how it went, the weights and `summary.json`, and the
+    /// snapshot removed.
+    fn finish(&mut self) -> Result<Summary> {
+        let mut summary = self.summary();
+        if let Some(expert) = self.expert.as_deref_mut() {
+            summary.person_s = expert.person_seconds();
+            expert.finish(&RunEnd {
+                solved: summary.solved,
+                steps_to_solve: summary.steps_to_solve,
+                train_steps: self.cfg.train_steps,
+                final_score: summary.final_score,
+                dir: self.log.dir().map(|d| d.to_path_buf()),
+            });
+        }
+        finish_log(
+            self.cfg,
+            &self.parts.agent,
+            self.log,
+            &summary,
+            self.st.step,
+        )?;
+        if let Some(ck) = self.checkpointer.as_deref_mut() {
+            ck.remove()?;
+        }
+        Ok(summary)
+    }
+
+    /// The run's summary so far.
+    fn summary(&self) -> Summary {
+        summarize(
+            self.cfg,
+            &*self.env,
+            self.log,
+            &self.st,
+            &self.parts.queries,
+            &self.clock,
+            self.demos.map(|d| d.transitions.len()).unwrap_or(0),
+        )
+    }
+
+    /// The kind of the run's expert, for the query log.
+    fn expert_kind(&self) -> String {
+        self.expert.as_deref().map(|e| e.kind()).unwrap_or_default()
+    }
+
+    /// Records a failure in the run directory, with the phase and the step in progress (the one the logs and
+    /// the error name, not past the last one).
+    fn record_failure(&self, err: &anyhow::Error) {
+        let Some(dir) = self.log.dir() else {
+            return;
+        };
+        let (phase, step) = if self.st.training {
+            ("training", (self.st.step + 1).min(self.last_step))
+        } else if self.st.pretrain_done > 0 {
+            ("pre-training", 0)
+        } else {
+            ("setup", 0)
+        };
+        record_failure(dir, err, phase, step);
+    }
+}
+
+/// What a [`Driver`] says after a step.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Control {
+    /// Take the next step.
+    Continue,
+    /// Hand the live run to [`Driver::paused`].
+    Pause,
+    /// End the run here.
+    Stop,
+}
+
+/// Where a run stands after a step, for a [`Driver`].
+pub struct StepView<'a, A = Agent> {
+    /// Environment steps done.
+    pub step: usize,
+    /// Episodes finished.
+    pub episode: usize,
+    /// Demonstrated transitions asked for so far (or queries, as `budget_unit` says).
+    pub budget_used: usize,
+    pub log: &'a RunLog,
+    pub agent: &'a A,
+}
+
+/// Steers a run from outside ([`RunBuilder::driver`]) (e.g. a Python `learn` call that trains for a while, returns,
+/// and is called again).
+pub trait Driver<A = Agent> {
+    /// Called after every environment step.
+    fn after_step(&mut self, at: &StepView<'_, A>) -> Result<Control>;
+    /// Called when `after_step` paused the run; returns [`Control::Continue`] or [`Control::Stop`] (a pause
+    /// again is a stop).
+    fn paused(&mut self, run: &mut PausedRun<'_, A>) -> Result<Control>;
+}
+
+/// A paused run, whole: its summary so far, the agent, the log, and a snapshot of everything on request.
+pub struct PausedRun<'a, A = Agent> {
+    pub summary: Summary,
+    pub agent: &'a A,
+    pub log: &'a mut RunLog,
+    cfg: &'a TrainConfig,
+    st: &'a LoopState,
+    parts: &'a Parts<A>,
+    expert_state: Option<String>,
+}
+
+impl<A: Learner> PausedRun<'_, A> {
+    /// Writes a snapshot of the run (the format of [`Checkpointer`]) into `dir` and waits until it is there.
+    pub fn snapshot(&mut self, dir: &Path) -> Result<()> {
+        let mut ck = Checkpointer::new(dir, self.cfg);
+        let expert_state = self.expert_state.clone();
+        snapshot(&mut ck, self.st, self.parts, expert_state, self.log, true)
+    }
+}
+
+/// Where the loop stands; with the agent, replay, query controller and generators, the whole run.
+#[derive(Clone, Debug, Default, serde::Serialize, serde::Deserialize)]
+struct LoopState {
+    /// Pre-training updates done (all of them once training on the environment has begun).
+    pretrain_done: usize,
+    /// Whether the environment phase has begun.
+    training: bool,
+    /// Environment steps done.
+    step: usize,
+    episode: usize,
+    ep_return: f64,
+    ep_len: usize,
+    ep_demo: usize,
+    updates: usize,
+    /// The actions of the episode in progress, and the environment's generator before the reset that began
+    /// it (words of [`crate::rng::NumpyRng`]; `None` for the first episode, which resets with the run's seed).
+    ep_actions: Vec<usize>,
+    ep_generator: Option<[u64; 6]>,
+    /// Wall-clock and CPU seconds the run spent before this point, over all its sessions (absent from
+    /// snapshots of older versions, which then count from their resume).
+    #[serde(default)]
+    elapsed_s: f64,
+    #[serde(default)]
+    cpu_s: f64,
+    /// The question that was open when the run stopped (the agent had decided to ask, the expert had not
+    /// answered): a resumed run asks it again instead of deciding anew. Absent from other snapshots.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pending: Option<OpenQuestion>,
+}
+
+impl LoopState {
+    /// How the episode in progress began (the first with the run's environment seed).
+    fn episode_start(&self, env_seed: u64) -> env::EpisodeStart {
+        self.ep_generator.map_or(
+            env::EpisodeStart::Seed(env_seed),
+            env::EpisodeStart::Generator,
+        )
+    }
+
+    /// The episode in progress, for an expert that rebuilds its state.
+    fn episode(&self, env_seed: u64) -> EpisodeTrace<'_> {
+        EpisodeTrace {
+            start: self.episode_start(env_seed),
+            actions: &self.ep_actions,
+        }
+    }
+}
+
+/// A query the agent decided on at the step in progress, before the expert's answer.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+struct OpenQuestion {
+    agent_action: usize,
+    score: Option<f32>,
+    threshold: Option<f32>,
+}
+
+/// The time a run has taken: wall-clock seconds, and CPU seconds of the thread that trains it (which a paused
+/// process or a busy machine does not inflate), over this session and the earlier ones its snapshot carried.
+struct RunClock {
+    wall: Instant,
+    cpu: Option<ThreadTime>,
+    carried: (f64, f64),
+}
+
+impl RunClock {
+    fn start() -> Self {
+        Self {
+            wall: Instant::now(),
+            cpu: ThreadTime::try_now().ok(),
+            carried: (0.0, 0.0),
+        }
+    }
+
+    /// Adds the time a resumed run had spent before its snapshot.
+    fn carry(&mut self, st: &LoopState) {
+        self.carried = (st.elapsed_s, st.cpu_s);
+    }
+
+    /// Wall-clock and CPU seconds so far (CPU `None` where the system cannot tell a thread's CPU time).
+    fn totals(&self) -> (f64, Option<f64>) {
+        let wall = self.carried.0 + self.wall.elapsed().as_secs_f64();
+        let cpu = self
+            .cpu
+            .as_ref()
+            .map(|t| self.carried.1 + t.elapsed().as_secs_f64());
+        (wall, cpu)
+    }
+
+    /// Writes the totals into the loop state a snapshot saves.
+    fn stamp(&self, st: &mut LoopState) {
+        let (wall, cpu) = self.totals();
+        (st.elapsed_s, st.cpu_s) = (wall, cpu.unwrap_or(0.0));
+    }
+}
+
+/// Writes a snapshot of the run; when the run stops after it (`stopping`), waits until it is on disk.
+fn snapshot(
+    checkpointer: &mut Checkpointer,
+    st: &LoopState,
+    parts: &Parts<impl Learner>,
+    expert_state: Option<String>,
+    log: &mut RunLog,
+    stopping: bool,
+) -> Result<()> {
+    let mut state = StateDict::default();
+    parts.agent.save_state("agent", &mut state);
+    parts.replay.save_state("replay", &mut state);
+    parts.queries.save_state("query", &mut state);
+    state.put_text("rng.replay", &parts.replay_rng);
+    state.put_text("rng.query", &parts.query_rng);
+    state.put_value("rng.eval_envs", &parts.evaluator.generators());
+    state.put_value("expert", &expert_state);
+    state.put_value("loop", st);
+    state.put_f32("obs", &parts.obs);
+    state.put_value("log", &log.position()?);
+    let position = serde_json::json!({
+        "phase": if st.training { "train" } else { "pretrain" },
+        "pretrain_updates": st.pretrain_done,
+        "step": st.step,
+        "episode": st.episode,
+        "episode_step": st.ep_len,
+        "expert_in_control": parts.queries.expert_in_control(),
+        "budget_used": parts.queries.budget_used(),
+    });
+    checkpointer.save(&state, position)?;
+    if stopping {
+        checkpointer.wait()?;
+    }
+    Ok(())
+}
+
+/// The run's summary after `st.step` environment steps.
+fn summarize(
+    cfg: &TrainConfig,
+    env: &dyn Env,
+    log: &RunLog,
+    st: &LoopState,
+    queries: &QueryController,
+    clock: &RunClock,
+    pretrain_demos: usize,
+) -> Summary {
+    let (wall, cpu) = clock.totals();
+    let threshold = env.solve_threshold();
+    let (steps, solved) = steps_to_solve(log.curve(), threshold, st.step as u64);
+    Summary {
+        env: cfg.env.clone(),
+        method: cfg.method,
+        net: cfg.net,
+        seed: cfg.seed,
+        steps_to_solve: steps as usize,
+        solved,
+        solve_threshold: threshold,
+        train_steps: st.step,
+        final_score: log.curve().last().map(|p| p.mean).unwrap_or(f64::NAN),
+        demos_pretrain: pretrain_demos,
+        queries_used: queries.budget_used(),
+        episodes: st.episode,
+        wall_time_s: wall,
+        cpu_time_s: cpu,
+        steps_per_s: st.step as f64 / wall.max(1e-9),
+        numerics: Some(crate::math::NUMERICS.to_string()),
+        arld_version: Some(crate::build_info::VERSION.to_string()),
+        git_commit: Some(crate::build_info::GIT_COMMIT.to_string()),
+        expert: cfg.expert_used().map(str::to_string),
+        person_s: None,
+    }
+}
+
+/// The run directory's results after `step` steps: the weights, then `summary.json`.
+fn finish_log(
+    cfg: &TrainConfig,
+    agent: &impl Learner,
+    log: &mut RunLog,
+    summary: &Summary,
+    step: usize,
+) -> Result<()> {
+    if let Some(dir) = log.dir() {
+        agent.save_weights(
+            &dir.join(run_dir::WEIGHTS_FILE),
+            &weights_metadata(cfg, step),
+        )?;
+    }
+    log.finish(summary)
+}
+
+/// Metadata stored with saved weights: where they come from.
+fn weights_metadata(cfg: &TrainConfig, step: usize) -> std::collections::BTreeMap<String, String> {
+    [
+        ("env", cfg.env.clone()),
+        ("method", cfg.method.to_string()),
+        ("seed", cfg.seed.to_string()),
+        ("step", step.to_string()),
+    ]
+    .into_iter()
+    .map(|(k, v)| (k.to_string(), v))
+    .collect()
+}
+
+/// The expert's action and Q-values for an oracle query rule (no question asked, no budget spent).
+fn peek_expert(
+    expert: &mut Option<&mut dyn Expert>,
+    obs: &[f32],
+    rule: &str,
+) -> Result<OracleView> {
+    let expert = expert
+        .as_deref_mut()
+        .context("the query rule reads the expert's Q-values, but no expert was given")?;
+    let description = expert.describe();
+    expert.peek(obs).with_context(|| {
+        format!(
+            "the {rule} query rule is an oracle reference: it reads the expert's Q-values, which only \
+             checkpoint experts give, and {description} has none"
+        )
+    })
+}
+
+/// Asks the expert for the action at `obs` (one step of a segment; `agent_action` on the step that opens it) and
+/// checks that the answer is an action of the environment.
+fn ask_expert(
+    expert: &mut Option<&mut dyn Expert>,
+    obs: &[f32],
+    env: &dyn Env,
+    episode: EpisodeTrace<'_>,
+    agent_action: Option<usize>,
+    queries: &QueryController,
+) -> Result<Answer> {
+    let expert = expert
+        .as_deref_mut()
+        .context("the query rule asked for the expert, but none was given")?;
+    let query = Query {
+        obs,
+        env,
+        episode,
+        agent_action,
+        steps_left: queries.segment_left(),
+    };
+    let answer = expert
+        .answer(&query)
+        .with_context(|| format!("the expert ({}) failed to answer", expert.describe()))?;
+    if let Answer::Action { action, .. } = answer {
+        ensure!(
+            action < env.n_actions(),
+            "the expert ({}) answered action {action}, but {} has {} actions",
+            expert.describe(),
+            env.id(),
+            env.n_actions()
+        );
+    }
+    Ok(answer)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A resumed run's time is what its snapshot carried plus this session's; the CPU time of an idle thread
+    /// does not grow with the wall clock.
+    #[test]
+    fn the_run_clock_carries_time_across_a_resume() {
+        let mut clock = RunClock::start();
+        let st = LoopState {
+            elapsed_s: 100.0,
+            cpu_s: 40.0,
+            ..LoopState::default()
+        };
+        clock.carry(&st);
+        std::thread::sleep(std::time::Duration::from_millis(50));
+        let (wall, cpu) = clock.totals();
+        assert!((100.05..101.0).contains(&wall), "wall {wall}");
+        let cpu = cpu.expect("Linux tells a thread's CPU time");
+        assert!((40.0..40.04).contains(&cpu), "cpu {cpu}");
+        let mut saved = LoopState::default();
+        clock.stamp(&mut saved);
+        assert!(saved.elapsed_s >= wall && saved.cpu_s >= cpu);
+        // A snapshot of an older version, without the fields, counts from zero.
+        let old: LoopState = serde_json::from_str(
+            r#"{"pretrain_done":0,"training":false,"step":0,"episode":0,"ep_return":0.0,"ep_len":0,
+                "ep_demo":0,"updates":0,"ep_actions":[],"ep_generator":null}"#,
+        )
+        .unwrap();
+        assert_eq!((old.elapsed_s, old.cpu_s), (0.0, 0.0));
+    }
+}

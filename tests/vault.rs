@@ -1,0 +1,725 @@
+//! A run directory is a vault: real `arld` processes, given hostile or clumsy inputs, write nothing outside the
+//! run directory, delete nothing a user put there, never mix two runs, never panic on a value read from a
+//! file, and never read an input without bound.
+//!
+//! Hostile snapshots are made from real ones: the test reads the safetensors file, changes a value or an array,
+//! and, when the file carries a checksum (`crc32c` in its metadata), computes it again here from the format's
+//! definition (CRC-32C of the arrays' bytes, then of the header with the checksum's digits as `00000000`), so
+//! that the change reaches the checks behind the checksum.
+
+#[path = "../fuzz/harness.rs"]
+mod harness;
+
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Output, Stdio};
+use std::time::{Duration, Instant};
+
+const ARLD: &str = env!("CARGO_BIN_EXE_arld");
+
+fn arld(args: &[&str]) -> Output {
+    Command::new(ARLD).args(args).output().expect("run arld")
+}
+
+fn spawn(args: &[&str]) -> Child {
+    Command::new(ARLD)
+        .args(args)
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("start arld")
+}
+
+/// Runs `command` in `sh` with at most `limit` of memory and `deadline` of time; `None` if it had to be killed.
+fn bounded(command: &str, limit_kib: u64, deadline: Duration) -> Option<Output> {
+    let mut child = Command::new("sh")
+        .arg("-c")
+        .arg(format!("ulimit -v {limit_kib}; exec {command}"))
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("start sh");
+    let started = Instant::now();
+    while child.try_wait().unwrap().is_none() {
+        if started.elapsed() > deadline {
+            let _ = child.kill();
+            let _ = child.wait();
+            return None;
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    Some(child.wait_with_output().unwrap())
+}
+
+fn stderr(out: &Output) -> String {
+    String::from_utf8_lossy(&out.stderr).into_owned()
+}
+
+/// Asserts that `out` is a clean failure: a non-zero exit status (not a signal, not a panic) whose message
+/// holds every one of `needles`.
+fn assert_refused(out: &Output, needles: &[&str]) {
+    let err = stderr(out);
+    assert!(
+        !out.status.success() && out.status.code().is_some(),
+        "expected a clean failure, got {:?}: {err}",
+        out.status
+    );
+    assert!(!err.contains("panicked"), "a panic: {err}");
+    for needle in needles {
+        assert!(err.contains(needle), "expected {needle:?} in: {err}");
+    }
+}
+
+/// Removes whatever is at `path` (a file, a link, a folder).
+fn clear(path: &Path) {
+    match std::fs::symlink_metadata(path) {
+        Ok(meta) if meta.is_dir() => std::fs::remove_dir_all(path).unwrap(),
+        Ok(_) => std::fs::remove_file(path).unwrap(),
+        Err(_) => {}
+    }
+}
+
+/// The arguments of a CartPole run in `dir` long enough to be caught running, snapshotting often.
+fn long_run(dir: &Path) -> Vec<String> {
+    [
+        "train",
+        "--quiet",
+        "--env",
+        "CartPole-v0",
+        "--method",
+        "dqn",
+        "--set",
+        "train_steps=30000",
+        "--set",
+        "snapshot_every=400",
+        "-o",
+    ]
+    .iter()
+    .map(|s| s.to_string())
+    .chain([dir.display().to_string()])
+    .collect()
+}
+
+/// Waits until `path` exists (the child still running), at most a minute.
+fn wait_for(path: &Path, child: &mut Child) {
+    let started = Instant::now();
+    while !path.exists() {
+        if let Some(status) = child.try_wait().unwrap() {
+            panic!("arld ended ({status}) before {} appeared", path.display());
+        }
+        assert!(
+            started.elapsed() < Duration::from_secs(60),
+            "{} never appeared",
+            path.display()
+        );
+        std::thread::sleep(Duration::from_millis(5));
+    }
+}
+
+/// A run in `dir` killed (SIGKILL) after its first snapshot: an interrupted run to continue.
+fn interrupted_run(dir: &Path) {
+    let args = long_run(dir);
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    let mut child = spawn(&args);
+    wait_for(&dir.join("snapshot.json"), &mut child);
+    child.kill().unwrap();
+    child.wait().unwrap();
+    assert!(dir.join("snapshot.safetensors").is_file());
+}
+
+fn resume(dir: &Path, extra: &[&str]) -> Output {
+    let d = dir.display().to_string();
+    let mut args = vec!["train", "--quiet", "--resume", &d];
+    args.extend(extra);
+    arld(&args)
+}
+
+/// A snapshot file taken apart: its header (JSON) and its arrays' bytes.
+struct Snapshot {
+    header: serde_json::Map<String, serde_json::Value>,
+    data: Vec<u8>,
+}
+
+impl Snapshot {
+    fn read(path: &Path) -> Self {
+        let bytes = std::fs::read(path).unwrap();
+        let n = u64::from_le_bytes(bytes[..8].try_into().unwrap()) as usize;
+        Snapshot {
+            header: serde_json::from_slice(&bytes[8..8 + n]).unwrap(),
+            data: bytes[8 + n..].to_vec(),
+        }
+    }
+
+    fn metadata(&mut self) -> &mut serde_json::Map<String, serde_json::Value> {
+        self.header["__metadata__"].as_object_mut().unwrap()
+    }
+
+    /// The small values (JSON text in the metadata), changed by `change`.
+    fn change_values(&mut self, change: impl FnOnce(&mut serde_json::Value)) {
+        let meta = self.metadata();
+        let mut values: serde_json::Value =
+            serde_json::from_str(meta["values"].as_str().unwrap()).unwrap();
+        change(&mut values);
+        meta["values"] = values.to_string().into();
+    }
+
+    /// The bytes of the array `name`.
+    fn array(&mut self, name: &str) -> &mut [u8] {
+        let offsets = &self.header[name]["data_offsets"];
+        let (start, end) = (
+            offsets[0].as_u64().unwrap() as usize,
+            offsets[1].as_u64().unwrap() as usize,
+        );
+        &mut self.data[start..end]
+    }
+
+    /// Writes the file, with its checksum computed again when it has one.
+    fn write(&mut self, path: &Path) {
+        let checksummed = self.metadata().contains_key("crc32c");
+        if checksummed {
+            self.metadata()["crc32c"] = "00000000".into();
+        }
+        let mut header = serde_json::to_vec(&self.header).unwrap();
+        header.resize(header.len().next_multiple_of(8), b' ');
+        if checksummed {
+            let crc = crc32c::crc32c_append(crc32c::crc32c(&self.data), &header);
+            let text = String::from_utf8(header).unwrap().replacen(
+                "\"crc32c\":\"00000000\"",
+                &format!("\"crc32c\":\"{crc:08x}\""),
+                1,
+            );
+            header = text.into_bytes();
+        }
+        let mut bytes = (header.len() as u64).to_le_bytes().to_vec();
+        bytes.extend(&header);
+        bytes.extend(&self.data);
+        std::fs::write(path, bytes).unwrap();
+    }
+}
+
+/// Every entry below `dir` (but the lock and temporary files a killed process left, and the record of a
+/// failure) with its kind, length and CRC-32C (a link: its
+/// target), to show that nothing changed.
+fn contents(dir: &Path) -> Vec<String> {
+    let mut all = Vec::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for entry in std::fs::read_dir(&d).unwrap() {
+            let path = entry.unwrap().path();
+            let name = path.file_name().unwrap().to_string_lossy().into_owned();
+            // A killed writer's temporary file, which the next process tidies away, is no change either.
+            let leftover = name.starts_with('.') && name.contains(".tmp");
+            if name == ".arld.lock" || name == "failed.json" || leftover {
+                continue;
+            }
+            let meta = std::fs::symlink_metadata(&path).unwrap();
+            let shown = path.display();
+            if meta.file_type().is_symlink() {
+                let target = std::fs::read_link(&path).unwrap();
+                all.push(format!("{shown} -> {}", target.display()));
+            } else if meta.is_dir() {
+                all.push(format!("{shown}/"));
+                stack.push(path);
+            } else {
+                let bytes = std::fs::read(&path).unwrap();
+                all.push(format!(
+                    "{shown}: {} bytes, crc {:08x}",
+                    bytes.len(),
+                    crc32c::crc32c(&bytes)
+                ));
+            }
+        }
+    }
+    all.sort();
+    all
+}
+
+#[test]
+fn a_snapshot_naming_a_file_outside_the_run_is_refused() {
+    let work = tempfile::tempdir().unwrap();
+    let dir = work.path().join("run");
+    interrupted_run(&dir);
+    let victim = work.path().join("victim.txt");
+    std::fs::write(
+        &victim,
+        "a file of the user's, outside the run\n".repeat(100),
+    )
+    .unwrap();
+    let before = std::fs::read(&victim).unwrap();
+    let path = dir.join("snapshot.safetensors");
+    let mut snapshot = Snapshot::read(&path);
+    snapshot.change_values(|v| v["log"]["events_file"] = "../victim.txt".into());
+    snapshot.write(&path);
+    let out = resume(&dir, &[]);
+    assert_refused(&out, &["../victim.txt"]);
+    assert_eq!(
+        std::fs::read(&victim).unwrap(),
+        before,
+        "the file outside was changed"
+    );
+}
+
+#[test]
+fn a_log_that_is_a_link_is_refused_and_what_it_names_kept() {
+    let work = tempfile::tempdir().unwrap();
+    let dir = work.path().join("run");
+    interrupted_run(&dir);
+    for name in ["episodes.csv", "queries.csv"] {
+        let elsewhere = work.path().join(format!("elsewhere-{name}"));
+        std::fs::copy(dir.join(name), &elsewhere).unwrap();
+        std::fs::write(dir.join("moved"), std::fs::read(dir.join(name)).unwrap()).unwrap();
+        std::fs::remove_file(dir.join(name)).unwrap();
+        std::os::unix::fs::symlink(&elsewhere, dir.join(name)).unwrap();
+        let before = contents(work.path());
+        let out = resume(&dir, &[]);
+        assert_refused(&out, &[name, "symbolic link"]);
+        assert_eq!(contents(work.path()), before, "{name}: something changed");
+        std::fs::remove_file(dir.join(name)).unwrap();
+        std::fs::rename(dir.join("moved"), dir.join(name)).unwrap();
+    }
+    // With the logs back, the run continues and finishes.
+    let out = resume(&dir, &[]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(dir.join("summary.json").is_file());
+}
+
+#[test]
+fn an_unreadable_snapshot_is_kept_and_only_restart_starts_over() {
+    let work = tempfile::tempdir().unwrap();
+    let dir = work.path().join("run");
+    interrupted_run(&dir);
+    let path = dir.join("snapshot.safetensors");
+    let real = std::fs::read(&path).unwrap();
+    let n = u64::from_le_bytes(real[..8].try_into().unwrap()) as usize;
+    // A link to a device, a folder, and the snapshot with one byte of its arrays changed.
+    let mut damaged = real.clone();
+    damaged[8 + n + (real.len() - 8 - n) / 2] ^= 0x10;
+    type Place = fn(&Path, &[u8]);
+    let cases: [(&str, Place, &[&str]); 3] = [
+        (
+            "link",
+            |p, _| std::os::unix::fs::symlink("/dev/zero", p).unwrap(),
+            &["symbolic link"],
+        ),
+        (
+            "folder",
+            |p, _| {
+                std::fs::create_dir(p).unwrap();
+                std::fs::write(p.join("notes.txt"), "mine").unwrap();
+            },
+            &["directory"],
+        ),
+        (
+            "damaged",
+            |p, bytes| std::fs::write(p, bytes).unwrap(),
+            &["damaged"],
+        ),
+    ];
+    for (what, place, needles) in cases {
+        clear(&path);
+        place(&path, &damaged);
+        let before = contents(&dir);
+        let out = resume(&dir, &[]);
+        assert_refused(&out, needles);
+        assert!(
+            stderr(&out).contains("snapshot.safetensors"),
+            "{what}: {}",
+            stderr(&out)
+        );
+        assert_eq!(contents(&dir), before, "{what}: the run directory changed");
+    }
+    // The damaged snapshot is still there; --restart starts the run over and finishes it.
+    assert_eq!(std::fs::read(&path).unwrap(), damaged);
+    let out = resume(&dir, &["--restart"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(dir.join("summary.json").is_file());
+    assert!(!path.exists());
+}
+
+#[test]
+fn overwrite_removes_only_what_a_run_writes() {
+    let work = tempfile::tempdir().unwrap();
+    let dir = work.path().join("run");
+    let d = dir.display().to_string();
+    let args = |overwrite: bool| {
+        let mut a = vec![
+            "train",
+            "--quiet",
+            "--env",
+            "CartPole-v0",
+            "--set",
+            "train_steps=1000",
+            "--set",
+            "checkpoint_every=500",
+            "-o",
+            &d,
+        ];
+        if overwrite {
+            a.push("--overwrite");
+        }
+        arld(&a)
+    };
+    let out = args(false);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(dir.join("checkpoints/step_00000500.safetensors").is_file());
+    // A file of the user's inside the checkpoints folder, then a folder in the place of a run file.
+    let thesis = dir.join("checkpoints/my_thesis.tex");
+    std::fs::write(&thesis, "\\section{Results}").unwrap();
+    let before = contents(&dir);
+    assert_refused(&args(true), &["my_thesis.tex"]);
+    assert_eq!(contents(&dir), before, "--overwrite changed the directory");
+    std::fs::remove_file(&thesis).unwrap();
+    std::fs::remove_file(dir.join("eval.csv")).unwrap();
+    std::fs::create_dir(dir.join("eval.csv")).unwrap();
+    std::fs::write(dir.join("eval.csv/plot-data.txt"), "mine").unwrap();
+    let before = contents(&dir);
+    assert_refused(&args(true), &["eval.csv", "directory"]);
+    assert_eq!(contents(&dir), before, "--overwrite changed the directory");
+    // With only the run's files, --overwrite replaces the run.
+    std::fs::remove_dir_all(dir.join("eval.csv")).unwrap();
+    let out = args(true);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(dir.join("summary.json").is_file());
+}
+
+#[test]
+fn a_second_process_in_a_run_directory_is_refused_naming_the_first() {
+    let work = tempfile::tempdir().unwrap();
+    let dir = work.path().join("run");
+    let args = long_run(&dir);
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    let mut first = spawn(&args);
+    wait_for(&dir.join("snapshot.json"), &mut first);
+    let holder = format!("process {}", first.id());
+    let d = dir.display().to_string();
+    let mut overwrite = args.clone();
+    overwrite.push("--overwrite");
+    for second in [
+        overwrite,
+        vec!["train", "--quiet", "--resume", &d],
+        vec!["train", "--quiet", "--resume", &d, "--restart"],
+    ] {
+        let out = arld(&second);
+        assert_refused(&out, &[&holder]);
+    }
+    // The first run was not disturbed: it finishes as a run alone in its directory does.
+    let out = first.wait_with_output().unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let alone = work.path().join("alone");
+    let args = long_run(&alone);
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    assert!(arld(&args).status.success());
+    for name in ["eval.csv", "episodes.csv", "weights.safetensors"] {
+        assert_eq!(
+            std::fs::read(dir.join(name)).unwrap(),
+            std::fs::read(alone.join(name)).unwrap(),
+            "{name} differs from a run alone"
+        );
+    }
+}
+
+#[test]
+fn values_read_from_a_snapshot_are_checked_into_errors() {
+    let work = tempfile::tempdir().unwrap();
+    // A bootstrapped run (10 heads) whose snapshot then names head 99, or holds action 7 in its replay memory.
+    let dir = work.path().join("run");
+    interrupted_run(&dir);
+    let path = dir.join("snapshot.safetensors");
+    let real = std::fs::read(&path).unwrap();
+    let mut snapshot = Snapshot::read(&path);
+    snapshot.change_values(|v| v["agent.active_head"] = 99.into());
+    snapshot.write(&path);
+    assert_refused(&resume(&dir, &[]), &["head 99"]);
+    std::fs::write(&path, &real).unwrap();
+    let mut snapshot = Snapshot::read(&path);
+    snapshot.array("replay.actions")[..8].copy_from_slice(&7u64.to_le_bytes());
+    snapshot.write(&path);
+    assert_refused(&resume(&dir, &[]), &["action 7"]);
+    std::fs::write(&path, &real).unwrap();
+    let mut snapshot = Snapshot::read(&path);
+    snapshot.change_values(|v| v["loop"]["ep_actions"] = serde_json::json!([0, 1, 5]));
+    snapshot.write(&path);
+    assert_refused(&resume(&dir, &[]), &["action 5"]);
+}
+
+#[test]
+fn numbers_too_large_for_a_clock_are_errors_not_panics() {
+    let work = tempfile::tempdir().unwrap();
+    let out = work.path().join("run").display().to_string();
+    let base = [
+        "train",
+        "--quiet",
+        "--env",
+        "CartPole-v0",
+        "--method",
+        "adqn",
+        "-o",
+        &out,
+    ];
+    let mut timeout = base.to_vec();
+    timeout.extend(["--expert", "cmd:cat", "--set", "expert_timeout=1e300"]);
+    assert_refused(&arld(&timeout), &["expert_timeout"]);
+    let mut fps = base.to_vec();
+    fps.extend([
+        "--expert",
+        "web",
+        "--listen",
+        "127.0.0.1:0",
+        "--web-fps",
+        "1e-300",
+        "--web-no-wait",
+    ]);
+    let command = fps
+        .iter()
+        .map(|a| format!("'{a}'"))
+        .collect::<Vec<_>>()
+        .join(" ");
+    let run = bounded(
+        &format!("'{ARLD}' {command}"),
+        4 << 20,
+        Duration::from_secs(30),
+    )
+    .expect("arld --web-fps 1e-300 did not end");
+    assert_refused(&run, &["fps"]);
+}
+
+#[test]
+fn an_endless_input_is_read_with_a_bound() {
+    // `env check` on a file without line breaks, under a memory cap of 1 GiB (a reader without a bound fails
+    // on its allocation: an abort, or it is killed at the deadline).
+    let out = bounded(
+        &format!("'{ARLD}' env check /dev/zero"),
+        1 << 20,
+        Duration::from_secs(60),
+    )
+    .expect("arld env check /dev/zero did not end");
+    assert_refused(&out, &["/dev/zero", "longer than"]);
+}
+
+/// A run of ADQN asking the process expert `command` (its first question comes within its first steps).
+fn expert_run(dir: &Path, command: &str, timeout_s: &str) -> Vec<String> {
+    [
+        "train",
+        "--quiet",
+        "--env",
+        "CartPole-v0",
+        "--method",
+        "adqn",
+        "--expert",
+        command,
+        "--set",
+        &format!("expert_timeout={timeout_s}"),
+        "--set",
+        "train_steps=5000",
+        "-o",
+        &dir.display().to_string(),
+    ]
+    .iter()
+    .map(|s| s.to_string())
+    .collect()
+}
+
+#[test]
+fn a_process_experts_children_do_not_outlive_its_timeout() {
+    let work = tempfile::tempdir().unwrap();
+    let dir = work.path().join("run");
+    let pid_file = work.path().join("grandchild.pid");
+    // The expert starts a child that keeps its output open and never answers.
+    let command = format!(
+        "cmd:sh -c 'sleep 1000 & echo $! > {}; read h; read q; wait'",
+        pid_file.display()
+    );
+    let args = expert_run(&dir, &command, "0.5");
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    let started = Instant::now();
+    let mut child = spawn(&args);
+    while child.try_wait().unwrap().is_none() {
+        if started.elapsed() > Duration::from_secs(30) {
+            let _ = child.kill();
+            panic!("the run did not end after its expert's timeout");
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let out = child.wait_with_output().unwrap();
+    assert_refused(&out, &["did not answer within 0.5 s"]);
+    let pid = std::fs::read_to_string(&pid_file).unwrap();
+    let proc = PathBuf::from(format!("/proc/{}", pid.trim()));
+    let gone = Instant::now();
+    while proc.exists() && gone.elapsed() < Duration::from_secs(5) {
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    // A zombie (reaped by nobody yet) is gone too; anything else is still running.
+    let state = std::fs::read_to_string(proc.join("stat")).unwrap_or_default();
+    let running = !state.is_empty() && !state.contains(") Z");
+    if running {
+        let _ = Command::new("kill").args(["-9", pid.trim()]).status();
+    }
+    assert!(
+        !running,
+        "the expert's child {} outlived the run",
+        pid.trim()
+    );
+}
+
+#[test]
+fn sigterm_ends_the_wait_for_a_process_expert_at_once() {
+    let work = tempfile::tempdir().unwrap();
+    let dir = work.path().join("run");
+    let asked = work.path().join("asked");
+    // The expert notes the question, then takes its time (up to its 60 s timeout).
+    let command = format!(
+        "cmd:sh -c 'read h; read q; touch {}; sleep 100'",
+        asked.display()
+    );
+    let args = expert_run(&dir, &command, "60");
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    let mut child = spawn(&args);
+    wait_for(&asked, &mut child);
+    let signalled = Instant::now();
+    Command::new("kill")
+        .args(["-TERM", &child.id().to_string()])
+        .status()
+        .unwrap();
+    while child.try_wait().unwrap().is_none() {
+        if signalled.elapsed() > Duration::from_secs(10) {
+            let _ = child.kill();
+            panic!("SIGTERM did not end the wait for the expert");
+        }
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    let took = signalled.elapsed();
+    let out = child.wait_with_output().unwrap();
+    assert_eq!(out.status.code(), Some(143), "{}", stderr(&out));
+    assert!(took < Duration::from_secs(5), "the stop took {took:?}");
+    assert!(
+        dir.join("snapshot.safetensors").is_file(),
+        "{}",
+        stderr(&out)
+    );
+    assert!(stderr(&out).contains("--resume"), "{}", stderr(&out));
+}
+
+#[test]
+fn an_answer_without_line_breaks_is_bounded() {
+    let work = tempfile::tempdir().unwrap();
+    let dir = work.path().join("run");
+    let args = expert_run(
+        &dir,
+        "cmd:sh -c 'read h; read q; yes | tr -d \"\\n\"'",
+        "60",
+    );
+    let command = args
+        .iter()
+        .map(|a| format!("'{}'", a.replace('\'', "'\\''")))
+        .collect::<Vec<_>>();
+    let out = bounded(
+        &format!("'{ARLD}' {}", command[..].join(" ")),
+        1 << 20,
+        Duration::from_secs(60),
+    )
+    .expect("the run did not end");
+    assert_refused(&out, &["longer than 65536 bytes"]);
+}
+
+#[test]
+fn every_changed_bit_of_a_snapshot_is_refused() {
+    // A snapshot of the fuzz target's configuration (what fuzz/run.sh seeds the fuzzer with), read in process.
+    let work = tempfile::tempdir().unwrap();
+    let dir = work.path().join("run");
+    let d = dir.display().to_string();
+    let mut args = vec![
+        "train",
+        "--quiet",
+        "--env",
+        "CartPole-v0",
+        "--method",
+        "dqn",
+        "--net",
+        "bootstrap",
+        "--seed",
+        "0",
+    ];
+    for assignment in harness::SNAPSHOT_SEED_CONFIG {
+        args.extend(["--set", assignment]);
+    }
+    args.extend(["-o", &d]);
+    let mut child = spawn(&args);
+    wait_for(&dir.join("snapshot.json"), &mut child);
+    child.kill().unwrap();
+    child.wait().unwrap();
+    let bytes = std::fs::read(dir.join("snapshot.safetensors")).unwrap();
+    assert!(harness::snapshot(&bytes), "the snapshot itself is read");
+    // One bit of every byte (a different bit from byte to byte), each change on its own.
+    let mut changed = bytes.clone();
+    let mut accepted = Vec::new();
+    for i in 0..bytes.len() {
+        let bit = 1u8 << (i % 8);
+        changed[i] ^= bit;
+        let outcome = std::panic::catch_unwind(|| harness::snapshot(&changed));
+        assert!(
+            outcome.is_ok(),
+            "byte {i}, bit {bit:#04x}: the reader panicked"
+        );
+        if matches!(outcome, Ok(true)) {
+            accepted.push(i);
+        }
+        changed[i] ^= bit;
+    }
+    assert!(
+        accepted.is_empty(),
+        "{} of {} changed bytes were accepted, the first at {:?}",
+        accepted.len(),
+        bytes.len(),
+        &accepted[..accepted.len().min(10)]
+    );
+}
+
+#[test]
+fn idle_connections_to_the_web_page_cannot_use_up_the_runs_files() {
+    use std::io::BufRead;
+    let work = tempfile::tempdir().unwrap();
+    let dir = work.path().join("run");
+    // A web run whose questions go back to the agent at once, allowed 160 open files; 200 idle connections.
+    let command = format!(
+        "ulimit -n 160; exec '{ARLD}' train --quiet --env CartPole-v0 --method adqn --expert web \
+         --listen 127.0.0.1:0 --web-no-wait --web-timeout 0.01 --set train_steps=10000 \
+         --set snapshot_every=500 -o '{}'",
+        dir.display()
+    );
+    let mut child = Command::new("sh")
+        .arg("-c")
+        .arg(command)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut lines = std::io::BufReader::new(child.stdout.take().unwrap()).lines();
+    let url = lines
+        .by_ref()
+        .map_while(Result::ok)
+        .find_map(|l| l.find("http://").map(|i| l[i..].to_string()))
+        .expect("the run printed its URL");
+    let authority = url["http://".len()..].split('/').next().unwrap();
+    let addr: std::net::SocketAddr = authority.parse().unwrap();
+    let held: Vec<std::net::TcpStream> = (0..200)
+        .filter_map(|_| {
+            std::net::TcpStream::connect_timeout(&addr, Duration::from_millis(100)).ok()
+        })
+        .collect();
+    assert!(held.len() > 32, "only {} connections opened", held.len());
+    let started = Instant::now();
+    while child.try_wait().unwrap().is_none() {
+        if started.elapsed() > Duration::from_secs(120) {
+            let _ = child.kill();
+            panic!("the run did not end");
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let out = child.wait_with_output().unwrap();
+    drop(held);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(dir.join("summary.json").is_file());
+}
