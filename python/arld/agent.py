@@ -729,7 +729,9 @@ class Agent:
     def load(cls, path: Union[str, os.PathLike], env: Any = None, expert: Any = None,  # type: ignore[type-arg]
              eval_env: Any = None, **kwargs: Any) -> "Agent":
         """An agent from `save` (the run's full state: `learn` continues it; pass the environment, and the expert
-        when it was a Python one) or from plain weights (`arld train`'s weights.safetensors: it acts only)."""
+        when it was a Python one) or from plain weights (`arld train`'s weights.safetensors: it acts only). A loaded
+        run has its `evaluations` (they are in the file); its `queries` list only those after the snapshot (the
+        run directory's queries.csv holds the earlier ones)."""
         path = str(path)
         if not os.path.exists(path) and os.path.exists(path + ".zip"):
             path += ".zip"
