@@ -1,5 +1,5 @@
 //! The continuous-action tasks against traces recorded from Gymnasium 1.4.0
-//! (`tests/data/conformance/continuous.jsonl`, the Pendulum-v1 and MountainCarContinuous-v0 episodes of the
+//! (`tests/data/continuous/conformance.jsonl`, the Pendulum-v1 and MountainCarContinuous-v0 episodes of the
 //! recorded file; its format is the one of the discrete traces, with float32 action
 //! vectors): every observation, reward and episode end, bit for bit, on seeds 0-4 with random actions (for
 //! MountainCarContinuous-v0 drawn from 1.5 times the box, so that the task's clipping is exercised). One exception,
@@ -7,12 +7,13 @@
 //! correctly rounded, so about one square in 1,500 is one float32 ulp away from ours (correctly rounded) and the
 //! reward of that step differs by that ulp of its torque cost (at most 5e-10); observations and states never do.
 
-use arld::env::continuous::{ContinuousEnv, make_continuous};
+use arld::env::continuous::ContinuousEnv;
+use arld::env::make_continuous;
 use serde_json::Value;
 
 const TRACES: &str = concat!(
     env!("CARGO_MANIFEST_DIR"),
-    "/tests/data/conformance/continuous.jsonl"
+    "/tests/data/continuous/conformance.jsonl"
 );
 
 fn floats(v: &Value) -> Vec<f64> {

@@ -179,10 +179,10 @@ pub fn run(args: TrainArgs) -> anyhow::Result<ExitCode> {
         "the run directory {} exists and is not a directory",
         dir.display()
     );
+    let created = !dir.exists();
     std::fs::create_dir_all(&dir)
         .map_err(|e| anyhow::anyhow!("cannot create the run directory {}: {e}", dir.display()))?;
-    let _lock =
-        arld::experiment::dir_lock::DirLock::acquire(&dir, arld::train::run_dir::LOCK_FILE)?;
+    let lock = arld::experiment::dir_lock::DirLock::acquire(&dir, arld::train::run_dir::LOCK_FILE)?;
     match &args.resume {
         None => arld::train::run_dir::prepare_new_run(&dir, args.overwrite)?,
         Some(resume) if args.restart => {
@@ -232,6 +232,13 @@ pub fn run(args: TrainArgs) -> anyhow::Result<ExitCode> {
             // Whatever ended it, the run stays incomplete: no summary.json, its logs whole up to here.
             eprintln!("error: {}", arld::errors::error_line(&err));
             if !dir.join(arld::train::run_dir::CONFIG_FILE).is_file() {
+                // Refused before the run wrote anything (bad demonstrations, an expert that cannot start): a
+                // directory this command created for it is removed again, so the same command can be given again.
+                if created {
+                    drop(lock);
+                    let _ = std::fs::remove_file(dir.join(arld::train::run_dir::FAILED_FILE));
+                    let _ = std::fs::remove_dir(&dir);
+                }
                 return Ok(ExitCode::FAILURE);
             }
             let why = if dir.join(arld::train::run_dir::FAILED_FILE).is_file() {

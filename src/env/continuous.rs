@@ -1,5 +1,6 @@
-//! Gymnasium-exact tasks whose action is a vector of float32 in a box: `Pendulum-v1` and
-//! `MountainCarContinuous-v0`, found by id in [`make_continuous`].
+//! Gymnasium-exact tasks whose action is a vector of float32 in a box (`Pendulum-v1` and
+//! `MountainCarContinuous-v0`, found by id in [`super::make_continuous`]): their registered facts, the interface of
+//! their physics, and the environment that adds the reset generator and the time limit.
 //!
 //! They share with the discrete tasks the reset generator ([`EnvRng`]: NumPy's `PCG64(SeedSequence(seed))`),
 //! Gymnasium's `TimeLimit` (truncated on the limit step) and the outcome of a step ([`Outcome`]); an action is a
@@ -81,26 +82,18 @@ pub struct ContinuousEnv {
     running: bool,
 }
 
-/// The continuous-action task registered as `id` (Gymnasium's spelling).
-pub fn make_continuous(id: &str) -> Result<ContinuousEnv, EnvError> {
-    let spec = CONTINUOUS_SPECS
-        .iter()
-        .find(|s| s.id == id)
-        .ok_or_else(|| EnvError::UnknownId { id: id.to_string() })?;
-    let physics: Box<dyn ContinuousDynamics> = match spec.id {
-        "Pendulum-v1" => Box::new(super::pendulum::Pendulum::default()),
-        _ => Box::new(super::mountain_car_continuous::MountainCarContinuous::default()),
-    };
-    Ok(ContinuousEnv {
-        spec,
-        rng: EnvRng::default(),
-        physics,
-        elapsed_steps: 0,
-        running: false,
-    })
-}
-
 impl ContinuousEnv {
+    /// The task `spec` with `physics` (the registry, [`super::make_continuous`], pairs them).
+    pub fn new(spec: &'static BoxSpec, physics: Box<dyn ContinuousDynamics>) -> Self {
+        ContinuousEnv {
+            spec,
+            rng: EnvRng::default(),
+            physics,
+            elapsed_steps: 0,
+            running: false,
+        }
+    }
+
     /// The task's registered facts.
     pub fn spec(&self) -> &'static BoxSpec {
         self.spec

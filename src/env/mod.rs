@@ -355,6 +355,19 @@ pub fn register(
 }
 
 /// Builds an environment by Gymnasium id.
+/// The continuous-action task registered as `id` (Gymnasium's spelling; see [`continuous`]).
+pub fn make_continuous(id: &str) -> Result<continuous::ContinuousEnv, EnvError> {
+    let spec = continuous::CONTINUOUS_SPECS
+        .iter()
+        .find(|s| s.id == id)
+        .ok_or_else(|| EnvError::UnknownId { id: id.to_string() })?;
+    let physics: Box<dyn continuous::ContinuousDynamics> = match spec.id {
+        "Pendulum-v1" => Box::new(pendulum::Pendulum::default()),
+        _ => Box::new(mountain_car_continuous::MountainCarContinuous::default()),
+    };
+    Ok(continuous::ContinuousEnv::new(spec, physics))
+}
+
 pub fn make(id: &str) -> Result<Box<dyn Env>, EnvError> {
     let spec = spec(id)?;
     match spec.id {

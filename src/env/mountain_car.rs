@@ -11,11 +11,11 @@ use super::Simulated;
 use super::classic::{Classic, ClassicTask, SingleId};
 use crate::rng::NumpyRng;
 
-const MIN_POSITION: f64 = -1.2;
-const MAX_POSITION: f64 = 0.6;
-const MAX_SPEED: f64 = 0.07;
+pub(super) const MIN_POSITION: f64 = -1.2;
+pub(super) const MAX_POSITION: f64 = 0.6;
+pub(super) const MAX_SPEED: f64 = 0.07;
 const GOAL_POSITION: f64 = 0.5;
-const GOAL_VELOCITY: f64 = 0.0;
+pub(super) const GOAL_VELOCITY: f64 = 0.0;
 const FORCE: f64 = 0.001;
 const GRAVITY: f64 = 0.0025;
 

@@ -10,15 +10,16 @@
 //! carries the type NumPy gives it ([`Scalar`]), and each operation rounds as NumPy's would.
 
 use super::continuous::{ContinuousDynamics, state_of_len};
+// The valley, the speed limit and the goal velocity of MountainCar-v0.
+use super::mountain_car::{GOAL_VELOCITY, MAX_POSITION, MAX_SPEED, MIN_POSITION};
 use crate::rng::NumpyRng;
 
+/// The action box (one force).
 const MIN_ACTION: f64 = -1.0;
 const MAX_ACTION: f64 = 1.0;
-const MIN_POSITION: f64 = -1.2;
-const MAX_POSITION: f64 = 0.6;
-const MAX_SPEED: f64 = 0.07;
+/// The flag (MountainCar-v0's is at 0.5).
 const GOAL_POSITION: f64 = 0.45;
-const GOAL_VELOCITY: f64 = 0.0;
+/// The force's scale.
 const POWER: f64 = 0.0015;
 
 /// A number as NumPy types it: a float32 scalar, a float64 scalar, or a Python float (float64, but "weak": with a

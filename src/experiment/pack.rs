@@ -406,14 +406,13 @@ fn decode_task(tables: &BTreeMap<&'static str, Vec<u8>>) -> Result<TaskRuns> {
     };
     let mut runs = TaskRuns::new();
     let mut absent: BTreeMap<String, [BTreeSet<String>; 2]> = BTreeMap::new();
-    let mut index = csv_reader(std::io::Cursor::new(gunzip(table(RUNS_TABLE)?)?));
-    for row in index.records() {
-        let row = row.context(RUNS_TABLE)?;
-        ensure!(
-            row.len() == 4,
-            "{RUNS_TABLE}: a row of {} fields",
-            row.len()
-        );
+    let (header, index) = run_table(table(RUNS_TABLE)?, RUNS_TABLE)?;
+    ensure!(
+        header.len() == 4,
+        "{RUNS_TABLE}: {} columns, not 4",
+        header.len()
+    );
+    for row in &index {
         let run = row[0].to_string();
         check_run_path(&run)?;
         let words = |i: usize| {
@@ -441,15 +440,14 @@ fn decode_task(tables: &BTreeMap<&'static str, Vec<u8>>) -> Result<TaskRuns> {
         filled.insert((run.to_string(), name.to_string()));
         Ok(())
     };
-    let mut verbatim = csv_reader(std::io::Cursor::new(gunzip(table(VERBATIM_TABLE)?)?));
+    let (header, verbatim) = run_table(table(VERBATIM_TABLE)?, VERBATIM_TABLE)?;
+    ensure!(
+        header.len() == 3,
+        "{VERBATIM_TABLE}: {} columns, not 3",
+        header.len()
+    );
     let mut verbatim_files = BTreeSet::new();
-    for row in verbatim.records() {
-        let row = row.context(VERBATIM_TABLE)?;
-        ensure!(
-            row.len() == 3,
-            "{VERBATIM_TABLE}: a row of {} fields",
-            row.len()
-        );
+    for row in &verbatim {
         put(&mut runs, &row[0], &row[1], row[2].as_bytes().to_vec())?;
         verbatim_files.insert((row[0].to_string(), row[1].to_string()));
     }
@@ -470,24 +468,8 @@ fn decode_task(tables: &BTreeMap<&'static str, Vec<u8>>) -> Result<TaskRuns> {
         ),
     ] {
         let string_columns = strings(string_key);
-        let mut reader = csv_reader(std::io::Cursor::new(gunzip(table(table_name)?)?));
-        let header: Vec<String> = reader
-            .headers()
-            .context(table_name)?
-            .iter()
-            .map(str::to_string)
-            .collect();
-        ensure!(
-            header.first().map(String::as_str) == Some("run"),
-            "{table_name}: no run column"
-        );
-        for row in reader.records() {
-            let row = row.context(table_name)?;
-            ensure!(
-                row.len() == header.len(),
-                "{table_name}: a row of {} fields",
-                row.len()
-            );
+        let (header, rows) = run_table(table(table_name)?, table_name)?;
+        for row in &rows {
             let run = &row[0];
             if verbatim_files.contains(&(run.to_string(), file.to_string())) {
                 continue;
@@ -508,17 +490,7 @@ fn decode_task(tables: &BTreeMap<&'static str, Vec<u8>>) -> Result<TaskRuns> {
         }
     }
     for (file, table_name) in LOG_TABLES {
-        let mut reader = csv_reader(std::io::Cursor::new(gunzip(table(table_name)?)?));
-        let header: Vec<String> = reader
-            .headers()
-            .context(table_name)?
-            .iter()
-            .map(str::to_string)
-            .collect();
-        ensure!(
-            header.first().map(String::as_str) == Some("run"),
-            "{table_name}: no run column"
-        );
+        let (header, rows) = run_table(table(table_name)?, table_name)?;
         let mut texts: BTreeMap<String, csv::Writer<Vec<u8>>> = BTreeMap::new();
         for (run, files) in &runs {
             if files.contains_key(file)
@@ -529,13 +501,7 @@ fn decode_task(tables: &BTreeMap<&'static str, Vec<u8>>) -> Result<TaskRuns> {
                 texts.insert(run.clone(), w);
             }
         }
-        for row in reader.records() {
-            let row = row.context(table_name)?;
-            ensure!(
-                row.len() == header.len(),
-                "{table_name}: a row of {} fields",
-                row.len()
-            );
+        for row in &rows {
             let w = texts.get_mut(&row[0]).with_context(|| {
                 format!(
                     "{table_name} holds rows of {}, which has no {file}",
@@ -557,6 +523,33 @@ fn decode_task(tables: &BTreeMap<&'static str, Vec<u8>>) -> Result<TaskRuns> {
         }
     }
     Ok(runs)
+}
+
+/// A table's header and rows, checked: a `run` column first and as many fields in every row as in the header.
+fn run_table(gz: &[u8], name: &str) -> Result<(Vec<String>, Vec<csv::StringRecord>)> {
+    let mut reader = csv_reader(std::io::Cursor::new(gunzip(gz)?));
+    let header: Vec<String> = reader
+        .headers()
+        .context(name.to_string())?
+        .iter()
+        .map(str::to_string)
+        .collect();
+    ensure!(
+        header.first().map(String::as_str) == Some("run"),
+        "{name}: no run column"
+    );
+    let mut rows = Vec::new();
+    for row in reader.records() {
+        let row = row.with_context(|| name.to_string())?;
+        ensure!(
+            row.len() == header.len(),
+            "{name}: a row of {} fields where the header has {}",
+            row.len(),
+            header.len()
+        );
+        rows.push(row);
+    }
+    Ok((header, rows))
 }
 
 /// A run path from a table: relative, `/`-separated, no `..`, nothing that leaves the task directory.
