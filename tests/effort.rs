@@ -509,7 +509,7 @@ fn cell_dirs(
     budget: &str,
     group: &str,
 ) -> BTreeMap<u64, PathBuf> {
-    let runs = results().join("runs").join(env);
+    let runs = common::committed_runs().join(env);
     let paper = arld::experiment::protocol::paper_budget(env).to_string();
     let (method_dir, spec) = match rule {
         "greedy (GDQN)" => (format!("gdqn-{net}"), None),
@@ -646,8 +646,8 @@ fn a_nan_mean_is_a_named_error() {
     let runs = tmp.path().join("runs");
     for method in ["bdqn", "adqn"] {
         for seed in 0..3 {
-            let from = results().join(format!(
-                "runs/Acrobot-v1/{method}-bootstrap/budget-25/seed{seed}"
+            let from = common::committed_runs().join(format!(
+                "Acrobot-v1/{method}-bootstrap/budget-25/seed{seed}"
             ));
             let to = runs.join(format!(
                 "Acrobot-v1/{method}-bootstrap/budget-25/seed{seed}"
