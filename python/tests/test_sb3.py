@@ -243,9 +243,10 @@ def test_mypy_strict_accepts_a_user_script(tmp_path):
     script = Path(__file__).with_name("typing_user.py")
     out = subprocess.run([sys.executable, "-m", "mypy", "--strict", str(script)], capture_output=True, text=True)
     assert out.returncode == 0, out.stdout + out.stderr
-    # The package itself, with the compiled part's stubs.
-    package = Path(arld.__file__).parent
-    out = subprocess.run([sys.executable, "-m", "mypy", "--strict", str(package)], capture_output=True, text=True)
+    # The package itself, with the compiled part's stubs, by name (a path inside site-packages would make mypy
+    # take site-packages for the package's root).
+    out = subprocess.run([sys.executable, "-m", "mypy", "--strict", "-p", "arld"], capture_output=True, text=True)
+    assert "Success" in out.stdout, out.stdout + out.stderr
     assert out.returncode == 0, out.stdout + out.stderr
     # A misspelt method or network, an expert or environment of the wrong kind: mypy says so before any run.
     wrong = tmp_path / "wrong.py"
