@@ -1,13 +1,16 @@
 //! The continuous-action tasks against traces recorded from Gymnasium 1.4.0
-//! (`tests/data/continuous/conformance.jsonl`, the Pendulum-v1 and MountainCarContinuous-v0 episodes of the
-//! recorded file; its format is the one of the discrete traces, with float32 action
-//! vectors): every observation, reward and episode end, bit for bit, on seeds 0-4 with random actions (for
-//! MountainCarContinuous-v0 drawn from 1.5 times the box, so that the task's clipping is exercised). One exception,
+//! (`tests/data/continuous/conformance.jsonl`; its format is the one of the discrete traces, with float32 action
+//! vectors). Pendulum-v1 and MountainCarContinuous-v0: every observation, reward and episode end, bit for bit, on
+//! seeds 0-4 with random actions (for MountainCarContinuous-v0 drawn from 1.5 times the box, so that the task's
+//! clipping is exercised). LunarLanderContinuous-v3 (recorded as `LunarLanderContinuous`): Box2D in float32, held
+//! to the discrete lander's tolerance (1e-4, every random episode; heuristic episodes may drift, as 7 of 100
+//! discrete ones do), and the heuristic's continuous branch chooses the recorded actions. One exception,
 //! measured and bounded here: NumPy computes Pendulum's float32 `u ** 2` with the C library's `powf`, which is not
 //! correctly rounded, so about one square in 1,500 is one float32 ulp away from ours (correctly rounded) and the
 //! reward of that step differs by that ulp of its torque cost (at most 5e-10); observations and states never do.
 
 use arld::env::continuous::ContinuousEnv;
+use arld::env::lunar_lander::heuristic_throttle;
 use arld::env::make_continuous;
 use serde_json::Value;
 
@@ -41,6 +44,9 @@ fn continuous_tasks_reproduce_gymnasiums_traces() {
     let (mut episodes, mut steps, mut torque_ulps) = (std::collections::BTreeMap::new(), 0, 0);
     for (i, line) in text.lines().enumerate() {
         let rec: Value = serde_json::from_str(line).unwrap();
+        if rec["env"] == LANDER_TRACE_ID {
+            continue; // its own test below
+        }
         let at = format!("line {}: {} seed {}", i + 1, rec["env"], rec["seed"]);
         match rec["kind"].as_str() {
             Some("start") => {
@@ -119,6 +125,114 @@ fn continuous_tasks_reproduce_gymnasiums_traces() {
     );
 }
 
+/// The name the trace gives the continuous lander (`gym.make("LunarLander-v3", continuous=True)`).
+const LANDER_TRACE_ID: &str = "LunarLanderContinuous";
+
+/// The discrete lander's tolerance (src/env/conformance.rs: Box2D runs in float32).
+const LANDER_TOLERANCE: f64 = 1e-4;
+
+/// Whether `ours` lies within the lander's tolerance of `theirs`.
+fn close(ours: &[f32], theirs: &[f64]) -> bool {
+    ours.len() == theirs.len()
+        && ours
+            .iter()
+            .zip(theirs)
+            .all(|(a, b)| (f64::from(*a) - b).abs() <= LANDER_TOLERANCE)
+}
+
+#[test]
+fn continuous_lander_reproduces_gymnasiums_traces() {
+    let text = std::fs::read_to_string(TRACES).expect("the committed traces");
+    let mut env = make_continuous("LunarLanderContinuous-v3").unwrap();
+    let mut obs = vec![0.0; env.spec().obs_dim];
+    // (case, seed) -> the first step where the episode left the trace, if it did
+    let mut episodes: Vec<(String, u64, Option<u64>)> = Vec::new();
+    let (mut steps, mut heuristic_actions) = (0, 0);
+    let mut recorded_obs: Vec<f64> = Vec::new();
+    for line in text.lines() {
+        let rec: Value = serde_json::from_str(line).unwrap();
+        if rec["env"] != LANDER_TRACE_ID {
+            continue;
+        }
+        let case = rec["case"].as_str().unwrap().to_string();
+        match rec["kind"].as_str() {
+            Some("start") => {
+                let spec = env.spec();
+                assert_eq!(
+                    spec.max_episode_steps as u64,
+                    rec["max_episode_steps"].as_u64().unwrap()
+                );
+                assert_eq!(
+                    spec.action_dim() as u64,
+                    rec["action_dim"].as_u64().unwrap()
+                );
+                let seed = rec["seed"].as_u64().unwrap();
+                env.reset_into(Some(seed), &mut obs);
+                recorded_obs = floats(&rec["obs"]);
+                assert!(
+                    close(&obs, &recorded_obs),
+                    "{case} seed {seed}: reset {obs:?}"
+                );
+                episodes.push((case, seed, None));
+            }
+            Some("step") => {
+                let t = rec["t"].as_u64().unwrap();
+                let action: Vec<f32> = floats(&rec["action"]).iter().map(|a| *a as f32).collect();
+                if case == "heuristic" {
+                    // Gymnasium's heuristic on the recorded observation before the step: the same action.
+                    let before: Vec<f32> = recorded_obs.iter().map(|x| *x as f32).collect();
+                    assert_eq!(
+                        heuristic_throttle(&before).to_vec(),
+                        action,
+                        "heuristic, t {t}"
+                    );
+                    heuristic_actions += 1;
+                }
+                recorded_obs = floats(&rec["obs"]);
+                let episode = episodes.last_mut().expect("a start line first");
+                if episode.2.is_some() {
+                    continue; // already left its trace: chaos from there on
+                }
+                let out = env.step_into(&action, &mut obs).unwrap();
+                let reward = rec["reward"].as_f64().unwrap();
+                let same = close(&obs, &recorded_obs)
+                    && (out.reward - reward).abs() <= LANDER_TOLERANCE * reward.abs().max(1.0)
+                    && out.terminated == rec["terminated"].as_bool().unwrap()
+                    && out.truncated == rec["truncated"].as_bool().unwrap();
+                if !same {
+                    episode.2 = Some(t);
+                }
+                steps += 1;
+            }
+            _ => {}
+        }
+    }
+    eprintln!(
+        "{steps} lander steps compared; episodes (case, seed, left the trace at): {episodes:?}"
+    );
+    assert_eq!(episodes.len(), 10);
+    for (case, seed, left) in &episodes {
+        // Every random episode whole; a heuristic episode may drift only late, as the discrete ones do.
+        match case.as_str() {
+            "seed" => assert_eq!(*left, None, "random episode of seed {seed} left its trace"),
+            _ => assert!(
+                left.is_none_or(|t| t > 100),
+                "heuristic seed {seed} left its trace at step {t:?}",
+                t = left
+            ),
+        }
+    }
+    let drifted = episodes.iter().filter(|e| e.2.is_some()).count();
+    assert!(
+        drifted <= 1,
+        "{drifted} of the 5 heuristic episodes drifted"
+    );
+    assert!(
+        heuristic_actions > 500,
+        "{heuristic_actions} heuristic actions"
+    );
+}
+
 #[test]
 fn bad_actions_are_named_errors() {
     let mut env = make_continuous("Pendulum-v1").unwrap();
@@ -137,4 +251,90 @@ fn bad_actions_are_named_errors() {
         .to_string();
     assert!(err.contains("not a finite number"), "{err}");
     assert!(make_continuous("Pendulum-v0").is_err());
+}
+
+/// Returns of `policy` on `env` from seeds `seeds`.
+fn returns_of(
+    env: &mut ContinuousEnv,
+    seeds: std::ops::Range<u64>,
+    policy: impl Fn(&[f32]) -> [f32; 1],
+) -> Vec<f64> {
+    let mut obs = vec![0.0; env.spec().obs_dim];
+    seeds
+        .map(|seed| {
+            env.reset_into(Some(seed), &mut obs);
+            let mut total = 0.0;
+            loop {
+                let out = env.step_into(&policy(&obs), &mut obs).unwrap();
+                total += out.reward;
+                if out.terminated || out.truncated {
+                    return total;
+                }
+            }
+        })
+        .collect()
+}
+
+#[test]
+fn scripted_controllers_return_what_they_return_on_gymnasium() {
+    // The scripted experts on seeds they were not chosen on (100-129), against the same controllers written in
+    // Python on Gymnasium's tasks (tests/data/continuous/scripted_returns.json, from record_statistics.py): the
+    // same returns seed by seed, and the levels their docs state.
+    let text = std::fs::read_to_string(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/tests/data/continuous/scripted_returns.json"
+    ))
+    .unwrap();
+    let recorded: Value = serde_json::from_str(&text).unwrap();
+    let seeds = 100..130;
+    assert_eq!(floats(&recorded["seeds"]), vec![100.0, 130.0]);
+    let mut pendulum = make_continuous("Pendulum-v1").unwrap();
+    let mut car = make_continuous("MountainCarContinuous-v0").unwrap();
+    use arld::env::{mountain_car_continuous::momentum, pendulum::swing_up};
+    let cases: [(&str, Vec<f64>); 3] = [
+        (
+            "Pendulum-v1 swing_up",
+            returns_of(&mut pendulum, seeds.clone(), swing_up),
+        ),
+        (
+            "MountainCarContinuous-v0 momentum(0.6)",
+            returns_of(&mut car, seeds.clone(), |o| momentum(o, 0.6)),
+        ),
+        (
+            "MountainCarContinuous-v0 momentum(1.0)",
+            returns_of(&mut car, seeds.clone(), |o| momentum(o, 1.0)),
+        ),
+    ];
+    for (name, ours) in &cases {
+        let theirs = floats(&recorded["returns"][name]);
+        assert_eq!(ours.len(), theirs.len(), "{name}");
+        for (seed, (a, b)) in seeds.clone().zip(ours.iter().zip(&theirs)) {
+            // Pendulum's rewards may differ by a float32 ulp of the torque cost per step (see above).
+            assert!(
+                (a - b).abs() <= 1e-6 * b.abs().max(1.0),
+                "{name} seed {seed}: {a} vs {b}"
+            );
+        }
+    }
+    let mean = |v: &Vec<f64>| v.iter().sum::<f64>() / v.len() as f64;
+    assert!(
+        mean(&cases[0].1) > -200.0,
+        "swing-up: {}",
+        mean(&cases[0].1)
+    );
+    assert!(
+        mean(&cases[1].1) > 90.0,
+        "momentum(0.6): {}",
+        mean(&cases[1].1)
+    );
+    // The weak one: below the threshold of 90, yet every episode reaches the flag (a return above 80).
+    assert!(
+        mean(&cases[2].1) < 90.0,
+        "momentum(1.0): {}",
+        mean(&cases[2].1)
+    );
+    assert!(
+        cases[2].1.iter().all(|r| *r > 80.0),
+        "momentum(1.0) failed to finish"
+    );
 }

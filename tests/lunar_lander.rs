@@ -1,5 +1,5 @@
-//! LunarLander against Gymnasium: the heuristic controller on the recorded trace, Gymnasium's
-//! random-policy statistics and the heuristic controller's performance.
+//! LunarLander (discrete, and `LunarLanderContinuous-v3`) against Gymnasium: the heuristic controller on the
+//! recorded trace, Gymnasium's random-policy statistics and the heuristic controller's performance.
 //!
 //! The trace (`lunar_lander.jsonl`, recorded from Gymnasium 1.4.0 with pybox2d) is the exact reference and
 //! is replayed in full by `tests/conformance.rs`; here it checks the heuristic controller's actions. The
@@ -7,8 +7,9 @@
 //! over the same seeds (`statistics.json`, two-sample Kolmogorov–Smirnov) and catch physics that drift on
 //! average even where no trace covers them (docs/environments.md).
 
-use arld::env::lunar_lander::{LunarLander, heuristic_action};
-use arld::env::{Env, make};
+use arld::env::continuous::ContinuousEnv;
+use arld::env::lunar_lander::{LunarLander, heuristic_action, heuristic_throttle};
+use arld::env::{Env, make, make_continuous};
 use rand::{Rng, SeedableRng};
 use serde_json::Value;
 use std::path::PathBuf;
@@ -79,12 +80,46 @@ fn heuristic_controller_chooses_the_recorded_actions() {
     assert!(compared > 500, "only {compared} heuristic steps compared");
 }
 
+/// Plays one episode of a continuous-action task from `reset(seed)` with `policy`; returns (return, length).
+fn play_continuous(
+    env: &mut ContinuousEnv,
+    seed: u64,
+    mut policy: impl FnMut(&[f32]) -> [f32; 2],
+) -> (f64, usize) {
+    let mut obs = vec![0.0; env.spec().obs_dim];
+    env.reset_into(Some(seed), &mut obs);
+    let (mut total, mut length) = (0.0, 0);
+    loop {
+        let action = policy(&obs);
+        let step = env
+            .step_into(&action, &mut obs)
+            .expect("valid action on a running episode");
+        total += step.reward;
+        length += 1;
+        if step.terminated || step.truncated {
+            return (total, length);
+        }
+    }
+}
+
 /// Gymnasium's own per-seed returns and lengths (`statistics.json`, recorded by `record.py`).
 fn gymnasium_statistics() -> Value {
-    let path = trace_path().with_file_name("statistics.json");
+    read_statistics(trace_path().with_file_name("statistics.json"))
+}
+
+/// Gymnasium's own per-seed returns and lengths of `LunarLanderContinuous-v3`
+/// (`tests/data/continuous/lander_statistics.json`, recorded by `record_statistics.py` next to it).
+fn continuous_statistics() -> Value {
+    read_statistics(
+        PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+            .join("tests/data/continuous/lander_statistics.json"),
+    )
+}
+
+fn read_statistics(path: PathBuf) -> Value {
     let text = std::fs::read_to_string(&path)
         .unwrap_or_else(|err| panic!("cannot read {}: {err}", path.display()));
-    serde_json::from_str(&text).expect("statistics.json is valid JSON")
+    serde_json::from_str(&text).expect("the statistics are valid JSON")
 }
 
 fn sample(stats: &Value, policy: &str, field: &str) -> Vec<f64> {
@@ -175,12 +210,31 @@ fn lander_sample(env: &mut dyn Env, episodes: u64, random: bool) -> (Vec<f64>, V
         .unzip()
 }
 
-/// The samples of `env` against Gymnasium's: the smallest KS p-value over the four comparisons.
-fn smallest_p_value(env: &mut dyn Env, stats: &Value) -> f64 {
+/// Returns and lengths of `episodes` episodes of the continuous lander from seeds 0.., under uniformly random
+/// actions in the box from a generator of our own (compared as distributions) or under the heuristic.
+fn continuous_sample(env: &mut ContinuousEnv, episodes: u64, random: bool) -> (Vec<f64>, Vec<f64>) {
+    let mut actions = rand_pcg::Pcg64::seed_from_u64(2024);
+    (0..episodes)
+        .map(|seed| {
+            let (ret, len) = if random {
+                play_continuous(env, seed, |_| {
+                    [(); 2].map(|_| actions.random_range(-1.0f32..=1.0))
+                })
+            } else {
+                play_continuous(env, seed, heuristic_throttle)
+            };
+            (ret, len as f64)
+        })
+        .unzip()
+}
+
+/// Our samples (from `ours(episodes, random)`) against Gymnasium's: the smallest KS p-value over the four
+/// comparisons (returns and lengths, random and heuristic policies).
+fn smallest_p_value(stats: &Value, mut ours: impl FnMut(u64, bool) -> (Vec<f64>, Vec<f64>)) -> f64 {
     let mut smallest = 1.0f64;
     for (policy, random) in [("random", true), ("heuristic", false)] {
         let episodes = sample(stats, policy, "returns").len() as u64;
-        let (returns, lengths) = lander_sample(env, episodes, random);
+        let (returns, lengths) = ours(episodes, random);
         for (field, ours) in [("returns", returns), ("lengths", lengths)] {
             let (d, p) = ks_two_sample(&ours, &sample(stats, policy, field));
             println!("{policy} {field}: D = {d:.4}, p = {p:.4}");
@@ -196,10 +250,36 @@ fn lander_statistics_match_gymnasium_ks() {
     // own: no two-sample KS test may reject at the 1% level.
     let stats = gymnasium_statistics();
     let mut env = make("LunarLander-v2").expect("LunarLander-v2 is registered");
-    let p = smallest_p_value(env.as_mut(), &stats);
+    let p = smallest_p_value(&stats, |n, random| lander_sample(env.as_mut(), n, random));
     assert!(
         p > 0.01,
         "a KS test rejects Gymnasium's distribution: p = {p}"
+    );
+}
+
+#[test]
+fn continuous_lander_statistics_match_gymnasium_ks() {
+    // The same comparison for LunarLanderContinuous-v3: uniform random actions in [-1, 1]² (300 seeds) and the
+    // heuristic's continuous branch (200 seeds) against Gymnasium's own.
+    let stats = continuous_statistics();
+    let mut env = make_continuous("LunarLanderContinuous-v3").expect("registered");
+    let p = smallest_p_value(&stats, |n, random| continuous_sample(&mut env, n, random));
+    assert!(
+        p > 0.01,
+        "a KS test rejects Gymnasium's distribution: p = {p}"
+    );
+}
+
+#[test]
+fn continuous_ks_comparison_notices_discrete_engines() {
+    // The test can fail: the discrete lander's statistics (full-throttle engines, other random actions) are
+    // rejected against the continuous lander's.
+    let stats = continuous_statistics();
+    let mut env = make("LunarLander-v3").expect("registered");
+    let p = smallest_p_value(&stats, |n, random| lander_sample(env.as_mut(), n, random));
+    assert!(
+        p < 1e-4,
+        "the discrete lander passed for the continuous one: p = {p}"
     );
 }
 
@@ -208,7 +288,7 @@ fn ks_comparison_notices_wrong_gravity() {
     // The same comparison with gravity -8 instead of -10 must reject: the test can fail.
     let stats = gymnasium_statistics();
     let mut env = LunarLander::with_gravity("LunarLander-v2", -8.0).expect("valid gravity");
-    let p = smallest_p_value(&mut env, &stats);
+    let p = smallest_p_value(&stats, |n, random| lander_sample(&mut env, n, random));
     assert!(p < 1e-4, "gravity -8 went unnoticed: p = {p}");
 }
 
@@ -222,6 +302,18 @@ fn heuristic_controller_lands() {
     let mean = returns.iter().sum::<f64>() / returns.len() as f64;
     println!("heuristic returns {returns:?}, mean {mean:.2}");
     assert!(mean > 200.0, "heuristic mean return {mean}");
+}
+
+#[test]
+fn continuous_heuristic_controller_lands() {
+    // Gymnasium's continuous heuristic averages 284.6 over seeds 0..199 (lander_statistics.json).
+    let mut env = make_continuous("LunarLanderContinuous-v3").expect("registered");
+    let returns: Vec<f64> = (0..20)
+        .map(|seed| play_continuous(&mut env, seed, heuristic_throttle).0)
+        .collect();
+    let mean = returns.iter().sum::<f64>() / returns.len() as f64;
+    println!("continuous heuristic returns {returns:?}, mean {mean:.2}");
+    assert!(mean > 200.0, "continuous heuristic mean return {mean}");
 }
 
 #[test]

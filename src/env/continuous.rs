@@ -1,5 +1,5 @@
-//! Gymnasium-exact tasks whose action is a vector of float32 in a box (`Pendulum-v1` and
-//! `MountainCarContinuous-v0`, found by id in [`super::make_continuous`]): their registered facts, the interface of
+//! Gymnasium-exact tasks whose action is a vector of float32 in a box (`Pendulum-v1`, `MountainCarContinuous-v0`
+//! and `LunarLanderContinuous-v3`, found by id in [`super::make_continuous`]): their registered facts, the interface of
 //! their physics, and the environment that adds the reset generator and the time limit.
 //!
 //! They share with the discrete tasks the reset generator ([`EnvRng`]: NumPy's `PCG64(SeedSequence(seed))`),
@@ -36,7 +36,7 @@ impl BoxSpec {
 }
 
 /// Every continuous-action task, in the order `known_continuous_ids` lists them.
-pub static CONTINUOUS_SPECS: [BoxSpec; 2] = [
+pub static CONTINUOUS_SPECS: [BoxSpec; 3] = [
     BoxSpec {
         id: "Pendulum-v1",
         obs_dim: 3,
@@ -53,6 +53,14 @@ pub static CONTINUOUS_SPECS: [BoxSpec; 2] = [
         max_episode_steps: 999,
         solve_threshold: Some(90.0),
     },
+    BoxSpec {
+        id: "LunarLanderContinuous-v3",
+        obs_dim: 8,
+        action_low: &[-1.0, -1.0],
+        action_high: &[1.0, 1.0],
+        max_episode_steps: 1000,
+        solve_threshold: Some(200.0),
+    },
 ];
 
 /// The ids of the continuous-action tasks.
@@ -65,8 +73,9 @@ pub trait ContinuousDynamics: Send {
     /// Draws the initial state from the reset's generator.
     fn reset(&mut self, rng: &mut NumpyRng);
     /// One step with a finite action of the task's dimension (not yet clipped to the box: each task clips as
-    /// Gymnasium does); returns the reward and whether the task terminated.
-    fn step(&mut self, action: &[f32]) -> (f64, bool);
+    /// Gymnasium does), drawing what the step draws (the lander's engine dispersion) from the episode's
+    /// generator; returns the reward and whether the task terminated.
+    fn step(&mut self, action: &[f32], rng: &mut NumpyRng) -> (f64, bool);
     /// Writes the observation of the current state into `obs`.
     fn observe(&self, obs: &mut [f32]);
     /// Overwrites the internal float64 state as Gymnasium's `env.unwrapped.state = ...` does.
@@ -131,7 +140,10 @@ impl ContinuousEnv {
                 msg: format!("an action holds {bad}, which is not a finite number"),
             });
         }
-        let (reward, terminated) = self.physics.step(action);
+        let Some(rng) = self.rng.current() else {
+            return Err(EnvError::NeedsReset { env });
+        };
+        let (reward, terminated) = self.physics.step(action, rng);
         self.elapsed_steps += 1;
         let truncated = self.elapsed_steps >= self.spec.max_episode_steps;
         self.running = !(terminated || truncated);

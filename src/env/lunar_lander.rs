@@ -1,4 +1,5 @@
-//! Gymnasium's LunarLander (v2 and v3, discrete actions, no wind), reproduced step for step.
+//! Gymnasium's LunarLander (v2 and v3, discrete actions, and `LunarLanderContinuous-v3`; no wind), reproduced
+//! step for step.
 //!
 //! Gymnasium simulates the lander with pybox2d, a Box2D 2.3 core in float32. This module drives the
 //! same engine (Box2D 2.3.1, bundled by the `wrapped2d` crate) through the same sequence of calls, so
@@ -13,7 +14,10 @@
 //!   by begin/end events exactly as Gymnasium's `ContactDetector` does (not by polling after the step).
 //! - [`LunarLander`]: the [`Env`] implementation: NumPy-exact random draws (terrain, initial push,
 //!   engine dispersion), engine impulses, observation normalisation, reward shaping, the time limit.
-//! - [`heuristic_action`]: Gymnasium's built-in heuristic controller, used as the scripted expert.
+//! - [`LunarLanderContinuous`]: the same world with continuous engines, for [`super::continuous::ContinuousEnv`];
+//!   [`Engines`] reads either kind of action as Gymnasium does.
+//! - [`heuristic_action`] and [`heuristic_throttle`]: Gymnasium's built-in heuristic controller (discrete and
+//!   continuous), used as the scripted expert.
 //!
 //! Every float64 quantity of the Python code (observations, shaping, impulse arithmetic) is computed in
 //! `f64` in the same operation order, and narrowed to `f32` where pybox2d hands it to Box2D.
@@ -294,18 +298,18 @@ impl Scene {
         }
     }
 
-    /// An engine's push: the impulse `-offset * strength` at the world point `at` (Gymnasium's
-    /// `ApplyLinearImpulse` for the particle the engine throws out at `offset` from the lander).
-    fn push(&mut self, (ox, oy): (f64, f64), at: (f64, f64), strength: f64) {
-        let impulse = vec2(-ox * strength, -oy * strength);
+    /// An engine's push: the impulse `(-offset * power) * throttle` at the world point `at` (Gymnasium's
+    /// `ApplyLinearImpulse` for the particle the engine throws out at `offset` from the lander, multiplied in
+    /// Python's order: the engine's power first, then the throttle).
+    fn push(&mut self, (ox, oy): (f64, f64), at: (f64, f64), power: f64, throttle: f64) {
+        let impulse = vec2(-ox * power * throttle, -oy * power * throttle);
         self.world
             .body_mut(self.lander)
             .apply_linear_impulse(&impulse, &vec2(at.0, at.1), true);
     }
 
-    /// Fires the engines of `action` (one of 0..4) with the given dispersion draws and advances the
-    /// world by one frame. Returns the main and side engine powers (for the fuel cost).
-    fn advance(&mut self, action: usize, dispersion: [f64; 2]) -> (f64, f64) {
+    /// Fires the `engines` with the given dispersion draws and advances the world by one frame.
+    fn advance(&mut self, engines: Engines, dispersion: [f64; 2]) {
         let (angle, position) = {
             let lander = self.world.body(self.lander);
             (lander.angle() as f64, *lander.position())
@@ -314,9 +318,7 @@ impl Scene {
         let tip = (angle.sin(), angle.cos());
         let side = (-tip.1, tip.0);
 
-        let mut m_power = 0.0;
-        if action == 2 {
-            m_power = 1.0;
+        if engines.main > 0.0 {
             let ox = tip.0 * (MAIN_ENGINE_Y_LOCATION / SCALE + 2.0 * dispersion[0])
                 + side.0 * dispersion[1];
             let oy = -tip.1 * (MAIN_ENGINE_Y_LOCATION / SCALE + 2.0 * dispersion[0])
@@ -324,14 +326,13 @@ impl Scene {
             self.push(
                 (ox, oy),
                 (pos_x + ox, pos_y + oy),
-                MAIN_ENGINE_POWER * m_power,
+                MAIN_ENGINE_POWER,
+                engines.main,
             );
         }
 
-        let mut s_power = 0.0;
-        if action == 1 || action == 3 {
-            s_power = 1.0;
-            let direction = action as f64 - 2.0;
+        if engines.side > 0.0 {
+            let direction = engines.direction;
             let lever = 3.0 * dispersion[1] + direction * SIDE_ENGINE_AWAY / SCALE;
             let ox = tip.0 * dispersion[0] + side.0 * lever;
             let oy = -tip.1 * dispersion[0] - side.1 * lever;
@@ -340,11 +341,10 @@ impl Scene {
                 pos_x + ox - tip.0 * 17.0 / SCALE,
                 pos_y + oy + tip.1 * SIDE_ENGINE_HEIGHT / SCALE,
             );
-            self.push((ox, oy), at, SIDE_ENGINE_POWER * s_power);
+            self.push((ox, oy), at, SIDE_ENGINE_POWER, engines.side);
         }
 
         self.world.step((1.0 / FPS) as f32, 6 * 30, 2 * 30);
-        (m_power, s_power)
     }
 
     /// Gymnasium's float64 state list (before its cast to the float32 observation).
@@ -428,6 +428,58 @@ fn shaping(s: &[f64; OBS_DIM]) -> f64 {
         + 10.0 * s[7]
 }
 
+/// The engines one step fires: the main engine's and the side engines' throttles (Gymnasium's `m_power` and
+/// `s_power`, 0 when an engine is off) and the side engines' direction (-1 left, +1 right).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Engines {
+    main: f64,
+    side: f64,
+    direction: f64,
+}
+
+impl Engines {
+    /// A discrete action (0 no-op, 1 left, 2 main, 3 right): full throttle on the engine it names.
+    fn discrete(action: usize) -> Self {
+        let side = action == 1 || action == 3;
+        Engines {
+            main: if action == 2 { 1.0 } else { 0.0 },
+            side: if side { 1.0 } else { 0.0 },
+            direction: if side { action as f64 - 2.0 } else { 0.0 },
+        }
+    }
+
+    /// A continuous action `[main, lateral]` as Gymnasium reads it: clipped to [-1, 1] in float32 and widened
+    /// to float64; the main engine fires above 0 at 50-100% throttle, a side engine when the lateral value's
+    /// magnitude exceeds 0.5, at that magnitude (at most 1), on the side of its sign.
+    pub fn continuous(action: [f32; 2]) -> Self {
+        let [main, lateral] = action.map(|a| f64::from(a.clamp(-1.0, 1.0)));
+        let mut engines = Engines {
+            main: 0.0,
+            side: 0.0,
+            direction: 0.0,
+        };
+        if main > 0.0 {
+            engines.main = (main.clamp(0.0, 1.0) + 1.0) * 0.5;
+        }
+        if lateral.abs() > 0.5 {
+            engines.direction = lateral.signum();
+            engines.side = lateral.abs().clamp(0.5, 1.0);
+        }
+        engines
+    }
+
+    /// The discrete action whose engine the drawing shows (the main engine first).
+    fn drawn(self) -> usize {
+        if self.main > 0.0 {
+            2
+        } else if self.side > 0.0 {
+            (2.0 + self.direction) as usize
+        } else {
+            0
+        }
+    }
+}
+
 /// Gymnasium's LunarLander with discrete actions and no wind (`LunarLander-v2` / `LunarLander-v3`).
 pub type LunarLander = Simulated<LunarLanderPhysics>;
 
@@ -437,8 +489,8 @@ pub struct LunarLanderPhysics {
     gravity: f32,
     scene: Option<Scene>,
     prev_shaping: f64,
-    /// The last action (drawing only: which engine fired).
-    last_action: usize,
+    /// The engines the last step fired (drawing only).
+    last_engines: Engines,
     /// The observation the last frame computed.
     obs: [f32; OBS_DIM],
 }
@@ -472,7 +524,7 @@ impl LunarLander {
             gravity,
             scene: None,
             prev_shaping: 0.0,
-            last_action: 0,
+            last_engines: Engines::discrete(0),
             obs: [0.0; OBS_DIM],
         };
         Ok(Simulated::with_physics(id, physics))
@@ -483,7 +535,7 @@ impl LunarLanderPhysics {
     /// One frame of Gymnasium's `step` without the time limit: engines, physics, observation, reward.
     fn frame(
         &mut self,
-        action: usize,
+        engines: Engines,
         first: bool,
         rng: &mut NumpyRng,
     ) -> ([f32; OBS_DIM], f64, bool) {
@@ -496,7 +548,7 @@ impl LunarLanderPhysics {
             rng.uniform(-1.0, 1.0) / SCALE,
             rng.uniform(-1.0, 1.0) / SCALE,
         ];
-        let (m_power, s_power) = scene.advance(action, dispersion);
+        scene.advance(engines, dispersion);
         let state = scene.state();
 
         let shaping_now = shaping(&state);
@@ -506,8 +558,8 @@ impl LunarLanderPhysics {
             shaping_now - self.prev_shaping
         };
         self.prev_shaping = shaping_now;
-        reward -= m_power * 0.30;
-        reward -= s_power * 0.03;
+        reward -= engines.main * 0.30;
+        reward -= engines.side * 0.03;
 
         let mut terminated = false;
         if scene.game_over() || state[0].abs() >= 1.0 {
@@ -527,19 +579,16 @@ impl Dynamics for LunarLanderPhysics {
         // Drop the old world before building the new one (Gymnasium destroys, then creates).
         self.scene = None;
         self.scene = Some(Scene::build(rng, self.gravity));
-        self.last_action = 0;
+        self.last_engines = Engines::discrete(0);
         // Gymnasium's reset returns the observation of one no-op step (outside the time limit count).
-        (self.obs, _, _) = self.frame(0, true, rng);
+        (self.obs, _, _) = self.frame(Engines::discrete(0), true, rng);
     }
 
     fn step(&mut self, action: usize, rng: &mut EnvRng) -> (f64, bool) {
         let rng = rng
             .current()
             .expect("a step runs only after reset() set the generator");
-        let (next, reward, terminated) = self.frame(action, false, rng);
-        self.last_action = action;
-        self.obs = next;
-        (reward, terminated)
+        self.fire(Engines::discrete(action), rng)
     }
 
     fn observe(&self, obs: &mut [f32]) {
@@ -549,29 +598,82 @@ impl Dynamics for LunarLanderPhysics {
     fn geometry(&self) -> Option<super::Geometry> {
         self.scene
             .as_ref()
-            .map(|scene| scene.geometry(self.last_action))
+            .map(|scene| scene.geometry(self.last_engines.drawn()))
     }
 }
 
-/// Gymnasium's heuristic lander controller (`heuristic` in lunar_lander.py, discrete branch).
+impl LunarLanderPhysics {
+    /// One step of the episode with `engines`: returns the reward and whether the task terminated.
+    fn fire(&mut self, engines: Engines, rng: &mut NumpyRng) -> (f64, bool) {
+        let (next, reward, terminated) = self.frame(engines, false, rng);
+        self.last_engines = engines;
+        self.obs = next;
+        (reward, terminated)
+    }
+}
+
+/// Gymnasium's LunarLander with continuous engines (`LunarLanderContinuous-v3`, that is
+/// `gym.make("LunarLander-v3", continuous=True)`): the same world, an action `[main, lateral]` in [-1, 1]²
+/// (see [`Engines::continuous`]).
+pub struct LunarLanderContinuous(LunarLanderPhysics);
+
+impl Default for LunarLanderContinuous {
+    fn default() -> Self {
+        LunarLanderContinuous(LunarLanderPhysics {
+            gravity: DEFAULT_GRAVITY,
+            scene: None,
+            prev_shaping: 0.0,
+            last_engines: Engines::discrete(0),
+            obs: [0.0; OBS_DIM],
+        })
+    }
+}
+
+impl super::continuous::ContinuousDynamics for LunarLanderContinuous {
+    fn reset(&mut self, rng: &mut NumpyRng) {
+        // Gymnasium resets the continuous lander with the action [0, 0]: no engine fires, as with discrete 0.
+        Dynamics::reset(&mut self.0, rng);
+    }
+
+    fn step(&mut self, action: &[f32], rng: &mut NumpyRng) -> (f64, bool) {
+        self.0
+            .fire(Engines::continuous([action[0], action[1]]), rng)
+    }
+
+    fn observe(&self, obs: &mut [f32]) {
+        obs.copy_from_slice(&self.0.obs);
+    }
+
+    fn set_state(&mut self, _state: &[f64]) -> Result<(), String> {
+        Err("the lander's state is a Box2D world: it cannot be set from numbers".into())
+    }
+}
+
+/// What Gymnasium's heuristic lander controller (`heuristic` in lunar_lander.py) wants to correct:
+/// `(angle_todo, hover_todo)`.
 ///
 /// It steers the tilt towards the pad and holds a hover height proportional to the horizontal offset;
 /// once a leg touches it only brakes the fall. Gymnasium evaluates it on the float32 observation with
 /// NumPy 2 scalar rules (Python float constants become float32), so the arithmetic here is `f32`.
 /// `obs` must have the 8 LunarLander components.
-pub fn heuristic_action(obs: &[f32]) -> usize {
-    let s = obs;
+fn heuristic_todo(s: &[f32]) -> (f32, f32) {
     // The angle should point towards the centre, at most 0.4 rad either way.
     let angle_targ = (s[0] * 0.5 + s[2] * 1.0).clamp(-0.4, 0.4);
     // The target height is proportional to the horizontal offset.
     let hover_targ = 0.55 * s[0].abs();
-    let mut angle_todo = (angle_targ - s[4]) * 0.5 - s[5] * 1.0;
-    let mut hover_todo = (hover_targ - s[1]) * 0.5 - s[3] * 0.5;
+    let angle_todo = (angle_targ - s[4]) * 0.5 - s[5] * 1.0;
+    let hover_todo = (hover_targ - s[1]) * 0.5 - s[3] * 0.5;
     if s[6] != 0.0 || s[7] != 0.0 {
         // After touchdown only reduce the fall speed.
-        angle_todo = 0.0;
-        hover_todo = -s[3] * 0.5;
+        (0.0, -s[3] * 0.5)
+    } else {
+        (angle_todo, hover_todo)
     }
+}
+
+/// Gymnasium's heuristic lander controller, discrete branch: the engine that corrects most.
+pub fn heuristic_action(obs: &[f32]) -> usize {
+    let (angle_todo, hover_todo) = heuristic_todo(obs);
     if hover_todo > angle_todo.abs() && hover_todo > 0.05 {
         2
     } else if angle_todo < -0.05 {
@@ -581,6 +683,13 @@ pub fn heuristic_action(obs: &[f32]) -> usize {
     } else {
         0
     }
+}
+
+/// Gymnasium's heuristic lander controller, continuous branch: `[hover_todo * 20 - 1, -angle_todo * 20]`
+/// clipped to [-1, 1], in float32 as NumPy computes it from the float32 observation.
+pub fn heuristic_throttle(obs: &[f32]) -> [f32; 2] {
+    let (angle_todo, hover_todo) = heuristic_todo(obs);
+    [hover_todo * 20.0 - 1.0, -angle_todo * 20.0].map(|a| a.clamp(-1.0, 1.0))
 }
 
 #[cfg(test)]

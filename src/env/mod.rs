@@ -354,8 +354,9 @@ pub fn register(
     Ok(spec)
 }
 
-/// Builds an environment by Gymnasium id.
 /// The continuous-action task registered as `id` (Gymnasium's spelling; see [`continuous`]).
+/// `LunarLanderContinuous-v3` is Gymnasium's `gym.make("LunarLander-v3", continuous=True)`; see
+/// [`continuous_id`] for that spelling.
 pub fn make_continuous(id: &str) -> Result<continuous::ContinuousEnv, EnvError> {
     let spec = continuous::CONTINUOUS_SPECS
         .iter()
@@ -363,11 +364,24 @@ pub fn make_continuous(id: &str) -> Result<continuous::ContinuousEnv, EnvError> 
         .ok_or_else(|| EnvError::UnknownId { id: id.to_string() })?;
     let physics: Box<dyn continuous::ContinuousDynamics> = match spec.id {
         "Pendulum-v1" => Box::new(pendulum::Pendulum::default()),
+        "LunarLanderContinuous-v3" => Box::new(lunar_lander::LunarLanderContinuous::default()),
         _ => Box::new(mountain_car_continuous::MountainCarContinuous::default()),
     };
     Ok(continuous::ContinuousEnv::new(spec, physics))
 }
 
+/// The registered id of `gym.make(id, continuous=True)` where a task has both kinds of action
+/// (`LunarLander-v3` and `LunarLander-v2` give `LunarLanderContinuous-v3`); `None` for any other id.
+pub fn continuous_id(id: &str) -> Option<&'static str> {
+    match id {
+        "LunarLander-v3" | "LunarLander-v2" | "LunarLanderContinuous-v3" => {
+            Some("LunarLanderContinuous-v3")
+        }
+        _ => None,
+    }
+}
+
+/// Builds an environment by Gymnasium id.
 pub fn make(id: &str) -> Result<Box<dyn Env>, EnvError> {
     let spec = spec(id)?;
     match spec.id {

@@ -19,6 +19,31 @@ use super::continuous::{ContinuousDynamics, state_of_len};
 use crate::rng::NumpyRng;
 use std::f64::consts::PI;
 
+/// The gravity term of the angular acceleration, `3 g / (2 l)` (the swing-up's energy uses it).
+const GRAVITY_TERM: f64 = 3.0 * G / 2.0;
+
+/// A scripted swing-up controller for Pendulum-v1 (the scripted expert of the task): energy pumping far from the
+/// top, a linear state feedback near it.
+///
+/// With `a = 3g/(2l) = 15` the pendulum obeys `theta'' = a sin(theta) + 3u`, and `E = theta_dot^2 / 2 + a (cos
+/// theta - 1)` is 0 upright at rest and -2a hanging at rest; `dE/dt = 3 u theta_dot`. So below the top
+/// (`cos theta <= 0.8`) full torque in the direction of motion pumps energy while `E < 0`, and no torque is spent
+/// once there is enough; near the top `u = -(10 theta + 2 theta_dot)` holds it (closed loop `theta'' = -15 theta -
+/// 6 theta_dot`). Chosen on seeds 0-9 (mean return -133); on seeds 100-129 Gymnasium's Pendulum-v1 gives it a mean
+/// of -184, above the -200 this project calls solved (`tests/experts.rs` checks it on ours).
+pub fn swing_up(obs: &[f32]) -> [f32; 1] {
+    let (cos, sin, theta_dot) = (f64::from(obs[0]), f64::from(obs[1]), f64::from(obs[2]));
+    let u = if cos > 0.8 {
+        let theta = sin.atan2(cos);
+        -(10.0 * theta + 2.0 * theta_dot)
+    } else {
+        let energy = 0.5 * theta_dot * theta_dot + GRAVITY_TERM * (cos - 1.0);
+        let direction = if theta_dot < 0.0 { -1.0 } else { 1.0 };
+        if energy < 0.0 { 2.0 * direction } else { 0.0 }
+    };
+    [(u as f32).clamp(-MAX_TORQUE, MAX_TORQUE)]
+}
+
 const MAX_SPEED: f64 = 8.0;
 const MAX_TORQUE: f32 = 2.0;
 const DT: f64 = 0.05;
@@ -44,7 +69,7 @@ impl ContinuousDynamics for Pendulum {
         self.state = [theta, theta_dot];
     }
 
-    fn step(&mut self, action: &[f32]) -> (f64, bool) {
+    fn step(&mut self, action: &[f32], _rng: &mut NumpyRng) -> (f64, bool) {
         let [theta, theta_dot] = self.state;
         let u = action[0].clamp(-MAX_TORQUE, MAX_TORQUE);
         let normalized = angle_normalize(theta);
@@ -52,7 +77,7 @@ impl ContinuousDynamics for Pendulum {
         let torque_cost = 0.001_f32 * (u * u);
         let cost = normalized * normalized + 0.1 * (theta_dot * theta_dot) + f64::from(torque_cost);
         // 3 g / (2 l) = 15 in float64; 3 / (m l^2) * u in float32.
-        let acceleration = 3.0 * G / 2.0 * theta.sin() + f64::from(3.0_f32 * u);
+        let acceleration = GRAVITY_TERM * theta.sin() + f64::from(3.0_f32 * u);
         let theta_dot = (theta_dot + acceleration * DT).clamp(-MAX_SPEED, MAX_SPEED);
         let theta = theta + theta_dot * DT;
         self.state = [theta, theta_dot];
@@ -86,8 +111,8 @@ mod tests {
     fn a_torque_beyond_the_box_is_clipped_to_it() {
         let mut a = Pendulum::default();
         let mut b = Pendulum::default();
-        let ra = a.step(&[5.0]);
-        let rb = b.step(&[2.0]);
+        let ra = a.step(&[5.0], &mut NumpyRng::new(0));
+        let rb = b.step(&[2.0], &mut NumpyRng::new(0));
         assert_eq!(ra, rb);
         assert_eq!(a.state, b.state);
     }
