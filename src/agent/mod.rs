@@ -8,6 +8,7 @@
 //! `L_E = max_a [Q(s, a) + M·1(a ≠ a_E)] − Q(s, a_E)`.
 
 mod learner;
+pub mod td3;
 
 pub use learner::Learner;
 

@@ -116,14 +116,19 @@ impl Adam {
 
     /// An optimiser for `net`'s parameters with learning rate `lr` and zero moments.
     pub fn new(net: &QNet, lr: f32) -> Self {
+        Self::for_parameters(net.num_parameters(), lr)
+    }
+
+    /// An optimiser for `count` parameters in one flat slice (an [`super::Mlp`]'s) with zero moments.
+    pub fn for_parameters(count: usize, lr: f32) -> Self {
         Self {
             lr,
             beta1: Self::BETA1,
             beta2: Self::BETA2,
             eps: Self::EPS,
             step: 0,
-            first_moment: vec![0.0; net.num_parameters()],
-            second_moment: vec![0.0; net.num_parameters()],
+            first_moment: vec![0.0; count],
+            second_moment: vec![0.0; count],
         }
     }
 
@@ -145,14 +150,21 @@ impl Adam {
     /// # Panics
     /// If `net` or `grads` has a different size from the network this optimiser was built for.
     pub fn step(&mut self, net: &mut QNet, grads: &Grads) {
-        let params = net.parameters_mut();
+        self.step_parameters(net.parameters_mut(), &grads.data);
+    }
+
+    /// One update of the flat parameters `params` with their gradients `grads`.
+    ///
+    /// # Panics
+    /// If `params` or `grads` has a different length from the parameters this optimiser was built for.
+    pub fn step_parameters(&mut self, params: &mut [f32], grads: &[f32]) {
         assert_eq!(
             params.len(),
             self.first_moment.len(),
             "Adam: network size changed"
         );
         assert_eq!(
-            grads.data.len(),
+            grads.len(),
             params.len(),
             "Adam: gradients do not match the network"
         );
@@ -173,8 +185,8 @@ impl Adam {
         };
         let (m, v) = (&mut self.first_moment, &mut self.second_moment);
         simd_dispatch!(
-            adam_update_avx2(params, &grads.data, m, v, &coefficients),
-            adam_update(params, &grads.data, m, v, &coefficients)
+            adam_update_avx2(params, grads, m, v, &coefficients),
+            adam_update(params, grads, m, v, &coefficients)
         )
     }
 }

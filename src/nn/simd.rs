@@ -134,22 +134,26 @@ pub(crate) use simd_dispatch;
 
 /// `at_simd_level!(net, method(arg: Type, ...))`: calls `net.method::<L>(args)` with the `Lanes` (`kernels.rs`) of
 /// the process's [`SimdLevel`], from a twin compiled for that instruction set (so the `#[inline(always)]`
-/// kernels inside are compiled for it too).
+/// kernels inside are compiled for it too). `net` is a `QNet`; `at_simd_level!(Type; net, ...)` names another
+/// network type (the actor-critic [`super::Mlp`]).
 macro_rules! at_simd_level {
-    ($net:expr, $method:ident($($arg:ident: $ty:ty),*)) => {{
+    ($net:expr, $method:ident($($arg:ident: $ty:ty),*)) => {
+        $crate::nn::simd::at_simd_level!($crate::nn::QNet; $net, $method($($arg: $ty),*))
+    };
+    ($net_type:ty; $net:expr, $method:ident($($arg:ident: $ty:ty),*)) => {{
         #[cfg(target_arch = "x86_64")]
         #[target_feature(enable = "avx512f,avx2,fma")]
-        fn avx512(net: &$crate::nn::QNet, $($arg: $ty),*) {
+        fn avx512(net: &$net_type, $($arg: $ty),*) {
             net.$method::<$crate::nn::kernels::Avx512>($($arg),*)
         }
         #[cfg(target_arch = "x86_64")]
         #[target_feature(enable = "avx2,fma")]
-        fn avx2(net: &$crate::nn::QNet, $($arg: $ty),*) {
+        fn avx2(net: &$net_type, $($arg: $ty),*) {
             net.$method::<$crate::nn::kernels::Avx2>($($arg),*)
         }
         #[cfg(target_arch = "x86_64")]
         #[target_feature(enable = "fma")]
-        fn scalar_fma(net: &$crate::nn::QNet, $($arg: $ty),*) {
+        fn scalar_fma(net: &$net_type, $($arg: $ty),*) {
             net.$method::<$crate::nn::kernels::Scalar>($($arg),*)
         }
         match $crate::nn::simd_level() {
