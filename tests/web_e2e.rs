@@ -397,6 +397,16 @@ fn a_stop_while_a_question_is_open_loses_nothing_and_resume_asks_it_again() {
     );
     assert_eq!(first["agent_action"], open["agent_action"]);
     assert_eq!(first["steps_left"], open["steps_left"]);
+    // The status panel is filled as the question is asked again: where the run stood when it stopped.
+    assert_eq!(
+        first["statusStep"], open["statusStep"],
+        "the resumed run's page did not show where it stands: {first}"
+    );
+    assert!(
+        first["panel"].as_str().unwrap().contains(" / ")
+            && !first["panel"].as_str().unwrap().starts_with('–'),
+        "the step in the status panel: {first}"
+    );
     let csv_after = std::fs::read_to_string(run.join("queries.csv")).unwrap();
     assert!(
         csv_after.starts_with(&csv_before),

@@ -253,7 +253,9 @@ for (;;) {
   if (p.agent_action !== null && p.waits) {
     if (p.id <= lastId) continue;
     lastId = p.id;
-    const question = { obs: p.obs, agent_action: p.agent_action, steps_left: p.steps_left };
+    // The status panel as the question opens (a resumed run fills it before asking again).
+    const panel = await page.evaluate(() => document.getElementById("s-step").textContent);
+    const question = { obs: p.obs, agent_action: p.agent_action, steps_left: p.steps_left, statusStep: s.status ? s.status.step : null, panel };
     if (first === null) first = question;
     if (answerLimit && answers.length >= answerLimit) { open = question; break; }
     if (skipped < skip) {
