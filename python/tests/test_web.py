@@ -338,7 +338,7 @@ model.learn(total_timesteps=200, log_dir=sys.argv[1])
 def test_a_large_observation_is_folded_and_an_actions_enum_names_the_buttons(tmp_path):
     train, url = start_run_with(BIG, tmp_path / "run")
     try:
-        report = page_person(url, tmp_path, "--key", "3")
+        report = page_person(url, tmp_path, "--key", "3", "--handback", "2")
         _out, err = train.communicate(timeout=120)
     finally:
         if train.poll() is None:
@@ -353,6 +353,19 @@ def test_a_large_observation_is_folded_and_an_actions_enum_names_the_buttons(tmp
     assert asked["tableRows"] == 25
     assert report["first"]["tallest"] < 1400, report["first"]["tallest"]
     assert report["handed"]["end"]["title"].startswith(("Solved at step", "Not solved in 200 steps"))
+    # The second question was handed back (Esc): the agent's questions in the next 100 steps of that episode went
+    # back to it unasked (logged unanswered with no time), not shown to the person again.
+    with open(tmp_path / "run" / "queries.csv") as f:
+        rows = list(csv.DictReader(f))
+    back = [i for i, r in enumerate(rows) if r["answered"] == "false" and float(r["response_s"]) > 0]
+    assert len(back) == 1 and report["first"]["handedBack"] == 1, rows
+    after = [r for r in rows[back[0] + 1:] if r["episode"] == rows[back[0]]["episode"]
+             and int(r["step"]) < int(rows[back[0]]["step"]) + 100]
+    assert after, "the agent did not ask again in that episode: nothing to check"
+    assert all(r["answered"] == "false" and float(r["response_s"]) == 0.0 for r in after), after
+    # Later episodes are asked again as before.
+    assert all(r["answered"] == "true" for r in rows[back[0] + 1:] if r not in after), rows
+    assert report["first"]["questions"] == sum(r["answered"] == "true" for r in rows)
 
 
 def test_an_environment_refused_prints_no_url(capfd):

@@ -6,7 +6,7 @@
 // pause must hold), then answered: the report says how long the question was open and how long paused.
 // With --gamepad ACTION, the page gets a scripted pad (navigator.getGamepads replaced by an init script, as
 // headless Chromium has no pad): the second question is answered on it, after ACTION's button is changed to the
-// d-pad's down on the page's mapping.
+// d-pad's down on the page's mapping. With --handback K, the K-th question is handed back (Esc).
 // The first `learn` runs to its end: the page must show where the run stands (the end screen, no live buttons)
 // while the program still runs. With --go, the person then creates FILE (the program waits for it and trains on),
 // checks the note is lifted, and when a question is open sends SIGTERM to PID: the page must show the stop, with the
@@ -120,12 +120,18 @@ async function pauseThenAnswer() {
   pauseReport = { openS: (Date.now() - seen) / 1000, pausedS: (goneOn - pausedAt) / 1000, stillPaused, banner };
 }
 async function answerUntilHanded() {
-  let answers = 0, questions = 0, tallest = 0, asked = null;
+  let answers = 0, questions = 0, tallest = 0, asked = null, handedBack = 0;
   for (;;) {
     await page.waitForFunction((last) => arld.handed || arld.ended || (arld.prompt && arld.prompt.waits && arld.prompt.id > last),
       lastId, { timeout: 0, polling: 5 });
     const v = await view();
-    if (v.handed || v.ended) return { answers, questions, tallest, asked };
+    if (v.handed || v.ended) return { answers, questions, tallest, asked, handedBack };
+    if (v.prompt.agent_action !== null && args.handback && questions + handedBack + 1 === Number(args.handback)) {
+      lastId = v.prompt.id;
+      handedBack++;
+      await page.keyboard.press("Escape");
+      continue;
+    }
     if (v.prompt.agent_action !== null) questions++;
     lastId = v.prompt.id;
     if (!asked) asked = v;

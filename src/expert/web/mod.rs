@@ -18,7 +18,10 @@
 //! rebuild the environment from the query's episode ([`crate::env::replay_episode`]) where the frame source
 //! can show such a copy. Undo works one key ahead: the page shows the state after a key on a copy, and the run
 //! takes that key only when the next one comes, so an undone key never reaches the training loop. A question goes back to the agent ([`Answer::Unanswered`]) when the person hands
-//! it back or, with a `timeout`, when nobody answers in time. The person may pause the run. A stop request
+//! it back or, with a `timeout`, when nobody answers in time (after a hand-back the agent's questions in the next
+//! [`HANDBACK_QUIET_STEPS`] steps of the episode go back to it unasked). The person may pause the run; their time
+//! leaves out pauses and time with no tab open. A Python program's run handed back to it between two steps
+//! ([`Expert::handed_over`]: `learn` returned, or a stop) shows where it stands until it goes on. A stop request
 //! (Ctrl-C, SIGTERM) ends any wait at once with [`crate::interrupt::Interrupted`], so that the run snapshots with
 //! the question open. The page ([`protocol`] describes its messages) is plain HTML, CSS and JavaScript embedded
 //! in the binary; at the end it shows how the run ended and what the person gave ([`Expert::finish`]).
@@ -343,8 +346,10 @@ pub struct WebExpert {
     stop_requested: Box<dyn FnMut() -> bool + Send>,
     /// Whether the page shows a hand-over note ([`Expert::handed_over`]), lifted when the run goes on.
     handed: bool,
-    /// Where the person last handed a question back: the episode and its steps then.
-    handed_back: Option<(EpisodeStart, usize)>,
+    /// Where the person last handed a question back: the episode (its number) and its steps then.
+    handed_back: Option<(usize, usize)>,
+    /// The episode in progress, by number (from [`Expert::observe`]).
+    episode: usize,
     /// Real time: when the person's last segment ended.
     segment_ended: Option<Instant>,
     /// The answer being given is a hand-back (Esc), not a timeout.
@@ -401,6 +406,7 @@ impl WebExpert {
             stop_requested: Box::new(crate::interrupt::requested),
             handed: false,
             handed_back: None,
+            episode: 0,
             segment_ended: None,
             handing_back: false,
             declined: false,
@@ -734,8 +740,8 @@ impl WebExpert {
         self.lift_hand_over();
         if query.agent_action.is_some() {
             // Shortly after a hand-back in the same episode the question is not asked again.
-            if let Some((start, at)) = self.handed_back {
-                if start == query.episode.start
+            if let Some((episode, at)) = self.handed_back {
+                if episode == self.episode
                     && query.episode.actions.len() < at + HANDBACK_QUIET_STEPS
                 {
                     self.declined = true;
@@ -776,7 +782,7 @@ impl WebExpert {
             Answer::Unanswered { .. } => {
                 self.publish_prompt(None);
                 if std::mem::take(&mut self.handing_back) {
-                    self.handed_back = Some((query.episode.start, query.episode.actions.len()));
+                    self.handed_back = Some((self.episode, query.episode.actions.len()));
                 }
             }
         }
@@ -878,6 +884,7 @@ impl Expert for WebExpert {
     }
     fn observe(&mut self, p: &Progress) {
         self.lift_hand_over();
+        self.episode = p.episode;
         if self.prompt_open && !p.queries.expert_in_control() && self.carried.is_none() {
             self.publish_prompt(None);
         }
