@@ -239,6 +239,13 @@ fn a_scripted_person_answers_in_headless_chromium() {
     let (answered, unanswered): (Vec<_>, Vec<_>) = rows.iter().partition(|r| r.answered);
     // The person skipped `skipped` questions; one more may have timed out before the browser came up.
     assert!(unanswered.len() >= cart.skipped && cart.skipped == 1);
+    // The page said the skipped question timed out (it was not replaced silently).
+    let notice = &cart.report["timeoutNotices"][0];
+    assert!(
+        notice["count"].as_u64() >= Some(1)
+            && notice["banner"].as_str().unwrap().starts_with("Time is up"),
+        "{notice}"
+    );
     assert!(
         unanswered
             .iter()

@@ -953,10 +953,6 @@ impl Expert for WebExpert {
     }
 
     fn handed_over(&mut self, end: &RunEnd, note: &str) {
-        // A question left open by a stop is closed on the page (it is asked again when the run goes on).
-        if self.prompt_open {
-            self.publish_prompt(None);
-        }
         // The page's status shows where the run stands (the latest one may wait, throttled).
         if let Some(status) = self.unsent.take() {
             let msg = ServerMsg::Status(&status).to_json();
@@ -976,6 +972,11 @@ impl Expert for WebExpert {
             .shared
             .publish(msg, |b, m| b.handed = Some(m.clone()));
         self.handed = true;
+        // A question left open by a stop is closed on the page (it is asked again when the run goes on); after
+        // the note, so that the page does not take it for a question that timed out.
+        if self.prompt_open {
+            self.publish_prompt(None);
+        }
     }
 
     fn finish(&mut self, end: &RunEnd) {
