@@ -239,6 +239,13 @@ fn a_scripted_person_answers_in_headless_chromium() {
     let (answered, unanswered): (Vec<_>, Vec<_>) = rows.iter().partition(|r| r.answered);
     // The person skipped `skipped` questions; one more may have timed out before the browser came up.
     assert!(unanswered.len() >= cart.skipped && cart.skipped == 1);
+    // The page said the skipped question timed out (it was not replaced silently).
+    let notice = &cart.report["timeoutNotices"][0];
+    assert!(
+        notice["count"].as_u64() >= Some(1)
+            && notice["banner"].as_str().unwrap().starts_with("Time is up"),
+        "{notice}"
+    );
     assert!(
         unanswered
             .iter()
@@ -397,6 +404,16 @@ fn a_stop_while_a_question_is_open_loses_nothing_and_resume_asks_it_again() {
     );
     assert_eq!(first["agent_action"], open["agent_action"]);
     assert_eq!(first["steps_left"], open["steps_left"]);
+    // The status panel is filled as the question is asked again: where the run stood when it stopped.
+    assert_eq!(
+        first["statusStep"], open["statusStep"],
+        "the resumed run's page did not show where it stands: {first}"
+    );
+    assert!(
+        first["panel"].as_str().unwrap().contains(" / ")
+            && !first["panel"].as_str().unwrap().starts_with('–'),
+        "the step in the status panel: {first}"
+    );
     let csv_after = std::fs::read_to_string(run.join("queries.csv")).unwrap();
     assert!(
         csv_after.starts_with(&csv_before),

@@ -663,6 +663,21 @@ impl Driver for Remote {
         if std::mem::take(&mut self.only_saving) && !failed {
             return Ok(Control::Continue);
         }
+        // A person's page shows that the program has the run back, and why.
+        let step = run.summary.train_steps;
+        let note = if self.interrupt.load(Ordering::Relaxed) {
+            format!(
+                "The program stopped the run at step {step} (Ctrl-C or SIGTERM). Your answers are saved; if it \
+                 goes on, an open question is asked again."
+            )
+        } else if step >= self.until {
+            format!(
+                "Training returned at step {step}: the program has the run back (it may train on)."
+            )
+        } else {
+            format!("The program paused the run at step {step}.")
+        };
+        run.hand_over(&note);
         let pause = Pause {
             net: run.agent.network().clone(),
             curve: run.log.curve().to_vec(),

@@ -4,9 +4,10 @@
 //! any environment is known; [`expert`] then turns it into the library's [`WebExpert`] for the run's
 //! environment. A built-in task is drawn from its geometry; a Gymnasium environment made with
 //! `render_mode="rgb_array"` is shown from its `render()` frames; any other one as its observation in a table.
-//! The keys: the environment's `get_keys_to_action()` where it has one (Gymnasium's `play` convention), else
-//! the `keys=` mapping, else a number key per action, labelled from `get_action_meanings()` where the
-//! environment has it.
+//! The keys: the `keys=` mapping where given, else the environment's `get_keys_to_action()` where it has one
+//! (Gymnasium's `play` convention), else a number key per action. The labels: `labels=`, else
+//! `get_action_meanings()`, else the names of an `actions` enum of the environment (MiniGrid's `Actions`).
+//! The URL is printed once the run has accepted the environment (a refused environment prints none).
 
 use arld::expert::Expert;
 use arld::expert::web::frames::{FrameSource, ObservationTable, RenderedFrames, RgbImage};
@@ -21,28 +22,31 @@ use std::sync::Mutex;
 /// Keys the page keeps for itself: Escape hands a question back.
 const RESERVED_KEYS: &[&str] = &["Escape"];
 
-/// `arld.WebExpert(listen="127.0.0.1:0", fps=None, timeout=None, keys=None, wait=True)`: starts the page's server
-/// and prints its URL (also `.url`). Pass it as `expert=` to `arld.Agent`; it serves one run. `fps`: real time
-/// at that many steps a second (default: turn-based, one step per key); `timeout`: seconds a question waits
-/// before it goes back to the agent; `keys`: `{"ArrowLeft": 0, "d": 1, ...}` (`KeyboardEvent.key` names) for an
-/// environment without `get_keys_to_action()`; `wait`: whether training starts only once the page is open.
+/// `arld.WebExpert(listen="127.0.0.1:0", fps=None, timeout=None, keys=None, wait=True, labels=None)`: starts the
+/// page's server (its URL is `.url`, printed when a run takes it). Pass it as `expert=` to `arld.Agent`; it serves
+/// one run. `fps`: real time at that many steps a second (default: turn-based, one step per key); `timeout`:
+/// seconds a question waits before it goes back to the agent; `keys`: `{"ArrowLeft": 0, "d": 1, ...}`
+/// (`KeyboardEvent.key` names; before the environment's `get_keys_to_action()`); `wait`: whether training starts
+/// only once the page is open; `labels`: what each action does, one string per action.
 #[pyclass(name = "WebExpert", module = "arld._arld")]
 pub struct PyWebExpert {
     server: Mutex<Option<WebServer>>,
     url: String,
     keys: Option<BTreeMap<String, usize>>,
+    labels: Option<Vec<String>>,
 }
 
 #[pymethods]
 impl PyWebExpert {
     #[new]
-    #[pyo3(signature = (listen="127.0.0.1:0", fps=None, timeout=None, keys=None, wait=true))]
+    #[pyo3(signature = (listen="127.0.0.1:0", fps=None, timeout=None, keys=None, wait=true, labels=None))]
     fn new(
         listen: &str,
         fps: Option<f64>,
         timeout: Option<f64>,
         keys: Option<BTreeMap<String, usize>>,
         wait: bool,
+        labels: Option<Vec<String>>,
     ) -> PyResult<Self> {
         let mut spec = format!("listen={listen},wait={}", if wait { "yes" } else { "no" });
         spec.extend(fps.map(|v| format!(",fps={v}")));
@@ -58,12 +62,21 @@ impl PyWebExpert {
                 "keys: {k} is the page's own key (it hands a question back to the agent); choose another"
             )));
         }
+        if let Some(l) = labels
+            .as_ref()
+            .and_then(|l| l.iter().find(|l| l.trim().is_empty()))
+        {
+            return Err(PyValueError::new_err(format!(
+                "labels: {l:?} is empty; give each action a word or two"
+            )));
+        }
         let server =
-            WebServer::start(&options).map_err(|e| PyRuntimeError::new_err(format!("{e:#}")))?;
+            WebServer::bind(&options).map_err(|e| PyRuntimeError::new_err(format!("{e:#}")))?;
         Ok(Self {
             url: server.url().to_string(),
             server: Mutex::new(Some(server)),
             keys,
+            labels,
         })
     }
 
@@ -106,10 +119,17 @@ pub fn expert(
         None => Page::builtin(spec.id)?,
         Some(bridge) => {
             let gym = bridge.getattr("env").map_err(|e| anyhow::anyhow!("{e}"))?;
-            gym_page(&gym, spec, web.keys.as_ref(), keep.clone())
-                .map_err(|e| anyhow::anyhow!("arld.WebExpert cannot show {}: {e}", spec.id))?
+            gym_page(
+                &gym,
+                spec,
+                web.keys.as_ref(),
+                web.labels.as_deref(),
+                keep.clone(),
+            )
+            .map_err(|e| anyhow::anyhow!("arld.WebExpert cannot show {}: {e}", spec.id))?
         }
     };
+    server.announce()?;
     let mut expert = WebExpert::new(server, page);
     // A stop in Python (Ctrl-C, or SIGTERM during `learn`): the main thread, which alone runs Python's signal
     // handlers, sets `stop` while the run trains in its own thread; the wait for the page, on the main thread,
@@ -133,9 +153,10 @@ fn gym_page(
     gym: &Bound<'_, PyAny>,
     spec: &arld::env::EnvSpec,
     keys: Option<&BTreeMap<String, usize>>,
+    labels: Option<&[String]>,
     keep: impl Fn(PyErr) -> String + Send + Sync + 'static,
 ) -> PyResult<Page> {
-    let (actions, noop) = gym_actions(gym, spec.n_actions, keys)?;
+    let (actions, noop) = gym_actions(gym, spec.n_actions, keys, labels)?;
     let render_mode: Option<String> = gym.getattr("render_mode")?.extract().unwrap_or(None);
     let frames: Box<dyn FrameSource> = if render_mode.as_deref() == Some("rgb_array") {
         let gym: Py<PyAny> = gym.clone().unbind();
@@ -192,12 +213,20 @@ fn gym_actions(
     gym: &Bound<'_, PyAny>,
     n_actions: usize,
     keys: Option<&BTreeMap<String, usize>>,
+    labels: Option<&[String]>,
 ) -> PyResult<(Vec<ActionKeys>, usize)> {
     let unwrapped = gym.getattr("unwrapped")?;
+    if let Some(labels) = labels.filter(|l| l.len() != n_actions) {
+        return Err(PyValueError::new_err(format!(
+            "labels= names {} actions, but the environment has {n_actions}",
+            labels.len()
+        )));
+    }
     let meanings: Option<Vec<String>> = unwrapped
         .call_method0("get_action_meanings")
         .ok()
         .and_then(|m| m.extract().ok())
+        .or_else(|| enum_names(&unwrapped))
         .filter(|m: &Vec<String>| m.len() == n_actions);
     let mut noop = meanings
         .as_ref()
@@ -212,7 +241,8 @@ fn gym_actions(
     let env_keys = [gym, &unwrapped]
         .into_iter()
         .find_map(|o| o.call_method0("get_keys_to_action").ok())
-        .and_then(|m| m.cast_into::<PyDict>().ok());
+        .and_then(|m| m.cast_into::<PyDict>().ok())
+        .filter(|_| keys.is_none());
     if let Some(map) = env_keys {
         for (combo, action) in map.iter() {
             let action: usize = action.extract()?;
@@ -256,14 +286,38 @@ fn gym_actions(
         .into_iter()
         .enumerate()
         .map(|(i, keys)| ActionKeys {
-            label: meanings.as_ref().map_or_else(
-                || format!("action {i}"),
-                |m| m[i].to_lowercase().replace('_', " "),
-            ),
+            label: match (labels, meanings.as_ref()) {
+                (Some(l), _) => l[i].clone(),
+                (None, Some(m)) => m[i].to_lowercase().replace('_', " "),
+                (None, None) => format!("action {i}"),
+            },
             keys,
         })
         .collect();
     Ok((actions, noop))
+}
+
+/// The member names of the environment's `actions` enum (MiniGrid's `Actions`: left, right, forward, ...) in the
+/// order of their values 0, 1, ...; `None` when it has no such enum or its values are not 0..n.
+fn enum_names(unwrapped: &Bound<'_, PyAny>) -> Option<Vec<String>> {
+    let actions = unwrapped.getattr("actions").ok()?;
+    let mut members: Vec<(usize, String)> = actions
+        .try_iter()
+        .ok()?
+        .map(|m| {
+            let m = m.ok()?;
+            Some((
+                m.getattr("value").ok()?.extract().ok()?,
+                m.getattr("name").ok()?.extract().ok()?,
+            ))
+        })
+        .collect::<Option<_>>()?;
+    members.sort();
+    members
+        .iter()
+        .enumerate()
+        .all(|(i, (v, _))| *v == i)
+        .then(|| members.into_iter().map(|(_, name)| name).collect())
 }
 
 /// A key of Gymnasium's `play` convention (a character, or a pygame key code) as `KeyboardEvent.key`.

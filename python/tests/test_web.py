@@ -135,7 +135,8 @@ def test_web_expert_arguments_are_checked_and_a_run_nobody_answers_completes(tmp
     assert rows and all(r["answered"] == "false" and r["expert_action"] == "" for r in rows)
     assert all(float(r["response_s"]) >= 0.05 for r in rows)
     assert model.summary["queries_used"] == 0
-    assert model.summary["person_s"] >= 0.05 * len(rows)
+    # Nobody had the page open: none of it is a person's time.
+    assert model.summary["person_s"] == 0.0
     # One run per WebExpert.
     with pytest.raises(RuntimeError, match="create a new one"):
         arld.Agent("adqn", gym.make("CartPole-v1"), expert=web, seed=1).learn(total_timesteps=100)
@@ -197,3 +198,206 @@ def test_a_stop_while_a_question_is_open_pauses_the_run_whole_and_learn_asks_it_
     assert answered == first["answers"] + second["answers"], "queries.csv lost answers across the stop"
     summary = json.loads(out.strip().splitlines()[-1])["summary"]
     assert summary["train_steps"] == 1500
+
+
+# FrozenLake under an id without a solve threshold, rendered; keys= (Space among them) and labels= given. The first
+# learn runs to its end and the program goes on (it waits for a file the person creates), then trains on until it is
+# stopped with a question open.
+LAKE = r"""
+import json, os, sys, time
+import gymnasium as gym
+import arld
+
+gym.register("PersonLake-v0", entry_point="gymnasium.envs.toy_text.frozen_lake:FrozenLakeEnv",
+             kwargs={"is_slippery": False}, max_episode_steps=40)
+env = gym.make("PersonLake-v0", render_mode="rgb_array")
+web = arld.WebExpert(keys={"a": 0, " ": 1, "d": 2, "w": 3}, labels=["west", "south", "east", "north"])
+model = arld.Agent("adqn", env, net="bootstrap", expert=web, seed=0, budget=400, eval_period=200, eval_episodes=2)
+started = time.monotonic()
+model.learn(total_timesteps=400, log_dir=sys.argv[1])
+wall = time.monotonic() - started
+print(json.dumps({"learned": model.num_timesteps, "summary": model.summary, "wall_s": wall}), flush=True)
+while not os.path.exists(sys.argv[2]):
+    time.sleep(0.05)
+try:
+    model.learn(total_timesteps=4000, reset_num_timesteps=False)
+    sys.exit("learn returned: the stop did not stop it")
+except KeyboardInterrupt:
+    print(json.dumps({"stopped": model.num_timesteps}), flush=True)
+"""
+
+
+def page_person(url, tmp_path, *extra):
+    out = subprocess.run(["node", "python_page.mjs", "--url", url, "--shots", str(tmp_path / "shots"), *extra],
+                         cwd=E2E, capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, f"the person failed: {out.stderr}{out.stdout}"
+    return json.loads([l for l in out.stdout.splitlines() if l.startswith("{")][-1])
+
+
+def test_the_page_shows_where_a_python_run_stands_when_learn_returns_and_when_it_is_stopped(tmp_path):
+    run, go = tmp_path / "run", tmp_path / "go"
+    train, url = start_run_with(LAKE, run, go)
+    try:
+        report = page_person(url, tmp_path, "--key", "Space", "--pause", "3000", "--gamepad", "2", "--go", str(go),
+                             "--pid", str(train.pid))
+        out, err = train.communicate(timeout=120)
+    finally:
+        if train.poll() is None:
+            train.kill()
+    assert train.returncode == 0, f"the program failed: {err}"
+    lines = [json.loads(l) for l in out.splitlines() if l.startswith("{")]
+    learned, stopped = lines[0], lines[1]
+    hello = report["hello"]
+    # labels= and keys= (Space named as such); rendered frames cannot be copied, so undo is neither offered nor
+    # promised.
+    assert [a["label"] for a in hello["actions"]] == ["west", "south", "east", "north"]
+    assert hello["buttons"][1] == "south [Space]", hello["buttons"]
+    assert not hello["undo"] and hello["undoHidden"] and "Backspace" not in hello["help"]
+    assert report["first"]["answers"] > 0
+    # learn returned, the program runs on: the page says where the run stands, with nothing left to press.
+    handed = report["handed"]
+    assert handed["end"] is not None, handed
+    assert handed["end"]["title"] == "Trained 400 steps", "no solve threshold: neither solved nor not solved"
+    assert "Training returned at step 400" in handed["end"]["note"]
+    assert handed["live"] == 0 and not handed["passLive"] and handed["prompt"] is None
+    assert handed["badge"] == "the program has the run"
+    with open(run / "queries.csv") as f:
+        answered = [r for r in csv.DictReader(f) if r["answered"] == "true"]
+    outcome = handed["outcome"]
+    assert outcome["answered"] == len(answered) == report["first"]["questions"]
+    assert outcome["keys"] == report["first"]["answers"]
+    assert abs(outcome["person_s"] - learned["summary"]["person_s"]) < 1e-9
+    # The first question was paused 3 s, its tab closed and opened again meanwhile: the pause held, and neither
+    # its response time nor the person's time counts the pause.
+    pause = report["pause"]
+    assert pause["stillPaused"] and pause["banner"].startswith("Paused"), pause
+    first_response = float(answered[0]["response_s"])
+    assert abs(first_response - (pause["openS"] - pause["pausedS"])) < 0.5, (first_response, pause)
+    assert first_response < pause["openS"] - 2.5
+    assert learned["summary"]["person_s"] <= learned["wall_s"] - pause["pausedS"] + 0.2
+    # A gamepad (scripted through the Gamepad API): its mapping shows on the page (south on A by default: its key is
+    # Space, no arrow); east, moved from the d-pad's right to its down there, answered the second question with
+    # that button (every key answered south).
+    pad = report["pad"]
+    assert pad["before"]["map"] == [14, 0, 15, 12], pad
+    assert pad["before"]["rows"][1] == ["south", "A / Cross"] and pad["after"] == [14, 0, 13, 12]
+    assert [int(r["expert_action"]) for r in answered[:2]] == [1, 2]
+    # Training goes on: the note leaves; the stop with a question open is shown, the question closed.
+    assert report["resumed"]["end"] is None and report["resumed"]["handed"] is None
+    assert report["openWhenStopped"] is not None
+    s = report["stopped"]
+    assert s["handed"]["stopped"] and s["prompt"] is None and s["live"] == 0 and not s["passLive"]
+    assert s["end"]["title"] == f"Stopped at step {stopped['stopped']}", s["end"]
+    assert "stopped the run" in s["text"]
+    # The program exits: the page says the run will not go on (no endless reconnecting).
+    assert report["exited"]["ended"] and report["exited"]["badge"] == "run over"
+    assert not report["exited"]["pauseLive"]
+
+
+# MiniGrid's shape: a 2835-value observation and an `actions` enum, no rendering, no keys given.
+BIG = r"""
+import enum, sys
+import numpy as np
+import gymnasium as gym
+import arld
+
+class Actions(enum.IntEnum):
+    left = 0
+    right = 1
+    forward = 2
+
+class Big(gym.Env):
+    observation_space = gym.spaces.Box(0.0, 1.0, (2835,), np.float32)
+    action_space = gym.spaces.Discrete(3)
+
+    def __init__(self):
+        self.actions = Actions
+
+    def reset(self, seed=None, options=None):
+        super().reset(seed=seed)
+        self.pos = 0
+        return self._obs(), {}
+
+    def _obs(self):
+        o = np.zeros(2835, np.float32)
+        o[self.pos] = 1.0
+        return o
+
+    def step(self, a):
+        self.pos += int(a == Actions.forward)
+        done = self.pos >= 5
+        return self._obs(), float(done), done, False, {}
+
+gym.register("PersonBig-v0", entry_point=Big, max_episode_steps=30, reward_threshold=0.9)
+model = arld.Agent("adqn", gym.make("PersonBig-v0"), net="bootstrap", expert=arld.WebExpert(), seed=0, budget=20,
+                   eval_period=100, eval_episodes=1)
+model.learn(total_timesteps=200, log_dir=sys.argv[1])
+"""
+
+
+def test_a_large_observation_is_folded_and_an_actions_enum_names_the_buttons(tmp_path):
+    train, url = start_run_with(BIG, tmp_path / "run")
+    try:
+        report = page_person(url, tmp_path, "--key", "3", "--handback", "2")
+        _out, err = train.communicate(timeout=120)
+    finally:
+        if train.poll() is None:
+            train.kill()
+    assert train.returncode == 0, f"the program failed: {err}"
+    assert [a["label"] for a in report["hello"]["actions"]] == ["left", "right", "forward"]
+    assert report["hello"]["buttons"] == ["left [1]", "right [2]", "forward [3]"]
+    asked = report["first"]["asked"]
+    assert asked is not None and report["first"]["answers"] > 0
+    # 16 values and a count, not 2835; the table's first 24 rows and a row that says how many more.
+    assert asked["obsLine"].endswith("(2819 more of 2835 values)"), asked["obsLine"]
+    assert asked["tableRows"] == 25
+    assert report["first"]["tallest"] < 1400, report["first"]["tallest"]
+    assert report["handed"]["end"]["title"].startswith(("Solved at step", "Not solved in 200 steps"))
+    # The second question was handed back (Esc): the agent's questions in the next 100 steps of that episode went
+    # back to it unasked (logged unanswered with no time), not shown to the person again.
+    with open(tmp_path / "run" / "queries.csv") as f:
+        rows = list(csv.DictReader(f))
+    back = [i for i, r in enumerate(rows) if r["answered"] == "false" and float(r["response_s"]) > 0]
+    assert len(back) == 1 and report["first"]["handedBack"] == 1, rows
+    after = [r for r in rows[back[0] + 1:] if r["episode"] == rows[back[0]]["episode"]
+             and int(r["step"]) < int(rows[back[0]]["step"]) + 100]
+    assert after, "the agent did not ask again in that episode: nothing to check"
+    assert all(r["answered"] == "false" and float(r["response_s"]) == 0.0 for r in after), after
+    # Later episodes are asked again as before.
+    assert all(r["answered"] == "true" for r in rows[back[0] + 1:] if r not in after), rows
+    assert report["first"]["questions"] == sum(r["answered"] == "true" for r in rows)
+
+
+def test_an_environment_refused_prints_no_url(capfd):
+    import gymnasium as gym
+    import pytest
+
+    import arld
+
+    class Endless(gym.Env):
+        observation_space = gym.spaces.Box(-1.0, 1.0, (3,))
+        action_space = gym.spaces.Discrete(2)
+
+    web = arld.WebExpert(wait=False)
+    with pytest.raises(ValueError, match="no time limit"):
+        arld.Agent("adqn", Endless(), expert=web, seed=0)
+    out, _ = capfd.readouterr()
+    assert "http://" not in out, "the URL was printed for a run that was refused"
+    assert web.url.startswith("http://127.0.0.1:")
+
+
+def start_run_with(script, *argv):
+    """Starts the Python program `script` with arguments `argv` after checking the prerequisites; returns the
+    process and the URL it printed."""
+    missing = missing_prerequisites()
+    assert not missing, (
+        f"the web expert's browser test cannot run; missing: {', '.join(missing)}; "
+        "`scripts/test --setup` installs them"
+    )
+    train = subprocess.Popen([sys.executable, "-c", script, *map(str, argv)], stdout=subprocess.PIPE,
+                             stderr=subprocess.PIPE, text=True)
+    for line in train.stdout:
+        if "http://" in line:
+            return train, line[line.index("http://"):].strip()
+    train.kill()
+    raise AssertionError(f"the program printed no URL: {train.stderr.read()}")

@@ -65,6 +65,10 @@ pub trait Expert: Send {
     }
     /// Called once when the run has finished, with its outcome (an interactive expert shows it).
     fn finish(&mut self, _end: &RunEnd) {}
+    /// Called when a driven run (a Python program's `learn`) is handed back to its program between two steps:
+    /// `end` says where it stands, `note` why (training returned, or a stop). The run may go on later; an
+    /// interactive expert shows the note until the next step or question.
+    fn handed_over(&mut self, _end: &RunEnd, _note: &str) {}
     /// The state that changes as the expert answers (a generator), as text for a run's snapshot; `None` for
     /// an expert whose answers depend only on the observation.
     fn state(&self) -> Option<String> {

@@ -310,6 +310,9 @@ impl<'a, A: Learner> Run<'a, A> {
         self.resume()?;
         self.pretrain()?;
         self.begin_training();
+        if self.resume_from.is_some() {
+            self.show_where_resumed();
+        }
         while self.driver.is_some() || self.st.step < self.cfg.train_steps {
             let (action, uncertainty) = match self.choose()? {
                 Choice::Act {
@@ -662,6 +665,22 @@ impl<'a, A: Learner> Run<'a, A> {
         Ok(())
     }
 
+    /// A resumed run shows its expert where it stands before anything else (a person's page fills its status
+    /// before the question that was open is asked again).
+    fn show_where_resumed(&mut self) {
+        if let Some(expert) = self.expert.as_deref_mut() {
+            expert.observe(&Progress {
+                step: self.st.step,
+                train_steps: self.cfg.train_steps,
+                episode: self.st.episode,
+                env: &*self.env,
+                uncertainty: None,
+                queries: &self.parts.queries,
+                last_eval: self.log.curve().last().map(|p| (p.step, p.mean)),
+            });
+        }
+    }
+
     /// After a step: the evaluation without exploration every `eval_period` steps, the expert's view of the run,
     /// progress, and the weights every `checkpoint_every` steps.
     fn report(&mut self, uncertainty: Option<f32>) -> Result<()> {
@@ -765,6 +784,7 @@ impl<'a, A: Learner> Run<'a, A> {
             st: &self.st,
             parts: &self.parts,
             expert_state,
+            expert: self.expert.as_mut().map(|e| &mut **e as &mut dyn Expert),
         };
         driver.paused(&mut paused)
     }
@@ -873,6 +893,7 @@ pub struct PausedRun<'a, A = Agent> {
     st: &'a LoopState,
     parts: &'a Parts<A>,
     expert_state: Option<String>,
+    expert: Option<&'a mut dyn Expert>,
 }
 
 impl<A: Learner> PausedRun<'_, A> {
@@ -881,6 +902,21 @@ impl<A: Learner> PausedRun<'_, A> {
         let mut ck = Checkpointer::new(dir, self.cfg);
         let expert_state = self.expert_state.clone();
         snapshot(&mut ck, self.st, self.parts, expert_state, self.log, true)
+    }
+
+    /// Tells the run's expert that the run is handed to its program, and why (`note`): a person's page shows
+    /// where the run stands until it goes on ([`Expert::handed_over`]).
+    pub fn hand_over(&mut self, note: &str) {
+        let end = RunEnd {
+            solved: self.summary.solved,
+            steps_to_solve: self.summary.steps_to_solve,
+            train_steps: self.summary.train_steps,
+            final_score: self.summary.final_score,
+            dir: self.log.dir().map(|d| d.to_path_buf()),
+        };
+        if let Some(expert) = self.expert.as_deref_mut() {
+            expert.handed_over(&end, note);
+        }
     }
 }
 

@@ -194,6 +194,7 @@ async function reloadAndTakeBack() {
 // ---- answering ------------------------------------------------------------------------------------------
 const answers = [];
 let skipped = 0, steps = 0, lastId = 0, held = null, reloaded = false, watching = null;
+const timeoutNotices = [];
 // The first opening question this person saw, and the one left open (with --answer).
 let first = null, open = null, budgetSpentSeen = false;
 const latencies = [];
@@ -253,13 +254,17 @@ for (;;) {
   if (p.agent_action !== null && p.waits) {
     if (p.id <= lastId) continue;
     lastId = p.id;
-    const question = { obs: p.obs, agent_action: p.agent_action, steps_left: p.steps_left };
+    // The status panel as the question opens (a resumed run fills it before asking again).
+    const panel = await page.evaluate(() => document.getElementById("s-step").textContent);
+    const question = { obs: p.obs, agent_action: p.agent_action, steps_left: p.steps_left, statusStep: s.status ? s.status.step : null, panel };
     if (first === null) first = question;
     if (answerLimit && answers.length >= answerLimit) { open = question; break; }
     if (skipped < skip) {
       // Nobody answers this one: it must go back to the agent.
       skipped++;
       await page.waitForFunction((id) => arld.ended || !arld.prompt || arld.prompt.id !== id, p.id, { timeout: 0, polling: 20 });
+      // A question that timed out is not replaced silently: the page says so.
+      timeoutNotices.push(await page.evaluate(() => ({ count: arld.timedOut || 0, banner: document.getElementById("banner").textContent })));
       continue;
     }
     if (reload && !reloaded) {
@@ -337,6 +342,6 @@ if (endScreen) {
 if (!answerLimit) for (const name of ["training", "asking", "mid-segment"]) if (!taken[name])
   fail(`no "${name}" screenshot: the run never showed that state (${answers.length} answers, ${steps} steps answered, budget spent seen: ${budgetSpentSeen})`);
 if (undoTest && !undoReport) fail("no question with steps to come was asked: undo was not tried");
-console.log(JSON.stringify({ env: hello.env, answers, skipped, steps, reloaded, refused, watcherErrors: watcher, drawn: taken, first, open, budgetSpentSeen, endScreen,
+console.log(JSON.stringify({ env: hello.env, answers, skipped, timeoutNotices, steps, reloaded, refused, watcherErrors: watcher, drawn: taken, first, open, budgetSpentSeen, endScreen,
   undo: undoReport, replaysWatched, replaysSkipped, countdownsSeen,
   keyLatencyMs: latencies.length ? { n: latencies.length, median: latencies.sort((x, y) => x - y)[latencies.length >> 1], max: latencies[latencies.length - 1] } : null }));

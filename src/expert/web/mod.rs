@@ -18,7 +18,10 @@
 //! rebuild the environment from the query's episode ([`crate::env::replay_episode`]) where the frame source
 //! can show such a copy. Undo works one key ahead: the page shows the state after a key on a copy, and the run
 //! takes that key only when the next one comes, so an undone key never reaches the training loop. A question goes back to the agent ([`Answer::Unanswered`]) when the person hands
-//! it back or, with a `timeout`, when nobody answers in time. The person may pause the run. A stop request
+//! it back or, with a `timeout`, when nobody answers in time (after a hand-back the agent's questions in the next
+//! [`HANDBACK_QUIET_STEPS`] steps of the episode go back to it unasked). The person may pause the run; their time
+//! leaves out pauses and time with no tab open. A Python program's run handed back to it between two steps
+//! ([`Expert::handed_over`]: `learn` returned, or a stop) shows where it stands until it goes on. A stop request
 //! (Ctrl-C, SIGTERM) ends any wait at once with [`crate::interrupt::Interrupted`], so that the run snapshots with
 //! the question open. The page ([`protocol`] describes its messages) is plain HTML, CSS and JavaScript embedded
 //! in the binary; at the end it shows how the run ended and what the person gave ([`Expert::finish`]).
@@ -52,7 +55,12 @@ const STOP_POLL: Duration = Duration::from_millis(50);
 /// The agent's steps replayed to the person before a question, at most (the page plays them within 2 s).
 pub const REPLAY_MAX_STEPS: usize = 200;
 /// Real time: the countdown between the person's key and the start of their segment.
-pub const REALTIME_COUNTDOWN: Duration = Duration::from_millis(1500);
+pub const REALTIME_COUNTDOWN: Duration = Duration::from_millis(750);
+/// Real time: the breath between the end of the person's segment and the next question.
+pub const REALTIME_BREATH: Duration = Duration::from_secs(1);
+/// After the person hands a question back, the agent's questions in the next this many steps of the same episode
+/// go back to it unasked (logged unanswered, nothing charged): the person said they would rather not.
+pub const HANDBACK_QUIET_STEPS: usize = 100;
 
 /// How the web expert listens and how the person answers. Written as the spec
 /// `web:listen=ADDR,fps=N,timeout=S,wait=no` (every part optional, e.g. `web` or `web:fps=10`).
@@ -148,6 +156,22 @@ pub struct WebServer {
 impl WebServer {
     /// Binds `options.listen`, starts serving and prints the URL to open on standard output.
     pub fn start(options: &WebOptions) -> Result<Self> {
+        let server = Self::bind(options)?;
+        server.announce()?;
+        Ok(server)
+    }
+
+    /// Prints the URL to open on standard output.
+    pub fn announce(&self) -> Result<()> {
+        let mut out = std::io::stdout().lock();
+        writeln!(out, "The agent asks a person: open {}", self.url)?;
+        out.flush()?;
+        Ok(())
+    }
+
+    /// Binds `options.listen` and starts serving, without printing the URL (a Python program prints it once
+    /// its run is accepted: [`WebServer::announce`]).
+    pub fn bind(options: &WebOptions) -> Result<Self> {
         let listener = std::net::TcpListener::bind(options.listen).with_context(|| {
             format!(
                 "the web expert cannot listen on {} (choose another with --listen)",
@@ -170,9 +194,6 @@ impl WebServer {
         let (stop, stop_rx) = tokio::sync::oneshot::channel();
         let thread = server::spawn(listener, Arc::clone(&shared), stop_rx)?;
         let url = format!("http://{}/?token={token}", reachable(addr));
-        let mut out = std::io::stdout().lock();
-        writeln!(out, "The agent asks a person: open {url}")?;
-        out.flush()?;
         Ok(Self {
             shared,
             keys,
@@ -288,7 +309,8 @@ impl Page {
 /// run's snapshot.
 #[derive(Clone, Debug, Default, serde::Serialize, serde::Deserialize)]
 struct Effort {
-    /// Seconds the run waited for the person (questions open, real-time segments), pauses excluded.
+    /// Seconds the run waited for the person (questions open, real-time segments), pauses and time with no
+    /// tab open excluded.
     person_s: f64,
     /// Keys (or buttons) that answered a question or a step.
     keys: usize,
@@ -322,6 +344,18 @@ pub struct WebExpert {
     /// Whether a stop was requested (Ctrl-C, SIGTERM): [`crate::interrupt::requested`] unless the program
     /// that owns the signals says otherwise ([`WebExpert::set_stop_check`]).
     stop_requested: Box<dyn FnMut() -> bool + Send>,
+    /// Whether the page shows a hand-over note ([`Expert::handed_over`]), lifted when the run goes on.
+    handed: bool,
+    /// Where the person last handed a question back: the episode (its number) and its steps then.
+    handed_back: Option<(usize, usize)>,
+    /// The episode in progress, by number (from [`Expert::observe`]).
+    episode: usize,
+    /// Real time: when the person's last segment ended.
+    segment_ended: Option<Instant>,
+    /// The answer being given is a hand-back (Esc), not a timeout.
+    handing_back: bool,
+    /// The question being asked went back to the agent unasked (within [`HANDBACK_QUIET_STEPS`]).
+    declined: bool,
 }
 
 impl WebExpert {
@@ -336,7 +370,13 @@ impl WebExpert {
 
     /// The expert of `server` for a run on the environment `page` describes; the open tabs learn of it at once.
     pub fn new(server: WebServer, page: Page) -> Self {
+        // Undo needs a copy of the environment (see `copy_of`): a source that draws what it is given, of an
+        // environment arld builds.
+        let undo = server.options.fps.is_none()
+            && page.frames.shows_copies()
+            && crate::env::make(&page.env).is_ok();
         let hello = Hello {
+            undo,
             env: page.env,
             actions: page.actions,
             noop: page.noop,
@@ -364,6 +404,12 @@ impl WebExpert {
             unsent: None,
             effort: Effort::default(),
             stop_requested: Box::new(crate::interrupt::requested),
+            handed: false,
+            handed_back: None,
+            episode: 0,
+            segment_ended: None,
+            handing_back: false,
+            declined: false,
         }
     }
 
@@ -464,6 +510,7 @@ impl WebExpert {
     /// `None`: the person took their last key back (only accepted when `undo` is).
     fn wait_for_key(&mut self, id: u64, undo: bool) -> Result<Option<Answer>> {
         let asked = Instant::now();
+        let absent_before = self.server.shared.absent_at(asked);
         let mut paused = Duration::ZERO;
         let timeout = self.server.options.timeout.map(Duration::from_secs_f64);
         loop {
@@ -488,9 +535,20 @@ impl WebExpert {
                 }
             };
             let waited_s = asked.elapsed().saturating_sub(paused).as_secs_f64();
+            // The person's response time: the wait while a tab was open and the run not paused.
+            let now = Instant::now();
+            let absent = self
+                .server
+                .shared
+                .absent_at(now)
+                .saturating_sub(absent_before);
+            let response_s = (now - asked).saturating_sub(absent).as_secs_f64();
             match input {
                 // Handed back: the agent acts; nothing is charged.
-                Input::HandBack => return Ok(Some(Answer::Unanswered { waited_s })),
+                Input::HandBack => {
+                    self.handing_back = true;
+                    return Ok(Some(Answer::Unanswered { waited_s }));
+                }
                 Input::Undo if undo => return Ok(None),
                 Input::Undo => {}
                 Input::Action(action) => {
@@ -498,7 +556,7 @@ impl WebExpert {
                     self.effort.keys += 1;
                     return Ok(Some(Answer::Action {
                         action,
-                        response_s: Some(waited_s),
+                        response_s: Some(response_s),
                     }));
                 }
             }
@@ -679,7 +737,27 @@ impl WebExpert {
     /// One step of a question: the agent's steps since the person's last one replayed first (on the step that
     /// opens a segment), then the person's answer.
     fn ask(&mut self, query: &Query) -> Result<Answer> {
+        self.lift_hand_over();
         if query.agent_action.is_some() {
+            // Shortly after a hand-back in the same episode the question is not asked again.
+            if let Some((episode, at)) = self.handed_back {
+                if episode == self.episode
+                    && query.episode.actions.len() < at + HANDBACK_QUIET_STEPS
+                {
+                    self.declined = true;
+                    return Ok(Answer::Unanswered { waited_s: 0.0 });
+                }
+                self.handed_back = None;
+            }
+            // Real time: a breath after the person's last segment before the next question.
+            if let Some(ended) = self.segment_ended.take() {
+                while ended.elapsed() < REALTIME_BREATH {
+                    self.stopped("before a question")?;
+                    std::thread::sleep(
+                        STOP_POLL.min(REALTIME_BREATH.saturating_sub(ended.elapsed())),
+                    );
+                }
+            }
             // A segment opens: nothing can be carried over from the last one (it ended with its last step).
             self.carried = None;
             if let Some(status) = self.unsent.take() {
@@ -697,10 +775,44 @@ impl WebExpert {
         match answer {
             Answer::Action { .. } => {
                 self.last_person = Some((query.episode.start, query.episode.actions.len() + 1));
+                if self.server.options.fps.is_some() && query.steps_left <= 1 {
+                    self.segment_ended = Some(Instant::now());
+                }
             }
-            Answer::Unanswered { .. } => self.publish_prompt(None),
+            Answer::Unanswered { .. } => {
+                self.publish_prompt(None);
+                if std::mem::take(&mut self.handing_back) {
+                    self.handed_back = Some((self.episode, query.episode.actions.len()));
+                }
+            }
         }
         Ok(answer)
+    }
+}
+
+impl WebExpert {
+    /// The run goes on: the hand-over note leaves the page.
+    fn lift_hand_over(&mut self) {
+        if std::mem::take(&mut self.handed) {
+            let msg = ServerMsg::Resumed.to_json();
+            self.server.shared.publish(msg, |b, _| b.handed = None);
+        }
+    }
+
+    /// What the person gave, with the run's outcome, for the end screen.
+    fn end_screen(&self, end: &RunEnd) -> EndScreen {
+        EndScreen {
+            solved: end.solved,
+            steps_to_solve: end.steps_to_solve,
+            train_steps: end.train_steps,
+            final_score: end.final_score,
+            run_dir: end.dir.as_ref().map(|d| d.display().to_string()),
+            answered: self.effort.answered,
+            unanswered: self.effort.unanswered,
+            keys: self.effort.keys,
+            undone: self.effort.undone,
+            person_s: self.effort.person_s,
+        }
     }
 }
 
@@ -733,10 +845,17 @@ impl Expert for WebExpert {
 
     fn answer(&mut self, query: &Query) -> Result<Answer> {
         let started = Instant::now();
+        let absent_before = self.server.shared.absent_at(started);
         let result = self.ask(query);
-        // The person's time: the whole wait, pauses excepted (they are waited out before and inside).
-        self.effort.person_s += started.elapsed().as_secs_f64();
-        if query.agent_action.is_some() {
+        // The person's time: the whole wait, less the time they were absent (the run paused, or no tab open).
+        let ended = Instant::now();
+        let absent = self
+            .server
+            .shared
+            .absent_at(ended)
+            .saturating_sub(absent_before);
+        self.effort.person_s += (ended - started).saturating_sub(absent).as_secs_f64();
+        if query.agent_action.is_some() && !std::mem::take(&mut self.declined) {
             match result {
                 Ok(Answer::Action { .. }) => self.effort.answered += 1,
                 Ok(Answer::Unanswered { .. }) => self.effort.unanswered += 1,
@@ -764,6 +883,8 @@ impl Expert for WebExpert {
         true
     }
     fn observe(&mut self, p: &Progress) {
+        self.lift_hand_over();
+        self.episode = p.episode;
         if self.prompt_open && !p.queries.expert_in_control() && self.carried.is_none() {
             self.publish_prompt(None);
         }
@@ -831,19 +952,36 @@ impl Expert for WebExpert {
         }
     }
 
+    fn handed_over(&mut self, end: &RunEnd, note: &str) {
+        // The page's status shows where the run stands (the latest one may wait, throttled).
+        if let Some(status) = self.unsent.take() {
+            let msg = ServerMsg::Status(&status).to_json();
+            self.server
+                .shared
+                .publish(msg, |b, m| b.status = Some(m.clone()));
+        }
+        let stopped = (self.stop_requested)();
+        let outcome = self.end_screen(end);
+        let msg = ServerMsg::Handed {
+            message: note.to_string(),
+            outcome: &outcome,
+            stopped,
+        }
+        .to_json();
+        self.server
+            .shared
+            .publish(msg, |b, m| b.handed = Some(m.clone()));
+        self.handed = true;
+        // A question left open by a stop is closed on the page (it is asked again when the run goes on); after
+        // the note, so that the page does not take it for a question that timed out.
+        if self.prompt_open {
+            self.publish_prompt(None);
+        }
+    }
+
     fn finish(&mut self, end: &RunEnd) {
-        let outcome = EndScreen {
-            solved: end.solved,
-            steps_to_solve: end.steps_to_solve,
-            train_steps: end.train_steps,
-            final_score: end.final_score,
-            run_dir: end.dir.as_ref().map(|d| d.display().to_string()),
-            answered: self.effort.answered,
-            unanswered: self.effort.unanswered,
-            keys: self.effort.keys,
-            undone: self.effort.undone,
-            person_s: self.effort.person_s,
-        };
+        self.lift_hand_over();
+        let outcome = self.end_screen(end);
         let msg = ServerMsg::End {
             message: "The run is over.".into(),
             outcome: Some(&outcome),

@@ -5,7 +5,8 @@
 //! (the environment's [`Geometry`] and observation), `image` (a frame the environment rendered), `table` (the
 //! observation, labelled, of an environment without a picture), `eval` (a point of the test-return curve), `history` (the
 //! recent uncertainty samples and the curve, for a tab that joins late), `prompt` (the agent asks; `null` when no
-//! question is open), `error` (a message was rejected) and `end` (the run is over).
+//! question is open), `error` (a message was rejected), `handed` (a Python program has the run back: `learn`
+//! returned, or it was stopped; it may go on, then `resumed`) and `end` (the run is over).
 //!
 //! Page to server: `key` (answer prompt `id` with `action`), `pass` (hand prompt `id` back to the agent),
 //! `hold` (real time: the action held down, or `null`), `pause` (the run waits, or goes on), `control` (this
@@ -84,7 +85,11 @@ pub struct Hello {
     pub fps: Option<f64>,
     /// Seconds a question stays open; `None`: the run waits.
     pub timeout: Option<f64>,
+    /// The return that solves the environment; `null` (infinite) when it has none.
     pub solve_threshold: f64,
+    /// Whether the person can take back their last key (turn-based, where the page can show a copy of the
+    /// environment that arld rebuilds).
+    pub undo: bool,
 }
 
 /// Where the run stands.
@@ -199,6 +204,16 @@ pub enum ServerMsg<'a> {
         message: String,
         outcome: Option<&'a EndScreen>,
     },
+    /// The run is handed to its program (a Python `learn` returned, or the program stopped it), with where it
+    /// stands; it may go on later (then `resumed`). The connection stays open, unlike after `end`.
+    Handed {
+        message: String,
+        outcome: &'a EndScreen,
+        /// Whether a stop request handed it over (a question open then is asked again when the run goes on).
+        stopped: bool,
+    },
+    /// The run goes on after `handed`.
+    Resumed,
 }
 
 impl ServerMsg<'_> {

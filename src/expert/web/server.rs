@@ -63,6 +63,8 @@ pub struct Board {
     pub uncertainty: Vec<(usize, f32, Option<f32>)>,
     pub curve: Vec<(u64, f64)>,
     pub end: Option<String>,
+    /// The note shown while the run is handed to its program (a Python `learn` returned), until it goes on.
+    pub handed: Option<String>,
     /// Open tabs, oldest first.
     clients: Vec<u64>,
     controller: Option<u64>,
@@ -70,6 +72,10 @@ pub struct Board {
     pub held: Option<usize>,
     /// Whether the controlling tab paused the run.
     pub paused: bool,
+    /// The person's absence (the run paused, or no tab open): the time absent before `absent_since`, and since
+    /// when they are absent now. Such time is not charged to the person.
+    absent_before: std::time::Duration,
+    absent_since: Option<std::time::Instant>,
 }
 
 impl Board {
@@ -89,10 +95,16 @@ impl Board {
             .to_json(),
         ]);
         msgs.extend(
-            [&self.status, &self.frame, &self.prompt, &self.end]
-                .into_iter()
-                .flatten()
-                .cloned(),
+            [
+                &self.status,
+                &self.frame,
+                &self.prompt,
+                &self.handed,
+                &self.end,
+            ]
+            .into_iter()
+            .flatten()
+            .cloned(),
         );
         if self.prompt.is_none() {
             msgs.push(ServerMsg::Prompt { prompt: None }.to_json());
@@ -116,6 +128,29 @@ impl Board {
     pub fn open_tabs(&self) -> usize {
         self.clients.len()
     }
+
+    /// Notes a change of the person's presence (a pause, a tab opened or closed) at `now`.
+    fn presence_changed(&mut self, now: std::time::Instant) {
+        let absent = self.paused || self.clients.is_empty();
+        match (absent, self.absent_since) {
+            (true, None) => self.absent_since = Some(now),
+            (false, Some(since)) => {
+                self.absent_before += now.saturating_duration_since(since);
+                self.absent_since = None;
+            }
+            _ => {}
+        }
+    }
+
+    /// The time the person was absent (paused, or no tab open) until `now`, since the board was made.
+    pub fn absent(&self, now: std::time::Instant) -> std::time::Duration {
+        self.absent_before
+            + self
+                .absent_since
+                .map_or(std::time::Duration::ZERO, |since| {
+                    now.saturating_duration_since(since)
+                })
+    }
 }
 
 /// State shared by the training thread and the server.
@@ -134,7 +169,11 @@ impl Shared {
         Self {
             token,
             served,
-            board: Mutex::new(Board::default()),
+            // No tab is open yet: the person is absent from the start.
+            board: Mutex::new(Board {
+                absent_since: Some(std::time::Instant::now()),
+                ..Board::default()
+            }),
             updates: broadcast::channel(256).0,
             keys: Mutex::new(keys),
             next_client: AtomicU64::new(1),
@@ -168,6 +207,11 @@ impl Shared {
 
     pub fn paused(&self) -> bool {
         self.board().paused
+    }
+
+    /// The time the person was absent until `now` (paused, or no tab open): subtracted from the person's time.
+    pub fn absent_at(&self, now: std::time::Instant) -> std::time::Duration {
+        self.board().absent(now)
     }
 
     /// Whether the end of the run was published.
@@ -435,6 +479,7 @@ async fn tab(mut socket: WebSocket, shared: Arc<Shared>) {
     let (mut updates, snapshot) = {
         let mut board = shared.board();
         board.clients.push(id);
+        board.presence_changed(std::time::Instant::now());
         if board.controller.is_none() {
             board.controller = Some(id);
             let _ = shared.updates.send(Arc::from(board.roles()));
@@ -487,16 +532,12 @@ async fn tab(mut socket: WebSocket, shared: Arc<Shared>) {
     let _ = socket.send(Message::Close(None)).await;
     let mut board = shared.board();
     board.clients.retain(|&c| c != id);
+    board.presence_changed(std::time::Instant::now());
     if board.controller == Some(id) {
         board.controller = board.clients.first().copied();
         board.held = None;
-        // Nobody is left to lift a pause of the tab that closed.
-        if board.paused {
-            board.paused = false;
-            let _ = shared
-                .updates
-                .send(Arc::from(ServerMsg::Paused { paused: false }.to_json()));
-        }
+        // A pause stays when its tab closes: the next tab to control the run lifts it (a new tab controls
+        // when no other is open).
         let _ = shared.updates.send(Arc::from(board.roles()));
     }
 }
@@ -524,6 +565,7 @@ fn handle(shared: &Shared, id: u64, text: &str) -> Result<(), String> {
         }
         ClientMsg::Pause { paused } => {
             board.paused = paused;
+            board.presence_changed(std::time::Instant::now());
             let _ = shared
                 .updates
                 .send(Arc::from(ServerMsg::Paused { paused }.to_json()));

@@ -8,7 +8,7 @@ const token = new URLSearchParams(location.search).get("token") || "";
 const arld = (window.arld = {
   client: null, hello: null, controller: null, status: null, frame: null, prompt: null, paused: false,
   uncertainty: [], curve: [], ended: null, outcome: null, errors: [], connected: false, obsHistory: [],
-  replaying: false, replays: [], countdowns: 0, undos: 0,
+  replaying: false, replays: [], countdowns: 0, undos: 0, handed: null,
 });
 let socket = null;
 let replay = null; // the replay being played: {frames, at, timer, live}
@@ -29,6 +29,12 @@ function connect() {
   socket.onclose = () => {
     arld.connected = false;
     if (arld.ended) return;
+    if (arld.handed) {
+      // The program had the run back and has ended without saying so (a Python program exits): nothing to wait for.
+      arld.ended = "The program has ended; the run will not go on.";
+      showPrompt(); showRole(); showEnd(); banner(arld.ended);
+      return;
+    }
     banner("Connection lost; reconnecting…");
     setTimeout(connect, 1000);
   };
@@ -49,12 +55,30 @@ function receive(m) {
     case "roles": arld.controller = m.controller; showRole(); break;
     case "status": arld.status = m; showStatus(); break;
     case "replay": startReplay(m.frames); break;
-    case "frame": arld.frame = m; draw(); break;
+    case "frame": arld.frame = m; draw(); if (arld.replaying && m.obs) showObs(m.obs, "replayed"); break;
     case "eval": arld.curve.push([m.step, m.mean]); drawCurve(); break;
     case "history": arld.uncertainty = m.uncertainty.slice(); arld.curve = m.curve.slice(); drawCharts(); break;
-    case "prompt": arld.prompt = m.prompt; showPrompt(); break;
+    case "prompt": {
+      // A question that waited for this tab and goes away unanswered timed out: say so, not silently.
+      const before = arld.prompt, h = arld.hello;
+      if (before && before.waits && h && h.timeout && answered !== before.id && controls() && (!m.prompt || m.prompt.id !== before.id)) {
+        arld.timedOut = (arld.timedOut || 0) + 1;
+        banner(`Time is up: the agent took that question back (${h.timeout} s to answer).`, 4000);
+      }
+      arld.prompt = m.prompt; showPrompt();
+      break;
+    }
     case "error": arld.errors.push(m.message); banner(m.message, 3000); break;
-    case "end": arld.ended = m.message; arld.outcome = m.outcome; arld.prompt = null; showPrompt(); showEnd(); banner(m.message); break;
+    case "end":
+      arld.ended = m.message; arld.outcome = m.outcome || arld.outcome; arld.prompt = null;
+      showPrompt(); showRole(); showEnd(); banner(m.message);
+      break;
+    case "handed":
+      // (No banner: the panel and the end screen say it.)
+      arld.handed = { message: m.message, stopped: m.stopped }; arld.outcome = m.outcome; arld.prompt = null;
+      showPrompt(); showRole(); showEnd(); banner(null);
+      break;
+    case "resumed": arld.handed = null; arld.outcome = null; $("end").hidden = true; banner(null); showRole(); showPrompt(); break;
   }
 }
 
@@ -86,19 +110,24 @@ function setup() {
   });
   $("keys-help").textContent = h.fps
     ? `A fresh key press starts your segment after a short countdown; then hold a key to act (with no key held the environment takes "${h.actions[h.noop].label}"). P pauses.`
-    : "Each key (or button) takes one step; Backspace undoes your last key of the segment. P pauses, Esc lets the agent decide.";
+    : h.undo
+      ? "Each key (or button) takes one step; Backspace undoes your last key of the segment. P pauses, Esc lets the agent decide."
+      : "Each key (or button) takes one step. P pauses, Esc lets the agent decide.";
   showRole();
   showPrompt();
+  padSetup();
 }
 
-const keyName = (k) => ({ ArrowLeft: "←", ArrowRight: "→", ArrowUp: "↑", ArrowDown: "↓" })[k] || k.toUpperCase();
+const keyName = (k) => ({ ArrowLeft: "←", ArrowRight: "→", ArrowUp: "↑", ArrowDown: "↓", " ": "Space" })[k] || k.toUpperCase();
 
 function showRole() {
   if (!arld.hello) return;
   const r = $("role");
-  r.textContent = controls() ? "you answer" : "watching (another tab answers)";
-  r.className = "badge " + (controls() ? "control" : "watch");
-  $("take-control").hidden = controls();
+  const over = arld.ended !== null, handed = !over && arld.handed !== null;
+  r.textContent = over ? "run over" : handed ? "the program has the run" : controls() ? "you answer" : "watching (another tab answers)";
+  r.className = "badge " + (over || handed ? "idle" : controls() ? "control" : "watch");
+  $("take-control").hidden = controls() || over;
+  $("pause").disabled = over;
   // The panel follows the role at once (an open question is answerable as soon as control is taken).
   showPrompt();
 }
@@ -139,6 +168,7 @@ function showPrompt() {
   if (!h) return;
   let text;
   if (arld.ended) { text = arld.ended; box.className = "idle"; }
+  else if (arld.handed) { text = arld.handed.message; box.className = arld.handed.stopped ? "stopped" : "idle"; }
   else if (!p && noneLeft()) { text = "No questions left: the agent trains on its own."; box.className = "idle"; }
   else if (!p) { text = "Training runs. When the agent is unsure it asks you here."; box.className = "idle"; }
   else if (p.starts_in) {
@@ -160,15 +190,15 @@ function showPrompt() {
   if (replay) text = `Replaying the agent's ${replay.frames.length - 1} steps since your last one… (any key skips)`;
   $("prompt-text").textContent = text;
   document.querySelectorAll("#buttons button").forEach((b) => {
-    b.disabled = !p || !controls() || arld.ended !== null;
+    b.disabled = !p || !controls() || arld.ended !== null || arld.handed !== null || !!replay;
     b.classList.toggle("proposed", !!p && p.agent_action === Number(b.dataset.action));
     b.classList.toggle("held", held === Number(b.dataset.action));
   });
   $("pass").disabled = !p || !p.waits || !controls() || arld.ended !== null;
   $("undo").disabled = !p || !p.undo || !controls() || arld.ended !== null || !!replay;
-  $("undo").hidden = !!h.fps;
+  $("undo").hidden = !!h.fps || !h.undo;
   if (p && p.starts_in && startsAt.id !== p.id) startsAt = { id: p.id, at: performance.now() + p.starts_in * 1000 };
-  $("obs").textContent = p ? "observation: " + p.obs.map((v) => v.toFixed(3)).join("  ") : "";
+  if (!replay) showObs(p ? p.obs : null, "");
   // A question waiting for this tab shows in the tab's title, also when the tab is in the background.
   document.title = p && p.waits && controls() && !arld.ended ? "● Your turn: the agent asks" : "arld: the agent asks";
 }
@@ -266,13 +296,19 @@ function showPaused() {
 }
 $("pause").addEventListener("click", () => { if (controls()) send({ type: "pause", paused: !arld.paused }); });
 
-// The end screen: how the run ended and what the person gave.
+// The end screen: how the run ended (or where it stands when its program has it back) and what the person gave.
+// An environment without a solve threshold is neither solved nor not solved.
 function showEnd() {
-  const o = arld.outcome, box = $("end");
+  const o = arld.outcome, box = $("end"), h = arld.hello;
   if (!o) return;
   box.hidden = false;
-  box.className = o.solved ? "solved" : "unsolved";
-  $("end-title").textContent = o.solved ? `Solved at step ${o.steps_to_solve} of ${o.train_steps}` : `Not solved in ${o.train_steps} steps`;
+  const solvable = !!h && h.solve_threshold !== null;
+  const stopped = !arld.ended && arld.handed && arld.handed.stopped;
+  box.className = stopped ? "stopped" : !solvable ? "trained" : o.solved ? "solved" : "unsolved";
+  $("end-title").textContent = stopped ? `Stopped at step ${o.train_steps}`
+    : o.solved ? `Solved at step ${o.steps_to_solve} of ${o.train_steps}`
+    : solvable ? `Not solved in ${o.train_steps} steps` : `Trained ${o.train_steps} steps`;
+  $("end-note").textContent = arld.ended || (arld.handed && arld.handed.message) || "";
   const rows = [
     ["Final score", fmt(o.final_score, 1)],
     ["Questions answered", `${o.answered}` + (o.unanswered ? ` (${o.unanswered} left to the agent)` : "")],
@@ -322,6 +358,86 @@ document.addEventListener("keyup", (e) => {
 });
 window.addEventListener("blur", () => { if (held !== null) release(held); });
 
+// ---- a gamepad (the browser's Gamepad API) ---------------------------------------------------------------
+// Discrete actions on buttons: by default the d-pad gives the actions whose keys are arrows (or WASD), the face
+// buttons the others in order; Start pauses, Back/Select lets the agent decide. The mapping shows on the page once a
+// pad is seen (a pad shows itself to a page at its first button press) and each action's button can be changed
+// there; it is kept for this pad in the browser (localStorage).
+const PAD_BUTTONS = ["A / Cross", "B / Circle", "X / Square", "Y / Triangle", "LB / L1", "RB / R1", "LT / L2", "RT / R2",
+  "Back / Select", "Start", "L3", "R3", "D-pad up", "D-pad down", "D-pad left", "D-pad right", "Home"];
+const PAD_BACK = 8, PAD_START = 9;
+const padState = { index: null, id: null, map: [], before: [] };
+arld.pad = null;
+
+function padDefault(actions) {
+  const dpad = { ArrowUp: 12, w: 12, ArrowDown: 13, s: 13, ArrowLeft: 14, a: 14, ArrowRight: 15, d: 15 };
+  const used = new Set(), map = actions.map((a) => {
+    const b = a.keys.map((k) => dpad[k]).find((b) => b !== undefined && !used.has(b));
+    if (b !== undefined) used.add(b);
+    return b === undefined ? null : b;
+  });
+  const free = [0, 1, 2, 3, 4, 5, 6, 7, 10, 11].filter((b) => !used.has(b));
+  return map.map((b) => (b === null ? free.shift() ?? null : b));
+}
+function padKey() { return `arld.pad:${padState.id}:${arld.hello.env}`; }
+function padSetup() {
+  if (!arld.hello || padState.id === null) return;
+  let map = null;
+  try { map = JSON.parse(localStorage.getItem(padKey()) || "null"); } catch (e) { map = null; }
+  padState.map = Array.isArray(map) && map.length === arld.hello.actions.length ? map : padDefault(arld.hello.actions);
+  showPad();
+}
+function showPad() {
+  const box = $("pad");
+  if (padState.id === null || !arld.hello) { box.hidden = true; return; }
+  box.hidden = false;
+  $("pad-name").textContent = padState.id;
+  const t = $("pad-map");
+  t.textContent = "";
+  arld.hello.actions.forEach((a, i) => {
+    const tr = t.insertRow(), th = document.createElement("th");
+    th.textContent = a.label; tr.appendChild(th);
+    const sel = document.createElement("select");
+    sel.dataset.action = i;
+    sel.add(new Option("none", ""));
+    PAD_BUTTONS.forEach((name, b) => { if (b !== PAD_BACK && b !== PAD_START) sel.add(new Option(name, String(b))); });
+    sel.value = padState.map[i] === null ? "" : String(padState.map[i]);
+    sel.addEventListener("change", () => {
+      const b = sel.value === "" ? null : Number(sel.value);
+      // A button gives one action: the action that had it gives up its button.
+      padState.map = padState.map.map((x, j) => (j === i ? b : x === b ? null : x));
+      try { localStorage.setItem(padKey(), JSON.stringify(padState.map)); } catch (e) { /* private mode */ }
+      showPad();
+    });
+    tr.insertCell().appendChild(sel);
+  });
+  arld.pad = { id: padState.id, map: padState.map.slice() };
+}
+function padPoll() {
+  const pads = navigator.getGamepads ? [...navigator.getGamepads()].filter(Boolean) : [];
+  const pad = pads.find((p) => p.index === padState.index) || pads[0];
+  if (!pad) return;
+  if (pad.id !== padState.id) {
+    padState.index = pad.index; padState.id = pad.id; padState.before = [];
+    padSetup();
+  }
+  const now = pad.buttons.map((b) => b.pressed || b.value > 0.5), before = padState.before;
+  const fresh = (b) => now[b] && !before[b], gone = (b) => !now[b] && before[b];
+  padState.before = now;
+  if (!arld.hello) return;
+  const h = arld.hello;
+  if (fresh(PAD_START)) { $("pause").click(); return; }
+  if (replay) { if (now.some((p, b) => fresh(b))) stopReplay(); return; }
+  if (fresh(PAD_BACK)) { pass(); return; }
+  padState.map.forEach((b, a) => {
+    if (b === null || b === undefined) return;
+    if (fresh(b)) { if (h.fps) { if (held !== a) hold(a); press(a); } else press(a); }
+    else if (gone(b) && h.fps) release(a);
+  });
+}
+setInterval(padPoll, 16);
+window.addEventListener("gamepadconnected", padPoll);
+
 // ---- drawing the environment ------------------------------------------------------------------------------
 const cv = $("env"), ctx = cv.getContext("2d");
 
@@ -341,20 +457,37 @@ function showImage(png) {
   img.src = "data:image/png;base64," + png;
 }
 
+// The observation line under the question; a long observation is folded: its first values and how many more.
+function showObs(obs, what) {
+  if (!obs) { $("obs").textContent = ""; return; }
+  const shown = obs.slice(0, OBS_SHOWN).map((v) => v.toFixed(3)).join("  ");
+  const more = obs.length > OBS_SHOWN ? `  … (${obs.length - OBS_SHOWN} more of ${obs.length} values)` : "";
+  $("obs").textContent = `${what ? what + " " : ""}observation: ${shown}${more}`;
+}
+
+// The values of an observation shown at most (in the line under the question, and as rows of the table); the
+// rest is folded into a count, so that a large observation (an image, a grid) does not flood the page.
+const OBS_SHOWN = 16, OBS_ROWS = 24, OBS_SERIES = 8;
+
 // An environment without a picture: its observation as a table, and a chart of its recent values.
 function showTable(labels, obs) {
   arld.frame = { table: labels };
   const t = $("obs-table");
   t.hidden = false;
   t.textContent = "";
-  labels.forEach((label, i) => {
+  labels.slice(0, OBS_ROWS).forEach((label, i) => {
     const tr = t.insertRow(), th = document.createElement("th");
     th.textContent = label; tr.appendChild(th); tr.insertCell().textContent = obs[i].toFixed(4);
   });
-  arld.obsHistory.push(obs);
+  if (labels.length > OBS_ROWS) {
+    const tr = t.insertRow(), th = document.createElement("th");
+    th.textContent = "…"; tr.appendChild(th);
+    tr.insertCell().textContent = `${labels.length - OBS_ROWS} more of ${labels.length} values`;
+  }
+  arld.obsHistory.push(obs.slice(0, OBS_SERIES));
   if (arld.obsHistory.length > 200) arld.obsHistory.shift();
   const colours = ["#2563eb", "#dc2626", "#16a34a", "#ca8a04", "#7c3aed", "#0891b2", "#db2777", "#4b5563"];
-  chart(cv, labels.map((_, i) => ({ color: colours[i % colours.length], points: arld.obsHistory.map((o, k) => [k, o[i]]) })),
+  chart(cv, labels.slice(0, OBS_SERIES).map((_, i) => ({ color: colours[i % colours.length], points: arld.obsHistory.map((o, k) => [k, o[i]]) })),
     { empty: "no observation yet", xname: "question" });
 }
 
@@ -466,7 +599,8 @@ function chart(canvas, series, opts) {
   let y0 = Math.min(...pts.map((p) => p[1])), y1 = Math.max(...pts.map((p) => p[1]));
   if (opts.zero) y0 = Math.min(0, y0);
   if (x1 <= x0) x1 = x0 + 1;
-  if (y1 <= y0) { y1 += 1; y0 -= 1; }
+  // A flat series: a narrow band around its value (not ±1 around a value near 0).
+  if (y1 <= y0) { const d = Math.abs(y0) / 2 || 0.5; y1 += d; y0 -= d; }
   const X = (x) => pad + ((x - x0) / (x1 - x0)) * (W - 2 * pad), Y = (y) => H - pad - 10 - ((y - y0) / (y1 - y0)) * (H - 2 * pad - 10);
   for (const s of series) {
     c.strokeStyle = s.color; c.lineWidth = 1.5; c.setLineDash(s.dash || []); c.beginPath();
