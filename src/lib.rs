@@ -1,47 +1,20 @@
-//! `arld`: Active Reinforcement Learning with Demonstration.
+//! `arld`: Active Reinforcement Learning with Demonstration, as one library.
 //!
-//! DQN-family agents (prioritized double DQN with plain, bootstrapped or noisy output stages) that learn
-//! from an expert's demonstrations, either collected before training (DQfD) or asked for during training
-//! only where the agent is unsure (Active DQN, Chen et al.). The crate is organised along the flow of one
-//! training run:
+//! The workspace's crates under the names the command line, the tests, the benches and the examples use:
+//! - the core (`arld-core`: environments, networks, replay, agents, query rules, experts, the run) at the top
+//!   level: [`train`], [`env`], [`agent`], ...;
+//! - the web expert (`arld-web`) as [`expert::web`], beside the other kinds of expert; [`expert::from_spec`] and
+//!   [`expert::build`] here build every kind, the web expert included;
+//! - the laboratory (`arld-lab`: configured runs, sweeps, Slurm, reports, verdict, figures) as [`experiment`].
 //!
-//! - [`env`]: the [`env::Env`] trait and Gymnasium-exact environments; [`rng`]: NumPy-compatible seeding.
-//! - [`nn`]: the fixed-shape Q-network (plain, K heads or noisy output), forward, backward, Adam, safetensors.
-//! - [`replay`]: sum-tree prioritized replay with a permanent demonstration part.
-//! - [`agent`]: the [`agent::Learner`] interface a run trains through, and the DQN family implementing it: acting
-//!   (exploration, head sampling, noise), the learner (losses, target network), the test-time policy.
-//! - [`query`]: uncertainty measures, query rules and budget accounting.
-//! - [`expert`]: the [`expert::Expert`] trait and its kinds.
-//! - [`train`]: one run: [`train::RunBuilder`], its one entry point, the loop as named steps, the run
-//!   directory's format and its full-state snapshots.
-//! - [`experiment`]: configured runs end to end, sweeps (local and on Slurm), the paper's grids, tables and figures.
-//! - [`paper`]: the paper's tables (tasks, parameters, expert statistics, steps to solve) as data.
-//! - [`build_info`]: the version and the git commit this arld was built from ([`VERSION`], [`GIT_COMMIT`]).
-//! - [`files`]: the one atomic file write every saved file goes through.
-//! - [`state`]: a component's state as named raw arrays and small values (what snapshots are made of).
-//! - [`math`]: the correctly rounded elementary functions every computation uses (one result on every CPU).
-//! - [`errors`]: an error and its causes on one line, as the command line and Python show it.
-//! - [`interrupt`]: SIGTERM/SIGINT as a stop request that the training loop polls.
-//! - [`tboard`]: a minimal TensorBoard event-file writer for scalar curves.
-//!
-//! The binary `arld` is a thin command-line layer over this library.
+//! The binary `arld` (src/main.rs, src/cli) is a thin command-line layer over them.
 
-pub mod agent;
-pub mod build_info;
-pub mod env;
-pub mod errors;
-pub mod experiment;
-pub mod expert;
-pub mod files;
-pub mod interrupt;
-pub mod math;
-pub mod nn;
-pub mod paper;
-pub mod query;
-pub mod replay;
-pub mod rng;
-pub mod state;
-pub mod tboard;
-pub mod train;
+pub use arld_core::*;
+pub use arld_lab as experiment;
 
-pub use build_info::{GIT_COMMIT, VERSION};
+/// Experts: the core's kinds, the web expert, and the factory that builds every kind from its spec.
+pub mod expert {
+    pub use arld_core::expert::*;
+    pub use arld_web as web;
+    pub use arld_web::{build, from_spec};
+}

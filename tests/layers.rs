@@ -1,25 +1,30 @@
-//! The crate's architecture, checked: imports only go down the layers (docs: the module list in `src/lib.rs`)
-//! and no two source files depend on each other, directly or through others.
+//! The workspace's architecture, checked: imports only go down the layers (docs: the module list in
+//! `crates/arld-core/src/lib.rs`) and no two source files depend on each other, directly or through others.
 //!
-//! Every `crate::…`, `super::…` and `self::…` path in the library's code (comments and `#[cfg(test)]` items
-//! left out, wherever they stand) is resolved to the source file it names. Two checks follow: a path from one
-//! top-level module to another must go to a lower layer, and the graph of files must have no cycle (a file's
-//! `mod` declarations are not uses; its `pub use` re-exports are). A `mod.rs` naming its own children by
-//! relative paths (`pub use adam::Adam`) is not counted: that is how a folder re-exports its parts, and the
-//! parts may use `super::`. Every module `src/lib.rs` declares must have a layer.
+//! The library is three crates, read here as one tree of modules: the core (`crates/arld-core`, whose top-level
+//! modules are the lower layers), the web expert (`crates/arld-web`, the layer `web`) and the laboratory
+//! (`crates/arld-lab`, the layer `experiment`, the names the `arld` library gives them). Every `crate::…`,
+//! `super::…`, `self::…`, `arld_core::…`, `arld_web::…` and `arld_lab::…` path in the library's code (comments
+//! and `#[cfg(test)]` items left out, wherever they stand) is resolved to the source file it names. Two checks
+//! follow: a path from one top-level module to another must go to a lower layer, and the graph of files must
+//! have no cycle (a file's `mod` declarations are not uses; its `pub use` re-exports are). A `mod.rs` naming its
+//! own children by relative paths (`pub use adam::Adam`) is not counted: that is how a folder re-exports its
+//! parts, and the parts may use `super::`. Every module the core's `lib.rs` declares must have a layer.
 //!
 //! The library's two clients sit above every layer: the binary's command modules (`src/cli`, used from
-//! `src/main.rs`) and the Python bindings (`python/src`). They reach the library only through its public API,
-//! `arld::…` paths, and may use any of it; the library never names them (no `crate::cli`, no `arld_python`).
-//! Within the binary, a command file (`src/cli/train_cmd.rs`, ...) does not use another: what two commands
-//! share belongs in the library or in `src/cli/mod.rs`. No source file pulls in another by `#[path]` or
-//! `include!`, which would pass code around the module tree and this check.
+//! `src/main.rs`; they name the library through the root package's `arld::…`, which re-exports the three
+//! crates) and the Python bindings (`python/src`, whose `arld::…` is the core and which may use the web expert
+//! but not the laboratory). They reach the library only through its public API and may use any of it; the
+//! library never names them (no `crate::cli`, no `arld_python`). Within the binary, a command file
+//! (`src/cli/train_cmd.rs`, ...) does not use another: what two commands share belongs in the library or in
+//! `src/cli/mod.rs`. No source file pulls in another by `#[path]` or `include!`, which would pass code around
+//! the module tree and this check.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
 /// The layers, bottom first. Modules of one layer may not use each other.
-const LAYERS: [&[&str]; 7] = [
+const LAYERS: [&[&str]; 8] = [
     &[
         "build_info",
         "errors",
@@ -34,6 +39,9 @@ const LAYERS: [&[&str]; 7] = [
     &["expert"],
     &["tboard"],
     &["train"],
+    // The crate arld-web.
+    &["web"],
+    // The crate arld-lab.
     &["experiment"],
 ];
 
@@ -133,22 +141,35 @@ fn is_ident(c: char) -> bool {
     c.is_ascii_alphanumeric() || c == '_'
 }
 
-/// Every path that starts at `crate`, `super`, `self` or `arld` (the library, named from its clients), expanded
+/// Every path that starts at `crate`, `super`, `self`, `arld` (the library, named from its clients) or one of the
+/// library's crates (`arld_core`, `arld_web`, `arld_lab`), expanded
 /// over `{…}` groups to their first segments, as (anchor, segments).
+const ANCHORS: [&str; 7] = [
+    "crate::",
+    "super::",
+    "self::",
+    "arld::",
+    "arld_core::",
+    "arld_web::",
+    "arld_lab::",
+];
+
 fn paths(code: &str) -> Vec<(String, Vec<String>)> {
     let chars: Vec<char> = code.chars().collect();
     let mut out = Vec::new();
     let mut i = 0;
     while i < chars.len() {
         let at_word = i == 0 || !is_ident(chars[i - 1]);
-        let anchor = ["crate::", "super::", "self::", "arld::"]
+        let anchor = ANCHORS
             .into_iter()
             .find(|a| at_word && chars[i..].iter().take(a.len()).collect::<String>() == *a);
         let Some(anchor) = anchor else {
             i += 1;
             continue;
         };
-        i += anchor.len();
+        // Back to the anchor's `::`, so that a group right after it (`arld_web::{Page, WebExpert}`) is read
+        // as one.
+        i += anchor.len() - 2;
         let mut segments = Vec::new();
         loop {
             let start = i;
@@ -247,18 +268,74 @@ impl SourceFile {
     }
 }
 
+/// The library's crates: folder, crate name, and the module its root is in the library's tree.
+const LIBRARY_CRATES: [(&str, &str, &[&str]); 3] = [
+    ("crates/arld-core/src", "arld_core", &[]),
+    ("crates/arld-web/src", "arld_web", &["web"]),
+    ("crates/arld-lab/src", "arld_lab", &["experiment"]),
+];
+
+/// The library's module named by a path from the root package's `arld::…` (the binary's view): the laboratory
+/// is `arld::experiment`, the web expert `arld::expert::web`, the core's modules are at the top.
+fn from_facade(segments: &[String]) -> Vec<String> {
+    match segments {
+        [expert, web, rest @ ..] if expert == "expert" && web == "web" => {
+            std::iter::once("web".to_string())
+                .chain(rest.iter().cloned())
+                .collect()
+        }
+        _ => segments.to_vec(),
+    }
+}
+
+/// A library file's use of `target` goes to a lower layer, or stays in its own top-level module.
+fn check_layers(violations: &mut Vec<String>, file: &SourceFile, target: &[String]) {
+    if file.krate != Crate::Library {
+        return;
+    }
+    let (from, to) = (&file.module[0], &target[0]);
+    if from != to && layer(to) >= layer(from) {
+        violations.push(format!(
+            "{} uses {} (not a lower layer)",
+            file.module.join("::"),
+            target.join("::")
+        ));
+    }
+}
+
 #[test]
 fn imports_go_down_the_layers_and_no_file_depends_on_itself() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let src = root.join("src");
     let mut sources = Vec::new();
+    for (dir, _, prefix) in LIBRARY_CRATES {
+        let src = root.join(dir);
+        for path in rust_files(&src, &[]) {
+            let within = if path == src.join("lib.rs") {
+                // The core's root only declares the layers; the web expert's and the laboratory's are modules.
+                if prefix.is_empty() {
+                    continue;
+                }
+                vec![]
+            } else {
+                module_path(&src, &path)
+            };
+            let module: Vec<String> = prefix.iter().map(|p| p.to_string()).chain(within).collect();
+            sources.push(SourceFile {
+                krate: Crate::Library,
+                module,
+                path,
+            });
+        }
+    }
+    let src = root.join("src");
     for path in rust_files(&src, &[]) {
         let in_cli = path.starts_with(src.join("cli"));
         let krate = match path.file_name().and_then(|n| n.to_str()) {
+            // The root package's library only re-exports the crates.
             Some("lib.rs") => continue,
             Some("main.rs") => Crate::Binary,
             _ if in_cli => Crate::Binary,
-            _ => Crate::Library,
+            _ => panic!("{} is neither the binary nor its commands", path.display()),
         };
         let module = if path == src.join("main.rs") {
             vec![]
@@ -288,9 +365,10 @@ fn imports_go_down_the_layers_and_no_file_depends_on_itself() {
         .iter()
         .map(|f| ((f.krate, f.module.clone()), f.node()))
         .collect();
-    // Every top-level module the library declares has a layer, and the layers name no module that is gone.
-    let lib = std::fs::read_to_string(src.join("lib.rs")).unwrap();
-    let declared: BTreeSet<String> = code(&lib)
+    // Every top-level module the core declares, and the two crates above it, has a layer, and the layers name
+    // no module that is gone.
+    let lib = std::fs::read_to_string(root.join("crates/arld-core/src/lib.rs")).unwrap();
+    let mut declared: BTreeSet<String> = code(&lib)
         .lines()
         .filter_map(|l| {
             l.trim()
@@ -299,16 +377,17 @@ fn imports_go_down_the_layers_and_no_file_depends_on_itself() {
         })
         .map(|l| l.trim_end_matches(';').trim().to_string())
         .collect();
+    declared.extend(["web".to_string(), "experiment".to_string()]);
     let layered: BTreeSet<String> = LAYERS
         .iter()
         .flat_map(|l| l.iter())
         .map(|m| m.to_string())
         .collect();
-    assert_eq!(declared, layered, "src/lib.rs's modules and LAYERS differ");
+    assert_eq!(declared, layered, "the library's modules and LAYERS differ");
     for f in sources.iter().filter(|f| f.krate == Crate::Library) {
         assert!(
             layered.contains(&f.module[0]),
-            "src/{} is in no layer; add it to LAYERS",
+            "{} is in no layer; add it to LAYERS",
             f.module[0]
         );
     }
@@ -335,18 +414,49 @@ fn imports_go_down_the_layers_and_no_file_depends_on_itself() {
             violations.push(format!("{shown} names the Python bindings"));
         }
         for (anchor, segments) in paths(&text) {
-            if anchor == "arld" {
-                // The library as its clients see it: its public modules.
-                if file.krate == Crate::Library {
-                    violations.push(format!("{shown} names its own crate as arld::"));
-                    continue;
+            if let Some((_, _, prefix)) = LIBRARY_CRATES.iter().find(|(_, name, _)| *name == anchor)
+            {
+                // One of the library's crates by name: from another crate, or from the bindings.
+                let full: Vec<String> = prefix
+                    .iter()
+                    .map(|p| p.to_string())
+                    .chain(segments)
+                    .collect();
+                if file.krate == Crate::Python && full[0] == "experiment" {
+                    violations.push(format!("{shown} uses the laboratory"));
                 }
-                if let Some(target) = resolve(Crate::Library, &segments) {
+                if let Some(target) = resolve(Crate::Library, &full) {
+                    check_layers(&mut violations, file, &target);
+                    edges.entry(node.clone()).or_default().insert(target);
+                }
+                continue;
+            }
+            if anchor == "arld" {
+                // The library as its clients see it: the root package's re-exports (the binary) or the core (the
+                // bindings, which name arld-core `arld`).
+                let full = match file.krate {
+                    Crate::Library => {
+                        violations.push(format!("{shown} names the library as arld::"));
+                        continue;
+                    }
+                    Crate::Binary => from_facade(&segments),
+                    Crate::Python => segments,
+                };
+                if let Some(target) = resolve(Crate::Library, &full) {
                     edges.entry(node.clone()).or_default().insert(target);
                 }
                 continue;
             }
             let mut full: Vec<String> = match anchor.as_str() {
+                // The root of the file's crate: its first module in the library's tree (the core's is empty).
+                "crate" if file.krate == Crate::Library => LIBRARY_CRATES
+                    .iter()
+                    .map(|(_, _, prefix)| prefix)
+                    .find(|prefix| {
+                        !prefix.is_empty() && module.first().is_some_and(|m| m == prefix[0])
+                    })
+                    .map(|prefix| prefix.iter().map(|p| p.to_string()).collect())
+                    .unwrap_or_default(),
                 "crate" => vec![],
                 // `super` of a file is its folder's module; of a folder's mod.rs (whose module is the
                 // folder), the folder's parent.
@@ -368,16 +478,7 @@ fn imports_go_down_the_layers_and_no_file_depends_on_itself() {
                 continue;
             }
             match file.krate {
-                Crate::Library => {
-                    let (from, to) = (&module[0], &target[0]);
-                    if from != to && layer(to) >= layer(from) {
-                        violations.push(format!(
-                            "{} uses {} (not a lower layer)",
-                            module.join("::"),
-                            target.join("::")
-                        ));
-                    }
-                }
+                Crate::Library => check_layers(&mut violations, file, &target),
                 // Command files (main::cli::X) do not use each other; cli/mod.rs and main.rs are shared.
                 Crate::Binary => {
                     if node.len() > 2 && target.len() > 2 && node[2] != target[2] {
@@ -442,7 +543,12 @@ fn imports_go_down_the_layers_and_no_file_depends_on_itself() {
         edges[&vec!["experiment".to_string(), "report".to_string()]]
             .contains(&vec!["experiment".to_string(), "sweep".to_string()])
     );
-    // ... and its clients: the train command uses the training loop, the bindings the environments.
+    // ... across the crates: the web expert uses the core's experts, the laboratory the web expert ...
+    assert!(edges[&path(&["web"])].contains(&path(&["expert"])));
+    assert!(edges[&path(&["experiment"])].contains(&path(&["web"])));
+    // ... and its clients: the train command uses the training loop and the web expert's options, the bindings
+    // the environments and the web expert.
     assert!(edges[&path(&["main", "cli", "train_cmd"])].contains(&path(&["train"])));
     assert!(edges[&path(&["python"])].contains(&path(&["env"])));
+    assert!(edges[&path(&["python", "web"])].contains(&path(&["web"])));
 }

@@ -1105,7 +1105,7 @@ fn start_run(
                 n_actions: spec.n_actions,
                 errors: errors.clone(),
             })),
-            (None, None) if cfg.expert_used().is_some() => Some(expert::from_spec(
+            (None, None) if cfg.expert_used().is_some() => Some(arld_web::from_spec(
                 &cfg.expert,
                 &cfg.env,
                 seed_for(cfg.seed, SeedPurpose::Expert),

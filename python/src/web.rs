@@ -10,9 +10,9 @@
 //! The URL is printed once the run has accepted the environment (a refused environment prints none).
 
 use arld::expert::Expert;
-use arld::expert::web::frames::{FrameSource, ObservationTable, RenderedFrames, RgbImage};
-use arld::expert::web::protocol::ActionKeys;
-use arld::expert::web::{Page, WebExpert, WebOptions, WebServer};
+use arld_web::frames::{FrameSource, ObservationTable, RenderedFrames, RgbImage};
+use arld_web::protocol::ActionKeys;
+use arld_web::{Page, WebExpert, WebOptions, WebServer};
 use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyString, PyTuple};

@@ -14,11 +14,11 @@
 
 use rand::{Rng, SeedableRng};
 
-use crate::train::run_dir::EvalPoint;
+use arld_core::train::run_dir::EvalPoint;
 
 /// First evaluation step whose mean reaches `target`, else `train_steps` (the paper's reading).
 pub fn first_hit(curve: &[EvalPoint], target: f64, train_steps: u64) -> u64 {
-    crate::train::run_dir::steps_to_solve(curve, target, train_steps).0
+    arld_core::train::run_dir::steps_to_solve(curve, target, train_steps).0
 }
 
 /// First evaluation step from which the mean stays at or above `target` for the next `k` evaluations as well.

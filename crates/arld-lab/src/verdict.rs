@@ -12,12 +12,12 @@ use super::protocol::env_order;
 use super::stats::{
     bootstrap_median_interval, final_score, mann_whitney, median, median_curve_hit, sustained,
 };
-use crate::paper::{self, PAPER_TASKS, TABLE5_NETS};
-use crate::train::TrainConfig;
-use crate::train::run_dir::{
+use anyhow::{Context, Result, bail};
+use arld_core::paper::{self, PAPER_TASKS, TABLE5_NETS};
+use arld_core::train::TrainConfig;
+use arld_core::train::run_dir::{
     DEFAULT_VARIANT, EXPERT_VARIANT_PREFIX, EvalPoint, RunId, RunRecord, T_QUERY_VARIANT_PREFIX,
 };
-use anyhow::{Context, Result, bail};
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -77,7 +77,7 @@ pub struct Cell {
 
 /// Groups runs per configuration and computes every reading; `k` is the sustained reading's K.
 pub fn cells(runs: &[RunRecord], k: usize) -> Vec<Cell> {
-    crate::train::run_dir::configurations(runs)
+    arld_core::train::run_dir::configurations(runs)
         .into_iter()
         .map(|members| {
             let reading = |f: &dyn Fn(&RunRecord) -> f64| {
@@ -798,7 +798,7 @@ pub fn write_verdict(cells: &[Cell], out_dir: &Path, k: usize) -> Result<(Vec<Pa
         ("ablations.csv", &variants_csv),
     ] {
         let path = out_dir.join(name);
-        crate::files::write_atomic(&path, text.as_bytes())?;
+        arld_core::files::write_atomic(&path, text.as_bytes())?;
         files.push(path);
     }
     let section = format!(
@@ -872,7 +872,7 @@ pub fn runs_from_evaluations_csv(path: &Path) -> Result<Vec<RunRecord>> {
             let preset = TrainConfig::preset(&env, method.parse()?, net.parse()?, seed)?;
             Ok(RunRecord {
                 dir: path.to_path_buf(),
-                solve_threshold: crate::env::spec(&env)?.solve_threshold,
+                solve_threshold: arld_core::env::spec(&env)?.solve_threshold,
                 train_steps: preset.train_steps as u64,
                 eval_period: preset.eval_period as u64,
                 t_query: None,
@@ -898,7 +898,7 @@ mod tests {
     use super::*;
 
     fn run(env: &str, method: &str, net: &str, seed: u64, means: &[f64]) -> RunRecord {
-        let spec = crate::env::spec(env).unwrap();
+        let spec = arld_core::env::spec(env).unwrap();
         RunRecord {
             dir: "x".into(),
             id: RunId {

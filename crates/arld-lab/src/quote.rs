@@ -25,8 +25,8 @@
 //! how a regenerated table tells the writer which sentence to read again. Every failed quote of a document is
 //! listed at once; the document is still written with the values, so that its difference shows what moved.
 
-use crate::files::write_atomic;
 use anyhow::{Context, Result, bail};
+use arld_core::files::write_atomic;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 

@@ -15,14 +15,14 @@
 //! per key) or in real time (`fps`: after a fresh key and a countdown, the environment advances at that rate
 //! with the held key, or the no-op action when none is held). Before a question the page replays the agent's
 //! own steps since the person's last one, and in turn-based mode the person can undo their last key: both
-//! rebuild the environment from the query's episode ([`crate::env::replay_episode`]) where the frame source
+//! rebuild the environment from the query's episode ([`arld_core::env::replay_episode`]) where the frame source
 //! can show such a copy. Undo works one key ahead: the page shows the state after a key on a copy, and the run
 //! takes that key only when the next one comes, so an undone key never reaches the training loop. A question goes back to the agent ([`Answer::Unanswered`]) when the person hands
 //! it back or, with a `timeout`, when nobody answers in time (after a hand-back the agent's questions in the next
 //! [`HANDBACK_QUIET_STEPS`] steps of the episode go back to it unasked). The person may pause the run; their time
 //! leaves out pauses and time with no tab open. A Python program's run handed back to it between two steps
 //! ([`Expert::handed_over`]: `learn` returned, or a stop) shows where it stands until it goes on. A stop request
-//! (Ctrl-C, SIGTERM) ends any wait at once with [`crate::interrupt::Interrupted`], so that the run snapshots with
+//! (Ctrl-C, SIGTERM) ends any wait at once with [`arld_core::interrupt::Interrupted`], so that the run snapshots with
 //! the question open. The page ([`protocol`] describes its messages) is plain HTML, CSS and JavaScript embedded
 //! in the binary; at the end it shows how the run ended and what the person gave ([`Expert::finish`]).
 //!
@@ -33,9 +33,10 @@ pub mod frames;
 pub mod protocol;
 pub mod server;
 
-use super::{Answer, Expert, Progress, Query, RunEnd};
-use crate::env::{Env, EpisodeStart};
-use anyhow::{Context, Result, bail, ensure};
+use anyhow::{Context, Result, bail};
+use arld_core::env::{Env, EpisodeStart};
+pub use arld_core::expert::web_options::{DEFAULT_LISTEN, WebOptions};
+use arld_core::expert::{Answer, Expert, Progress, Query, RunEnd};
 use frames::FrameSource;
 use protocol::{ActionKeys, EndScreen, Hello, Prompt, ServerMsg, Status};
 use server::{Input, KeyInput, Shared};
@@ -44,12 +45,8 @@ use std::net::{IpAddr, SocketAddr};
 use std::sync::{Arc, mpsc};
 use std::time::{Duration, Instant};
 
-/// The default address: this machine only.
-pub const DEFAULT_LISTEN: &str = "127.0.0.1:8765";
 /// Live updates per second while training runs.
 const UPDATES_PER_S: f64 = 15.0;
-/// The slowest real-time pace (one step in 100 s): the step period 1/fps stays a time a clock can hold.
-const MIN_FPS: f64 = 0.01;
 /// How often a wait for the person looks for a stop request.
 const STOP_POLL: Duration = Duration::from_millis(50);
 /// The agent's steps replayed to the person before a question, at most (the page plays them within 2 s).
@@ -61,86 +58,6 @@ pub const REALTIME_BREATH: Duration = Duration::from_secs(1);
 /// After the person hands a question back, the agent's questions in the next this many steps of the same episode
 /// go back to it unasked (logged unanswered, nothing charged): the person said they would rather not.
 pub const HANDBACK_QUIET_STEPS: usize = 100;
-
-/// How the web expert listens and how the person answers. Written as the spec
-/// `web:listen=ADDR,fps=N,timeout=S,wait=no` (every part optional, e.g. `web` or `web:fps=10`).
-#[derive(Clone, Debug, PartialEq)]
-pub struct WebOptions {
-    pub listen: SocketAddr,
-    /// Real-time steps per second; `None`: turn-based.
-    pub fps: Option<f64>,
-    /// Seconds a question waits before it goes back to the agent; `None`: it waits for ever.
-    pub timeout: Option<f64>,
-    /// Whether the run waits for the page to be opened before it starts (so that the first question is not
-    /// timed against opening a browser).
-    pub wait: bool,
-}
-
-impl Default for WebOptions {
-    fn default() -> Self {
-        Self {
-            listen: DEFAULT_LISTEN.parse().expect("valid default address"),
-            fps: None,
-            timeout: None,
-            wait: true,
-        }
-    }
-}
-
-impl std::str::FromStr for WebOptions {
-    type Err = anyhow::Error;
-    /// Parses `listen=ADDR,fps=N,timeout=S` (any subset, any order; empty: the defaults).
-    fn from_str(s: &str) -> Result<Self> {
-        let mut o = WebOptions::default();
-        for part in s.split(',').filter(|p| !p.is_empty()) {
-            let (key, value) = part
-                .split_once('=')
-                .with_context(|| format!("web expert option '{part}' is not key=value"))?;
-            // Bounded on both sides: a step period of 1/fps seconds must be a time a clock can hold.
-            let within = |what: &str, min: f64, max: f64| -> Result<f64> {
-                let v: f64 = value
-                    .parse()
-                    .with_context(|| format!("web expert {what} '{value}' is not a number"))?;
-                ensure!(
-                    v.is_finite() && v >= min && v <= max,
-                    "web expert {what} must be in [{min}, {max}], got {value}"
-                );
-                Ok(v)
-            };
-            match key {
-                "listen" => o.listen = value.parse().with_context(|| {
-                    format!(
-                        "web expert listen address '{value}' is not IP:PORT (e.g. {DEFAULT_LISTEN})"
-                    )
-                })?,
-                "fps" => o.fps = Some(within("fps", MIN_FPS, 1000.0)?),
-                "timeout" => o.timeout = Some(within("timeout", 0.001, 1e6)?),
-                "wait" => {
-                    o.wait = match value {
-                        "yes" | "true" => true,
-                        "no" | "false" => false,
-                        _ => bail!("web expert wait must be yes or no, got '{value}'"),
-                    }
-                }
-                _ => bail!("unknown web expert option '{key}'; known: listen, fps, timeout, wait"),
-            }
-        }
-        Ok(o)
-    }
-}
-
-impl WebOptions {
-    /// The options as the spec suffix that [`FromStr`](std::str::FromStr) reads back.
-    pub fn to_spec(&self) -> String {
-        let mut parts = vec![format!("listen={}", self.listen)];
-        parts.extend(self.fps.map(|v| format!("fps={v}")));
-        parts.extend(self.timeout.map(|v| format!("timeout={v}")));
-        if !self.wait {
-            parts.push("wait=no".into());
-        }
-        format!("web:{}", parts.join(","))
-    }
-}
 
 /// The web server and the address to open: started before the run knows its environment (a Python user creates
 /// it first and passes it as the expert), it shows "waiting for the run" until a [`WebExpert`] takes it.
@@ -251,7 +168,7 @@ impl Drop for WebServer {
     /// it, and stops the server.
     fn drop(&mut self) {
         if !self.shared.ended() {
-            let message = if crate::interrupt::requested() {
+            let message = if arld_core::interrupt::requested() {
                 "The run was stopped. Your answers are saved; resumed, it continues where it stopped."
             } else {
                 "The run is over."
@@ -292,7 +209,7 @@ pub struct Page {
 impl Page {
     /// A built-in task: drawn from its geometry, with arrow and WASD keys.
     pub fn builtin(env_id: &str) -> Result<Self> {
-        let spec = crate::env::spec(env_id)?;
+        let spec = arld_core::env::spec(env_id)?;
         let (actions, noop) = protocol::action_keys(env_id)
             .with_context(|| format!("the web expert has no keys for {env_id}"))?;
         Ok(Self {
@@ -341,7 +258,7 @@ pub struct WebExpert {
     /// The run's latest status when it was not published yet (updates are throttled).
     unsent: Option<Status>,
     effort: Effort,
-    /// Whether a stop was requested (Ctrl-C, SIGTERM): [`crate::interrupt::requested`] unless the program
+    /// Whether a stop was requested (Ctrl-C, SIGTERM): [`arld_core::interrupt::requested`] unless the program
     /// that owns the signals says otherwise ([`WebExpert::set_stop_check`]).
     stop_requested: Box<dyn FnMut() -> bool + Send>,
     /// Whether the page shows a hand-over note ([`Expert::handed_over`]), lifted when the run goes on.
@@ -374,7 +291,7 @@ impl WebExpert {
         // environment arld builds.
         let undo = server.options.fps.is_none()
             && page.frames.shows_copies()
-            && crate::env::make(&page.env).is_ok();
+            && arld_core::env::make(&page.env).is_ok();
         let hello = Hello {
             undo,
             env: page.env,
@@ -403,7 +320,7 @@ impl WebExpert {
             last_person: None,
             unsent: None,
             effort: Effort::default(),
-            stop_requested: Box::new(crate::interrupt::requested),
+            stop_requested: Box::new(arld_core::interrupt::requested),
             handed: false,
             handed_back: None,
             episode: 0,
@@ -425,7 +342,7 @@ impl WebExpert {
 
     fn stopped(&mut self, what: &str) -> Result<()> {
         if (self.stop_requested)() {
-            return Err(crate::interrupt::Interrupted(format!("stopped {what}")).into());
+            return Err(arld_core::interrupt::Interrupted(format!("stopped {what}")).into());
         }
         Ok(())
     }
@@ -444,7 +361,7 @@ impl WebExpert {
     }
 
     /// Publishes what the page shows of the environment, when it changed.
-    fn publish_frame(&mut self, env: &dyn crate::env::Env, obs: &[f32]) -> Result<()> {
+    fn publish_frame(&mut self, env: &dyn arld_core::env::Env, obs: &[f32]) -> Result<()> {
         if let Some(msg) = self.frames.frame(env, obs)? {
             self.server
                 .shared
@@ -570,9 +487,9 @@ impl WebExpert {
         if !self.frames.shows_copies() {
             return None;
         }
-        let mut env = crate::env::make(query.env.id()).ok()?;
+        let mut env = arld_core::env::make(query.env.id()).ok()?;
         let mut obs = Vec::new();
-        crate::env::replay_episode(&mut *env, query.episode.start, actions, &mut obs).ok()?;
+        arld_core::env::replay_episode(&mut *env, query.episode.start, actions, &mut obs).ok()?;
         Some((env, obs))
     }
 
@@ -666,7 +583,7 @@ impl WebExpert {
                     return Ok(answer);
                 }
                 // A stop: the run takes this key first (the person's answers are never lost), then stops.
-                Err(err) if crate::interrupt::is_stop(&err) => return Ok(answer),
+                Err(err) if arld_core::interrupt::is_stop(&err) => return Ok(answer),
                 Err(err) => return Err(err),
             }
         }
@@ -994,6 +911,27 @@ impl Expert for WebExpert {
     }
 }
 
+/// Starts a web expert for the environment `env_id` ([`WebExpert::start`]), as the expert factory of
+/// `arld_core::expert` takes it ([`arld_core::expert::WebStart`]).
+pub fn start(options: &WebOptions, env_id: &str) -> Result<Box<dyn Expert>> {
+    Ok(Box::new(WebExpert::start(options, env_id)?))
+}
+
+/// Builds an expert from a spec, every kind including the web expert ([`arld_core::expert::from_spec`]).
+pub fn from_spec(spec: &str, env_id: &str, seed: u64, timeout_s: f64) -> Result<Box<dyn Expert>> {
+    build(&spec.parse()?, env_id, seed, timeout_s)
+}
+
+/// Builds the expert of a parsed spec, every kind including the web expert.
+pub fn build(
+    spec: &arld_core::expert::ExpertSpec,
+    env_id: &str,
+    seed: u64,
+    timeout_s: f64,
+) -> Result<Box<dyn Expert>> {
+    arld_core::expert::build_with(spec, env_id, seed, timeout_s, start)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -1020,38 +958,6 @@ mod tests {
                 from,
                 "{last:?} {start:?} {len}"
             );
-        }
-    }
-
-    #[test]
-    fn options_parse_and_round_trip() {
-        assert_eq!("".parse::<WebOptions>().unwrap(), WebOptions::default());
-        let o: WebOptions = "fps=12.5,listen=0.0.0.0:9000,timeout=30,wait=no"
-            .parse()
-            .unwrap();
-        assert!(!o.wait);
-        assert_eq!(o.listen, "0.0.0.0:9000".parse().unwrap());
-        assert_eq!((o.fps, o.timeout), (Some(12.5), Some(30.0)));
-        assert_eq!(
-            o.to_spec()
-                .strip_prefix("web:")
-                .unwrap()
-                .parse::<WebOptions>()
-                .unwrap(),
-            o
-        );
-        for bad in [
-            "fps=0",
-            "fps=-3",
-            "fps=nan",
-            "timeout=inf",
-            "listen=localhost",
-            "listen=1.2.3.4",
-            "speed=3",
-            "fps",
-            "wait=maybe",
-        ] {
-            assert!(bad.parse::<WebOptions>().is_err(), "{bad} accepted");
         }
     }
 }

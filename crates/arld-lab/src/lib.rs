@@ -3,7 +3,7 @@
 //! the paper's experiment grids ([`protocol`]), statistics over seeds ([`stats`]), and reports with the paper's
 //! table and figures ([`report`]; which figures and what they show in [`figures`], how one is drawn in
 //! [`plot`]; hand-written documents that quote its tables in [`quote`]). Sweeps and reports read runs through
-//! [`crate::train::run_dir`], the owner of the run directory's format.
+//! [`arld_core::train::run_dir`], the owner of the run directory's format.
 //!
 //! Within this layer imports go one way: `dir_lock` <- `sweep`; `stats`, `sweep` <- `protocol`;
 //! `protocol`, `plot` <- `figures`; `protocol`, `plot`, `stats`, `verdict` <- `effort`; `effort`, `figures`, `plot`,
@@ -22,17 +22,17 @@ pub mod stats;
 pub mod sweep;
 pub mod verdict;
 
-use crate::expert::{self, demos::Demonstrations};
-use crate::train::{
+use anyhow::{Context, Result};
+use arld_core::expert::{self, demos::Demonstrations};
+use arld_core::train::{
     self, Checkpointer, RunBuilder, RunLog, SeedPurpose, Summary, TrainConfig, seed_for,
 };
-use anyhow::{Context, Result};
 use std::path::Path;
 
 /// Builds the expert and the demonstrations a configuration needs, trains, and writes the run directory
 /// (or keeps everything in memory when `out_dir` is `None`). A run directory holding a snapshot of an
 /// interrupted run of `cfg` is continued from it; while the run goes on it snapshots itself every
-/// `cfg.snapshot_every` steps and when asked to stop ([`crate::interrupt`]).
+/// `cfg.snapshot_every` steps and when asked to stop ([`arld_core::interrupt`]).
 ///
 /// A run that ends with an error leaves `failed.json` in its directory when it has one (training records the
 /// step it failed at; an error before training, such as an expert that cannot be started, is recorded here as
@@ -94,7 +94,7 @@ type Setup = (Option<Box<dyn expert::Expert>>, Option<Demonstrations>);
 /// The expert and the demonstrations `cfg` needs (none for a method that needs none).
 fn setup(cfg: &TrainConfig) -> Result<Setup> {
     let mut expert = if cfg.expert_used().is_some() {
-        Some(expert::from_spec(
+        Some(arld_web::from_spec(
             &cfg.expert,
             &cfg.env,
             seed_for(cfg.seed, SeedPurpose::Expert),
@@ -134,7 +134,7 @@ fn setup(cfg: &TrainConfig) -> Result<Setup> {
 /// with a snapshot continues; any other leftovers of a run are cleared first, so that no earlier run's files
 /// (checkpoints) mix into this one.
 pub fn run_or_reuse(cfg: &TrainConfig, dir: &Path, progress: bool) -> Result<Option<Summary>> {
-    use crate::train::run_dir;
+    use arld_core::train::run_dir;
     if run_dir::is_complete(dir) {
         let config = dir.join(run_dir::CONFIG_FILE);
         let mut input = train::ConfigInput::new(&cfg.env, cfg.method, cfg.net, cfg.seed);

@@ -14,12 +14,12 @@
 //! Packing checks before it writes anything that every run comes back from the tables byte for byte (a file that
 //! would not goes to `verbatim.csv.gz` whole), and its output depends only on the runs, so packing the same runs
 //! again changes no byte. Unpacking writes only the files that are missing and refuses to replace a file whose
-//! bytes differ. Runs are read and written through [`crate::train::run_dir`]'s names for the files; binary files
+//! bytes differ. Runs are read and written through [`arld_core::train::run_dir`]'s names for the files; binary files
 //! (weights, snapshots, event files) are not part of a dataset and are left where they are.
 
-use crate::files::write_atomic;
-use crate::train::run_dir;
 use anyhow::{Context, Result, bail, ensure};
+use arld_core::files::write_atomic;
+use arld_core::train::run_dir;
 use flate2::Compression;
 use flate2::read::GzDecoder;
 use flate2::write::GzEncoder;

@@ -3,7 +3,7 @@
 //! together.
 //!
 //! The parts fit as follows:
-//! - [`crate::train::run_dir::load_runs`] reads every complete run below a directory into a [`RunRecord`].
+//! - [`arld_core::train::run_dir::load_runs`] reads every complete run below a directory into a [`RunRecord`].
 //! - [`super::verdict::cells`] applies the paper's measure per (env, method, net, variant): the first evaluation
 //!   that reaches the threshold ([`stats::first_hit`]), and the median over seeds ([`stats::median`];
 //!   docs/algorithm.md section 11), beside the other readings.
@@ -15,12 +15,12 @@ use super::stats;
 use super::sweep::{SWEEP_FILE, SweepGrid};
 use super::verdict::Cell;
 use super::{figures, plot};
-use crate::paper::{self, PAPER_TASKS, TABLE5_METHODS, TABLE5_NETS};
-use crate::train::Method;
-use crate::train::run_dir::{
+use anyhow::{Context, Result, bail};
+use arld_core::paper::{self, PAPER_TASKS, TABLE5_METHODS, TABLE5_NETS};
+use arld_core::train::Method;
+use arld_core::train::run_dir::{
     self, DEFAULT_VARIANT, EvalPoint, RunRecord, SUMMARY_FILE, load_runs, write_atomic,
 };
-use anyhow::{Context, Result, bail};
 
 /// The file of every evaluation of every run (gzip-compressed CSV), which `arld report --from-evaluations` reads.
 pub const EVALUATIONS_FILE: &str = "evaluations.csv.gz";
@@ -294,7 +294,7 @@ pub fn report(dir: &Path, out_dir: &Path, sustain: usize) -> Result<ReportSummar
     }
     let older = runs
         .iter()
-        .filter(|run| run.numerics.as_deref() != Some(crate::math::NUMERICS))
+        .filter(|run| run.numerics.as_deref() != Some(arld_core::math::NUMERICS))
         .count();
     // Stated even when none are: a reader learns that every number regenerates on their own CPU.
     notes.push(if older > 0 {
@@ -310,7 +310,7 @@ pub fn report(dir: &Path, out_dir: &Path, sustain: usize) -> Result<ReportSummar
              functions (`\"numerics\": \"{}\"` in summary.json) and regenerates byte for byte with this arld on \
              any x86-64 CPU",
             runs.len(),
-            crate::math::NUMERICS
+            arld_core::math::NUMERICS
         )
     });
     let cells = super::verdict::cells(&runs, sustain);
@@ -395,7 +395,7 @@ pub fn report(dir: &Path, out_dir: &Path, sustain: usize) -> Result<ReportSummar
             expert.std_return,
             expert.min_return,
             expert.mean_episode_length,
-            crate::env::spec(task.gym_id)?.solve_threshold
+            arld_core::env::spec(task.gym_id)?.solve_threshold
         )?;
     }
     writeln!(md, "\n## Figures\n")?;

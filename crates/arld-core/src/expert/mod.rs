@@ -6,14 +6,15 @@
 //! observation, the environment to draw, the agent's own proposal); the [`Answer`] may be that nobody answered,
 //! and [`Expert::observe`] lets an interactive expert follow the run. Kinds: [`CheckpointExpert`] (a trained
 //! network acting greedily), [`NoisyExpert`] (acts at random with probability p), [`scripted`] controllers,
-//! [`web`] (a person in a browser) and [`process::ProcessExpert`] (another program speaking JSON lines).
-//! [`from_spec`] builds one from a short spec; [`demos`] collects demonstrations from an expert.
+//! the web expert (a person in a browser: the `arld-web` crate, whose options [`web_options`] parses) and
+//! [`process::ProcessExpert`] (another program speaking JSON lines). [`from_spec`] builds one from a short spec
+//! ([`build_with`] also the web expert, given its start); [`demos`] collects demonstrations from an expert.
 
 pub mod demos;
 pub mod pipeline;
 pub mod process;
 pub mod scripted;
-pub mod web;
+pub mod web_options;
 
 use crate::agent::test_policy_action;
 use crate::env::{Env, EnvSpec};
@@ -254,7 +255,15 @@ impl Expert for NoisyExpert {
 pub fn shipped_dir() -> PathBuf {
     std::env::var_os("ARLD_EXPERTS_DIR")
         .map(PathBuf::from)
-        .unwrap_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("experts"))
+        .unwrap_or_else(|| {
+            // The repository's `experts/`, two folders above this crate (`crates/arld-core`).
+            let crate_dir = Path::new(env!("CARGO_MANIFEST_DIR"));
+            crate_dir
+                .ancestors()
+                .nth(2)
+                .unwrap_or(crate_dir)
+                .join("experts")
+        })
 }
 
 /// Path of a shipped expert: `experts/<env>/<quality>.safetensors` (v1/v3 ids share their v0/v2 experts).
@@ -291,7 +300,7 @@ pub enum ExpertSpec {
     /// `scripted`.
     Scripted,
     /// `web[:OPTIONS]`.
-    Web(web::WebOptions),
+    Web(web_options::WebOptions),
     /// `noisy:P:SPEC`.
     Noisy { p: f64, inner: Box<ExpertSpec> },
 }
@@ -341,18 +350,36 @@ impl ExpertSpec {
     }
 }
 
+/// Starts the web expert with its options for the environment `env_id` (`arld_web::start`): the crate above this
+/// one that holds the server and the page hands it to [`build_with`].
+pub type WebStart = fn(&web_options::WebOptions, &str) -> Result<Box<dyn Expert>>;
+
 /// Builds an expert from a spec for the environment `env_id`; `seed` seeds any randomness the expert has and
-/// `timeout_s` bounds an expert process's answer.
+/// `timeout_s` bounds an expert process's answer. Every kind but the web expert ([`build_with`]).
 pub fn from_spec(spec: &str, env_id: &str, seed: u64, timeout_s: f64) -> Result<Box<dyn Expert>> {
     build(&spec.parse()?, env_id, seed, timeout_s)
 }
 
-/// Builds the expert of a parsed spec ([`from_spec`]).
+/// Builds the expert of a parsed spec ([`from_spec`]); a web expert is refused (see [`build_with`]).
 pub fn build(
     spec: &ExpertSpec,
     env_id: &str,
     seed: u64,
     timeout_s: f64,
+) -> Result<Box<dyn Expert>> {
+    let no_web: WebStart = |_, _| {
+        bail!("this program was built without the web expert (the arld-web crate builds it)")
+    };
+    build_with(spec, env_id, seed, timeout_s, no_web)
+}
+
+/// Builds the expert of a parsed spec, starting a web expert with `web`.
+pub fn build_with(
+    spec: &ExpertSpec,
+    env_id: &str,
+    seed: u64,
+    timeout_s: f64,
+    web: WebStart,
 ) -> Result<Box<dyn Expert>> {
     let env_spec = *crate::env::spec(env_id)?;
     Ok(match spec {
@@ -370,9 +397,9 @@ pub fn build(
             command, &env_spec, timeout_s,
         )?),
         ExpertSpec::Scripted => Box::new(scripted::ScriptedExpert::new(env_id)?),
-        ExpertSpec::Web(options) => Box::new(web::WebExpert::start(options, env_id)?),
+        ExpertSpec::Web(options) => web(options, env_id)?,
         ExpertSpec::Noisy { p, inner } => {
-            let inner = build(inner, env_id, seed.wrapping_add(1), timeout_s)?;
+            let inner = build_with(inner, env_id, seed.wrapping_add(1), timeout_s, web)?;
             Box::new(NoisyExpert::new(inner, *p, env_spec.n_actions, seed)?)
         }
     })

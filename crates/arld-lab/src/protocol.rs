@@ -1,11 +1,11 @@
 //! The paper's experimental protocol (Section 4: the method comparison, the t_query study and the
 //! expert-quality study) and our studies of what it leaves open (the window N_r, the ablations of
 //! docs/algorithm.md section 13) as sweep grids, so one command can reproduce them ([`paper_grids`]); and the
-//! order in which reports list environments. The paper's numbers themselves are in [`crate::paper`].
+//! order in which reports list environments. The paper's numbers themselves are in [`arld_core::paper`].
 
 use super::sweep::SweepGrid;
-use crate::paper::{TABLE5_METHODS, TABLE5_NETS, task_index};
-use crate::train::{Method, NetKind};
+use arld_core::paper::{TABLE5_METHODS, TABLE5_NETS, task_index};
+use arld_core::train::{Method, NetKind};
 
 /// Environments in table order: the paper's tasks first in its column order, then any others alphabetically.
 pub fn env_order<'a>(envs: impl IntoIterator<Item = &'a str>) -> Vec<String> {
@@ -163,7 +163,7 @@ pub fn is_effort_variant(variant: &str) -> bool {
 
 /// The paper's budget for `env` (ADQN's preset), in demonstrated transitions.
 pub fn paper_budget(env: &str) -> usize {
-    crate::train::TrainConfig::preset(env, Method::Adqn, EFFORT_NET, 0)
+    arld_core::train::TrainConfig::preset(env, Method::Adqn, EFFORT_NET, 0)
         .map(|c| c.budget)
         .unwrap_or(0)
 }
@@ -177,7 +177,10 @@ pub fn scaled_budget(env: &str, scale: f64) -> usize {
 /// rule of [`EFFORT_RULES`] at the paper's budget, then BDQN, ADQN and [`EFFORT_SCALED_RULES`] at the budgets of
 /// [`EFFORT_BUDGET_SCALES`], on the four tasks with [`EFFORT_NET`].
 pub fn effort_grids(seeds: &[u64]) -> Vec<SweepGrid> {
-    let tasks: Vec<&str> = crate::paper::PAPER_TASKS.iter().map(|t| t.gym_id).collect();
+    let tasks: Vec<&str> = arld_core::paper::PAPER_TASKS
+        .iter()
+        .map(|t| t.gym_id)
+        .collect();
     let mut grids = Vec::new();
     for env in &tasks {
         grids.push(SweepGrid {
@@ -232,7 +235,7 @@ pub fn held_out_grids() -> Vec<SweepGrid> {
     let nets = vec![NetKind::Bootstrap, NetKind::Noisy];
     let seeds: Vec<u64> = HELD_OUT_SEEDS.collect();
     let mut grids = Vec::new();
-    for task in crate::paper::PAPER_TASKS {
+    for task in arld_core::paper::PAPER_TASKS {
         let budget = format!("budget={}", paper_budget(task.gym_id));
         grids.push(SweepGrid {
             envs: vec![task.gym_id.to_string()],
@@ -298,7 +301,7 @@ pub const PAPER_SEEDS: u64 = 20;
 ///
 /// Every other setting is left to the per-task presets of the training code. A part may have several grids.
 pub fn paper_grids(seeds: u64) -> Vec<(&'static str, SweepGrid)> {
-    let all_tasks: Vec<String> = crate::paper::PAPER_TASKS
+    let all_tasks: Vec<String> = arld_core::paper::PAPER_TASKS
         .iter()
         .map(|t| t.gym_id.to_string())
         .collect();
@@ -325,7 +328,7 @@ pub fn paper_grids(seeds: u64) -> Vec<(&'static str, SweepGrid)> {
         ..SweepGrid::default()
     };
     let experts = SweepGrid {
-        envs: vec![crate::paper::PAPER_TASKS[3].gym_id.to_string()],
+        envs: vec![arld_core::paper::PAPER_TASKS[3].gym_id.to_string()],
         methods: EXPERT_QUALITY_METHODS.iter().map(|m| method(m)).collect(),
         nets: nets.clone(),
         seeds: seed_list.clone(),
@@ -360,7 +363,7 @@ pub fn paper_grids(seeds: u64) -> Vec<(&'static str, SweepGrid)> {
     grids.push((
         "ablations",
         ablation(
-            crate::paper::PAPER_TASKS[0].gym_id,
+            arld_core::paper::PAPER_TASKS[0].gym_id,
             CARTPOLE_TARGET_ABLATION,
             &["dqn", "bdqn", "adqn"],
         ),
@@ -457,6 +460,6 @@ mod tests {
         );
         assert_eq!(paper_budget("CartPole-v0"), 200);
         assert_eq!(scaled_budget("CartPole-v0", 0.25), 50);
-        assert_eq!(crate::paper::PAPER_TASKS[0].gym_id, "CartPole-v0");
+        assert_eq!(arld_core::paper::PAPER_TASKS[0].gym_id, "CartPole-v0");
     }
 }

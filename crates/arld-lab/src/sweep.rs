@@ -16,12 +16,12 @@
 //! - [`collect_results`] reads every complete run under a directory and writes `results.csv`, one row per
 //!   evaluation point.
 
-use crate::train::run_dir::{
+use anyhow::{Context, Result, bail};
+use arld_core::train::run_dir::{
     self, DEFAULT_VARIANT, EXPERT_VARIANT_PREFIX, RunId, RunRecord, T_QUERY_VARIANT_PREFIX,
     write_atomic,
 };
-use crate::train::{ConfigInput, Method, NetKind, TrainConfig};
-use anyhow::{Context, Result, bail};
+use arld_core::train::{ConfigInput, Method, NetKind, TrainConfig};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeSet;
@@ -267,7 +267,7 @@ impl SweepGrid {
         check_list("nets", &self.nets, true)?;
         check_seed_count(self.seeds.len() as u64)?;
         check_list("seeds", &self.seeds, true)?;
-        let max_seed = crate::train::config::MAX_SEED;
+        let max_seed = arld_core::train::config::MAX_SEED;
         if let Some(s) = self.seeds.iter().find(|&&s| s > max_seed) {
             bail!("seed {s} is too large for the field `seed`: at most {max_seed}");
         }
@@ -700,7 +700,10 @@ fn run_sweep_inner(
     let mut reused = 0;
     pending.retain(|spec| {
         let path = dir.join(spec.dir_name());
-        if path.join(crate::train::snapshot::SNAPSHOT_FILE).is_file() {
+        if path
+            .join(arld_core::train::snapshot::SNAPSHOT_FILE)
+            .is_file()
+        {
             return true;
         }
         let Some(source) = identical_run(spec, dir) else {
@@ -758,7 +761,7 @@ fn run_sweep_inner(
             scope.spawn(|| {
                 loop {
                     // Asked to stop: the runs in progress snapshot themselves; no new run starts.
-                    if crate::interrupt::requested() {
+                    if arld_core::interrupt::requested() {
                         break;
                     }
                     let index = next.fetch_add(1, Ordering::Relaxed);
@@ -895,8 +898,10 @@ fn copy_run(spec: &RunSpec, from: &Path, to: &Path) -> Result<()> {
 fn run_one_spec(spec: &RunSpec, path: &Path, status: &Path, run_fn: &RunFn) -> Result<()> {
     // An interrupted run with a snapshot continues from it; any other incomplete run starts again, and so does
     // one whose snapshot an older arld computed with other elementary functions.
-    let has_snapshot = path.join(crate::train::snapshot::SNAPSHOT_FILE).is_file();
-    let stale = has_snapshot && crate::train::snapshot::is_stale(path);
+    let has_snapshot = path
+        .join(arld_core::train::snapshot::SNAPSHOT_FILE)
+        .is_file();
+    let stale = has_snapshot && arld_core::train::snapshot::is_stale(path);
     if stale {
         eprintln!(
             "run {}: its snapshot was computed by an older arld with the C library's elementary functions; \
@@ -937,9 +942,10 @@ fn run_one_spec(spec: &RunSpec, path: &Path, status: &Path, run_fn: &RunFn) -> R
         run_dir::check_complete(path).context("the run's files are not whole")?;
         Ok(())
     })();
-    let interrupted = result
-        .as_ref()
-        .is_err_and(|e| e.chain().any(|c| c.is::<crate::interrupt::Interrupted>()));
+    let interrupted = result.as_ref().is_err_and(|e| {
+        e.chain()
+            .any(|c| c.is::<arld_core::interrupt::Interrupted>())
+    });
     let outcome = match &result {
         Ok(()) => RunStatus::finished("done", None),
         Err(_) if interrupted => RunStatus::finished("interrupted", None),

@@ -1,6 +1,6 @@
 //! What the page shows of the environment: one [`FrameSource`] per kind of environment, side by side.
 //!
-//! - [`GeometryFrames`]: the built-in tasks, drawn by the page from their [`Geometry`](crate::env::Geometry)
+//! - [`GeometryFrames`]: the built-in tasks, drawn by the page from their [`Geometry`](arld_core::env::Geometry)
 //!   (a few hundred bytes a frame, crisp at any size);
 //! - [`RenderedFrames`]: any environment that renders RGB images (Gymnasium's `render_mode="rgb_array"`),
 //!   sent as PNG, and only when the picture changed;
@@ -11,8 +11,8 @@
 //! into nothing when the page already shows that state.
 
 use super::protocol::ServerMsg;
-use crate::env::Env;
 use anyhow::{Context, Result, ensure};
+use arld_core::env::Env;
 use base64::Engine;
 
 /// The environment as the page shows it.
@@ -182,7 +182,7 @@ mod tests {
 
     #[test]
     fn a_rendered_frame_is_sent_only_when_it_changed() {
-        let env = crate::env::make("CartPole-v0").unwrap();
+        let env = arld_core::env::make("CartPole-v0").unwrap();
         let mut n = 0u8;
         let mut frames = RenderedFrames::new(Box::new(move || {
             n += 1;

@@ -13,7 +13,7 @@
 //! tab takes control). Anything else, or an action out of range, gets an `error` frame and
 //! changes nothing.
 
-use crate::env::Geometry;
+use arld_core::env::Geometry;
 use serde::{Deserialize, Serialize};
 
 /// One action as the page shows it: what it does and the keys that give it.
@@ -307,7 +307,7 @@ mod tests {
 
     #[test]
     fn every_builtin_environment_has_keys_for_each_action() {
-        for spec in crate::env::SPECS {
+        for spec in arld_core::env::SPECS {
             let (actions, noop) = action_keys(spec.id).expect("keys for a built-in environment");
             assert_eq!(actions.len(), spec.n_actions, "{}", spec.id);
             assert!(noop < spec.n_actions);
@@ -331,7 +331,7 @@ mod tests {
                 .unwrap()
         };
         let vx_after = |action: usize| {
-            let mut env = crate::env::make("LunarLander-v2").unwrap();
+            let mut env = arld_core::env::make("LunarLander-v2").unwrap();
             let mut obs = env.reset(Some(7));
             for _ in 0..8 {
                 env.step_into(action, &mut obs).unwrap();

@@ -3,8 +3,8 @@
 //! DejaVu Sans font embedded in the binary (assets/), so no system font library is needed. Which figures the
 //! paper has and what goes into them is [`super::figures`]' business.
 
-use crate::files::write_atomic;
 use anyhow::{Context, Result, anyhow};
+use arld_core::files::write_atomic;
 use plotters::coord::Shift;
 use plotters::element::DashedPathElement;
 use plotters::prelude::*;
@@ -14,7 +14,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Once;
 
 /// DejaVu Sans (Bitstream Vera license, see assets/DejaVuSans-LICENSE.txt).
-static FONT_BYTES: &[u8] = include_bytes!("../../assets/DejaVuSans.ttf");
+static FONT_BYTES: &[u8] = include_bytes!("../../../assets/DejaVuSans.ttf");
 const FONT_FAMILY: &str = "sans-serif";
 
 fn ensure_font() -> Result<()> {

@@ -9,11 +9,11 @@
 use super::plot::{Band, Curve, FigureContent, PALETTE, Panel, XScale};
 use super::protocol::{self, env_order};
 use super::stats::quantile;
-use crate::paper::TABLE5_METHODS;
-use crate::train::run_dir::{
+use arld_core::paper::TABLE5_METHODS;
+use arld_core::train::run_dir::{
     DEFAULT_VARIANT, EXPERT_VARIANT_PREFIX, RunRecord, T_QUERY_VARIANT_PREFIX,
 };
-use crate::train::{Method, NetKind};
+use arld_core::train::{Method, NetKind};
 use std::collections::BTreeMap;
 
 #[derive(Debug, Clone)]
@@ -399,7 +399,7 @@ pub fn paper_figures(runs: &[RunRecord]) -> Vec<PaperFigure> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::train::run_dir::{EvalPoint, RunId};
+    use arld_core::train::run_dir::{EvalPoint, RunId};
     use std::path::PathBuf;
 
     fn run(seed: u64, means: &[f64], queries: Option<Vec<u64>>) -> RunRecord {

@@ -9,7 +9,7 @@
 //! One step of the training loop, in terms of this module:
 //!
 //! ```
-//! # use arld::query::{QueryController, RuleSpec, RuleDefaults, BudgetUnit, Signals, DecisionInput};
+//! # use arld_core::query::{QueryController, RuleSpec, RuleDefaults, BudgetUnit, Signals, DecisionInput};
 //! # use rand::SeedableRng;
 //! # let mut rng = rand_pcg::Pcg64::seed_from_u64(0);
 //! # let defaults = RuleDefaults { t_query: 0.3, n_r: 1000, budget: 100, segment_len: 5, train_steps: 1000, unit: BudgetUnit::Transitions };

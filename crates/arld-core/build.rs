@@ -10,7 +10,9 @@
 //! For every `extern "C" fn __wrap_<name>` defined in `src/math.rs`, the linker gets `--wrap=<name>` (every
 //! reference to `<name>`, from Rust, the standard library or the bundled Box2D, goes to `__wrap_<name>`) and
 //! `--undefined=__wrap_<name>` (so the definition is taken from this crate's library whatever the link order).
-//! The Python extension (`python/Cargo.toml`) runs this same script, so both find `src/math.rs` next to it.
+//! Every package of the workspace that links a program runs this same script (the command line, the web expert's and
+//! the laboratory's tests, the Python extension, the fuzz targets): each finds `crates/arld-core/src/math.rs`, and
+//! reuses the Box2D archive that arld-core's own run compiled (`links = "arld_box2d"`).
 //!
 //! It also records the git commit the build comes from as `ARLD_GIT_COMMIT` (read by `src/build_info.rs`): the
 //! short hash of `HEAD`, with `-dirty` when tracked files differ from it; `unknown` outside a git checkout (a
@@ -22,21 +24,34 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 fn main() {
-    // `src/math.rs` of this package, or of its parent for the Python extension (`python/`).
+    // The core package (`crates/arld-core`): this package, or the core of the workspace this package is in (the
+    // command line at the root, the web expert and the laboratory beside it, the Python extension and the fuzz
+    // targets one folder down).
     let manifest = std::env::var("CARGO_MANIFEST_DIR").expect("cargo sets CARGO_MANIFEST_DIR");
-    let math = [".", ".."]
-        .iter()
-        .map(|up| Path::new(&manifest).join(up).join("src/math.rs"))
-        .find(|path| path.is_file())
-        .expect("build.rs finds arld's src/math.rs");
+    let core = [
+        ".",
+        "crates/arld-core",
+        "../arld-core",
+        "../crates/arld-core",
+    ]
+    .iter()
+    .map(|place| Path::new(&manifest).join(place))
+    .find(|dir| dir.join("src/math.rs").is_file() && dir.join("build.rs").is_file())
+    .expect("build.rs finds arld-core's src/math.rs");
+    let math = core.join("src/math.rs");
     println!("cargo:rerun-if-changed={}", math.display());
-    println!("cargo:rerun-if-changed=build.rs");
-    let root = math
+    println!("cargo:rerun-if-changed={}", core.join("build.rs").display());
+    // The repository: the workspace's Cargo.lock and the git checkout.
+    let root = core
         .parent()
         .and_then(Path::parent)
-        .expect("src/math.rs is in a package");
+        .expect("arld-core is in the workspace's crates/ folder");
     println!("cargo:rustc-env=ARLD_GIT_COMMIT={}", git_commit(root));
     let box2d = compile_box2d(root);
+    // For the build scripts of the packages that use arld-core (`DEP_ARLD_BOX2D_ARCHIVE`).
+    if std::env::var_os("CARGO_MANIFEST_LINKS").is_some() {
+        println!("cargo:archive={}", box2d.display());
+    }
     let target_os = std::env::var("CARGO_CFG_TARGET_OS").unwrap_or_default();
     if target_os != "linux" {
         // `--wrap` is a GNU ld / lld option; elsewhere the platform's C library computes these functions.
@@ -102,7 +117,7 @@ fn git_commit(root: &Path) -> String {
             println!("cargo:rerun-if-changed={}", path.display());
         }
     }
-    for dir in ["src", "python/src", "Cargo.toml"] {
+    for dir in ["src", "crates", "python/src", "Cargo.toml"] {
         if root.join(dir).exists() {
             println!("cargo:rerun-if-changed={}", root.join(dir).display());
         }
@@ -116,6 +131,13 @@ fn git_commit(root: &Path) -> String {
 /// archive of an earlier run of this script is kept when it was compiled from the same sources the same way
 /// (the script runs again on every commit, and Box2D's sources do not change with arld's).
 fn compile_box2d(root: &Path) -> PathBuf {
+    // A package that uses arld-core links the archive that arld-core's run of this script compiled (`links`).
+    println!("cargo:rerun-if-env-changed=DEP_ARLD_BOX2D_ARCHIVE");
+    if let Some(archive) = std::env::var_os("DEP_ARLD_BOX2D_ARCHIVE").map(PathBuf::from)
+        && archive.is_file()
+    {
+        return archive;
+    }
     let out = std::env::var("OUT_DIR").expect("cargo sets OUT_DIR");
     let archive = Path::new(&out).join("libarld_box2d.a");
     let stamp_path = Path::new(&out).join("arld_box2d.stamp");

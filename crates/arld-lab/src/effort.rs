@@ -33,8 +33,8 @@ use super::stats::{
     hodges_lehmann, holm, mann_whitney, median, sample_sd, sustained, wilcoxon_signed_rank,
 };
 use super::verdict::FINAL_EVALUATIONS;
-use crate::train::run_dir::{DEFAULT_VARIANT, RunRecord};
 use anyhow::{Context, Result};
+use arld_core::train::run_dir::{DEFAULT_VARIANT, RunRecord};
 use rand::{Rng, SeedableRng};
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
@@ -146,7 +146,7 @@ fn rule_and_budget(run: &RunRecord) -> Result<Option<(String, usize)>> {
             .expect("a querying method")
     } else {
         // The canonical form of the spec, so that equal specs written differently share a cell.
-        rule.parse::<crate::query::RuleSpec>()
+        rule.parse::<arld_core::query::RuleSpec>()
             .map(|s| s.to_string())
             .unwrap_or(rule)
     };
@@ -165,17 +165,17 @@ fn transitions_spent(run: &RunRecord) -> Result<f64> {
 
 /// Mean returns of the random policy and of the shipped weak expert on `env`.
 fn references(env: &str) -> Result<(f64, f64)> {
-    let mut e = crate::env::make(env)?;
+    let mut e = arld_core::env::make(env)?;
     let n_actions = e.n_actions();
     let mut rng = rand_pcg::Pcg64::seed_from_u64(REFERENCE_SEED);
-    let random = crate::env::rollouts(
+    let random = arld_core::env::rollouts(
         e.as_mut(),
         REFERENCE_EPISODES,
         |i| Some(REFERENCE_SEED + i as u64),
         |_| Ok::<_, anyhow::Error>(rng.random_range(0..n_actions)),
     )?;
-    let mut expert = crate::expert::from_spec("shipped:weak", env, REFERENCE_SEED, 30.0)?;
-    let stats = crate::expert::pipeline::evaluate_expert(
+    let mut expert = arld_core::expert::from_spec("shipped:weak", env, REFERENCE_SEED, 30.0)?;
+    let stats = arld_core::expert::pipeline::evaluate_expert(
         expert.as_mut(),
         env,
         REFERENCE_EPISODES,
@@ -536,9 +536,10 @@ fn comparison_tables(comparisons: &[Comparison]) -> String {
     let families: std::collections::BTreeSet<Family> =
         comparisons.iter().map(|c| c.family.clone()).collect();
     let order = |f: &Family| match f {
-        Family::Screen(e) | Family::HeldOut(e) | Family::Budgets(e) => {
-            (crate::paper::task_index(e).unwrap_or(usize::MAX), e.clone())
-        }
+        Family::Screen(e) | Family::HeldOut(e) | Family::Budgets(e) => (
+            arld_core::paper::task_index(e).unwrap_or(usize::MAX),
+            e.clone(),
+        ),
         _ => (usize::MAX, String::new()),
     };
     let mut families: Vec<Family> = families.into_iter().collect();
@@ -708,7 +709,7 @@ fn second_test(cells: &BTreeMap<CellKey, Vec<RunMetrics>>, comparisons: &[Compar
     );
     let full = SECOND_HELD_OUT_SEEDS.count();
     let rule = SECOND_HELD_OUT_RULE
-        .parse::<crate::query::RuleSpec>()
+        .parse::<arld_core::query::RuleSpec>()
         .map(|s| s.to_string())
         .unwrap_or_else(|_| SECOND_HELD_OUT_RULE.to_string());
     let mut readings = Vec::new();
@@ -1488,13 +1489,13 @@ pub fn write_effort(
          (The AUC-against-budget figure appears once a rule has runs at two budgets or more.)\n",
         report.markdown
     );
-    crate::files::write_atomic(&md_path, md.as_bytes())?;
+    arld_core::files::write_atomic(&md_path, md.as_bytes())?;
     files.push(md_path);
     let csv_path = out_dir.join("effort.csv");
-    crate::files::write_atomic(&csv_path, report.csv.as_bytes())?;
+    arld_core::files::write_atomic(&csv_path, report.csv.as_bytes())?;
     files.push(csv_path);
     let comparisons_path = out_dir.join("effort_comparisons.csv");
-    crate::files::write_atomic(&comparisons_path, report.comparisons_csv.as_bytes())?;
+    arld_core::files::write_atomic(&comparisons_path, report.comparisons_csv.as_bytes())?;
     files.push(comparisons_path);
     for (name, content) in &report.figures {
         files.extend(super::plot::draw_figure(content, out_dir, name)?);
