@@ -5,7 +5,8 @@
 //! `cargo bench --bench snapshot` (plain timing, no criterion: each measurement is seconds long). The runs
 //! with and without snapshots alternate, `ARLD_BENCH_REPS` pairs (default 5) of `ARLD_BENCH_STEPS` steps
 //! (default 60000); medians are reported. A snapshot is written in two parts: what the run waits for (the
-//! arrays into the operating system's cache) and the sync and rename a background thread does meanwhile.
+//! arrays into the operating system's cache) and the sync and rename a background thread does meanwhile. The
+//! checksum of format 2 is timed on its own too: a CRC-32C over the whole snapshot.
 
 use arld::agent::Agent;
 use arld::env;
@@ -96,6 +97,23 @@ fn full_replay_snapshot() -> f64 {
         restored.load_state("replay", &state).unwrap();
         load.push(started.elapsed().as_secs_f64());
     }
+    // The checksum's own cost (format 2): a CRC-32C over every byte of the snapshot, which a save computes
+    // in one more pass over the arrays and a load once more before using them.
+    let bytes = std::fs::read(dir.path().join(arld::train::snapshot::SNAPSHOT_FILE)).unwrap();
+    let mut crc = Vec::new();
+    let mut sum = 0u32;
+    for _ in 0..reps {
+        let started = Instant::now();
+        sum ^= crc32c::crc32c(std::hint::black_box(&bytes));
+        crc.push(started.elapsed().as_secs_f64());
+    }
+    let crc_s = median(&mut crc);
+    println!(
+        "checksum (CRC-32C) of the {:.2} MB snapshot: {:.2} ms ({:.1} GB/s; median of {reps}; {sum:08x})",
+        bytes.len() as f64 / 1e6,
+        crc_s * 1e3,
+        bytes.len() as f64 / crc_s / 1e9
+    );
     let save_s = median(&mut blocking);
     println!(
         "snapshot, LunarLander-v2 ADQN-B, replay full ({} agent + {} demonstration transitions): {:.2} MB; \

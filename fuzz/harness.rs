@@ -99,3 +99,84 @@ pub const SNAPSHOT_SEED_CONFIG: [&str; 4] = [
     "replay_size=400",
     "learning_starts=100",
 ];
+
+/// The line that separates the files within the inputs of the `run_dir` and `packed` targets.
+pub const SEPARATOR: &[u8] = b"\n%%%%\n";
+
+/// The input's parts between [`SEPARATOR`]s; `None` unless there are exactly `N`.
+fn parts<const N: usize>(data: &[u8]) -> Option<[&[u8]; N]> {
+    let mut parts = Vec::with_capacity(N);
+    let mut rest = data;
+    while let Some(at) = rest
+        .windows(SEPARATOR.len())
+        .position(|window| window == SEPARATOR)
+    {
+        parts.push(&rest[..at]);
+        rest = &rest[at + SEPARATOR.len()..];
+    }
+    parts.push(rest);
+    parts.try_into().ok()
+}
+
+/// A run directory as `arld report` reads it: its `summary.json`, `config.toml`, `eval.csv` and `queries.csv`
+/// in this order, separated by [`SEPARATOR`]; an empty `config.toml` or `queries.csv` part stands for a run
+/// without that file.
+pub fn run_dir(data: &[u8]) -> bool {
+    use arld::train::run_dir;
+    let Some([summary, config, eval, queries]) = parts::<4>(data) else {
+        return false;
+    };
+    let dir = Path::new("fuzz/CartPole-v0/adqn-bootstrap/seed0");
+    let Ok(summary) = run_dir::parse_summary(summary, &dir.join("summary.json")) else {
+        return false;
+    };
+    let Ok(eval) = run_dir::parse_curve(eval, &dir.join("eval.csv")) else {
+        return false;
+    };
+    let query_steps = if queries.is_empty() {
+        None
+    } else {
+        let Ok(steps) = run_dir::parse_query_steps(queries, &dir.join("queries.csv")) else {
+            return false;
+        };
+        Some(steps)
+    };
+    let config = (!config.is_empty()).then_some(config);
+    let Ok(record) = run_dir::run_record(dir, Path::new(""), summary, config, eval, query_steps)
+    else {
+        return false;
+    };
+    // What the report computes of one run (the statistics over runs take it from here).
+    let _ = run_dir::steps_to_solve(&record.eval, record.solve_threshold, record.train_steps);
+    // The curve writes out and reads back to itself.
+    let text = run_dir::curve_csv(&record.eval);
+    let again = run_dir::parse_curve(text.as_bytes(), Path::new("again.csv"))
+        .expect("a written curve reads back");
+    assert_eq!(again.len(), record.eval.len());
+    true
+}
+
+/// A packed task directory's files (arld::experiment::pack::TASK_FILES, in that order, separated by
+/// [`SEPARATOR`]), its CSV tables uncompressed: the harness compresses them, so that the fuzzer changes the
+/// tables' text rather than gzip's bytes.
+pub fn packed(data: &[u8]) -> bool {
+    use std::io::Write;
+    let Some(parts) = parts::<8>(data) else {
+        return false;
+    };
+    let files: Vec<Vec<u8>> = arld::experiment::pack::TASK_FILES
+        .iter()
+        .zip(parts)
+        .map(|(name, part)| {
+            if name.ends_with(".gz") {
+                let mut gz = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::fast());
+                gz.write_all(part).expect("compressing into memory");
+                gz.finish().expect("compressing into memory")
+            } else {
+                part.to_vec()
+            }
+        })
+        .collect();
+    let files: [&[u8]; 8] = std::array::from_fn(|i| files[i].as_slice());
+    arld::experiment::pack::decode_tables(files).is_ok()
+}

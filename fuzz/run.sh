@@ -2,13 +2,16 @@
 # Runs every fuzz target for a set time (default 60 s each; SECONDS_PER_TARGET=N, or name targets as
 # arguments) and copies any input that crashed a target into fuzz/regressions/<target>/, where
 # tests/fuzz_regressions.rs replays it in the ordinary test suite. Needs cargo-fuzz (`cargo install
-# cargo-fuzz`); on a stable toolchain RUSTC_BOOTSTRAP=1 lets it use libFuzzer's sanitizer flags.
-# Prints one line per target: its time, its executions and what it found.
+# cargo-fuzz`); on a stable toolchain RUSTC_BOOTSTRAP=1 (set here) lets it use the nightly-only sanitizer flags,
+# so no nightly toolchain is needed. One target at a time, e.g. niced on a shared machine:
+#   SECONDS_PER_TARGET=900 nice -n 19 fuzz/run.sh run_dir
+# Prints one line per target: its time, its executions, the coverage libFuzzer reached (edges, features) and
+# what it found.
 set -euo pipefail
 cd "$(dirname "$0")"
 seconds="${SECONDS_PER_TARGET:-60}"
 targets=("$@")
-[ "${#targets[@]}" -gt 0 ] || targets=(config demos checkpoint trace snapshot)
+[ "${#targets[@]}" -gt 0 ] || targets=(config demos checkpoint trace run_dir packed snapshot)
 export RUSTC_BOOTSTRAP=1
 cargo fuzz build -O
 # The snapshot target's seed is a snapshot of this arld (a snapshot records the version that wrote it, so none
@@ -41,13 +44,14 @@ for t in "${targets[@]}"; do
   code=$?
   set -e
   execs=$(grep -o 'stat::number_of_executed_units: *[0-9]*' "$log" | grep -o '[0-9]*$' | tail -1)
+  cov=$(grep -o 'cov: [0-9]* ft: [0-9]*' "$log" | tail -1)
   found=0
   for crash in artifacts/"$t"/crash-* artifacts/"$t"/oom-* artifacts/"$t"/timeout-* artifacts/"$t"/leak-*; do
     [ -e "$crash" ] || continue
     cp "$crash" "regressions/$t/"
     found=$((found + 1))
   done
-  echo "$t: ${seconds} s, ${execs:-?} executions, exit $code, $found crashing inputs (in regressions/$t)"
+  echo "$t: ${seconds} s, ${execs:-?} executions, ${cov:-cov: ?}, exit $code, $found crashing inputs (in regressions/$t)"
   [ "$code" -eq 0 ] || status=1
 done
 exit "$status"

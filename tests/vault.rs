@@ -488,15 +488,46 @@ fn numbers_too_large_for_a_clock_are_errors_not_panics() {
 
 #[test]
 fn an_endless_input_is_read_with_a_bound() {
-    // `env check` on a file without line breaks, under a memory cap of 1 GiB (a reader without a bound fails
-    // on its allocation: an abort, or it is killed at the deadline).
+    // `env check` on an endless device, and on a file of 64 GiB without line breaks (sparse: no disk used),
+    // under a memory cap of 1 GiB: a reader without a bound fails on its allocation (an abort), or is killed at
+    // the deadline.
+    let dir = tempfile::tempdir().unwrap();
+    let long = dir.path().join("no-line-breaks.jsonl");
+    std::fs::File::create(&long)
+        .unwrap()
+        .set_len(64 << 30)
+        .unwrap();
+    for (input, needles) in [
+        ("/dev/zero", ["/dev/zero", "a device"]),
+        (
+            long.to_str().unwrap(),
+            ["no-line-breaks.jsonl", "longer than"],
+        ),
+    ] {
+        let out = bounded(
+            &format!("'{ARLD}' env check '{input}'"),
+            1 << 20,
+            Duration::from_secs(60),
+        )
+        .unwrap_or_else(|| panic!("arld env check {input} did not end"));
+        assert_refused(&out, &needles);
+    }
+}
+
+#[test]
+fn a_named_pipe_given_as_input_is_refused_at_once() {
+    // Opening a pipe nobody writes to waits forever; arld refuses it, naming it.
+    let dir = tempfile::tempdir().unwrap();
+    let pipe = dir.path().join("trace.jsonl");
+    let made = Command::new("mkfifo").arg(&pipe).status().expect("mkfifo");
+    assert!(made.success());
     let out = bounded(
-        &format!("'{ARLD}' env check /dev/zero"),
+        &format!("'{ARLD}' env check '{}'", pipe.display()),
         1 << 20,
-        Duration::from_secs(60),
+        Duration::from_secs(30),
     )
-    .expect("arld env check /dev/zero did not end");
-    assert_refused(&out, &["/dev/zero", "longer than"]);
+    .expect("arld env check on a named pipe did not end");
+    assert_refused(&out, &["trace.jsonl", "a named pipe"]);
 }
 
 /// A run of ADQN asking the process expert `command` (its first question comes within its first steps).

@@ -11,6 +11,7 @@ import shutil
 import sys
 import tempfile
 import time
+import weakref
 from pathlib import Path
 from typing import Any, Callable, Dict, List, Literal, Optional, Protocol, Sequence, Tuple, Union, cast
 
@@ -58,8 +59,10 @@ SB3_NAMES = {
     "lambda_margin": "lambda",
 }
 # defaults="sb3": Stable-Baselines3's DQN defaults in arld's keys. SB3 trains once num_timesteps > learning_starts
-# (arld: >=), so its 100 is arld's 101; its target_update_interval of 10,000 environment steps is 2,500 updates at
-# train_freq=4. `train_steps` (the ε schedule's horizon) is each new run's learn(total_timesteps) unless given.
+# (arld: >=), so its 100 is arld's 101, and acts uniformly at random before (random_before_learning); its
+# target_update_interval counts environment steps from the first (target_period_in_steps), copying when
+# _n_calls % 10,000 == 0. `train_steps` (the ε schedule's horizon) is each new run's learn(total_timesteps) unless
+# given.
 SB3_DEFAULTS: Dict[str, Any] = {
     "lr": 1e-4,
     "replay_size": 1_000_000,
@@ -67,7 +70,9 @@ SB3_DEFAULTS: Dict[str, Any] = {
     "batch_size": 32,
     "gamma": 0.99,
     "train_freq": 4,
-    "target_period": 2_500,
+    "target_period": 10_000,
+    "target_period_in_steps": True,
+    "random_before_learning": True,
     "eps_start": 1.0,
     "eps_end": 0.05,
     "eps_fraction": 0.1,
@@ -140,17 +145,22 @@ class Agent:
     Every hyperparameter is a keyword (None: the preset's value; `arld.preset(method, env_id)` shows them).
     SB3's names are accepted where the meaning is the same (learning_rate=lr, buffer_size=replay_size,
     exploration_fraction=eps_fraction, exploration_initial_eps=eps_start, exploration_final_eps=eps_end,
-    target_update_interval=target_period, counted in updates, i.e. steps when train_freq=1,
+    target_update_interval=target_period, counted in updates (in environment steps as SB3 with defaults="sb3"),
     max_grad_norm=grad_clip).
 
     defaults="sb3": Stable-Baselines3's DQN defaults instead of the paper's preset (`arld.SB3_DEFAULTS`): a plain
     network (unless net= is given), learning_rate 1e-4, buffer_size 1M, batch 32, gamma 0.99, train_freq 4, the
     first update after step 100 (arld's learning_starts 101: SB3 starts when num_timesteps > learning_starts, arld
-    when >=), a target copy every 10,000 steps (target_update_interval 2,500 updates), Huber loss, max_grad_norm
-    10, no double Q, no prioritized replay, ε from 1.0 to 0.05 over the first 10% of each new run's
-    `learn(total_timesteps)` (unless train_steps= is given). Keywords given still win (in arld's units). Unlike
-    SB3, ε-greedy also acts before learning_starts (SB3 samples uniformly there), and `learn(n,
-    reset_num_timesteps=False)` keeps the run's horizon (SB3 stretches it to the new total).
+    when >=), uniformly random actions before it (random_before_learning), a target copy after every 10,000th
+    environment step counted from the first, before that step's update, as SB3's `_n_calls %
+    target_update_interval == 0` (target_update_interval 10,000 with target_period_in_steps), Huber loss,
+    max_grad_norm 10, no double Q, no prioritized replay, ε from 1.0 to 0.05 over the first 10% of each new run's
+    `learn(total_timesteps)` (unless train_steps= is given). Keywords given still win (in arld's units). One
+    difference remains: `learn(n, reset_num_timesteps=False)` keeps the run's horizon, where SB3 stretches its
+    schedule to num_timesteps + n. arld's horizon is the run's `train_steps`, part of its configuration
+    (config.toml, the snapshot) and fixed for the run, which is what makes learn(a) then learn(b,
+    reset_num_timesteps=False) equal learn(a + b); SB3's ε after the second learn depends on how the run was
+    split. To have SB3's schedule of one learn(total), give train_steps=total when making the agent.
 
     Network: two hidden layers, 64 and 64 wide as in the paper; `hidden=[256, 256]` (or SB3's
     `policy_kwargs=dict(net_arch=[256, 256])`) sets their widths.
@@ -164,7 +174,10 @@ class Agent:
     - exploration_fraction: fraction of train_steps over which ε anneals [0.1]
     - exploration_initial_eps: ε at the start (eps_start) [0.9]
     - exploration_final_eps: ε at the end (eps_end) [0.01]
-    - target_update_interval: updates between target copies (target_period) [preset]
+    - target_update_interval: updates between target copies (target_period) [preset]; environment steps with
+      target_period_in_steps
+    - target_period_in_steps: target_update_interval counts environment steps from the first, as SB3 [False]
+    - random_before_learning: uniformly random actions before learning_starts, as SB3 [False]
     - learning_starts: environment steps before the first update [500/1000]
     - train_freq: environment steps per update [1]
     - max_grad_norm: global gradient-norm clip (grad_clip) [10]
@@ -257,6 +270,8 @@ class Agent:
         n_demo: Optional[int] = None,
         pretrain_steps: Optional[int] = None,
         queries_from_learning_starts: Optional[bool] = None,
+        random_before_learning: Optional[bool] = None,
+        target_period_in_steps: Optional[bool] = None,
         exact_factorised_var: Optional[bool] = None,
         expert_timeout: Optional[float] = None,
         demo_file: Optional[str] = None,
@@ -528,12 +543,14 @@ class Agent:
         (locals, globals) -> bool, called after every step with the live model (predict, get_parameters, save,
         evaluations and queries are those of that step; a save is written when the callback returns); returning
         False stops training there (the run can be continued). One learn is one rollout: on_rollout_start when it
-        begins, on_rollout_end when it returns. An exception from a callback or a Python expert pauses the run
-        whole (num_timesteps, weights, replay, queries and budget kept; the expert's open question is asked
-        again): learn raises it with a note, and learn(..., reset_num_timesteps=False) goes on as if it had not
-        happened. An exception from the environment ends the run. log_dir (or tensorboard_log= of the
-        agent, in numbered folders <tb_log_name>_<n>) writes the run directory: config.toml, CSVs, TensorBoard
-        events, weights, summary.json. log_interval: with verbose >= 1, a line on standard output every
+        begins, on_rollout_end when it returns. An exception from a callback, a Python expert or the environment
+        (its step or reset) pauses the run whole (num_timesteps, weights, replay, queries and budget kept; the
+        expert's open question is asked again, the environment's step or reset is taken again): learn raises it
+        with a note, with a run directory a snapshot is written there, and learn(..., reset_num_timesteps=False)
+        goes on as if it had not happened. log_dir (or tensorboard_log= of the agent, in numbered folders
+        <tb_log_name>_<n>) writes the run directory: config.toml, CSVs, TensorBoard events, weights,
+        summary.json; the run holds its lock (.arld.lock) until close() (or a new run), so no other Agent or
+        `arld train` writes there meanwhile. log_interval: with verbose >= 1, a line on standard output every
         log_interval finished episodes (as SB3's DQN); None or a verbose of 0 prints none (the run directory and
         TensorBoard get every value either way).
         """
@@ -574,10 +591,19 @@ class Agent:
             with _stop_on_sigterm():
                 self._live_step = self._run.advance(until, callbacks, bar)
         except BaseException as e:
-            # The run paused whole (an exception from a callback or an expert, Ctrl-C) or ended (the
-            # environment's exception): it stands where its last step left it.
+            # The run paused whole (an exception from a callback, an expert or the environment, Ctrl-C) or
+            # ended (an error of the run itself): it stands where its last step left it.
             self._live_step = self._run.num_timesteps
             if not isinstance(e, KeyboardInterrupt):
+                if self._run_dir is not None and self._run.num_timesteps > 0:
+                    path = os.path.join(self._run_dir, "snapshot.safetensors")
+                    try:
+                        self.save(path)
+                    except RuntimeError:
+                        pass  # the run ended: nothing to continue from
+                    else:
+                        if hasattr(e, "add_note"):  # Python 3.11 on
+                            e.add_note(f"arld: the run's snapshot is in {path}")
                 raise
             # A stop (Ctrl-C, SIGTERM), also while a person's question is open: the run paused whole (a question
             # open is asked again by the next learn). With a run directory, its snapshot goes there too.
@@ -603,6 +629,31 @@ class Agent:
             print(f"arld {self.method}-{self.net} on {self.env_id}: {self._live_step} steps, last evaluation "
                   f"{shown}, budget used {self.summary['queries_used']}")
         return self
+
+    def close(self) -> None:
+        """Ends the run's thread: its files are finished, and its run directory's lock (.arld.lock) is released,
+        so that another Agent or `arld train --resume` may continue there. The agent keeps everything: predict,
+        evaluations, queries and save work as before, and the next learn continues the run as for an agent from
+        Agent.load (in a run directory only when given again as log_dir). Nothing happens when no run is alive."""
+        run = self._run
+        if run is None:
+            return
+        if self._in_callback():
+            raise RuntimeError("close() cannot be called from inside a callback; return False to stop training")
+        if run.num_timesteps > 0:
+            # The run's state, to continue from as from Agent.load of a save.
+            keep = tempfile.mkdtemp(prefix="arld-closed-")
+            weakref.finalize(self, shutil.rmtree, keep, True)
+            path: Optional[str] = os.path.join(keep, "run.arld")
+            try:
+                run.save(path)
+            except RuntimeError:
+                path = None  # the run had ended: it cannot be continued
+            self._refresh()
+            self._prior_evaluations = list(self._evaluations)
+            self._resume = path
+        run.close()
+        self._run = None
 
     def _refresh(self) -> None:
         run = self._run
@@ -730,8 +781,9 @@ class Agent:
              eval_env: Any = None, **kwargs: Any) -> "Agent":
         """An agent from `save` (the run's full state: `learn` continues it; pass the environment, and the expert
         when it was a Python one) or from plain weights (`arld train`'s weights.safetensors: it acts only). A loaded
-        run has its `evaluations` (they are in the file); its `queries` list only those after the snapshot (the
-        run directory's queries.csv holds the earlier ones)."""
+        run has its `evaluations` and its `queries` as the agent that saved it had them (both are in the file;
+        a file written before the queries were kept there has none, and its run directory's queries.csv holds
+        them)."""
         path = str(path)
         if not os.path.exists(path) and os.path.exists(path + ".zip"):
             path += ".zip"
@@ -780,10 +832,11 @@ class Agent:
                 raise ValueError(f"{path} was trained with the Python expert {spec[7:]}: pass it as expert=")
             expert = spec
         agent = cls(cfg["method"], env, cfg["net"], expert, seed=cfg["seed"], eval_env=eval_env, **kwargs)
-        policy, _cfg, step, curve = _arld.snapshot_policy(path)
+        policy, _cfg, step, curve, queries = _arld.snapshot_policy(path)
         agent.config = cfg
-        # The evaluations travel in the snapshot; the query events do not (queries.csv of its run directory).
+        # The evaluations and the queries travel in the snapshot.
         agent._evaluations = list(json.loads(curve))
+        agent._queries = list(queries)
         agent._prior_evaluations = list(agent._evaluations)
         agent.policy_kwargs = {"net_arch": list(cfg["hidden"])}
         agent._policy, agent._resume, agent._live_step = policy, path, step

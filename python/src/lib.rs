@@ -93,8 +93,9 @@ struct PyEnv {
     obj: Py<PyAny>,
     spec: &'static EnvSpec,
     errors: ErrorSlot,
-    /// The last `reset` raised: the next step reports it (the trait's `reset` cannot fail).
-    reset_failed: Option<String>,
+    /// Why the last `reset` failed: the loop takes it after an episode's reset (and pauses when the environment
+    /// raised); otherwise the next step reports it (the trait's `reset` cannot fail).
+    reset_failed: Option<EnvError>,
 }
 
 impl PyEnv {
@@ -123,32 +124,47 @@ impl Env for PyEnv {
             self.obj
                 .call_method1(py, "reset", (seed,))
                 .and_then(|o| o.extract::<Vec<f32>>(py))
-                .map_err(|e| self.errors.keep(e))
+                .map_err(|e| EnvError::Raised {
+                    env: self.spec.id.to_string(),
+                    msg: format!("reset failed: {}", self.errors.keep(e)),
+                })
         })
-        .and_then(|obs| self.checked_obs(obs));
+        .and_then(|obs| {
+            self.checked_obs(obs)
+                .map_err(|m| self.error(format!("reset failed: {m}")))
+        });
         match result {
             Ok(first) => {
                 self.reset_failed = None;
                 obs.copy_from_slice(&first);
             }
-            Err(msg) => {
-                self.reset_failed = Some(format!("reset failed: {msg}"));
+            Err(err) => {
+                self.reset_failed = Some(err);
                 obs.fill(0.0);
             }
         }
     }
 
+    fn take_reset_error(&mut self) -> Option<EnvError> {
+        self.reset_failed.take()
+    }
+
     fn step_into(&mut self, action: usize, obs: &mut [f32]) -> Result<Outcome, EnvError> {
-        if let Some(msg) = &self.reset_failed {
-            return Err(self.error(msg.clone()));
+        // A failed reset that the loop did not take (the first one, or one while an episode is replayed) ends
+        // the run.
+        if let Some(err) = &self.reset_failed {
+            return Err(self.error(format!("the last reset failed ({err})")));
         }
         let result = Python::attach(|py| {
             py.check_signals()?;
             let out = self.obj.call_method1(py, "step", (action,))?;
             out.extract::<(Vec<f32>, f64, bool, bool)>(py)
         });
-        let (next, reward, terminated, truncated) =
-            result.map_err(|e| self.error(self.errors.keep(e)))?;
+        // An exception (the environment's own, or a value of the wrong type) pauses the run whole.
+        let (next, reward, terminated, truncated) = result.map_err(|e| EnvError::Raised {
+            env: self.spec.id.to_string(),
+            msg: self.errors.keep(e),
+        })?;
         let next = self.checked_obs(next).map_err(|m| self.error(m))?;
         obs.copy_from_slice(&next);
         Ok(Outcome {
@@ -271,7 +287,7 @@ fn resolve_config(
 ) -> PyResult<String> {
     let cfg = resolve(env, method, net, seed, &values, preset_of)
         .map_err(|e| value_error(format!("{e:#}")))?;
-    serde_json::to_string(&cfg).map_err(|e| runtime_error(e.to_string()))
+    Ok(cfg.to_json())
 }
 
 fn resolve(
@@ -918,6 +934,15 @@ impl Run {
         })
     }
 
+    /// The live target network (as a policy), inside this run's callback; `None` elsewhere. It changes only at
+    /// a target copy.
+    fn live_target_policy(&self) -> Option<Policy> {
+        let step = self.step.load(Ordering::Relaxed);
+        with_lent(self.id, |agent, _| {
+            Policy::exploring(agent.target_network().clone(), &self.cfg, step)
+        })
+    }
+
     /// The live network's test-policy actions for rows of observations, inside this run's callback; `None`
     /// elsewhere.
     fn live_actions(&self, rows: Vec<Vec<f32>>) -> PyResult<Option<Vec<usize>>> {
@@ -1004,6 +1029,30 @@ impl Run {
     }
 }
 
+/// Takes the lock of the run directory `dir` (created if missing), as `arld train` does: one process, and in it
+/// one run, at a time. Refused naming the holder (and, when it is this process, how to end its run).
+fn lock_run_dir(dir: &Path) -> anyhow::Result<arld::experiment::dir_lock::DirLock> {
+    use arld::experiment::dir_lock::{DirLock, Holder};
+    anyhow::ensure!(
+        !dir.exists() || dir.is_dir(),
+        "the run directory {} exists and is not a directory",
+        dir.display()
+    );
+    std::fs::create_dir_all(dir)
+        .map_err(|e| anyhow::anyhow!("cannot create the run directory {}: {e}", dir.display()))?;
+    DirLock::acquire(dir, train::run_dir::LOCK_FILE).map_err(|e| {
+        let holder = std::fs::read_to_string(dir.join(train::run_dir::LOCK_FILE))
+            .ok()
+            .and_then(|text| serde_json::from_str::<Holder>(&text).ok());
+        match holder {
+            Some(h) if h.pid == std::process::id() => e.context(
+                "another Agent of this Python process runs in it; its close() ends that run",
+            ),
+            _ => e,
+        }
+    })
+}
+
 /// Starts a training run in its own thread (it waits for `Run.advance`): the configuration as JSON text (from
 /// `resolve_config`), the environments (Python objects, or `None` for the built-in one of the configuration's
 /// id; `test_envs` one per test episode, stepped in lockstep), the expert (a Python callable, or `None` to
@@ -1064,9 +1113,18 @@ fn start_run(
         }
         None => None,
     };
+    // One process per run directory, as `arld train`: the lock is taken here (a second run is refused before
+    // anything starts, naming the holder) and held by the run's thread until it ends.
+    let lock = match &log_dir {
+        Some(dir) => {
+            Some(lock_run_dir(Path::new(dir)).map_err(|e| errors.raise(py, e, runtime_error))?)
+        }
+        None => None,
+    };
     let thread_cfg = cfg.clone();
     let thread_errors = errors.clone();
     let body = move || -> anyhow::Result<()> {
+        let _lock = lock;
         let cfg = thread_cfg;
         let errors = thread_errors;
         // Wait for the first command: the run starts on the first `advance`.
@@ -1166,7 +1224,8 @@ fn start_run(
                 cfg.train_steps as u64,
                 false,
             )?,
-            (None, _) => RunLog::in_memory(),
+            (None, Some(state)) => RunLog::in_memory_resumed(&train::resume_position(state)?),
+            (None, None) => RunLog::in_memory(),
         };
         RunBuilder::new(&cfg)
             .env(env)
@@ -1203,10 +1262,14 @@ fn start_run(
 
 /// The network of a run's snapshot file, acting (and exploring) as the run did at its step; returns the policy,
 /// the configuration as JSON text, the step and the run's evaluations so far (JSON text: step, mean, std, min,
-/// max of each). The snapshot does not hold the query events (only how far queries.csv had been written).
+/// max of each) and its queries so far (as [`Run::queries`]; none from a snapshot of an arld that did not keep
+/// them).
 #[pyfunction]
-fn snapshot_policy(path: &str) -> PyResult<(Policy, String, usize, String)> {
-    let read = || -> anyhow::Result<(Policy, String, usize, String)> {
+fn snapshot_policy(
+    py: Python<'_>,
+    path: &str,
+) -> PyResult<(Policy, String, usize, String, Py<PyList>)> {
+    let read = || -> anyhow::Result<(Policy, String, usize, String, Vec<QueryEvent>)> {
         let text = train::snapshot::recorded_config(Path::new(path))?;
         let cfg: TrainConfig = toml::from_str(&text)?;
         let spec = env::spec(&cfg.env)?;
@@ -1221,15 +1284,22 @@ fn snapshot_policy(path: &str) -> PyResult<(Policy, String, usize, String)> {
         let st: serde_json::Value = state.value("loop")?;
         let step = st["step"].as_u64().unwrap_or(0) as usize;
         let policy = Policy::exploring(agent.network().clone(), &cfg, step);
-        let curve = train::resume_position(&state)?.curve;
+        let position = train::resume_position(&state)?;
         Ok((
             policy,
-            serde_json::to_string(&cfg)?,
+            cfg.to_json(),
             step,
-            serde_json::to_string(&curve)?,
+            serde_json::to_string(&position.curve)?,
+            position.query_events,
         ))
     };
-    read().map_err(|e| value_error(format!("cannot load {path}: {e:#}")))
+    let (policy, cfg, step, curve, queries) =
+        read().map_err(|e| value_error(format!("cannot load {path}: {e:#}")))?;
+    let list = PyList::empty(py);
+    for q in &queries {
+        list.append(query_dict(py, q)?)?;
+    }
+    Ok((policy, cfg, step, curve, list.unbind()))
 }
 
 /// The configuration a snapshot file recorded, as JSON text (`None` when the file is plain weights).
@@ -1241,9 +1311,7 @@ fn snapshot_config(path: &str) -> PyResult<Option<String>> {
             let cfg: TrainConfig = toml::from_str(&text).map_err(|e| {
                 value_error(format!("{path}: its configuration cannot be read: {e}"))
             })?;
-            serde_json::to_string(&cfg)
-                .map(Some)
-                .map_err(|e| runtime_error(e.to_string()))
+            Ok(Some(cfg.to_json()))
         }
     }
 }

@@ -2,8 +2,13 @@
 exceptions that keep the run, wrapped and re-limited tasks, any observation space, and arld.make as a
 gymnasium.Env. Live values are compared with a second run of the same seed stopped at that step."""
 
+import json
+import os
 import pickle
+import shutil
+import subprocess
 import sys
+from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
@@ -354,6 +359,7 @@ def test_continuing_a_loaded_run_in_its_log_dir_keeps_its_records(tmp_path):
     first = agent()
     first.learn(800, log_dir=tmp_path / "run")
     first.save(tmp_path / "snap.arld")
+    first.close()  # its run holds the directory until then
     loaded = arld.Agent.load(tmp_path / "snap.arld", gym.make("CartPole-v1"), expert=expert)
     loaded.learn(700, log_dir=tmp_path / "run")
     agent().learn(1500, log_dir=tmp_path / "whole")
@@ -378,3 +384,100 @@ def test_verbose_with_no_evaluation_yet_and_bad_observations_for_predict(capsys)
     for bad in (np.zeros((2, 2)), np.zeros((1, 1, 4)), np.array([0.0, np.nan, 0.0, 0.0])):
         with pytest.raises(ValueError, match="shape|NaN"):
             model.predict(bad)
+
+
+def test_a_loaded_agent_has_the_queries_of_the_agent_that_saved_it(tmp_path):
+    first = agent().learn(200)
+    assert len(first.queries) > 5
+    first.save(tmp_path / "snap.arld")
+    loaded = arld.Agent.load(tmp_path / "snap.arld", gym.make("CartPole-v1"), expert=expert)
+    assert loaded.queries == first.queries and loaded.evaluations == first.evaluations
+    loaded.learn(1300)
+    whole = agent().learn(1500)
+    assert loaded.queries == whole.queries and len(whole.queries) > len(first.queries)
+
+
+ARLD = Path(__file__).resolve().parents[2] / "target" / "release" / "arld"
+
+
+def test_a_run_directory_holds_one_run_at_a_time(tmp_path):
+    run = tmp_path / "run"
+    first = agent().learn(600, log_dir=run)
+    holder = json.loads((run / ".arld.lock").read_text())
+    assert holder["pid"] == os.getpid()
+    second = agent()
+    with pytest.raises(RuntimeError, match=rf"close\(\).*process {os.getpid()} on host"):
+        second.learn(300, log_dir=run)
+    assert not (tmp_path / "run" / "snapshot.safetensors").exists()
+    if ARLD.is_file():  # the command line is refused too, naming this process
+        out = subprocess.run([str(ARLD), "train", "--env", "CartPole-v1", "--method", "dqn", "--quiet",
+                              "--overwrite", "-o", str(run)], capture_output=True, text=True)
+        assert out.returncode != 0 and f"process {os.getpid()} on host" in out.stderr, out.stderr
+    queries = list(first.queries)
+    first.close()
+    assert not (run / ".arld.lock").exists()
+    # Closed, the agent keeps its run: it predicts, and continues as if it had not been closed.
+    assert first.queries == queries and first.predict(OBS[0])[0] in (0, 1)
+    first.learn(900, reset_num_timesteps=False)
+    whole = agent().learn(1500)
+    assert first.queries == whole.queries and first.evaluations == whole.evaluations
+    assert same_params(params(first), params(whole))
+    # The directory is free: the second agent's run takes it.
+    second.learn(300, log_dir=run)
+    assert json.loads((run / ".arld.lock").read_text())["pid"] == os.getpid()
+    second.close()
+    if ARLD.is_file():
+        out = subprocess.run([str(ARLD), "train", "--env", "CartPole-v0", "--method", "dqn", "--quiet",
+                              "--set", "train_steps=200", "--overwrite", "-o", str(run)], capture_output=True, text=True)
+        assert out.returncode == 0, out.stderr
+
+
+class Flaky(gym.Wrapper):
+    """Raises once: at its `fail_step`-th step (before stepping), or at its `fail_reset`-th reset."""
+
+    def __init__(self, env, fail_step=None, fail_reset=None):
+        super().__init__(env)
+        self.steps, self.resets, self.fail_step, self.fail_reset = 0, 0, fail_step, fail_reset
+
+    def step(self, action):
+        self.steps += 1
+        if self.steps == self.fail_step:
+            raise OSError("the simulator dropped the connection")
+        return self.env.step(action)
+
+    def reset(self, **kwargs):
+        self.resets += 1
+        if self.resets == self.fail_reset:
+            raise OSError("the simulator could not restart")
+        return self.env.reset(**kwargs)
+
+
+@pytest.mark.parametrize("where", ["step", "reset"])
+def test_an_exception_from_the_environment_pauses_the_run_whole_and_it_goes_on_as_if_not(tmp_path, where):
+    fail = {"fail_step": 450} if where == "step" else {"fail_reset": 20}
+    model = agent(env=Flaky(gym.make("CartPole-v1"), **fail), eval_env=gym.make("CartPole-v1"))
+    run = tmp_path / "run"
+    with pytest.raises(OSError, match="the simulator") as info:
+        model.learn(1500, log_dir=run)
+    if sys.version_info >= (3, 11):
+        notes = " ".join(info.value.__notes__)
+        assert "paused whole" in notes and "snapshot.safetensors" in notes
+    paused_at = model.num_timesteps
+    assert 0 < paused_at < 1500
+    # The logs are whole (every line ended) and the snapshot is there.
+    for f in ("queries.csv", "episodes.csv"):
+        assert (run / f).read_bytes().endswith(b"\n"), f
+    shutil.copy(run / "snapshot.safetensors", tmp_path / "at-exception.arld")
+    queries_then = list(model.queries)
+    model.learn(1500 - paused_at, reset_num_timesteps=False)
+    whole = agent(eval_env=gym.make("CartPole-v1")).learn(1500, log_dir=tmp_path / "whole")
+    assert model.queries == whole.queries and model.evaluations == whole.evaluations
+    assert same_params(params(model), params(whole))
+    for f in ("queries.csv", "eval.csv", "episodes.csv"):
+        assert (run / f).read_bytes() == (tmp_path / "whole" / f).read_bytes(), f
+    # Another process continues from the snapshot written at the exception: the same run again.
+    loaded = arld.Agent.load(tmp_path / "at-exception.arld", gym.make("CartPole-v1"), expert=expert,
+                             eval_env=gym.make("CartPole-v1"))
+    assert loaded.queries == queries_then
+    loaded.learn(1500 - paused_at)
+    assert loaded.queries == whole.queries and same_params(params(loaded), params(whole))

@@ -374,7 +374,8 @@ def test_defaults_sb3_are_those_of_stable_baselines3_dqn():
     assert cfg["lr"] == sb3.learning_rate and cfg["replay_size"] == sb3.buffer_size
     assert cfg["batch_size"] == sb3.batch_size and cfg["gamma"] == sb3.gamma
     assert cfg["train_freq"] == sb3.train_freq.frequency and sb3.gradient_steps == 1 and sb3.tau == 1.0
-    assert cfg["target_period"] * cfg["train_freq"] == sb3.target_update_interval
+    assert cfg["target_period"] == sb3.target_update_interval and cfg["target_period_in_steps"] is True
+    assert cfg["random_before_learning"] is True
     assert cfg["grad_clip"] == sb3.max_grad_norm
     assert (cfg["eps_start"], cfg["eps_end"], cfg["eps_fraction"]) == (
         sb3.exploration_initial_eps, sb3.exploration_final_eps, sb3.exploration_fraction)
@@ -417,3 +418,97 @@ def test_defaults_sb3_are_those_of_stable_baselines3_dqn():
     assert agent.config["train_steps"] == 200
     fixed = arld.Agent("dqn", "CartPole-v1", defaults="sb3", train_steps=1000, eval_period=100, eval_episodes=2)
     assert fixed.learn(100).config["train_steps"] == 1000
+
+
+class _Actions(gym.Wrapper):
+    """Records each step's observation and action."""
+
+    def __init__(self, env):
+        super().__init__(env)
+        self.seen, self.last = [], None
+
+    def reset(self, **kwargs):
+        obs, info = self.env.reset(**kwargs)
+        self.last = obs
+        return obs, info
+
+    def step(self, action):
+        self.seen.append((self.last, int(action)))
+        obs, reward, terminated, truncated, info = self.env.step(action)
+        self.last = obs
+        return obs, reward, terminated, truncated, info
+
+
+def test_defaults_sb3_take_random_actions_copy_the_target_and_anneal_as_sb3_step_by_step(tmp_path):
+    """Against SB3's own attributes, read after each of its steps: its target copies (`_n_calls %
+    target_update_interval == 0`) and ε, and its uniformly random actions while num_timesteps < learning_starts."""
+    from stable_baselines3 import DQN
+
+    interval, starts, total = 50, 100, 400
+
+    class Recording(DQN):
+        def _on_step(self):
+            super()._on_step()
+            self.record.append((self.num_timesteps, self._n_calls % max(self.target_update_interval, 1) == 0,
+                                self.exploration_rate))
+
+    sb3 = Recording("MlpPolicy", gym.make("CartPole-v1"), learning_starts=starts, target_update_interval=interval,
+                    seed=0, device="cpu")
+    sb3.record = []
+    sb3.learn(total)
+    assert [t for t, _, _ in sb3.record] == list(range(1, total + 1))
+    sb3_copies = [t for t, copied, _ in sb3.record if copied]
+    first_update = next(t for t in range(1, total) if t % sb3.train_freq.frequency == 0 and t > starts)
+
+    # arld, the same settings in its units (its learning_starts is SB3's + 1).
+    model = arld.Agent("dqn", gym.make("CartPole-v1"), defaults="sb3", learning_starts=starts + 1,
+                       target_update_interval=interval, seed=0, eval_period=total, eval_episodes=2)
+    targets, eps = [], []
+
+    def record(local_vars, global_vars):
+        run = local_vars["self"]._run
+        path = str(tmp_path / "target.safetensors")
+        run.live_target_policy().save(path, {})
+        targets.append(Path(path).read_bytes())
+        eps.append((local_vars["self"].num_timesteps, local_vars["self"].exploration_rate))
+        return True
+
+    model.learn(total, callback=record)
+    assert [t for t, _ in eps] == list(range(1, total + 1))
+    # ε after every step, as SB3's exploration_rate after the same step.
+    for (t, mine), (t_sb3, _, theirs) in zip(eps, sb3.record):
+        assert t == t_sb3 and mine == pytest.approx(theirs, abs=1e-12), t
+    # The target changes exactly at SB3's copies once the network has learned (copies before the first update
+    # copy an unchanged network).
+    changed = [t for t in range(2, total + 1) if targets[t - 1] != targets[t - 2]]
+    assert changed == [t for t in sb3_copies if t > first_update] and len(changed) >= 5
+    assert sb3_copies == list(range(interval, total + 1, interval))
+
+    # Random actions before learning_starts: with ε 0, arld acts greedily from step learning_starts on, and
+    # uniformly before; without random_before_learning it is greedy from the first step.
+    def acted(random_before_learning):
+        env = _Actions(gym.make("CartPole-v1"))
+        arld.Agent("dqn", env, defaults="sb3", learning_starts=starts + 1, exploration_initial_eps=0.0,
+                   exploration_final_eps=0.0, random_before_learning=random_before_learning, seed=0,
+                   eval_period=total, eval_episodes=2).learn(first_update)
+        return env.seen
+
+    # The network before its first update (a run of one step learns nothing).
+    untrained = arld.Agent("dqn", gym.make("CartPole-v1"), defaults="sb3", learning_starts=starts + 1, seed=0,
+                           eval_period=total, eval_episodes=2).learn(1)
+
+    def greedy(obs):
+        return int(untrained.predict(np.asarray(obs, dtype=np.float32), deterministic=True)[0])
+
+    random_first = acted(True)
+    assert all(a == greedy(o) for o, a in random_first[starts:first_update])
+    off_greedy = sum(a != greedy(o) for o, a in random_first[:starts])
+    assert 25 <= off_greedy <= 75  # uniform over 2 actions: about half differ from the greedy one
+    assert all(a == greedy(o) for o, a in acted(False)[:first_update])
+    # SB3 too: with ε 0 its actions before learning_starts are uniform (SB3 samples the action space there).
+    recorder = _Actions(gym.make("CartPole-v1"))
+    sb3_zero = DQN("MlpPolicy", recorder, learning_starts=starts, exploration_initial_eps=0.0,
+                   exploration_final_eps=0.0, seed=0, device="cpu")
+    sb3_zero.learn(starts)
+    actions = [a for _, a in recorder.seen]
+    assert len(actions) == starts and 25 <= sum(actions) <= 75

@@ -210,22 +210,10 @@ pub fn open_own_file(path: &Path, create: bool) -> std::io::Result<File> {
 /// that never ends cannot exhaust the memory.
 pub fn read_bounded(path: &Path, max_bytes: u64) -> std::io::Result<Vec<u8>> {
     use std::io::Read;
-    use std::os::unix::fs::OpenOptionsExt;
     let named =
         |e: std::io::Error| std::io::Error::new(e.kind(), format!("{}: {e}", path.display()));
-    let file = std::fs::OpenOptions::new()
-        .read(true)
-        .custom_flags(libc::O_NONBLOCK)
-        .open(path)
-        .map_err(named)?;
+    let file = open_regular(path)?;
     let meta = file.metadata().map_err(named)?;
-    if !meta.is_file() {
-        return Err(std::io::Error::other(format!(
-            "{} is {}, not a regular file",
-            path.display(),
-            kind_name(meta.file_type())
-        )));
-    }
     if meta.len() > max_bytes {
         return Err(too_long(path, max_bytes));
     }
@@ -237,6 +225,30 @@ pub fn read_bounded(path: &Path, max_bytes: u64) -> std::io::Result<Vec<u8>> {
         return Err(too_long(path, max_bytes));
     }
     Ok(bytes)
+}
+
+/// Opens an input file for reading: a regular file, or what a link names if that is one. Anything else (a named
+/// pipe, a device, a directory, a socket) is an error naming the path and what it is, at once: opening a named
+/// pipe without a writer would wait for one forever.
+pub fn open_regular(path: &Path) -> std::io::Result<File> {
+    use std::os::unix::fs::OpenOptionsExt;
+    let named =
+        |e: std::io::Error| std::io::Error::new(e.kind(), format!("{}: {e}", path.display()));
+    let file = std::fs::OpenOptions::new()
+        .read(true)
+        // Opening a pipe does not wait for a writer; a regular file reads as without the flag.
+        .custom_flags(libc::O_NONBLOCK)
+        .open(path)
+        .map_err(named)?;
+    let meta = file.metadata().map_err(named)?;
+    if !meta.is_file() {
+        return Err(std::io::Error::other(format!(
+            "{} is {}, not a regular file",
+            path.display(),
+            kind_name(meta.file_type())
+        )));
+    }
+    Ok(file)
 }
 
 fn too_long(path: &Path, max_bytes: u64) -> std::io::Error {

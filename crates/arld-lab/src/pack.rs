@@ -351,16 +351,7 @@ fn encode_task(runs: &TaskRuns) -> Result<BTreeMap<&'static str, Vec<u8>>> {
 /// Reads a packed task directory.
 fn read_task(dir: &Path) -> Result<TaskRuns> {
     let mut tables = BTreeMap::new();
-    for name in [
-        RUNS_TABLE,
-        CONFIGS_TABLE,
-        SUMMARIES_TABLE,
-        VERBATIM_TABLE,
-        LAYOUT_FILE,
-    ]
-    .into_iter()
-    .chain(LOG_TABLES.iter().map(|(_, table)| *table))
-    {
+    for name in TASK_FILES {
         let path = dir.join(name);
         let meta = std::fs::metadata(&path).with_context(|| {
             format!(
@@ -380,6 +371,33 @@ fn read_task(dir: &Path) -> Result<TaskRuns> {
     }
     decode_task(&tables)
         .with_context(|| format!("the packed runs of {} are unreadable", dir.display()))
+}
+
+/// The files of a packed task directory.
+pub const TASK_FILES: [&str; 8] = [
+    RUNS_TABLE,
+    CONFIGS_TABLE,
+    SUMMARIES_TABLE,
+    VERBATIM_TABLE,
+    LAYOUT_FILE,
+    LOG_TABLES[0].1,
+    LOG_TABLES[1].1,
+    LOG_TABLES[2].1,
+];
+
+/// Rebuilds a task's runs from the bytes of its files, given in the order of [`TASK_FILES`] (what `arld runs
+/// unpack` and `arld report` read from a packed directory, without the file system): each run's path and the
+/// number of its files.
+pub fn decode_tables(files: [&[u8]; 8]) -> Result<Vec<(String, usize)>> {
+    let tables = TASK_FILES
+        .into_iter()
+        .zip(files)
+        .map(|(name, bytes)| (name, bytes.to_vec()))
+        .collect();
+    Ok(decode_task(&tables)?
+        .into_iter()
+        .map(|(run, files)| (run, files.len()))
+        .collect())
 }
 
 /// Rebuilds a task's runs from its tables.

@@ -164,6 +164,11 @@ impl Agent {
         &self.online
     }
 
+    /// The target network (a copy of the online one at its last target copy).
+    pub fn target_network(&self) -> &QNet {
+        &self.target
+    }
+
     /// Bootstrapped acting samples one head uniformly at the start of every episode [BS].
     pub fn begin_episode(&mut self) {
         if self.online.heads() > 1 {

@@ -214,7 +214,8 @@ pub const MAX_LINE_BYTES: usize = 1 << 20;
 /// Replays a trace file. See [`check_reader`].
 pub fn check_file(path: &Path) -> Result<Vec<EnvReport>, ConformanceError> {
     let file_name = path.display().to_string();
-    let file = std::fs::File::open(path).map_err(|error| ConformanceError::Io {
+    // Only a regular file: a named pipe or a device is refused at once (a pipe without a writer never ends).
+    let file = crate::files::open_regular(path).map_err(|error| ConformanceError::Io {
         file: file_name.clone(),
         error,
     })?;

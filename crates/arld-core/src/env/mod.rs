@@ -74,6 +74,10 @@ pub enum EnvError {
     InvalidParameter { name: &'static str, message: String },
     #[error("{env}: {msg}")]
     External { env: String, msg: String },
+    /// The environment's own code raised (an exception of a Python environment): nothing of the step or reset
+    /// happened, and a driven run pauses there and takes it again when it goes on.
+    #[error("{env} raised: {msg}")]
+    Raised { env: String, msg: String },
     #[error("cannot register environment '{id}': {msg}")]
     Register { id: String, msg: String },
     #[error("environment '{id}' is registered but not available in this build: {reason}")]
@@ -99,6 +103,11 @@ pub trait Env: Send {
     /// Advances one step and writes the observation after it into `obs`. Errors on an action out of range or a
     /// step without a running episode (`obs` is then left as it was).
     fn step_into(&mut self, action: usize, obs: &mut [f32]) -> Result<Outcome, EnvError>;
+    /// Why the last [`Env::reset_into`] failed, taken (it is reported once); `None` when it did not, as for
+    /// every built-in task (only an environment in another language can fail to reset).
+    fn take_reset_error(&mut self) -> Option<EnvError> {
+        None
+    }
     /// [`Env::reset_into`] into a fresh `Vec`.
     fn reset(&mut self, seed: Option<u64>) -> Vec<f32> {
         let mut obs = vec![0.0; self.obs_dim()];

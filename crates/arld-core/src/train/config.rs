@@ -170,6 +170,12 @@ pub struct TrainConfig {
     pub train_freq: usize,
     /// Hard target-network copy period in updates \[OURS: 250 CartPole, 1000 otherwise\].
     pub target_period: usize,
+    /// `target_period` counts environment steps, not updates: the target network is copied after every
+    /// `target_period`-th step counted from the first, before that step's update (also before learning starts),
+    /// as Stable-Baselines3's DQN copies when `_n_calls % target_update_interval == 0` \[OURS: false; Python's
+    /// `defaults="sb3"`: true\]. Written to a configuration only when true.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub target_period_in_steps: bool,
     /// Number of bootstrapped heads \[P: 10\].
     pub heads: usize,
     /// Widths of the network's two hidden layers \[P: 64, 64\]; other widths run on the same kernels.
@@ -193,6 +199,11 @@ pub struct TrainConfig {
     pub eps_fraction: f64,
     /// Use ε-greedy on top of bootstrapped/noisy exploration \[P: true\].
     pub eps_greedy_on_top: bool,
+    /// Act uniformly at random before `learning_starts` (the steps before the first update), as
+    /// Stable-Baselines3's DQN does, instead of by the policy and ε \[OURS: false; Python's `defaults="sb3"`:
+    /// true\]. Written to a configuration only when true.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub random_before_learning: bool,
 
     /// Proportional prioritized replay (false: uniform) \[P\].
     pub prioritized: bool,
@@ -641,6 +652,8 @@ impl TrainConfig {
             budget,
             budget_unit: BudgetUnit::Transitions,
             queries_from_learning_starts: false,
+            random_before_learning: false,
+            target_period_in_steps: false,
             t_query,
             n_r: 1000,
             query_rule: String::new(),
@@ -667,8 +680,34 @@ impl TrainConfig {
         .collect()
     }
 
+    /// The keys a configuration file leaves out at their default (false), so that the files of runs that do
+    /// not use them stay as they were before the keys existed.
+    fn omitted_at_default(&self) -> [(&'static str, bool); 2] {
+        [
+            ("random_before_learning", self.random_before_learning),
+            ("target_period_in_steps", self.target_period_in_steps),
+        ]
+    }
+
+    /// The configuration as JSON with every key, also those a configuration file leaves out at their default
+    /// (for the Python package, whose configuration dicts hold every key).
+    pub fn to_json(&self) -> String {
+        let mut value = serde_json::to_value(self).expect("config serialises");
+        if let Some(map) = value.as_object_mut() {
+            for (key, set) in self.omitted_at_default() {
+                map.entry(key).or_insert(set.into());
+            }
+        }
+        value.to_string()
+    }
+
+    /// Every key and its value (also those a configuration file leaves out).
     fn preset_table(cfg: &Self) -> toml::Table {
-        toml::Table::try_from(cfg).expect("config serialises")
+        let mut table = toml::Table::try_from(cfg).expect("config serialises");
+        for (key, set) in cfg.omitted_at_default() {
+            table.entry(key).or_insert(set.into());
+        }
+        table
     }
 
     /// The configuration as TOML, for the run directory.
@@ -1337,6 +1376,8 @@ mod tests {
             "timeout_as_terminal",
             "queries_from_learning_starts",
             "eps_greedy_on_top",
+            "random_before_learning",
+            "target_period_in_steps",
             "prioritized",
             "exact_factorised_var",
             "demo_file",

@@ -15,7 +15,8 @@ use std::io::{BufWriter, IsTerminal, Seek, Write};
 use std::path::{Path, PathBuf};
 
 /// Where a run's logs stood when a snapshot was taken: byte lengths of the streams, the event file's name,
-/// and the evaluation curve.
+/// the evaluation curve, and the queries asked so far (so that a run continued from the snapshot alone, without
+/// its run directory, still knows them; empty when read from a snapshot written before they were kept).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct LogPosition {
     pub episodes: u64,
@@ -23,6 +24,8 @@ pub struct LogPosition {
     pub events_file: String,
     pub events: u64,
     pub curve: Vec<EvalPoint>,
+    #[serde(default)]
+    pub query_events: Vec<QueryEvent>,
 }
 
 /// Receives a run's events; writes them to a run directory when one is given, and drives the progress bar.
@@ -154,6 +157,7 @@ impl RunLog {
             events_file,
             events,
             curve: self.curve.clone(),
+            query_events: self.query_events.clone(),
         })
     }
 
@@ -197,8 +201,17 @@ impl RunLog {
                 .with_context(|| format!("cannot reopen {}", events.display()))?,
         );
         log.curve = position.curve.clone();
+        log.query_events = position.query_events.clone();
         run_dir::write_curve(dir, &log.curve)?;
         Ok(log)
+    }
+
+    /// A log in memory only ([`RunLog::in_memory`]) that continues a run from `position`: it knows the queries
+    /// asked before the snapshot.
+    pub fn in_memory_resumed(position: &LogPosition) -> Self {
+        let mut log = Self::in_memory();
+        log.query_events = position.query_events.clone();
+        log
     }
 
     /// Sets the label shown before the progress bar.

@@ -237,6 +237,15 @@ struct Run<'a, A: Learner> {
     last_step: usize,
 }
 
+/// The ε the agent acts with at `step`: the schedule's ([`epsilon_at`]), or 1 (a uniformly random action)
+/// before learning starts when the run acts randomly there (`random_before_learning`).
+fn acting_epsilon(cfg: &TrainConfig, step: usize) -> f64 {
+    if cfg.random_before_learning && step + 1 < cfg.learning_starts {
+        return 1.0;
+    }
+    epsilon_at(cfg, step)
+}
+
 /// Who acts at the step in progress, or what the loop does instead.
 enum Choice {
     /// Step the environment with `action`; `uncertainty` is the agent's, when it was computed.
@@ -247,6 +256,16 @@ enum Choice {
     /// Take the same step again (a driver went on after a stop while the expert was asked).
     Again,
     /// End the run here.
+    End,
+}
+
+/// How the environment took the step in progress.
+enum Took {
+    /// The step (and the reset after an episode's end) is done.
+    Done,
+    /// The environment raised, the run paused, and its driver went on: take the step (or the reset) again.
+    Again,
+    /// The environment raised and the run ends here.
     End,
 }
 
@@ -314,15 +333,29 @@ impl<'a, A: Learner> Run<'a, A> {
             self.show_where_resumed();
         }
         while self.driver.is_some() || self.st.step < self.cfg.train_steps {
-            let (action, uncertainty) = match self.choose()? {
-                Choice::Act {
+            let (took, uncertainty) = match self.st.env_pending {
+                // The environment raised at this step: its step, or its reset, is taken again.
+                Some(EnvRetry::Step {
                     action,
                     uncertainty,
-                } => (action, uncertainty),
-                Choice::Again => continue,
-                Choice::End => break,
+                }) => (self.step_env(action, uncertainty)?, uncertainty),
+                Some(EnvRetry::Reset { uncertainty }) => {
+                    (self.reset_env(uncertainty)?, uncertainty)
+                }
+                None => match self.choose()? {
+                    Choice::Act {
+                        action,
+                        uncertainty,
+                    } => (self.step_env(action, uncertainty)?, uncertainty),
+                    Choice::Again => continue,
+                    Choice::End => break,
+                },
             };
-            self.step_env(action)?;
+            match took {
+                Took::Done => {}
+                Took::Again => continue,
+                Took::End => break,
+            }
             self.learn()?;
             self.report(uncertainty)?;
             self.st.step += 1;
@@ -357,7 +390,13 @@ impl<'a, A: Learner> Run<'a, A> {
         }
         self.st = state.value("loop")?;
         self.clock.carry(&self.st);
-        if self.st.training {
+        if let (true, Some(EnvRetry::Reset { .. })) = (self.st.training, self.st.env_pending) {
+            // An episode had ended and the environment raised on its reset: the reset is taken again, from the
+            // generator it was to draw from.
+            let generator = self.st.ep_generator.map(crate::rng::NumpyRng::from_words);
+            self.env.set_generator(generator);
+            self.parts.obs.resize(self.env.obs_dim(), 0.0);
+        } else if self.st.training {
             // The environment: the generator its episode's reset drew from, the reset, the actions taken.
             env::replay_episode(
                 &mut *self.env,
@@ -454,7 +493,7 @@ impl<'a, A: Learner> Run<'a, A> {
     fn decide(&mut self) -> Result<(Turn, Option<f32>)> {
         let (cfg, step) = (self.cfg, self.st.step);
         let parts = &mut self.parts;
-        let epsilon = epsilon_at(cfg, step);
+        let epsilon = acting_epsilon(cfg, step);
         if cfg.queries_from_learning_starts && step + 1 < cfg.learning_starts {
             // Ablation: no queries before the first update; the rule does not see these steps.
             let action = parts.agent.act(&parts.obs, epsilon, Needs::NOTHING).0;
@@ -554,7 +593,7 @@ impl<'a, A: Learner> Run<'a, A> {
         };
         let parts = &mut self.parts;
         parts.queries.withdraw();
-        let epsilon = epsilon_at(self.cfg, self.st.step);
+        let epsilon = acting_epsilon(self.cfg, self.st.step);
         let agent_action = parts.agent.act(&parts.obs, epsilon, Needs::NOTHING).0;
         self.log.query(&QueryEvent {
             step: self.st.step,
@@ -588,16 +627,30 @@ impl<'a, A: Learner> Run<'a, A> {
     }
 
     /// Steps the environment; an expert's transition is stored as a demonstration (margin loss, bonus
-    /// priority). An episode's end logs it and resets the environment.
-    fn step_env(&mut self, action: usize) -> Result<()> {
+    /// priority). An episode's end logs it and resets the environment. When the environment raises (a Python
+    /// environment in a driven run), nothing of the step happened: the run pauses, and takes it again when it goes
+    /// on.
+    fn step_env(&mut self, action: usize, uncertainty: Option<f32>) -> Result<Took> {
+        self.next_obs.resize(self.parts.obs.len(), 0.0);
+        let s = match self.env.step_into(action, &mut self.next_obs) {
+            Ok(s) => s,
+            Err(err) => {
+                return self.env_raised(
+                    err,
+                    EnvRetry::Step {
+                        action,
+                        uncertainty,
+                    },
+                );
+            }
+        };
         let (cfg, parts, st) = (self.cfg, &mut self.parts, &mut self.st);
+        st.env_pending = None;
         let by_expert = parts.queries.expert_in_control();
         if by_expert {
             parts.queries.record_expert_step();
             st.ep_demo += 1;
         }
-        self.next_obs.resize(parts.obs.len(), 0.0);
-        let s = self.env.step_into(action, &mut self.next_obs)?;
         st.ep_actions.push(action);
         parts.replay.push(Transition {
             obs: &parts.obs,
@@ -619,17 +672,45 @@ impl<'a, A: Learner> Run<'a, A> {
             parts.replay.end_episode()?;
             st.ep_actions.clear();
             st.ep_generator = self.env.generator().map(|g| g.to_words());
-            self.env.reset_into(None, &mut parts.obs);
-            parts.agent.begin_episode();
-            parts.queries.end_episode();
+            return self.reset_env(uncertainty);
         }
-        Ok(())
+        Ok(Took::Done)
+    }
+
+    /// The reset after an episode's end (the step that ended it is done); when the environment raises, the run
+    /// pauses, and resets again when it goes on.
+    fn reset_env(&mut self, uncertainty: Option<f32>) -> Result<Took> {
+        self.env.reset_into(None, &mut self.parts.obs);
+        if let Some(err) = self.env.take_reset_error() {
+            return self.env_raised(err, EnvRetry::Reset { uncertainty });
+        }
+        self.st.env_pending = None;
+        self.parts.agent.begin_episode();
+        self.parts.queries.end_episode();
+        Ok(Took::Done)
+    }
+
+    /// The environment failed to take `retry`: an error, unless its own code raised in a driven run, which then
+    /// pauses whole (its driver raises the exception) with `retry` to take again when it goes on.
+    fn env_raised(&mut self, err: env::EnvError, retry: EnvRetry) -> Result<Took> {
+        if !matches!(err, env::EnvError::Raised { .. }) || self.driver.is_none() {
+            return Err(err.into());
+        }
+        self.st.env_pending = Some(retry);
+        Ok(match self.pause()? {
+            Control::Continue => Took::Again,
+            Control::Pause | Control::Stop => Took::End,
+        })
     }
 
     /// One prioritized double-DQN update per `train_freq` steps once learning has started, hard target copies,
     /// and the training scalars every 1000 updates.
     fn learn(&mut self) -> Result<()> {
         let (cfg, step, parts) = (self.cfg, self.st.step, &mut self.parts);
+        if cfg.target_period_in_steps && (step + 1).is_multiple_of(cfg.target_period) {
+            // Counted in environment steps (as Stable-Baselines3): after the step, before its update.
+            parts.agent.end_target_period();
+        }
         let due = step + 1 >= cfg.learning_starts && (step + 1).is_multiple_of(cfg.train_freq);
         if !due || parts.replay.len() < cfg.batch_size {
             return Ok(());
@@ -645,7 +726,7 @@ impl<'a, A: Learner> Run<'a, A> {
             format!("step {}", step + 1)
         })?;
         self.st.updates += 1;
-        if self.st.updates.is_multiple_of(cfg.target_period) {
+        if !cfg.target_period_in_steps && self.st.updates.is_multiple_of(cfg.target_period) {
             parts.agent.end_target_period();
         }
         if self.st.updates.is_multiple_of(1000) {
@@ -948,6 +1029,10 @@ struct LoopState {
     /// answered): a resumed run asks it again instead of deciding anew. Absent from other snapshots.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pending: Option<OpenQuestion>,
+    /// What the environment raised on (a Python environment), for the run to take again when it goes on.
+    /// Absent from other snapshots.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    env_pending: Option<EnvRetry>,
 }
 
 impl LoopState {
@@ -966,6 +1051,20 @@ impl LoopState {
             actions: &self.ep_actions,
         }
     }
+}
+
+/// What the environment raised on at the step in progress: the step with the action chosen (nothing of it
+/// happened), or the reset after the episode it ended (the step itself is done). `uncertainty` is the agent's at
+/// that step, for the step's report.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+enum EnvRetry {
+    Step {
+        action: usize,
+        uncertainty: Option<f32>,
+    },
+    Reset {
+        uncertainty: Option<f32>,
+    },
 }
 
 /// A query the agent decided on at the step in progress, before the expert's answer.

@@ -496,9 +496,20 @@ pub fn check_complete(dir: &Path) -> Result<()> {
 /// Reads `summary.json` of a run directory.
 pub fn read_summary(dir: &Path) -> Result<Summary> {
     let path = dir.join(SUMMARY_FILE);
-    let text = std::fs::read_to_string(&path)
+    let bytes = crate::files::read_bounded(&path, MAX_KEY_FILE_BYTES)
         .with_context(|| format!("cannot read {}", path.display()))?;
-    serde_json::from_str(&text).with_context(|| format!("{} is not a run summary", path.display()))
+    parse_summary(&bytes, &path)
+}
+
+/// The largest `summary.json` or `config.toml` a reader reads (theirs are about 2 KB).
+const MAX_KEY_FILE_BYTES: u64 = 16 << 20;
+/// The largest `eval.csv` or `queries.csv` a reader reads (far above a run of millions of steps).
+const MAX_LOG_BYTES: u64 = 1 << 30;
+
+/// A run summary from the bytes of `path` (named in the error).
+pub fn parse_summary(bytes: &[u8], path: &Path) -> Result<Summary> {
+    serde_json::from_slice(bytes)
+        .with_context(|| format!("{} is not a run summary", path.display()))
 }
 
 /// Writes `summary.json` (last: it marks the run complete), then removes the `failed.json` of an earlier
@@ -616,8 +627,14 @@ pub fn write_curve(dir: &Path, curve: &[EvalPoint]) -> Result<()> {
 /// Reads `eval.csv` of a run directory, in step order.
 pub fn read_curve(dir: &Path) -> Result<Vec<EvalPoint>> {
     let path = dir.join(EVAL_FILE);
-    let mut reader =
-        csv::Reader::from_path(&path).with_context(|| format!("cannot read {}", path.display()))?;
+    let bytes = crate::files::read_bounded(&path, MAX_LOG_BYTES)
+        .with_context(|| format!("cannot read {}", path.display()))?;
+    parse_curve(&bytes, &path)
+}
+
+/// An evaluation curve from the bytes of an `eval.csv` at `path` (named in errors), in step order.
+pub fn parse_curve(bytes: &[u8], path: &Path) -> Result<Vec<EvalPoint>> {
+    let mut reader = csv::Reader::from_reader(bytes);
     let mut points = Vec::new();
     for (line, row) in reader.deserialize::<EvalPoint>().enumerate() {
         points.push(row.with_context(|| format!("{}: bad row {}", path.display(), line + 1))?);
@@ -633,10 +650,17 @@ pub fn read_query_steps(dir: &Path) -> Result<Option<Vec<u64>>> {
     if !path.is_file() {
         return Ok(None);
     }
-    let mut reader =
-        csv::Reader::from_path(&path).with_context(|| format!("cannot read {}", path.display()))?;
+    let bytes = crate::files::read_bounded(&path, MAX_LOG_BYTES)
+        .with_context(|| format!("cannot read {}", path.display()))?;
+    parse_query_steps(&bytes, &path).map(Some)
+}
+
+/// The `step` column of the bytes of a `queries.csv` at `path` (named in errors).
+pub fn parse_query_steps(bytes: &[u8], path: &Path) -> Result<Vec<u64>> {
+    let mut reader = csv::Reader::from_reader(bytes);
     let column = reader
-        .headers()?
+        .headers()
+        .with_context(|| format!("{}: bad header", path.display()))?
         .iter()
         .position(|h| h == "step")
         .with_context(|| format!("{} has no `step` column", path.display()))?;
@@ -651,7 +675,7 @@ pub fn read_query_steps(dir: &Path) -> Result<Option<Vec<u64>>> {
                 .with_context(|| format!("{}: bad step '{value}'", path.display()))?,
         );
     }
-    Ok(Some(steps))
+    Ok(steps)
 }
 
 /// Where a run of a sweep lives below the sweep directory: `ENV/METHOD-NET[/VARIANT]/seedN`, e.g.
@@ -692,12 +716,36 @@ pub fn variant_from_path(relative: &Path, method: Method, net: NetKind, seed: u6
 /// Reads one complete run directory; `relative` is its path below the directory being reported on.
 pub fn read_run(dir: &Path, relative: &Path) -> Result<RunRecord> {
     let summary = read_summary(dir)?;
-    // config.toml is optional for a report: it only adds t_query, the expert and the eval period. It is read
-    // key by key so that configurations written by earlier versions still load.
-    let config: toml::Table = match std::fs::read_to_string(dir.join(CONFIG_FILE)) {
-        Ok(text) => toml::from_str(&text)
-            .with_context(|| format!("{}/{CONFIG_FILE} is not valid TOML", dir.display()))?,
-        Err(_) => toml::Table::new(),
+    // config.toml is optional for a report: it only adds t_query, the expert and the eval period.
+    let config_path = dir.join(CONFIG_FILE);
+    let config = match crate::files::read_bounded(&config_path, MAX_KEY_FILE_BYTES) {
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => None,
+        read => Some(read.with_context(|| format!("cannot read {}", config_path.display()))?),
+    };
+    let eval = read_curve(dir)?;
+    let query_steps = read_query_steps(dir)?;
+    run_record(dir, relative, summary, config.as_deref(), eval, query_steps)
+}
+
+/// A run's record from what its files hold: its summary, the bytes of its `config.toml` (if it has one), its
+/// evaluation curve and its query steps (if it has a query log).
+pub fn run_record(
+    dir: &Path,
+    relative: &Path,
+    summary: Summary,
+    config: Option<&[u8]>,
+    eval: Vec<EvalPoint>,
+    query_steps: Option<Vec<u64>>,
+) -> Result<RunRecord> {
+    // Read key by key so that configurations written by earlier versions still load.
+    let config: toml::Table = match config {
+        Some(bytes) => {
+            let text = std::str::from_utf8(bytes)
+                .with_context(|| format!("{}/{CONFIG_FILE} is not UTF-8 text", dir.display()))?;
+            toml::from_str(text)
+                .with_context(|| format!("{}/{CONFIG_FILE} is not valid TOML", dir.display()))?
+        }
+        None => toml::Table::new(),
     };
     let t_query = config
         .get("t_query")
@@ -707,7 +755,6 @@ pub fn read_run(dir: &Path, relative: &Path) -> Result<RunRecord> {
         .and_then(|v| v.as_str())
         .map(str::to_string);
     let train_steps = summary.train_steps as u64;
-    let eval = read_curve(dir)?;
     let eval_period = config
         .get("eval_period")
         .and_then(|v| v.as_integer())
@@ -734,7 +781,7 @@ pub fn read_run(dir: &Path, relative: &Path) -> Result<RunRecord> {
         train_steps,
         eval_period,
         eval,
-        query_steps: read_query_steps(dir)?,
+        query_steps,
         summary_steps_to_solve: Some(summary.steps_to_solve as u64),
         numerics: summary.numerics,
     })
