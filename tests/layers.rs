@@ -27,6 +27,7 @@ use std::path::{Path, PathBuf};
 const LAYERS: [&[&str]; 8] = [
     &[
         "build_info",
+        "dir_lock",
         "errors",
         "files",
         "paper",

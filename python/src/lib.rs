@@ -18,8 +18,8 @@
 
 use arld::agent::Agent;
 use arld::env::{self, Env, EnvError, EnvSpec, Outcome};
+use arld::expert::Expert;
 use arld::expert::demos::{DemoColumns, Demonstrations};
-use arld::expert::{self, Expert};
 use arld::interrupt::Interrupted;
 use arld::nn::QNet;
 use arld::rng::NumpyRng;
@@ -1031,8 +1031,8 @@ impl Run {
 
 /// Takes the lock of the run directory `dir` (created if missing), as `arld train` does: one process, and in it
 /// one run, at a time. Refused naming the holder (and, when it is this process, how to end its run).
-fn lock_run_dir(dir: &Path) -> anyhow::Result<arld::experiment::dir_lock::DirLock> {
-    use arld::experiment::dir_lock::{DirLock, Holder};
+fn lock_run_dir(dir: &Path) -> anyhow::Result<arld::dir_lock::DirLock> {
+    use arld::dir_lock::{DirLock, Holder};
     anyhow::ensure!(
         !dir.exists() || dir.is_dir(),
         "the run directory {} exists and is not a directory",

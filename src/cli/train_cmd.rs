@@ -182,7 +182,7 @@ pub fn run(args: TrainArgs) -> anyhow::Result<ExitCode> {
     let created = !dir.exists();
     std::fs::create_dir_all(&dir)
         .map_err(|e| anyhow::anyhow!("cannot create the run directory {}: {e}", dir.display()))?;
-    let lock = arld::experiment::dir_lock::DirLock::acquire(&dir, arld::train::run_dir::LOCK_FILE)?;
+    let lock = arld::dir_lock::DirLock::acquire(&dir, arld::train::run_dir::LOCK_FILE)?;
     match &args.resume {
         None => arld::train::run_dir::prepare_new_run(&dir, args.overwrite)?,
         Some(resume) if args.restart => {

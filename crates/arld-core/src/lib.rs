@@ -6,10 +6,12 @@
 //! and is organised along its flow:
 //!
 //! - [`env`]: the [`env::Env`] trait and Gymnasium-exact environments; [`rng`]: NumPy-compatible seeding.
-//! - [`nn`]: the fixed-shape Q-network (plain, K heads or noisy output), forward, backward, Adam, safetensors.
+//! - [`nn`]: the fixed-shape Q-network (plain, K heads or noisy output), forward, backward, Adam, safetensors;
+//!   dense networks of any shape for the actor-critic learners.
 //! - [`replay`]: sum-tree prioritized replay with a permanent demonstration part.
 //! - [`agent`]: the [`agent::Learner`] interface a run trains through, and the DQN family implementing it: acting
-//!   (exploration, head sampling, noise), the learner (losses, target network), the test-time policy.
+//!   (exploration, head sampling, noise), the learner (losses, target network), the test-time policy; and TD3's
+//!   core for actions in a box ([`agent::td3`], not yet behind the run loop).
 //! - [`query`]: uncertainty measures, query rules and budget accounting.
 //! - [`expert`]: the [`expert::Expert`] trait and its kinds (the web expert's server and page are `arld-web`).
 //! - [`train`]: one run: [`train::RunBuilder`], its one entry point, the loop as named steps, the run
@@ -17,6 +19,7 @@
 //! - [`paper`]: the paper's tables (tasks, parameters, expert statistics, steps to solve) as data.
 //! - [`build_info`]: the version and the git commit this arld was built from ([`VERSION`], [`GIT_COMMIT`]).
 //! - [`files`]: the one atomic file write every saved file goes through.
+//! - [`dir_lock`]: one process at a time in a run (or sweep) directory, whether the CLI or Python runs it.
 //! - [`state`]: a component's state as named raw arrays and small values (what snapshots are made of).
 //! - [`math`]: the correctly rounded elementary functions every computation uses (one result on every CPU).
 //! - [`errors`]: an error and its causes on one line, as the command line and Python show it.
@@ -28,6 +31,7 @@
 
 pub mod agent;
 pub mod build_info;
+pub mod dir_lock;
 pub mod env;
 pub mod errors;
 pub mod expert;

@@ -5,11 +5,13 @@
 //! [`plot`]; hand-written documents that quote its tables in [`quote`]). Sweeps and reports read runs through
 //! [`arld_core::train::run_dir`], the owner of the run directory's format.
 //!
-//! Within this layer imports go one way: `dir_lock` <- `sweep`; `stats`, `sweep` <- `protocol`;
+//! A sweep directory is locked with the core's [`dir_lock`] (re-exported here), the lock of a run directory.
+//!
+//! Within this layer imports go one way: `stats`, `sweep` <- `protocol`;
 //! `protocol`, `plot` <- `figures`; `protocol`, `plot`, `stats`, `verdict` <- `effort`; `effort`, `figures`, `plot`,
 //! `quote`, `pack` <- `report`; `pack` <- `sweep`; `slurm` <- the CLI.
 
-pub mod dir_lock;
+pub use arld_core::dir_lock;
 pub mod effort;
 pub mod figures;
 pub mod pack;

@@ -60,8 +60,8 @@ pub fn is_complete(dir: &Path) -> bool {
 /// The prefix of a TensorBoard event file's name.
 const EVENTS_PREFIX: &str = "events.out.tfevents.";
 
-/// The lock file a process running the run holds in its directory (the laboratory's lock, `arld_lab::dir_lock`:
-/// one process per run directory).
+/// The lock file a process running the run holds in its directory ([`crate::dir_lock`]: one process per run
+/// directory, whether the CLI or Python runs it).
 pub const LOCK_FILE: &str = ".arld.lock";
 
 /// Whether `name` is the name of a run's TensorBoard event file (one file name, no path).

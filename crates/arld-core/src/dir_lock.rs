@@ -51,7 +51,7 @@ impl DirLock {
         let me = Holder::this_process();
         let temp = dir.join(format!("{name}.{}.tmp", me.pid));
         // Written without following a link someone put at the temporary name.
-        arld_core::files::open_own_file(&temp, true)
+        crate::files::open_own_file(&temp, true)
             .and_then(|mut f| {
                 std::io::Write::write_all(&mut f, serde_json::to_string(&me)?.as_bytes())
             })
