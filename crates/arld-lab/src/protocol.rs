@@ -193,7 +193,7 @@ pub fn effort_grids(seeds: &[u64]) -> Vec<SweepGrid> {
     let mut grids = Vec::new();
     for env in &tasks {
         let rules = EFFORT_RULES.iter().map(|r| format!("query_rule={r}"));
-        grids.push(grid(*env, vec![Method::Adqn], rules.collect()));
+        grids.push(grid(env, vec![Method::Adqn], rules.collect()));
     }
     for env in &tasks {
         let budgets: Vec<String> = EFFORT_BUDGET_SCALES
@@ -206,8 +206,8 @@ pub fn effort_grids(seeds: &[u64]) -> Vec<SweepGrid> {
                 .map(move |r| format!("{b};query_rule={r}"))
         });
         let scaled_rules: Vec<String> = scaled_rules.collect();
-        grids.push(grid(*env, vec![Method::Bdqn, Method::Adqn], budgets));
-        grids.push(grid(*env, vec![Method::Adqn], scaled_rules));
+        grids.push(grid(env, vec![Method::Bdqn, Method::Adqn], budgets));
+        grids.push(grid(env, vec![Method::Adqn], scaled_rules));
     }
     grids
 }
