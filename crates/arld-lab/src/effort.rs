@@ -373,6 +373,20 @@ impl Comparison {
         }
     }
 
+    /// The test's Markdown cells, as both comparison tables show them: shift, p, Holm p, equivalence Holm p,
+    /// reading and paired shift.
+    fn test_cells(&self) -> String {
+        format!(
+            "{} | {} | {} | {} | {} | {}",
+            self.shift_text(),
+            fmt_p(self.p),
+            fmt_p(self.holm),
+            fmt_p(self.tost_holm),
+            self.reading(),
+            self.paired.map_or("–".into(), |x| format!("{:+.3}", x.0)),
+        )
+    }
+
     /// What the comparison says in words: significantly higher or lower (adjusted p), level (adjusted TOST), or
     /// no difference detected.
     fn reading(&self) -> String {
@@ -566,7 +580,7 @@ fn comparison_tables(comparisons: &[Comparison]) -> String {
         for c in rows {
             let _ = writeln!(
                 out,
-                "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
+                "| {} | {} | {} | {} | {} | {} | {} | {} | {} |",
                 c.a.0,
                 c.a.1,
                 c.a.2,
@@ -581,12 +595,7 @@ fn comparison_tables(comparisons: &[Comparison]) -> String {
                     c.b.1.clone()
                 },
                 c.seeds,
-                c.shift_text(),
-                fmt_p(c.p),
-                fmt_p(c.holm),
-                fmt_p(c.tost_holm),
-                c.reading(),
-                c.paired.map_or("–".into(), |x| format!("{:+.3}", x.0)),
+                c.test_cells(),
                 fmt_p(c.paired.map(|x| x.1)),
                 fmt_p(c.paired_holm),
             );
@@ -756,15 +765,10 @@ fn second_test(cells: &BTreeMap<CellKey, Vec<RunMetrics>>, comparisons: &[Compar
             };
             let _ = write!(
                 out,
-                "\n| {name} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
+                "\n| {name} | {} | {} | {} | {} |",
                 c.seeds,
                 method.to_uppercase(),
-                c.shift_text(),
-                fmt_p(c.p),
-                fmt_p(c.holm),
-                fmt_p(c.tost_holm),
-                c.reading(),
-                c.paired.map_or("–".into(), |x| format!("{:+.3}", x.0)),
+                c.test_cells(),
                 fmt_p(c.paired_holm),
             );
             if c.significant() && c.shift_value() > 0.0 {
@@ -922,28 +926,11 @@ pub fn effort(runs: &[RunRecord], k: usize) -> Result<Option<EffortReport>> {
                 let questions = median(&vals(|m| m.questions)).unwrap_or(f64::NAN);
                 let last: Vec<f64> = cell.iter().filter_map(|m| m.last_question).collect();
                 let last = median(&last);
-                writeln!(
-                    md,
-                    "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {:.0} | {:.0} | {} |",
-                    key.1,
-                    key.2,
-                    key.3,
-                    cell.len(),
-                    auc.2,
-                    first.2,
-                    sus.2,
-                    fin.2,
-                    fmt_p(ps[0]),
-                    fmt_p(ps[1]),
-                    fmt_p(ps[2]),
-                    transitions,
-                    questions,
-                    last.map_or("–".into(), |s| format!("{s:.0}")),
-                )?;
-                let pv = |p: Option<f64>| p.map_or(String::new(), |p| format!("{p}"));
-                writeln!(
-                    csv,
-                    "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
+                // The same row in both tables: the key, the four readings, the three p values, the effort.
+                let readings = [&auc, &first, &sus, &fin];
+                let mut md_row = format!("| {} | {} | {} | {} |", key.1, key.2, key.3, cell.len());
+                let mut csv_row = format!(
+                    "{},{},{},{},{},{},{}",
                     key.0,
                     csv_field(&key.1),
                     key.2,
@@ -951,26 +938,24 @@ pub fn effort(runs: &[RunRecord], k: usize) -> Result<Option<EffortReport>> {
                     key.3 as f64 / paper_budget(&key.0).max(1) as f64,
                     cell.len(),
                     key.4.csv(),
-                    auc.0,
-                    auc.1.0,
-                    auc.1.1,
-                    first.0,
-                    first.1.0,
-                    first.1.1,
-                    sus.0,
-                    sus.1.0,
-                    sus.1.1,
-                    fin.0,
-                    fin.1.0,
-                    fin.1.1,
-                    pv(ps[0]),
-                    pv(ps[1]),
-                    pv(ps[2]),
-                    transitions,
-                    questions,
+                );
+                for (m, (lo, hi), shown) in readings {
+                    write!(md_row, " {shown} |")?;
+                    write!(csv_row, ",{m},{lo},{hi}")?;
+                }
+                for p in &ps {
+                    write!(md_row, " {} |", fmt_p(*p))?;
+                    write!(csv_row, ",{}", p.map_or(String::new(), |p| format!("{p}")))?;
+                }
+                writeln!(
+                    md,
+                    "{md_row} {transitions:.0} | {questions:.0} | {} |",
+                    last.map_or("–".into(), |s| format!("{s:.0}")),
+                )?;
+                writeln!(
+                    csv,
+                    "{csv_row},{transitions},{questions},{},{random},{expert}",
                     last.map_or(String::new(), |s| format!("{s}")),
-                    random,
-                    expert,
                 )?;
             }
             writeln!(md)?;

@@ -1100,12 +1100,18 @@ mod tests {
         );
     }
 
-    #[test]
-    fn packing_again_changes_no_byte_and_unpacking_again_writes_nothing() {
+    /// The sample tree, packed, in a temporary directory (removed when the first value drops).
+    fn packed_sample() -> (tempfile::TempDir, PathBuf) {
         let dir = tempfile::tempdir().unwrap();
         let root = dir.path().join("runs");
         sample(&root);
         pack(&root).unwrap();
+        (dir, root)
+    }
+
+    #[test]
+    fn packing_again_changes_no_byte_and_unpacking_again_writes_nothing() {
+        let (_dir, root) = packed_sample();
         let first = tree(&root);
         let again = pack(&root).unwrap();
         assert_eq!(again.tables_written, 0);
@@ -1118,10 +1124,7 @@ mod tests {
 
     #[test]
     fn unpacking_never_replaces_a_file_with_other_bytes() {
-        let dir = tempfile::tempdir().unwrap();
-        let root = dir.path().join("runs");
-        sample(&root);
-        pack(&root).unwrap();
+        let (_dir, root) = packed_sample();
         let eval = root.join("CartPole-v0/adqn-bootstrap/seed0/eval.csv");
         std::fs::write(&eval, "step,mean,std,min,max\n").unwrap();
         let err = unpack(&root, &root).unwrap_err().to_string();
@@ -1137,10 +1140,7 @@ mod tests {
 
     #[test]
     fn a_table_naming_a_path_outside_its_task_is_refused() {
-        let dir = tempfile::tempdir().unwrap();
-        let root = dir.path().join("runs");
-        sample(&root);
-        pack(&root).unwrap();
+        let (dir, root) = packed_sample();
         let index = root.join("Acrobot-v1").join(RUNS_TABLE);
         let text = String::from_utf8(gunzip(&std::fs::read(&index).unwrap()).unwrap()).unwrap();
         let hostile = text.replace("dqn-noisy/seed0", "../../escaped");

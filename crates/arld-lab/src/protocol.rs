@@ -181,48 +181,33 @@ pub fn effort_grids(seeds: &[u64]) -> Vec<SweepGrid> {
         .iter()
         .map(|t| t.gym_id)
         .collect();
+    // One grid: a task, its methods and its variants, on the effort network and the given seeds.
+    let grid = |env: &str, methods: Vec<Method>, vary: Vec<String>| SweepGrid {
+        envs: vec![env.to_string()],
+        methods,
+        nets: vec![EFFORT_NET],
+        seeds: seeds.to_vec(),
+        vary,
+        ..SweepGrid::default()
+    };
     let mut grids = Vec::new();
     for env in &tasks {
-        grids.push(SweepGrid {
-            envs: vec![env.to_string()],
-            methods: vec![Method::Adqn],
-            nets: vec![EFFORT_NET],
-            seeds: seeds.to_vec(),
-            vary: EFFORT_RULES
-                .iter()
-                .map(|r| format!("query_rule={r}"))
-                .collect(),
-            ..SweepGrid::default()
-        });
+        let rules = EFFORT_RULES.iter().map(|r| format!("query_rule={r}"));
+        grids.push(grid(env, vec![Method::Adqn], rules.collect()));
     }
     for env in &tasks {
         let budgets: Vec<String> = EFFORT_BUDGET_SCALES
             .iter()
             .map(|&s| format!("budget={}", scaled_budget(env, s)))
             .collect();
-        grids.push(SweepGrid {
-            envs: vec![env.to_string()],
-            methods: vec![Method::Bdqn, Method::Adqn],
-            nets: vec![EFFORT_NET],
-            seeds: seeds.to_vec(),
-            vary: budgets.clone(),
-            ..SweepGrid::default()
-        });
-        grids.push(SweepGrid {
-            envs: vec![env.to_string()],
-            methods: vec![Method::Adqn],
-            nets: vec![EFFORT_NET],
-            seeds: seeds.to_vec(),
-            vary: budgets
+        let scaled_rules = budgets.iter().flat_map(|b| {
+            EFFORT_SCALED_RULES
                 .iter()
-                .flat_map(|b| {
-                    EFFORT_SCALED_RULES
-                        .iter()
-                        .map(move |r| format!("{b};query_rule={r}"))
-                })
-                .collect(),
-            ..SweepGrid::default()
+                .map(move |r| format!("{b};query_rule={r}"))
         });
+        let scaled_rules: Vec<String> = scaled_rules.collect();
+        grids.push(grid(env, vec![Method::Bdqn, Method::Adqn], budgets));
+        grids.push(grid(env, vec![Method::Adqn], scaled_rules));
     }
     grids
 }

@@ -145,14 +145,15 @@ fn fmt_p(p: Option<f64>) -> String {
     }
 }
 
+/// A reading's median, lower and upper bound, each written by `num`.
+fn parts(r: &Reading, num: fn(f64) -> String) -> [String; 3] {
+    [num(r.median), num(r.interval.0), num(r.interval.1)]
+}
+
 /// A reading for Markdown: `median [lo, hi]`.
 fn show(r: &Reading) -> String {
-    format!(
-        "{} [{}, {}]",
-        fmt_num(r.median),
-        fmt_num(r.interval.0),
-        fmt_num(r.interval.1)
-    )
+    let [m, lo, hi] = parts(r, fmt_num);
+    format!("{m} [{lo}, {hi}]")
 }
 
 /// A number for CSV, in full (empty when undefined).
@@ -166,12 +167,7 @@ fn num(v: f64) -> String {
 
 /// A reading for CSV: `median,lo,hi`.
 fn csv_reading(r: &Reading) -> String {
-    format!(
-        "{},{},{}",
-        num(r.median),
-        num(r.interval.0),
-        num(r.interval.1)
-    )
+    parts(r, num).join(",")
 }
 
 /// A p-value for CSV (empty when undefined).
@@ -220,35 +216,31 @@ pub fn readings_table(cells: &[Cell], k: usize) -> (String, String) {
                     p(|c| &c.final_score),
                 );
                 let paper_median = paper::median_steps(env, method, net);
-                let _ = writeln!(
-                    md,
-                    "| {}-{suffix} | {} ({}) | {} | {} | {} | {} | {} | {} | {} | {} |",
-                    paper::method_display_name(method),
-                    cell.seeds,
-                    cell.solved,
-                    show(&cell.first_hit),
-                    fmt_p(p_first),
-                    show(&cell.sustained),
-                    fmt_p(p_sustained),
-                    cell.median_curve,
-                    show(&cell.final_score),
-                    fmt_p(p_final),
-                    paper_median.map_or("-".into(), |v| v.to_string()),
-                );
-                let _ = writeln!(
-                    csv,
-                    "{env},{method},{net},{},{},{},{},{},{},{},{},{},{}",
-                    cell.seeds,
-                    cell.solved,
-                    csv_reading(&cell.first_hit),
-                    pv(p_first),
-                    csv_reading(&cell.sustained),
-                    pv(p_sustained),
-                    cell.median_curve,
-                    csv_reading(&cell.final_score),
-                    pv(p_final),
-                    paper_median.map_or(String::new(), |v| v.to_string()),
-                );
+                // The same row in both tables, each entry as (markdown cell, CSV fields).
+                let reading = |r: &Reading| (show(r), csv_reading(r));
+                let p_entry = |p: Option<f64>| (fmt_p(p), pv(p));
+                let entries = [
+                    reading(&cell.first_hit),
+                    p_entry(p_first),
+                    reading(&cell.sustained),
+                    p_entry(p_sustained),
+                    (cell.median_curve.to_string(), cell.median_curve.to_string()),
+                    reading(&cell.final_score),
+                    p_entry(p_final),
+                    (
+                        paper_median.map_or("-".into(), |v| v.to_string()),
+                        paper_median.map_or(String::new(), |v| v.to_string()),
+                    ),
+                ];
+                let name = paper::method_display_name(method);
+                let mut md_row = format!("| {name}-{suffix} | {} ({}) |", cell.seeds, cell.solved);
+                let mut csv_row = format!("{env},{method},{net},{},{}", cell.seeds, cell.solved);
+                for (md_cell, csv_fields) in entries {
+                    let _ = write!(md_row, " {md_cell} |");
+                    let _ = write!(csv_row, ",{csv_fields}");
+                }
+                let _ = writeln!(md, "{md_row}");
+                let _ = writeln!(csv, "{csv_row}");
             }
         }
     }

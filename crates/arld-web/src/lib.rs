@@ -453,13 +453,8 @@ impl WebExpert {
             };
             let waited_s = asked.elapsed().saturating_sub(paused).as_secs_f64();
             // The person's response time: the wait while a tab was open and the run not paused.
-            let now = Instant::now();
-            let absent = self
-                .server
-                .shared
-                .absent_at(now)
-                .saturating_sub(absent_before);
-            let response_s = (now - asked).saturating_sub(absent).as_secs_f64();
+            let response_s = self.server.shared.present_since(asked, absent_before);
+            let response_s = response_s.as_secs_f64();
             match input {
                 // Handed back: the agent acts; nothing is charged.
                 Input::HandBack => {
@@ -765,13 +760,8 @@ impl Expert for WebExpert {
         let absent_before = self.server.shared.absent_at(started);
         let result = self.ask(query);
         // The person's time: the whole wait, less the time they were absent (the run paused, or no tab open).
-        let ended = Instant::now();
-        let absent = self
-            .server
-            .shared
-            .absent_at(ended)
-            .saturating_sub(absent_before);
-        self.effort.person_s += (ended - started).saturating_sub(absent).as_secs_f64();
+        let present = self.server.shared.present_since(started, absent_before);
+        self.effort.person_s += present.as_secs_f64();
         if query.agent_action.is_some() && !std::mem::take(&mut self.declined) {
             match result {
                 Ok(Answer::Action { .. }) => self.effort.answered += 1,

@@ -214,6 +214,18 @@ impl Shared {
         self.board().absent(now)
     }
 
+    /// The time from `start` until now that the person was present (the run not paused, a tab open), given
+    /// `absent_at_start`, what [`Self::absent_at`] said at `start`.
+    pub fn present_since(
+        &self,
+        start: std::time::Instant,
+        absent_at_start: std::time::Duration,
+    ) -> std::time::Duration {
+        let now = std::time::Instant::now();
+        let absent = self.absent_at(now).saturating_sub(absent_at_start);
+        (now - start).saturating_sub(absent)
+    }
+
     /// Whether the end of the run was published.
     pub fn ended(&self) -> bool {
         self.board().end.is_some()

@@ -69,15 +69,20 @@ fn analytic(case: &Case) -> (Vec<f32>, Grads) {
     (q, grads)
 }
 
-/// Independent f64 forward pass on the flat parameters, following the layout documented on `Layout`
-/// with explicit index arithmetic. Returns Q in [head][batch][action] order.
-fn reference_q(layout: &Layout, p: &[f64], x: &[f64], noise: Option<&NoiseSample>) -> Vec<f64> {
-    let (d, a, width, heads) = (
+/// A layout's observation size, action count, output width and head count.
+fn sizes(layout: &Layout) -> (usize, usize, usize, usize) {
+    (
         layout.obs_dim,
         layout.n_actions,
         layout.out_width,
         layout.heads(),
-    );
+    )
+}
+
+/// Independent f64 forward pass on the flat parameters, following the layout documented on `Layout`
+/// with explicit index arithmetic. Returns Q in [head][batch][action] order.
+fn reference_q(layout: &Layout, p: &[f64], x: &[f64], noise: Option<&NoiseSample>) -> Vec<f64> {
+    let (d, a, width, heads) = sizes(layout);
     let [n1, n2] = layout.hidden;
     let batch = x.len() / d;
     let mut q = vec![0.0; heads * batch * a];
@@ -203,30 +208,34 @@ fn check_against_finite_differences(case: &Case) {
     }
 }
 
-#[test]
-fn plain_gradients_match_finite_differences() {
-    check_against_finite_differences(&case(OutputKind::Plain, 1, false));
+/// The cases each oracle checks, with `seeds` in this order: Plain, Bootstrap (`heads[0]` heads) and Noisy (under a
+/// fixed noise sample) at the paper's widths, then the same kinds (Bootstrap with `heads[1]`) at [`OTHER_WIDTHS`].
+fn every_kind_and_width(seeds: [u64; 6], heads: [usize; 2]) -> Vec<Case> {
+    let kinds = |heads| {
+        [
+            OutputKind::Plain,
+            OutputKind::Bootstrap { heads },
+            OutputKind::Noisy,
+        ]
+    };
+    let paper = kinds(heads[0]).map(|kind| (kind, [HIDDEN, HIDDEN]));
+    let other = kinds(heads[1]).map(|kind| (kind, OTHER_WIDTHS));
+    paper
+        .into_iter()
+        .chain(other)
+        .zip(seeds)
+        .map(|((kind, hidden), seed)| {
+            let c = case_with(kind, seed, kind == OutputKind::Noisy, hidden);
+            assert_eq!(c.net.hidden(), hidden);
+            c
+        })
+        .collect()
 }
 
+/// For Bootstrap, the trunk's analytic gradient is scaled by 1/K (the check multiplies it back by K).
 #[test]
-fn bootstrap_gradients_match_finite_differences_with_trunk_scaled_by_one_over_k() {
-    check_against_finite_differences(&case(OutputKind::Bootstrap { heads: 4 }, 2, false));
-}
-
-#[test]
-fn noisy_gradients_match_finite_differences_under_a_fixed_noise_sample() {
-    check_against_finite_differences(&case(OutputKind::Noisy, 3, true));
-}
-
-#[test]
-fn other_hidden_widths_match_finite_differences_for_every_kind() {
-    for (kind, seed) in [
-        (OutputKind::Plain, 21),
-        (OutputKind::Bootstrap { heads: 3 }, 22),
-        (OutputKind::Noisy, 23),
-    ] {
-        let c = case_with(kind, seed, kind == OutputKind::Noisy, OTHER_WIDTHS);
-        assert_eq!(c.net.hidden(), OTHER_WIDTHS);
+fn gradients_match_finite_differences_for_every_kind_and_width() {
+    for c in every_kind_and_width([1, 2, 3, 21, 22, 23], [4, 3]) {
         check_against_finite_differences(&c);
     }
 }
@@ -266,12 +275,7 @@ fn columns(m: &[f32], width: usize, cols: Range<usize>) -> Vec<f32> {
 
 fn check_against_candle(case: &Case) {
     let layout = *case.net.layout();
-    let (d, a, width, heads) = (
-        layout.obs_dim,
-        layout.n_actions,
-        layout.out_width,
-        layout.heads(),
-    );
+    let (d, a, width, heads) = sizes(&layout);
     let [n1, n2] = layout.hidden;
     let (q, grads) = analytic(case);
     let p = case.net.parameters();
@@ -372,34 +376,11 @@ fn check_against_candle(case: &Case) {
     }
 }
 
+/// For Bootstrap, candle's network carries the trunk hook (1/K gradient).
 #[test]
-fn plain_gradients_match_candle() {
-    check_against_candle(&case(OutputKind::Plain, 5, false));
-}
-
-#[test]
-fn bootstrap_gradients_match_candle_with_the_trunk_hook() {
-    check_against_candle(&case(OutputKind::Bootstrap { heads: 10 }, 6, false));
-}
-
-#[test]
-fn noisy_gradients_match_candle_under_a_fixed_noise_sample() {
-    check_against_candle(&case(OutputKind::Noisy, 7, true));
-}
-
-#[test]
-fn other_hidden_widths_match_candle_for_every_kind() {
-    for (kind, seed) in [
-        (OutputKind::Plain, 24),
-        (OutputKind::Bootstrap { heads: 4 }, 25),
-        (OutputKind::Noisy, 26),
-    ] {
-        check_against_candle(&case_with(
-            kind,
-            seed,
-            kind == OutputKind::Noisy,
-            OTHER_WIDTHS,
-        ));
+fn gradients_match_candle_for_every_kind_and_width() {
+    for c in every_kind_and_width([5, 6, 7, 24, 25, 26], [10, 4]) {
+        check_against_candle(&c);
     }
 }
 

@@ -290,16 +290,18 @@ mod tests {
 
     /// A rule from its spec, with defaults that leave nothing to chance: t_query 0.3, N_r 1000.
     fn rule(spec: &str) -> Box<dyn QueryRule> {
-        let defaults = RuleDefaults {
-            t_query: 0.3,
-            n_r: 1000,
-            budget: 100,
-            segment_len: 5,
-            train_steps: 1000,
-            unit: BudgetUnit::Transitions,
-        };
-        spec.parse::<RuleSpec>().unwrap().build(&defaults).unwrap()
+        spec.parse::<RuleSpec>().unwrap().build(&DEFAULTS).unwrap()
     }
+
+    /// Defaults that leave nothing to chance: t_query 0.3, N_r 1000, a budget of 100 transitions.
+    const DEFAULTS: RuleDefaults = RuleDefaults {
+        t_query: 0.3,
+        n_r: 1000,
+        budget: 100,
+        segment_len: 5,
+        train_steps: 1000,
+        unit: BudgetUnit::Transitions,
+    };
 
     /// One decision with `uncertainty` as the only signal.
     fn decide_with(
@@ -323,16 +325,7 @@ mod tests {
 
     #[test]
     fn invalid_parameters_are_rejected_with_errors() {
-        let build = |spec: &str| {
-            spec.parse::<RuleSpec>().unwrap().build(&RuleDefaults {
-                t_query: 0.3,
-                n_r: 1000,
-                budget: 100,
-                segment_len: 5,
-                train_steps: 1000,
-                unit: BudgetUnit::Transitions,
-            })
-        };
+        let build = |spec: &str| spec.parse::<RuleSpec>().unwrap().build(&DEFAULTS);
         assert_eq!(
             AdaptiveQuantileRule::new(10, 1.5).unwrap_err(),
             QueryError::TQueryOutOfRange(1.5)

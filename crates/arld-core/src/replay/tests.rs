@@ -54,6 +54,16 @@ fn chi_square(counts: &[u64], probs: &[f64]) -> f64 {
         .sum()
 }
 
+/// The prioritized [`mixed_memory`] after one batch of `size` drawn at beta 0.4 by a generator seeded with `seed`;
+/// the generator and the batch come back for further draws.
+fn mixed_sample(size: usize, seed: u64) -> (Replay, Pcg64, Batch) {
+    let (mut replay, _) = mixed_memory(true);
+    let mut rng = Pcg64::seed_from_u64(seed);
+    let mut batch = Batch::default();
+    replay.sample(size, 0.4, &mut rng, &mut batch);
+    (replay, rng, batch)
+}
+
 /// A memory with 3 demonstrations and 9 agent transitions whose TD errors are spread out.
 /// Returns it with each stored slot's TD error.
 fn mixed_memory(prioritized: bool) -> (Replay, Vec<(usize, f32)>) {
@@ -219,10 +229,7 @@ fn batch_is_stratified_in_mass_order() {
 
 #[test]
 fn batch_contents_match_stored_transitions() {
-    let (mut replay, _) = mixed_memory(true);
-    let mut rng = Pcg64::seed_from_u64(9);
-    let mut batch = Batch::default();
-    replay.sample(16, 0.4, &mut rng, &mut batch);
+    let (replay, _, batch) = mixed_sample(16, 9);
     for (i, &slot) in batch.idx.iter().enumerate() {
         let t = replay.transition(slot).unwrap();
         let tag = t.reward;
@@ -480,25 +487,15 @@ fn same_seed_gives_the_same_batches() {
 
 #[test]
 fn sampling_reuses_the_batch_buffers() {
-    let (mut replay, _) = mixed_memory(true);
-    let mut rng = Pcg64::seed_from_u64(2);
-    let mut batch = Batch::default();
-    replay.sample(32, 0.4, &mut rng, &mut batch);
-    let before = (
-        batch.obs.as_ptr(),
-        batch.obs.capacity(),
-        batch.idx.as_ptr(),
-        batch.weights.as_ptr(),
-    );
+    let (mut replay, mut rng, mut batch) = mixed_sample(32, 2);
+    let buffers = |b: &Batch| {
+        let obs = (b.obs.as_ptr(), b.obs.capacity());
+        (obs, b.idx.as_ptr(), b.weights.as_ptr())
+    };
+    let before = buffers(&batch);
     for _ in 0..10 {
         replay.sample(32, 0.4, &mut rng, &mut batch);
     }
-    let after = (
-        batch.obs.as_ptr(),
-        batch.obs.capacity(),
-        batch.idx.as_ptr(),
-        batch.weights.as_ptr(),
-    );
-    assert_eq!(before, after);
+    assert_eq!(before, buffers(&batch));
     assert_eq!(batch.obs.len(), 32 * OBS_DIM);
 }

@@ -845,13 +845,7 @@ impl<'a, A: Learner> Run<'a, A> {
     fn pause(&mut self) -> Result<Control> {
         let mut summary = self.summary();
         summary.person_s = self.expert.as_deref().and_then(|e| e.person_seconds());
-        finish_log(
-            self.cfg,
-            &self.parts.agent,
-            self.log,
-            &summary,
-            self.st.step,
-        )?;
+        self.write_summary(&summary)?;
         self.clock.stamp(&mut self.st);
         let expert_state = self.expert.as_deref().and_then(|e| e.state());
         let Some(driver) = self.driver.as_deref_mut() else {
@@ -870,6 +864,11 @@ impl<'a, A: Learner> Run<'a, A> {
         driver.paused(&mut paused)
     }
 
+    /// The logs closed with `summary` at the current step (see [`finish_log`]).
+    fn write_summary(&mut self, summary: &Summary) -> Result<()> {
+        finish_log(self.cfg, &self.parts.agent, self.log, summary, self.st.step)
+    }
+
     /// The end of the run: its summary, the expert told how it went, the weights and `summary.json`, and the
     /// snapshot removed.
     fn finish(&mut self) -> Result<Summary> {
@@ -884,13 +883,7 @@ impl<'a, A: Learner> Run<'a, A> {
                 dir: self.log.dir().map(|d| d.to_path_buf()),
             });
         }
-        finish_log(
-            self.cfg,
-            &self.parts.agent,
-            self.log,
-            &summary,
-            self.st.step,
-        )?;
+        self.write_summary(&summary)?;
         if let Some(ck) = self.checkpointer.as_deref_mut() {
             ck.remove()?;
         }

@@ -642,24 +642,15 @@ mod tests {
             train_steps: 20_000,
             unit: BudgetUnit::Transitions,
         };
-        let err = "nope"
-            .parse::<RuleSpec>()
-            .unwrap()
-            .build(&defaults)
-            .unwrap_err();
-        assert!(err.to_string().contains("rcmp"), "{err}");
-        let err = "paced(speed=2)"
-            .parse::<RuleSpec>()
-            .unwrap()
-            .build(&defaults)
-            .unwrap_err();
-        assert!(err.to_string().contains("horizon"), "{err}");
-        let err = "paced(horizon=2)"
-            .parse::<RuleSpec>()
-            .unwrap()
-            .build(&defaults)
-            .unwrap_err();
-        assert!(err.to_string().contains("(0, 1]"), "{err}");
+        for (spec, named) in [
+            ("nope", "rcmp"),
+            ("paced(speed=2)", "horizon"),
+            ("paced(horizon=2)", "(0, 1]"),
+        ] {
+            let err = spec.parse::<RuleSpec>().unwrap().build(&defaults);
+            let err = err.unwrap_err().to_string();
+            assert!(err.contains(named), "{spec}: {err}");
+        }
         // Every registered rule builds with its defaults, under its own name.
         for info in RULES {
             let rule = info
