@@ -27,7 +27,6 @@ use std::path::{Path, PathBuf};
 const LAYERS: [&[&str]; 8] = [
     &[
         "build_info",
-        "dir_lock",
         "errors",
         "files",
         "paper",
@@ -35,7 +34,7 @@ const LAYERS: [&[&str]; 8] = [
         "interrupt",
         "math",
     ],
-    &["rng", "nn", "replay", "query"],
+    &["rng", "nn", "replay", "query", "dir_lock"],
     &["env", "agent"],
     &["expert"],
     &["tboard"],
