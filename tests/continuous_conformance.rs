@@ -11,7 +11,7 @@
 
 use arld::env::continuous::ContinuousEnv;
 use arld::env::lunar_lander::heuristic_throttle;
-use arld::env::make_continuous;
+use arld::env::{Env, make_continuous};
 use serde_json::Value;
 
 const TRACES: &str = concat!(

@@ -33,6 +33,7 @@ const LAYERS: [&[&str]; 8] = [
         "state",
         "interrupt",
         "math",
+        "task",
     ],
     &["rng", "nn", "replay", "query", "dir_lock"],
     &["env", "agent"],

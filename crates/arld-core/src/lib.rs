@@ -44,6 +44,7 @@ pub mod query;
 pub mod replay;
 pub mod rng;
 pub mod state;
+pub mod task;
 pub mod tboard;
 pub mod train;
 

@@ -355,7 +355,7 @@ impl<R: Rng> Td3<R> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::env::make_continuous;
+    use crate::env::{Env, make_continuous};
     use rand::SeedableRng;
 
     /// A minimal uniform replay of one-step transitions for the learning test.

@@ -8,32 +8,8 @@
 //! follows NumPy's types step for step, float32 where NumPy computes in float32 (see each task's docs), so the
 //! conformance traces recorded from Gymnasium 1.4.0 are reproduced bit for bit (`tests/continuous_conformance.rs`).
 
-use super::{EnvError, EnvRng, Outcome};
+use super::{BoxSpec, Env, EnvError, EnvRng, Outcome};
 use crate::rng::NumpyRng;
-
-/// The registered facts of a continuous-action task.
-#[derive(Debug, Clone, PartialEq)]
-pub struct BoxSpec {
-    /// Gymnasium id.
-    pub id: &'static str,
-    /// Length of the observation vector.
-    pub obs_dim: usize,
-    /// The action box's lower bounds, one per action dimension.
-    pub action_low: &'static [f32],
-    /// The action box's upper bounds.
-    pub action_high: &'static [f32],
-    /// Gymnasium's `max_episode_steps`.
-    pub max_episode_steps: usize,
-    /// Gymnasium's `reward_threshold`, where the task has one (Pendulum-v1 has none).
-    pub solve_threshold: Option<f64>,
-}
-
-impl BoxSpec {
-    /// Number of action dimensions.
-    pub fn action_dim(&self) -> usize {
-        self.action_low.len()
-    }
-}
 
 /// Every continuous-action task, in the order `known_continuous_ids` lists them.
 pub static CONTINUOUS_SPECS: [BoxSpec; 3] = [
@@ -102,15 +78,12 @@ impl ContinuousEnv {
             running: false,
         }
     }
+}
 
-    /// The task's registered facts.
-    pub fn spec(&self) -> &'static BoxSpec {
-        self.spec
-    }
-
+impl Env<Vec<f32>> for ContinuousEnv {
     /// Starts an episode and writes its first observation into `obs` (`reset(seed=seed)` in Gymnasium; `None`
     /// continues the current generator).
-    pub fn reset_into(&mut self, seed: Option<u64>, obs: &mut [f32]) {
+    fn reset_into(&mut self, seed: Option<u64>, obs: &mut [f32]) {
         self.physics.reset(self.rng.reseed(seed));
         self.elapsed_steps = 0;
         self.running = true;
@@ -119,27 +92,13 @@ impl ContinuousEnv {
 
     /// Advances one step with `action` and writes the observation after it into `obs`. An action of another
     /// length or with a value that is not finite is an error naming it, and so is a step outside an episode.
-    pub fn step_into(&mut self, action: &[f32], obs: &mut [f32]) -> Result<Outcome, EnvError> {
+    fn step_into(&mut self, action: &[f32], obs: &mut [f32]) -> Result<Outcome, EnvError> {
         let env = self.spec.id;
         if !self.running {
             return Err(EnvError::NeedsReset { env });
         }
-        if action.len() != self.spec.action_dim() {
-            return Err(EnvError::BadState {
-                env,
-                msg: format!(
-                    "an action has {} values, not {} (the task's action dimension)",
-                    action.len(),
-                    self.spec.action_dim()
-                ),
-            });
-        }
-        if let Some(bad) = action.iter().find(|a| !a.is_finite()) {
-            return Err(EnvError::BadState {
-                env,
-                msg: format!("an action holds {bad}, which is not a finite number"),
-            });
-        }
+        <Vec<f32> as super::Action>::check(action, self.spec)
+            .map_err(|msg| EnvError::BadState { env, msg })?;
         let Some(rng) = self.rng.current() else {
             return Err(EnvError::NeedsReset { env });
         };
@@ -155,8 +114,20 @@ impl ContinuousEnv {
         })
     }
 
+    fn spec(&self) -> &'static BoxSpec {
+        self.spec
+    }
+
+    fn generator(&self) -> Option<NumpyRng> {
+        self.rng.get()
+    }
+
+    fn set_generator(&mut self, rng: Option<NumpyRng>) {
+        self.rng.set(rng);
+    }
+
     /// Overwrites the internal float64 state (a new episode starts at it) and returns its observation.
-    pub fn set_state(&mut self, state: &[f64]) -> Result<Vec<f32>, EnvError> {
+    fn set_state(&mut self, state: &[f64]) -> Result<Vec<f32>, EnvError> {
         self.physics
             .set_state(state)
             .map_err(|msg| EnvError::BadState {

@@ -703,7 +703,7 @@ mod tests {
         assert!(matches!(env.step(0), Err(EnvError::NeedsReset { .. })));
         env.reset(Some(0));
         assert!(matches!(
-            env.step(env.n_actions()),
+            env.step(env.spec().n_actions),
             Err(EnvError::ActionOutOfRange {
                 action: 4,
                 n_actions: 4,

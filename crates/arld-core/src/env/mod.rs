@@ -6,6 +6,7 @@
 //! `../conformance` traces recorded from Gymnasium are the test (see [`conformance`]).
 
 use crate::rng::NumpyRng;
+pub use crate::task::{Action, ActionColumn, BoxSpec, EnvSpec, TaskSpec};
 use thiserror::Error;
 
 pub mod acrobot;
@@ -87,7 +88,8 @@ pub enum EnvError {
     },
 }
 
-/// A Gymnasium-style episodic environment with a discrete action space.
+/// A Gymnasium-style episodic environment whose actions are of the kind `A` ([`Action`]): discrete (`usize`,
+/// the default) or a box of float32 numbers (`Vec<f32>`).
 ///
 /// The time limit is part of the environment (as Gymnasium's `TimeLimit` wrapper is part of `gym.make`):
 /// `step` sets `truncated` when the limit is reached (on the limit step, also if it terminated there).
@@ -95,14 +97,14 @@ pub enum EnvError {
 /// Observations go into a buffer the caller owns (`obs`, exactly [`Env::obs_dim`] long: a buffer of another
 /// length is a bug in the caller and panics), so stepping allocates nothing; [`Env::reset`] and [`Env::step`]
 /// return them in a fresh `Vec` instead, for code where one allocation per step does not matter.
-pub trait Env: Send {
+pub trait Env<A: Action = usize>: Send {
     /// Starts an episode and writes its first observation into `obs`. `Some(seed)` reseeds the generator exactly
     /// as `reset(seed=seed)` does in Gymnasium; `None` continues the current generator (the first unseeded reset
     /// seeds from OS entropy, as Gymnasium).
     fn reset_into(&mut self, seed: Option<u64>, obs: &mut [f32]);
     /// Advances one step and writes the observation after it into `obs`. Errors on an action out of range or a
     /// step without a running episode (`obs` is then left as it was).
-    fn step_into(&mut self, action: usize, obs: &mut [f32]) -> Result<Outcome, EnvError>;
+    fn step_into(&mut self, action: A::Ref<'_>, obs: &mut [f32]) -> Result<Outcome, EnvError>;
     /// Why the last [`Env::reset_into`] failed, taken (it is reported once); `None` when it did not, as for
     /// every built-in task (only an environment in another language can fail to reset).
     fn take_reset_error(&mut self) -> Option<EnvError> {
@@ -115,7 +117,7 @@ pub trait Env: Send {
         obs
     }
     /// [`Env::step_into`] into a fresh `Vec`.
-    fn step(&mut self, action: usize) -> Result<Step, EnvError> {
+    fn step(&mut self, action: A::Ref<'_>) -> Result<Step, EnvError> {
         let mut obs = vec![0.0; self.obs_dim()];
         let Outcome {
             reward,
@@ -129,27 +131,23 @@ pub trait Env: Send {
             truncated,
         })
     }
-    /// The registered facts of this environment (id, sizes, time limit, solve threshold).
-    fn spec(&self) -> &'static EnvSpec;
+    /// The registered facts of this environment (id, sizes, actions, time limit, solve threshold).
+    fn spec(&self) -> &'static A::Spec;
     /// Length of the observation vector.
     fn obs_dim(&self) -> usize {
-        self.spec().obs_dim
-    }
-    /// Number of discrete actions.
-    fn n_actions(&self) -> usize {
-        self.spec().n_actions
+        self.spec().obs_dim()
     }
     /// Gymnasium's `max_episode_steps`.
     fn max_episode_steps(&self) -> usize {
-        self.spec().max_episode_steps
+        self.spec().max_episode_steps()
     }
     /// Gymnasium's `reward_threshold`: the mean test return that counts as solving the task.
     fn solve_threshold(&self) -> f64 {
-        self.spec().solve_threshold
+        self.spec().solve_threshold()
     }
     /// Gymnasium id, e.g. `CartPole-v0`.
     fn id(&self) -> &'static str {
-        self.spec().id
+        self.spec().id()
     }
     /// The generator the next unseeded reset draws from (`None` before the first reset). With
     /// [`Env::set_generator`] it lets a run put an environment back where it was: restore the generator that
@@ -167,6 +165,13 @@ pub trait Env: Send {
     /// drawing. Reading it never changes the environment.
     fn geometry(&self) -> Option<Geometry> {
         None
+    }
+}
+
+impl dyn Env + '_ {
+    /// Number of discrete actions.
+    pub fn n_actions(&self) -> usize {
+        self.spec().n_actions
     }
 }
 
@@ -211,16 +216,6 @@ pub enum Geometry {
         leg_contact: [bool; 2],
         engine: usize,
     },
-}
-
-/// Static facts about a registered environment.
-#[derive(Debug, Clone, Copy)]
-pub struct EnvSpec {
-    pub id: &'static str,
-    pub obs_dim: usize,
-    pub n_actions: usize,
-    pub max_episode_steps: usize,
-    pub solve_threshold: f64,
 }
 
 /// Static facts of every registered environment, in registry order (Gymnasium's registrations).

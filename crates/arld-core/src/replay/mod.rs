@@ -50,6 +50,7 @@ pub use sum_tree::SumMinTree;
 use nstep::NStepQueue;
 
 use crate::state::{Persist, StateDict, StateError};
+use crate::task::{Action, ActionColumn};
 use rand::Rng;
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
@@ -153,14 +154,14 @@ pub enum ReplayError {
 
 /// A sampled batch, laid out for the learner; reused across calls so sampling does not allocate.
 #[derive(Clone, Debug, Default)]
-pub struct Batch {
+pub struct Batch<A: Action = usize> {
     /// Slot of each sample, to pass back to [`Replay::update_priorities`].
     pub idx: Vec<usize>,
     /// Importance-sampling weight of each sample (all 1 in uniform mode).
     pub weights: Vec<f32>,
     /// Observations, `[sample][obs_dim]` row-major.
     pub obs: Vec<f32>,
-    pub actions: Vec<usize>,
+    pub actions: A::Column,
     pub rewards: Vec<f32>,
     /// Next observations, `[sample][obs_dim]` row-major.
     pub next_obs: Vec<f32>,
@@ -175,7 +176,7 @@ pub struct Batch {
     pub nstep_discounts: Vec<f32>,
 }
 
-impl Batch {
+impl<A: Action> Batch<A> {
     /// Number of samples.
     pub fn len(&self) -> usize {
         self.idx.len()
@@ -204,9 +205,9 @@ impl Batch {
 /// ([`Replay::transition`]). `terminal` is the bootstrap cut (true termination, or truncation when so
 /// configured); `is_demo` marks a demonstration (the expert acted).
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Transition<'a> {
+pub struct Transition<'a, A: Action = usize> {
     pub obs: &'a [f32],
-    pub action: usize,
+    pub action: A::Ref<'a>,
     pub reward: f32,
     pub next_obs: &'a [f32],
     pub terminal: bool,
@@ -215,13 +216,13 @@ pub struct Transition<'a> {
 
 /// The replay memory (see the module docs for layout and sampling rules).
 #[derive(Clone, Debug)]
-pub struct Replay {
+pub struct Replay<A: Action = usize> {
     obs_dim: usize,
     cfg: ReplayConfig,
     // Per-slot storage for `demo_capacity + capacity` slots, demonstrations first.
     obs: Vec<f32>,
     next_obs: Vec<f32>,
-    actions: Vec<usize>,
+    actions: A::Column,
     rewards: Vec<f32>,
     terminal: Vec<bool>,
     /// n-step returns, allocated only when `cfg.n_step > 0`.
@@ -241,7 +242,7 @@ pub struct Replay {
     /// Largest raw priority seen so far; new transitions enter with it.
     max_priority: f32,
     /// Transitions of the current episode waiting for their n-step return (`cfg.n_step > 0`).
-    nstep: Option<NStepQueue>,
+    nstep: Option<NStepQueue<A>>,
     /// Reused buffers of the batched tree searches and updates (no allocation per step).
     scratch: Scratch,
 }
@@ -295,6 +296,18 @@ impl Replay {
 
     /// An empty memory, or the configuration error.
     pub fn try_new(obs_dim: usize, cfg: &ReplayConfig) -> Result<Self, ReplayError> {
+        Self::try_with_action_width(obs_dim, 1, cfg)
+    }
+}
+
+impl<A: Action> Replay<A> {
+    /// An empty memory for observations of `obs_dim` numbers and actions of `action_width` numbers each (the
+    /// task's [`crate::task::TaskSpec::action_width`]), or the configuration error.
+    pub fn try_with_action_width(
+        obs_dim: usize,
+        action_width: usize,
+        cfg: &ReplayConfig,
+    ) -> Result<Self, ReplayError> {
         cfg.validate()?;
         let slots = cfg.demo_capacity + cfg.capacity;
         let n_step = cfg.n_step > 0;
@@ -303,7 +316,7 @@ impl Replay {
             cfg: cfg.clone(),
             obs: vec![0.0; slots * obs_dim],
             next_obs: vec![0.0; slots * obs_dim],
-            actions: vec![0; slots],
+            actions: A::Column::zeros(slots, action_width),
             rewards: vec![0.0; slots],
             terminal: vec![false; slots],
             nstep_next_obs: vec![0.0; if n_step { slots * obs_dim } else { 0 }],
@@ -325,7 +338,7 @@ impl Replay {
     /// evicting the oldest agent transition when the ring is full. Either enters with the current maximum
     /// priority. With n-step returns, the transition is checked now but stored once its return is known (at
     /// the latest when its episode ends: a terminal transition, or [`Replay::end_episode`]).
-    pub fn push(&mut self, t: Transition<'_>) -> Result<(), ReplayError> {
+    pub fn push(&mut self, t: Transition<'_, A>) -> Result<(), ReplayError> {
         self.check(&t)?;
         let Some(mut queue) = self.nstep.take() else {
             return self.store(t, None);
@@ -347,7 +360,7 @@ impl Replay {
     }
 
     /// Rejects a transition that does not fit the memory or holds a non-finite number.
-    fn check(&self, t: &Transition<'_>) -> Result<(), ReplayError> {
+    fn check(&self, t: &Transition<'_, A>) -> Result<(), ReplayError> {
         for (what, o) in [("obs", t.obs), ("next_obs", t.next_obs)] {
             if o.len() != self.obs_dim {
                 return Err(ReplayError::ObsDimMismatch {
@@ -369,7 +382,7 @@ impl Replay {
     /// Writes a checked transition (and its n-step return) into its slot.
     fn store(
         &mut self,
-        t: Transition<'_>,
+        t: Transition<'_, A>,
         n_step: Option<nstep::NStepReturn<'_>>,
     ) -> Result<(), ReplayError> {
         let Transition {
@@ -400,7 +413,7 @@ impl Replay {
         let row = slot * self.obs_dim..(slot + 1) * self.obs_dim;
         self.obs[row.clone()].copy_from_slice(obs);
         self.next_obs[row].copy_from_slice(next_obs);
-        self.actions[slot] = action;
+        self.actions.set(slot, action);
         self.rewards[slot] = reward;
         self.terminal[slot] = terminal;
         if let Some(n) = n_step {
@@ -451,14 +464,14 @@ impl Replay {
     }
 
     /// The transition in `slot`, `None` if the slot holds nothing.
-    pub fn transition(&self, slot: usize) -> Option<Transition<'_>> {
+    pub fn transition(&self, slot: usize) -> Option<Transition<'_, A>> {
         if !self.is_stored(slot) {
             return None;
         }
         let row = slot * self.obs_dim..(slot + 1) * self.obs_dim;
         Some(Transition {
             obs: &self.obs[row.clone()],
-            action: self.actions[slot],
+            action: self.actions.get(slot),
             reward: self.rewards[slot],
             next_obs: &self.next_obs[row],
             terminal: self.terminal[slot],
@@ -478,7 +491,7 @@ impl Replay {
     ///
     /// # Panics
     /// If the memory is empty.
-    pub fn sample(&mut self, batch_size: usize, beta: f32, rng: &mut impl Rng, out: &mut Batch) {
+    pub fn sample(&mut self, batch_size: usize, beta: f32, rng: &mut impl Rng, out: &mut Batch<A>) {
         assert!(!self.is_empty(), "sample from an empty replay memory");
         out.clear();
         if !self.cfg.prioritized {
@@ -545,7 +558,7 @@ impl Replay {
         batch_size: usize,
         beta: f32,
         rng: &mut impl Rng,
-        out: &mut Batch,
+        out: &mut Batch<A>,
     ) {
         assert!(
             self.n_demo > 0,
@@ -674,14 +687,13 @@ impl Replay {
     /// Fills every per-sample field of `out` from the slots in `out.idx`, one field at a time: the
     /// slots are random, so nearly every read misses the cache, and a loop over one field keeps many
     /// of those reads in flight at once.
-    fn gather(&self, out: &mut Batch) {
+    fn gather(&self, out: &mut Batch<A>) {
         let d = self.obs_dim;
         let rows = |from: &[f32], to: &mut Vec<f32>| gather_rows(from, d, &out.idx, to);
         rows(&self.obs, &mut out.obs);
         rows(&self.next_obs, &mut out.next_obs);
         let idx = &out.idx;
-        out.actions
-            .extend(idx.iter().map(|&slot| self.actions[slot]));
+        out.actions.gather(&self.actions, idx);
         out.rewards
             .extend(idx.iter().map(|&slot| self.rewards[slot]));
         out.terminal
@@ -698,7 +710,7 @@ impl Replay {
     }
 }
 
-impl Persist for Replay {
+impl<A: Action> Persist for Replay<A> {
     /// Writes the memory's contents into `state` under `prefix`: every slot's arrays, the priorities, the
     /// counters and the n-step queue. The sum/min trees are not written: their inner nodes are recomputed from
     /// the leaves on every change, so rebuilding them from the priorities gives the same trees bit for bit.
@@ -706,8 +718,7 @@ impl Persist for Replay {
         let name = |n: &str| format!("{prefix}.{n}");
         state.put_f32(&name("obs"), &self.obs);
         state.put_f32(&name("next_obs"), &self.next_obs);
-        let actions: Vec<u64> = self.actions.iter().map(|&a| a as u64).collect();
-        state.put_u64(&name("actions"), actions);
+        self.actions.save(state, &name("actions"));
         state.put_f32(&name("rewards"), &self.rewards);
         let terminal: Vec<u8> = self.terminal.iter().map(|&t| u8::from(t)).collect();
         state.put_u8(&name("terminal"), terminal);
@@ -731,9 +742,7 @@ impl Persist for Replay {
         let name = |n: &str| format!("{prefix}.{n}");
         state.f32s_into(&name("obs"), &mut self.obs)?;
         state.f32s_into(&name("next_obs"), &mut self.next_obs)?;
-        let mut actions = vec![0u64; self.actions.len()];
-        state.u64s_into(&name("actions"), &mut actions)?;
-        self.actions = actions.iter().map(|&a| a as usize).collect();
+        self.actions.load(state, &name("actions"))?;
         state.f32s_into(&name("rewards"), &mut self.rewards)?;
         let mut terminal = vec![0u8; self.terminal.len()];
         state.u8s_into(&name("terminal"), &mut terminal)?;

@@ -4,6 +4,7 @@
 //! the memory `n − 1` steps late, and all at once at the end of an episode. [`super::Replay`] owns the queue.
 
 use super::{ReplayError, Transition};
+use crate::task::Action;
 use std::collections::VecDeque;
 
 /// The n-step return of a transition (DQfD): `reward = Σ_{i<k} γ^i r_{t+i}`, the observation `k` steps
@@ -17,20 +18,21 @@ pub struct NStepReturn<'a> {
 
 /// A transition waiting for its n-step return: an owned copy of a [`Transition`].
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
-pub(super) struct Pending {
+#[serde(bound = "")]
+pub(super) struct Pending<A: Action> {
     obs: Vec<f32>,
-    action: usize,
+    action: A,
     reward: f32,
     next_obs: Vec<f32>,
     terminal: bool,
     is_demo: bool,
 }
 
-impl Pending {
-    fn transition(&self) -> Transition<'_> {
+impl<A: Action> Pending<A> {
+    fn transition(&self) -> Transition<'_, A> {
         Transition {
             obs: &self.obs,
-            action: self.action,
+            action: self.action.borrow(),
             reward: self.reward,
             next_obs: &self.next_obs,
             terminal: self.terminal,
@@ -41,16 +43,16 @@ impl Pending {
 
 /// Holds the last `n` transitions of the current episode until their n-step returns are known.
 #[derive(Clone, Debug)]
-pub(super) struct NStepQueue {
+pub(super) struct NStepQueue<A: Action> {
     n: usize,
     gamma: f32,
-    pending: VecDeque<Pending>,
+    pending: VecDeque<Pending<A>>,
 }
 
 /// Where completed transitions go (the memory's slot writer).
-type Store<'s> = dyn FnMut(Transition<'_>, NStepReturn<'_>) -> Result<(), ReplayError> + 's;
+type Store<'s, A> = dyn FnMut(Transition<'_, A>, NStepReturn<'_>) -> Result<(), ReplayError> + 's;
 
-impl NStepQueue {
+impl<A: Action> NStepQueue<A> {
     pub(super) fn new(n: usize, gamma: f32) -> Self {
         Self {
             n: n.max(1),
@@ -60,12 +62,12 @@ impl NStepQueue {
     }
 
     /// The transitions waiting for their n-step return (for snapshots).
-    pub(super) fn pending(&self) -> Vec<&Pending> {
+    pub(super) fn pending(&self) -> Vec<&Pending<A>> {
         self.pending.iter().collect()
     }
 
     /// Replaces the waiting transitions (from a snapshot).
-    pub(super) fn set_pending(&mut self, pending: Vec<Pending>) {
+    pub(super) fn set_pending(&mut self, pending: Vec<Pending<A>>) {
         self.pending = pending.into();
     }
 
@@ -73,12 +75,12 @@ impl NStepQueue {
     /// A terminal transition completes the whole episode.
     pub(super) fn push(
         &mut self,
-        t: Transition<'_>,
-        mut store: impl FnMut(Transition<'_>, NStepReturn<'_>) -> Result<(), ReplayError>,
+        t: Transition<'_, A>,
+        mut store: impl FnMut(Transition<'_, A>, NStepReturn<'_>) -> Result<(), ReplayError>,
     ) -> Result<(), ReplayError> {
         self.pending.push_back(Pending {
             obs: t.obs.to_vec(),
-            action: t.action,
+            action: A::owned(t.action),
             reward: t.reward,
             next_obs: t.next_obs.to_vec(),
             terminal: t.terminal,
@@ -96,7 +98,7 @@ impl NStepQueue {
     /// The episode ended (termination or time limit): stores the rest with shortened horizons.
     pub(super) fn end_episode(
         &mut self,
-        mut store: impl FnMut(Transition<'_>, NStepReturn<'_>) -> Result<(), ReplayError>,
+        mut store: impl FnMut(Transition<'_, A>, NStepReturn<'_>) -> Result<(), ReplayError>,
     ) -> Result<(), ReplayError> {
         while !self.pending.is_empty() {
             self.emit_front(&mut store)?;
@@ -104,7 +106,7 @@ impl NStepQueue {
         Ok(())
     }
 
-    fn emit_front(&mut self, store: &mut Store<'_>) -> Result<(), ReplayError> {
+    fn emit_front(&mut self, store: &mut Store<'_, A>) -> Result<(), ReplayError> {
         let (mut reward, mut scale) = (0.0f32, 1.0f32);
         for t in &self.pending {
             reward += scale * t.reward;
