@@ -326,6 +326,8 @@ impl Agent {
 /// The DQN family as a [`Learner`]: the methods above, and the batched test-time policy
 /// ([`test_policy_actions`]).
 impl Learner for Agent {
+    type Action = usize;
+
     fn begin_episode(&mut self) {
         Agent::begin_episode(self);
     }
@@ -342,7 +344,8 @@ impl Learner for Agent {
         self.sync_target();
     }
 
-    fn test_actions(&mut self, obs: &[f32], actions: &mut [usize]) {
+    fn test_actions(&mut self, obs: &[f32], actions: &mut Vec<usize>) {
+        actions.resize(obs.len() / self.online.obs_dim(), 0);
         if self.ws_test.max_batch() < actions.len() {
             self.ws_test = Workspace::new(&self.online, actions.len());
         }

@@ -2,7 +2,7 @@
 
 use super::EvalPoint;
 use crate::agent::Learner;
-use crate::env::Env;
+use crate::env::{Action, ActionColumn, Env};
 use anyhow::{Result, ensure};
 
 /// The test episodes of every evaluation (no exploration), run in lockstep: one environment per episode,
@@ -11,21 +11,21 @@ use anyhow::{Result, ensure};
 /// Environment `i` is seeded once with `seed + i` and then continues its own generator from one evaluation
 /// to the next. The batched forward computes each row exactly as a single-state forward would
 /// ([`Learner::test_actions`]), so lockstep changes the cost, not the actions.
-pub struct Evaluator {
-    envs: Vec<Box<dyn Env>>,
+pub struct Evaluator<A: Action = usize> {
+    envs: Vec<Box<dyn Env<A>>>,
     /// The length of an observation.
     obs_dim: usize,
     returns: Vec<f64>,
     /// Indices of the environments whose episode is still running, and their observations (row-major).
     running: Vec<usize>,
     obs: Vec<f32>,
-    actions: Vec<usize>,
+    actions: A::Column,
 }
 
-impl Evaluator {
+impl<A: Action> Evaluator<A> {
     /// One test episode per environment of `envs`, environment `i` seeded `seed + i`, for observations of
     /// `obs_dim` values.
-    pub fn new(mut envs: Vec<Box<dyn Env>>, seed: u64, obs_dim: usize) -> Result<Self> {
+    pub fn new(mut envs: Vec<Box<dyn Env<A>>>, seed: u64, obs_dim: usize) -> Result<Self> {
         ensure!(
             !envs.is_empty(),
             "evaluation needs at least one test environment"
@@ -40,7 +40,7 @@ impl Evaluator {
             returns: Vec::with_capacity(episodes),
             running: Vec::with_capacity(episodes),
             obs: Vec::with_capacity(episodes * obs_dim),
-            actions: Vec::with_capacity(episodes),
+            actions: A::Column::default(),
         })
     }
 
@@ -67,7 +67,11 @@ impl Evaluator {
     }
 
     /// One episode per environment under `net`'s test policy; the returns' summary at training step `step`.
-    pub fn evaluate(&mut self, agent: &mut impl Learner, step: usize) -> Result<EvalPoint> {
+    pub fn evaluate(
+        &mut self,
+        agent: &mut impl Learner<Action = A>,
+        step: usize,
+    ) -> Result<EvalPoint> {
         self.returns.clear();
         self.running.clear();
         let d = self.obs_dim;
@@ -79,7 +83,6 @@ impl Evaluator {
             self.returns.push(0.0);
         }
         while !self.running.is_empty() {
-            self.actions.resize(self.running.len(), 0);
             agent.test_actions(&self.obs, &mut self.actions);
             // Step every running environment; compact the finished ones out, keeping the order (row `kept` is
             // at or before row `row`, so the running environment's new observation moves up in place).
@@ -87,7 +90,7 @@ impl Evaluator {
             for row in 0..self.running.len() {
                 let i = self.running[row];
                 let s = self.envs[i]
-                    .step_into(self.actions[row], &mut self.obs[row * d..(row + 1) * d])?;
+                    .step_into(self.actions.get(row), &mut self.obs[row * d..(row + 1) * d])?;
                 self.returns[i] += s.reward;
                 if !(s.terminated || s.truncated) {
                     self.running[kept] = i;

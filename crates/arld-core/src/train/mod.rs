@@ -58,7 +58,7 @@ pub fn record_failure(dir: &std::path::Path, err: &anyhow::Error, phase: &str, s
 /// from them alone (TD plus margin loss, prioritized among demonstrations), with the usual target copies.
 pub fn pretrain(
     cfg: &TrainConfig,
-    agent: &mut impl Learner,
+    agent: &mut impl Learner<Action = usize>,
     replay: &mut Replay,
     demos: &Demonstrations,
     rng: &mut Pcg64,
@@ -98,12 +98,12 @@ pub(super) fn push_demos(
 }
 
 /// Pre-training update number `update` (from 1): demonstrations only, prioritized among them.
-pub(super) fn pretrain_update(
+pub(super) fn pretrain_update<L: Learner>(
     cfg: &TrainConfig,
-    agent: &mut impl Learner,
-    replay: &mut Replay,
+    agent: &mut L,
+    replay: &mut Replay<L::Action>,
     rng: &mut Pcg64,
-    batch: &mut Batch,
+    batch: &mut Batch<L::Action>,
     update: usize,
 ) -> Result<()> {
     replay.sample_demo_only(cfg.batch_size, cfg.beta0 as f32, rng, batch);
@@ -133,11 +133,11 @@ pub struct Diverged {
 /// One prioritized update on `batch` and the new priorities of its transitions. A loss or gradient that is not
 /// finite ends the run with [`Diverged`] (`at` says where), before any priority is taken from it; the weights
 /// the update spoiled are never saved, since the run ends there.
-pub(super) fn update_checked(
+pub(super) fn update_checked<L: Learner>(
     cfg: &TrainConfig,
-    agent: &mut impl Learner,
-    replay: &mut Replay,
-    batch: &Batch,
+    agent: &mut L,
+    replay: &mut Replay<L::Action>,
+    batch: &Batch<L::Action>,
     at: impl FnOnce() -> String,
 ) -> Result<crate::agent::UpdateStats> {
     let (stats, priorities) = agent.learn(batch);

@@ -45,7 +45,7 @@ use std::time::Instant;
 ///   `cfg.train_steps` is then the horizon of the schedules (ε, β) and of the last evaluation, not a limit: past
 ///   it ε stays at `eps_end` and β at 1. Pausing and going on changes nothing in the run: it is the same loop,
 ///   so two stretches equal one of their total length.
-pub struct RunBuilder<'a, A: Learner = Agent> {
+pub struct RunBuilder<'a, A: Learner<Action = usize> = Agent> {
     cfg: &'a TrainConfig,
     /// Builds the agent for an environment of `obs_dim` inputs and `n_actions` actions, from the run's seed.
     make_agent: fn(&TrainConfig, usize, usize) -> A,
@@ -76,7 +76,7 @@ fn dqn_agent(cfg: &TrainConfig, obs_dim: usize, n_actions: usize) -> Agent {
     )
 }
 
-impl<'a, A: Learner> RunBuilder<'a, A> {
+impl<'a, A: Learner<Action = usize>> RunBuilder<'a, A> {
     /// A run of `cfg` whose agent `make_agent` builds (any [`Learner`]), otherwise as [`RunBuilder::new`].
     pub fn with_agent(
         cfg: &'a TrainConfig,
@@ -215,7 +215,7 @@ struct Parts<A> {
 }
 
 /// A run in progress: what it was given, its parts, and where its loop stands.
-struct Run<'a, A: Learner> {
+struct Run<'a, A: Learner<Action = usize>> {
     cfg: &'a TrainConfig,
     env: Box<dyn Env>,
     expert: Option<&'a mut dyn Expert>,
@@ -282,7 +282,7 @@ enum Turn {
     Ask(OpenQuestion),
 }
 
-impl<'a, A: Learner> Run<'a, A> {
+impl<'a, A: Learner<Action = usize>> Run<'a, A> {
     fn new(
         given: RunBuilder<'a, A>,
         env: Box<dyn Env>,
@@ -970,7 +970,7 @@ pub struct PausedRun<'a, A = Agent> {
     expert: Option<&'a mut dyn Expert>,
 }
 
-impl<A: Learner> PausedRun<'_, A> {
+impl<A: Learner<Action = usize>> PausedRun<'_, A> {
     /// Writes a snapshot of the run (the format of [`Checkpointer`]) into `dir` and waits until it is there.
     pub fn snapshot(&mut self, dir: &Path) -> Result<()> {
         let mut ck = Checkpointer::new(dir, self.cfg);
@@ -1111,7 +1111,7 @@ impl RunClock {
 fn snapshot(
     checkpointer: &mut Checkpointer,
     st: &LoopState,
-    parts: &Parts<impl Learner>,
+    parts: &Parts<impl Learner<Action = usize>>,
     expert_state: Option<String>,
     log: &mut RunLog,
     stopping: bool,
@@ -1183,7 +1183,7 @@ fn summarize(
 /// The run directory's results after `step` steps: the weights, then `summary.json`.
 fn finish_log(
     cfg: &TrainConfig,
-    agent: &impl Learner,
+    agent: &impl Learner<Action = usize>,
     log: &mut RunLog,
     summary: &Summary,
     step: usize,
