@@ -24,7 +24,7 @@ use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
 /// The layers, bottom first. Modules of one layer may not use each other.
-const LAYERS: [&[&str]; 8] = [
+const LAYERS: [&[&str]; 9] = [
     &[
         "build_info",
         "errors",
@@ -33,8 +33,9 @@ const LAYERS: [&[&str]; 8] = [
         "state",
         "interrupt",
         "math",
-        "task",
     ],
+    // What a task and its actions are (uses `state` to store actions).
+    &["task"],
     &["rng", "nn", "replay", "query", "dir_lock"],
     &["env", "agent"],
     &["expert"],

@@ -242,6 +242,14 @@ impl BoxColumn {
     pub fn values(&self) -> &[f32] {
         &self.values
     }
+
+    /// Makes the column `rows` actions of `width` numbers (their values left as they were or zero) and
+    /// returns every row's numbers to fill.
+    pub fn rows_mut(&mut self, rows: usize, width: usize) -> &mut [f32] {
+        self.width = width;
+        self.values.resize(rows * width, 0.0);
+        &mut self.values
+    }
 }
 
 impl ActionColumn<Vec<f32>> for BoxColumn {

@@ -17,6 +17,8 @@ use rand::Rng;
 use rand_distr::StandardNormal;
 
 use crate::nn::{Adam, Mlp, MlpWorkspace, OutputActivation};
+use crate::state::{Persist, StateDict, StateError};
+use serde::{Serialize, de::DeserializeOwned};
 
 /// TD3's settings (the paper's defaults where it has them).
 #[derive(Debug, Clone, PartialEq)]
@@ -349,6 +351,54 @@ impl<R: Rng> Td3<R> {
         self.actor
             .backward(&mut self.actor_ws, d_y, &mut self.actor_grads, None);
         loss
+    }
+}
+
+impl<R: Rng> Td3<R> {
+    /// The learner's generator, for a caller's draws in sequence with the learner's own.
+    pub fn rng(&mut self) -> &mut R {
+        &mut self.rng
+    }
+
+    /// The actor network (the policy).
+    pub fn actor(&self) -> &Mlp {
+        &self.actor
+    }
+}
+
+impl<R: Rng + Serialize + DeserializeOwned> Persist for Td3<R> {
+    /// Writes everything that changes while TD3 learns and acts: the four networks, both optimisers, the
+    /// generator and the update count. Buffers are left out: every use overwrites them.
+    fn save_state<'a>(&'a self, prefix: &str, state: &mut StateDict<'a>) {
+        self.actor.save_state(&format!("{prefix}.actor"), state);
+        self.actor_target
+            .save_state(&format!("{prefix}.actor_target"), state);
+        self.critic.save_state(&format!("{prefix}.critic"), state);
+        self.critic_target
+            .save_state(&format!("{prefix}.critic_target"), state);
+        self.actor_opt
+            .save_state(&format!("{prefix}.actor_adam"), state);
+        self.critic_opt
+            .save_state(&format!("{prefix}.critic_adam"), state);
+        state.put_text(&format!("{prefix}.rng"), &self.rng);
+        state.put_value(&format!("{prefix}.updates"), &self.updates);
+    }
+
+    /// Reads what [`Td3::save_state`] wrote into a learner of the same configuration.
+    fn load_state(&mut self, prefix: &str, state: &StateDict<'_>) -> Result<(), StateError> {
+        self.actor.load_state(&format!("{prefix}.actor"), state)?;
+        self.actor_target
+            .load_state(&format!("{prefix}.actor_target"), state)?;
+        self.critic.load_state(&format!("{prefix}.critic"), state)?;
+        self.critic_target
+            .load_state(&format!("{prefix}.critic_target"), state)?;
+        self.actor_opt
+            .load_state(&format!("{prefix}.actor_adam"), state)?;
+        self.critic_opt
+            .load_state(&format!("{prefix}.critic_adam"), state)?;
+        self.rng = state.text(&format!("{prefix}.rng"))?;
+        self.updates = state.value(&format!("{prefix}.updates"))?;
+        Ok(())
     }
 }
 

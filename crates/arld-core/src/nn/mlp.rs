@@ -11,6 +11,8 @@
 
 use rand::Rng;
 
+use crate::state::{Persist, StateDict, StateError};
+
 use super::kernels::{Lanes, Strided, product, relu_backward, transpose};
 use super::linear::{MatView, column_sums, init_linear, relu_in_place};
 use super::simd::at_simd_level;
@@ -263,6 +265,18 @@ impl Mlp {
             );
             dx.copy_from_slice(&dz_buf[..n]);
         }
+    }
+}
+
+impl Persist for Mlp {
+    /// Writes the parameters into `state` as `{prefix}.params` (the shape is the configuration's).
+    fn save_state<'a>(&'a self, prefix: &str, state: &mut StateDict<'a>) {
+        state.put_f32(&format!("{prefix}.params"), &self.params[..]);
+    }
+
+    /// Reads the parameters [`Mlp::save_state`] wrote into a network of the same shape.
+    fn load_state(&mut self, prefix: &str, state: &StateDict<'_>) -> Result<(), StateError> {
+        state.f32s_into(&format!("{prefix}.params"), &mut self.params)
     }
 }
 
