@@ -116,6 +116,12 @@ pub trait Action:
     fn owned(action: Self::Ref<'_>) -> Self;
     /// Checks that `action` is one the task `spec` accepts; the error says why not.
     fn check(action: Self::Ref<'_>, spec: &Self::Spec) -> Result<(), String>;
+    /// The index of a discrete action (`None` for a box): what rules that compare the agent's action with an
+    /// oracle's read.
+    fn index(action: Self::Ref<'_>) -> Option<usize>;
+    /// The action as one field of a CSV file (`queries.csv`): the index, or the box's numbers separated by
+    /// spaces.
+    fn to_field(action: Self::Ref<'_>) -> String;
 }
 
 impl Action for usize {
@@ -131,12 +137,20 @@ impl Action for usize {
         action
     }
 
+    fn index(action: usize) -> Option<usize> {
+        Some(action)
+    }
+
+    fn to_field(action: usize) -> String {
+        action.to_string()
+    }
+
     fn check(action: usize, spec: &EnvSpec) -> Result<(), String> {
         if action < spec.n_actions {
             Ok(())
         } else {
             Err(format!(
-                "action {action} is out of range: {} has {} actions (0 to {})",
+                "{} has {} actions (0 to {})",
                 spec.id,
                 spec.n_actions,
                 spec.n_actions.saturating_sub(1)
@@ -156,6 +170,18 @@ impl Action for Vec<f32> {
 
     fn owned(action: &[f32]) -> Vec<f32> {
         action.to_vec()
+    }
+
+    fn index(_: &[f32]) -> Option<usize> {
+        None
+    }
+
+    fn to_field(action: &[f32]) -> String {
+        action
+            .iter()
+            .map(f32::to_string)
+            .collect::<Vec<_>>()
+            .join(" ")
     }
 
     fn check(action: &[f32], spec: &BoxSpec) -> Result<(), String> {

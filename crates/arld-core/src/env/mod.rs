@@ -407,10 +407,10 @@ pub enum EpisodeStart {
 
 /// Puts `env` where an episode that began at `start` stands after `actions`: resets it the same way and takes the
 /// same actions (our environments are deterministic given both). Writes the last observation into `obs`.
-pub fn replay_episode(
-    env: &mut dyn Env,
+pub fn replay_episode<A: Action>(
+    env: &mut dyn Env<A>,
     start: EpisodeStart,
-    actions: &[usize],
+    actions: &[A],
     obs: &mut Vec<f32>,
 ) -> Result<(), EnvError> {
     obs.resize(env.obs_dim(), 0.0);
@@ -421,8 +421,8 @@ pub fn replay_episode(
             env.reset_into(None, obs);
         }
     }
-    for &a in actions {
-        env.step_into(a, obs)?;
+    for a in actions {
+        env.step_into(a.borrow(), obs)?;
     }
     Ok(())
 }

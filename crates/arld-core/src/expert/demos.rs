@@ -9,7 +9,7 @@
 //! until `N` transitions are gathered (the last episode is cut at `N`).
 
 use super::Expert;
-use crate::env::{self, Env};
+use crate::env::{self, Action, Env};
 use crate::replay::Transition;
 use anyhow::{Context, Result, bail, ensure};
 use serde::{Deserialize, Serialize};
@@ -19,23 +19,24 @@ use std::path::Path;
 /// One line of a demonstration file: a demonstrated step with its episode and how the episode ended there.
 /// Training reads it as a [`Transition`] ([`DemoStep::transition`]).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct DemoStep {
+#[serde(bound = "")]
+pub struct DemoStep<A: Action = usize> {
     pub episode: usize,
     pub obs: Vec<f32>,
-    pub action: usize,
+    pub action: A,
     pub reward: f32,
     pub next_obs: Vec<f32>,
     pub terminated: bool,
     pub truncated: bool,
 }
 
-impl DemoStep {
+impl<A: Action> DemoStep<A> {
     /// The step as a demonstration transition; the bootstrap cut is true termination only, so training
     /// bootstraps through a time limit.
-    pub fn transition(&self) -> Transition<'_> {
+    pub fn transition(&self) -> Transition<'_, A> {
         Transition {
             obs: &self.obs,
-            action: self.action,
+            action: self.action.borrow(),
             reward: self.reward,
             next_obs: &self.next_obs,
             terminal: self.terminated,
@@ -78,12 +79,15 @@ pub struct DemoColumns {
 }
 
 /// A set of demonstrations for one environment.
+///
+/// Demonstrations of discrete actions are collected, saved and loaded here; a set of box actions
+/// (`Demonstrations<Vec<f32>>`) is built from its steps.
 #[derive(Clone, Debug, PartialEq)]
-pub struct Demonstrations {
+pub struct Demonstrations<A: Action = usize> {
     pub env: String,
     pub expert: String,
     pub seed: u64,
-    pub transitions: Vec<DemoStep>,
+    pub transitions: Vec<DemoStep<A>>,
 }
 
 impl Demonstrations {

@@ -17,7 +17,7 @@ pub mod scripted;
 pub mod web_options;
 
 use crate::agent::test_policy_action;
-use crate::env::{Env, EnvSpec};
+use crate::env::{Action, Env, EnvSpec};
 use crate::nn::QNet;
 use crate::query::{OracleView, QueryController};
 use anyhow::{Context, Result, bail, ensure};
@@ -26,9 +26,12 @@ use rand_pcg::Pcg64;
 use std::path::{Path, PathBuf};
 
 /// Something that can be asked which action to take.
-pub trait Expert: Send {
+///
+/// An expert answers with actions of the kind `A` ([`Action`]): discrete indices (the default) or boxes of
+/// numbers.
+pub trait Expert<A: Action = usize>: Send {
     /// The expert's action for `obs`. May block (a person, a process) and may fail.
-    fn act(&mut self, obs: &[f32]) -> Result<usize>;
+    fn act(&mut self, obs: &[f32]) -> Result<A>;
     /// A short human-readable description, e.g. `checkpoint:experts/CartPole-v0/weak.safetensors`.
     fn describe(&self) -> String;
     /// The kind of expert recorded with each query (`queries.csv`): the description up to its first `:` or
@@ -39,7 +42,7 @@ pub trait Expert: Send {
     }
     /// Answers a query of the training loop. Programs answer at once with [`Expert::act`]; an interactive
     /// expert may show `query.env`, take its time, or give the query back ([`Answer::Unanswered`]).
-    fn answer(&mut self, query: &Query) -> Result<Answer> {
+    fn answer(&mut self, query: &Query<'_, A>) -> Result<Answer<A>> {
         Ok(Answer::Action {
             action: self.act(query.obs)?,
             response_s: None,
@@ -53,7 +56,7 @@ pub trait Expert: Send {
     }
     /// Called by the training loop after every step, so that an interactive expert can show the run as it goes.
     /// It must be cheap and must not change anything the run depends on.
-    fn observe(&mut self, _progress: &Progress) {}
+    fn observe(&mut self, _progress: &Progress<'_, A>) {}
     /// Whether the expert shows the agent's uncertainty at every step (a person's page): the agent then
     /// computes it even where no query rule reads it (a segment aside), so that it goes on after the budget is
     /// spent. Programs say no: the agent computes only what its rule needs.
@@ -86,25 +89,33 @@ pub trait Expert: Send {
 }
 
 /// What the training loop asks the expert at one step of a query's segment.
-pub struct Query<'a> {
+pub struct Query<'a, A: Action = usize> {
     pub obs: &'a [f32],
     /// The environment in the state `obs` comes from (to draw it; never stepped by the expert).
-    pub env: &'a dyn Env,
+    pub env: &'a dyn Env<A>,
     /// How the episode in progress began and its actions so far: with them an expert can rebuild the state
     /// (to replay the agent's steps to a person, or let them undo a key on a copy).
-    pub episode: EpisodeTrace<'a>,
+    pub episode: EpisodeTrace<'a, A>,
     /// The agent's own proposal, on the step that opens the segment (`None` on the later steps).
-    pub agent_action: Option<usize>,
+    pub agent_action: Option<A::Ref<'a>>,
     /// Expert steps left in the segment, this one included.
     pub steps_left: usize,
 }
 
 /// The episode in progress: how it began and the actions taken since.
-#[derive(Clone, Copy, Debug)]
-pub struct EpisodeTrace<'a> {
+#[derive(Debug)]
+pub struct EpisodeTrace<'a, A: Action = usize> {
     pub start: crate::env::EpisodeStart,
-    pub actions: &'a [usize],
+    pub actions: &'a [A],
 }
+
+impl<A: Action> Clone for EpisodeTrace<'_, A> {
+    fn clone(&self) -> Self {
+        *self
+    }
+}
+
+impl<A: Action> Copy for EpisodeTrace<'_, A> {}
 
 /// How a run ended, for [`Expert::finish`].
 #[derive(Clone, Debug)]
@@ -121,25 +132,22 @@ pub struct RunEnd {
 
 /// An expert's reply to a [`Query`].
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub enum Answer {
+pub enum Answer<A = usize> {
     /// The action; an interactive expert also reports how long the answer took (seconds).
-    Action {
-        action: usize,
-        response_s: Option<f64>,
-    },
+    Action { action: A, response_s: Option<f64> },
     /// Nobody answered in time: the agent acts instead, the step is not charged to the budget and the
     /// segment ends.
     Unanswered { waited_s: f64 },
 }
 
 /// Where a run stands after a step, for [`Expert::observe`].
-pub struct Progress<'a> {
+pub struct Progress<'a, A: Action = usize> {
     /// Environment steps done.
     pub step: usize,
     pub train_steps: usize,
     pub episode: usize,
     /// The environment after the step (reset already if the episode ended).
-    pub env: &'a dyn Env,
+    pub env: &'a dyn Env<A>,
     /// The uncertainty of this step's agent action, when it was computed.
     pub uncertainty: Option<f32>,
     /// Budget, segments and the query rule (its adaptive threshold).

@@ -18,7 +18,7 @@
 //! # let signals_of = |_needs| Signals { uncertainty: Some(0.5), ..Signals::default() };
 //! let expert_acts = controller.expert_in_control() || {
 //!     let signals = signals_of(controller.signals_wanted_now());
-//!     let input = DecisionInput { step: 0, train_steps: 1000, agent_action: 0, signals: &signals, oracle: None };
+//!     let input = DecisionInput { step: 0, train_steps: 1000, agent_action: Some(0), signals: &signals, oracle: None };
 //!     controller.decide(&input, &mut rng).query
 //! };
 //! if expert_acts {
@@ -62,7 +62,8 @@ impl Decision {
 pub struct DecisionInput<'a> {
     pub step: usize,
     pub train_steps: usize,
-    pub agent_action: usize,
+    /// The index of the action the agent is about to take (`None` for a box action).
+    pub agent_action: Option<usize>,
     pub signals: &'a Signals,
     /// The expert's view, given only to oracle rules.
     pub oracle: Option<&'a OracleView>,
@@ -316,7 +317,7 @@ mod tests {
         let input = DecisionInput {
             step: 0,
             train_steps: 1000,
-            agent_action: 0,
+            agent_action: Some(0),
             signals: &signals,
             oracle: None,
         };

@@ -153,7 +153,7 @@ pub enum ReplayError {
 }
 
 /// A sampled batch, laid out for the learner; reused across calls so sampling does not allocate.
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Debug)]
 pub struct Batch<A: Action = usize> {
     /// Slot of each sample, to pass back to [`Replay::update_priorities`].
     pub idx: Vec<usize>,
@@ -174,6 +174,24 @@ pub struct Batch<A: Action = usize> {
     pub nstep_rewards: Vec<f32>,
     pub nstep_next_obs: Vec<f32>,
     pub nstep_discounts: Vec<f32>,
+}
+
+impl<A: Action> Default for Batch<A> {
+    fn default() -> Self {
+        Self {
+            idx: Vec::new(),
+            weights: Vec::new(),
+            obs: Vec::new(),
+            actions: A::Column::default(),
+            rewards: Vec::new(),
+            next_obs: Vec::new(),
+            terminal: Vec::new(),
+            is_demo: Vec::new(),
+            nstep_rewards: Vec::new(),
+            nstep_next_obs: Vec::new(),
+            nstep_discounts: Vec::new(),
+        }
+    }
 }
 
 impl<A: Action> Batch<A> {

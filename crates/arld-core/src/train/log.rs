@@ -6,6 +6,7 @@ use super::run_dir::{
     self, CONFIG_FILE, EPISODES_FILE, EPISODES_HEADER, EvalPoint, QUERIES_FILE, QUERIES_HEADER,
     QueryEvent, SUMMARY_FILE, Summary, write_atomic,
 };
+use crate::task::Action;
 use crate::tboard::EventWriter;
 use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
@@ -18,18 +19,19 @@ use std::path::{Path, PathBuf};
 /// the evaluation curve, and the queries asked so far (so that a run continued from the snapshot alone, without
 /// its run directory, still knows them; empty when read from a snapshot written before they were kept).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct LogPosition {
+#[serde(bound = "")]
+pub struct LogPosition<A: Action = usize> {
     pub episodes: u64,
     pub queries: u64,
     pub events_file: String,
     pub events: u64,
     pub curve: Vec<EvalPoint>,
     #[serde(default)]
-    pub query_events: Vec<QueryEvent>,
+    pub query_events: Vec<QueryEvent<A>>,
 }
 
 /// Receives a run's events; writes them to a run directory when one is given, and drives the progress bar.
-pub struct RunLog {
+pub struct RunLog<A: Action = usize> {
     dir: Option<PathBuf>,
     curve: Vec<EvalPoint>,
     episodes: Option<BufWriter<File>>,
@@ -37,10 +39,10 @@ pub struct RunLog {
     events: Option<EventWriter>,
     progress: ProgressBar,
     /// Every query of the run, also kept in memory (a run asks at most its budget, a few thousand).
-    query_events: Vec<QueryEvent>,
+    query_events: Vec<QueryEvent<A>>,
 }
 
-impl RunLog {
+impl<A: Action> RunLog<A> {
     /// A log that keeps results in memory only (tests, sweeps that only need the summary).
     pub fn in_memory() -> Self {
         Self {
@@ -129,7 +131,7 @@ impl RunLog {
 
     /// Where the run's logs stand: flushes the streams and returns their lengths and the evaluation curve, so
     /// that [`RunLog::resume`] can put them back exactly there.
-    pub fn position(&mut self) -> Result<LogPosition> {
+    pub fn position(&mut self) -> Result<LogPosition<A>> {
         let len = |f: &mut Option<BufWriter<File>>| -> Result<u64> {
             Ok(match f {
                 Some(f) => {
@@ -166,7 +168,7 @@ impl RunLog {
     /// `eval.csv` is rewritten from the curve then. Whatever the interrupted run wrote after its snapshot is gone.
     pub fn resume(
         dir: &Path,
-        position: &LogPosition,
+        position: &LogPosition<A>,
         total_steps: u64,
         progress: bool,
     ) -> Result<Self> {
@@ -208,7 +210,7 @@ impl RunLog {
 
     /// A log in memory only ([`RunLog::in_memory`]) that continues a run from `position`: it knows the queries
     /// asked before the snapshot.
-    pub fn in_memory_resumed(position: &LogPosition) -> Self {
+    pub fn in_memory_resumed(position: &LogPosition<A>) -> Self {
         let mut log = Self::in_memory();
         log.query_events = position.query_events.clone();
         log
@@ -238,7 +240,7 @@ impl RunLog {
         self.scalar("train/episode_return", step, ret as f32)
     }
 
-    pub fn query(&mut self, q: &QueryEvent) -> Result<()> {
+    pub fn query(&mut self, q: &QueryEvent<A>) -> Result<()> {
         self.query_events.push(q.clone());
         if let Some(f) = &mut self.queries {
             f.write_all(q.csv_row().as_bytes())?;
@@ -268,7 +270,7 @@ impl RunLog {
     }
 
     /// Every query so far.
-    pub fn query_events(&self) -> &[QueryEvent] {
+    pub fn query_events(&self) -> &[QueryEvent<A>] {
         &self.query_events
     }
 

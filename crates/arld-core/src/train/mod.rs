@@ -37,7 +37,7 @@ pub fn epsilon_at(cfg: &TrainConfig, step: usize) -> f64 {
 }
 
 /// The log position recorded in a snapshot.
-pub fn resume_position(state: &StateDict) -> Result<log::LogPosition> {
+pub fn resume_position<A: crate::task::Action>(state: &StateDict) -> Result<log::LogPosition<A>> {
     Ok(state.value("log")?)
 }
 
@@ -56,13 +56,13 @@ pub fn record_failure(dir: &std::path::Path, err: &anyhow::Error, phase: &str, s
 
 /// DQfD pre-training (§9): the demonstrations enter replay permanently, then `pretrain_steps` updates sample
 /// from them alone (TD plus margin loss, prioritized among demonstrations), with the usual target copies.
-pub fn pretrain(
+pub fn pretrain<L: Learner>(
     cfg: &TrainConfig,
-    agent: &mut impl Learner<Action = usize>,
-    replay: &mut Replay,
-    demos: &Demonstrations,
+    agent: &mut L,
+    replay: &mut Replay<L::Action>,
+    demos: &Demonstrations<L::Action>,
     rng: &mut Pcg64,
-    batch: &mut Batch,
+    batch: &mut Batch<L::Action>,
 ) -> Result<()> {
     push_demos(cfg, replay, demos)?;
     for update in 1..=cfg.pretrain_steps {
@@ -73,10 +73,10 @@ pub fn pretrain(
 }
 
 /// The demonstrations enter replay permanently, episode by episode.
-pub(super) fn push_demos(
+pub(super) fn push_demos<A: crate::task::Action>(
     cfg: &TrainConfig,
-    replay: &mut Replay,
-    demos: &Demonstrations,
+    replay: &mut Replay<A>,
+    demos: &Demonstrations<A>,
 ) -> Result<()> {
     ensure!(
         demos.env == cfg.env,

@@ -12,7 +12,7 @@ use super::{
     pretrain_update, push_demos, record_failure, run_dir, seed_for, steps_to_solve, update_checked,
 };
 use crate::agent::{Agent, Learner};
-use crate::env::{self, Env};
+use crate::env::{self, Action, Env, TaskSpec};
 use crate::expert::demos::Demonstrations;
 use crate::expert::{Answer, EpisodeTrace, Expert, Progress, Query, RunEnd};
 use crate::interrupt;
@@ -45,18 +45,25 @@ use std::time::Instant;
 ///   `cfg.train_steps` is then the horizon of the schedules (ε, β) and of the last evaluation, not a limit: past
 ///   it ε stays at `eps_end` and β at 1. Pausing and going on changes nothing in the run: it is the same loop,
 ///   so two stretches equal one of their total length.
-pub struct RunBuilder<'a, A: Learner<Action = usize> = Agent> {
+pub struct RunBuilder<'a, L: Learner = Agent> {
     cfg: &'a TrainConfig,
-    /// Builds the agent for an environment of `obs_dim` inputs and `n_actions` actions, from the run's seed.
-    make_agent: fn(&TrainConfig, usize, usize) -> A,
-    env: Option<Box<dyn Env>>,
-    test_envs: Option<Vec<Box<dyn Env>>>,
-    expert: Option<&'a mut dyn Expert>,
-    demos: Option<&'a Demonstrations>,
+    /// Builds the agent for the task `spec` (its observations and actions), from the run's seed.
+    make_agent: AgentMaker<L>,
+    make_env: EnvMaker<L::Action>,
+    env: Option<Box<dyn Env<L::Action>>>,
+    test_envs: Option<Vec<Box<dyn Env<L::Action>>>>,
+    expert: Option<&'a mut dyn Expert<L::Action>>,
+    demos: Option<&'a Demonstrations<L::Action>>,
     checkpointer: Option<&'a mut Checkpointer>,
     resume_from: Option<&'a StateDict<'a>>,
-    driver: Option<&'a mut dyn Driver<A>>,
+    driver: Option<&'a mut dyn Driver<L>>,
 }
+
+/// Builds a run's agent for a task from the run's configuration (and seed).
+pub type AgentMaker<L> = fn(&TrainConfig, &'static <<L as Learner>::Action as Action>::Spec) -> L;
+
+/// Makes the environment `id` for a run of actions of the kind `A`.
+pub type EnvMaker<A> = fn(&str) -> Result<Box<dyn Env<A>>>;
 
 impl<'a> RunBuilder<'a> {
     /// A run of `cfg` in the configuration's own environments, with no expert, demonstrations, snapshots or
@@ -66,25 +73,43 @@ impl<'a> RunBuilder<'a> {
     }
 }
 
+/// The environment `id` of discrete actions, as a run makes it.
+fn discrete_env(id: &str) -> Result<Box<dyn Env>> {
+    Ok(env::make(id)?)
+}
+
 /// The DQN-family agent of `cfg` ([`TrainConfig::agent_config`]), seeded from the run's seed.
-fn dqn_agent(cfg: &TrainConfig, obs_dim: usize, n_actions: usize) -> Agent {
+fn dqn_agent(cfg: &TrainConfig, spec: &'static crate::env::EnvSpec) -> Agent {
     Agent::new(
         &cfg.agent_config(),
-        obs_dim,
-        n_actions,
+        spec.obs_dim,
+        spec.n_actions,
         seed_for(cfg.seed, SeedPurpose::Agent),
     )
 }
 
-impl<'a, A: Learner<Action = usize>> RunBuilder<'a, A> {
-    /// A run of `cfg` whose agent `make_agent` builds (any [`Learner`]), otherwise as [`RunBuilder::new`].
-    pub fn with_agent(
+impl<'a> RunBuilder<'a> {
+    /// A run of `cfg` whose agent of discrete actions `make_agent` builds, otherwise as [`RunBuilder::new`].
+    pub fn with_agent<L: Learner<Action = usize>>(
         cfg: &'a TrainConfig,
-        make_agent: fn(&TrainConfig, usize, usize) -> A,
+        make_agent: AgentMaker<L>,
+    ) -> RunBuilder<'a, L> {
+        RunBuilder::for_learner(cfg, make_agent, discrete_env)
+    }
+}
+
+impl<'a, L: Learner> RunBuilder<'a, L> {
+    /// A run of `cfg` whose agent `make_agent` builds (any [`Learner`], of any kind of action), in environments
+    /// `make_env` makes by id unless [`Self::env`] and [`Self::test_envs`] give them.
+    pub fn for_learner(
+        cfg: &'a TrainConfig,
+        make_agent: AgentMaker<L>,
+        make_env: EnvMaker<L::Action>,
     ) -> Self {
         Self {
             cfg,
             make_agent,
+            make_env,
             env: None,
             test_envs: None,
             expert: None,
@@ -96,25 +121,25 @@ impl<'a, A: Learner<Action = usize>> RunBuilder<'a, A> {
     }
 
     /// The environment to train in (the configuration's environment by default).
-    pub fn env(mut self, env: Box<dyn Env>) -> Self {
+    pub fn env(mut self, env: Box<dyn Env<L::Action>>) -> Self {
         self.env = Some(env);
         self
     }
 
     /// The environments of the test episodes, one per episode (`eval_episodes` of them).
-    pub fn test_envs(mut self, envs: Vec<Box<dyn Env>>) -> Self {
+    pub fn test_envs(mut self, envs: Vec<Box<dyn Env<L::Action>>>) -> Self {
         self.test_envs = Some(envs);
         self
     }
 
     /// The expert the run asks (and that observes it), if any.
-    pub fn expert(mut self, expert: Option<&'a mut dyn Expert>) -> Self {
+    pub fn expert(mut self, expert: Option<&'a mut dyn Expert<L::Action>>) -> Self {
         self.expert = expert;
         self
     }
 
     /// The demonstrations the run pre-trains on, if any.
-    pub fn demos(mut self, demos: Option<&'a Demonstrations>) -> Self {
+    pub fn demos(mut self, demos: Option<&'a Demonstrations<L::Action>>) -> Self {
         self.demos = demos;
         self
     }
@@ -132,7 +157,7 @@ impl<'a, A: Learner<Action = usize>> RunBuilder<'a, A> {
     }
 
     /// Drives the run from outside: it ends when `driver` stops it.
-    pub fn driver(mut self, driver: &'a mut dyn Driver<A>) -> Self {
+    pub fn driver(mut self, driver: &'a mut dyn Driver<L>) -> Self {
         self.driver = Some(driver);
         self
     }
@@ -140,7 +165,7 @@ impl<'a, A: Learner<Action = usize>> RunBuilder<'a, A> {
     /// Trains, logging into `log`, and returns the run's summary and the trained agent. When the run ends with
     /// an error (other than a stop request) and writes a run directory, `failed.json` records the error, the
     /// phase and the step ([`run_dir::Failure`]).
-    pub fn train(mut self, log: &'a mut RunLog) -> Result<(Summary, A)> {
+    pub fn train(mut self, log: &'a mut RunLog<L::Action>) -> Result<(Summary, L)> {
         match self.prepare() {
             Ok((env, parts)) => Run::new(self, env, parts, log).execute(),
             Err(err) => {
@@ -153,7 +178,7 @@ impl<'a, A: Learner<Action = usize>> RunBuilder<'a, A> {
     }
 
     /// The environment and the parts of the run a snapshot holds, each from the run's seed.
-    fn prepare(&mut self) -> Result<(Box<dyn Env>, Parts<A>)> {
+    fn prepare(&mut self) -> Result<(Box<dyn Env<L::Action>>, Parts<L>)> {
         let cfg = self.cfg;
         ensure!(
             !cfg.method.queries() || self.expert.is_some(),
@@ -162,12 +187,12 @@ impl<'a, A: Learner<Action = usize>> RunBuilder<'a, A> {
         );
         let env = match self.env.take() {
             Some(env) => env,
-            None => env::make(&cfg.env)?,
+            None => (self.make_env)(&cfg.env)?,
         };
         let test_envs = match self.test_envs.take() {
             Some(envs) => envs,
             None => (0..cfg.eval_episodes)
-                .map(|_| Ok(env::make(&cfg.env)?))
+                .map(|_| (self.make_env)(&cfg.env))
                 .collect::<Result<_>>()?,
         };
         ensure!(
@@ -176,18 +201,19 @@ impl<'a, A: Learner<Action = usize>> RunBuilder<'a, A> {
             test_envs.len(),
             cfg.eval_episodes
         );
-        let (obs_dim, n_actions) = (env.obs_dim(), env.n_actions());
-        let agent = (self.make_agent)(cfg, obs_dim, n_actions);
+        let obs_dim = env.obs_dim();
+        let agent = (self.make_agent)(cfg, env.spec());
         let evaluator =
             Evaluator::new(test_envs, seed_for(cfg.seed, SeedPurpose::EvalEnv), obs_dim)?;
         let pretrain_demos = self.demos.map(|d| d.transitions.len()).unwrap_or(0);
-        let replay = Replay::new(
+        let replay = Replay::try_with_action_width(
             obs_dim,
+            env.spec().action_width(),
             &ReplayConfig {
                 demo_capacity: pretrain_demos + cfg.query_transitions(),
                 ..cfg.replay_config()
             },
-        );
+        )?;
         let parts = Parts {
             agent,
             replay,
@@ -202,32 +228,32 @@ impl<'a, A: Learner<Action = usize>> RunBuilder<'a, A> {
 }
 
 /// The parts of a run that learn or draw: with the [`LoopState`] and the expert's state, what a snapshot holds.
-struct Parts<A> {
-    agent: A,
-    replay: Replay,
+struct Parts<L: Learner> {
+    agent: L,
+    replay: Replay<L::Action>,
     queries: QueryController,
     replay_rng: Pcg64,
     query_rng: Pcg64,
-    evaluator: Evaluator,
+    evaluator: Evaluator<L::Action>,
     /// The observation the agent acts on; empty until training starts (a snapshot taken in pre-training has
     /// none).
     obs: Vec<f32>,
 }
 
 /// A run in progress: what it was given, its parts, and where its loop stands.
-struct Run<'a, A: Learner<Action = usize>> {
+struct Run<'a, L: Learner> {
     cfg: &'a TrainConfig,
-    env: Box<dyn Env>,
-    expert: Option<&'a mut dyn Expert>,
-    demos: Option<&'a Demonstrations>,
-    log: &'a mut RunLog,
+    env: Box<dyn Env<L::Action>>,
+    expert: Option<&'a mut dyn Expert<L::Action>>,
+    demos: Option<&'a Demonstrations<L::Action>>,
+    log: &'a mut RunLog<L::Action>,
     checkpointer: Option<&'a mut Checkpointer>,
     resume_from: Option<&'a StateDict<'a>>,
-    driver: Option<&'a mut dyn Driver<A>>,
-    parts: Parts<A>,
-    st: LoopState,
+    driver: Option<&'a mut dyn Driver<L>>,
+    parts: Parts<L>,
+    st: LoopState<L::Action>,
     clock: RunClock,
-    batch: Batch,
+    batch: Batch<L::Action>,
     /// The observation a step writes (swapped with `parts.obs` after each step: no allocation).
     next_obs: Vec<f32>,
     /// The seed of the training environment's first reset.
@@ -247,12 +273,9 @@ fn acting_epsilon(cfg: &TrainConfig, step: usize) -> f64 {
 }
 
 /// Who acts at the step in progress, or what the loop does instead.
-enum Choice {
+enum Choice<A> {
     /// Step the environment with `action`; `uncertainty` is the agent's, when it was computed.
-    Act {
-        action: usize,
-        uncertainty: Option<f32>,
-    },
+    Act { action: A, uncertainty: Option<f32> },
     /// Take the same step again (a driver went on after a stop while the expert was asked).
     Again,
     /// End the run here.
@@ -277,17 +300,17 @@ enum Flow {
 }
 
 /// Who acts, as the query rule decided when no question was open.
-enum Turn {
-    Agent(usize),
-    Ask(OpenQuestion),
+enum Turn<A: Action> {
+    Agent(A),
+    Ask(OpenQuestion<A>),
 }
 
-impl<'a, A: Learner<Action = usize>> Run<'a, A> {
+impl<'a, L: Learner> Run<'a, L> {
     fn new(
-        given: RunBuilder<'a, A>,
-        env: Box<dyn Env>,
-        parts: Parts<A>,
-        log: &'a mut RunLog,
+        given: RunBuilder<'a, L>,
+        env: Box<dyn Env<L::Action>>,
+        parts: Parts<L>,
+        log: &'a mut RunLog<L::Action>,
     ) -> Self {
         let cfg = given.cfg;
         Self {
@@ -314,7 +337,7 @@ impl<'a, A: Learner<Action = usize>> Run<'a, A> {
     }
 
     /// The whole run; a failure is recorded in the run directory with the phase and step it happened at.
-    fn execute(mut self) -> Result<(Summary, A)> {
+    fn execute(mut self) -> Result<(Summary, L)> {
         match self.steps() {
             Ok(summary) => Ok((summary, self.parts.agent)),
             Err(err) => {
@@ -333,7 +356,7 @@ impl<'a, A: Learner<Action = usize>> Run<'a, A> {
             self.show_where_resumed();
         }
         while self.driver.is_some() || self.st.step < self.cfg.train_steps {
-            let (took, uncertainty) = match self.st.env_pending {
+            let (took, uncertainty) = match self.st.env_pending.clone() {
                 // The environment raised at this step: its step, or its reset, is taken again.
                 Some(EnvRetry::Step {
                     action,
@@ -390,7 +413,7 @@ impl<'a, A: Learner<Action = usize>> Run<'a, A> {
         }
         self.st = state.value("loop")?;
         self.clock.carry(&self.st);
-        if let (true, Some(EnvRetry::Reset { .. })) = (self.st.training, self.st.env_pending) {
+        if let (true, Some(EnvRetry::Reset { .. })) = (self.st.training, &self.st.env_pending) {
             // An episode had ended and the environment raised on its reset: the reset is taken again, from the
             // generator it was to draw from.
             let generator = self.st.ep_generator.map(crate::rng::NumpyRng::from_words);
@@ -458,7 +481,7 @@ impl<'a, A: Learner<Action = usize>> Run<'a, A> {
 
     /// Who acts at this step: the agent, or the expert when a query is running or the rule asks for one now (or
     /// a resumed run asks again the question that was open when it stopped).
-    fn choose(&mut self) -> Result<Choice> {
+    fn choose(&mut self) -> Result<Choice<L::Action>> {
         let mut uncertainty = None;
         let mut open = self.st.pending.take();
         if open.is_none() && !self.parts.queries.expert_in_control() {
@@ -490,7 +513,7 @@ impl<'a, A: Learner<Action = usize>> Run<'a, A> {
 
     /// The agent's action and whether the query rule asks the expert instead; the agent's uncertainty when it
     /// was computed.
-    fn decide(&mut self) -> Result<(Turn, Option<f32>)> {
+    fn decide(&mut self) -> Result<(Turn<L::Action>, Option<f32>)> {
         let (cfg, step) = (self.cfg, self.st.step);
         let parts = &mut self.parts;
         let epsilon = acting_epsilon(cfg, step);
@@ -517,7 +540,7 @@ impl<'a, A: Learner<Action = usize>> Run<'a, A> {
         let input = DecisionInput {
             step,
             train_steps: cfg.train_steps,
-            agent_action,
+            agent_action: L::Action::index(agent_action.borrow()),
             signals: &signals,
             oracle: oracle.as_ref(),
         };
@@ -536,14 +559,14 @@ impl<'a, A: Learner<Action = usize>> Run<'a, A> {
 
     /// Asks the question that opens a segment; its answer (or the agent's action, when nobody answered) acts.
     /// On a stop while it is asked, the question stays open for the run to ask again.
-    fn ask_open(&mut self, question: OpenQuestion) -> Result<usize> {
-        let agent_action = question.agent_action;
+    fn ask_open(&mut self, question: OpenQuestion<L::Action>) -> Result<L::Action> {
+        let agent_action = question.agent_action.clone();
         let asked = ask_expert(
             &mut self.expert,
             &self.parts.obs,
             &*self.env,
             self.st.episode(self.env_seed),
-            Some(agent_action),
+            Some(agent_action.borrow()),
             &self.parts.queries,
         );
         let answer = match asked {
@@ -562,23 +585,24 @@ impl<'a, A: Learner<Action = usize>> Run<'a, A> {
                 (None, Some(waited_s))
             }
         };
+        let (action_taken, answered) = (expert_action.clone(), expert_action.is_some());
         self.log.query(&QueryEvent {
             step: self.st.step,
             episode: self.st.episode,
             uncertainty: question.score,
             threshold: question.threshold,
             expert_action,
-            agent_action,
+            agent_action: agent_action.clone(),
             expert: self.expert_kind(),
             response_s,
-            answered: expert_action.is_some(),
+            answered,
         })?;
-        Ok(expert_action.unwrap_or(agent_action))
+        Ok(action_taken.unwrap_or(agent_action))
     }
 
     /// The expert's action at a later step of its segment; when nobody answers, the agent takes the rest of the
     /// segment back, and the log says so.
-    fn ask_in_segment(&mut self) -> Result<usize> {
+    fn ask_in_segment(&mut self) -> Result<L::Action> {
         let answer = ask_expert(
             &mut self.expert,
             &self.parts.obs,
@@ -601,7 +625,7 @@ impl<'a, A: Learner<Action = usize>> Run<'a, A> {
             uncertainty: None,
             threshold: None,
             expert_action: None,
-            agent_action,
+            agent_action: agent_action.clone(),
             expert: self.expert_kind(),
             response_s: Some(waited_s),
             answered: false,
@@ -612,7 +636,7 @@ impl<'a, A: Learner<Action = usize>> Run<'a, A> {
     /// A stop while the expert is asked (a person who has not answered yet): the snapshot holds the run as it
     /// stands, with the open question, so that a resumed run asks it again. A driven run (Python) pauses there
     /// instead: its driver raises the stop, and when it goes on the same question is asked again.
-    fn stop_while_asking(&mut self, err: anyhow::Error) -> Result<Choice> {
+    fn stop_while_asking(&mut self, err: anyhow::Error) -> Result<Choice<L::Action>> {
         if self.driver.is_some() {
             return Ok(match self.pause()? {
                 Control::Continue => Choice::Again,
@@ -630,9 +654,9 @@ impl<'a, A: Learner<Action = usize>> Run<'a, A> {
     /// priority). An episode's end logs it and resets the environment. When the environment raises (a Python
     /// environment in a driven run), nothing of the step happened: the run pauses, and takes it again when it goes
     /// on.
-    fn step_env(&mut self, action: usize, uncertainty: Option<f32>) -> Result<Took> {
+    fn step_env(&mut self, action: L::Action, uncertainty: Option<f32>) -> Result<Took> {
         self.next_obs.resize(self.parts.obs.len(), 0.0);
-        let s = match self.env.step_into(action, &mut self.next_obs) {
+        let s = match self.env.step_into(action.borrow(), &mut self.next_obs) {
             Ok(s) => s,
             Err(err) => {
                 return self.env_raised(
@@ -651,15 +675,15 @@ impl<'a, A: Learner<Action = usize>> Run<'a, A> {
             parts.queries.record_expert_step();
             st.ep_demo += 1;
         }
-        st.ep_actions.push(action);
         parts.replay.push(Transition {
             obs: &parts.obs,
-            action,
+            action: action.borrow(),
             reward: s.reward as f32,
             next_obs: &self.next_obs,
             terminal: s.terminated || (s.truncated && cfg.timeout_as_terminal),
             is_demo: by_expert,
         })?;
+        st.ep_actions.push(action);
         st.ep_return += s.reward;
         st.ep_len += 1;
         std::mem::swap(&mut parts.obs, &mut self.next_obs);
@@ -692,7 +716,7 @@ impl<'a, A: Learner<Action = usize>> Run<'a, A> {
 
     /// The environment failed to take `retry`: an error, unless its own code raised in a driven run, which then
     /// pauses whole (its driver raises the exception) with `retry` to take again when it goes on.
-    fn env_raised(&mut self, err: env::EnvError, retry: EnvRetry) -> Result<Took> {
+    fn env_raised(&mut self, err: env::EnvError, retry: EnvRetry<L::Action>) -> Result<Took> {
         if !matches!(err, env::EnvError::Raised { .. }) || self.driver.is_none() {
             return Err(err.into());
         }
@@ -859,7 +883,10 @@ impl<'a, A: Learner<Action = usize>> Run<'a, A> {
             st: &self.st,
             parts: &self.parts,
             expert_state,
-            expert: self.expert.as_mut().map(|e| &mut **e as &mut dyn Expert),
+            expert: self
+                .expert
+                .as_mut()
+                .map(|e| &mut **e as &mut dyn Expert<L::Action>),
         };
         driver.paused(&mut paused)
     }
@@ -937,40 +964,40 @@ pub enum Control {
 }
 
 /// Where a run stands after a step, for a [`Driver`].
-pub struct StepView<'a, A = Agent> {
+pub struct StepView<'a, L: Learner = Agent> {
     /// Environment steps done.
     pub step: usize,
     /// Episodes finished.
     pub episode: usize,
     /// Demonstrated transitions asked for so far (or queries, as `budget_unit` says).
     pub budget_used: usize,
-    pub log: &'a RunLog,
-    pub agent: &'a A,
+    pub log: &'a RunLog<L::Action>,
+    pub agent: &'a L,
 }
 
 /// Steers a run from outside ([`RunBuilder::driver`]) (e.g. a Python `learn` call that trains for a while, returns,
 /// and is called again).
-pub trait Driver<A = Agent> {
+pub trait Driver<L: Learner = Agent> {
     /// Called after every environment step.
-    fn after_step(&mut self, at: &StepView<'_, A>) -> Result<Control>;
+    fn after_step(&mut self, at: &StepView<'_, L>) -> Result<Control>;
     /// Called when `after_step` paused the run; returns [`Control::Continue`] or [`Control::Stop`] (a pause
     /// again is a stop).
-    fn paused(&mut self, run: &mut PausedRun<'_, A>) -> Result<Control>;
+    fn paused(&mut self, run: &mut PausedRun<'_, L>) -> Result<Control>;
 }
 
 /// A paused run, whole: its summary so far, the agent, the log, and a snapshot of everything on request.
-pub struct PausedRun<'a, A = Agent> {
+pub struct PausedRun<'a, L: Learner = Agent> {
     pub summary: Summary,
-    pub agent: &'a A,
-    pub log: &'a mut RunLog,
+    pub agent: &'a L,
+    pub log: &'a mut RunLog<L::Action>,
     cfg: &'a TrainConfig,
-    st: &'a LoopState,
-    parts: &'a Parts<A>,
+    st: &'a LoopState<L::Action>,
+    parts: &'a Parts<L>,
     expert_state: Option<String>,
-    expert: Option<&'a mut dyn Expert>,
+    expert: Option<&'a mut dyn Expert<L::Action>>,
 }
 
-impl<A: Learner<Action = usize>> PausedRun<'_, A> {
+impl<L: Learner> PausedRun<'_, L> {
     /// Writes a snapshot of the run (the format of [`Checkpointer`]) into `dir` and waits until it is there.
     pub fn snapshot(&mut self, dir: &Path) -> Result<()> {
         let mut ck = Checkpointer::new(dir, self.cfg);
@@ -995,8 +1022,9 @@ impl<A: Learner<Action = usize>> PausedRun<'_, A> {
 }
 
 /// Where the loop stands; with the agent, replay, query controller and generators, the whole run.
-#[derive(Clone, Debug, Default, serde::Serialize, serde::Deserialize)]
-struct LoopState {
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
+#[serde(bound = "")]
+struct LoopState<A: Action> {
     /// Pre-training updates done (all of them once training on the environment has begun).
     pretrain_done: usize,
     /// Whether the environment phase has begun.
@@ -1010,7 +1038,7 @@ struct LoopState {
     updates: usize,
     /// The actions of the episode in progress, and the environment's generator before the reset that began
     /// it (words of [`crate::rng::NumpyRng`]; `None` for the first episode, which resets with the run's seed).
-    ep_actions: Vec<usize>,
+    ep_actions: Vec<A>,
     ep_generator: Option<[u64; 6]>,
     /// Wall-clock and CPU seconds the run spent before this point, over all its sessions (absent from
     /// snapshots of older versions, which then count from their resume).
@@ -1021,14 +1049,35 @@ struct LoopState {
     /// The question that was open when the run stopped (the agent had decided to ask, the expert had not
     /// answered): a resumed run asks it again instead of deciding anew. Absent from other snapshots.
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pending: Option<OpenQuestion>,
+    pending: Option<OpenQuestion<A>>,
     /// What the environment raised on (a Python environment), for the run to take again when it goes on.
     /// Absent from other snapshots.
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    env_pending: Option<EnvRetry>,
+    env_pending: Option<EnvRetry<A>>,
 }
 
-impl LoopState {
+impl<A: Action> Default for LoopState<A> {
+    fn default() -> Self {
+        Self {
+            pretrain_done: 0,
+            training: false,
+            step: 0,
+            episode: 0,
+            ep_return: 0.0,
+            ep_len: 0,
+            ep_demo: 0,
+            updates: 0,
+            ep_actions: Vec::new(),
+            ep_generator: None,
+            elapsed_s: 0.0,
+            cpu_s: 0.0,
+            pending: None,
+            env_pending: None,
+        }
+    }
+}
+
+impl<A: Action> LoopState<A> {
     /// How the episode in progress began (the first with the run's environment seed).
     fn episode_start(&self, env_seed: u64) -> env::EpisodeStart {
         self.ep_generator.map_or(
@@ -1038,7 +1087,7 @@ impl LoopState {
     }
 
     /// The episode in progress, for an expert that rebuilds its state.
-    fn episode(&self, env_seed: u64) -> EpisodeTrace<'_> {
+    fn episode(&self, env_seed: u64) -> EpisodeTrace<'_, A> {
         EpisodeTrace {
             start: self.episode_start(env_seed),
             actions: &self.ep_actions,
@@ -1049,21 +1098,18 @@ impl LoopState {
 /// What the environment raised on at the step in progress: the step with the action chosen (nothing of it
 /// happened), or the reset after the episode it ended (the step itself is done). `uncertainty` is the agent's at
 /// that step, for the step's report.
-#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
-enum EnvRetry {
-    Step {
-        action: usize,
-        uncertainty: Option<f32>,
-    },
-    Reset {
-        uncertainty: Option<f32>,
-    },
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(bound = "")]
+enum EnvRetry<A: Action> {
+    Step { action: A, uncertainty: Option<f32> },
+    Reset { uncertainty: Option<f32> },
 }
 
 /// A query the agent decided on at the step in progress, before the expert's answer.
-#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
-struct OpenQuestion {
-    agent_action: usize,
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(bound = "")]
+struct OpenQuestion<A: Action> {
+    agent_action: A,
     score: Option<f32>,
     threshold: Option<f32>,
 }
@@ -1086,7 +1132,7 @@ impl RunClock {
     }
 
     /// Adds the time a resumed run had spent before its snapshot.
-    fn carry(&mut self, st: &LoopState) {
+    fn carry<A: Action>(&mut self, st: &LoopState<A>) {
         self.carried = (st.elapsed_s, st.cpu_s);
     }
 
@@ -1101,19 +1147,19 @@ impl RunClock {
     }
 
     /// Writes the totals into the loop state a snapshot saves.
-    fn stamp(&self, st: &mut LoopState) {
+    fn stamp<A: Action>(&self, st: &mut LoopState<A>) {
         let (wall, cpu) = self.totals();
         (st.elapsed_s, st.cpu_s) = (wall, cpu.unwrap_or(0.0));
     }
 }
 
 /// Writes a snapshot of the run; when the run stops after it (`stopping`), waits until it is on disk.
-fn snapshot(
+fn snapshot<L: Learner>(
     checkpointer: &mut Checkpointer,
-    st: &LoopState,
-    parts: &Parts<impl Learner<Action = usize>>,
+    st: &LoopState<L::Action>,
+    parts: &Parts<L>,
     expert_state: Option<String>,
-    log: &mut RunLog,
+    log: &mut RunLog<L::Action>,
     stopping: bool,
 ) -> Result<()> {
     let mut state = StateDict::default();
@@ -1144,11 +1190,11 @@ fn snapshot(
 }
 
 /// The run's summary after `st.step` environment steps.
-fn summarize(
+fn summarize<A: Action>(
     cfg: &TrainConfig,
-    env: &dyn Env,
-    log: &RunLog,
-    st: &LoopState,
+    env: &dyn Env<A>,
+    log: &RunLog<A>,
+    st: &LoopState<A>,
     queries: &QueryController,
     clock: &RunClock,
     pretrain_demos: usize,
@@ -1181,10 +1227,10 @@ fn summarize(
 }
 
 /// The run directory's results after `step` steps: the weights, then `summary.json`.
-fn finish_log(
+fn finish_log<L: Learner>(
     cfg: &TrainConfig,
-    agent: &impl Learner<Action = usize>,
-    log: &mut RunLog,
+    agent: &L,
+    log: &mut RunLog<L::Action>,
     summary: &Summary,
     step: usize,
 ) -> Result<()> {
@@ -1211,8 +1257,8 @@ fn weights_metadata(cfg: &TrainConfig, step: usize) -> std::collections::BTreeMa
 }
 
 /// The expert's action and Q-values for an oracle query rule (no question asked, no budget spent).
-fn peek_expert(
-    expert: &mut Option<&mut dyn Expert>,
+fn peek_expert<A: Action>(
+    expert: &mut Option<&mut dyn Expert<A>>,
     obs: &[f32],
     rule: &str,
 ) -> Result<OracleView> {
@@ -1230,14 +1276,14 @@ fn peek_expert(
 
 /// Asks the expert for the action at `obs` (one step of a segment; `agent_action` on the step that opens it) and
 /// checks that the answer is an action of the environment.
-fn ask_expert(
-    expert: &mut Option<&mut dyn Expert>,
-    obs: &[f32],
-    env: &dyn Env,
-    episode: EpisodeTrace<'_>,
-    agent_action: Option<usize>,
+fn ask_expert<'q, A: Action>(
+    expert: &mut Option<&mut dyn Expert<A>>,
+    obs: &'q [f32],
+    env: &'q dyn Env<A>,
+    episode: EpisodeTrace<'q, A>,
+    agent_action: Option<A::Ref<'q>>,
     queries: &QueryController,
-) -> Result<Answer> {
+) -> Result<Answer<A>> {
     let expert = expert
         .as_deref_mut()
         .context("the query rule asked for the expert, but none was given")?;
@@ -1251,13 +1297,13 @@ fn ask_expert(
     let answer = expert
         .answer(&query)
         .with_context(|| format!("the expert ({}) failed to answer", expert.describe()))?;
-    if let Answer::Action { action, .. } = answer {
-        ensure!(
-            action < env.n_actions(),
-            "the expert ({}) answered action {action}, but {} has {} actions",
+    if let Answer::Action { action, .. } = &answer
+        && let Err(why) = A::check(action.borrow(), env.spec())
+    {
+        anyhow::bail!(
+            "the expert ({}) answered action {}, but {why}",
             expert.describe(),
-            env.id(),
-            env.n_actions()
+            A::to_field(action.borrow())
         );
     }
     Ok(answer)
@@ -1272,7 +1318,7 @@ mod tests {
     #[test]
     fn the_run_clock_carries_time_across_a_resume() {
         let mut clock = RunClock::start();
-        let st = LoopState {
+        let st = LoopState::<usize> {
             elapsed_s: 100.0,
             cpu_s: 40.0,
             ..LoopState::default()
@@ -1283,11 +1329,11 @@ mod tests {
         assert!((100.05..101.0).contains(&wall), "wall {wall}");
         let cpu = cpu.expect("Linux tells a thread's CPU time");
         assert!((40.0..40.04).contains(&cpu), "cpu {cpu}");
-        let mut saved = LoopState::default();
+        let mut saved = LoopState::<usize>::default();
         clock.stamp(&mut saved);
         assert!(saved.elapsed_s >= wall && saved.cpu_s >= cpu);
         // A snapshot of an older version, without the fields, counts from zero.
-        let old: LoopState = serde_json::from_str(
+        let old: LoopState<usize> = serde_json::from_str(
             r#"{"pretrain_done":0,"training":false,"step":0,"episode":0,"ep_return":0.0,"ep_len":0,
                 "ep_demo":0,"updates":0,"ep_actions":[],"ep_generator":null}"#,
         )

@@ -14,6 +14,7 @@
 
 use super::config::{Method, NetKind};
 pub use crate::files::write_atomic;
+use crate::task::Action;
 use anyhow::{Context, Result, bail};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
@@ -289,15 +290,19 @@ impl EvalPoint {
 }
 
 /// One query: the agent asked the expert to take over (a row of [`QUERIES_FILE`]).
+///
+/// Its actions are of the run's kind `A`: a discrete run's columns are the indices as they always were, a box
+/// run's the numbers of each action separated by spaces ([`Action::to_field`]).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct QueryEvent {
+#[serde(bound = "")]
+pub struct QueryEvent<A: Action = usize> {
     pub step: usize,
     pub episode: usize,
     pub uncertainty: Option<f32>,
     pub threshold: Option<f32>,
     /// The expert's action; `None` when nobody answered (the agent's action was taken).
-    pub expert_action: Option<usize>,
-    pub agent_action: usize,
+    pub expert_action: Option<A>,
+    pub agent_action: A,
     /// Who was asked: the expert's kind (`checkpoint`, `scripted`, `web`, ...).
     pub expert: String,
     /// Seconds the expert took to answer, for experts that measure it (a person); `None` for programs, whose
@@ -307,7 +312,7 @@ pub struct QueryEvent {
     pub answered: bool,
 }
 
-impl QueryEvent {
+impl<A: Action> QueryEvent<A> {
     /// The event as a line of [`QUERIES_FILE`] (columns of [`QUERIES_HEADER`]; `None` is an empty field).
     pub fn csv_row(&self) -> String {
         let opt = |v: Option<String>| v.unwrap_or_default();
@@ -317,8 +322,8 @@ impl QueryEvent {
             self.episode,
             opt(self.uncertainty.map(|x| x.to_string())),
             opt(self.threshold.map(|x| x.to_string())),
-            opt(self.expert_action.map(|x| x.to_string())),
-            self.agent_action,
+            opt(self.expert_action.as_ref().map(|x| A::to_field(x.borrow()))),
+            A::to_field(self.agent_action.borrow()),
             csv_field(&self.expert),
             opt(self.response_s.map(|x| format!("{x:.3}"))),
             self.answered

@@ -333,7 +333,7 @@ impl QueryRule for ImportanceRule {
             None => self.window.observe(importance),
         };
         Verdict {
-            query: verdict.query && (!self.mistake || ctx.agent_action != oracle.action),
+            query: verdict.query && (!self.mistake || ctx.agent_action != Some(oracle.action)),
             ..verdict
         }
     }

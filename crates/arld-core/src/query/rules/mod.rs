@@ -165,8 +165,8 @@ pub struct QueryContext<'a> {
     pub segment_len: usize,
     /// Queries asked so far.
     pub queries: usize,
-    /// The action the agent is about to take (after exploration).
-    pub agent_action: usize,
+    /// The index of the action the agent is about to take (after exploration); `None` for a box action.
+    pub agent_action: Option<usize>,
     pub signals: &'a Signals,
     /// The expert's view, for oracle rules only.
     pub oracle: Option<&'a OracleView>,
@@ -594,7 +594,7 @@ pub(crate) mod tests_support {
                 unit: BudgetUnit::Transitions,
                 segment_len: recorded.segment_len,
                 queries,
-                agent_action: recorded.agent_action[i],
+                agent_action: Some(recorded.agent_action[i]),
                 signals: &signals,
                 oracle: Some(&recorded.oracle[i]),
             };
@@ -675,7 +675,7 @@ mod tests {
             unit: BudgetUnit::Transitions,
             segment_len: 5,
             queries: 0,
-            agent_action: 0,
+            agent_action: Some(0),
             signals: &signals,
             oracle: None,
         };
