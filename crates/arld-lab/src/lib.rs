@@ -25,6 +25,8 @@ pub mod sweep;
 pub mod verdict;
 
 use anyhow::{Context, Result};
+use arld_core::agent::Learner;
+use arld_core::env;
 use arld_core::expert::{self, demos::Demonstrations};
 use arld_core::train::{
     self, Checkpointer, RunBuilder, RunLog, SeedPurpose, Summary, TrainConfig, seed_for,
@@ -40,19 +42,50 @@ use std::path::Path;
 /// step it failed at; an error before training, such as an expert that cannot be started, is recorded here as
 /// the `setup` phase); the summary of a later attempt that finishes the run removes it.
 pub fn run_one(cfg: &TrainConfig, out_dir: Option<&Path>, progress: bool) -> Result<Summary> {
-    let (mut expert, demos) = match setup(cfg) {
-        Ok(parts) => parts,
-        Err(err) => {
-            if let Some(dir) = out_dir.filter(|dir| dir.is_dir()) {
-                train::record_failure(dir, &err, "setup", 0);
-            }
-            return Err(err);
+    let record_setup_failure = |err: anyhow::Error| {
+        if let Some(dir) = out_dir.filter(|dir| dir.is_dir()) {
+            train::record_failure(dir, &err, "setup", 0);
         }
+        err
     };
-    let expert = expert.as_mut().map(|e| &mut **e as &mut dyn expert::Expert);
+    if env::box_spec(&cfg.env).is_ok() {
+        let expert = box_setup(cfg).map_err(record_setup_failure)?;
+        return run_in(
+            |cfg| RunBuilder::for_box(cfg),
+            expert,
+            None,
+            cfg,
+            out_dir,
+            progress,
+        );
+    }
+    let (expert, demos) = setup(cfg).map_err(record_setup_failure)?;
+    run_in(
+        |cfg| RunBuilder::new(cfg),
+        expert,
+        demos,
+        cfg,
+        out_dir,
+        progress,
+    )
+}
+
+/// Trains the run `start` begins with its expert and demonstrations, into `out_dir` or in memory (see
+/// [`run_one`]), whatever the kind of its actions.
+fn run_in<L: Learner>(
+    start: for<'b> fn(&'b TrainConfig) -> RunBuilder<'b, L>,
+    mut expert: Option<Box<dyn expert::Expert<L::Action>>>,
+    demos: Option<Demonstrations<L::Action>>,
+    cfg: &TrainConfig,
+    out_dir: Option<&Path>,
+    progress: bool,
+) -> Result<Summary> {
+    let expert = expert
+        .as_mut()
+        .map(|e| &mut **e as &mut dyn expert::Expert<L::Action>);
+    let builder = start(cfg).expert(expert).demos(demos.as_ref());
     let Some(dir) = out_dir else {
-        let run = RunBuilder::new(cfg).expert(expert).demos(demos.as_ref());
-        let (summary, _agent) = run.train(&mut RunLog::in_memory())?;
+        let (summary, _agent) = builder.train(&mut RunLog::in_memory())?;
         return Ok(summary);
     };
     // A run directory with a snapshot continues from it (refused if it belongs to another configuration).
@@ -81,13 +114,35 @@ pub fn run_one(cfg: &TrainConfig, out_dir: Option<&Path>, progress: bool) -> Res
     if snapshot.is_some() {
         eprintln!("{}: continuing from its snapshot", dir.display());
     }
-    let run = RunBuilder::new(cfg)
-        .expert(expert)
-        .demos(demos.as_ref())
+    let run = builder
         .snapshots(&mut checkpointer)
         .resume_from(snapshot.as_ref());
     let (summary, _agent) = run.train(&mut log)?;
     Ok(summary)
+}
+
+/// The expert a run in a continuous-action task asks: the task's scripted controller (`scripted`), when its
+/// method asks one. Pre-training on demonstrations of box actions is not built yet.
+fn box_setup(cfg: &TrainConfig) -> Result<Option<Box<dyn expert::Expert<Vec<f32>>>>> {
+    anyhow::ensure!(
+        !cfg.method.pretrains(),
+        "{} pre-trains on demonstrations, which runs in {} (actions in a box) cannot do yet; use a method \
+         without pre-training (dqn, gdqn, bdqn, adqn)",
+        cfg.method,
+        cfg.env
+    );
+    if cfg.expert_used().is_none() {
+        return Ok(None);
+    }
+    anyhow::ensure!(
+        cfg.expert == "scripted",
+        "the expert '{}' cannot answer in {} (actions in a box): use --expert scripted",
+        cfg.expert,
+        cfg.env
+    );
+    Ok(Some(Box::new(expert::scripted::ScriptedBoxExpert::new(
+        &cfg.env,
+    )?)))
 }
 
 /// What a run is given before training: its expert and its pre-training demonstrations, each if it needs them.

@@ -1,9 +1,10 @@
 //! The actor-critic family behind the [`Learner`] interface: [`BoxAgent`] acts and learns in a box of float32
 //! actions with TD3 ([`super::td3`]), from the same replay batches, schedules and snapshots as the DQN family.
 //!
-//! - Acting: with probability ε (the run's exploration schedule; 1 before learning starts) a uniform draw from
-//!   the box, otherwise the actor's action plus TD3's Gaussian exploration noise. Every draw comes from the
-//!   learner's generator, so the run's seed fixes the actions.
+//! - Acting: at ε = 1 (a run acting at random before learning starts) a uniform draw from the box, otherwise
+//!   the actor's action plus TD3's Gaussian exploration noise: TD3 explores with noise, so a DQN's ε-greedy
+//!   schedule below 1 does not apply. Every draw comes from the learner's generator, so the run's seed fixes
+//!   the actions.
 //! - Uncertainty: the standard deviation of the critic heads at the action taken ([`Td3::critic_spread`]),
 //!   computed only when the query rule asks for it.
 //! - Learning: a replay batch becomes TD3's batch: the n-step return, its observation and `gamma^n` when the
@@ -67,7 +68,7 @@ impl Learner for BoxAgent {
 
     fn act(&mut self, obs: &[f32], epsilon: f64, want: Needs) -> (Vec<f32>, Signals) {
         let mut action = vec![0.0; self.low.len()];
-        if epsilon > 0.0 && self.td3.rng().random::<f64>() < epsilon {
+        if epsilon >= 1.0 {
             for (d, a) in action.iter_mut().enumerate() {
                 *a = self.td3.rng().random_range(self.low[d]..=self.high[d]);
             }

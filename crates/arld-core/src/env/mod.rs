@@ -362,10 +362,7 @@ pub fn register(
 /// `LunarLanderContinuous-v3` is Gymnasium's `gym.make("LunarLander-v3", continuous=True)`; see
 /// [`continuous_id`] for that spelling.
 pub fn make_continuous(id: &str) -> Result<continuous::ContinuousEnv, EnvError> {
-    let spec = continuous::CONTINUOUS_SPECS
-        .iter()
-        .find(|s| s.id == id)
-        .ok_or_else(|| EnvError::UnknownId { id: id.to_string() })?;
+    let spec = box_spec(id)?;
     let physics: Box<dyn continuous::ContinuousDynamics> = match spec.id {
         "Pendulum-v1" => Box::new(pendulum::Pendulum::default()),
         "LunarLanderContinuous-v3" => Box::new(lunar_lander::LunarLanderContinuous::default()),
@@ -383,6 +380,27 @@ pub fn continuous_id(id: &str) -> Option<&'static str> {
         }
         _ => None,
     }
+}
+
+/// The registered facts of a continuous-action task (its id as [`make_continuous`] takes it).
+pub fn box_spec(id: &str) -> Result<&'static BoxSpec, EnvError> {
+    continuous::CONTINUOUS_SPECS
+        .iter()
+        .find(|s| s.id == id)
+        .ok_or_else(|| EnvError::UnknownId { id: id.to_string() })
+}
+
+/// The facts of any task, discrete (built in or registered) or continuous, by id.
+pub fn task_spec(id: &str) -> Result<&'static dyn TaskSpec, EnvError> {
+    match box_spec(id) {
+        Ok(spec) => Ok(spec),
+        Err(_) => Ok(spec(id)?),
+    }
+}
+
+/// A continuous-action task by id, boxed for a run.
+pub fn make_box(id: &str) -> Result<Box<dyn Env<Vec<f32>>>, EnvError> {
+    Ok(Box::new(make_continuous(id)?))
 }
 
 /// Builds an environment by Gymnasium id.

@@ -4,6 +4,7 @@
 //! in the direction of motion (pumping energy); Acrobot applies elbow torque against the first link's swing. They are deterministic, fast and good, which makes them handy as "perfect" experts in tests.
 
 use super::Expert;
+use crate::env::{lunar_lander, mountain_car_continuous, pendulum};
 use anyhow::{Result, bail};
 
 /// A hand-written controller for one environment.
@@ -30,6 +31,39 @@ impl ScriptedExpert {
 
 impl Expert for ScriptedExpert {
     fn act(&mut self, obs: &[f32]) -> Result<usize> {
+        Ok((self.policy)(obs))
+    }
+    fn describe(&self) -> String {
+        format!("scripted({})", self.env)
+    }
+}
+
+/// A hand-written controller for a task with actions in a box: Gymnasium's heuristic for the continuous
+/// lander, an energy-based swing-up for Pendulum, a momentum controller for MountainCarContinuous.
+pub struct ScriptedBoxExpert {
+    env: &'static str,
+    policy: fn(&[f32]) -> Vec<f32>,
+}
+
+impl ScriptedBoxExpert {
+    /// The scripted controller of the continuous task `env_id`.
+    pub fn new(env_id: &str) -> Result<Self> {
+        let (env, policy): (&'static str, fn(&[f32]) -> Vec<f32>) = match env_id {
+            "Pendulum-v1" => ("Pendulum-v1", |obs| pendulum::swing_up(obs).to_vec()),
+            "MountainCarContinuous-v0" => ("MountainCarContinuous-v0", |obs| {
+                mountain_car_continuous::momentum(obs, 0.6).to_vec()
+            }),
+            "LunarLanderContinuous-v3" => ("LunarLanderContinuous-v3", |obs| {
+                lunar_lander::heuristic_throttle(obs).to_vec()
+            }),
+            other => bail!("no scripted expert for '{other}'"),
+        };
+        Ok(Self { env, policy })
+    }
+}
+
+impl Expert<Vec<f32>> for ScriptedBoxExpert {
+    fn act(&mut self, obs: &[f32]) -> Result<Vec<f32>> {
         Ok((self.policy)(obs))
     }
     fn describe(&self) -> String {

@@ -308,6 +308,28 @@ const EXTERNAL_TASK: (crate::paper::TaskParameters, TaskSchedule) = (
     },
 );
 
+/// General defaults for a task with actions in a box (learned by TD3, [`crate::agent::box_agent`]): TD3's
+/// discount and learning rate (Fujimoto et al. 2018), a replay of every step and 1,000 steps before learning
+/// starts \[OURS\]. The target networks follow by Polyak averaging, so the target period is unused.
+const BOX_TASK: (crate::paper::TaskParameters, TaskSchedule) = (
+    crate::paper::TaskParameters {
+        gamma: 0.99,
+        lr: 1e-3,
+        train_steps: 20_000,
+        n_demo: 1_000,
+        replay_size: 100_000,
+        pretrain_steps: 1_000,
+        lambda: 1.0,
+        t_query_bootstrap: 0.1,
+        t_query_noisy: 0.3,
+    },
+    TaskSchedule {
+        eval_period: 1_000,
+        learning_starts: 1_000,
+        target_period: 1,
+    },
+);
+
 /// The paper's parameters and our schedule for a Gymnasium id (CartPole-v1 reuses the CartPole-v0 row); an
 /// environment registered at run time gets [`EXTERNAL_TASK`].
 fn task_preset(env: &str) -> Result<(&'static crate::paper::TaskParameters, TaskSchedule)> {
@@ -324,6 +346,9 @@ fn task_preset(env: &str) -> Result<(&'static crate::paper::TaskParameters, Task
             }
         )
     };
+    if crate::env::box_spec(env).is_ok() {
+        return Ok((&BOX_TASK.0, BOX_TASK.1));
+    }
     let Some(paper) = crate::paper::task_parameters(row) else {
         return match crate::env::spec(env) {
             Ok(_) => Ok((&EXTERNAL_TASK.0, EXTERNAL_TASK.1)),
@@ -732,7 +757,7 @@ impl TrainConfig {
     /// Checks every value: the one place a run's configuration is validated (called by
     /// [`ConfigInput::resolve`]). Limits on sizes keep a typo from asking for more memory than a machine has.
     pub fn validate(&self) -> Result<()> {
-        let env = crate::env::spec(&self.env).map_err(|e| anyhow::anyhow!("{e}"))?;
+        let env = crate::env::task_spec(&self.env).map_err(|e| anyhow::anyhow!("{e}"))?;
         let unit = |name: &str, v: f64| -> Result<()> {
             ensure!(
                 (0.0..=1.0).contains(&v),
@@ -863,7 +888,7 @@ impl TrainConfig {
         count("eval_period", self.eval_period, MAX_STEPS)?;
         count("eval_episodes", self.eval_episodes, MAX_EVAL_EPISODES)?;
         // Memory: the replay memory is allocated whole at the start.
-        let bytes = self.replay_config().memory_bytes(env.obs_dim);
+        let bytes = self.replay_config().memory_bytes(env.obs_dim());
 
         ensure!(
             bytes <= MAX_REPLAY_BYTES,

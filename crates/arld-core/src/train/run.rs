@@ -11,8 +11,10 @@ use super::{
     Checkpointer, QueryEvent, RunLog, SeedPurpose, Summary, TrainConfig, epsilon_at,
     pretrain_update, push_demos, record_failure, run_dir, seed_for, steps_to_solve, update_checked,
 };
+use crate::agent::box_agent::BoxAgent;
+use crate::agent::td3::Td3Config;
 use crate::agent::{Agent, Learner};
-use crate::env::{self, Action, Env, TaskSpec};
+use crate::env::{self, Action, BoxSpec, Env, TaskSpec};
 use crate::expert::demos::Demonstrations;
 use crate::expert::{Answer, EpisodeTrace, Expert, Progress, Query, RunEnd};
 use crate::interrupt;
@@ -71,6 +73,40 @@ impl<'a> RunBuilder<'a> {
     pub fn new(cfg: &'a TrainConfig) -> Self {
         RunBuilder::with_agent(cfg, dqn_agent)
     }
+}
+
+impl<'a> RunBuilder<'a, BoxAgent> {
+    /// A run of `cfg` in a task with actions in a box, learned by TD3 ([`BoxAgent`]), otherwise as
+    /// [`RunBuilder::new`].
+    pub fn for_box(cfg: &'a TrainConfig) -> Self {
+        RunBuilder::for_learner(cfg, box_agent, box_env)
+    }
+}
+
+/// TD3 for the task `spec` with the configuration's networks (its hidden widths, at least two critic heads:
+/// more heads are a larger ensemble), learning rate and batch, seeded from the run's seed.
+fn box_agent(cfg: &TrainConfig, spec: &'static BoxSpec) -> BoxAgent {
+    let config = Td3Config {
+        hidden: cfg.hidden.clone(),
+        heads: cfg.heads.max(2),
+        actor_lr: cfg.lr as f32,
+        critic_lr: cfg.lr as f32,
+        max_batch: cfg.batch_size,
+        ..Td3Config::default()
+    };
+    BoxAgent::new(
+        config,
+        spec.obs_dim,
+        spec.action_low,
+        spec.action_high,
+        cfg.gamma as f32,
+        seed_for(cfg.seed, SeedPurpose::Agent),
+    )
+}
+
+/// The continuous-action task `id`, as a run makes it.
+fn box_env(id: &str) -> Result<Box<dyn Env<Vec<f32>>>> {
+    Ok(env::make_box(id)?)
 }
 
 /// The environment `id` of discrete actions, as a run makes it.
