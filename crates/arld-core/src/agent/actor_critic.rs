@@ -326,13 +326,12 @@ pub struct BcStats {
 /// The behaviour cloning loss with the Q-filter (Nair et al. 2018): `weight / n * sum over the demonstrated rows
 /// where q_demo > q_pi of |y - y_demo|^2`, with `y` the actor's tanh output and `y_demo` the demonstrated
 /// action's (so the distance is in half-widths of the box); adds its gradient with respect to `y` to `d_y`.
-/// `q_demo` and `q_pi` are the critic's values (as the actor's loss aggregates the heads) of the demonstrated
-/// action and of the actor's.
+/// `q_filter` holds the critic's values (as the actor's loss aggregates the heads) of the demonstrated action and
+/// of the actor's, `(q_demo, q_pi)`; without it every demonstrated row counts.
 pub(crate) fn behaviour_cloning(
     weight: f32,
     batch: &BoxBatch,
-    q_demo: &[f32],
-    q_pi: &[f32],
+    q_filter: Option<(&[f32], &[f32])>,
     y: &[f32],
     action_box: &ActionBox,
     d_y: &mut [f32],
@@ -346,7 +345,7 @@ pub(crate) fn behaviour_cloning(
             continue;
         }
         stats.demos += 1;
-        if q_demo[r] <= q_pi[r] {
+        if q_filter.is_some_and(|(q_demo, q_pi)| q_demo[r] <= q_pi[r]) {
             continue;
         }
         stats.cloned += 1;
@@ -372,7 +371,7 @@ pub(crate) mod testing {
     pub(crate) trait BoxLearner {
         fn act(&mut self, obs: &[f32], action: &mut [f32]);
         fn test_action(&mut self, obs: &[f32], action: &mut [f32]);
-        fn learn_batch(&mut self, batch: &BoxBatch);
+        fn learn_batch(&mut self, batch: &BoxBatch) -> Option<super::BcStats>;
     }
 
     impl<R: Rng> BoxLearner for crate::agent::td3::Td3<R> {
@@ -382,8 +381,8 @@ pub(crate) mod testing {
         fn test_action(&mut self, obs: &[f32], action: &mut [f32]) {
             self.test_action(obs, action)
         }
-        fn learn_batch(&mut self, batch: &BoxBatch) {
-            self.learn(batch);
+        fn learn_batch(&mut self, batch: &BoxBatch) -> Option<super::BcStats> {
+            self.learn(batch).0.bc
         }
     }
 
@@ -394,8 +393,8 @@ pub(crate) mod testing {
         fn test_action(&mut self, obs: &[f32], action: &mut [f32]) {
             self.test_action(obs, action)
         }
-        fn learn_batch(&mut self, batch: &BoxBatch) {
-            self.learn(batch);
+        fn learn_batch(&mut self, batch: &BoxBatch) -> Option<super::BcStats> {
+            self.learn(batch).0.bc
         }
     }
 
@@ -542,17 +541,21 @@ pub(crate) mod testing {
     }
 
     /// Pre-trains `agent` with `updates` updates on batches of 128 demonstrated transitions of the swing-up on
-    /// seeds 0-9, and checks that its test actions then follow the demonstrator on those states and on seeds
-    /// 100-102 it never saw, by at least half the error of the best constant action.
-    pub(crate) fn pretraining_imitates(agent: &mut impl BoxLearner, updates: usize, name: &str) {
+    /// seeds 0-9; returns the mean |pi(s) - a_E| on those states and on seeds 100-102 it never saw, and the
+    /// best constant action's on each.
+    pub(crate) fn pretrain(agent: &mut impl BoxLearner, updates: usize, name: &str) -> [f64; 4] {
         let demos = swing_up_demonstrations(0..10);
         let unseen = swing_up_demonstrations(100..103);
         let before = imitation_error(agent, &demos);
         let mut draw = rand_pcg::Pcg64::seed_from_u64(2);
         let mut batch = BoxBatch::default();
+        let (mut cloned, mut demos_seen) = (0, 0);
         for _ in 0..updates {
             demos.sample(&mut draw, 128, true, &mut batch);
-            agent.learn_batch(&batch);
+            if let Some(bc) = agent.learn_batch(&batch) {
+                cloned += bc.cloned;
+                demos_seen += bc.demos;
+            }
         }
         let (seen, held_out) = (
             imitation_error(agent, &demos),
@@ -562,8 +565,15 @@ pub(crate) mod testing {
         eprintln!(
             "{name} pre-trained {updates} updates: mean |pi(s) - a_E| {before:.3} -> {seen:.3} on the \
              demonstrated states ({held_out:.3} on unseen episodes); the best constant action: {constant:.3} \
-             ({constant_unseen:.3})"
+             ({constant_unseen:.3}); the cloning term covered {cloned} of {demos_seen} demonstrated samples"
         );
+        [seen, held_out, constant, constant_unseen]
+    }
+
+    /// Pre-trains `agent` ([`pretrain`]) and checks that its test actions then follow the demonstrator, on the
+    /// demonstrated states and on unseen episodes, with at most half the error of the best constant action.
+    pub(crate) fn pretraining_imitates(agent: &mut impl BoxLearner, updates: usize, name: &str) {
+        let [seen, held_out, constant, constant_unseen] = pretrain(agent, updates, name);
         assert!(
             seen < 0.5 * constant && held_out < 0.5 * constant_unseen,
             "{name} did not imitate the demonstrations: {seen} and {held_out} against {constant} and \

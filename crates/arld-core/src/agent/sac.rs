@@ -56,6 +56,10 @@ pub struct SacConfig {
     pub max_batch: usize,
     /// Weight of the behaviour cloning loss on demonstrated samples (with the Q-filter; 0 turns it off).
     pub bc_weight: f32,
+    /// Whether the cloning loss keeps only the demonstrated samples whose action the critics value above the
+    /// actor's (the Q-filter); without it every demonstrated sample counts (pre-training on demonstrations
+    /// alone needs that: there the critics overvalue the actor's unseen actions).
+    pub q_filter: bool,
     /// Added to the priority of a demonstrated sample (DDPGfD's `eps_D`).
     pub demo_priority_bonus: f32,
 }
@@ -73,6 +77,7 @@ impl Default for SacConfig {
             target_entropy: None,
             max_batch: 256,
             bc_weight: 0.0,
+            q_filter: true,
             demo_priority_bonus: 0.0,
         }
     }
@@ -370,7 +375,8 @@ impl<R: Rng> Sac<R> {
         let (d, a, k) = (self.obs_dim, self.action_dim(), self.config.heads);
         let pair_min = |q: &[f32], r: usize| q[r * k].min(q[r * k + 1]);
         let cloning = self.config.bc_weight > 0.0 && batch.has_demos();
-        if cloning {
+        let filtering = cloning && self.config.q_filter;
+        if filtering {
             let q = self
                 .critics
                 .evaluate(Net::Online, &batch.obs, &batch.actions, n);
@@ -386,6 +392,8 @@ impl<R: Rng> Sac<R> {
                     self.y_mean[r * a + dim] = self.out[r * 2 * a + dim].tanh();
                 }
             }
+        }
+        if filtering {
             let actions = &mut self.actions[..n * a];
             actions.copy_from_slice(&self.y_mean[..n * a]);
             self.action_box.to_box(actions);
@@ -442,8 +450,7 @@ impl<R: Rng> Sac<R> {
             let stats = behaviour_cloning(
                 self.config.bc_weight,
                 batch,
-                &self.q_demo[..n],
-                &self.q_pi[..n],
+                filtering.then_some((&self.q_demo[..n], &self.q_pi[..n])),
                 &self.y_mean[..n * a],
                 &self.action_box,
                 d_y,
@@ -595,31 +602,33 @@ mod tests {
             }
             total / n as f64
         };
-        // Central differences; where the step crosses a kink (a ReLU, the heads' minimum) the one-sided slopes
-        // disagree and the point is skipped, and there must be few of them.
-        let h = 1e-2f32;
-        let centre = loss(&agent);
+        // Central differences at two steps; where a step crosses a kink (a ReLU, the heads' minimum) the two
+        // disagree and the point is skipped; with eight rows through 16 ReLUs there are a few, at most one in ten.
         let mut skipped = 0;
         for (i, analytic) in grads.iter().enumerate() {
             let original = agent.actor.parameters()[i];
-            agent.actor.parameters_mut()[i] = original + h;
-            let up = loss(&agent);
-            agent.actor.parameters_mut()[i] = original - h;
-            let down = loss(&agent);
-            agent.actor.parameters_mut()[i] = original;
-            let (left, right) = ((centre - down) / f64::from(h), (up - centre) / f64::from(h));
-            if (left - right).abs() > 0.05 * left.abs().max(right.abs()).max(0.1) {
+            let mut central = |h: f32| {
+                agent.actor.parameters_mut()[i] = original + h;
+                let up = loss(&agent);
+                agent.actor.parameters_mut()[i] = original - h;
+                let down = loss(&agent);
+                agent.actor.parameters_mut()[i] = original;
+                (up - down) / (2.0 * f64::from(h))
+            };
+            let (coarse, numeric) = (central(1e-2), central(5e-3));
+            let tolerance = 5e-3 * numeric.abs().max(0.1);
+            if (coarse - numeric).abs() > tolerance {
                 skipped += 1;
                 continue;
             }
-            let numeric = (up - down) / (2.0 * f64::from(h));
             assert!(
-                (f64::from(*analytic) - numeric).abs() < 2e-3 * numeric.abs().max(0.1),
+                (f64::from(*analytic) - numeric).abs() < tolerance,
                 "actor parameter {i}: {analytic} vs {numeric}"
             );
         }
+        eprintln!("{skipped} of {} parameters at a kink", grads.len());
         assert!(
-            skipped * 20 <= grads.len(),
+            skipped * 10 <= grads.len(),
             "{skipped} of {} at a kink",
             grads.len()
         );
@@ -809,11 +818,16 @@ mod tests {
             actor_lr: 1e-3,
             critic_lr: 1e-3,
             alpha_lr: 1e-3,
-            bc_weight: 1.0,
-            demo_priority_bonus: 1.0,
+            bc_weight: 100.0,
+            q_filter: false,
             ..SacConfig::default()
         };
         let mut agent = Sac::new(config, 3, &[-2.0], &[2.0], Pcg::seed_from_u64(3));
         pretraining_imitates(&mut agent, 2_000, "SAC");
+    }
+
+    #[test]
+    fn the_actor_gradient_on_eight_rows_matches_finite_differences() {
+        check_actor_gradient(0.0, &[false; 8]);
     }
 }

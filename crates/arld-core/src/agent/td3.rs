@@ -42,6 +42,10 @@ pub struct Td3Config {
     pub max_batch: usize,
     /// Weight of the behaviour cloning loss on demonstrated samples (with the Q-filter; 0 turns it off).
     pub bc_weight: f32,
+    /// Whether the cloning loss keeps only the demonstrated samples whose action the critics value above the
+    /// actor's (the Q-filter); without it every demonstrated sample counts (pre-training on demonstrations
+    /// alone needs that: there the critics overvalue the actor's unseen actions).
+    pub q_filter: bool,
     /// Added to the priority of a demonstrated sample (DDPGfD's `eps_D`).
     pub demo_priority_bonus: f32,
 }
@@ -60,6 +64,7 @@ impl Default for Td3Config {
             exploration_noise: 0.1,
             max_batch: 256,
             bc_weight: 0.0,
+            q_filter: true,
             demo_priority_bonus: 0.0,
         }
     }
@@ -265,7 +270,8 @@ impl<R: Rng> Td3<R> {
         let n = batch.len();
         let (d, a, k) = (self.obs_dim, self.action_dim(), self.config.heads);
         let cloning = self.config.bc_weight > 0.0 && batch.has_demos();
-        if cloning {
+        let filtering = cloning && self.config.q_filter;
+        if filtering {
             let q = self
                 .critics
                 .evaluate(Net::Online, &batch.obs, &batch.actions, n);
@@ -280,7 +286,7 @@ impl<R: Rng> Td3<R> {
         self.action_box.to_box(actions);
         let q = self.critics.evaluate(Net::Online, &batch.obs, actions, n);
         let loss = -q.iter().sum::<f32>() / (n * k) as f32;
-        if cloning {
+        if filtering {
             for r in 0..n {
                 self.q_pi[r] = q[r * k..(r + 1) * k].iter().sum::<f32>() / k as f32;
             }
@@ -297,8 +303,7 @@ impl<R: Rng> Td3<R> {
             Some(behaviour_cloning(
                 self.config.bc_weight,
                 batch,
-                &self.q_demo[..n],
-                &self.q_pi[..n],
+                filtering.then_some((&self.q_demo[..n], &self.q_pi[..n])),
                 &self.y[..n * a],
                 &self.action_box,
                 d_y,
@@ -349,8 +354,8 @@ mod tests {
         let config = Td3Config {
             hidden: vec![64, 64],
             max_batch: 128,
-            bc_weight: 1.0,
-            demo_priority_bonus: 1.0,
+            bc_weight: 100.0,
+            q_filter: false,
             ..Td3Config::default()
         };
         let mut agent = Td3::new(
