@@ -11,7 +11,10 @@
 //!
 //! A batch ([`BoxBatch`]) carries n-step transitions with their discount `gamma^n` (0 at a terminal state), and
 //! per-sample importance weights for a prioritized replay; [`Td3::learn`] returns the new priorities (the
-//! absolute TD errors of the first head).
+//! absolute TD errors of the first head, plus `demo_priority_bonus` on demonstrated samples). On demonstrated
+//! samples the actor's loss gains the behaviour cloning term of Nair et al. 2018, with or without their Q-filter
+//! (`bc_weight`, `q_filter`; docs/algorithm.md §17). The critics, the batch and the box map are shared with SAC
+//! (`actor_critic.rs`).
 
 use rand::Rng;
 use rand_distr::StandardNormal;
