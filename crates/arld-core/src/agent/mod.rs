@@ -7,8 +7,10 @@
 //! `δ_kb = Q_k(s_b, a_b) − (r_b + γ(1 − d_b) Q⁻_k(s'_b, argmax_a Q_k(s'_b, a)))` and
 //! `L_E = max_a [Q(s, a) + M·1(a ≠ a_E)] − Q(s, a_E)`.
 
+pub mod actor_critic;
 pub mod box_agent;
 mod learner;
+pub mod sac;
 pub mod td3;
 
 pub use learner::Learner;

@@ -11,11 +11,16 @@
 //!
 //! A batch ([`BoxBatch`]) carries n-step transitions with their discount `gamma^n` (0 at a terminal state), and
 //! per-sample importance weights for a prioritized replay; [`Td3::learn`] returns the new priorities (the
-//! absolute TD errors of the first head).
+//! absolute TD errors of the first head, plus `demo_priority_bonus` on demonstrated samples). On demonstrated
+//! samples the actor's loss gains the behaviour cloning term of Nair et al. 2018, with or without their Q-filter
+//! (`bc_weight`, `q_filter`; docs/algorithm.md §17). The critics, the batch and the box map are shared with SAC
+//! (`actor_critic.rs`).
 
 use rand::Rng;
 use rand_distr::StandardNormal;
 
+use super::actor_critic::{ActionBox, Critics, Net, behaviour_cloning};
+pub use super::actor_critic::{BcStats, BoxBatch};
 use crate::nn::{Adam, Mlp, MlpWorkspace, OutputActivation};
 use crate::state::{Persist, StateDict, StateError};
 use serde::{Serialize, de::DeserializeOwned};
@@ -40,6 +45,14 @@ pub struct Td3Config {
     pub exploration_noise: f32,
     /// The largest batch [`Td3::learn`] accepts.
     pub max_batch: usize,
+    /// Weight of the behaviour cloning loss on demonstrated samples (with the Q-filter; 0 turns it off).
+    pub bc_weight: f32,
+    /// Whether the cloning loss keeps only the demonstrated samples whose action the critics value above the
+    /// actor's (the Q-filter); without it every demonstrated sample counts (pre-training on demonstrations
+    /// alone needs that: there the critics overvalue the actor's unseen actions).
+    pub q_filter: bool,
+    /// Added to the priority of a demonstrated sample (DDPGfD's `eps_D`).
+    pub demo_priority_bonus: f32,
 }
 
 impl Default for Td3Config {
@@ -55,33 +68,10 @@ impl Default for Td3Config {
             noise_clip: 0.5,
             exploration_noise: 0.1,
             max_batch: 256,
+            bc_weight: 0.0,
+            q_filter: true,
+            demo_priority_bonus: 0.0,
         }
-    }
-}
-
-/// A batch of transitions in a box action space, row-major.
-#[derive(Debug, Clone, Default)]
-pub struct BoxBatch {
-    pub obs: Vec<f32>,
-    pub actions: Vec<f32>,
-    /// The n-step return of each sample.
-    pub rewards: Vec<f32>,
-    pub next_obs: Vec<f32>,
-    /// `gamma^n` of each sample, 0 where the n-step return reached a terminal state.
-    pub discounts: Vec<f32>,
-    /// Importance-sampling weights (1 without prioritized replay).
-    pub weights: Vec<f32>,
-}
-
-impl BoxBatch {
-    /// Number of samples.
-    pub fn len(&self) -> usize {
-        self.rewards.len()
-    }
-
-    /// Whether the batch holds no sample.
-    pub fn is_empty(&self) -> bool {
-        self.rewards.is_empty()
     }
 }
 
@@ -92,31 +82,32 @@ pub struct Td3Stats {
     pub critic_loss: f32,
     /// `-mean Q` of the actor's actions, when the actor moved in this update.
     pub actor_loss: Option<f32>,
+    /// The behaviour cloning term, when the actor moved on a batch with demonstrations and it is on.
+    pub bc: Option<BcStats>,
 }
 
 /// The TD3 learner: actor, critics, their targets and optimisers, and the buffers of an update.
 pub struct Td3<R: Rng> {
     config: Td3Config,
     obs_dim: usize,
-    low: Vec<f32>,
-    high: Vec<f32>,
+    action_box: ActionBox,
     actor: Mlp,
     actor_target: Mlp,
-    critic: Mlp,
-    critic_target: Mlp,
+    critics: Critics,
     actor_opt: Adam,
-    critic_opt: Adam,
     rng: R,
     updates: u64,
     // Buffers, sized for `max_batch`.
     actor_ws: MlpWorkspace,
-    critic_ws: MlpWorkspace,
-    inputs: Vec<f32>,
+    /// Actions (in the box), the actor's tanh outputs and their loss gradient, `max_batch * dim(A)`.
+    actions: Vec<f32>,
+    y: Vec<f32>,
+    d_y: Vec<f32>,
     targets: Vec<f32>,
-    d_out: Vec<f32>,
-    d_input: Vec<f32>,
+    /// The critic's values of the demonstrated actions and of the actor's, for the Q-filter.
+    q_demo: Vec<f32>,
+    q_pi: Vec<f32>,
     actor_grads: Vec<f32>,
-    critic_grads: Vec<f32>,
     priorities: Vec<f32>,
 }
 
@@ -128,47 +119,42 @@ impl<R: Rng> Td3<R> {
     /// If the box is empty or inverted, or the configuration has fewer than two heads or a zero batch (callers
     /// validate configurations first).
     pub fn new(config: Td3Config, obs_dim: usize, low: &[f32], high: &[f32], mut rng: R) -> Self {
-        assert!(
-            !low.is_empty() && low.len() == high.len() && low.iter().zip(high).all(|(l, h)| l < h),
-            "an action box needs low < high in every dimension"
-        );
+        let action_box = ActionBox::new(low, high);
         assert!(
             config.heads >= 2 && config.max_batch > 0,
             "TD3 needs two critic heads and a batch"
         );
         let act_dim = low.len();
-        let layers = |input: usize, output: usize| {
-            let mut sizes = vec![input];
-            sizes.extend(&config.hidden);
-            sizes.push(output);
-            sizes
-        };
-        let actor = Mlp::new(&layers(obs_dim, act_dim), OutputActivation::Tanh, &mut rng);
-        let critic = Mlp::new(
-            &layers(obs_dim + act_dim, config.heads),
-            OutputActivation::Linear,
+        let mut sizes = vec![obs_dim];
+        sizes.extend(&config.hidden);
+        sizes.push(act_dim);
+        let actor = Mlp::new(&sizes, OutputActivation::Tanh, &mut rng);
+        let n = config.max_batch;
+        let critics = Critics::new(
+            obs_dim,
+            act_dim,
+            &config.hidden,
+            config.heads,
+            config.critic_lr,
+            n,
             &mut rng,
         );
-        let n = config.max_batch;
         Td3 {
             actor_opt: Adam::for_parameters(actor.parameters().len(), config.actor_lr),
-            critic_opt: Adam::for_parameters(critic.parameters().len(), config.critic_lr),
             actor_ws: MlpWorkspace::new(&actor, n),
-            critic_ws: MlpWorkspace::new(&critic, n),
-            inputs: vec![0.0; n * (obs_dim + act_dim)],
+            actions: vec![0.0; n * act_dim],
+            y: vec![0.0; n * act_dim],
+            d_y: vec![0.0; n * act_dim],
             targets: vec![0.0; n],
-            d_out: vec![0.0; n * config.heads.max(act_dim)],
-            d_input: vec![0.0; n * (obs_dim + act_dim)],
+            q_demo: vec![0.0; n],
+            q_pi: vec![0.0; n],
             actor_grads: vec![0.0; actor.parameters().len()],
-            critic_grads: vec![0.0; critic.parameters().len()],
             priorities: vec![0.0; n],
             actor_target: actor.clone(),
-            critic_target: critic.clone(),
             actor,
-            critic,
+            critics,
             obs_dim,
-            low: low.to_vec(),
-            high: high.to_vec(),
+            action_box,
             rng,
             updates: 0,
             config,
@@ -177,7 +163,7 @@ impl<R: Rng> Td3<R> {
 
     /// Action dimension.
     pub fn action_dim(&self) -> usize {
-        self.low.len()
+        self.action_box.dim()
     }
 
     /// Number of critic updates so far.
@@ -185,56 +171,38 @@ impl<R: Rng> Td3<R> {
         self.updates
     }
 
-    /// The box's half-width of dimension `d`.
-    fn half_width(&self, d: usize) -> f32 {
-        0.5 * (self.high[d] - self.low[d])
-    }
-
-    /// Maps the actor's tanh outputs (in (-1, 1)) to the box, in place.
-    fn to_box(&self, y: &mut [f32]) {
-        let act_dim = self.action_dim();
-        for (i, v) in y.iter_mut().enumerate() {
-            let d = i % act_dim;
-            *v = self.low[d] + (*v + 1.0) * self.half_width(d);
-        }
-    }
-
     /// The test-time action at `obs`: the actor's, without noise.
     pub fn test_action(&mut self, obs: &[f32], action: &mut [f32]) {
         let y = self.actor.forward(obs, 1, &mut self.actor_ws);
         action.copy_from_slice(y);
-        self.to_box(action);
+        self.action_box.to_box(action);
     }
 
     /// The behaviour action at `obs`: the actor's plus Gaussian exploration noise, clipped to the box.
     pub fn act(&mut self, obs: &[f32], action: &mut [f32]) {
         self.test_action(obs, action);
+        let b = &self.action_box;
         for (d, a) in action.iter_mut().enumerate() {
             let z: f32 = self.rng.sample(StandardNormal);
-            let noisy = *a + z * self.config.exploration_noise * self.half_width(d);
-            *a = noisy.clamp(self.low[d], self.high[d]);
+            let noisy = *a + z * self.config.exploration_noise * b.half[d];
+            *a = noisy.clamp(b.low[d], b.high[d]);
         }
     }
 
     /// The critics' disagreement at `(obs, action)`: the standard deviation of the heads' values (the
     /// uncertainty a query rule can read). Draws no random number.
     pub fn critic_spread(&mut self, obs: &[f32], action: &[f32]) -> f32 {
-        let input = &mut self.inputs[..self.obs_dim + action.len()];
-        input[..self.obs_dim].copy_from_slice(obs);
-        input[self.obs_dim..].copy_from_slice(action);
-        let q = self.critic.forward(input, 1, &mut self.critic_ws);
-        let mean = q.iter().sum::<f32>() / q.len() as f32;
-        (q.iter().map(|v| (v - mean) * (v - mean)).sum::<f32>() / q.len() as f32).sqrt()
+        self.critics.spread(obs, action)
     }
 
-    /// Writes `[obs | action]` rows for the critic into `self.inputs`.
-    fn critic_inputs(&mut self, obs: &[f32], actions: &[f32], batch: usize) {
-        let (d, a) = (self.obs_dim, self.action_dim());
-        for r in 0..batch {
-            let row = &mut self.inputs[r * (d + a)..(r + 1) * (d + a)];
-            row[..d].copy_from_slice(&obs[r * d..(r + 1) * d]);
-            row[d..].copy_from_slice(&actions[r * a..(r + 1) * a]);
-        }
+    /// The critics' disagreement about the best action near the actor's at `obs`, in half-widths of the box
+    /// (see `Critics::argmax_disagreement`; 0 when every head prefers the same probe). Draws no random number.
+    pub fn action_disagreement(&mut self, obs: &[f32]) -> f32 {
+        let a = self.action_dim();
+        let y = self.actor.forward(obs, 1, &mut self.actor_ws);
+        self.y[..a].copy_from_slice(y);
+        self.critics
+            .argmax_disagreement(obs, &self.y[..a], &self.action_box)
     }
 
     /// One update from `batch`: the critics always, the actor and the targets every `policy_delay` updates.
@@ -244,113 +212,113 @@ impl<R: Rng> Td3<R> {
     /// If the batch is larger than the configured maximum or its vectors disagree in length.
     pub fn learn(&mut self, batch: &BoxBatch) -> (Td3Stats, &[f32]) {
         let n = batch.len();
-        let (d, a, k) = (self.obs_dim, self.action_dim(), self.config.heads);
-        assert!(n > 0 && n <= self.config.max_batch, "batch of {n} samples");
-        assert!(
-            batch.obs.len() == n * d
-                && batch.next_obs.len() == n * d
-                && batch.actions.len() == n * a
-                && batch.discounts.len() == n
-                && batch.weights.len() == n,
-            "a batch's vectors disagree in length"
-        );
+        let a = self.action_dim();
+        batch.check(self.obs_dim, a, self.config.max_batch);
+        let k = self.config.heads;
 
         // The target: r + gamma^n * min(Q'_1, Q'_2)(s', pi'(s') + clipped noise).
-        let mut next_actions = self
+        let y = self
             .actor_target
-            .forward(&batch.next_obs, n, &mut self.actor_ws)
-            .to_vec();
-        self.to_box(&mut next_actions);
+            .forward(&batch.next_obs, n, &mut self.actor_ws);
+        let next_actions = &mut self.actions[..n * a];
+        next_actions.copy_from_slice(y);
+        self.action_box.to_box(next_actions);
+        let b = &self.action_box;
         for (i, v) in next_actions.iter_mut().enumerate() {
             let dim = i % a;
-            let scale = self.half_width(dim);
+            let scale = b.half[dim];
             let z: f32 = self.rng.sample(StandardNormal);
             let clip = self.config.noise_clip * scale;
             let noise = (z * self.config.target_noise * scale).clamp(-clip, clip);
-            *v = (*v + noise).clamp(self.low[dim], self.high[dim]);
+            *v = (*v + noise).clamp(b.low[dim], b.high[dim]);
         }
-        self.critic_inputs(&batch.next_obs, &next_actions, n);
-        let q_next =
-            self.critic_target
-                .forward(&self.inputs[..n * (d + a)], n, &mut self.critic_ws);
+        let q_next = self
+            .critics
+            .evaluate(Net::Target, &batch.next_obs, next_actions, n);
         for r in 0..n {
             let pair = q_next[r * k].min(q_next[r * k + 1]);
             self.targets[r] = batch.rewards[r] + batch.discounts[r] * pair;
         }
 
         // The critics: weighted squared TD error of every head, averaged over the batch.
-        self.critic_inputs(&batch.obs, &batch.actions, n);
-        let q = self
-            .critic
-            .forward(&self.inputs[..n * (d + a)], n, &mut self.critic_ws);
-        let mut loss = 0.0f32;
-        let d_q = &mut self.d_out[..n * k];
-        for r in 0..n {
-            for h in 0..k {
-                let error = q[r * k + h] - self.targets[r];
-                loss += batch.weights[r] * error * error;
-                d_q[r * k + h] = 2.0 * batch.weights[r] * error / n as f32;
-            }
-            self.priorities[r] = (q[r * k] - self.targets[r]).abs();
-        }
-        self.critic
-            .backward(&mut self.critic_ws, d_q, &mut self.critic_grads, None);
-        self.critic_opt
-            .step_parameters(self.critic.parameters_mut(), &self.critic_grads);
+        let critic_loss = self.critics.update(
+            batch,
+            &self.targets[..n],
+            &mut self.priorities[..n],
+            self.config.demo_priority_bonus,
+        );
         self.updates += 1;
         let mut stats = Td3Stats {
-            critic_loss: loss / (n * k) as f32,
+            critic_loss,
             actor_loss: None,
+            bc: None,
         };
 
         if self.updates.is_multiple_of(self.config.policy_delay) {
-            stats.actor_loss = Some(self.update_actor(batch));
+            let (actor_loss, bc) = self.actor_gradient(batch);
+            self.actor_opt
+                .step_parameters(self.actor.parameters_mut(), &self.actor_grads);
+            stats.actor_loss = Some(actor_loss);
+            stats.bc = bc;
             self.actor_target.soft_update(&self.actor, self.config.tau);
-            self.critic_target
-                .soft_update(&self.critic, self.config.tau);
+            self.critics.soft_update(self.config.tau);
         }
         (stats, &self.priorities[..n])
     }
 
-    /// The actor's step: ascend the mean over heads of `Q(s, pi(s))`; returns the loss `-mean Q`.
-    fn update_actor(&mut self, batch: &BoxBatch) -> f32 {
-        let loss = self.actor_gradient(&batch.obs, batch.len());
-        self.actor_opt
-            .step_parameters(self.actor.parameters_mut(), &self.actor_grads);
-        loss
-    }
-
-    /// The loss `-mean over the batch and the heads of Q(s, pi(s))` at the `n` observations `obs`, and its
-    /// gradient with respect to the actor's parameters in `self.actor_grads` (through the critic's input
-    /// gradient and the box's scaling; the critic's own gradients are computed and dropped).
-    fn actor_gradient(&mut self, obs: &[f32], n: usize) -> f32 {
+    /// The actor's loss at the batch's observations, `-mean over the batch and the heads of Q(s, pi(s))` plus the
+    /// behaviour cloning term with the Q-filter on its demonstrated samples (the heads' mean compares the
+    /// demonstrated action with the actor's), and its gradient with respect to the actor's parameters in
+    /// `self.actor_grads` (through the critic's input gradient and the box's scaling). Returns the Q part of
+    /// the loss and the cloning term's measures.
+    fn actor_gradient(&mut self, batch: &BoxBatch) -> (f32, Option<BcStats>) {
+        let n = batch.len();
         let (d, a, k) = (self.obs_dim, self.action_dim(), self.config.heads);
-        let mut actions = self.actor.forward(obs, n, &mut self.actor_ws).to_vec();
-        self.to_box(&mut actions);
-        self.critic_inputs(obs, &actions, n);
-        let q = self
-            .critic
-            .forward(&self.inputs[..n * (d + a)], n, &mut self.critic_ws);
-        let loss = -q.iter().sum::<f32>() / (n * k) as f32;
-        let d_q = &mut self.d_out[..n * k];
-        d_q.fill(-1.0 / (n * k) as f32);
-        let d_input = &mut self.d_input[..n * (d + a)];
-        self.critic.backward(
-            &mut self.critic_ws,
-            d_q,
-            &mut self.critic_grads,
-            Some(d_input),
-        );
-        let half_widths: Vec<f32> = (0..a).map(|dim| self.half_width(dim)).collect();
-        let d_y = &mut self.d_out[..n * a];
-        for r in 0..n {
-            for dim in 0..a {
-                d_y[r * a + dim] = self.d_input[r * (d + a) + d + dim] * half_widths[dim];
+        let cloning = self.config.bc_weight > 0.0 && batch.has_demos();
+        let filtering = cloning && self.config.q_filter;
+        if filtering {
+            let q = self
+                .critics
+                .evaluate(Net::Online, &batch.obs, &batch.actions, n);
+            for r in 0..n {
+                self.q_demo[r] = q[r * k..(r + 1) * k].iter().sum::<f32>() / k as f32;
             }
         }
+        let y = self.actor.forward(&batch.obs, n, &mut self.actor_ws);
+        self.y[..n * a].copy_from_slice(y);
+        let actions = &mut self.actions[..n * a];
+        actions.copy_from_slice(y);
+        self.action_box.to_box(actions);
+        let q = self.critics.evaluate(Net::Online, &batch.obs, actions, n);
+        let loss = -q.iter().sum::<f32>() / (n * k) as f32;
+        if filtering {
+            for r in 0..n {
+                self.q_pi[r] = q[r * k..(r + 1) * k].iter().sum::<f32>() / k as f32;
+            }
+        }
+        self.critics.d_q(n).fill(-1.0 / (n * k) as f32);
+        let d_input = self.critics.backward_to_actions(n);
+        let d_y = &mut self.d_y[..n * a];
+        for r in 0..n {
+            for dim in 0..a {
+                d_y[r * a + dim] = d_input[r * (d + a) + d + dim] * self.action_box.half[dim];
+            }
+        }
+        let bc = if cloning {
+            Some(behaviour_cloning(
+                self.config.bc_weight,
+                batch,
+                filtering.then_some((&self.q_demo[..n], &self.q_pi[..n])),
+                &self.y[..n * a],
+                &self.action_box,
+                d_y,
+            ))
+        } else {
+            None
+        };
         self.actor
             .backward(&mut self.actor_ws, d_y, &mut self.actor_grads, None);
-        loss
+        (loss, bc)
     }
 }
 
@@ -367,19 +335,15 @@ impl<R: Rng> Td3<R> {
 }
 
 impl<R: Rng + Serialize + DeserializeOwned> Persist for Td3<R> {
-    /// Writes everything that changes while TD3 learns and acts: the four networks, both optimisers, the
+    /// Writes everything that changes while TD3 learns and acts: the actor, the critics, their targets and optimisers, the
     /// generator and the update count. Buffers are left out: every use overwrites them.
     fn save_state<'a>(&'a self, prefix: &str, state: &mut StateDict<'a>) {
         self.actor.save_state(&format!("{prefix}.actor"), state);
         self.actor_target
             .save_state(&format!("{prefix}.actor_target"), state);
-        self.critic.save_state(&format!("{prefix}.critic"), state);
-        self.critic_target
-            .save_state(&format!("{prefix}.critic_target"), state);
+        self.critics.save_state(&format!("{prefix}.critics"), state);
         self.actor_opt
             .save_state(&format!("{prefix}.actor_adam"), state);
-        self.critic_opt
-            .save_state(&format!("{prefix}.critic_adam"), state);
         state.put_text(&format!("{prefix}.rng"), &self.rng);
         state.put_value(&format!("{prefix}.updates"), &self.updates);
     }
@@ -389,13 +353,10 @@ impl<R: Rng + Serialize + DeserializeOwned> Persist for Td3<R> {
         self.actor.load_state(&format!("{prefix}.actor"), state)?;
         self.actor_target
             .load_state(&format!("{prefix}.actor_target"), state)?;
-        self.critic.load_state(&format!("{prefix}.critic"), state)?;
-        self.critic_target
-            .load_state(&format!("{prefix}.critic_target"), state)?;
+        self.critics
+            .load_state(&format!("{prefix}.critics"), state)?;
         self.actor_opt
             .load_state(&format!("{prefix}.actor_adam"), state)?;
-        self.critic_opt
-            .load_state(&format!("{prefix}.critic_adam"), state)?;
         self.rng = state.text(&format!("{prefix}.rng"))?;
         self.updates = state.value(&format!("{prefix}.updates"))?;
         Ok(())
@@ -405,38 +366,10 @@ impl<R: Rng + Serialize + DeserializeOwned> Persist for Td3<R> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::env::{Env, make_continuous};
+    use crate::agent::actor_critic::testing::{
+        evaluate_pendulum, pretraining_imitates, train_pendulum,
+    };
     use rand::SeedableRng;
-
-    /// A minimal uniform replay of one-step transitions for the learning test.
-    #[derive(Default)]
-    struct Replay {
-        obs: Vec<Vec<f32>>,
-        actions: Vec<Vec<f32>>,
-        rewards: Vec<f32>,
-        next_obs: Vec<Vec<f32>>,
-        discounts: Vec<f32>,
-    }
-
-    fn evaluate(agent: &mut Td3<rand_pcg::Pcg64>, seeds: std::ops::Range<u64>) -> f64 {
-        let mut env = make_continuous("Pendulum-v1").unwrap();
-        let mut obs = vec![0.0; 3];
-        let mut action = vec![0.0; 1];
-        let episodes = seeds.end - seeds.start;
-        let mut total = 0.0;
-        for seed in seeds {
-            env.reset_into(Some(seed), &mut obs);
-            loop {
-                agent.test_action(&obs, &mut action);
-                let out = env.step_into(&action, &mut obs).unwrap();
-                total += out.reward;
-                if out.terminated || out.truncated {
-                    break;
-                }
-            }
-        }
-        total / episodes as f64
-    }
 
     #[test]
     fn td3_learns_pendulum() {
@@ -454,53 +387,8 @@ mod tests {
             &[2.0],
             rand_pcg::Pcg64::seed_from_u64(0),
         );
-        let mut env = make_continuous("Pendulum-v1").unwrap();
-        let mut draw = rand_pcg::Pcg64::seed_from_u64(1);
-        let mut replay = Replay::default();
-        let mut obs = vec![0.0; 3];
-        let mut action = vec![0.0; 1];
-        let mut batch = BoxBatch::default();
-        env.reset_into(Some(0), &mut obs);
-        for step in 0..12_000 {
-            if step < 1_000 {
-                action[0] = draw.random_range(-2.0..2.0);
-            } else {
-                agent.act(&obs, &mut action);
-            }
-            let before = obs.clone();
-            let out = env.step_into(&action, &mut obs).unwrap();
-            replay.obs.push(before);
-            replay.actions.push(action.clone());
-            replay.rewards.push(out.reward as f32);
-            replay.next_obs.push(obs.clone());
-            replay
-                .discounts
-                .push(if out.terminated { 0.0 } else { 0.99 });
-            if out.terminated || out.truncated {
-                env.reset_into(None, &mut obs);
-            }
-            if step >= 1_000 {
-                batch = BoxBatch {
-                    weights: vec![1.0; 128],
-                    ..std::mem::take(&mut batch)
-                };
-                batch.obs.clear();
-                batch.actions.clear();
-                batch.rewards.clear();
-                batch.next_obs.clear();
-                batch.discounts.clear();
-                for _ in 0..128 {
-                    let i = draw.random_range(0..replay.rewards.len());
-                    batch.obs.extend(&replay.obs[i]);
-                    batch.actions.extend(&replay.actions[i]);
-                    batch.rewards.push(replay.rewards[i]);
-                    batch.next_obs.extend(&replay.next_obs[i]);
-                    batch.discounts.push(replay.discounts[i]);
-                }
-                agent.learn(&batch);
-            }
-        }
-        let score = evaluate(&mut agent, 1000..1010);
+        train_pendulum(&mut agent, 12_000, 128);
+        let score = evaluate_pendulum(&mut agent, 1000..1010);
         eprintln!(
             "TD3 on Pendulum-v1 after 12,000 steps: mean return {score:.1} on seeds 1000-1009"
         );
@@ -508,42 +396,118 @@ mod tests {
     }
 
     #[test]
-    fn the_actor_gradient_matches_finite_differences_of_the_mean_q() {
-        // d(-mean Q(s, pi(s)))/d(theta), from the critic's input gradient through the box's scaling, against
-        // central differences of the same loss computed by forward passes alone, in a box that is neither
-        // centred nor symmetric.
+    fn pretraining_on_demonstrations_imitates_the_swing_up() {
         let config = Td3Config {
-            hidden: vec![8, 8],
-            heads: 3,
-            max_batch: 4,
+            hidden: vec![64, 64],
+            max_batch: 128,
+            bc_weight: 100.0,
+            q_filter: false,
             ..Td3Config::default()
         };
         let mut agent = Td3::new(
             config,
-            2,
-            &[-1.0, 0.0],
-            &[3.0, 0.5],
-            rand_pcg::Pcg64::seed_from_u64(5),
+            3,
+            &[-2.0],
+            &[2.0],
+            rand_pcg::Pcg64::seed_from_u64(3),
         );
-        let obs: Vec<f32> = vec![0.3, -0.2, 1.0, 0.5, -0.7, 0.1];
-        agent.actor_gradient(&obs, 3);
+        pretraining_imitates(&mut agent, 2_000, "TD3");
+    }
+
+    #[test]
+    fn the_actor_gradient_matches_finite_differences_of_the_mean_q() {
+        // d(-mean Q(s, pi(s)))/d(theta), from the critic's input gradient through the box's scaling, against
+        // central differences of the same loss computed by forward passes alone, in a box that is neither
+        // centred nor symmetric.
+        check_actor_gradient(0.0, &[]);
+    }
+
+    #[test]
+    fn the_behaviour_cloning_gradient_with_the_q_filter_matches_finite_differences() {
+        // The actor loss plus 0.7 / n * sum over demonstrated rows whose demonstrated action the critics value
+        // above the actor's of |y - y_demo|^2: the Q-filter computed independently here, and both of its
+        // outcomes present among the demonstrated rows.
+        check_actor_gradient(0.7, &[true, true, false, true, true, true, false, true]);
+    }
+
+    /// Checks `actor_gradient` against central differences with the cloning weight `bc_weight` and the
+    /// demonstration flags `is_demo` (one per row; empty for none).
+    fn check_actor_gradient(bc_weight: f32, is_demo: &[bool]) {
+        let config = Td3Config {
+            hidden: vec![8, 8],
+            heads: 3,
+            max_batch: 8,
+            bc_weight,
+            ..Td3Config::default()
+        };
+        let (low, high) = ([-1.0f32, 0.0], [3.0f32, 0.5]);
+        let mut agent = Td3::new(config, 2, &low, &high, rand_pcg::Pcg64::seed_from_u64(5));
+        let mut draw = rand_pcg::Pcg64::seed_from_u64(6);
+        let n = is_demo.len().max(3);
+        let batch = BoxBatch {
+            obs: (0..2 * n).map(|_| draw.random_range(-1.0..1.0)).collect(),
+            actions: (0..n)
+                .flat_map(|_| [draw.random_range(-1.0..3.0), draw.random_range(0.0..0.5)])
+                .collect(),
+            rewards: vec![0.0; n],
+            next_obs: vec![0.0; 2 * n],
+            discounts: vec![0.99; n],
+            weights: vec![1.0; n],
+            is_demo: is_demo.to_vec(),
+        };
+        let (_, bc) = agent.actor_gradient(&batch);
         let grads = agent.actor_grads.clone();
-        let loss = |agent: &mut Td3<rand_pcg::Pcg64>| -> f64 {
-            let mut total = 0.0f64;
-            let mut ws = MlpWorkspace::new(&agent.critic, 1);
-            for state in obs.chunks(2) {
+        // The Q-filter's outcome at the unperturbed parameters (a selection, not differentiated).
+        let heads_mean =
+            |agent: &Td3<rand_pcg::Pcg64>, state: &[f32], action: &[f32]| -> (f64, f64) {
+                let mut ws = MlpWorkspace::new(&agent.critics.net, 1);
+                let mut input = state.to_vec();
+                input.extend(action);
+                let q = agent.critics.net.forward(&input, 1, &mut ws);
+                let sum = q.iter().map(|v| f64::from(*v)).sum::<f64>();
+                (sum, sum / q.len() as f64)
+            };
+        let filter: Vec<bool> = (0..n)
+            .map(|r| {
+                let state = &batch.obs[2 * r..2 * r + 2];
                 let mut action = vec![0.0; 2];
                 agent.test_action(state, &mut action);
-                let mut input = state.to_vec();
-                input.extend(&action);
-                total += agent
-                    .critic
-                    .forward(&input, 1, &mut ws)
-                    .iter()
-                    .map(|q| f64::from(*q))
-                    .sum::<f64>();
+                let demo = &batch.actions[2 * r..2 * r + 2];
+                batch.is_demo(r)
+                    && heads_mean(&agent, state, demo).1 > heads_mean(&agent, state, &action).1
+            })
+            .collect();
+        let cloned = filter.iter().filter(|&&f| f).count();
+        if bc_weight > 0.0 {
+            let demos = is_demo.iter().filter(|&&d| d).count();
+            assert!(
+                cloned > 0 && cloned < demos,
+                "the filter passed {cloned} of {demos}"
+            );
+            let bc = bc.unwrap();
+            assert_eq!((bc.cloned, bc.demos), (cloned, demos));
+        } else {
+            assert!(bc.is_none());
+        }
+        let loss = |agent: &mut Td3<rand_pcg::Pcg64>| -> f64 {
+            let mut q_total = 0.0f64;
+            let mut cloning = 0.0f64;
+            for (r, &cloned) in filter.iter().enumerate() {
+                let state = &batch.obs[2 * r..2 * r + 2];
+                let mut action = vec![0.0; 2];
+                agent.test_action(state, &mut action);
+                q_total += heads_mean(agent, state, &action).0;
+                if cloned {
+                    for d in 0..2 {
+                        let half = 0.5 * f64::from(high[d] - low[d]);
+                        let y = (f64::from(action[d]) - f64::from(low[d])) / half;
+                        let y_demo =
+                            (f64::from(batch.actions[2 * r + d]) - f64::from(low[d])) / half;
+                        cloning += (y - y_demo).powi(2);
+                    }
+                }
             }
-            -total / 9.0
+            -q_total / (3 * n) as f64 + f64::from(bc_weight) / n as f64 * cloning
         };
         let h = 1e-2f32;
         for (i, analytic) in grads.iter().enumerate() {
@@ -559,5 +523,44 @@ mod tests {
                 "actor parameter {i}: {analytic} vs {numeric}"
             );
         }
+    }
+
+    #[test]
+    fn demonstrated_samples_get_the_priority_bonus_and_nothing_else_changes() {
+        // Two learners from one seed, one with a bonus of 0.5: on a batch with demonstrations the priorities
+        // differ by exactly the bonus on the demonstrated samples, and the updates are the same.
+        let mut agents = [0.0, 0.5].map(|bonus| {
+            Td3::new(
+                Td3Config {
+                    hidden: vec![8],
+                    max_batch: 4,
+                    demo_priority_bonus: bonus,
+                    ..Td3Config::default()
+                },
+                1,
+                &[-2.0],
+                &[2.0],
+                rand_pcg::Pcg64::seed_from_u64(9),
+            )
+        });
+        let batch = BoxBatch {
+            obs: vec![0.1, -0.4, 0.9, 0.3],
+            actions: vec![1.0, -1.5, 0.2, 0.0],
+            rewards: vec![1.0, 0.0, -1.0, 0.5],
+            next_obs: vec![0.2, -0.3, 0.8, 0.2],
+            discounts: vec![0.99, 0.0, 0.99, 0.99],
+            weights: vec![1.0; 4],
+            is_demo: vec![true, false, false, true],
+        };
+        let plain = agents[0].learn(&batch).1.to_vec();
+        let bonus = agents[1].learn(&batch).1.to_vec();
+        for r in 0..4 {
+            let expected = plain[r] + if batch.is_demo[r] { 0.5 } else { 0.0 };
+            assert_eq!(bonus[r], expected, "sample {r}");
+        }
+        assert_eq!(
+            agents[0].critics.net.parameters(),
+            agents[1].critics.net.parameters()
+        );
     }
 }

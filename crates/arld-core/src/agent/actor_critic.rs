@@ -1,0 +1,600 @@
+//! What the actor-critic learners for actions in a box (TD3 in `td3.rs`, SAC in `sac.rs`) share: the batch they
+//! learn from ([`BoxBatch`]), the box itself ([`ActionBox`]: the map between a tanh output in (-1, 1) and an
+//! action), the critic ensemble with its target and optimiser ([`Critics`]: K heads on a shared torso, the
+//! regression step that returns priorities, the gradient with respect to the action, and the two uncertainties
+//! read from its heads), and the behaviour cloning loss with the Q-filter on demonstrated samples
+//! ([`behaviour_cloning`]; Nair et al. 2018).
+//!
+//! Every buffer is sized once for the largest batch, so an update allocates nothing.
+
+use rand::Rng;
+
+use crate::nn::{Adam, Mlp, MlpWorkspace, OutputActivation};
+use crate::state::{Persist, StateDict, StateError};
+
+/// A batch of transitions in a box action space, row-major.
+#[derive(Debug, Clone, Default)]
+pub struct BoxBatch {
+    pub obs: Vec<f32>,
+    pub actions: Vec<f32>,
+    /// The n-step return of each sample.
+    pub rewards: Vec<f32>,
+    pub next_obs: Vec<f32>,
+    /// `gamma^n` of each sample, 0 where the n-step return reached a terminal state.
+    pub discounts: Vec<f32>,
+    /// Importance-sampling weights (1 without prioritized replay).
+    pub weights: Vec<f32>,
+    /// Whether each sample's action is a demonstrator's (the behaviour cloning loss reads them and their
+    /// priorities get the demonstration bonus). Empty means no sample is demonstrated.
+    pub is_demo: Vec<bool>,
+}
+
+impl BoxBatch {
+    /// Number of samples.
+    pub fn len(&self) -> usize {
+        self.rewards.len()
+    }
+
+    /// Whether the batch holds no sample.
+    pub fn is_empty(&self) -> bool {
+        self.rewards.is_empty()
+    }
+
+    /// Whether sample `r` is demonstrated.
+    pub fn is_demo(&self, r: usize) -> bool {
+        self.is_demo.get(r).copied().unwrap_or(false)
+    }
+
+    /// Whether any sample is demonstrated.
+    pub fn has_demos(&self) -> bool {
+        self.is_demo.iter().any(|&d| d)
+    }
+
+    /// Checks the batch against a learner's shapes.
+    ///
+    /// # Panics
+    /// If the batch is empty or larger than `max_batch`, or its vectors disagree in length (the replay builds
+    /// batches; a mismatch is a bug, not an input error).
+    pub(crate) fn check(&self, obs_dim: usize, act_dim: usize, max_batch: usize) {
+        let n = self.len();
+        assert!(n > 0 && n <= max_batch, "batch of {n} samples");
+        assert!(
+            self.obs.len() == n * obs_dim
+                && self.next_obs.len() == n * obs_dim
+                && self.actions.len() == n * act_dim
+                && self.discounts.len() == n
+                && self.weights.len() == n
+                && (self.is_demo.is_empty() || self.is_demo.len() == n),
+            "a batch's vectors disagree in length"
+        );
+    }
+}
+
+/// An action box `[low, high]` and the map from a tanh output `y` in (-1, 1) to an action,
+/// `a = low + (y + 1) w` with `w = (high - low) / 2` the half-width.
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) struct ActionBox {
+    pub low: Vec<f32>,
+    pub high: Vec<f32>,
+    pub half: Vec<f32>,
+}
+
+impl ActionBox {
+    /// # Panics
+    /// If the box is empty or inverted (callers validate the action space first).
+    pub fn new(low: &[f32], high: &[f32]) -> Self {
+        assert!(
+            !low.is_empty() && low.len() == high.len() && low.iter().zip(high).all(|(l, h)| l < h),
+            "an action box needs low < high in every dimension"
+        );
+        ActionBox {
+            low: low.to_vec(),
+            high: high.to_vec(),
+            half: low.iter().zip(high).map(|(l, h)| 0.5 * (h - l)).collect(),
+        }
+    }
+
+    /// Action dimension.
+    pub fn dim(&self) -> usize {
+        self.low.len()
+    }
+
+    /// Maps rows of tanh outputs to the box, in place.
+    pub fn to_box(&self, y: &mut [f32]) {
+        let dim = self.dim();
+        for (i, v) in y.iter_mut().enumerate() {
+            let d = i % dim;
+            *v = self.low[d] + (*v + 1.0) * self.half[d];
+        }
+    }
+
+    /// The tanh output of action value `a` in dimension `d` (the inverse of [`Self::to_box`]).
+    pub fn to_unit(&self, a: f32, d: usize) -> f32 {
+        (a - self.low[d]) / self.half[d] - 1.0
+    }
+}
+
+/// Which of the critics' networks to evaluate.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Net {
+    Online,
+    Target,
+}
+
+/// The critic ensemble `Q(s, a) -> [Q_1 .. Q_K]` (one network, K linear heads on a shared torso), its Polyak
+/// target, its Adam optimiser and its buffers.
+pub(crate) struct Critics {
+    pub net: Mlp,
+    pub target: Mlp,
+    opt: Adam,
+    ws: MlpWorkspace,
+    obs_dim: usize,
+    act_dim: usize,
+    heads: usize,
+    inputs: Vec<f32>,
+    d_q: Vec<f32>,
+    d_input: Vec<f32>,
+    grads: Vec<f32>,
+}
+
+impl Persist for Critics {
+    /// Writes the critic network, its target and its optimiser (buffers are left out).
+    fn save_state<'a>(&'a self, prefix: &str, state: &mut StateDict<'a>) {
+        self.net.save_state(&format!("{prefix}.net"), state);
+        self.target.save_state(&format!("{prefix}.target"), state);
+        self.opt.save_state(&format!("{prefix}.adam"), state);
+    }
+
+    /// Reads what [`Critics::save_state`] wrote into critics of the same shape.
+    fn load_state(&mut self, prefix: &str, state: &StateDict<'_>) -> Result<(), StateError> {
+        self.net.load_state(&format!("{prefix}.net"), state)?;
+        self.target.load_state(&format!("{prefix}.target"), state)?;
+        self.opt.load_state(&format!("{prefix}.adam"), state)
+    }
+}
+
+/// Offset of the probe actions of [`Critics::argmax_disagreement`] from the centre action, as a fraction of the
+/// box's half-width.
+pub const PROBE_OFFSET: f32 = 0.5;
+
+impl Critics {
+    /// Critics with `hidden` widths and `heads` heads, initialised from `rng`, for batches of at most `max_batch`
+    /// rows.
+    pub fn new(
+        obs_dim: usize,
+        act_dim: usize,
+        hidden: &[usize],
+        heads: usize,
+        lr: f32,
+        max_batch: usize,
+        rng: &mut impl Rng,
+    ) -> Self {
+        let mut sizes = vec![obs_dim + act_dim];
+        sizes.extend(hidden);
+        sizes.push(heads);
+        let net = Mlp::new(&sizes, OutputActivation::Linear, rng);
+        // The probes of `argmax_disagreement` are one batch too.
+        let rows = max_batch.max(2 * act_dim + 1);
+        Critics {
+            opt: Adam::for_parameters(net.parameters().len(), lr),
+            ws: MlpWorkspace::new(&net, rows),
+            inputs: vec![0.0; rows * (obs_dim + act_dim)],
+            d_q: vec![0.0; max_batch * heads],
+            d_input: vec![0.0; (max_batch * (obs_dim + act_dim)).max(2 * rows * act_dim)],
+            grads: vec![0.0; net.parameters().len()],
+            target: net.clone(),
+            net,
+            obs_dim,
+            act_dim,
+            heads,
+        }
+    }
+
+    /// The heads' values at `n` rows of `(obs, actions)`, `n * K` values row by row. The online network's pass
+    /// stays in the workspace for [`Self::backward_to_actions`].
+    pub fn evaluate(&mut self, net: Net, obs: &[f32], actions: &[f32], n: usize) -> &[f32] {
+        self.fill_inputs(obs, actions, n);
+        let (d, a) = (self.obs_dim, self.act_dim);
+        let network = match net {
+            Net::Online => &self.net,
+            Net::Target => &self.target,
+        };
+        network.forward(&self.inputs[..n * (d + a)], n, &mut self.ws)
+    }
+
+    /// Writes `n` rows of `[obs | action]` into the input buffer.
+    fn fill_inputs(&mut self, obs: &[f32], actions: &[f32], n: usize) {
+        let (d, a) = (self.obs_dim, self.act_dim);
+        for r in 0..n {
+            let row = &mut self.inputs[r * (d + a)..(r + 1) * (d + a)];
+            row[..d].copy_from_slice(&obs[r * d..(r + 1) * d]);
+            row[d..].copy_from_slice(&actions[r * a..(r + 1) * a]);
+        }
+    }
+
+    /// One regression step of every head on `targets` (`batch`'s weighted squared TD errors, averaged over the
+    /// batch): writes each sample's new priority (the first head's absolute TD error, plus `demo_bonus` for a
+    /// demonstrated sample) into `priorities` and returns the loss averaged over the batch and the heads.
+    pub fn update(
+        &mut self,
+        batch: &BoxBatch,
+        targets: &[f32],
+        priorities: &mut [f32],
+        demo_bonus: f32,
+    ) -> f32 {
+        let n = batch.len();
+        let k = self.heads;
+        self.fill_inputs(&batch.obs, &batch.actions, n);
+        let width = self.obs_dim + self.act_dim;
+        let q = self.net.forward(&self.inputs[..n * width], n, &mut self.ws);
+        let mut loss = 0.0f32;
+        let d_q = &mut self.d_q[..n * k];
+        for r in 0..n {
+            for h in 0..k {
+                let error = q[r * k + h] - targets[r];
+                loss += batch.weights[r] * error * error;
+                d_q[r * k + h] = 2.0 * batch.weights[r] * error / n as f32;
+            }
+            priorities[r] = (q[r * k] - targets[r]).abs();
+            if batch.is_demo(r) {
+                priorities[r] += demo_bonus;
+            }
+        }
+        self.net.backward(&mut self.ws, d_q, &mut self.grads, None);
+        self.opt
+            .step_parameters(self.net.parameters_mut(), &self.grads);
+        loss / (n * k) as f32
+    }
+
+    /// The loss gradient with respect to the heads of the last online [`Self::evaluate`] of `n` rows, to fill
+    /// before [`Self::backward_to_actions`].
+    pub fn d_q(&mut self, n: usize) -> &mut [f32] {
+        &mut self.d_q[..n * self.heads]
+    }
+
+    /// Back-propagates [`Self::d_q`] through the last online evaluation of `n` rows: returns the input gradient,
+    /// rows of `obs_dim + act_dim` values whose last `act_dim` are `dL/da` (the critic's own parameter gradients
+    /// are computed and dropped).
+    pub fn backward_to_actions(&mut self, n: usize) -> &[f32] {
+        let width = self.obs_dim + self.act_dim;
+        let d_input = &mut self.d_input[..n * width];
+        self.net.backward(
+            &mut self.ws,
+            &self.d_q[..n * self.heads],
+            &mut self.grads,
+            Some(d_input),
+        );
+        d_input
+    }
+
+    /// Moves the target towards the online network by Polyak averaging.
+    pub fn soft_update(&mut self, tau: f32) {
+        self.target.soft_update(&self.net, tau);
+    }
+
+    /// The heads' disagreement at `(obs, action)`: the standard deviation of their values.
+    pub fn spread(&mut self, obs: &[f32], action: &[f32]) -> f32 {
+        let q = self.evaluate(Net::Online, obs, action, 1);
+        let mean = q.iter().sum::<f32>() / q.len() as f32;
+        (q.iter().map(|v| (v - mean) * (v - mean)).sum::<f32>() / q.len() as f32).sqrt()
+    }
+
+    /// The heads' disagreement about which action is best near `centre` (a tanh output, one value per
+    /// dimension): each head picks the best of `2 dim(A) + 1` probes (the centre, and the centre moved by
+    /// `±PROBE_OFFSET` in each dimension, clipped to (-1, 1)); the result is the standard deviation over the heads
+    /// of the picked probes, in half-widths, as the root of the mean over dimensions of the variance. 0 when the
+    /// heads agree; at most 1. Draws no random number.
+    pub fn argmax_disagreement(
+        &mut self,
+        obs: &[f32],
+        centre: &[f32],
+        action_box: &ActionBox,
+    ) -> f32 {
+        let a = self.act_dim;
+        let probes = 2 * a + 1;
+        // The probes' tanh outputs, then their actions, in `d_input`'s first rows (free outside an update).
+        let (units, rest) = self.d_input.split_at_mut(probes * a);
+        let actions = &mut rest[..probes * a];
+        for p in 0..probes {
+            let row = &mut units[p * a..(p + 1) * a];
+            row.copy_from_slice(centre);
+            if p > 0 {
+                let (dim, sign) = ((p - 1) / 2, if p % 2 == 1 { 1.0 } else { -1.0 });
+                row[dim] = (row[dim] + sign * PROBE_OFFSET).clamp(-1.0, 1.0);
+            }
+        }
+        actions.copy_from_slice(units);
+        action_box.to_box(actions);
+        let (d, k) = (self.obs_dim, self.heads);
+        for r in 0..probes {
+            let row = &mut self.inputs[r * (d + a)..(r + 1) * (d + a)];
+            row[..d].copy_from_slice(obs);
+            row[d..].copy_from_slice(&actions[r * a..(r + 1) * a]);
+        }
+        let q = self
+            .net
+            .forward(&self.inputs[..probes * (d + a)], probes, &mut self.ws);
+        let mut variance = 0.0f32;
+        for dim in 0..a {
+            let picked = |h: usize| {
+                let best = (0..probes)
+                    .max_by(|&x, &y| q[x * k + h].total_cmp(&q[y * k + h]).then(y.cmp(&x)))
+                    .unwrap_or(0);
+                units[best * a + dim]
+            };
+            let mean = (0..k).map(picked).sum::<f32>() / k as f32;
+            variance += (0..k).map(|h| (picked(h) - mean).powi(2)).sum::<f32>() / k as f32;
+        }
+        (variance / a as f32).sqrt()
+    }
+}
+
+/// What the behaviour cloning term measured in one actor update.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct BcStats {
+    /// The term's value (already multiplied by its weight).
+    pub loss: f32,
+    /// Demonstrated samples that passed the Q-filter.
+    pub cloned: usize,
+    /// Demonstrated samples in the batch.
+    pub demos: usize,
+}
+
+/// The behaviour cloning loss with the Q-filter (Nair et al. 2018): `weight / n * sum over the demonstrated rows
+/// where q_demo > q_pi of |y - y_demo|^2`, with `y` the actor's tanh output and `y_demo` the demonstrated
+/// action's (so the distance is in half-widths of the box); adds its gradient with respect to `y` to `d_y`.
+/// `q_filter` holds the critic's values (as the actor's loss aggregates the heads) of the demonstrated action and
+/// of the actor's, `(q_demo, q_pi)`; without it every demonstrated row counts.
+pub(crate) fn behaviour_cloning(
+    weight: f32,
+    batch: &BoxBatch,
+    q_filter: Option<(&[f32], &[f32])>,
+    y: &[f32],
+    action_box: &ActionBox,
+    d_y: &mut [f32],
+) -> BcStats {
+    let n = batch.len();
+    let a = action_box.dim();
+    let mut stats = BcStats::default();
+    let scale = weight / n as f32;
+    for r in 0..n {
+        if !batch.is_demo(r) {
+            continue;
+        }
+        stats.demos += 1;
+        if q_filter.is_some_and(|(q_demo, q_pi)| q_demo[r] <= q_pi[r]) {
+            continue;
+        }
+        stats.cloned += 1;
+        for dim in 0..a {
+            let diff = y[r * a + dim] - action_box.to_unit(batch.actions[r * a + dim], dim);
+            stats.loss += scale * diff * diff;
+            d_y[r * a + dim] += 2.0 * scale * diff;
+        }
+    }
+    stats
+}
+
+/// What the learners' tests share: a Pendulum-v1 training loop, the evaluation of a greedy policy, and
+/// demonstrations of the scripted swing-up.
+#[cfg(test)]
+pub(crate) mod testing {
+    use super::BoxBatch;
+    use crate::env::pendulum::swing_up;
+    use crate::env::{Env, make_continuous};
+    use rand::{Rng, SeedableRng};
+
+    /// The part of a box learner's interface the tests drive.
+    pub(crate) trait BoxLearner {
+        fn act(&mut self, obs: &[f32], action: &mut [f32]);
+        fn test_action(&mut self, obs: &[f32], action: &mut [f32]);
+        fn learn_batch(&mut self, batch: &BoxBatch) -> Option<super::BcStats>;
+    }
+
+    impl<R: Rng> BoxLearner for crate::agent::td3::Td3<R> {
+        fn act(&mut self, obs: &[f32], action: &mut [f32]) {
+            self.act(obs, action)
+        }
+        fn test_action(&mut self, obs: &[f32], action: &mut [f32]) {
+            self.test_action(obs, action)
+        }
+        fn learn_batch(&mut self, batch: &BoxBatch) -> Option<super::BcStats> {
+            self.learn(batch).0.bc
+        }
+    }
+
+    impl<R: Rng> BoxLearner for crate::agent::sac::Sac<R> {
+        fn act(&mut self, obs: &[f32], action: &mut [f32]) {
+            self.act(obs, action)
+        }
+        fn test_action(&mut self, obs: &[f32], action: &mut [f32]) {
+            self.test_action(obs, action)
+        }
+        fn learn_batch(&mut self, batch: &BoxBatch) -> Option<super::BcStats> {
+            self.learn(batch).0.bc
+        }
+    }
+
+    /// One-step transitions, one vector per sample.
+    #[derive(Default)]
+    pub(crate) struct Transitions {
+        pub obs: Vec<Vec<f32>>,
+        pub actions: Vec<Vec<f32>>,
+        pub rewards: Vec<f32>,
+        pub next_obs: Vec<Vec<f32>>,
+        pub discounts: Vec<f32>,
+    }
+
+    impl Transitions {
+        /// Fills `batch` with `size` samples drawn uniformly by `draw`, flagged `demo`.
+        pub fn sample(&self, draw: &mut impl Rng, size: usize, demo: bool, batch: &mut BoxBatch) {
+            batch.obs.clear();
+            batch.actions.clear();
+            batch.rewards.clear();
+            batch.next_obs.clear();
+            batch.discounts.clear();
+            batch.weights.clear();
+            batch.is_demo.clear();
+            for _ in 0..size {
+                let i = draw.random_range(0..self.rewards.len());
+                batch.obs.extend(&self.obs[i]);
+                batch.actions.extend(&self.actions[i]);
+                batch.rewards.push(self.rewards[i]);
+                batch.next_obs.extend(&self.next_obs[i]);
+                batch.discounts.push(self.discounts[i]);
+                batch.weights.push(1.0);
+                batch.is_demo.push(demo);
+            }
+        }
+    }
+
+    /// The mean return of the greedy policy on Pendulum-v1 over the episodes of `seeds`.
+    pub(crate) fn evaluate_pendulum(
+        agent: &mut impl BoxLearner,
+        seeds: std::ops::Range<u64>,
+    ) -> f64 {
+        let mut env = make_continuous("Pendulum-v1").unwrap();
+        let mut obs = vec![0.0; 3];
+        let mut action = vec![0.0; 1];
+        let episodes = seeds.end - seeds.start;
+        let mut total = 0.0;
+        for seed in seeds {
+            env.reset_into(Some(seed), &mut obs);
+            loop {
+                agent.test_action(&obs, &mut action);
+                let out = env.step_into(&action, &mut obs).unwrap();
+                total += out.reward;
+                if out.terminated || out.truncated {
+                    break;
+                }
+            }
+        }
+        total / episodes as f64
+    }
+
+    /// Trains on Pendulum-v1 (seed 0) for `steps` steps, the first 1,000 uniformly random, one update of a
+    /// uniform batch of `batch_size` one-step transitions (gamma 0.99) a step after those.
+    pub(crate) fn train_pendulum(agent: &mut impl BoxLearner, steps: usize, batch_size: usize) {
+        let mut env = make_continuous("Pendulum-v1").unwrap();
+        let mut draw = rand_pcg::Pcg64::seed_from_u64(1);
+        let mut replay = Transitions::default();
+        let mut obs = vec![0.0; 3];
+        let mut action = vec![0.0; 1];
+        let mut batch = BoxBatch::default();
+        env.reset_into(Some(0), &mut obs);
+        for step in 0..steps {
+            if step < 1_000 {
+                action[0] = draw.random_range(-2.0..2.0);
+            } else {
+                agent.act(&obs, &mut action);
+            }
+            let before = obs.clone();
+            let out = env.step_into(&action, &mut obs).unwrap();
+            replay.obs.push(before);
+            replay.actions.push(action.clone());
+            replay.rewards.push(out.reward as f32);
+            replay.next_obs.push(obs.clone());
+            replay
+                .discounts
+                .push(if out.terminated { 0.0 } else { 0.99 });
+            if out.terminated || out.truncated {
+                env.reset_into(None, &mut obs);
+            }
+            if step >= 1_000 {
+                replay.sample(&mut draw, batch_size, false, &mut batch);
+                agent.learn_batch(&batch);
+            }
+        }
+    }
+
+    /// The scripted swing-up's transitions on Pendulum-v1 over the episodes of `seeds`.
+    pub(crate) fn swing_up_demonstrations(seeds: std::ops::Range<u64>) -> Transitions {
+        let mut env = make_continuous("Pendulum-v1").unwrap();
+        let mut demos = Transitions::default();
+        let mut obs = vec![0.0; 3];
+        for seed in seeds {
+            env.reset_into(Some(seed), &mut obs);
+            loop {
+                let action = swing_up(&obs).to_vec();
+                let before = obs.clone();
+                let out = env.step_into(&action, &mut obs).unwrap();
+                demos.obs.push(before);
+                demos.actions.push(action);
+                demos.rewards.push(out.reward as f32);
+                demos.next_obs.push(obs.clone());
+                demos
+                    .discounts
+                    .push(if out.terminated { 0.0 } else { 0.99 });
+                if out.terminated || out.truncated {
+                    break;
+                }
+            }
+        }
+        demos
+    }
+
+    /// The mean absolute difference between the learner's test action and the demonstrated action over `demos`.
+    pub(crate) fn imitation_error(agent: &mut impl BoxLearner, demos: &Transitions) -> f64 {
+        let mut action = vec![0.0; 1];
+        let mut total = 0.0f64;
+        for (obs, expert) in demos.obs.iter().zip(&demos.actions) {
+            agent.test_action(obs, &mut action);
+            total += f64::from((action[0] - expert[0]).abs());
+        }
+        total / demos.obs.len() as f64
+    }
+
+    /// The mean absolute difference to the best constant action (the median of the demonstrated actions): the
+    /// error of a policy that ignores the state.
+    pub(crate) fn constant_error(demos: &Transitions) -> f64 {
+        let mut actions: Vec<f32> = demos.actions.iter().map(|a| a[0]).collect();
+        actions.sort_by(f32::total_cmp);
+        let median = actions[actions.len() / 2];
+        actions
+            .iter()
+            .map(|a| f64::from((a - median).abs()))
+            .sum::<f64>()
+            / actions.len() as f64
+    }
+
+    /// Pre-trains `agent` with `updates` updates on batches of 128 demonstrated transitions of the swing-up on
+    /// seeds 0-9; returns the mean |pi(s) - a_E| on those states and on seeds 100-102 it never saw, and the
+    /// best constant action's on each.
+    pub(crate) fn pretrain(agent: &mut impl BoxLearner, updates: usize, name: &str) -> [f64; 4] {
+        let demos = swing_up_demonstrations(0..10);
+        let unseen = swing_up_demonstrations(100..103);
+        let before = imitation_error(agent, &demos);
+        let mut draw = rand_pcg::Pcg64::seed_from_u64(2);
+        let mut batch = BoxBatch::default();
+        let (mut cloned, mut demos_seen) = (0, 0);
+        for _ in 0..updates {
+            demos.sample(&mut draw, 128, true, &mut batch);
+            if let Some(bc) = agent.learn_batch(&batch) {
+                cloned += bc.cloned;
+                demos_seen += bc.demos;
+            }
+        }
+        let (seen, held_out) = (
+            imitation_error(agent, &demos),
+            imitation_error(agent, &unseen),
+        );
+        let (constant, constant_unseen) = (constant_error(&demos), constant_error(&unseen));
+        eprintln!(
+            "{name} pre-trained {updates} updates: mean |pi(s) - a_E| {before:.3} -> {seen:.3} on the \
+             demonstrated states ({held_out:.3} on unseen episodes); the best constant action: {constant:.3} \
+             ({constant_unseen:.3}); the cloning term covered {cloned} of {demos_seen} demonstrated samples"
+        );
+        [seen, held_out, constant, constant_unseen]
+    }
+
+    /// Pre-trains `agent` ([`pretrain`]) and checks that its test actions then follow the demonstrator, on the
+    /// demonstrated states and on unseen episodes, with at most half the error of the best constant action.
+    pub(crate) fn pretraining_imitates(agent: &mut impl BoxLearner, updates: usize, name: &str) {
+        let [seen, held_out, constant, constant_unseen] = pretrain(agent, updates, name);
+        assert!(
+            seen < 0.5 * constant && held_out < 0.5 * constant_unseen,
+            "{name} did not imitate the demonstrations: {seen} and {held_out} against {constant} and \
+             {constant_unseen}"
+        );
+    }
+}
