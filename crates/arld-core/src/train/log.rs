@@ -1,10 +1,10 @@
 //! [`RunLog`] receives a run's events as it trains: it fills the run directory (the format is
-//! [`super::run_dir`]'s: config, evaluation curve, episode and query logs, TensorBoard events, summary) and
+//! [`super::run_dir`]'s: config, evaluation curve, episode, query and answer logs, TensorBoard events, summary) and
 //! drives the progress bar.
 
 use super::run_dir::{
-    self, CONFIG_FILE, EPISODES_FILE, EPISODES_HEADER, EvalPoint, QUERIES_FILE, QUERIES_HEADER,
-    QueryEvent, SUMMARY_FILE, Summary, write_atomic,
+    self, ANSWERS_FILE, AnswerStep, CONFIG_FILE, EPISODES_FILE, EPISODES_HEADER, EvalPoint,
+    QUERIES_FILE, QUERIES_HEADER, QueryEvent, SUMMARY_FILE, Summary, write_atomic,
 };
 use crate::tboard::EventWriter;
 use anyhow::{Context, Result};
@@ -26,6 +26,9 @@ pub struct LogPosition {
     pub curve: Vec<EvalPoint>,
     #[serde(default)]
     pub query_events: Vec<QueryEvent>,
+    /// Byte length of the answer log (0 in a snapshot written before the run kept one: it starts empty then).
+    #[serde(default)]
+    pub answers: u64,
 }
 
 /// Receives a run's events; writes them to a run directory when one is given, and drives the progress bar.
@@ -34,6 +37,7 @@ pub struct RunLog {
     curve: Vec<EvalPoint>,
     episodes: Option<BufWriter<File>>,
     queries: Option<BufWriter<File>>,
+    answers: Option<BufWriter<File>>,
     events: Option<EventWriter>,
     progress: ProgressBar,
     /// Every query of the run, also kept in memory (a run asks at most its budget, a few thousand).
@@ -48,6 +52,7 @@ impl RunLog {
             curve: Vec::new(),
             episodes: None,
             queries: None,
+            answers: None,
             events: None,
             progress: ProgressBar::hidden(),
             query_events: Vec::new(),
@@ -85,6 +90,7 @@ impl RunLog {
                 curve: Vec::new(),
                 episodes: None,
                 queries: None,
+                answers: None,
                 events: None,
                 progress: bar,
                 query_events: Vec::new(),
@@ -114,6 +120,7 @@ impl RunLog {
         };
         let episodes = open(EPISODES_FILE, EPISODES_HEADER)?;
         let queries = open(QUERIES_FILE, QUERIES_HEADER)?;
+        let answers = open(ANSWERS_FILE, "")?;
         let events =
             EventWriter::create(dir).context("cannot create the TensorBoard event file")?;
         Ok(Self {
@@ -121,6 +128,7 @@ impl RunLog {
             curve: Vec::new(),
             episodes: Some(episodes),
             queries: Some(queries),
+            answers: Some(answers),
             events: Some(events),
             progress: bar,
             query_events: Vec::new(),
@@ -141,6 +149,7 @@ impl RunLog {
         };
         let episodes = len(&mut self.episodes)?;
         let queries = len(&mut self.queries)?;
+        let answers = len(&mut self.answers)?;
         let (events_file, events) = match &mut self.events {
             Some(ev) => (
                 ev.path()
@@ -158,6 +167,7 @@ impl RunLog {
             events,
             curve: self.curve.clone(),
             query_events: self.query_events.clone(),
+            answers,
         })
     }
 
@@ -188,6 +198,16 @@ impl RunLog {
         };
         log.episodes = Some(reopen(EPISODES_FILE, position.episodes)?);
         log.queries = Some(reopen(QUERIES_FILE, position.queries)?);
+        // A run from before the answer log has none yet: it starts empty where the snapshot was taken.
+        let answers = dir.join(ANSWERS_FILE);
+        log.answers = Some(if position.answers == 0 {
+            BufWriter::new(
+                crate::files::open_own_file(&answers, true)
+                    .with_context(|| format!("cannot create {}", answers.display()))?,
+            )
+        } else {
+            reopen(ANSWERS_FILE, position.answers)?
+        });
         // The name comes from the snapshot, a file people copy around: it must name an event file of this
         // directory, never a path elsewhere.
         let name = &position.events_file;
@@ -246,6 +266,37 @@ impl RunLog {
         Ok(())
     }
 
+    /// A step the expert took: written to the answer log with the question that opened its segment (the last
+    /// query logged).
+    #[allow(clippy::too_many_arguments)]
+    pub fn answered(
+        &mut self,
+        step: usize,
+        episode: usize,
+        obs: &[f32],
+        action: usize,
+        reward: f64,
+        next_obs: &[f32],
+        ended: (bool, bool),
+    ) -> Result<()> {
+        let Some(f) = &mut self.answers else {
+            return Ok(());
+        };
+        let line = AnswerStep::new(
+            step,
+            episode,
+            obs,
+            action,
+            reward,
+            next_obs,
+            ended,
+            self.query_events.last(),
+        )
+        .json_line()?;
+        f.write_all(line.as_bytes())?;
+        Ok(())
+    }
+
     pub fn scalar(&mut self, tag: &str, step: usize, value: f32) -> Result<()> {
         if let Some(ev) = &mut self.events {
             ev.scalar(tag, step as u64, value)?;
@@ -285,7 +336,7 @@ impl RunLog {
     /// Flushes the streams and writes `summary.json` last, marking the run complete.
     pub fn finish(&mut self, summary: &Summary) -> Result<()> {
         self.progress.finish_and_clear();
-        for f in [&mut self.episodes, &mut self.queries]
+        for f in [&mut self.episodes, &mut self.queries, &mut self.answers]
             .into_iter()
             .flatten()
         {

@@ -652,6 +652,17 @@ impl<'a, A: Learner> Run<'a, A> {
             st.ep_demo += 1;
         }
         st.ep_actions.push(action);
+        if by_expert {
+            self.log.answered(
+                st.step,
+                st.episode,
+                &parts.obs,
+                action,
+                s.reward,
+                &self.next_obs,
+                (s.terminated, s.truncated),
+            )?;
+        }
         parts.replay.push(Transition {
             obs: &parts.obs,
             action,
