@@ -26,6 +26,7 @@ import argparse
 import json
 import math
 import os
+import re
 import shutil
 import sys
 from pathlib import Path
@@ -73,13 +74,18 @@ def segments(steps: List[Dict[str, Any]]) -> List[List[Dict[str, Any]]]:
 
 
 def _run_env(run_dir: Path) -> str:
-    """The environment id of the run's configuration (`env = "..."` in config.toml)."""
+    """The environment id of the run's configuration (the top-level `env = "..."` of config.toml)."""
     try:
-        import tomllib
-        with open(run_dir / CONFIG_FILE, "rb") as f:
-            return str(tomllib.load(f)["env"])
-    except (OSError, KeyError, ValueError) as e:
+        text = (run_dir / CONFIG_FILE).read_text(encoding="utf-8")
+    except OSError as e:
         raise ValueError(f"{run_dir / CONFIG_FILE}: cannot read the run's environment ({e})") from None
+    for line in text.splitlines():
+        if line.startswith("["):
+            break  # the top-level keys come before the first table
+        match = re.fullmatch(r'env\s*=\s*"((?:[^"\\]|\\.)*)"\s*', line)
+        if match:
+            return str(json.loads(f'"{match.group(1)}"'))
+    raise ValueError(f"{run_dir / CONFIG_FILE}: no `env = ...` line; is {run_dir} a run directory?")
 
 
 def _number(x: Optional[float]) -> float:
@@ -87,7 +93,7 @@ def _number(x: Optional[float]) -> float:
 
 
 def _buffer(index: int, seg: List[Dict[str, Any]]) -> Any:
-    from minari.data_collector import EpisodeBuffer
+    from minari.data_collector import EpisodeBuffer  # type: ignore[import-untyped, import-not-found, unused-ignore]
     first = seg[0]
     n = len(seg)
     observations = [s["obs"] for s in seg] + [seg[-1]["next_obs"]]
@@ -121,14 +127,19 @@ def _buffer(index: int, seg: List[Dict[str, Any]]) -> Any:
 
 
 def _n_actions(env_id: str) -> int:
-    """How many actions `env_id` has: a built-in environment's own count, else Gymnasium's."""
+    """How many actions `env_id` has: a built-in environment's own count; for a Python environment arld tells
+    apart by its facts (`Id[...,n_actions=N]`), that N; else Gymnasium's."""
     from . import _arld
-    if env_id in _arld.builtin_env_ids():
+    facts = re.search(r"n_actions=(\d+)", env_id)
+    if facts:
+        return int(facts.group(1))
+    base = env_id.split("[", 1)[0]
+    if base in _arld.builtin_env_ids():
         from .envs import make
-        space = make(env_id).action_space
+        space = make(base).action_space
     else:
         import gymnasium as gym
-        space = gym.make(env_id).action_space
+        space = gym.make(base).action_space
     n = getattr(space, "n", None)
     if n is None:
         raise ValueError(f"{env_id} has no discrete actions ({space}); arld's answers are discrete actions")
@@ -141,15 +152,16 @@ def export_minari(run_dir: "str | os.PathLike[str]", dataset_id: str, *, n_actio
     Minari's Arrow format) and returns it (a `minari.MinariDataset`). `n_actions` defaults to the run's
     environment's. A run with no answers is an error (a dataset needs an episode)."""
     import gymnasium as gym
-    import minari
-    from minari.dataset.minari_dataset import parse_dataset_id
-    from minari.storage import get_dataset_path
+    import minari  # type: ignore[import-untyped, import-not-found, unused-ignore]
+    from minari.dataset.minari_dataset import (  # type: ignore[import-untyped, import-not-found, unused-ignore]
+        parse_dataset_id)
+    from minari.storage import get_dataset_path  # type: ignore[import-untyped, import-not-found, unused-ignore]
 
     run_dir = Path(run_dir)
-    env_id = _run_env(run_dir)
     steps = read_answers(run_dir)
     if not steps:
         raise ValueError(f"{run_dir / ANSWERS_FILE}: the run has no answers to export (the expert took no step)")
+    env_id = _run_env(run_dir)
     obs_dim = len(steps[0]["obs"])
     n = _n_actions(env_id) if n_actions is None else int(n_actions)
     buffers = [_buffer(i, seg) for i, seg in enumerate(segments(steps))]
@@ -179,7 +191,7 @@ def export_minari(run_dir: "str | os.PathLike[str]", dataset_id: str, *, n_actio
 def load_dataset(dataset: Any) -> Any:
     """A Minari dataset from a `MinariDataset`, a dataset id (`namespace/name-vN`, under Minari's dataset
     directory) or the path of a dataset's directory (the one holding `data/`)."""
-    import minari
+    import minari  # type: ignore[import-untyped, import-not-found, unused-ignore]
     if isinstance(dataset, minari.MinariDataset):
         return dataset
     path = Path(dataset)
@@ -247,7 +259,8 @@ def write_demo_file(dataset: Any, path: "str | os.PathLike[str]", env_id: Option
         f.write(json.dumps(header) + "\n")
         for i in range(n):
             f.write(json.dumps({
-                "episode": int(episode[i]), "obs": [float(x) for x in cols["obs"][i]], "action": int(cols["actions"][i]),
+                "episode": int(episode[i]), "obs": [float(x) for x in cols["obs"][i]],
+                "action": int(cols["actions"][i]),
                 "reward": float(cols["rewards"][i]), "next_obs": [float(x) for x in cols["next_obs"][i]],
                 "terminated": bool(cols["terminated"][i]), "truncated": bool(cols["truncated"][i])}) + "\n")
     os.replace(tmp, path)
