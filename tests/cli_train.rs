@@ -236,6 +236,7 @@ fn a_short_run_writes_every_result_file() {
     );
     let queries = std::fs::read_to_string(out.join("queries.csv")).unwrap();
     assert!(queries.lines().count() > 1, "ADQN asked no query");
+    answers_agree_with_the_logs(&out);
     let events = std::fs::read_dir(&out).unwrap().flatten().find(|e| {
         e.file_name()
             .to_string_lossy()
@@ -250,6 +251,61 @@ fn a_short_run_writes_every_result_file() {
             .flatten()
             .any(|e| e.file_name().to_string_lossy().ends_with(".tmp"))
     );
+}
+
+/// `answers.jsonl` against what the other logs say independently: every episode's count of expert steps is
+/// `episodes.csv`'s `demo_steps`; every step names an answered question of `queries.csv` with its agent's action
+/// and uncertainty, and a question's own step takes the action `queries.csv` says the expert answered; within a
+/// segment each step starts where the previous one ended.
+fn answers_agree_with_the_logs(out: &Path) {
+    let text = std::fs::read_to_string(out.join("answers.jsonl")).unwrap();
+    let answers: Vec<serde_json::Value> = text
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    assert!(!answers.is_empty(), "the expert took no step");
+    let csv = std::fs::read_to_string(out.join("queries.csv")).unwrap();
+    let asked: std::collections::HashMap<u64, Vec<&str>> = csv
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').collect::<Vec<_>>())
+        .filter(|r| r[8] == "true")
+        .map(|r| (r[0].parse().unwrap(), r))
+        .collect();
+    let episodes = std::fs::read_to_string(out.join("episodes.csv")).unwrap();
+    for row in episodes.lines().skip(1) {
+        let r: Vec<&str> = row.split(',').collect();
+        let episode: u64 = r[0].parse().unwrap();
+        let taken = answers
+            .iter()
+            .filter(|a| a["episode"].as_u64() == Some(episode))
+            .count();
+        assert_eq!(taken.to_string(), r[4], "expert steps of episode {episode}");
+    }
+    for (i, a) in answers.iter().enumerate() {
+        let q = a["question_step"].as_u64().unwrap();
+        let row = asked
+            .get(&q)
+            .unwrap_or_else(|| panic!("step {} names no answered question: {a}", a["step"]));
+        assert_eq!(a["agent_action"].to_string(), row[5], "{a}");
+        assert_eq!(
+            a["uncertainty"].as_f64().map(|u| u as f32),
+            row[2].parse::<f32>().ok(),
+            "{a}"
+        );
+        assert_eq!(a["started_by"], "rule");
+        if a["step"].as_u64() == Some(q) {
+            assert_eq!(a["action"].to_string(), row[4], "{a}");
+        } else {
+            let prev = &answers[i - 1];
+            assert_eq!(prev["question_step"].as_u64(), Some(q), "{a}");
+            assert_eq!(
+                prev["step"].as_u64().unwrap() + 1,
+                a["step"].as_u64().unwrap()
+            );
+            assert_eq!(prev["next_obs"], a["obs"], "{a}");
+        }
+    }
 }
 
 /// A short ADQN run with the expert in another process (`examples/expert.py` through `cmd:`): it completes, and

@@ -103,6 +103,15 @@ fn demonstrations_round_trip_and_are_checked() {
     std::fs::write(&path, text.replacen("\"action\":", "\"action\"", 1)).unwrap();
     let e = format!("{:#}", Demonstrations::load(&path, None).unwrap_err());
     assert!(e.contains(":2:"), "{e}");
+    // A Minari dataset's directory: refused, saying how to use it.
+    let minari = dir.path().join("answers-v0");
+    std::fs::create_dir_all(minari.join("data")).unwrap();
+    std::fs::write(minari.join("data").join("metadata.json"), "{}").unwrap();
+    let e = format!("{:#}", Demonstrations::load(&minari, None).unwrap_err());
+    assert!(
+        e.contains("Minari dataset") && e.contains("arld.answers to-demos"),
+        "{e}"
+    );
 }
 
 /// DQfD pre-training alone makes the network imitate the expert on the demonstration states.

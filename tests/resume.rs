@@ -157,7 +157,7 @@ fn survives(args: &[&str], moments: &[Moment]) -> Vec<String> {
     if !cut.join("summary.json").is_file() {
         finish(spawn(&args_end));
     }
-    for name in ["eval.csv", "episodes.csv", "queries.csv"] {
+    for name in ["eval.csv", "episodes.csv", "queries.csv", "answers.jsonl"] {
         let a = std::fs::read(full.join(name)).unwrap();
         let b = std::fs::read(cut.join(name)).unwrap();
         assert!(a == b, "{name} differs after kills at {hits:#?}");
@@ -493,7 +493,7 @@ fn a_run_stopped_with_sigint_or_sigterm_leaves_whole_logs_and_says_where_it_stop
             "--resume".to_string(),
             dir.display().to_string(),
         ]));
-        for name in ["eval.csv", "episodes.csv", "queries.csv"] {
+        for name in ["eval.csv", "episodes.csv", "queries.csv", "answers.jsonl"] {
             assert!(
                 std::fs::read(full.join(name)).unwrap() == std::fs::read(dir.join(name)).unwrap(),
                 "{name} differs after SIG{signal} and --resume"

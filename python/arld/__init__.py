@@ -10,7 +10,8 @@ This module adapts Python objects (Gymnasium environments, callables, Stable-Bas
 the plain interfaces of the compiled part `arld._arld` and gives them Stable-Baselines3's shape.
 
 The package's modules: `agent` (Agent, presets, SB3's defaults), `envs` (Gymnasium environments as arld sees
-them, arld.make), `experts` (experts and demonstrations), `callbacks` (what runs beside a learn).
+them, arld.make), `experts` (experts and demonstrations), `callbacks` (what runs beside a learn), `answers` (a
+run's answers as a Minari dataset, and Minari datasets as demonstrations; `python -m arld.answers`).
 """
 
 from . import _arld

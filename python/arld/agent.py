@@ -134,7 +134,8 @@ class Agent:
     expert: a callable obs -> action, an object with SB3's predict(obs, deterministic=True), an arld.Agent, or
     an arld expert spec ("shipped:weak", "checkpoint:PATH", "cmd:python my_expert.py"). demos (dqfd, adqnp): a
     dict of columns (obs, actions, rewards, next_obs, terminated[, truncated]), imitation's transitions with
-    rewards, or `arld.collect_demos(env, expert, n, seed)`; by default collected from the expert on `env`.
+    rewards, `arld.collect_demos(env, expert, n, seed)`, or a Minari dataset (a MinariDataset, its id or its
+    directory: an earlier run's answers exported with `arld.answers`); by default collected from the expert on `env`.
 
     Run length and schedules: `train_steps` is the run's length, the horizon of the schedules (ε anneals from
     `exploration_initial_eps` to `exploration_final_eps` over `exploration_fraction × train_steps` steps; PER's

@@ -113,8 +113,12 @@ class _Demos:
 
 
 def _demos(demos: Any) -> _Demos:
-    """Demonstrations from a dict of columns, or from imitation's transitions (duck-typed: obs, acts, next_obs,
-    dones, and rews; `infos[i]["TimeLimit.truncated"]` marks a truncation)."""
+    """Demonstrations from a dict of columns, from imitation's transitions (duck-typed: obs, acts, next_obs,
+    dones, and rews; `infos[i]["TimeLimit.truncated"]` marks a truncation), or from a Minari dataset (a
+    MinariDataset, a dataset id or a dataset's directory: `arld.answers.minari_columns`)."""
+    from . import answers
+    if answers.is_dataset(demos):
+        return _Demos(**answers.minari_columns(demos))
     if isinstance(demos, dict):
         return _Demos(**demos)
     if all(hasattr(demos, k) for k in ("obs", "acts", "next_obs", "dones")):
@@ -130,8 +134,8 @@ def _demos(demos: Any) -> _Demos:
         if infos is not None:
             truncated = np.array([bool(dict(i or {}).get("TimeLimit.truncated", False)) for i in infos], dtype=bool)
         return _Demos(demos.obs, demos.acts, rews, demos.next_obs, dones & ~truncated, truncated)
-    raise TypeError("demos must be a dict of columns (obs, actions, rewards, next_obs, terminated[, truncated]) "
-                    "or imitation's transitions (obs, acts, rews, next_obs, dones)")
+    raise TypeError("demos must be a dict of columns (obs, actions, rewards, next_obs, terminated[, truncated]), "
+                    "imitation's transitions (obs, acts, rews, next_obs, dones) or a Minari dataset (its id or path)")
 
 
 def collect_demos(env: Any, expert: Any, n: int, seed: int = 0) -> Dict[str, np.ndarray]:

@@ -6,7 +6,9 @@
 //! `{"episode": e, "obs": [...], "action": a, "reward": r, "next_obs": [...], "terminated": bool,
 //! "truncated": bool}`. `terminated` is the true end of the task; time-limit truncation is kept apart so that
 //! training can bootstrap through it. Collection follows DQfD: whole episodes from the start state, in order,
-//! until `N` transitions are gathered (the last episode is cut at `N`).
+//! until `N` transitions are gathered (the last episode is cut at `N`). A Minari dataset (a person's answers
+//! exported from a run, or any other with discrete actions) becomes such a file with
+//! `python -m arld.answers to-demos`; [`Demonstrations::load`] given one says so.
 
 use super::Expert;
 use crate::env::{self, Action, Env};
@@ -255,6 +257,21 @@ impl Demonstrations {
     /// Reads and checks a demonstration file; `expect_env` rejects a file recorded on another environment. A
     /// file with no transitions is an error: the methods that load demonstrations pre-train on them.
     pub fn load(path: &Path, expect_env: Option<&str>) -> Result<Self> {
+        // A Minari dataset (a directory whose `data` holds `metadata.json`) is read by the Python package.
+        if [
+            path.join("data").join("metadata.json"),
+            path.join("metadata.json"),
+        ]
+        .iter()
+        .any(|m| m.is_file())
+        {
+            bail!(
+                "{} is a Minari dataset, not an arld demonstration file: give it as `demos=` from Python, or \
+                 convert it with `python -m arld.answers to-demos {} OUT.jsonl` and give OUT.jsonl",
+                path.display(),
+                path.display()
+            );
+        }
         let file = std::fs::File::open(path)
             .with_context(|| format!("cannot open demonstration file {}", path.display()))?;
         let meta = file

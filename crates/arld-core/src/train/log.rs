@@ -1,10 +1,10 @@
 //! [`RunLog`] receives a run's events as it trains: it fills the run directory (the format is
-//! [`super::run_dir`]'s: config, evaluation curve, episode and query logs, TensorBoard events, summary) and
+//! [`super::run_dir`]'s: config, evaluation curve, episode, query and answer logs, TensorBoard events, summary) and
 //! drives the progress bar.
 
 use super::run_dir::{
-    self, CONFIG_FILE, EPISODES_FILE, EPISODES_HEADER, EvalPoint, QUERIES_FILE, QUERIES_HEADER,
-    QueryEvent, SUMMARY_FILE, Summary, write_atomic,
+    self, ANSWERS_FILE, AnswerStep, CONFIG_FILE, EPISODES_FILE, EPISODES_HEADER, EvalPoint,
+    QUERIES_FILE, QUERIES_HEADER, QueryEvent, SUMMARY_FILE, Summary, write_atomic,
 };
 use crate::task::Action;
 use crate::tboard::EventWriter;
@@ -28,6 +28,9 @@ pub struct LogPosition<A: Action = usize> {
     pub curve: Vec<EvalPoint>,
     #[serde(default)]
     pub query_events: Vec<QueryEvent<A>>,
+    /// Byte length of the answer log (0 in a snapshot written before the run kept one: it starts empty then).
+    #[serde(default)]
+    pub answers: u64,
 }
 
 /// Receives a run's events; writes them to a run directory when one is given, and drives the progress bar.
@@ -36,6 +39,7 @@ pub struct RunLog<A: Action = usize> {
     curve: Vec<EvalPoint>,
     episodes: Option<BufWriter<File>>,
     queries: Option<BufWriter<File>>,
+    answers: Option<BufWriter<File>>,
     events: Option<EventWriter>,
     progress: ProgressBar,
     /// Every query of the run, also kept in memory (a run asks at most its budget, a few thousand).
@@ -50,6 +54,7 @@ impl<A: Action> RunLog<A> {
             curve: Vec::new(),
             episodes: None,
             queries: None,
+            answers: None,
             events: None,
             progress: ProgressBar::hidden(),
             query_events: Vec::new(),
@@ -87,6 +92,7 @@ impl<A: Action> RunLog<A> {
                 curve: Vec::new(),
                 episodes: None,
                 queries: None,
+                answers: None,
                 events: None,
                 progress: bar,
                 query_events: Vec::new(),
@@ -116,6 +122,7 @@ impl<A: Action> RunLog<A> {
         };
         let episodes = open(EPISODES_FILE, EPISODES_HEADER)?;
         let queries = open(QUERIES_FILE, QUERIES_HEADER)?;
+        let answers = open(ANSWERS_FILE, "")?;
         let events =
             EventWriter::create(dir).context("cannot create the TensorBoard event file")?;
         Ok(Self {
@@ -123,6 +130,7 @@ impl<A: Action> RunLog<A> {
             curve: Vec::new(),
             episodes: Some(episodes),
             queries: Some(queries),
+            answers: Some(answers),
             events: Some(events),
             progress: bar,
             query_events: Vec::new(),
@@ -143,6 +151,7 @@ impl<A: Action> RunLog<A> {
         };
         let episodes = len(&mut self.episodes)?;
         let queries = len(&mut self.queries)?;
+        let answers = len(&mut self.answers)?;
         let (events_file, events) = match &mut self.events {
             Some(ev) => (
                 ev.path()
@@ -160,6 +169,7 @@ impl<A: Action> RunLog<A> {
             events,
             curve: self.curve.clone(),
             query_events: self.query_events.clone(),
+            answers,
         })
     }
 
@@ -190,6 +200,16 @@ impl<A: Action> RunLog<A> {
         };
         log.episodes = Some(reopen(EPISODES_FILE, position.episodes)?);
         log.queries = Some(reopen(QUERIES_FILE, position.queries)?);
+        // A run from before the answer log has none yet: it starts empty where the snapshot was taken.
+        let answers = dir.join(ANSWERS_FILE);
+        log.answers = Some(if position.answers == 0 {
+            BufWriter::new(
+                crate::files::open_own_file(&answers, true)
+                    .with_context(|| format!("cannot create {}", answers.display()))?,
+            )
+        } else {
+            reopen(ANSWERS_FILE, position.answers)?
+        });
         // The name comes from the snapshot, a file people copy around: it must name an event file of this
         // directory, never a path elsewhere.
         let name = &position.events_file;
@@ -248,6 +268,37 @@ impl<A: Action> RunLog<A> {
         Ok(())
     }
 
+    /// A step the expert took: written to the answer log with the question that opened its segment (the last
+    /// query logged).
+    #[allow(clippy::too_many_arguments)]
+    pub fn answered(
+        &mut self,
+        step: usize,
+        episode: usize,
+        obs: &[f32],
+        action: A::Ref<'_>,
+        reward: f64,
+        next_obs: &[f32],
+        ended: (bool, bool),
+    ) -> Result<()> {
+        let Some(f) = &mut self.answers else {
+            return Ok(());
+        };
+        let line = AnswerStep::<A>::new(
+            step,
+            episode,
+            obs,
+            action,
+            reward,
+            next_obs,
+            ended,
+            self.query_events.last(),
+        )
+        .json_line()?;
+        f.write_all(line.as_bytes())?;
+        Ok(())
+    }
+
     pub fn scalar(&mut self, tag: &str, step: usize, value: f32) -> Result<()> {
         if let Some(ev) = &mut self.events {
             ev.scalar(tag, step as u64, value)?;
@@ -287,7 +338,7 @@ impl<A: Action> RunLog<A> {
     /// Flushes the streams and writes `summary.json` last, marking the run complete.
     pub fn finish(&mut self, summary: &Summary) -> Result<()> {
         self.progress.finish_and_clear();
-        for f in [&mut self.episodes, &mut self.queries]
+        for f in [&mut self.episodes, &mut self.queries, &mut self.answers]
             .into_iter()
             .flatten()
         {

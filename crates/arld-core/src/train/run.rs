@@ -711,6 +711,17 @@ impl<'a, L: Learner> Run<'a, L> {
             parts.queries.record_expert_step();
             st.ep_demo += 1;
         }
+        if by_expert {
+            self.log.answered(
+                st.step,
+                st.episode,
+                &parts.obs,
+                action.borrow(),
+                s.reward,
+                &self.next_obs,
+                (s.terminated, s.truncated),
+            )?;
+        }
         parts.replay.push(Transition {
             obs: &parts.obs,
             action: action.borrow(),

@@ -2,12 +2,13 @@
 //! ([`super::log::RunLog`]), sweeps, reports and tests all go through here, so the format has one owner.
 //!
 //! A run directory holds `config.toml` (the resolved configuration), `eval.csv` (the evaluation curve:
-//! `step,mean,std,min,max`), `episodes.csv`, `queries.csv`, a TensorBoard event file, `weights.safetensors`,
+//! `step,mean,std,min,max`), `episodes.csv`, `queries.csv`, `answers.jsonl` (every step the expert took, as a
+//! transition with its question: [`AnswerStep`]), a TensorBoard event file, `weights.safetensors`,
 //! optional `checkpoints/step_NNNNNNNN.safetensors`, and `summary.json` ([`Summary`]), written last: a run is
 //! complete exactly when it exists ([`is_complete`]). A run that ended with an error instead leaves `failed.json`
 //! ([`Failure`]: the error chain, the step, the time, the arld version and commit), which the summary of a later
 //! attempt that finishes the run removes. Whole files are written with
-//! [`crate::files::write_atomic`]; the episode and query logs and the event file are append-only streams.
+//! [`crate::files::write_atomic`]; the episode, query and answer logs and the event file are append-only streams.
 //!
 //! Inside a sweep, runs live at `ENV/METHOD-NET[/VARIANT]/seedN` ([`sweep_run_path`]); [`load_runs`] finds the
 //! complete runs below a directory and reads each into a [`RunRecord`] for reports.
@@ -27,6 +28,8 @@ pub const EVAL_FILE: &str = "eval.csv";
 pub const EPISODES_FILE: &str = "episodes.csv";
 /// One row per query (CSV).
 pub const QUERIES_FILE: &str = "queries.csv";
+/// One line per step the expert took (JSON lines of [`AnswerStep`]).
+pub const ANSWERS_FILE: &str = "answers.jsonl";
 /// The summary, written last: its presence marks the run complete.
 pub const SUMMARY_FILE: &str = "summary.json";
 /// Why the run ended with an error ([`Failure`]); removed when a later attempt finishes the run.
@@ -71,13 +74,14 @@ pub fn is_events_file(name: &str) -> bool {
 }
 
 /// The regular files a run owns in its directory, by name.
-fn own_files() -> [&'static str; 9] {
+fn own_files() -> [&'static str; 10] {
     use super::snapshot::{SNAPSHOT_FILE, SNAPSHOT_INFO_FILE};
     [
         CONFIG_FILE,
         EVAL_FILE,
         EPISODES_FILE,
         QUERIES_FILE,
+        ANSWERS_FILE,
         SUMMARY_FILE,
         FAILED_FILE,
         WEIGHTS_FILE,
@@ -328,6 +332,80 @@ impl<A: Action> QueryEvent<A> {
             opt(self.response_s.map(|x| format!("{x:.3}"))),
             self.answered
         )
+    }
+}
+
+/// Who started the expert's segment a step belongs to, as [`AnswerStep::started_by`] says it.
+pub const STARTED_BY_RULE: &str = "rule";
+
+/// One line of [`ANSWERS_FILE`]: a step the expert took, as the transition the run stored as a demonstration
+/// (observation, action, reward, next observation, how the episode ended there), with the question that opened
+/// the expert's segment (the row of [`QUERIES_FILE`] at `question_step`): the agent's proposal then, its
+/// uncertainty and the rule's threshold, who answered and how long the answer took. These are the person's
+/// answers kept for use again (`python -m arld.minari export` writes them as a Minari dataset).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(bound = "")]
+pub struct AnswerStep<A: Action = usize> {
+    pub step: usize,
+    pub episode: usize,
+    pub obs: Vec<f32>,
+    pub action: A,
+    pub reward: f32,
+    pub next_obs: Vec<f32>,
+    pub terminated: bool,
+    pub truncated: bool,
+    /// The step of the question that opened this segment (`None` when the run does not know it: a run continued
+    /// from a snapshot written before queries were kept in snapshots).
+    pub question_step: Option<usize>,
+    /// The agent's action at the question (what it proposed).
+    pub agent_action: Option<A>,
+    pub uncertainty: Option<f32>,
+    pub threshold: Option<f32>,
+    /// Seconds the answer to the question took (a person; `None` for programs).
+    pub response_s: Option<f64>,
+    /// Who answered: the expert's kind (`scripted`, `web`, ...).
+    pub expert: String,
+    /// What opened the segment: [`STARTED_BY_RULE`], the query rule asked.
+    pub started_by: String,
+}
+
+impl<A: Action> AnswerStep<A> {
+    /// The step taken by the expert, tied to `question` (the last question asked, which opened its segment).
+    #[allow(clippy::too_many_arguments)]
+    pub fn new(
+        step: usize,
+        episode: usize,
+        obs: &[f32],
+        action: A::Ref<'_>,
+        reward: f64,
+        next_obs: &[f32],
+        (terminated, truncated): (bool, bool),
+        question: Option<&QueryEvent<A>>,
+    ) -> Self {
+        Self {
+            step,
+            episode,
+            obs: obs.to_vec(),
+            action: A::owned(action),
+            reward: reward as f32,
+            next_obs: next_obs.to_vec(),
+            terminated,
+            truncated,
+            question_step: question.map(|q| q.step),
+            agent_action: question.map(|q| q.agent_action.clone()),
+            uncertainty: question.and_then(|q| q.uncertainty),
+            threshold: question.and_then(|q| q.threshold),
+            response_s: question.and_then(|q| q.response_s),
+            expert: question.map(|q| q.expert.clone()).unwrap_or_default(),
+            started_by: STARTED_BY_RULE.to_string(),
+        }
+    }
+
+    /// The step as one line of [`ANSWERS_FILE`].
+    pub fn json_line(&self) -> Result<String> {
+        let mut line = serde_json::to_string(self)?;
+        line.push('\n');
+        Ok(line)
     }
 }
 
