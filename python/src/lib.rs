@@ -1200,10 +1200,11 @@ fn start_run(
         };
         let mut log = match (&log_dir, &resume_state) {
             // Continuing a run in its own directory continues its logs (the CLI's --resume does the same).
-            (Some(dir), Some(state)) if Path::new(dir).join("config.toml").is_file() => {
+            (Some(dir), Some(state))
+                if Path::new(dir).join(train::run_dir::CONFIG_FILE).is_file() =>
+            {
                 let dir = Path::new(dir);
-                let recorded: TrainConfig =
-                    toml::from_str(&std::fs::read_to_string(dir.join("config.toml"))?)?;
+                let recorded = train::run_dir::read_written_config(dir)?;
                 let differences = recorded.differences(&cfg);
                 anyhow::ensure!(
                     differences.is_empty(),
