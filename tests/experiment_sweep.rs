@@ -498,7 +498,11 @@ fn group_medians_follow_the_design_for_every_configuration() {
                 let spec = RunSpec {
                     id: r.id.clone(),
                     t_query: r.config.t_query.filter(|_| r.variant.starts_with("tq")),
-                    expert: r.config.expert.clone().filter(|_| r.variant.starts_with("expert")),
+                    expert: r
+                        .config
+                        .expert
+                        .clone()
+                        .filter(|_| r.variant.starts_with("expert")),
                     set: vec![],
                     vary: None,
                 };

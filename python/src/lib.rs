@@ -995,7 +995,12 @@ impl Run {
     /// The queries so far (live inside a callback): dicts of step, episode, uncertainty, threshold,
     /// expert_action, agent_action.
     fn queries(&self, py: Python<'_>) -> PyResult<Py<PyList>> {
-        self.record_list(py, |log| log.query_events(), |last| &last.queries, query_dict)
+        self.record_list(
+            py,
+            |log| log.query_events(),
+            |last| &last.queries,
+            query_dict,
+        )
     }
 
     /// The summary at the last pause, as JSON text.

@@ -403,11 +403,7 @@ mod tests {
             net: NetKind::Bootstrap,
             seed,
         };
-        let eval = means
-            .iter()
-            .enumerate()
-            .map(|(i, &mean)| EvalPoint::constant((i as u64 + 1) * 1000, mean))
-            .collect();
+        let eval = EvalPoint::constant_curve(1000, means);
         let dir = PathBuf::from(format!("seed{seed}"));
         RunRecord {
             query_steps: queries,

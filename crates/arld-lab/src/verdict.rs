@@ -893,11 +893,7 @@ mod tests {
             net: net.parse().unwrap(),
             seed,
         };
-        let eval = means
-            .iter()
-            .enumerate()
-            .map(|(i, &mean)| EvalPoint::constant((i as u64 + 1) * 1000, mean))
-            .collect();
+        let eval = EvalPoint::constant_curve(1000, means);
         let variant = DEFAULT_VARIANT.into();
         RunRecord::from_curve(
             "x".into(),

@@ -287,6 +287,15 @@ impl EvalPoint {
             max: mean,
         }
     }
+
+    /// A curve evaluated every `period` steps from step `period` on, the test episodes of evaluation i all
+    /// returning `means[i]`, for tests and examples.
+    pub fn constant_curve(period: u64, means: &[f64]) -> Vec<Self> {
+        (1..)
+            .zip(means)
+            .map(|(i, &mean)| Self::constant(i * period, mean))
+            .collect()
+    }
 }
 
 /// One query: the agent asked the expert to take over (a row of [`QUERIES_FILE`]).
