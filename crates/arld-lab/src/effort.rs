@@ -616,11 +616,8 @@ fn comparisons_csv(comparisons: &[Comparison]) -> String {
 /// robust standard deviation of the paper rules' AUCs at the paper's budget with [`EFFORT_NET`] (pooled over the three,
 /// seeds outside the held-out ones): for one comparison at the level, and at the first step of Holm's procedure
 /// over the task's screen family.
-fn detectable(
-    cells: &BTreeMap<CellKey, Vec<RunMetrics>>,
-    comparisons: &[Comparison],
-    envs: &[String],
-) -> String {
+fn detectable(measured: &Measured) -> String {
+    let (cells, comparisons, envs) = measured.parts();
     let mut out = format!(
         "## The smallest detectable difference\n\nThe smallest shift of the AUC that a two-sided Mann-Whitney test \
          at {TEST_LEVEL} detects with 80% power with {PAPER_SEEDS} seeds a rule (normal approximation, the \
@@ -930,20 +927,46 @@ pub fn effort(runs: &[RunRecord], k: usize) -> Result<Option<EffortReport>> {
             writeln!(md)?;
         }
     }
-    writeln!(md, "{}", screen(&cells, &all, &envs))?;
-    writeln!(md, "{}", detectable(&cells, &all, &envs))?;
-    writeln!(md, "{}", effort_buys(&cells, &all, &envs))?;
-    writeln!(md, "{}", design_choice(&cells))?;
-    writeln!(md, "{}", goal_verdict(&cells, &all, &envs))?;
-    writeln!(md, "{}", second_test(&cells, &all))?;
-    writeln!(md, "{}", comparison_tables(&all))?;
-    let figures = figures(&cells, &envs);
+    let measured = Measured {
+        cells,
+        comparisons: all,
+        envs,
+    };
+    let (cells, all, envs) = measured.parts();
+    writeln!(md, "{}", screen(&measured))?;
+    writeln!(md, "{}", detectable(&measured))?;
+    writeln!(md, "{}", effort_buys(&measured))?;
+    writeln!(md, "{}", design_choice(cells))?;
+    writeln!(md, "{}", goal_verdict(&measured))?;
+    writeln!(md, "{}", second_test(cells, all))?;
+    writeln!(md, "{}", comparison_tables(all))?;
+    let figures = figures(cells, envs);
     Ok(Some(EffortReport {
         markdown: md,
         csv,
-        comparisons_csv: comparisons_csv(&all),
+        comparisons_csv: comparisons_csv(all),
         figures,
     }))
+}
+
+/// What the benchmark measured, as the sections of the report read it: the cells, every comparison with its
+/// adjusted p-values, and the tasks in the report's order.
+struct Measured {
+    cells: BTreeMap<CellKey, Vec<RunMetrics>>,
+    comparisons: Vec<Comparison>,
+    envs: Vec<String>,
+}
+
+impl Measured {
+    fn parts(
+        &self,
+    ) -> (
+        &BTreeMap<CellKey, Vec<RunMetrics>>,
+        &[Comparison],
+        &[String],
+    ) {
+        (&self.cells, &self.comparisons, &self.envs)
+    }
 }
 
 /// The paper's rules first, then the others alphabetically.
@@ -975,11 +998,8 @@ fn design_aucs(cell: &[RunMetrics]) -> Vec<f64> {
 /// per task, the rules whose AUC is significantly higher than each of GDQN, BDQN and ADQN, higher than some of
 /// them, and lower than some of them (two-sided Mann–Whitney, Holm-adjusted p < [`TEST_LEVEL`] within the
 /// task's screen family).
-fn screen(
-    cells: &BTreeMap<CellKey, Vec<RunMetrics>>,
-    comparisons: &[Comparison],
-    envs: &[String],
-) -> String {
+fn screen(measured: &Measured) -> String {
+    let (cells, comparisons, envs) = measured.parts();
     let mut out = format!(
         "## The screen at the paper's budget\n\nEvery rule against GDQN, BDQN and ADQN at the paper's budget with \
          the {} network, on its seeds outside the held-out ones (two-sided Mann-Whitney of the AUC, Holm-adjusted p < \
@@ -1068,11 +1088,8 @@ fn budget_multiple(env: &str, budget: usize) -> String {
 /// What more or less of the expert's effort bought, task by task: for every rule run at two budgets or more
 /// (design seeds only), its median AUC and first hit at each budget, and the AUC at the largest budget against
 /// the smallest (Mann–Whitney).
-fn effort_buys(
-    cells: &BTreeMap<CellKey, Vec<RunMetrics>>,
-    comparisons: &[Comparison],
-    envs: &[String],
-) -> String {
+fn effort_buys(measured: &Measured) -> String {
+    let (cells, comparisons, envs) = measured.parts();
     let mut out = format!(
         "## What the expert's effort buys\n\nFor each rule run at two budgets or more, on the design seeds \
          {} that every budget has: the median AUC and, in parentheses, the median first hit at each \
@@ -1206,11 +1223,8 @@ fn design_choice(cells: &BTreeMap<CellKey, Vec<RunMetrics>>) -> String {
 /// The goal of the benchmark, read on the held-out cells at the paper's budget: a rule whose AUC is
 /// significantly higher than each of GDQN, BDQN and ADQN on at least 3 of the 4 tasks, and never significantly
 /// lower, for each network.
-fn goal_verdict(
-    cells: &BTreeMap<CellKey, Vec<RunMetrics>>,
-    comparisons: &[Comparison],
-    envs: &[String],
-) -> String {
+fn goal_verdict(measured: &Measured) -> String {
+    let (cells, comparisons, envs) = measured.parts();
     let mut out = String::from(
         "## The held-out test\n\nSignificance follows the Holm-adjusted p within each task's held-out family \
          (\"Every comparison\"); shift: the rule minus the paper rule, Hodges-Lehmann with 95% interval.\n\n",
