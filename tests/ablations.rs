@@ -77,9 +77,9 @@ fn a_budget_in_queries_buys_whole_segments() {
     }
     let logged: Vec<usize> = log.iter().map(|&(_, d)| d).collect();
     assert_eq!(logged, expected);
-    assert_eq!(summary.queries_used, expected.iter().sum::<usize>());
+    assert_eq!(summary.demos_queried, expected.iter().sum::<usize>());
     assert!(
-        summary.queries_used > budget,
+        summary.demos_queried > budget,
         "more transitions than queries"
     );
     let query_rows = run_dir::read_query_steps(dir.path()).unwrap().unwrap();
@@ -88,5 +88,5 @@ fn a_budget_in_queries_buys_whole_segments() {
     // The paper's reading: the same number spends transitions, the last segment cut at the budget.
     let cfg = config(Method::Gdqn, &[&format!("budget={budget}")]);
     let summary = run_one(&cfg, None, false).unwrap();
-    assert_eq!(summary.queries_used, budget);
+    assert_eq!(summary.demos_queried, budget);
 }

@@ -231,8 +231,8 @@ fn a_short_run_writes_every_result_file() {
         serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
     assert_eq!(summary["train_steps"], 2000);
     assert!(
-        summary["queries_used"].as_u64().unwrap() > 0
-            && summary["queries_used"].as_u64().unwrap() <= 200
+        summary["demos_queried"].as_u64().unwrap() > 0
+            && summary["demos_queried"].as_u64().unwrap() <= 200
     );
     let queries = std::fs::read_to_string(out.join("queries.csv")).unwrap();
     assert!(queries.lines().count() > 1, "ADQN asked no query");

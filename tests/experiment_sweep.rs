@@ -130,7 +130,7 @@ fn write_fake_run(spec: &RunSpec, dir: &Path, interrupt: bool) -> Result<()> {
             train_steps: TRAIN_STEPS as usize,
             final_score: fake_mean(spec, TRAIN_STEPS),
             demos_pretrain: 0,
-            queries_used: 20,
+            demos_queried: 20,
             episodes: 1,
             wall_time_s: 0.1,
             cpu_time_s: None,
@@ -497,8 +497,12 @@ fn group_medians_follow_the_design_for_every_configuration() {
             .map(|r| {
                 let spec = RunSpec {
                     id: r.id.clone(),
-                    t_query: r.t_query.filter(|_| r.variant.starts_with("tq")),
-                    expert: r.expert.clone().filter(|_| r.variant.starts_with("expert")),
+                    t_query: r.config.t_query.filter(|_| r.variant.starts_with("tq")),
+                    expert: r
+                        .config
+                        .expert
+                        .clone()
+                        .filter(|_| r.variant.starts_with("expert")),
                     set: vec![],
                     vary: None,
                 };

@@ -62,7 +62,7 @@ fn unanswered_questions_cost_no_budget_and_are_logged() {
         .unwrap();
     // Greedy queries ask until the budget is spent: 4 answered segments of 5 steps, each after a question that
     // went back to the agent (segments are cut by episode ends, so there may be more).
-    assert_eq!(summary.queries_used, 20);
+    assert_eq!(summary.demos_queried, 20);
     let text = std::fs::read_to_string(dir.path().join("queries.csv")).unwrap();
     let mut lines = text.lines();
     assert_eq!(
@@ -190,7 +190,7 @@ fn an_expert_that_shows_the_uncertainty_sees_it_after_the_budget_is_spent() {
             .expert(Some(&mut expert))
             .train(&mut RunLog::in_memory())
             .unwrap();
-        assert_eq!(summary.queries_used, 10, "the budget is spent");
+        assert_eq!(summary.demos_queried, 10, "the budget is spent");
         let late: Vec<bool> = expert
             .computed
             .iter()

@@ -263,8 +263,8 @@ fn a_scripted_person_answers_in_headless_chromium() {
     let s = summary(&cart.run);
     assert_eq!(s["train_steps"], 10000);
     // The unanswered question cost nothing: the budget was spent on answered segments only.
-    assert!(s["queries_used"].as_u64().unwrap() <= 5 * answered.len() as u64);
-    assert!(s["queries_used"].as_u64().unwrap() > 0);
+    assert!(s["demos_queried"].as_u64().unwrap() <= 5 * answered.len() as u64);
+    assert!(s["demos_queried"].as_u64().unwrap() > 0);
 
     // LunarLander-v2, real time at 40 steps per second. The budget runs out near step 170; the steps after it
     // train without questions long enough for the page to show the training state on a loaded machine.

@@ -628,7 +628,7 @@ class Agent:
             score = self.summary.get("final_score")
             shown = "none yet" if score is None else f"{score:.1f}"
             print(f"arld {self.method}-{self.net} on {self.env_id}: {self._live_step} steps, last evaluation "
-                  f"{shown}, budget used {self.summary['queries_used']}")
+                  f"{shown}, demonstrated transitions asked for {self.summary['demos_queried']}")
         return self
 
     def close(self) -> None:

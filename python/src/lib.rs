@@ -816,6 +816,28 @@ impl Run {
             .ok_or_else(|| runtime_error("the run has not trained yet: call learn() first".into()))
     }
 
+    /// A list of dicts (made by `dict`) of records of the run: of its log while it runs (inside a callback, `live`),
+    /// else of its last pause (`paused`).
+    fn record_list<'py, T>(
+        &self,
+        py: Python<'py>,
+        live: impl FnOnce(&RunLog) -> &[T],
+        paused: impl FnOnce(&Pause) -> &[T],
+        dict: impl Fn(Python<'py>, &T) -> PyResult<Bound<'py, PyDict>>,
+    ) -> PyResult<Py<PyList>> {
+        let list = PyList::empty(py);
+        let fill = |records: &[T]| {
+            records
+                .iter()
+                .try_for_each(|record| list.append(dict(py, record)?))
+        };
+        match with_lent(self.id, |_, log| fill(live(log))) {
+            Some(filled) => filled?,
+            None => self.with_last(|last| fill(paused(last)))??,
+        }
+        Ok(list.unbind())
+    }
+
     fn refuse_in_callback(&self, what: &str) -> PyResult<()> {
         if in_callback() {
             return Err(runtime_error(format!(
@@ -967,41 +989,18 @@ impl Run {
 
     /// The evaluations so far (live inside a callback): dicts of step, mean, std, min, max.
     fn evaluations(&self, py: Python<'_>) -> PyResult<Py<PyList>> {
-        let list = PyList::empty(py);
-        let live = with_lent(self.id, |_, log| {
-            log.curve()
-                .iter()
-                .try_for_each(|p| list.append(eval_dict(py, p)?))
-        });
-        match live {
-            Some(r) => r?,
-            None => self.with_last(|last| {
-                last.curve
-                    .iter()
-                    .try_for_each(|p| list.append(eval_dict(py, p)?))
-            })??,
-        }
-        Ok(list.unbind())
+        self.record_list(py, |log| log.curve(), |last| &last.curve, eval_dict)
     }
 
     /// The queries so far (live inside a callback): dicts of step, episode, uncertainty, threshold,
     /// expert_action, agent_action.
     fn queries(&self, py: Python<'_>) -> PyResult<Py<PyList>> {
-        let list = PyList::empty(py);
-        let live = with_lent(self.id, |_, log| {
-            log.query_events()
-                .iter()
-                .try_for_each(|q| list.append(query_dict(py, q)?))
-        });
-        match live {
-            Some(r) => r?,
-            None => self.with_last(|last| {
-                last.queries
-                    .iter()
-                    .try_for_each(|q| list.append(query_dict(py, q)?))
-            })??,
-        }
-        Ok(list.unbind())
+        self.record_list(
+            py,
+            |log| log.query_events(),
+            |last| &last.queries,
+            query_dict,
+        )
     }
 
     /// The summary at the last pause, as JSON text.
@@ -1200,10 +1199,11 @@ fn start_run(
         };
         let mut log = match (&log_dir, &resume_state) {
             // Continuing a run in its own directory continues its logs (the CLI's --resume does the same).
-            (Some(dir), Some(state)) if Path::new(dir).join("config.toml").is_file() => {
+            (Some(dir), Some(state))
+                if Path::new(dir).join(train::run_dir::CONFIG_FILE).is_file() =>
+            {
                 let dir = Path::new(dir);
-                let recorded: TrainConfig =
-                    toml::from_str(&std::fs::read_to_string(dir.join("config.toml"))?)?;
+                let recorded = train::run_dir::read_written_config(dir)?;
                 let differences = recorded.differences(&cfg);
                 anyhow::ensure!(
                     differences.is_empty(),

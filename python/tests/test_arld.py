@@ -31,7 +31,7 @@ def test_adqn_b_solves_gymnasium_cartpole_with_a_callable_expert():
         model = arld.Agent("adqn", gym.make("CartPole-v0"), net="bootstrap", expert=weak_expert(), seed=seed)
         model.learn(total_timesteps=20_000)
         budget = model.config["budget"]
-        assert model.summary["queries_used"] <= budget
+        assert model.summary["demos_queried"] <= budget
         expert_steps = sum(1 for _ in model.queries)  # each query is at least one expert step
         assert expert_steps <= budget
         assert [e["step"] for e in model.evaluations] == list(range(1000, 20_001, 1000))
@@ -73,7 +73,7 @@ def test_a_trained_stable_baselines3_model_is_an_expert():
     sb3.predict = recording_predict
     model = arld.Agent("adqn", gym.make("CartPole-v1"), net="bootstrap", expert=sb3, seed=0)
     model.learn(total_timesteps=3000)
-    assert model.summary["queries_used"] == len(answers) > 0
+    assert model.summary["demos_queried"] == len(answers) > 0
     # Every query's expert action is what the SB3 policy answers for that observation.
     assert answers[0][1] == model.queries[0]["expert_action"]
     for obs, action in answers[:50]:
@@ -151,7 +151,7 @@ def test_the_example_expert_process_works_from_python():
     script = REPO / "examples" / "expert.py"
     model = arld.Agent("gdqn", gym.make("CartPole-v0"), expert=f"cmd:{sys.executable} {script}", seed=0)
     model.learn(2000)
-    assert model.summary["queries_used"] == model.config["budget"]
+    assert model.summary["demos_queried"] == model.config["budget"]
 
 
 def test_predict_save_load_and_the_run_directory(tmp_path):

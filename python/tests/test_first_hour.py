@@ -133,7 +133,7 @@ def test_a_checkpoint_written_in_a_callback_is_the_whole_run_at_that_step(tmp_pa
     whole = agent().learn(1500)
     assert resumed.num_timesteps == 1500 and same_params(params(resumed), params(whole))
     assert resumed.evaluations == [e for e in whole.evaluations if e["step"] > 400]
-    assert resumed.summary["queries_used"] == whole.summary["queries_used"]
+    assert resumed.summary["demos_queried"] == whole.summary["demos_queried"]
 
 
 def test_stop_training_on_max_episodes_counts_the_runs_episodes():

@@ -75,7 +75,7 @@ def test_load_continues_the_saved_run(tmp_path):
     loaded.learn(1000)
     whole = cartpole_agent().learn(2000)
     assert len(whole.evaluations) == 4 and loaded.evaluations == whole.evaluations
-    assert loaded.summary["queries_used"] == whole.summary["queries_used"]
+    assert loaded.summary["demos_queried"] == whole.summary["demos_queried"]
     # A Python expert is not in the file: loading without it says so.
     with pytest.raises(ValueError, match="pass it as expert="):
         arld.Agent.load(tmp_path / "run.arld", gym.make("CartPole-v1"))

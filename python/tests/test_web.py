@@ -102,7 +102,7 @@ def test_a_person_answers_a_gymnasium_environment_from_its_rendered_frames(tmp_p
     assert all(r["expert"] == "web" and float(r["response_s"]) > 0 for r in answered)
     summary = json.loads((run / "summary.json").read_text())
     assert summary["train_steps"] == 1500 and summary["env"] == "PersonCartPole-v0"
-    assert 0 < summary["queries_used"] <= 30
+    assert 0 < summary["demos_queried"] <= 30
     # The person's time: at least the sum of their response times to opening questions, and what the end
     # screen showed.
     assert summary["person_s"] >= sum(float(r["response_s"]) for r in answered) - 1e-6
@@ -134,7 +134,7 @@ def test_web_expert_arguments_are_checked_and_a_run_nobody_answers_completes(tmp
         rows = list(csv.DictReader(f))
     assert rows and all(r["answered"] == "false" and r["expert_action"] == "" for r in rows)
     assert all(float(r["response_s"]) >= 0.05 for r in rows)
-    assert model.summary["queries_used"] == 0
+    assert model.summary["demos_queried"] == 0
     # Nobody had the page open: none of it is a person's time.
     assert model.summary["person_s"] == 0.0
     # One run per WebExpert.

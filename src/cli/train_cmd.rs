@@ -104,9 +104,14 @@ pub fn resolve(args: &TrainArgs) -> anyhow::Result<TrainConfig> {
             dir.display(),
             arld::train::run_dir::SUMMARY_FILE
         );
-        let mut input = ConfigInput::new("CartPole-v0", Method::Dqn, NetKind::Bootstrap, 0);
-        input.apply_file(&config)?;
-        return input.resolve();
+        // The preset under it is the one of the env, method, net and seed the file names.
+        let placeholder = arld::train::run_dir::RunId {
+            env: "CartPole-v0".into(),
+            method: Method::Dqn,
+            net: NetKind::Bootstrap,
+            seed: 0,
+        };
+        return arld::train::run_dir::read_config(dir, &placeholder);
     }
     // The identity flags win over the config file's keys, which win over the defaults.
     let mut input = ConfigInput::new("", Method::Dqn, NetKind::Bootstrap, 0);
@@ -255,12 +260,12 @@ pub fn run(args: TrainArgs) -> anyhow::Result<ExitCode> {
         }
     };
     println!(
-        "{}: steps to solve {}{}, final score {:.2}, queries {}, {:.0} steps/s, {:.1} s -> {}",
+        "{}: steps to solve {}{}, final score {:.2}, demonstrated transitions {}, {:.0} steps/s, {:.1} s -> {}",
         cfg.run_name(),
         s.steps_to_solve,
         if s.solved { "" } else { " (not solved)" },
         s.final_score,
-        s.queries_used,
+        s.demos_queried,
         s.steps_per_s,
         s.wall_time_s,
         dir.display()

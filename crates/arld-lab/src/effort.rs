@@ -33,8 +33,8 @@ use super::stats::{
     hodges_lehmann, holm, mann_whitney, median, sample_sd, sustained, wilcoxon_signed_rank,
 };
 use super::verdict::FINAL_EVALUATIONS;
-use anyhow::{Context, Result};
-use arld_core::train::run_dir::{DEFAULT_VARIANT, RunRecord};
+use anyhow::Result;
+use arld_core::train::run_dir::{DEFAULT_VARIANT, RunRecord, canonical_rule};
 use rand::{Rng, SeedableRng};
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
@@ -111,56 +111,28 @@ fn paper_cell(env: &str, rule: &str, net: &str, held_out: Group) -> CellKey {
     )
 }
 
-/// The rule and budget of a benchmark run, from its `config.toml`; `None` for runs outside the benchmark.
-fn rule_and_budget(run: &RunRecord) -> Result<Option<(String, usize)>> {
+/// The rule and budget of a benchmark run, as its configuration records them; `None` for runs outside the
+/// benchmark.
+fn rule_and_budget(run: &RunRecord) -> Option<(String, usize)> {
     let method = run.id.method.name();
     if !["gdqn", "bdqn", "adqn"].contains(&method) {
-        return Ok(None);
+        return None;
     }
     let variant = run.variant.as_str();
-    let in_benchmark = variant == DEFAULT_VARIANT || is_effort_variant(variant);
-    if !in_benchmark {
-        return Ok(None);
+    if variant != DEFAULT_VARIANT && !is_effort_variant(variant) {
+        return None;
     }
     // A run whose configuration records no budget (made by hand, or outside the benchmark) is left out.
-    let path = run.dir.join("config.toml");
-    let Ok(text) = std::fs::read_to_string(&path) else {
-        return Ok(None);
-    };
-    let table: toml::Table =
-        toml::from_str(&text).with_context(|| format!("{} is not TOML", path.display()))?;
-    let Some(budget) = table.get("budget").and_then(toml::Value::as_integer) else {
-        return Ok(None);
-    };
-    let budget = budget as usize;
-    let rule = table
-        .get("query_rule")
-        .and_then(toml::Value::as_str)
-        .unwrap_or("")
-        .to_string();
-    let label = if rule.is_empty() {
-        BASELINES
+    let budget = run.config.budget?;
+    let label = match &run.config.query_rule {
+        Some(rule) => rule.clone(),
+        None => BASELINES
             .iter()
             .find(|(_, m)| *m == method)
             .map(|(l, _)| l.to_string())
-            .expect("a querying method")
-    } else {
-        // The canonical form of the spec, so that equal specs written differently share a cell.
-        rule.parse::<arld_core::query::RuleSpec>()
-            .map(|s| s.to_string())
-            .unwrap_or(rule)
+            .expect("a querying method"),
     };
-    Ok(Some((label, budget)))
-}
-
-/// The demonstrated transitions a run spent (`summary.json`'s `queries_used`).
-fn transitions_spent(run: &RunRecord) -> Result<f64> {
-    let path = run.dir.join("summary.json");
-    let text = std::fs::read_to_string(&path)
-        .with_context(|| format!("cannot read {}", path.display()))?;
-    let json: serde_json::Value =
-        serde_json::from_str(&text).with_context(|| format!("{} is not JSON", path.display()))?;
-    Ok(json["queries_used"].as_f64().unwrap_or(0.0))
+    Some((label, budget))
 }
 
 /// Mean returns of the random policy and of the shipped weak expert on `env`.
@@ -186,7 +158,7 @@ fn references(env: &str) -> Result<(f64, f64)> {
 }
 
 /// What `run` measured; its evaluation means are finite ([`super::report::report`] refuses a run otherwise).
-fn metrics(run: &RunRecord, reference: (f64, f64), k: usize) -> Result<RunMetrics> {
+fn metrics(run: &RunRecord, reference: (f64, f64), k: usize) -> RunMetrics {
     let (random, expert) = reference;
     let span = expert - random;
     let auc = if run.eval.is_empty() {
@@ -208,13 +180,13 @@ fn metrics(run: &RunRecord, reference: (f64, f64), k: usize) -> Result<RunMetric
             (p.step, asked)
         })
         .collect();
-    Ok(RunMetrics {
+    RunMetrics {
         seed: run.id.seed,
         auc,
         first_hit: sustained(&run.eval, run.solve_threshold, 0, run.train_steps) as f64,
         sustained: sustained(&run.eval, run.solve_threshold, k, run.train_steps) as f64,
         final_score: final_score(&run.eval, FINAL_EVALUATIONS).unwrap_or(f64::NAN),
-        transitions: transitions_spent(run)?,
+        transitions: run.demos_queried().unwrap_or(0) as f64,
         questions: questions as f64,
         last_question: run
             .query_steps
@@ -222,7 +194,7 @@ fn metrics(run: &RunRecord, reference: (f64, f64), k: usize) -> Result<RunMetric
             .and_then(|q| q.last())
             .map(|&s| s as f64),
         questions_at,
-    })
+    }
 }
 
 /// Median and bootstrap 95% interval, formatted `m [lo, hi]`.
@@ -644,11 +616,8 @@ fn comparisons_csv(comparisons: &[Comparison]) -> String {
 /// robust standard deviation of the paper rules' AUCs at the paper's budget with [`EFFORT_NET`] (pooled over the three,
 /// seeds outside the held-out ones): for one comparison at the level, and at the first step of Holm's procedure
 /// over the task's screen family.
-fn detectable(
-    cells: &BTreeMap<CellKey, Vec<RunMetrics>>,
-    comparisons: &[Comparison],
-    envs: &[String],
-) -> String {
+fn detectable(measured: &Measured) -> String {
+    let (cells, comparisons, envs) = measured.parts();
     let mut out = format!(
         "## The smallest detectable difference\n\nThe smallest shift of the AUC that a two-sided Mann-Whitney test \
          at {TEST_LEVEL} detects with 80% power with {PAPER_SEEDS} seeds a rule (normal approximation, the \
@@ -717,10 +686,7 @@ fn second_test(cells: &BTreeMap<CellKey, Vec<RunMetrics>>, comparisons: &[Compar
         seed_span(&SECOND_HELD_OUT_SEEDS)
     );
     let full = SECOND_HELD_OUT_SEEDS.count();
-    let rule = SECOND_HELD_OUT_RULE
-        .parse::<arld_core::query::RuleSpec>()
-        .map(|s| s.to_string())
-        .unwrap_or_else(|_| SECOND_HELD_OUT_RULE.to_string());
+    let rule = canonical_rule(SECOND_HELD_OUT_RULE);
     let mut readings = Vec::new();
     let mut any = false;
     for (env, scale) in SECOND_HELD_OUT_CELLS {
@@ -824,7 +790,7 @@ pub fn effort(runs: &[RunRecord], k: usize) -> Result<Option<EffortReport>> {
     let mut refs: BTreeMap<String, (f64, f64)> = BTreeMap::new();
     let mut beyond_paper = false;
     for run in runs {
-        let Some((rule, budget)) = rule_and_budget(run)? else {
+        let Some((rule, budget)) = rule_and_budget(run) else {
             continue;
         };
         beyond_paper |= run.variant != DEFAULT_VARIANT;
@@ -836,7 +802,7 @@ pub fn effort(runs: &[RunRecord], k: usize) -> Result<Option<EffortReport>> {
         cells
             .entry((env, rule, run.id.net.name().to_string(), budget, held_out))
             .or_default()
-            .push(metrics(run, refs[&run.id.env], k)?);
+            .push(metrics(run, refs[&run.id.env], k));
     }
     if !beyond_paper {
         return Ok(None);
@@ -961,20 +927,46 @@ pub fn effort(runs: &[RunRecord], k: usize) -> Result<Option<EffortReport>> {
             writeln!(md)?;
         }
     }
-    writeln!(md, "{}", screen(&cells, &all, &envs))?;
-    writeln!(md, "{}", detectable(&cells, &all, &envs))?;
-    writeln!(md, "{}", effort_buys(&cells, &all, &envs))?;
-    writeln!(md, "{}", design_choice(&cells))?;
-    writeln!(md, "{}", goal_verdict(&cells, &all, &envs))?;
-    writeln!(md, "{}", second_test(&cells, &all))?;
-    writeln!(md, "{}", comparison_tables(&all))?;
-    let figures = figures(&cells, &envs);
+    let measured = Measured {
+        cells,
+        comparisons: all,
+        envs,
+    };
+    let (cells, all, envs) = measured.parts();
+    writeln!(md, "{}", screen(&measured))?;
+    writeln!(md, "{}", detectable(&measured))?;
+    writeln!(md, "{}", effort_buys(&measured))?;
+    writeln!(md, "{}", design_choice(cells))?;
+    writeln!(md, "{}", goal_verdict(&measured))?;
+    writeln!(md, "{}", second_test(cells, all))?;
+    writeln!(md, "{}", comparison_tables(all))?;
+    let figures = figures(cells, envs);
     Ok(Some(EffortReport {
         markdown: md,
         csv,
-        comparisons_csv: comparisons_csv(&all),
+        comparisons_csv: comparisons_csv(all),
         figures,
     }))
+}
+
+/// What the benchmark measured, as the sections of the report read it: the cells, every comparison with its
+/// adjusted p-values, and the tasks in the report's order.
+struct Measured {
+    cells: BTreeMap<CellKey, Vec<RunMetrics>>,
+    comparisons: Vec<Comparison>,
+    envs: Vec<String>,
+}
+
+impl Measured {
+    fn parts(
+        &self,
+    ) -> (
+        &BTreeMap<CellKey, Vec<RunMetrics>>,
+        &[Comparison],
+        &[String],
+    ) {
+        (&self.cells, &self.comparisons, &self.envs)
+    }
 }
 
 /// The paper's rules first, then the others alphabetically.
@@ -1006,11 +998,8 @@ fn design_aucs(cell: &[RunMetrics]) -> Vec<f64> {
 /// per task, the rules whose AUC is significantly higher than each of GDQN, BDQN and ADQN, higher than some of
 /// them, and lower than some of them (two-sided Mann–Whitney, Holm-adjusted p < [`TEST_LEVEL`] within the
 /// task's screen family).
-fn screen(
-    cells: &BTreeMap<CellKey, Vec<RunMetrics>>,
-    comparisons: &[Comparison],
-    envs: &[String],
-) -> String {
+fn screen(measured: &Measured) -> String {
+    let (cells, comparisons, envs) = measured.parts();
     let mut out = format!(
         "## The screen at the paper's budget\n\nEvery rule against GDQN, BDQN and ADQN at the paper's budget with \
          the {} network, on its seeds outside the held-out ones (two-sided Mann-Whitney of the AUC, Holm-adjusted p < \
@@ -1099,11 +1088,8 @@ fn budget_multiple(env: &str, budget: usize) -> String {
 /// What more or less of the expert's effort bought, task by task: for every rule run at two budgets or more
 /// (design seeds only), its median AUC and first hit at each budget, and the AUC at the largest budget against
 /// the smallest (Mann–Whitney).
-fn effort_buys(
-    cells: &BTreeMap<CellKey, Vec<RunMetrics>>,
-    comparisons: &[Comparison],
-    envs: &[String],
-) -> String {
+fn effort_buys(measured: &Measured) -> String {
+    let (cells, comparisons, envs) = measured.parts();
     let mut out = format!(
         "## What the expert's effort buys\n\nFor each rule run at two budgets or more, on the design seeds \
          {} that every budget has: the median AUC and, in parentheses, the median first hit at each \
@@ -1237,11 +1223,8 @@ fn design_choice(cells: &BTreeMap<CellKey, Vec<RunMetrics>>) -> String {
 /// The goal of the benchmark, read on the held-out cells at the paper's budget: a rule whose AUC is
 /// significantly higher than each of GDQN, BDQN and ADQN on at least 3 of the 4 tasks, and never significantly
 /// lower, for each network.
-fn goal_verdict(
-    cells: &BTreeMap<CellKey, Vec<RunMetrics>>,
-    comparisons: &[Comparison],
-    envs: &[String],
-) -> String {
+fn goal_verdict(measured: &Measured) -> String {
+    let (cells, comparisons, envs) = measured.parts();
     let mut out = String::from(
         "## The held-out test\n\nSignificance follows the Holm-adjusted p within each task's held-out family \
          (\"Every comparison\"); shift: the rule minus the paper rule, Hodges-Lehmann with 95% interval.\n\n",

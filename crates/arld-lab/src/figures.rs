@@ -10,9 +10,7 @@ use super::plot::{Band, Curve, FigureContent, PALETTE, Panel, XScale};
 use super::protocol::{self, env_order};
 use super::stats::quantile;
 use arld_core::paper::TABLE5_METHODS;
-use arld_core::train::run_dir::{
-    DEFAULT_VARIANT, EXPERT_VARIANT_PREFIX, RunRecord, T_QUERY_VARIANT_PREFIX,
-};
+use arld_core::train::run_dir::{DEFAULT_VARIANT, EXPERT_VARIANT_PREFIX, RunRecord};
 use arld_core::train::{Method, NetKind};
 use std::collections::BTreeMap;
 
@@ -226,14 +224,10 @@ fn steps_figure(title: String, y_label: &str, panels: Vec<Panel>) -> Option<Figu
     })
 }
 
-/// ADQN runs of the t_query study (variant `tqVALUE`): panels per environment, one curve per value.
+/// ADQN runs of the t_query study (variant `tqVALUE`): panels per environment, one curve per value of t_query
+/// (as each run's configuration records it).
 fn t_query_figure(runs: &[&RunRecord], title: String) -> Option<FigureContent> {
-    let t_query = |r: &RunRecord| {
-        r.variant
-            .strip_prefix(T_QUERY_VARIANT_PREFIX)?
-            .parse::<f64>()
-            .ok()
-    };
+    let t_query = RunRecord::t_query_study;
     let selected: Vec<&RunRecord> = runs
         .iter()
         .copied()
@@ -266,7 +260,7 @@ fn expert_figure(runs: &[&RunRecord], suffix: &str, title: String) -> Option<Fig
     // Legend order and colours follow the paper's order of experts; unknown specs come after, alphabetically.
     let mut experts: Vec<String> = selected
         .iter()
-        .map(|r| r.expert.clone().unwrap_or_else(|| r.variant.clone()))
+        .map(|r| r.config.expert.clone().unwrap_or_else(|| r.variant.clone()))
         .collect();
     experts.sort_by_key(|e| {
         (
@@ -293,7 +287,7 @@ fn expert_figure(runs: &[&RunRecord], suffix: &str, title: String) -> Option<Fig
             let curves = setting_curves(
                 &in_panel,
                 &experts,
-                |r, expert| r.expert.as_ref().unwrap_or(&r.variant) == expert,
+                |r, expert| r.config.expert.as_ref().unwrap_or(&r.variant) == expert,
                 |expert| expert_label(expert),
                 [4, 1, 3, 5, 6, 2, 0, 7],
             );
@@ -403,28 +397,17 @@ mod tests {
     use std::path::PathBuf;
 
     fn run(seed: u64, means: &[f64], queries: Option<Vec<u64>>) -> RunRecord {
+        let id = RunId {
+            env: "CartPole-v0".into(),
+            method: Method::Adqn,
+            net: NetKind::Bootstrap,
+            seed,
+        };
+        let eval = EvalPoint::constant_curve(1000, means);
+        let dir = PathBuf::from(format!("seed{seed}"));
         RunRecord {
-            dir: PathBuf::from(format!("seed{seed}")),
-            id: RunId {
-                env: "CartPole-v0".into(),
-                method: Method::Adqn,
-                net: NetKind::Bootstrap,
-                seed,
-            },
-            variant: DEFAULT_VARIANT.into(),
-            t_query: None,
-            expert: None,
-            solve_threshold: 195.0,
-            train_steps: 3000,
-            eval_period: 1000,
-            eval: means
-                .iter()
-                .enumerate()
-                .map(|(i, &mean)| EvalPoint::constant((i as u64 + 1) * 1000, mean))
-                .collect(),
             query_steps: queries,
-            summary_steps_to_solve: None,
-            numerics: None,
+            ..RunRecord::from_curve(dir, id, DEFAULT_VARIANT.into(), eval, 195.0, (3000, 1000))
         }
     }
 

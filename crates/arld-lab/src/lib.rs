@@ -193,12 +193,12 @@ fn setup(cfg: &TrainConfig) -> Result<Setup> {
 pub fn run_or_reuse(cfg: &TrainConfig, dir: &Path, progress: bool) -> Result<Option<Summary>> {
     use arld_core::train::run_dir;
     if run_dir::is_complete(dir) {
-        let config = dir.join(run_dir::CONFIG_FILE);
-        let mut input = train::ConfigInput::new(&cfg.env, cfg.method, cfg.net, cfg.seed);
-        input.apply_file(&config)?;
-        let earlier = input
-            .resolve()
-            .with_context(|| format!("the finished run's {} is not valid", config.display()))?;
+        let earlier = run_dir::read_config(dir, &run_dir::RunId::of(cfg)).with_context(|| {
+            format!(
+                "the finished run's {} is not valid",
+                dir.join(run_dir::CONFIG_FILE).display()
+            )
+        })?;
         let differences = earlier.differences(cfg);
         anyhow::ensure!(
             differences.is_empty(),

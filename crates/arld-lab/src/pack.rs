@@ -19,7 +19,7 @@
 
 use anyhow::{Context, Result, bail, ensure};
 use arld_core::files::write_atomic;
-use arld_core::train::run_dir;
+use arld_core::train::run_dir::{self, CONFIG_FILE, SUMMARY_FILE};
 use flate2::Compression;
 use flate2::read::GzDecoder;
 use flate2::write::GzEncoder;
@@ -30,13 +30,11 @@ use std::path::{Path, PathBuf};
 /// The index of a packed task directory; its presence marks the directory as packed.
 pub const RUNS_TABLE: &str = "runs.csv.gz";
 const LAYOUT_FILE: &str = "layout.json";
-const CONFIG_FILE: &str = "config.toml";
-const SUMMARY_FILE: &str = "summary.json";
 /// The logs kept as row tables: the run's file and the table that holds its rows.
 const LOG_TABLES: [(&str, &str); 3] = [
-    ("eval.csv", "eval.csv.gz"),
-    ("queries.csv", "queries.csv.gz"),
-    ("episodes.csv", "episodes.csv.gz"),
+    (run_dir::EVAL_FILE, "eval.csv.gz"),
+    (run_dir::QUERIES_FILE, "queries.csv.gz"),
+    (run_dir::EPISODES_FILE, "episodes.csv.gz"),
 ];
 const CONFIGS_TABLE: &str = "configs.csv.gz";
 const SUMMARIES_TABLE: &str = "summaries.csv.gz";

@@ -283,7 +283,7 @@ pub fn report(dir: &Path, out_dir: &Path, sustain: usize) -> Result<ReportSummar
     notes.extend(sweep_completion_notes(dir)?);
     for run in &runs {
         let ours = stats::first_hit(&run.eval, run.solve_threshold, run.train_steps);
-        if let Some(recorded) = run.summary_steps_to_solve
+        if let Some(recorded) = run.summary.as_ref().map(|s| s.steps_to_solve as u64)
             && recorded != ours
         {
             notes.push(format!(
@@ -294,7 +294,10 @@ pub fn report(dir: &Path, out_dir: &Path, sustain: usize) -> Result<ReportSummar
     }
     let older = runs
         .iter()
-        .filter(|run| run.numerics.as_deref() != Some(arld_core::math::NUMERICS))
+        .filter(|run| {
+            run.summary.as_ref().and_then(|s| s.numerics.as_deref())
+                != Some(arld_core::math::NUMERICS)
+        })
         .count();
     // Stated even when none are: a reader learns that every number regenerates on their own CPU.
     notes.push(if older > 0 {

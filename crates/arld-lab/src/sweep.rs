@@ -709,7 +709,10 @@ fn run_sweep_inner(
         let Some(source) = identical_run(spec, dir) else {
             return true;
         };
-        match copy_run(spec, &source, &path) {
+        match spec
+            .config()
+            .and_then(|config| run_dir::copy_finished_run(&source, &path, &config))
+        {
             Ok(()) => {
                 eprintln!(
                     "run {}: the same configuration as {}, whose files it takes",
@@ -851,46 +854,8 @@ fn identical_run(spec: &RunSpec, dir: &Path) -> Option<PathBuf> {
         *candidate != own
             && run_dir::check_complete(candidate).is_ok()
             && !run_dir::is_stale(candidate)
-            && run_config(spec, candidate).is_ok_and(|other| other == config)
+            && run_dir::read_config(candidate, &spec.id).is_ok_and(|other| other == config)
     })
-}
-
-/// The resolved configuration of the finished run in `run` (its `config.toml` over the preset of `spec`'s
-/// environment, method, network and seed, so keys added since it ran take their defaults).
-fn run_config(spec: &RunSpec, run: &Path) -> Result<TrainConfig> {
-    let mut input = ConfigInput::new(&spec.id.env, spec.id.method, spec.id.net, spec.id.seed);
-    input.apply_file(&run.join(run_dir::CONFIG_FILE))?;
-    input.resolve()
-}
-
-/// Gives `to` the files of the finished run `from`, as `spec`'s run: its own resolved `config.toml`, and the
-/// summary last, so the copy is complete only once whole.
-fn copy_run(spec: &RunSpec, from: &Path, to: &Path) -> Result<()> {
-    if to.exists() {
-        std::fs::remove_dir_all(to)
-            .with_context(|| format!("cannot clear incomplete run directory {}", to.display()))?;
-    }
-    std::fs::create_dir_all(to).with_context(|| format!("cannot create {}", to.display()))?;
-    for entry in
-        std::fs::read_dir(from).with_context(|| format!("cannot read {}", from.display()))?
-    {
-        let entry = entry?;
-        let name = entry.file_name();
-        let skip = [run_dir::SUMMARY_FILE, run_dir::CONFIG_FILE];
-        if !entry.file_type()?.is_file() || skip.iter().any(|s| name == *s) {
-            continue;
-        }
-        let bytes = std::fs::read(entry.path())
-            .with_context(|| format!("cannot read {}", entry.path().display()))?;
-        write_atomic(&to.join(&name), &bytes)?;
-    }
-    write_atomic(
-        &to.join(run_dir::CONFIG_FILE),
-        spec.config()?.to_toml().as_bytes(),
-    )?;
-    let summary = std::fs::read(from.join(run_dir::SUMMARY_FILE))?;
-    write_atomic(&to.join(run_dir::SUMMARY_FILE), &summary)?;
-    run_dir::check_complete(to).context("the copy is not whole")
 }
 
 /// Clears an incomplete run directory, performs the run, and checks that it left `summary.json`.

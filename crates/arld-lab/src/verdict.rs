@@ -862,25 +862,21 @@ pub fn runs_from_evaluations_csv(path: &Path) -> Result<Vec<RunRecord>> {
         .map(|((env, method, net, variant, seed), mut eval)| {
             eval.sort_by_key(|p| p.step);
             let preset = TrainConfig::preset(&env, method.parse()?, net.parse()?, seed)?;
-            Ok(RunRecord {
-                dir: path.to_path_buf(),
-                solve_threshold: arld_core::env::spec(&env)?.solve_threshold,
-                train_steps: preset.train_steps as u64,
-                eval_period: preset.eval_period as u64,
-                t_query: None,
-                expert: None,
-                query_steps: None,
-                summary_steps_to_solve: None,
-                numerics: None,
-                id: RunId {
-                    method: method.parse()?,
-                    net: net.parse()?,
-                    env,
-                    seed,
-                },
+            let id = RunId {
+                method: method.parse()?,
+                net: net.parse()?,
+                env,
+                seed,
+            };
+            let threshold = arld_core::env::spec(&id.env)?.solve_threshold;
+            Ok(RunRecord::from_curve(
+                path.to_path_buf(),
+                id,
                 variant,
                 eval,
-            })
+                threshold,
+                (preset.train_steps as u64, preset.eval_period as u64),
+            ))
         })
         .collect()
 }
@@ -891,35 +887,22 @@ mod tests {
 
     fn run(env: &str, method: &str, net: &str, seed: u64, means: &[f64]) -> RunRecord {
         let spec = arld_core::env::spec(env).unwrap();
-        RunRecord {
-            dir: "x".into(),
-            id: RunId {
-                env: env.into(),
-                method: method.parse().unwrap(),
-                net: net.parse().unwrap(),
-                seed,
-            },
-            variant: DEFAULT_VARIANT.into(),
-            t_query: None,
-            expert: None,
-            solve_threshold: spec.solve_threshold,
-            train_steps: 20_000,
-            eval_period: 1000,
-            eval: means
-                .iter()
-                .enumerate()
-                .map(|(i, &mean)| EvalPoint {
-                    step: (i as u64 + 1) * 1000,
-                    mean,
-                    std: 0.0,
-                    min: mean,
-                    max: mean,
-                })
-                .collect(),
-            query_steps: None,
-            summary_steps_to_solve: None,
-            numerics: None,
-        }
+        let id = RunId {
+            env: env.into(),
+            method: method.parse().unwrap(),
+            net: net.parse().unwrap(),
+            seed,
+        };
+        let eval = EvalPoint::constant_curve(1000, means);
+        let variant = DEFAULT_VARIANT.into();
+        RunRecord::from_curve(
+            "x".into(),
+            id,
+            variant,
+            eval,
+            spec.solve_threshold,
+            (20_000, 1000),
+        )
     }
 
     #[test]

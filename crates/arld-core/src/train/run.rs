@@ -1260,7 +1260,7 @@ fn summarize<A: Action>(
         train_steps: st.step,
         final_score: log.curve().last().map(|p| p.mean).unwrap_or(f64::NAN),
         demos_pretrain: pretrain_demos,
-        queries_used: queries.budget_used(),
+        demos_queried: queries.budget_used(),
         episodes: st.episode,
         wall_time_s: wall,
         cpu_time_s: cpu,

@@ -13,8 +13,9 @@
 //! Inside a sweep, runs live at `ENV/METHOD-NET[/VARIANT]/seedN` ([`sweep_run_path`]); [`load_runs`] finds the
 //! complete runs below a directory and reads each into a [`RunRecord`] for reports.
 
-use super::config::{Method, NetKind};
+use super::config::{ConfigInput, Method, NetKind, TrainConfig};
 pub use crate::files::write_atomic;
+use crate::query::RuleSpec;
 use crate::task::Action;
 use anyhow::{Context, Result, bail};
 use serde::{Deserialize, Serialize};
@@ -291,6 +292,15 @@ impl EvalPoint {
             max: mean,
         }
     }
+
+    /// A curve evaluated every `period` steps from step `period` on, the test episodes of evaluation i all
+    /// returning `means[i]`, for tests and examples.
+    pub fn constant_curve(period: u64, means: &[f64]) -> Vec<Self> {
+        (1..)
+            .zip(means)
+            .map(|(i, &mean)| Self::constant(i * period, mean))
+            .collect()
+    }
 }
 
 /// One query: the agent asked the expert to take over (a row of [`QUERIES_FILE`]).
@@ -432,9 +442,14 @@ pub struct Summary {
     pub train_steps: usize,
     /// Mean test return of the last evaluation.
     pub final_score: f64,
-    /// Demonstrated transitions used: before training (pre-training) and asked for during training.
+    /// Demonstrated transitions used before training (pre-training).
     pub demos_pretrain: usize,
-    pub queries_used: usize,
+    /// Demonstrated transitions the expert gave in answer to queries during training. It is the budget spent
+    /// when the budget counts transitions, but neither the budget spent when it counts questions
+    /// ([`crate::query::BudgetUnit`]) nor the number of questions (`queries.csv` has a row per question).
+    /// Summaries of earlier versions call it `queries_used`.
+    #[serde(alias = "queries_used")]
+    pub demos_queried: usize,
     pub episodes: usize,
     /// Wall-clock seconds of the whole run, over all its sessions when it was resumed from a snapshot.
     pub wall_time_s: f64,
@@ -500,6 +515,18 @@ pub struct RunId {
     pub seed: u64,
 }
 
+impl RunId {
+    /// The run `cfg` configures.
+    pub fn of(cfg: &TrainConfig) -> Self {
+        Self {
+            env: cfg.env.clone(),
+            method: cfg.method,
+            net: cfg.net,
+            seed: cfg.seed,
+        }
+    }
+}
+
 /// Everything a report needs from one complete run directory.
 #[derive(Debug, Clone)]
 pub struct RunRecord {
@@ -509,10 +536,6 @@ pub struct RunRecord {
     pub id: RunId,
     /// Variant label (`default`, `tq0.05`, `expert-shipped-weak`, ...).
     pub variant: String,
-    /// The t_query the run used, if its config records one.
-    pub t_query: Option<f64>,
-    /// The expert spec the run used, if its config records one.
-    pub expert: Option<String>,
     /// Score that counts as solving the task.
     pub solve_threshold: f64,
     /// Environment steps of training (a seed that never solves counts as this many).
@@ -523,14 +546,77 @@ pub struct RunRecord {
     pub eval: Vec<EvalPoint>,
     /// Environment step of every query, in log order; `None` when the run has no `queries.csv`.
     pub query_steps: Option<Vec<u64>>,
-    /// `steps_to_solve` as the training code recorded it in `summary.json`, for cross-checking.
-    pub summary_steps_to_solve: Option<u64>,
-    /// `summary.json`'s `numerics` (how the elementary functions were computed; `None` for older runs or
-    /// records not read from a run directory).
-    pub numerics: Option<String>,
+    /// What the run's `config.toml` records of its setting (nothing for a run without one).
+    pub config: RecordedConfig,
+    /// The run's `summary.json`; `None` for records not read from a run directory.
+    pub summary: Option<Summary>,
+}
+
+/// What reports read of a run's `config.toml`, key by key, so that configurations written by earlier versions
+/// still load: each is `None` where the file has no such key.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct RecordedConfig {
+    pub t_query: Option<f64>,
+    /// The expert spec.
+    pub expert: Option<String>,
+    /// The budget, in its unit.
+    pub budget: Option<usize>,
+    /// The query rule, in canonical form ([`canonical_rule`]) so that one spec written two ways is one rule;
+    /// `None` also when the key is empty (the method's own rule asks).
+    pub query_rule: Option<String>,
+}
+
+impl RecordedConfig {
+    /// The values of a `config.toml` read as a table.
+    fn of(table: &toml::Table) -> Self {
+        let text_of = |key: &str| table.get(key).and_then(|v| v.as_str());
+        Self {
+            t_query: table
+                .get("t_query")
+                .and_then(|v| v.as_float().or_else(|| v.as_integer().map(|i| i as f64))),
+            expert: text_of("expert").map(str::to_string),
+            budget: table
+                .get("budget")
+                .and_then(|v| v.as_integer())
+                .and_then(|b| usize::try_from(b).ok()),
+            query_rule: text_of("query_rule")
+                .filter(|rule| !rule.is_empty())
+                .map(canonical_rule),
+        }
+    }
 }
 
 impl RunRecord {
+    /// The record of a run known only by its evaluation curve (no run directory: no configuration, summary or
+    /// query log), such as a row group of `evaluations.csv.gz`.
+    pub fn from_curve(
+        dir: PathBuf,
+        id: RunId,
+        variant: String,
+        eval: Vec<EvalPoint>,
+        solve_threshold: f64,
+        (train_steps, eval_period): (u64, u64),
+    ) -> Self {
+        Self {
+            dir,
+            id,
+            variant,
+            solve_threshold,
+            train_steps,
+            eval_period,
+            eval,
+            query_steps: None,
+            config: RecordedConfig::default(),
+            summary: None,
+        }
+    }
+
+    /// Demonstrated transitions the expert gave during training ([`Summary::demos_queried`]); `None` without a
+    /// summary.
+    pub fn demos_queried(&self) -> Option<u64> {
+        self.summary.as_ref().map(|s| s.demos_queried as u64)
+    }
+
     /// The run's identity as reports sort and group runs: the names of its env, method, net and variant, then
     /// its seed.
     pub fn key(&self) -> (&str, &str, &str, &str, u64) {
@@ -542,6 +628,21 @@ impl RunRecord {
         } = &self.id;
         (env, method.name(), net.name(), &self.variant, *seed)
     }
+
+    /// The t_query of a run of the t_query study (variant `tqVALUE`, [`T_QUERY_VARIANT_PREFIX`]), as its config
+    /// records it; `None` for any other run.
+    pub fn t_query_study(&self) -> Option<f64> {
+        self.config
+            .t_query
+            .filter(|_| self.variant.starts_with(T_QUERY_VARIANT_PREFIX))
+    }
+}
+
+/// A query rule spec in canonical form (parameters in key order, numbers as Rust prints them; see
+/// [`RuleSpec`]), or as written when it does not parse.
+pub fn canonical_rule(spec: &str) -> String {
+    spec.parse::<RuleSpec>()
+        .map_or_else(|_| spec.to_string(), |s| s.to_string())
 }
 
 /// Whether the complete run in `dir` is whole: its summary, configuration and evaluation curve are present and
@@ -557,7 +658,7 @@ pub fn check_complete(dir: &Path) -> Result<()> {
         }
     }
     let run = read_run(dir, Path::new(""))?;
-    let summary = read_summary(dir)?;
+    let summary = run.summary.as_ref().expect("read from a run directory");
     match run.eval.iter().max_by_key(|p| p.step) {
         None => bail!("{EVAL_FILE} has no evaluation"),
         // Training always evaluates after its last step.
@@ -574,6 +675,55 @@ pub fn check_complete(dir: &Path) -> Result<()> {
         ),
         Some(_) => Ok(()),
     }
+}
+
+/// The resolved configuration of the run in `dir`: its `config.toml` over the preset of `id` (the file's own
+/// `env`, `method`, `net` and `seed` win), so that keys added since the run was made take their defaults.
+pub fn read_config(dir: &Path, id: &RunId) -> Result<TrainConfig> {
+    let mut input = ConfigInput::new(&id.env, id.method, id.net, id.seed);
+    input.apply_file(&dir.join(CONFIG_FILE))?;
+    input.resolve()
+}
+
+/// The configuration of the run in `dir` exactly as its `config.toml` has it: neither resolved over a preset nor
+/// validated (a run driven from Python records an expert that only Python supplies); a key that an older file
+/// lacks is not taken from a preset, as [`read_config`] takes it.
+pub fn read_written_config(dir: &Path) -> Result<TrainConfig> {
+    let path = dir.join(CONFIG_FILE);
+    let bytes = crate::files::read_bounded(&path, MAX_KEY_FILE_BYTES)
+        .with_context(|| format!("cannot read {}", path.display()))?;
+    let text = std::str::from_utf8(&bytes)
+        .with_context(|| format!("{} is not UTF-8 text", path.display()))?;
+    toml::from_str(text).with_context(|| format!("{} is not a run configuration", path.display()))
+}
+
+/// Gives `to` the files of the finished run `from` as the run `config` configures (a run of the same
+/// computation under another name): every regular file of `from` but its configuration and summary, then `config`
+/// as its `config.toml`, and the summary last, so that the copy is complete only once whole. Whatever `to` held
+/// is removed first.
+pub fn copy_finished_run(from: &Path, to: &Path, config: &TrainConfig) -> Result<()> {
+    if to.exists() {
+        std::fs::remove_dir_all(to)
+            .with_context(|| format!("cannot clear incomplete run directory {}", to.display()))?;
+    }
+    std::fs::create_dir_all(to).with_context(|| format!("cannot create {}", to.display()))?;
+    for entry in
+        std::fs::read_dir(from).with_context(|| format!("cannot read {}", from.display()))?
+    {
+        let entry = entry?;
+        let name = entry.file_name();
+        if !entry.file_type()?.is_file() || name == SUMMARY_FILE || name == CONFIG_FILE {
+            continue;
+        }
+        let bytes = std::fs::read(entry.path())
+            .with_context(|| format!("cannot read {}", entry.path().display()))?;
+        write_atomic(&to.join(&name), &bytes)?;
+    }
+    write_atomic(&to.join(CONFIG_FILE), config.to_toml().as_bytes())?;
+    let summary = std::fs::read(from.join(SUMMARY_FILE))
+        .with_context(|| format!("cannot read {}", from.join(SUMMARY_FILE).display()))?;
+    write_atomic(&to.join(SUMMARY_FILE), &summary)?;
+    check_complete(to).context("the copy is not whole")
 }
 
 /// Reads `summary.json` of a run directory.
@@ -830,13 +980,6 @@ pub fn run_record(
         }
         None => toml::Table::new(),
     };
-    let t_query = config
-        .get("t_query")
-        .and_then(|v| v.as_float().or_else(|| v.as_integer().map(|i| i as f64)));
-    let expert = config
-        .get("expert")
-        .and_then(|v| v.as_str())
-        .map(str::to_string);
     let train_steps = summary.train_steps as u64;
     let eval_period = config
         .get("eval_period")
@@ -853,20 +996,18 @@ pub fn run_record(
         dir: dir.to_path_buf(),
         variant: variant_from_path(relative, summary.method, summary.net, summary.seed),
         id: RunId {
-            env: summary.env,
+            env: summary.env.clone(),
             method: summary.method,
             net: summary.net,
             seed: summary.seed,
         },
-        t_query,
-        expert,
         solve_threshold: summary.solve_threshold,
         train_steps,
         eval_period,
         eval,
         query_steps,
-        summary_steps_to_solve: Some(summary.steps_to_solve as u64),
-        numerics: summary.numerics,
+        config: RecordedConfig::of(&config),
+        summary: Some(summary),
     })
 }
 
@@ -1003,7 +1144,7 @@ mod tests {
             train_steps: 3000,
             final_score: 195.25,
             demos_pretrain: 0,
-            queries_used: 12,
+            demos_queried: 12,
             episodes: 30,
             wall_time_s: 1.5,
             cpu_time_s: Some(1.4),
@@ -1023,6 +1164,43 @@ mod tests {
             (Method::Bdqn, NetKind::Noisy, 1000)
         );
         assert_eq!(record.query_steps, None);
+        assert_eq!(record.config, RecordedConfig::default());
+        assert_eq!(record.demos_queried(), Some(12));
+        assert_eq!(record.summary, Some(summary));
+        // What the configuration records, the rule in one spelling whichever way it was written.
+        std::fs::write(
+            dir.path().join(CONFIG_FILE),
+            "budget = 250\nt_query = 0.3\nquery_rule = \"paced( horizon = 0.50 )\"\n",
+        )
+        .unwrap();
+        for (relative, study) in [
+            ("CartPole-v0/bdqn-noisy/tq0.3/seed4", Some(0.3)),
+            ("CartPole-v0/bdqn-noisy/seed4", None),
+        ] {
+            let record = read_run(dir.path(), Path::new(relative)).unwrap();
+            let expected = RecordedConfig {
+                t_query: Some(0.3),
+                expert: None,
+                budget: Some(250),
+                query_rule: Some("paced(horizon=0.5)".into()),
+            };
+            assert_eq!(record.config, expected);
+            assert_eq!(record.t_query_study(), study, "{relative}");
+        }
+    }
+
+    #[test]
+    fn a_summary_of_an_earlier_version_loads_and_is_written_with_todays_names() {
+        let old = r#"{"env":"CartPole-v0","method":"gdqn","net":"plain","seed":0,"steps_to_solve":1,
+            "solved":false,"solve_threshold":195.0,"train_steps":1,"final_score":0.0,"demos_pretrain":0,
+            "queries_used":37,"episodes":0,"wall_time_s":0.0,"steps_per_s":0.0}"#;
+        let summary = parse_summary(old.as_bytes(), Path::new("old.json")).unwrap();
+        assert_eq!(summary.demos_queried, 37);
+        let written: serde_json::Value = serde_json::to_value(&summary).unwrap();
+        assert_eq!(written["demos_queried"], 37);
+        assert!(written.get("queries_used").is_none());
+        let both = old.replace("\"episodes\"", "\"demos_queried\":37,\"episodes\"");
+        assert!(parse_summary(both.as_bytes(), Path::new("both.json")).is_err());
     }
 
     #[test]

@@ -18,7 +18,7 @@
 //!   expert's best and worst Q-values are far apart, and (mistake correcting) the agent is about to act otherwise
 //!   than the expert would.
 
-use rand::{Rng, RngCore};
+use rand::RngCore;
 
 use super::paper::{AdaptiveQuantileRule, t_query};
 use super::{Needs, QueryContext, QueryError, QueryRule, RuleInfo, Verdict};
@@ -32,17 +32,11 @@ pub struct PacedRule {
 }
 
 impl QueryRule for PacedRule {
-    fn name(&self) -> &'static str {
-        "paced"
-    }
-    fn needs(&self) -> Needs {
-        Needs::NOTHING
+    fn info(&self) -> &'static RuleInfo {
+        &PACED
     }
     fn decide(&mut self, ctx: &QueryContext<'_>, rng: &mut dyn RngCore) -> Verdict {
-        Verdict {
-            query: rng.random_bool(ctx.paced_probability(self.horizon)),
-            ..Verdict::NO
-        }
+        Verdict::chance(ctx.paced_probability(self.horizon), rng)
     }
 }
 
@@ -53,14 +47,8 @@ pub struct RcmpRule {
 }
 
 impl QueryRule for RcmpRule {
-    fn name(&self) -> &'static str {
-        "rcmp"
-    }
-    fn needs(&self) -> Needs {
-        Needs {
-            head_variance: true,
-            ..Needs::NOTHING
-        }
+    fn info(&self) -> &'static RuleInfo {
+        &RCMP
     }
     fn decide(&mut self, ctx: &QueryContext<'_>, _rng: &mut dyn RngCore) -> Verdict {
         let variance = ctx
@@ -132,14 +120,8 @@ pub struct QGapRule {
 }
 
 impl QueryRule for QGapRule {
-    fn name(&self) -> &'static str {
-        "qgap"
-    }
-    fn needs(&self) -> Needs {
-        Needs {
-            q_gap: true,
-            ..Needs::NOTHING
-        }
+    fn info(&self) -> &'static RuleInfo {
+        &QGAP
     }
     fn decide(&mut self, ctx: &QueryContext<'_>, _rng: &mut dyn RngCore) -> Verdict {
         let gap = ctx.signals.q_gap.expect("qgap reads the Q-gap");
@@ -171,14 +153,11 @@ pub struct CalibratedRule {
 }
 
 impl QueryRule for CalibratedRule {
-    fn name(&self) -> &'static str {
-        "calibrated"
-    }
-    fn needs(&self) -> Needs {
-        Needs::UNCERTAINTY
+    fn info(&self) -> &'static RuleInfo {
+        &CALIBRATED
     }
     fn decide(&mut self, ctx: &QueryContext<'_>, _rng: &mut dyn RngCore) -> Verdict {
-        let u = ctx.uncertainty("calibrated");
+        let u = ctx.uncertainty(self.name());
         self.history.push(u);
         Verdict {
             query: self.threshold.is_some_and(|t| u > t),
@@ -211,14 +190,11 @@ pub struct BudgetPacedRule {
 }
 
 impl QueryRule for BudgetPacedRule {
-    fn name(&self) -> &'static str {
-        "budget_paced"
-    }
-    fn needs(&self) -> Needs {
-        Needs::UNCERTAINTY
+    fn info(&self) -> &'static RuleInfo {
+        &BUDGET_PACED
     }
     fn decide(&mut self, ctx: &QueryContext<'_>, _rng: &mut dyn RngCore) -> Verdict {
-        let u = ctx.uncertainty("budget_paced");
+        let u = ctx.uncertainty(self.name());
         let verdict = self.window.observe(u);
         Verdict {
             query: verdict.query && (ctx.budget_spent as f64) < ctx.pro_rata(self.horizon),
@@ -247,14 +223,11 @@ pub struct VariableThresholdRule {
 }
 
 impl QueryRule for VariableThresholdRule {
-    fn name(&self) -> &'static str {
-        "variable"
-    }
-    fn needs(&self) -> Needs {
-        Needs::UNCERTAINTY
+    fn info(&self) -> &'static RuleInfo {
+        &VARIABLE
     }
     fn decide(&mut self, ctx: &QueryContext<'_>, _rng: &mut dyn RngCore) -> Verdict {
-        let u = ctx.uncertainty("variable");
+        let u = ctx.uncertainty(self.name());
         let Some(threshold) = self.threshold.filter(|_| !u.is_nan()) else {
             if !u.is_nan() {
                 self.threshold = Some(u);
@@ -308,18 +281,8 @@ pub struct ImportanceRule {
 }
 
 impl QueryRule for ImportanceRule {
-    fn name(&self) -> &'static str {
-        if self.mistake {
-            "mistake"
-        } else {
-            "importance"
-        }
-    }
-    fn needs(&self) -> Needs {
-        Needs {
-            oracle: true,
-            ..Needs::NOTHING
-        }
+    fn info(&self) -> &'static RuleInfo {
+        if self.mistake { &MISTAKE } else { &IMPORTANCE }
     }
     fn decide(&mut self, ctx: &QueryContext<'_>, _rng: &mut dyn RngCore) -> Verdict {
         let oracle = ctx.oracle.expect("an oracle rule sees the expert");
@@ -363,7 +326,7 @@ pub(super) const PACED: RuleInfo = RuleInfo {
     name: "paced",
     source: "chance without front-loading (ours, after the issue's probe)",
     params: &[("horizon", "1: spread over the whole run")],
-    oracle: false,
+    needs: Needs::NOTHING,
     build: |params, _| {
         Ok(Box::new(PacedRule {
             horizon: horizon(params)?,
@@ -378,7 +341,10 @@ pub(super) const RCMP: RuleInfo = RuleInfo {
         "threshold",
         "0.03: about the upper decile of the head variances on design seed 0",
     )],
-    oracle: false,
+    needs: Needs {
+        head_variance: true,
+        ..Needs::NOTHING
+    },
     build: |params, _| {
         let threshold = params.get("threshold", 0.03, "at least 0", |v| v >= 0.0)?;
         Ok(Box::new(RcmpRule {
@@ -391,7 +357,10 @@ pub(super) const QGAP: RuleInfo = RuleInfo {
     name: "qgap",
     source: "student-initiated advising, Amir, Kamar, Kolobov, Grosz (IJCAI 2016)",
     params: &[("percentile", "the task's t_query")],
-    oracle: false,
+    needs: Needs {
+        q_gap: true,
+        ..Needs::NOTHING
+    },
     build: |params, d| {
         let percentile = params.fraction("percentile", d.t_query)?;
         Ok(Box::new(QGapRule {
@@ -408,7 +377,7 @@ pub(super) const CALIBRATED: RuleInfo = RuleInfo {
         "alpha",
         "budget / (units per query x train_steps): the budget spread over the run",
     )],
-    oracle: false,
+    needs: Needs::UNCERTAINTY,
     build: |params, d| {
         let alpha = params.fraction("alpha", d.target_rate().max(f64::MIN_POSITIVE))?;
         Ok(Box::new(CalibratedRule {
@@ -427,7 +396,7 @@ pub(super) const BUDGET_PACED: RuleInfo = RuleInfo {
         ("n_r", "n_r (1000)"),
         ("horizon", "1"),
     ],
-    oracle: false,
+    needs: Needs::UNCERTAINTY,
     build: |params, d| {
         let t = t_query(params, d)?;
         let n_r = params.count("n_r", d.n_r)?;
@@ -442,7 +411,7 @@ pub(super) const VARIABLE: RuleInfo = RuleInfo {
     name: "variable",
     source: "variable-threshold budget manager, Zliobaite et al. (2014)",
     params: &[("step", "0.01"), ("horizon", "1")],
-    oracle: false,
+    needs: Needs::UNCERTAINTY,
     build: |params, _| {
         let step = params.get("step", 0.01, "in (0, 1)", |v| v > 0.0 && v < 1.0)?;
         Ok(Box::new(VariableThresholdRule {
@@ -478,7 +447,7 @@ pub(super) const IMPORTANCE: RuleInfo = RuleInfo {
         ("t_query", "the task's t_query"),
         ("n_r", "n_r (1000)"),
     ],
-    oracle: true,
+    needs: Needs::ORACLE,
     build: |params, d| importance_rule(params, d, false),
 };
 
@@ -486,7 +455,7 @@ pub(super) const MISTAKE: RuleInfo = RuleInfo {
     name: "mistake",
     source: "mistake correcting, Torrey and Taylor (AAMAS 2013); oracle",
     params: IMPORTANCE.params,
-    oracle: true,
+    needs: Needs::ORACLE,
     build: |params, d| importance_rule(params, d, true),
 };
 

@@ -22,7 +22,7 @@ pub mod paper;
 
 use std::collections::BTreeMap;
 
-use rand::RngCore;
+use rand::{Rng, RngCore};
 
 use crate::state::{StateDict, StateError};
 
@@ -31,7 +31,7 @@ pub use field::{
     VariableThresholdRule,
 };
 pub use ours::RankedPacedRule;
-pub use paper::{AdaptiveQuantileRule, BernoulliRule, GreedyRule, NeverRule};
+pub use paper::{AdaptiveQuantileRule, BernoulliRule, FixedRule};
 
 /// What the budget counts. The paper's budget is in demonstrated transitions; counting queries (each one a whole
 /// segment of up to `segment_len` transitions, however few of them the episode leaves) is an ablation of that
@@ -146,6 +146,11 @@ impl Needs {
         uncertainty: true,
         ..Needs::NOTHING
     };
+    /// The expert's view only ([`OracleView`]).
+    pub const ORACLE: Needs = Needs {
+        oracle: true,
+        ..Needs::NOTHING
+    };
 }
 
 /// Everything a rule may read at one agent decision.
@@ -234,12 +239,13 @@ impl Verdict {
         threshold: None,
         score: None,
     };
-    /// A query, nothing compared.
-    pub const YES: Verdict = Verdict {
-        query: true,
-        threshold: None,
-        score: None,
-    };
+    /// A query with probability `p` (a draw from `rng`), nothing compared.
+    pub fn chance(p: f64, rng: &mut dyn RngCore) -> Verdict {
+        Verdict {
+            query: rng.random_bool(p),
+            ..Verdict::NO
+        }
+    }
 }
 
 /// When the agent asks the expert: one decision per agent step while budget is left.
@@ -248,10 +254,16 @@ impl Verdict {
 /// same questions. A rule's state (windows, thresholds) goes into the run's snapshot through
 /// [`QueryRule::save_state`] so that a resumed run decides exactly as an uninterrupted one.
 pub trait QueryRule: std::fmt::Debug + Send {
+    /// The rule's entry in [`RULES`], which names it and says what it reads.
+    fn info(&self) -> &'static RuleInfo;
     /// The rule's name, as in specs and logs.
-    fn name(&self) -> &'static str;
+    fn name(&self) -> &'static str {
+        self.info().name
+    }
     /// The signals the rule reads.
-    fn needs(&self) -> Needs;
+    fn needs(&self) -> Needs {
+        self.info().needs
+    }
     /// Decides whether to ask now. Called only while the agent is about to act and budget is left.
     fn decide(&mut self, ctx: &QueryContext<'_>, rng: &mut dyn RngCore) -> Verdict;
     /// An episode ended (rules that recalibrate per episode do it here).
@@ -358,8 +370,9 @@ pub struct RuleInfo {
     pub source: &'static str,
     /// Its parameters and their defaults, in words.
     pub params: &'static [(&'static str, &'static str)],
-    /// Reads the expert's Q-values: a reference, not a rule for a real expert.
-    pub oracle: bool,
+    /// The signals the rule reads; an oracle rule ([`Needs::oracle`]) reads the expert's Q-values: a reference,
+    /// not a rule for a real expert.
+    pub needs: Needs,
     build: Build,
 }
 
@@ -659,8 +672,7 @@ mod tests {
                 .unwrap()
                 .build(&defaults)
                 .unwrap();
-            assert_eq!(rule.name(), info.name);
-            assert_eq!(rule.needs().oracle, info.oracle, "{}", info.name);
+            assert_eq!((rule.name(), rule.needs()), (info.name, info.needs));
         }
     }
 

@@ -7,7 +7,7 @@
 //!   uniform on [0, 1]), but a question lands where the agent is unsure relative to its recent states, and no
 //!   question is asked before `start` of the run (say, before the network has learned anything).
 
-use rand::{Rng, RngCore};
+use rand::RngCore;
 
 use super::paper::AdaptiveQuantileRule;
 use super::{Needs, QueryContext, QueryRule, RuleInfo, Verdict};
@@ -22,14 +22,11 @@ pub struct RankedPacedRule {
 }
 
 impl QueryRule for RankedPacedRule {
-    fn name(&self) -> &'static str {
-        "ranked"
-    }
-    fn needs(&self) -> Needs {
-        Needs::UNCERTAINTY
+    fn info(&self) -> &'static RuleInfo {
+        &RANKED
     }
     fn decide(&mut self, ctx: &QueryContext<'_>, rng: &mut dyn RngCore) -> Verdict {
-        let u = ctx.uncertainty("ranked");
+        let u = ctx.uncertainty(self.name());
         let rank = self.window.rank(u);
         self.window.push(u);
         if (ctx.step as f64) < self.start * ctx.train_steps as f64 || u.is_nan() {
@@ -40,9 +37,8 @@ impl QueryRule for RankedPacedRule {
         }
         let p = (2.0 * rank * ctx.paced_probability(self.horizon)).min(1.0);
         Verdict {
-            query: rng.random_bool(p),
-            threshold: None,
             score: Some(u),
+            ..Verdict::chance(p, rng)
         }
     }
     fn save_state<'a>(&'a self, prefix: &str, state: &mut StateDict<'a>) {
@@ -57,7 +53,7 @@ pub(super) const RANKED: RuleInfo = RuleInfo {
     name: "ranked",
     source: "ours: paced chance tilted toward uncertain states",
     params: &[("horizon", "1"), ("start", "0"), ("n_r", "n_r (1000)")],
-    oracle: false,
+    needs: Needs::UNCERTAINTY,
     build: |params, d| {
         let horizon = params.fraction("horizon", 1.0)?;
         let start = params.get("start", 0.0, "in [0, 1)", |v| (0.0..1.0).contains(&v))?;

@@ -3,41 +3,28 @@
 
 use std::collections::VecDeque;
 
-use rand::{Rng, RngCore};
+use rand::RngCore;
 
 use super::{Needs, Params, QueryContext, QueryError, QueryRule, RuleDefaults, RuleInfo, Verdict};
 use crate::query::OrderStatistics;
 use crate::state::{StateDict, StateError};
 
-/// Never ask (DQN, DQfD).
-#[derive(Clone, Copy, Debug, Default)]
-pub struct NeverRule;
-
-impl QueryRule for NeverRule {
-    fn name(&self) -> &'static str {
-        "never"
-    }
-    fn needs(&self) -> Needs {
-        Needs::NOTHING
-    }
-    fn decide(&mut self, _ctx: &QueryContext<'_>, _rng: &mut dyn RngCore) -> Verdict {
-        Verdict::NO
-    }
+/// The same answer at every decision: never ask (`never`: DQN, DQfD), or ask at every decision until the budget
+/// is spent (`greedy`: GDQN, whose expert drives the first `budget` steps).
+#[derive(Clone, Copy, Debug)]
+pub struct FixedRule {
+    pub ask: bool,
 }
 
-/// Ask at every decision until the budget is spent (GDQN): the expert drives the first `budget` steps.
-#[derive(Clone, Copy, Debug, Default)]
-pub struct GreedyRule;
-
-impl QueryRule for GreedyRule {
-    fn name(&self) -> &'static str {
-        "greedy"
-    }
-    fn needs(&self) -> Needs {
-        Needs::NOTHING
+impl QueryRule for FixedRule {
+    fn info(&self) -> &'static RuleInfo {
+        if self.ask { &GREEDY } else { &NEVER }
     }
     fn decide(&mut self, _ctx: &QueryContext<'_>, _rng: &mut dyn RngCore) -> Verdict {
-        Verdict::YES
+        Verdict {
+            query: self.ask,
+            ..Verdict::NO
+        }
     }
 }
 
@@ -62,17 +49,11 @@ impl BernoulliRule {
 }
 
 impl QueryRule for BernoulliRule {
-    fn name(&self) -> &'static str {
-        "bernoulli"
-    }
-    fn needs(&self) -> Needs {
-        Needs::NOTHING
+    fn info(&self) -> &'static RuleInfo {
+        &BERNOULLI
     }
     fn decide(&mut self, _ctx: &QueryContext<'_>, rng: &mut dyn RngCore) -> Verdict {
-        Verdict {
-            query: rng.random_bool(self.p),
-            ..Verdict::NO
-        }
+        Verdict::chance(self.p, rng)
     }
 }
 
@@ -206,14 +187,11 @@ impl AdaptiveQuantileRule {
 }
 
 impl QueryRule for AdaptiveQuantileRule {
-    fn name(&self) -> &'static str {
-        "adaptive"
-    }
-    fn needs(&self) -> Needs {
-        Needs::UNCERTAINTY
+    fn info(&self) -> &'static RuleInfo {
+        &ADAPTIVE
     }
     fn decide(&mut self, ctx: &QueryContext<'_>, _rng: &mut dyn RngCore) -> Verdict {
-        let uncertainty = ctx.uncertainty("adaptive");
+        let uncertainty = ctx.uncertainty(self.name());
         self.observe(uncertainty)
     }
     fn threshold(&self) -> Option<f32> {
@@ -234,27 +212,26 @@ pub(super) fn t_query(params: &mut Params, d: &RuleDefaults) -> Result<f64, Quer
     })
 }
 
-pub(super) const NEVER: RuleInfo = RuleInfo {
-    name: "never",
-    source: "the paper (DQN, DQfD)",
-    params: &[],
-    oracle: false,
-    build: |_, _| Ok(Box::new(NeverRule)),
-};
+/// The registry entry of a [`FixedRule`] answering `ASK`: no parameters, no signals.
+const fn fixed<const ASK: bool>(name: &'static str, source: &'static str) -> RuleInfo {
+    RuleInfo {
+        name,
+        source,
+        params: &[],
+        needs: Needs::NOTHING,
+        build: |_, _| Ok(Box::new(FixedRule { ask: ASK })),
+    }
+}
 
-pub(super) const GREEDY: RuleInfo = RuleInfo {
-    name: "greedy",
-    source: "the paper (GDQN): the first B steps",
-    params: &[],
-    oracle: false,
-    build: |_, _| Ok(Box::new(GreedyRule)),
-};
+pub(super) const NEVER: RuleInfo = fixed::<false>("never", "the paper (DQN, DQfD)");
+
+pub(super) const GREEDY: RuleInfo = fixed::<true>("greedy", "the paper (GDQN): the first B steps");
 
 pub(super) const BERNOULLI: RuleInfo = RuleInfo {
     name: "bernoulli",
     source: "the paper (BDQN)",
     params: &[("p", "the task's t_query")],
-    oracle: false,
+    needs: Needs::NOTHING,
     build: |params, d| {
         let p = params.get("p", d.t_query, "in [0, 1]", |v| (0.0..=1.0).contains(&v))?;
         Ok(Box::new(BernoulliRule::new(p)?))
@@ -265,7 +242,7 @@ pub(super) const ADAPTIVE: RuleInfo = RuleInfo {
     name: "adaptive",
     source: "the paper (ADQN, ADQNP; Algorithm 1)",
     params: &[("t_query", "the task's t_query"), ("n_r", "n_r (1000)")],
-    oracle: false,
+    needs: Needs::UNCERTAINTY,
     build: |params, d| {
         let t = t_query(params, d)?;
         let n_r = params.count("n_r", d.n_r)?;
