@@ -38,17 +38,20 @@ impl Expert for ScriptedExpert {
     }
 }
 
+/// A controller of box actions: the action for an observation.
+type BoxPolicy = fn(&[f32]) -> Vec<f32>;
+
 /// A hand-written controller for a task with actions in a box: Gymnasium's heuristic for the continuous
 /// lander, an energy-based swing-up for Pendulum, a momentum controller for MountainCarContinuous.
 pub struct ScriptedBoxExpert {
     env: &'static str,
-    policy: fn(&[f32]) -> Vec<f32>,
+    policy: BoxPolicy,
 }
 
 impl ScriptedBoxExpert {
     /// The scripted controller of the continuous task `env_id`.
     pub fn new(env_id: &str) -> Result<Self> {
-        let (env, policy): (&'static str, fn(&[f32]) -> Vec<f32>) = match env_id {
+        let (env, policy): (&'static str, BoxPolicy) = match env_id {
             "Pendulum-v1" => ("Pendulum-v1", |obs| pendulum::swing_up(obs).to_vec()),
             "MountainCarContinuous-v0" => ("MountainCarContinuous-v0", |obs| {
                 mountain_car_continuous::momentum(obs, 0.6).to_vec()

@@ -214,7 +214,7 @@ impl<'a, L: Learner> RunBuilder<'a, L> {
     }
 
     /// The environment and the parts of the run a snapshot holds, each from the run's seed.
-    fn prepare(&mut self) -> Result<(Box<dyn Env<L::Action>>, Parts<L>)> {
+    fn prepare(&mut self) -> Result<Prepared<L>> {
         let cfg = self.cfg;
         ensure!(
             !cfg.method.queries() || self.expert.is_some(),
@@ -262,6 +262,9 @@ impl<'a, L: Learner> RunBuilder<'a, L> {
         Ok((env, parts))
     }
 }
+
+/// The training environment and the parts of a run, as [`RunBuilder::prepare`] makes them.
+type Prepared<L> = (Box<dyn Env<<L as Learner>::Action>>, Parts<L>);
 
 /// The parts of a run that learn or draw: with the [`LoopState`] and the expert's state, what a snapshot holds.
 struct Parts<L: Learner> {
