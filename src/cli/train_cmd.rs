@@ -1,7 +1,7 @@
 //! `arld train`: one training run with the paper's presets, a config file and `--set` overrides.
 use arld::experiment::run_one;
 use arld::expert::web::WebOptions;
-use arld::train::{ConfigInput, Method, NetKind, TrainConfig};
+use arld::train::{Algo, ConfigInput, Method, NetKind, TrainConfig};
 use clap::Args;
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -32,6 +32,11 @@ pub struct TrainArgs {
     /// file's `net`, else bootstrap].
     #[arg(long, value_enum)]
     net: Option<NetKind>,
+    /// Learner of a task with actions in a box (Pendulum-v1, MountainCarContinuous-v0,
+    /// LunarLanderContinuous-v3): td3 or sac [default: the config file's `algo`, else td3]. The method keeps its
+    /// meaning: adqn is an active TD3 (or SAC) asking the expert where its critics disagree.
+    #[arg(long, value_enum)]
+    algo: Option<Algo>,
     /// Seed of every random draw of the run [default: the config file's `seed`, else 0].
     #[arg(long)]
     seed: Option<u64>,
@@ -130,6 +135,9 @@ pub fn resolve(args: &TrainArgs) -> anyhow::Result<TrainConfig> {
     }
     if let Some(net) = args.net {
         input.set("net", net.name())?;
+    }
+    if let Some(algo) = args.algo {
+        input.set("algo", algo.name())?;
     }
     if let Some(seed) = args.seed {
         input.set_seed(seed);

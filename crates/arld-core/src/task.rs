@@ -35,7 +35,8 @@ pub struct BoxSpec {
     pub action_high: &'static [f32],
     /// Gymnasium's `max_episode_steps`.
     pub max_episode_steps: usize,
-    /// Gymnasium's `reward_threshold`, where the task has one (Pendulum-v1 has none).
+    /// The mean test return that counts as solving the task: Gymnasium's `reward_threshold`, or ours where it
+    /// has none (Pendulum-v1: -200).
     pub solve_threshold: Option<f64>,
 }
 

@@ -1,18 +1,23 @@
 //! The actor-critic family behind the [`Learner`] interface: [`BoxAgent`] acts and learns in a box of float32
-//! actions with TD3 ([`super::td3`]), from the same replay batches, schedules and snapshots as the DQN family.
+//! actions with any [`ActorCritic`] learner (TD3, [`super::td3`]; SAC, [`super::sac`]), from the same replay
+//! batches, schedules and snapshots as the DQN family.
 //!
 //! - Acting: at ε = 1 (a run acting at random before learning starts) a uniform draw from the box, otherwise
-//!   the actor's action plus TD3's Gaussian exploration noise: TD3 explores with noise, so a DQN's ε-greedy
-//!   schedule below 1 does not apply. Every draw comes from the learner's generator, so the run's seed fixes
-//!   the actions.
-//! - Uncertainty: the standard deviation of the critic heads at the action taken ([`Td3::critic_spread`]),
-//!   computed only when the query rule asks for it.
-//! - Learning: a replay batch becomes TD3's batch: the n-step return, its observation and `gamma^n` when the
-//!   replay keeps them, otherwise the one-step reward, the next observation and `gamma` (0 at a bootstrap cut).
-//!   The priorities are the absolute TD errors of the first critic head.
+//!   the learner's behaviour action (TD3: the actor's action plus Gaussian noise; SAC: a sample of its policy):
+//!   actor-critic learners explore by themselves, so a DQN's ε-greedy schedule below 1 does not apply. Every
+//!   draw comes from the learner's generator, so the run's seed fixes the actions.
+//! - Uncertainty: the standard deviation of the critic heads at the action taken (`critic_spread`), computed
+//!   only when the query rule asks for it.
+//! - Learning: a replay batch becomes the learner's batch: the n-step return, its observation and `gamma^n`
+//!   when the replay keeps them, otherwise the one-step reward, the next observation and `gamma` (0 at a
+//!   bootstrap cut); demonstrated samples are flagged for the cloning loss. The priorities are the absolute TD
+//!   errors of the first critic head.
 
-use super::td3::{BoxBatch, Td3, Td3Config};
+use super::actor_critic::BoxBatch;
+use super::sac::{Sac, SacConfig};
+use super::td3::{Td3, Td3Config};
 use super::{Learner, UpdateStats};
+use crate::nn::Mlp;
 use crate::query::{Needs, Signals};
 use crate::replay::Batch;
 use crate::state::{Persist, StateDict, StateError};
@@ -23,14 +28,83 @@ use safetensors::{Dtype, tensor::TensorView};
 use std::collections::{BTreeMap, HashMap};
 use std::path::Path;
 
-/// A learner of actions in a box: TD3 behind [`Learner`].
+/// What a run needs of an actor-critic learner of box actions: acting, learning from a batch, the critics'
+/// disagreement, its generator, its policy network and its state.
+pub trait ActorCritic: Persist + Send {
+    /// The behaviour action at `obs` (with the learner's own exploration), into `action`.
+    fn act(&mut self, obs: &[f32], action: &mut [f32]);
+    /// The test-time action at `obs` (no exploration), into `action`.
+    fn test_action(&mut self, obs: &[f32], action: &mut [f32]);
+    /// The standard deviation of the critic heads at `(obs, action)`. Draws no random number.
+    fn critic_spread(&mut self, obs: &[f32], action: &[f32]) -> f32;
+    /// One update: the critics' loss and the new priority of each sample.
+    fn learn(&mut self, batch: &BoxBatch) -> (f32, &[f32]);
+    /// The learner's generator.
+    fn rng(&mut self) -> &mut Pcg64;
+    /// The policy network a run keeps.
+    fn actor(&self) -> &Mlp;
+    /// The learner's name in a weights file.
+    fn name(&self) -> &'static str;
+}
+
+impl ActorCritic for Td3<Pcg64> {
+    fn act(&mut self, obs: &[f32], action: &mut [f32]) {
+        Td3::act(self, obs, action);
+    }
+    fn test_action(&mut self, obs: &[f32], action: &mut [f32]) {
+        Td3::test_action(self, obs, action);
+    }
+    fn critic_spread(&mut self, obs: &[f32], action: &[f32]) -> f32 {
+        Td3::critic_spread(self, obs, action)
+    }
+    fn learn(&mut self, batch: &BoxBatch) -> (f32, &[f32]) {
+        let (stats, priorities) = Td3::learn(self, batch);
+        (stats.critic_loss, priorities)
+    }
+    fn rng(&mut self) -> &mut Pcg64 {
+        Td3::rng(self)
+    }
+    fn actor(&self) -> &Mlp {
+        Td3::actor(self)
+    }
+    fn name(&self) -> &'static str {
+        "td3"
+    }
+}
+
+impl ActorCritic for Sac<Pcg64> {
+    fn act(&mut self, obs: &[f32], action: &mut [f32]) {
+        Sac::act(self, obs, action);
+    }
+    fn test_action(&mut self, obs: &[f32], action: &mut [f32]) {
+        Sac::test_action(self, obs, action);
+    }
+    fn critic_spread(&mut self, obs: &[f32], action: &[f32]) -> f32 {
+        Sac::critic_spread(self, obs, action)
+    }
+    fn learn(&mut self, batch: &BoxBatch) -> (f32, &[f32]) {
+        let (stats, priorities) = Sac::learn(self, batch);
+        (stats.critic_loss, priorities)
+    }
+    fn rng(&mut self) -> &mut Pcg64 {
+        Sac::rng(self)
+    }
+    fn actor(&self) -> &Mlp {
+        Sac::actor(self)
+    }
+    fn name(&self) -> &'static str {
+        "sac"
+    }
+}
+
+/// A learner of actions in a box: an [`ActorCritic`] learner behind [`Learner`].
 pub struct BoxAgent {
-    td3: Td3<Pcg64>,
+    learner: Box<dyn ActorCritic>,
     obs_dim: usize,
     low: Vec<f32>,
     high: Vec<f32>,
     gamma: f32,
-    /// The replay batch in TD3's layout, reused from update to update.
+    /// The replay batch in the learner's layout, reused from update to update.
     batch: BoxBatch,
 }
 
@@ -45,19 +119,38 @@ impl BoxAgent {
         gamma: f32,
         seed: u64,
     ) -> Self {
+        let td3 = Td3::new(config, obs_dim, low, high, Pcg64::seed_from_u64(seed));
+        Self::with_learner(Box::new(td3), obs_dim, low, high, gamma)
+    }
+
+    /// SAC with `config`, otherwise as [`BoxAgent::new`].
+    pub fn sac(
+        config: SacConfig,
+        obs_dim: usize,
+        low: &[f32],
+        high: &[f32],
+        gamma: f32,
+        seed: u64,
+    ) -> Self {
+        let sac = Sac::new(config, obs_dim, low, high, Pcg64::seed_from_u64(seed));
+        Self::with_learner(Box::new(sac), obs_dim, low, high, gamma)
+    }
+
+    fn with_learner(
+        learner: Box<dyn ActorCritic>,
+        obs_dim: usize,
+        low: &[f32],
+        high: &[f32],
+        gamma: f32,
+    ) -> Self {
         BoxAgent {
-            td3: Td3::new(config, obs_dim, low, high, Pcg64::seed_from_u64(seed)),
+            learner,
             obs_dim,
             low: low.to_vec(),
             high: high.to_vec(),
             gamma,
             batch: BoxBatch::default(),
         }
-    }
-
-    /// The TD3 learner inside.
-    pub fn td3(&self) -> &Td3<Pcg64> {
-        &self.td3
     }
 }
 
@@ -70,14 +163,14 @@ impl Learner for BoxAgent {
         let mut action = vec![0.0; self.low.len()];
         if epsilon >= 1.0 {
             for (d, a) in action.iter_mut().enumerate() {
-                *a = self.td3.rng().random_range(self.low[d]..=self.high[d]);
+                *a = self.learner.rng().random_range(self.low[d]..=self.high[d]);
             }
         } else {
-            self.td3.act(obs, &mut action);
+            self.learner.act(obs, &mut action);
         }
         let uncertainty = want
             .uncertainty
-            .then(|| self.td3.critic_spread(obs, &action));
+            .then(|| self.learner.critic_spread(obs, &action));
         let signals = Signals {
             uncertainty,
             ..Signals::default()
@@ -91,6 +184,7 @@ impl Learner for BoxAgent {
         b.actions.clear();
         b.actions.extend_from_slice(batch.actions.values());
         b.weights.clone_from(&batch.weights);
+        b.is_demo.clone_from(&batch.is_demo);
         if batch.nstep_rewards.is_empty() {
             b.rewards.clone_from(&batch.rewards);
             b.next_obs.clone_from(&batch.next_obs);
@@ -106,9 +200,9 @@ impl Learner for BoxAgent {
             b.next_obs.clone_from(&batch.nstep_next_obs);
             b.discounts.clone_from(&batch.nstep_discounts);
         }
-        let (stats, priorities) = self.td3.learn(&self.batch);
+        let (critic_loss, priorities) = self.learner.learn(&self.batch);
         let stats = UpdateStats {
-            td_loss: stats.critic_loss,
+            td_loss: critic_loss,
             margin_loss: 0.0,
             nstep_loss: 0.0,
             grad_norm: 0.0,
@@ -116,7 +210,7 @@ impl Learner for BoxAgent {
         (stats, priorities)
     }
 
-    /// TD3's targets follow the online networks by Polyak averaging inside every update: nothing to copy.
+    /// The targets follow the online networks by Polyak averaging inside every update: nothing to copy.
     fn end_target_period(&mut self) {}
 
     fn test_actions(&mut self, obs: &[f32], actions: &mut BoxColumn) {
@@ -124,15 +218,15 @@ impl Learner for BoxAgent {
         let rows = obs.len() / d;
         let values = actions.rows_mut(rows, a);
         for r in 0..rows {
-            self.td3
+            self.learner
                 .test_action(&obs[r * d..(r + 1) * d], &mut values[r * a..(r + 1) * a]);
         }
     }
 
     /// Writes the actor (the policy a run keeps) as safetensors: one tensor `actor.params` with every weight
-    /// and bias layer by layer, its layer sizes and the box in the header.
+    /// and bias layer by layer, its layer sizes, the learner and the box in the header.
     fn save_weights(&self, path: &Path, metadata: &BTreeMap<String, String>) -> anyhow::Result<()> {
-        let actor = self.td3.actor();
+        let actor = self.learner.actor();
         let bytes: Vec<u8> = actor
             .parameters()
             .iter()
@@ -141,7 +235,7 @@ impl Learner for BoxAgent {
         let view = TensorView::new(Dtype::F32, vec![actor.parameters().len()], &bytes)?;
         let mut header: HashMap<String, String> = metadata.clone().into_iter().collect();
         let list = |v: &[f32]| v.iter().map(f32::to_string).collect::<Vec<_>>().join(",");
-        header.insert("kind".into(), "td3-actor".into());
+        header.insert("kind".into(), format!("{}-actor", self.learner.name()));
         header.insert(
             "sizes".into(),
             actor
@@ -161,11 +255,13 @@ impl Learner for BoxAgent {
 
 impl Persist for BoxAgent {
     fn save_state<'a>(&'a self, prefix: &str, state: &mut StateDict<'a>) {
-        self.td3.save_state(&format!("{prefix}.td3"), state);
+        let name = format!("{prefix}.{}", self.learner.name());
+        self.learner.save_state(&name, state);
     }
 
     fn load_state(&mut self, prefix: &str, state: &StateDict<'_>) -> Result<(), StateError> {
-        self.td3.load_state(&format!("{prefix}.td3"), state)
+        let name = format!("{prefix}.{}", self.learner.name());
+        self.learner.load_state(&name, state)
     }
 }
 
@@ -247,29 +343,41 @@ mod tests {
         assert!(score > -250.0, "TD3 did not learn Pendulum-v1: {score}");
     }
 
+    fn sac_agent(seed: u64) -> BoxAgent {
+        let config = SacConfig {
+            hidden: vec![64, 64],
+            max_batch: 128,
+            ..SacConfig::default()
+        };
+        BoxAgent::sac(config, 3, &[-2.0], &[2.0], 0.99, seed)
+    }
+
     #[test]
     fn a_snapshot_continues_to_the_same_bytes() {
         // Two learners act and learn 1,200 steps; one is saved at step 1,100 and loaded into a third, fresh
-        // learner built from another seed. The third and the first must then be equal to the last bit.
-        let (mut a, mut memory_a) = (agent(3), replay());
-        train(&mut a, &mut memory_a, 0..1_100);
-        let mut b = agent(99);
-        {
-            let mut state = StateDict::default();
-            a.save_state("agent", &mut state);
-            b.load_state("agent", &state).unwrap();
+        // learner built from another seed. The third and the first must then be equal to the last bit; for TD3
+        // and for SAC.
+        for (make, name) in [(agent as fn(u64) -> BoxAgent, "td3"), (sac_agent, "sac")] {
+            let (mut a, mut memory_a) = (make(3), replay());
+            train(&mut a, &mut memory_a, 0..1_100);
+            let mut b = make(99);
+            {
+                let mut state = StateDict::default();
+                a.save_state("agent", &mut state);
+                b.load_state("agent", &state).unwrap();
+            }
+            let mut memory_b = memory_a.clone();
+            train(&mut a, &mut memory_a, 1_100..1_200);
+            train(&mut b, &mut memory_b, 1_100..1_200);
+            let (mut sa, mut sb) = (StateDict::default(), StateDict::default());
+            a.save_state("agent", &mut sa);
+            b.save_state("agent", &mut sb);
+            assert!(sa == sb, "{name}: the continued learner differs");
+            let updates: u64 = sa.value(&format!("agent.{name}.updates")).unwrap();
+            assert_eq!(
+                updates, 200,
+                "{name}: 100 updates before the snapshot, 100 after"
+            );
         }
-        let mut memory_b = memory_a.clone();
-        train(&mut a, &mut memory_a, 1_100..1_200);
-        train(&mut b, &mut memory_b, 1_100..1_200);
-        let (mut sa, mut sb) = (StateDict::default(), StateDict::default());
-        a.save_state("agent", &mut sa);
-        b.save_state("agent", &mut sb);
-        assert_eq!(sa, sb);
-        assert_eq!(
-            a.td3().updates(),
-            200,
-            "100 updates before the snapshot, 100 after"
-        );
     }
 }

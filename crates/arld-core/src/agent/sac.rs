@@ -27,6 +27,8 @@ use rand_distr::StandardNormal;
 use super::actor_critic::{ActionBox, Critics, Net, behaviour_cloning};
 pub use super::actor_critic::{BcStats, BoxBatch};
 use crate::nn::{Adam, Mlp, MlpWorkspace, OutputActivation};
+use crate::state::{Persist, StateDict, StateError};
+use serde::{Serialize, de::DeserializeOwned};
 
 /// The clip of the actor's log standard deviation (the authors' code).
 pub const LOG_STD_MIN: f32 = -20.0;
@@ -472,6 +474,49 @@ impl<R: Rng> Sac<R> {
             None,
         );
         (loss * inv_n, bc)
+    }
+}
+
+impl<R: Rng> Sac<R> {
+    /// The learner's generator, for a caller's draws in sequence with the learner's own.
+    pub fn rng(&mut self) -> &mut R {
+        &mut self.rng
+    }
+
+    /// The actor network (the policy: the mean and log standard deviation of each action dimension).
+    pub fn actor(&self) -> &Mlp {
+        &self.actor
+    }
+}
+
+impl<R: Rng + Serialize + DeserializeOwned> Persist for Sac<R> {
+    /// Writes everything that changes while SAC learns and acts: the actor, the critics with their target and
+    /// optimiser, the temperature and its optimiser, the generator and the update count.
+    fn save_state<'a>(&'a self, prefix: &str, state: &mut StateDict<'a>) {
+        self.actor.save_state(&format!("{prefix}.actor"), state);
+        self.critics.save_state(&format!("{prefix}.critics"), state);
+        self.actor_opt
+            .save_state(&format!("{prefix}.actor_adam"), state);
+        state.put_value(&format!("{prefix}.log_alpha"), &self.log_alpha);
+        self.alpha_opt
+            .save_state(&format!("{prefix}.alpha_adam"), state);
+        state.put_text(&format!("{prefix}.rng"), &self.rng);
+        state.put_value(&format!("{prefix}.updates"), &self.updates);
+    }
+
+    /// Reads what [`Sac::save_state`] wrote into a learner of the same configuration.
+    fn load_state(&mut self, prefix: &str, state: &StateDict<'_>) -> Result<(), StateError> {
+        self.actor.load_state(&format!("{prefix}.actor"), state)?;
+        self.critics
+            .load_state(&format!("{prefix}.critics"), state)?;
+        self.actor_opt
+            .load_state(&format!("{prefix}.actor_adam"), state)?;
+        self.log_alpha = state.value(&format!("{prefix}.log_alpha"))?;
+        self.alpha_opt
+            .load_state(&format!("{prefix}.alpha_adam"), state)?;
+        self.rng = state.text(&format!("{prefix}.rng"))?;
+        self.updates = state.value(&format!("{prefix}.updates"))?;
+        Ok(())
     }
 }
 

@@ -121,6 +121,30 @@ fn parse_named<T: Copy>(s: &str, all: &[T], name: fn(T) -> &'static str, what: &
         })
 }
 
+/// The actor-critic learner of a task with actions in a box (docs/algorithm.md §15-17).
+#[derive(
+    Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize, clap::ValueEnum,
+)]
+#[serde(rename_all = "lowercase")]
+pub enum Algo {
+    /// TD3 (Fujimoto et al. 2018).
+    #[default]
+    Td3,
+    /// Soft actor-critic (Haarnoja et al. 2018).
+    Sac,
+}
+
+fixed_names!(Algo, "actor-critic learner", {
+    Td3 => "td3",
+    Sac => "sac",
+});
+
+impl Algo {
+    fn is_td3(&self) -> bool {
+        *self == Algo::Td3
+    }
+}
+
 /// The output stage of the Q-network (docs/algorithm.md §2).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize, clap::ValueEnum)]
 #[serde(rename_all = "lowercase")]
@@ -204,6 +228,10 @@ pub struct TrainConfig {
     /// true\]. Written to a configuration only when true.
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub random_before_learning: bool,
+    /// The learner of a task with actions in a box: `td3` or `sac` \[OURS: td3\]; unused by discrete tasks.
+    /// Written to a configuration only when it is not td3.
+    #[serde(default, skip_serializing_if = "Algo::is_td3")]
+    pub algo: Algo,
 
     /// Proportional prioritized replay (false: uniform) \[P\].
     pub prioritized: bool,
@@ -624,6 +652,10 @@ impl TrainConfig {
              file holds)"
         );
         let (p, schedule) = task_preset(env)?;
+        // A task with actions in a box is learned by TD3 (or SAC): one-step returns, two critic heads, batches
+        // of 128, uniform actions before learning starts (as Stable-Baselines3's TD3), the task's scripted
+        // controller as the expert \[OURS\].
+        let boxed = crate::env::box_spec(env).is_ok();
         let t_query = match net {
             NetKind::Noisy => p.t_query_noisy,
             _ => p.t_query_bootstrap,
@@ -644,11 +676,11 @@ impl TrainConfig {
             lr: p.lr,
             train_steps: p.train_steps,
             replay_size: p.replay_size,
-            batch_size: 32,
+            batch_size: if boxed { 128 } else { 32 },
             learning_starts: schedule.learning_starts,
             train_freq: 1,
             target_period: schedule.target_period,
-            heads: 10,
+            heads: if boxed { 2 } else { 10 },
             hidden: paper_hidden(),
             loss: TdLoss::Mse,
             double_q: true,
@@ -666,7 +698,7 @@ impl TrainConfig {
             margin: 0.8,
             lambda: p.lambda,
             lambda_n: 0.0,
-            n_step: 10,
+            n_step: if boxed { 1 } else { 10 },
             l2: 0.0,
             n_demo,
             pretrain_steps: if method.pretrains() {
@@ -677,14 +709,15 @@ impl TrainConfig {
             budget,
             budget_unit: BudgetUnit::Transitions,
             queries_from_learning_starts: false,
-            random_before_learning: false,
+            random_before_learning: boxed,
+            algo: Algo::Td3,
             target_period_in_steps: false,
             t_query,
             n_r: 1000,
             query_rule: String::new(),
             segment_len: 5,
             exact_factorised_var: false,
-            expert: "shipped:weak".to_string(),
+            expert: if boxed { "scripted" } else { "shipped:weak" }.to_string(),
             expert_timeout: crate::expert::process::DEFAULT_TIMEOUT_S,
             demo_file: String::new(),
             eval_period: schedule.eval_period,
@@ -707,10 +740,11 @@ impl TrainConfig {
 
     /// The keys a configuration file leaves out at their default (false), so that the files of runs that do
     /// not use them stay as they were before the keys existed.
-    fn omitted_at_default(&self) -> [(&'static str, bool); 2] {
+    fn omitted_at_default(&self) -> [(&'static str, toml::Value); 3] {
         [
-            ("random_before_learning", self.random_before_learning),
-            ("target_period_in_steps", self.target_period_in_steps),
+            ("random_before_learning", self.random_before_learning.into()),
+            ("target_period_in_steps", self.target_period_in_steps.into()),
+            ("algo", self.algo.name().into()),
         ]
     }
 
@@ -720,7 +754,8 @@ impl TrainConfig {
         let mut value = serde_json::to_value(self).expect("config serialises");
         if let Some(map) = value.as_object_mut() {
             for (key, set) in self.omitted_at_default() {
-                map.entry(key).or_insert(set.into());
+                let set = serde_json::to_value(set).expect("a config value serialises");
+                map.entry(key).or_insert(set);
             }
         }
         value.to_string()
@@ -730,7 +765,7 @@ impl TrainConfig {
     fn preset_table(cfg: &Self) -> toml::Table {
         let mut table = toml::Table::try_from(cfg).expect("config serialises");
         for (key, set) in cfg.omitted_at_default() {
-            table.entry(key).or_insert(set.into());
+            table.entry(key).or_insert(set);
         }
         table
     }
@@ -1402,6 +1437,7 @@ mod tests {
             "queries_from_learning_starts",
             "eps_greedy_on_top",
             "random_before_learning",
+            "algo",
             "target_period_in_steps",
             "prioritized",
             "exact_factorised_var",

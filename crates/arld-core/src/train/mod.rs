@@ -11,7 +11,7 @@ pub mod run_dir;
 pub mod seeds;
 pub mod snapshot;
 
-pub use config::{ConfigInput, Method, NetKind, TdLoss, TrainConfig};
+pub use config::{Algo, ConfigInput, Method, NetKind, TdLoss, TrainConfig};
 pub use eval::Evaluator;
 pub use log::{LogPosition, RunLog};
 pub use run::{Control, Driver, PausedRun, RunBuilder, StepView};
