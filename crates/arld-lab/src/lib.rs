@@ -121,8 +121,8 @@ fn run_in<L: Learner>(
     Ok(summary)
 }
 
-/// The expert a run in a continuous-action task asks: the task's scripted controller (`scripted`), when its
-/// method asks one. Pre-training on demonstrations of box actions is not built yet.
+/// The expert a run in a continuous-action task asks ([`expert::boxed`]: scripted, a trained actor, noisy), when
+/// its method asks one. Pre-training on demonstrations of box actions is not built yet.
 fn box_setup(cfg: &TrainConfig) -> Result<Option<Box<dyn expert::Expert<Vec<f32>>>>> {
     anyhow::ensure!(
         !cfg.method.pretrains(),
@@ -134,15 +134,12 @@ fn box_setup(cfg: &TrainConfig) -> Result<Option<Box<dyn expert::Expert<Vec<f32>
     if cfg.expert_used().is_none() {
         return Ok(None);
     }
-    anyhow::ensure!(
-        cfg.expert == "scripted",
-        "the expert '{}' cannot answer in {} (actions in a box): use --expert scripted",
-        cfg.expert,
-        cfg.env
-    );
-    Ok(Some(Box::new(expert::scripted::ScriptedBoxExpert::new(
-        &cfg.env,
-    )?)))
+    let spec = env::box_spec(&cfg.env)?;
+    Ok(Some(expert::boxed::from_spec(
+        &cfg.expert,
+        spec,
+        seed_for(cfg.seed, SeedPurpose::Expert),
+    )?))
 }
 
 /// What a run is given before training: its expert and its pre-training demonstrations, each if it needs them.

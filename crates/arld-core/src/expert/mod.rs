@@ -10,6 +10,7 @@
 //! [`process::ProcessExpert`] (another program speaking JSON lines). [`from_spec`] builds one from a short spec
 //! ([`build_with`] also the web expert, given its start); [`demos`] collects demonstrations from an expert.
 
+pub mod boxed;
 pub mod demos;
 pub mod pipeline;
 pub mod process;

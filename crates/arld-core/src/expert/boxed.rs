@@ -1,0 +1,335 @@
+//! Experts of actions in a box (the continuous tasks): built from the same specs as the discrete experts, where
+//! the kind makes sense for a box.
+//!
+//! - `scripted`: the task's controller ([`super::scripted::ScriptedBoxExpert`]).
+//! - `checkpoint:PATH`: a trained actor, as a run saves it (`weights.safetensors` or a checkpoint of a TD3 or SAC
+//!   run: [`crate::agent::box_agent::BoxAgent`]'s weights file), acting without exploration.
+//! - `noisy:S:SPEC`: the expert `SPEC` with Gaussian noise of standard deviation `S` half-widths of the box on
+//!   every action, clipped to the box (for a discrete task `noisy:P:SPEC` is a random action with probability
+//!   `P`; a box has no single "random action" a weaker expert would take, so the weakening is noise).
+//!
+//! The other kinds (`shipped`, `cmd`, `web`) do not answer with box actions yet, and say so.
+
+use super::scripted::ScriptedBoxExpert;
+use super::{Expert, ExpertSpec};
+use crate::agent::actor_critic::ActionBox;
+use crate::env::BoxSpec;
+use crate::nn::{Mlp, MlpWorkspace, OutputActivation};
+use anyhow::{Context, Result, bail, ensure};
+use rand::SeedableRng;
+use rand_distr::{Distribution, Normal};
+use rand_pcg::Pcg64;
+use std::path::{Path, PathBuf};
+
+/// The largest actor file read (an actor of 4096-wide layers is far below it).
+const MAX_ACTOR_FILE_BYTES: u64 = 1 << 30;
+
+/// The expert `spec` for the box task `spec`, its random draws (noise) from `seed`.
+pub fn from_spec(
+    expert: &str,
+    spec: &'static BoxSpec,
+    seed: u64,
+) -> Result<Box<dyn Expert<Vec<f32>>>> {
+    build(&expert.parse()?, expert, spec, seed)
+}
+
+fn build(
+    parsed: &ExpertSpec,
+    text: &str,
+    spec: &'static BoxSpec,
+    seed: u64,
+) -> Result<Box<dyn Expert<Vec<f32>>>> {
+    Ok(match parsed {
+        ExpertSpec::Scripted => Box::new(ScriptedBoxExpert::new(spec.id)?),
+        ExpertSpec::Checkpoint(path) => Box::new(ActorExpert::load(path, spec)?),
+        ExpertSpec::Noisy { p, inner } => {
+            let inner = build(inner, text, spec, seed)?;
+            Box::new(GaussianNoise::new(inner, *p as f32, spec, seed)?)
+        }
+        _ => bail!(
+            "the expert '{text}' cannot answer in {} (actions in a box): use scripted, checkpoint:PATH (a TD3 or \
+             SAC run's weights) or noisy:S:SPEC",
+            spec.id
+        ),
+    })
+}
+
+/// Which actor a weights file holds: TD3's (tanh of every output) or SAC's (tanh of the means, the first half of
+/// the outputs).
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum ActorKind {
+    Td3,
+    Sac,
+}
+
+/// A trained actor acting without exploration.
+pub struct ActorExpert {
+    path: PathBuf,
+    kind: ActorKind,
+    net: Mlp,
+    ws: MlpWorkspace,
+    action_box: ActionBox,
+}
+
+impl ActorExpert {
+    /// Reads the actor saved at `path` for the task `spec`: the file must be an actor's weights file of a run
+    /// of the same task (observation size, box), whole and finite.
+    pub fn load(path: &Path, spec: &BoxSpec) -> Result<Self> {
+        let bytes = crate::files::read_bounded(path, MAX_ACTOR_FILE_BYTES)
+            .with_context(|| format!("cannot read the expert's actor {}", path.display()))?;
+        let what = || format!("the expert's actor {}", path.display());
+        let (_, header) = safetensors::SafeTensors::read_metadata(&bytes)
+            .with_context(|| format!("{} is not a safetensors file", what()))?;
+        let meta = header.metadata().clone().unwrap_or_default();
+        let field = |key: &str| {
+            meta.get(key).with_context(|| {
+                format!(
+                    "{} has no `{key}` in its header: it is not an actor's weights file",
+                    what()
+                )
+            })
+        };
+        let kind = match field("kind")?.as_str() {
+            "td3-actor" => ActorKind::Td3,
+            "sac-actor" => ActorKind::Sac,
+            other => bail!("{} holds a `{other}`, not a TD3 or SAC actor", what()),
+        };
+        let sizes = field("sizes")?
+            .split(',')
+            .map(|w| {
+                w.trim()
+                    .parse::<usize>()
+                    .ok()
+                    .filter(|&w| (1..=1 << 16).contains(&w))
+            })
+            .collect::<Option<Vec<usize>>>()
+            .filter(|s| s.len() >= 2)
+            .with_context(|| format!("{}: bad layer sizes `{}`", what(), meta["sizes"]))?;
+        let floats = |key: &str| -> Result<Vec<f32>> {
+            field(key)?
+                .split(',')
+                .map(|v| {
+                    v.trim()
+                        .parse::<f32>()
+                        .with_context(|| format!("{}: bad `{key}`", what()))
+                })
+                .collect()
+        };
+        let (low, high) = (floats("action_low")?, floats("action_high")?);
+        ensure!(
+            low == spec.action_low && high == spec.action_high,
+            "{} acts in the box {low:?} to {high:?}, but {} has {:?} to {:?}",
+            what(),
+            spec.id,
+            spec.action_low,
+            spec.action_high
+        );
+        let outputs = match kind {
+            ActorKind::Td3 => spec.action_dim(),
+            ActorKind::Sac => 2 * spec.action_dim(),
+        };
+        ensure!(
+            sizes[0] == spec.obs_dim && sizes[sizes.len() - 1] == outputs,
+            "{} has {} inputs and {} outputs, but {} needs {} and {outputs}",
+            what(),
+            sizes[0],
+            sizes[sizes.len() - 1],
+            spec.id,
+            spec.obs_dim
+        );
+        let tensors = safetensors::SafeTensors::deserialize(&bytes)
+            .with_context(|| format!("{} is not a whole safetensors file", what()))?;
+        let params = tensors
+            .tensor("actor.params")
+            .with_context(|| format!("{} has no tensor `actor.params`", what()))?;
+        let output = match kind {
+            ActorKind::Td3 => OutputActivation::Tanh,
+            ActorKind::Sac => OutputActivation::Linear,
+        };
+        let mut net = Mlp::new(&sizes, output, &mut Pcg64::seed_from_u64(0));
+        ensure!(
+            params.dtype() == safetensors::Dtype::F32
+                && params.data().len() == 4 * net.parameters().len(),
+            "{}: `actor.params` holds {} bytes, but layers {sizes:?} need {} float32 numbers",
+            what(),
+            params.data().len(),
+            net.parameters().len()
+        );
+        for (p, b) in net
+            .parameters_mut()
+            .iter_mut()
+            .zip(params.data().chunks_exact(4))
+        {
+            *p = f32::from_le_bytes([b[0], b[1], b[2], b[3]]);
+        }
+        ensure!(
+            net.parameters().iter().all(|p| p.is_finite()),
+            "{} holds a weight that is not a finite number",
+            what()
+        );
+        let ws = MlpWorkspace::new(&net, 1);
+        Ok(ActorExpert {
+            path: path.to_path_buf(),
+            kind,
+            net,
+            ws,
+            action_box: ActionBox::new(spec.action_low, spec.action_high),
+        })
+    }
+}
+
+impl Expert<Vec<f32>> for ActorExpert {
+    fn act(&mut self, obs: &[f32]) -> Result<Vec<f32>> {
+        let a = self.action_box.dim();
+        let out = self.net.forward(obs, 1, &mut self.ws);
+        let mut action = match self.kind {
+            ActorKind::Td3 => out.to_vec(),
+            ActorKind::Sac => out[..a].iter().map(|mu| mu.tanh()).collect(),
+        };
+        self.action_box.to_box(&mut action);
+        Ok(action)
+    }
+
+    fn describe(&self) -> String {
+        format!("checkpoint:{}", self.path.display())
+    }
+}
+
+/// An expert whose every action gets Gaussian noise of standard deviation `sigma` half-widths of the box,
+/// clipped to the box.
+pub struct GaussianNoise {
+    inner: Box<dyn Expert<Vec<f32>>>,
+    sigma: f32,
+    action_box: ActionBox,
+    rng: Pcg64,
+}
+
+impl GaussianNoise {
+    /// `inner` with noise `sigma` (in half-widths, at least 0 and finite), drawn from `seed`.
+    pub fn new(
+        inner: Box<dyn Expert<Vec<f32>>>,
+        sigma: f32,
+        spec: &BoxSpec,
+        seed: u64,
+    ) -> Result<Self> {
+        ensure!(
+            sigma.is_finite() && sigma >= 0.0,
+            "the noise of a noisy expert must be a finite number of half-widths, at least 0, got {sigma}"
+        );
+        Ok(GaussianNoise {
+            inner,
+            sigma,
+            action_box: ActionBox::new(spec.action_low, spec.action_high),
+            rng: Pcg64::seed_from_u64(seed),
+        })
+    }
+}
+
+impl Expert<Vec<f32>> for GaussianNoise {
+    fn act(&mut self, obs: &[f32]) -> Result<Vec<f32>> {
+        let mut action = self.inner.act(obs)?;
+        let unit = Normal::new(0.0f32, 1.0).expect("a unit normal");
+        for (d, a) in action.iter_mut().enumerate() {
+            let noisy = *a + self.sigma * self.action_box.half[d] * unit.sample(&mut self.rng);
+            *a = noisy.clamp(self.action_box.low[d], self.action_box.high[d]);
+        }
+        Ok(action)
+    }
+
+    fn describe(&self) -> String {
+        format!("noisy({}, {})", self.sigma, self.inner.describe())
+    }
+
+    fn state(&self) -> Option<String> {
+        Some(serde_json::to_string(&self.rng).expect("the generator serialises"))
+    }
+
+    fn restore(&mut self, state: &str) -> Result<()> {
+        self.rng =
+            serde_json::from_str(state).context("the noisy expert's state in the snapshot")?;
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::agent::Learner;
+    use crate::agent::box_agent::BoxAgent;
+    use crate::agent::sac::SacConfig;
+    use crate::agent::td3::Td3Config;
+    use crate::env::box_spec;
+    use crate::task::{ActionColumn, BoxColumn};
+
+    /// An actor saved by a run answers as the run's own test-time policy, bit for bit, for TD3 and SAC.
+    #[test]
+    fn a_saved_actor_answers_as_the_agent_that_saved_it() {
+        let spec = box_spec("LunarLanderContinuous-v3").unwrap();
+        let (low, high) = (spec.action_low, spec.action_high);
+        let agents = [
+            BoxAgent::new(
+                Td3Config {
+                    hidden: vec![16, 8],
+                    ..Td3Config::default()
+                },
+                8,
+                low,
+                high,
+                0.99,
+                1,
+            ),
+            BoxAgent::sac(
+                SacConfig {
+                    hidden: vec![16, 8],
+                    ..SacConfig::default()
+                },
+                8,
+                low,
+                high,
+                0.99,
+                2,
+            ),
+        ];
+        let dir = tempfile::tempdir().unwrap();
+        for (i, mut agent) in agents.into_iter().enumerate() {
+            let path = dir.path().join(format!("actor{i}.safetensors"));
+            agent.save_weights(&path, &Default::default()).unwrap();
+            let mut expert = from_spec(&format!("checkpoint:{}", path.display()), spec, 0).unwrap();
+            let obs: Vec<f32> = (0..8).map(|k| (k as f32 * 0.37 + i as f32).sin()).collect();
+            let mut column = BoxColumn::default();
+            agent.test_actions(&obs, &mut column);
+            assert_eq!(
+                expert.act(&obs).unwrap(),
+                column.get(0).to_vec(),
+                "agent {i}"
+            );
+        }
+        // Another task's box or a file that is no actor is refused, naming the problem.
+        let path = dir.path().join("actor0.safetensors");
+        let err = ActorExpert::load(&path, box_spec("Pendulum-v1").unwrap())
+            .err()
+            .unwrap();
+        assert!(format!("{err:#}").contains("box"), "{err:#}");
+        std::fs::write(&path, b"not a file of weights").unwrap();
+        let err = ActorExpert::load(&path, spec).err().unwrap();
+        assert!(format!("{err:#}").contains("safetensors"), "{err:#}");
+    }
+
+    /// The noise's spread is the asked number of half-widths (measured over many draws), and it stays in the
+    /// box.
+    #[test]
+    fn noisy_box_experts_spread_as_asked_and_stay_in_the_box() {
+        let spec = box_spec("Pendulum-v1").unwrap();
+        let mut expert = from_spec("noisy:0.1:scripted", spec, 5).unwrap();
+        let obs = [1.0f32, 0.0, 0.0];
+        let clean = crate::env::pendulum::swing_up(&obs)[0];
+        let draws: Vec<f32> = (0..20_000).map(|_| expert.act(&obs).unwrap()[0]).collect();
+        assert!(draws.iter().all(|a| (-2.0..=2.0).contains(a)));
+        let n = draws.len() as f32;
+        let mean = draws.iter().sum::<f32>() / n;
+        let sd = (draws.iter().map(|a| (a - mean).powi(2)).sum::<f32>() / n).sqrt();
+        assert!((mean - clean).abs() < 0.01, "mean {mean}, clean {clean}");
+        assert!((sd - 0.2).abs() < 0.01, "sd {sd} for 0.1 half-widths of 2");
+        assert!(from_spec("shipped:weak", spec, 0).is_err());
+    }
+}
