@@ -1,5 +1,6 @@
 //! What the actor-critic learners for actions in a box (TD3 in `td3.rs`, SAC in `sac.rs`) share: the batch they
-//! learn from ([`BoxBatch`]), the box itself ([`ActionBox`]: the map between a tanh output in (-1, 1) and an
+//! learn from ([`BoxBatch`]), the sizes their networks are built to ([`Sizes`]), the actor with its optimiser and
+//! buffers ([`Actor`]), the box itself ([`ActionBox`]: the map between a tanh output in (-1, 1) and an
 //! action), the critic ensemble with its target and optimiser ([`Critics`]: K heads on a shared torso, the
 //! regression step that returns priorities, the gradient with respect to the action, and the two uncertainties
 //! read from its heads), and the behaviour cloning loss with the Q-filter on demonstrated samples
@@ -114,6 +115,61 @@ impl ActionBox {
     }
 }
 
+/// What a learner's networks are built to: the observation length, the hidden widths (of the actor and of the
+/// critics' torso) and the largest batch their buffers hold.
+pub(crate) struct Sizes<'a> {
+    pub obs_dim: usize,
+    pub hidden: &'a [usize],
+    pub max_batch: usize,
+}
+
+/// The actor network `obs -> outputs`, its Adam optimiser, its workspace and its parameter gradient.
+pub(crate) struct Actor {
+    pub net: Mlp,
+    pub opt: Adam,
+    pub ws: MlpWorkspace,
+    pub grads: Vec<f32>,
+}
+
+impl Actor {
+    /// An actor of `sizes` with `outputs` outputs through `activation`, its weights drawn from `rng`.
+    pub fn new(
+        sizes: &Sizes<'_>,
+        outputs: usize,
+        activation: OutputActivation,
+        lr: f32,
+        rng: &mut impl Rng,
+    ) -> Self {
+        let mut widths = vec![sizes.obs_dim];
+        widths.extend(sizes.hidden);
+        widths.push(outputs);
+        let net = Mlp::new(&widths, activation, rng);
+        Actor {
+            opt: Adam::for_parameters(net.parameters().len(), lr),
+            ws: MlpWorkspace::new(&net, sizes.max_batch),
+            grads: vec![0.0; net.parameters().len()],
+            net,
+        }
+    }
+
+    /// The outputs at `n` rows of `obs`; the pass stays in the workspace for [`Self::backward`].
+    pub fn forward(&mut self, obs: &[f32], n: usize) -> &[f32] {
+        self.net.forward(obs, n, &mut self.ws)
+    }
+
+    /// The parameter gradient of the last [`Self::forward`] given the loss gradient `d_out` at its outputs.
+    pub fn backward(&mut self, d_out: &[f32]) {
+        self.net
+            .backward(&mut self.ws, d_out, &mut self.grads, None);
+    }
+
+    /// One optimiser step along the last [`Self::backward`]'s gradient.
+    pub fn step(&mut self) {
+        self.opt
+            .step_parameters(self.net.parameters_mut(), &self.grads);
+    }
+}
+
 /// Which of the critics' networks to evaluate.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub(crate) enum Net {
@@ -158,21 +214,19 @@ impl Persist for Critics {
 pub const PROBE_OFFSET: f32 = 0.5;
 
 impl Critics {
-    /// Critics with `hidden` widths and `heads` heads, initialised from `rng`, for batches of at most `max_batch`
-    /// rows.
+    /// Critics of `sizes` for actions of `act_dim` values, with `heads` heads, initialised from `rng`.
     pub fn new(
-        obs_dim: usize,
+        sizes: &Sizes<'_>,
         act_dim: usize,
-        hidden: &[usize],
         heads: usize,
         lr: f32,
-        max_batch: usize,
         rng: &mut impl Rng,
     ) -> Self {
-        let mut sizes = vec![obs_dim + act_dim];
-        sizes.extend(hidden);
-        sizes.push(heads);
-        let net = Mlp::new(&sizes, OutputActivation::Linear, rng);
+        let (obs_dim, max_batch) = (sizes.obs_dim, sizes.max_batch);
+        let mut widths = vec![obs_dim + act_dim];
+        widths.extend(sizes.hidden);
+        widths.push(heads);
+        let net = Mlp::new(&widths, OutputActivation::Linear, rng);
         // The probes of `argmax_disagreement` are one batch too.
         let rows = max_batch.max(2 * act_dim + 1);
         Critics {

@@ -24,9 +24,9 @@
 use rand::Rng;
 use rand_distr::StandardNormal;
 
-use super::actor_critic::{ActionBox, Critics, Net, behaviour_cloning};
+use super::actor_critic::{ActionBox, Actor, Critics, Net, Sizes, behaviour_cloning};
 pub use super::actor_critic::{BcStats, BoxBatch};
-use crate::nn::{Adam, Mlp, MlpWorkspace, OutputActivation};
+use crate::nn::{Adam, OutputActivation};
 
 /// The clip of the actor's log standard deviation (the authors' code).
 pub const LOG_STD_MIN: f32 = -20.0;
@@ -105,15 +105,13 @@ pub struct Sac<R: Rng> {
     obs_dim: usize,
     action_box: ActionBox,
     target_entropy: f32,
-    actor: Mlp,
+    actor: Actor,
     critics: Critics,
-    actor_opt: Adam,
     log_alpha: f32,
     alpha_opt: Adam,
     rng: R,
     updates: u64,
     // Buffers, sized for `max_batch`.
-    actor_ws: MlpWorkspace,
     /// The actor's outputs, rows `[mu | log sigma]`, and their loss gradient, `max_batch * 2 dim(A)`.
     out: Vec<f32>,
     d_out: Vec<f32>,
@@ -131,7 +129,6 @@ pub struct Sac<R: Rng> {
     /// The critic's values of the demonstrated actions and of the test actions, for the Q-filter.
     q_demo: Vec<f32>,
     q_pi: Vec<f32>,
-    actor_grads: Vec<f32>,
     priorities: Vec<f32>,
 }
 
@@ -183,27 +180,24 @@ impl<R: Rng> Sac<R> {
             config.heads >= 2 && config.max_batch > 0 && config.initial_alpha > 0.0,
             "SAC needs two critic heads, a batch and a positive temperature"
         );
-        let a = low.len();
-        let mut sizes = vec![obs_dim];
-        sizes.extend(&config.hidden);
-        sizes.push(2 * a);
-        let actor = Mlp::new(&sizes, OutputActivation::Linear, &mut rng);
-        let n = config.max_batch;
-        let critics = Critics::new(
+        let (a, n) = (low.len(), config.max_batch);
+        let sizes = Sizes {
             obs_dim,
-            a,
-            &config.hidden,
-            config.heads,
-            config.critic_lr,
-            n,
+            hidden: &config.hidden,
+            max_batch: n,
+        };
+        let actor = Actor::new(
+            &sizes,
+            2 * a,
+            OutputActivation::Linear,
+            config.actor_lr,
             &mut rng,
         );
+        let critics = Critics::new(&sizes, a, config.heads, config.critic_lr, &mut rng);
         Sac {
             target_entropy: config.target_entropy.unwrap_or(-(a as f32)),
-            actor_opt: Adam::for_parameters(actor.parameters().len(), config.actor_lr),
             log_alpha: config.initial_alpha.ln(),
             alpha_opt: Adam::for_parameters(1, config.alpha_lr),
-            actor_ws: MlpWorkspace::new(&actor, n),
             out: vec![0.0; n * 2 * a],
             d_out: vec![0.0; n * 2 * a],
             noise: vec![0.0; n * a],
@@ -216,7 +210,6 @@ impl<R: Rng> Sac<R> {
             min_head: vec![0; n],
             q_demo: vec![0.0; n],
             q_pi: vec![0.0; n],
-            actor_grads: vec![0.0; actor.parameters().len()],
             priorities: vec![0.0; n],
             actor,
             critics,
@@ -246,7 +239,7 @@ impl<R: Rng> Sac<R> {
     /// The test-time action at `obs`: `tanh(mu)` scaled to the box.
     pub fn test_action(&mut self, obs: &[f32], action: &mut [f32]) {
         let a = self.action_dim();
-        let out = self.actor.forward(obs, 1, &mut self.actor_ws);
+        let out = self.actor.forward(obs, 1);
         for (v, mu) in action.iter_mut().zip(&out[..a]) {
             *v = mu.tanh();
         }
@@ -256,19 +249,10 @@ impl<R: Rng> Sac<R> {
     /// The behaviour action at `obs`: a sample of the policy.
     pub fn act(&mut self, obs: &[f32], action: &mut [f32]) {
         let a = self.action_dim();
-        let out = self.actor.forward(obs, 1, &mut self.actor_ws);
-        self.out[..2 * a].copy_from_slice(out);
-        for eps in &mut self.noise[..a] {
-            *eps = self.rng.sample(StandardNormal);
-        }
-        squash(
-            &self.out[..2 * a],
-            &self.noise[..a],
-            &self.action_box,
-            &mut self.y[..a],
-            action,
-            &mut self.log_probs[..1],
-        );
+        self.actor_outputs(obs, 1);
+        self.draw_noise(a);
+        self.sample_policy(1);
+        action.copy_from_slice(&self.actions[..a]);
     }
 
     /// The critics' disagreement at `(obs, action)`: the standard deviation of the heads' values (the
@@ -281,7 +265,7 @@ impl<R: Rng> Sac<R> {
     /// (see `Critics::argmax_disagreement`; 0 when every head prefers the same probe). Draws no random number.
     pub fn action_disagreement(&mut self, obs: &[f32]) -> f32 {
         let a = self.action_dim();
-        let out = self.actor.forward(obs, 1, &mut self.actor_ws);
+        let out = self.actor.forward(obs, 1);
         for (y, mu) in self.y_mean[..a].iter_mut().zip(&out[..a]) {
             *y = mu.tanh();
         }
@@ -294,6 +278,27 @@ impl<R: Rng> Sac<R> {
         for eps in &mut self.noise[..count] {
             *eps = self.rng.sample(StandardNormal);
         }
+    }
+
+    /// The actor's outputs at `n` rows of `obs`, into `self.out` (the pass stays in the actor's workspace).
+    fn actor_outputs(&mut self, obs: &[f32], n: usize) {
+        let a = self.action_dim();
+        let out = self.actor.forward(obs, n);
+        self.out[..2 * n * a].copy_from_slice(out);
+    }
+
+    /// Samples the policy ([`squash`]) at the first `n` rows of `self.out` with the noise in `self.noise`, into
+    /// `self.y`, `self.actions` and `self.log_probs`.
+    fn sample_policy(&mut self, n: usize) {
+        let a = self.action_dim();
+        squash(
+            &self.out[..2 * n * a],
+            &self.noise[..n * a],
+            &self.action_box,
+            &mut self.y[..n * a],
+            &mut self.actions[..n * a],
+            &mut self.log_probs[..n],
+        );
     }
 
     /// One update from `batch` (critics, actor, temperature, target). Returns what it measured and the new
@@ -309,17 +314,9 @@ impl<R: Rng> Sac<R> {
         let alpha = self.alpha();
 
         // The soft target: r + gamma^n (min(Q'_1, Q'_2)(s', a') - alpha log pi(a'|s')), a' ~ pi(s').
-        let out = self.actor.forward(&batch.next_obs, n, &mut self.actor_ws);
-        self.out[..2 * n * a].copy_from_slice(out);
+        self.actor_outputs(&batch.next_obs, n);
         self.draw_noise(n * a);
-        squash(
-            &self.out[..2 * n * a],
-            &self.noise[..n * a],
-            &self.action_box,
-            &mut self.y[..n * a],
-            &mut self.actions[..n * a],
-            &mut self.log_probs[..n],
-        );
+        self.sample_policy(n);
         let q_next = self
             .critics
             .evaluate(Net::Target, &batch.next_obs, &self.actions[..n * a], n);
@@ -338,8 +335,7 @@ impl<R: Rng> Sac<R> {
         // The actor, on fresh samples at the batch's states.
         self.draw_noise(n * a);
         let (actor_loss, bc) = self.actor_gradient(batch, alpha);
-        self.actor_opt
-            .step_parameters(self.actor.parameters_mut(), &self.actor_grads);
+        self.actor.step();
 
         // The temperature, from the same samples' log-probabilities.
         let (entropy, d_log_alpha) = self.temperature_gradient(n);
@@ -368,7 +364,7 @@ impl<R: Rng> Sac<R> {
     /// The actor's loss at the batch's states with the noise in `self.noise` and temperature `alpha`:
     /// `mean_b [alpha log pi(a_b|s_b) - min(Q_1, Q_2)(s_b, a_b)]` plus the behaviour cloning term with the
     /// Q-filter (the demonstrated action against `tanh(mu)`, each valued by `min(Q_1, Q_2)`), and its gradient
-    /// with respect to the actor's parameters in `self.actor_grads`. Returns the first part and the cloning
+    /// with respect to the actor's parameters in `self.actor.grads`. Returns the first part and the cloning
     /// term's measures; leaves the samples' log-probabilities in `self.log_probs`.
     fn actor_gradient(&mut self, batch: &BoxBatch, alpha: f32) -> (f32, Option<BcStats>) {
         let n = batch.len();
@@ -384,8 +380,7 @@ impl<R: Rng> Sac<R> {
                 self.q_demo[r] = pair_min(q, r);
             }
         }
-        let out = self.actor.forward(&batch.obs, n, &mut self.actor_ws);
-        self.out[..2 * n * a].copy_from_slice(out);
+        self.actor_outputs(&batch.obs, n);
         if cloning {
             for r in 0..n {
                 for dim in 0..a {
@@ -402,14 +397,7 @@ impl<R: Rng> Sac<R> {
                 self.q_pi[r] = pair_min(q, r);
             }
         }
-        squash(
-            &self.out[..2 * n * a],
-            &self.noise[..n * a],
-            &self.action_box,
-            &mut self.y[..n * a],
-            &mut self.actions[..n * a],
-            &mut self.log_probs[..n],
-        );
+        self.sample_policy(n);
         let q = self
             .critics
             .evaluate(Net::Online, &batch.obs, &self.actions[..n * a], n);
@@ -465,12 +453,7 @@ impl<R: Rng> Sac<R> {
         } else {
             None
         };
-        self.actor.backward(
-            &mut self.actor_ws,
-            &self.d_out[..2 * n * a],
-            &mut self.actor_grads,
-            None,
-        );
+        self.actor.backward(&self.d_out[..2 * n * a]);
         (loss * inv_n, bc)
     }
 }
@@ -481,6 +464,7 @@ mod tests {
     use crate::agent::actor_critic::testing::{
         evaluate_pendulum, pretraining_imitates, train_pendulum,
     };
+    use crate::nn::MlpWorkspace;
     use rand::SeedableRng;
 
     type Pcg = rand_pcg::Pcg64;
@@ -530,8 +514,8 @@ mod tests {
     /// One sample of the policy at `state` for the noise `eps`, in float64 with the textbook formulas: the
     /// action (in the box) and `log N(u; mu, sigma) - log(1 - tanh(u)^2)` summed over the dimensions.
     fn sample(agent: &Sac<Pcg>, state: &[f32], eps: &[f32]) -> (Vec<f32>, f64, Vec<f64>) {
-        let mut ws = MlpWorkspace::new(&agent.actor, 1);
-        let out = agent.actor.forward(state, 1, &mut ws).to_vec();
+        let mut ws = MlpWorkspace::new(&agent.actor.net, 1);
+        let out = agent.actor.net.forward(state, 1, &mut ws).to_vec();
         let a = eps.len();
         let (low, high) = (&agent.action_box.low, &agent.action_box.high);
         let mut action = vec![0.0; a];
@@ -563,7 +547,7 @@ mod tests {
         agent.noise[..2 * n].copy_from_slice(&noise);
         let alpha = 0.3f32;
         let (_, bc) = agent.actor_gradient(&batch, alpha);
-        let grads = agent.actor_grads.clone();
+        let grads = agent.actor.grads.clone();
         // The Q-filter's outcome at the unperturbed parameters (a selection, not differentiated).
         let filter: Vec<bool> = (0..n)
             .map(|r| {
@@ -606,13 +590,13 @@ mod tests {
         // disagree and the point is skipped; with eight rows through 16 ReLUs there are a few, at most one in ten.
         let mut skipped = 0;
         for (i, analytic) in grads.iter().enumerate() {
-            let original = agent.actor.parameters()[i];
+            let original = agent.actor.net.parameters()[i];
             let mut central = |h: f32| {
-                agent.actor.parameters_mut()[i] = original + h;
+                agent.actor.net.parameters_mut()[i] = original + h;
                 let up = loss(&agent);
-                agent.actor.parameters_mut()[i] = original - h;
+                agent.actor.net.parameters_mut()[i] = original - h;
                 let down = loss(&agent);
-                agent.actor.parameters_mut()[i] = original;
+                agent.actor.net.parameters_mut()[i] = original;
                 (up - down) / (2.0 * f64::from(h))
             };
             let (coarse, numeric) = (central(1e-2), central(5e-3));
@@ -717,7 +701,7 @@ mod tests {
                 trace.push(agent.critic_spread(&[0.1, -0.2], &action).to_bits());
                 trace.push(agent.action_disagreement(&[0.1, -0.2]).to_bits());
             }
-            trace.extend(agent.actor.parameters().iter().map(|p| p.to_bits()));
+            trace.extend(agent.actor.net.parameters().iter().map(|p| p.to_bits()));
             trace.extend(agent.critics.net.parameters().iter().map(|p| p.to_bits()));
             trace
         };
@@ -788,18 +772,23 @@ mod tests {
         eprintln!("the heads disagreed on {nonzero} of 8 states");
     }
 
-    #[test]
-    fn sac_learns_pendulum() {
-        // 64-64 networks, batch 128, 10,000 steps (the first 1,000 uniformly random), one update a step; the
-        // policy's mean action must then hold Pendulum-v1 above -200 on ten evaluation seeds it never trained on.
-        let config = SacConfig {
+    /// The settings of the Pendulum-v1 tests: 64-64 networks, batch 128, learning rates 1e-3.
+    fn pendulum_config() -> SacConfig {
+        SacConfig {
             hidden: vec![64, 64],
             max_batch: 128,
             actor_lr: 1e-3,
             critic_lr: 1e-3,
             alpha_lr: 1e-3,
             ..SacConfig::default()
-        };
+        }
+    }
+
+    #[test]
+    fn sac_learns_pendulum() {
+        // 64-64 networks, batch 128, 10,000 steps (the first 1,000 uniformly random), one update a step; the
+        // policy's mean action must then hold Pendulum-v1 above -200 on ten evaluation seeds it never trained on.
+        let config = pendulum_config();
         let mut agent = Sac::new(config, 3, &[-2.0], &[2.0], Pcg::seed_from_u64(0));
         train_pendulum(&mut agent, 10_000, 128);
         let score = evaluate_pendulum(&mut agent, 1000..1010);
@@ -813,14 +802,9 @@ mod tests {
     #[test]
     fn pretraining_on_demonstrations_imitates_the_swing_up() {
         let config = SacConfig {
-            hidden: vec![64, 64],
-            max_batch: 128,
-            actor_lr: 1e-3,
-            critic_lr: 1e-3,
-            alpha_lr: 1e-3,
             bc_weight: 100.0,
             q_filter: false,
-            ..SacConfig::default()
+            ..pendulum_config()
         };
         let mut agent = Sac::new(config, 3, &[-2.0], &[2.0], Pcg::seed_from_u64(3));
         pretraining_imitates(&mut agent, 2_000, "SAC");

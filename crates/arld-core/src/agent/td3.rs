@@ -19,9 +19,9 @@
 use rand::Rng;
 use rand_distr::StandardNormal;
 
-use super::actor_critic::{ActionBox, Critics, Net, behaviour_cloning};
+use super::actor_critic::{ActionBox, Actor, Critics, Net, Sizes, behaviour_cloning};
 pub use super::actor_critic::{BcStats, BoxBatch};
-use crate::nn::{Adam, Mlp, MlpWorkspace, OutputActivation};
+use crate::nn::{Mlp, OutputActivation};
 use crate::state::{Persist, StateDict, StateError};
 use serde::{Serialize, de::DeserializeOwned};
 
@@ -91,14 +91,12 @@ pub struct Td3<R: Rng> {
     config: Td3Config,
     obs_dim: usize,
     action_box: ActionBox,
-    actor: Mlp,
+    actor: Actor,
     actor_target: Mlp,
     critics: Critics,
-    actor_opt: Adam,
     rng: R,
     updates: u64,
     // Buffers, sized for `max_batch`.
-    actor_ws: MlpWorkspace,
     /// Actions (in the box), the actor's tanh outputs and their loss gradient, `max_batch * dim(A)`.
     actions: Vec<f32>,
     y: Vec<f32>,
@@ -107,7 +105,6 @@ pub struct Td3<R: Rng> {
     /// The critic's values of the demonstrated actions and of the actor's, for the Q-filter.
     q_demo: Vec<f32>,
     q_pi: Vec<f32>,
-    actor_grads: Vec<f32>,
     priorities: Vec<f32>,
 }
 
@@ -124,33 +121,29 @@ impl<R: Rng> Td3<R> {
             config.heads >= 2 && config.max_batch > 0,
             "TD3 needs two critic heads and a batch"
         );
-        let act_dim = low.len();
-        let mut sizes = vec![obs_dim];
-        sizes.extend(&config.hidden);
-        sizes.push(act_dim);
-        let actor = Mlp::new(&sizes, OutputActivation::Tanh, &mut rng);
-        let n = config.max_batch;
-        let critics = Critics::new(
+        let (act_dim, n) = (low.len(), config.max_batch);
+        let sizes = Sizes {
             obs_dim,
+            hidden: &config.hidden,
+            max_batch: n,
+        };
+        let actor = Actor::new(
+            &sizes,
             act_dim,
-            &config.hidden,
-            config.heads,
-            config.critic_lr,
-            n,
+            OutputActivation::Tanh,
+            config.actor_lr,
             &mut rng,
         );
+        let critics = Critics::new(&sizes, act_dim, config.heads, config.critic_lr, &mut rng);
         Td3 {
-            actor_opt: Adam::for_parameters(actor.parameters().len(), config.actor_lr),
-            actor_ws: MlpWorkspace::new(&actor, n),
             actions: vec![0.0; n * act_dim],
             y: vec![0.0; n * act_dim],
             d_y: vec![0.0; n * act_dim],
             targets: vec![0.0; n],
             q_demo: vec![0.0; n],
             q_pi: vec![0.0; n],
-            actor_grads: vec![0.0; actor.parameters().len()],
             priorities: vec![0.0; n],
-            actor_target: actor.clone(),
+            actor_target: actor.net.clone(),
             actor,
             critics,
             obs_dim,
@@ -173,7 +166,7 @@ impl<R: Rng> Td3<R> {
 
     /// The test-time action at `obs`: the actor's, without noise.
     pub fn test_action(&mut self, obs: &[f32], action: &mut [f32]) {
-        let y = self.actor.forward(obs, 1, &mut self.actor_ws);
+        let y = self.actor.forward(obs, 1);
         action.copy_from_slice(y);
         self.action_box.to_box(action);
     }
@@ -199,7 +192,7 @@ impl<R: Rng> Td3<R> {
     /// (see `Critics::argmax_disagreement`; 0 when every head prefers the same probe). Draws no random number.
     pub fn action_disagreement(&mut self, obs: &[f32]) -> f32 {
         let a = self.action_dim();
-        let y = self.actor.forward(obs, 1, &mut self.actor_ws);
+        let y = self.actor.forward(obs, 1);
         self.y[..a].copy_from_slice(y);
         self.critics
             .argmax_disagreement(obs, &self.y[..a], &self.action_box)
@@ -219,7 +212,7 @@ impl<R: Rng> Td3<R> {
         // The target: r + gamma^n * min(Q'_1, Q'_2)(s', pi'(s') + clipped noise).
         let y = self
             .actor_target
-            .forward(&batch.next_obs, n, &mut self.actor_ws);
+            .forward(&batch.next_obs, n, &mut self.actor.ws);
         let next_actions = &mut self.actions[..n * a];
         next_actions.copy_from_slice(y);
         self.action_box.to_box(next_actions);
@@ -256,11 +249,11 @@ impl<R: Rng> Td3<R> {
 
         if self.updates.is_multiple_of(self.config.policy_delay) {
             let (actor_loss, bc) = self.actor_gradient(batch);
-            self.actor_opt
-                .step_parameters(self.actor.parameters_mut(), &self.actor_grads);
+            self.actor.step();
             stats.actor_loss = Some(actor_loss);
             stats.bc = bc;
-            self.actor_target.soft_update(&self.actor, self.config.tau);
+            self.actor_target
+                .soft_update(&self.actor.net, self.config.tau);
             self.critics.soft_update(self.config.tau);
         }
         (stats, &self.priorities[..n])
@@ -269,7 +262,7 @@ impl<R: Rng> Td3<R> {
     /// The actor's loss at the batch's observations, `-mean over the batch and the heads of Q(s, pi(s))` plus the
     /// behaviour cloning term with the Q-filter on its demonstrated samples (the heads' mean compares the
     /// demonstrated action with the actor's), and its gradient with respect to the actor's parameters in
-    /// `self.actor_grads` (through the critic's input gradient and the box's scaling). Returns the Q part of
+    /// `self.actor.grads` (through the critic's input gradient and the box's scaling). Returns the Q part of
     /// the loss and the cloning term's measures.
     fn actor_gradient(&mut self, batch: &BoxBatch) -> (f32, Option<BcStats>) {
         let n = batch.len();
@@ -284,7 +277,7 @@ impl<R: Rng> Td3<R> {
                 self.q_demo[r] = q[r * k..(r + 1) * k].iter().sum::<f32>() / k as f32;
             }
         }
-        let y = self.actor.forward(&batch.obs, n, &mut self.actor_ws);
+        let y = self.actor.forward(&batch.obs, n);
         self.y[..n * a].copy_from_slice(y);
         let actions = &mut self.actions[..n * a];
         actions.copy_from_slice(y);
@@ -316,8 +309,7 @@ impl<R: Rng> Td3<R> {
         } else {
             None
         };
-        self.actor
-            .backward(&mut self.actor_ws, d_y, &mut self.actor_grads, None);
+        self.actor.backward(d_y);
         (loss, bc)
     }
 }
@@ -330,7 +322,7 @@ impl<R: Rng> Td3<R> {
 
     /// The actor network (the policy).
     pub fn actor(&self) -> &Mlp {
-        &self.actor
+        &self.actor.net
     }
 }
 
@@ -338,11 +330,12 @@ impl<R: Rng + Serialize + DeserializeOwned> Persist for Td3<R> {
     /// Writes everything that changes while TD3 learns and acts: the actor, the critics, their targets and optimisers, the
     /// generator and the update count. Buffers are left out: every use overwrites them.
     fn save_state<'a>(&'a self, prefix: &str, state: &mut StateDict<'a>) {
-        self.actor.save_state(&format!("{prefix}.actor"), state);
+        self.actor.net.save_state(&format!("{prefix}.actor"), state);
         self.actor_target
             .save_state(&format!("{prefix}.actor_target"), state);
         self.critics.save_state(&format!("{prefix}.critics"), state);
-        self.actor_opt
+        self.actor
+            .opt
             .save_state(&format!("{prefix}.actor_adam"), state);
         state.put_text(&format!("{prefix}.rng"), &self.rng);
         state.put_value(&format!("{prefix}.updates"), &self.updates);
@@ -350,12 +343,15 @@ impl<R: Rng + Serialize + DeserializeOwned> Persist for Td3<R> {
 
     /// Reads what [`Td3::save_state`] wrote into a learner of the same configuration.
     fn load_state(&mut self, prefix: &str, state: &StateDict<'_>) -> Result<(), StateError> {
-        self.actor.load_state(&format!("{prefix}.actor"), state)?;
+        self.actor
+            .net
+            .load_state(&format!("{prefix}.actor"), state)?;
         self.actor_target
             .load_state(&format!("{prefix}.actor_target"), state)?;
         self.critics
             .load_state(&format!("{prefix}.critics"), state)?;
-        self.actor_opt
+        self.actor
+            .opt
             .load_state(&format!("{prefix}.actor_adam"), state)?;
         self.rng = state.text(&format!("{prefix}.rng"))?;
         self.updates = state.value(&format!("{prefix}.updates"))?;
@@ -369,7 +365,19 @@ mod tests {
     use crate::agent::actor_critic::testing::{
         evaluate_pendulum, pretraining_imitates, train_pendulum,
     };
+    use crate::nn::MlpWorkspace;
     use rand::SeedableRng;
+
+    /// A learner for Pendulum-v1 (3 observations, one action in [-2, 2]) from `seed`.
+    fn pendulum_agent(config: Td3Config, seed: u64) -> Td3<rand_pcg::Pcg64> {
+        Td3::new(
+            config,
+            3,
+            &[-2.0],
+            &[2.0],
+            rand_pcg::Pcg64::seed_from_u64(seed),
+        )
+    }
 
     #[test]
     fn td3_learns_pendulum() {
@@ -380,13 +388,7 @@ mod tests {
             max_batch: 128,
             ..Td3Config::default()
         };
-        let mut agent = Td3::new(
-            config,
-            3,
-            &[-2.0],
-            &[2.0],
-            rand_pcg::Pcg64::seed_from_u64(0),
-        );
+        let mut agent = pendulum_agent(config, 0);
         train_pendulum(&mut agent, 12_000, 128);
         let score = evaluate_pendulum(&mut agent, 1000..1010);
         eprintln!(
@@ -404,13 +406,7 @@ mod tests {
             q_filter: false,
             ..Td3Config::default()
         };
-        let mut agent = Td3::new(
-            config,
-            3,
-            &[-2.0],
-            &[2.0],
-            rand_pcg::Pcg64::seed_from_u64(3),
-        );
+        let mut agent = pendulum_agent(config, 3);
         pretraining_imitates(&mut agent, 2_000, "TD3");
     }
 
@@ -456,7 +452,7 @@ mod tests {
             is_demo: is_demo.to_vec(),
         };
         let (_, bc) = agent.actor_gradient(&batch);
-        let grads = agent.actor_grads.clone();
+        let grads = agent.actor.grads.clone();
         // The Q-filter's outcome at the unperturbed parameters (a selection, not differentiated).
         let heads_mean =
             |agent: &Td3<rand_pcg::Pcg64>, state: &[f32], action: &[f32]| -> (f64, f64) {
@@ -511,12 +507,12 @@ mod tests {
         };
         let h = 1e-2f32;
         for (i, analytic) in grads.iter().enumerate() {
-            let original = agent.actor.parameters()[i];
-            agent.actor.parameters_mut()[i] = original + h;
+            let original = agent.actor.net.parameters()[i];
+            agent.actor.net.parameters_mut()[i] = original + h;
             let up = loss(&mut agent);
-            agent.actor.parameters_mut()[i] = original - h;
+            agent.actor.net.parameters_mut()[i] = original - h;
             let down = loss(&mut agent);
-            agent.actor.parameters_mut()[i] = original;
+            agent.actor.net.parameters_mut()[i] = original;
             let numeric = (up - down) / (2.0 * f64::from(h));
             assert!(
                 (f64::from(*analytic) - numeric).abs() < 2e-3 * numeric.abs().max(0.1),
