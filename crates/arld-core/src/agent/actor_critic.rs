@@ -1,6 +1,7 @@
 //! What the actor-critic learners for actions in a box (TD3 in `td3.rs`, SAC in `sac.rs`) share: the batch they
-//! learn from ([`BoxBatch`]), the sizes their networks are built to ([`Sizes`]), the actor with its optimiser and
-//! buffers ([`Actor`]), the box itself ([`ActionBox`]: the map between a tanh output in (-1, 1) and an
+//! learn from ([`BoxBatch`]), what both hold ([`ActorCritic`]: the box, the actor, the critics, the generator and
+//! the per-sample buffers, with the critics' regression towards the clipped double-Q target), the sizes their
+//! networks are built to ([`Sizes`]), the actor with its optimiser and buffers ([`Actor`]), the box itself ([`ActionBox`]: the map between a tanh output in (-1, 1) and an
 //! action), the critic ensemble with its target and optimiser ([`Critics`]: K heads on a shared torso, the
 //! regression step that returns priorities, the gradient with respect to the action, and the two uncertainties
 //! read from its heads), and the behaviour cloning loss with the Q-filter on demonstrated samples
@@ -380,6 +381,114 @@ impl Critics {
             variance += (0..k).map(|h| (picked(h) - mean).powi(2)).sum::<f32>() / k as f32;
         }
         (variance / a as f32).sqrt()
+    }
+}
+
+/// What TD3 and SAC both hold: the observation length, the box, the actor, the critics, the generator, the update
+/// count, and the per-sample buffers of an update (TD targets, the Q-filter's values, the new priorities).
+pub(crate) struct ActorCritic<R> {
+    pub obs_dim: usize,
+    pub action_box: ActionBox,
+    pub actor: Actor,
+    pub critics: Critics,
+    pub rng: R,
+    pub updates: u64,
+    pub targets: Vec<f32>,
+    /// The critics' values of the demonstrated actions and of the actor's, for the Q-filter.
+    pub q_demo: Vec<f32>,
+    pub q_pi: Vec<f32>,
+    pub priorities: Vec<f32>,
+}
+
+impl<R: Rng> ActorCritic<R> {
+    /// The parts of a learner of `sizes` in `action_box`, their weights drawn from `rng`, actor first: `actor` is
+    /// its outputs per action dimension, their activation and its learning rate; `critics` the heads and their
+    /// learning rate.
+    pub fn new(
+        sizes: &Sizes<'_>,
+        action_box: ActionBox,
+        (per_dim, activation, actor_lr): (usize, OutputActivation, f32),
+        (heads, critic_lr): (usize, f32),
+        mut rng: R,
+    ) -> Self {
+        let (a, n) = (action_box.dim(), sizes.max_batch);
+        let actor = Actor::new(sizes, per_dim * a, activation, actor_lr, &mut rng);
+        let critics = Critics::new(sizes, a, heads, critic_lr, &mut rng);
+        ActorCritic {
+            obs_dim: sizes.obs_dim,
+            action_box,
+            actor,
+            critics,
+            rng,
+            updates: 0,
+            targets: vec![0.0; n],
+            q_demo: vec![0.0; n],
+            q_pi: vec![0.0; n],
+            priorities: vec![0.0; n],
+        }
+    }
+
+    /// Action dimension.
+    pub fn action_dim(&self) -> usize {
+        self.action_box.dim()
+    }
+
+    /// One regression step of the critics ([`Critics::update`]) towards the clipped double-Q target
+    /// `r + gamma^n (min(Q'_1, Q'_2)(s', a') - alpha log_probs)` at the next actions `next_actions` (`entropy`
+    /// holds `(alpha, log_probs)`; without it the target has no entropy term). Returns the loss; the new
+    /// priorities are in `priorities`.
+    pub fn critic_step(
+        &mut self,
+        batch: &BoxBatch,
+        next_actions: &[f32],
+        entropy: Option<(f32, &[f32])>,
+        demo_bonus: f32,
+    ) -> f32 {
+        let (n, k) = (batch.len(), self.critics.heads);
+        let q_next = self
+            .critics
+            .evaluate(Net::Target, &batch.next_obs, next_actions, n);
+        for r in 0..n {
+            let pair = q_next[r * k].min(q_next[r * k + 1]);
+            let soft = match entropy {
+                Some((alpha, log_probs)) => pair - alpha * log_probs[r],
+                None => pair,
+            };
+            self.targets[r] = batch.rewards[r] + batch.discounts[r] * soft;
+        }
+        self.critics.update(
+            batch,
+            &self.targets[..n],
+            &mut self.priorities[..n],
+            demo_bonus,
+        )
+    }
+
+    /// The critics' value of each demonstrated action of `batch` (`value` aggregates a row of the heads), into
+    /// `q_demo`, for the Q-filter.
+    pub fn value_demonstrations(&mut self, batch: &BoxBatch, value: impl Fn(&[f32]) -> f32) {
+        let (n, k) = (batch.len(), self.critics.heads);
+        let q = self
+            .critics
+            .evaluate(Net::Online, &batch.obs, &batch.actions, n);
+        for (r, v) in self.q_demo[..n].iter_mut().enumerate() {
+            *v = value(&q[r * k..(r + 1) * k]);
+        }
+    }
+
+    /// [`behaviour_cloning`] of the actor's tanh outputs `y` at `batch`, with the Q-filter of `q_demo` and
+    /// `q_pi` when `filtering`.
+    pub fn behaviour_cloning(
+        &self,
+        weight: f32,
+        batch: &BoxBatch,
+        filtering: bool,
+        y: &[f32],
+        d_y: &mut [f32],
+    ) -> BcStats {
+        let n = batch.len();
+        let q_filter = filtering.then_some((&self.q_demo[..n], &self.q_pi[..n]));
+        behaviour_cloning(weight, batch, q_filter, y, &self.action_box, d_y)
     }
 }
 
