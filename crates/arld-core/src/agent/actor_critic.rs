@@ -1,5 +1,7 @@
 //! What the actor-critic learners for actions in a box (TD3 in `td3.rs`, SAC in `sac.rs`) share: the batch they
-//! learn from ([`BoxBatch`]), the box itself ([`ActionBox`]: the map between a tanh output in (-1, 1) and an
+//! learn from ([`BoxBatch`]), what both hold ([`ActorCritic`]: the box, the actor, the critics, the generator and
+//! the per-sample buffers, with the critics' regression towards the clipped double-Q target), the sizes their
+//! networks are built to ([`Sizes`]), the actor with its optimiser and buffers ([`Actor`]), the box itself ([`ActionBox`]: the map between a tanh output in (-1, 1) and an
 //! action), the critic ensemble with its target and optimiser ([`Critics`]: K heads on a shared torso, the
 //! regression step that returns priorities, the gradient with respect to the action, and the two uncertainties
 //! read from its heads), and the behaviour cloning loss with the Q-filter on demonstrated samples
@@ -114,6 +116,61 @@ impl ActionBox {
     }
 }
 
+/// What a learner's networks are built to: the observation length, the hidden widths (of the actor and of the
+/// critics' torso) and the largest batch their buffers hold.
+pub(crate) struct Sizes<'a> {
+    pub obs_dim: usize,
+    pub hidden: &'a [usize],
+    pub max_batch: usize,
+}
+
+/// The actor network `obs -> outputs`, its Adam optimiser, its workspace and its parameter gradient.
+pub(crate) struct Actor {
+    pub net: Mlp,
+    pub opt: Adam,
+    pub ws: MlpWorkspace,
+    pub grads: Vec<f32>,
+}
+
+impl Actor {
+    /// An actor of `sizes` with `outputs` outputs through `activation`, its weights drawn from `rng`.
+    pub fn new(
+        sizes: &Sizes<'_>,
+        outputs: usize,
+        activation: OutputActivation,
+        lr: f32,
+        rng: &mut impl Rng,
+    ) -> Self {
+        let mut widths = vec![sizes.obs_dim];
+        widths.extend(sizes.hidden);
+        widths.push(outputs);
+        let net = Mlp::new(&widths, activation, rng);
+        Actor {
+            opt: Adam::for_parameters(net.parameters().len(), lr),
+            ws: MlpWorkspace::new(&net, sizes.max_batch),
+            grads: vec![0.0; net.parameters().len()],
+            net,
+        }
+    }
+
+    /// The outputs at `n` rows of `obs`; the pass stays in the workspace for [`Self::backward`].
+    pub fn forward(&mut self, obs: &[f32], n: usize) -> &[f32] {
+        self.net.forward(obs, n, &mut self.ws)
+    }
+
+    /// The parameter gradient of the last [`Self::forward`] given the loss gradient `d_out` at its outputs.
+    pub fn backward(&mut self, d_out: &[f32]) {
+        self.net
+            .backward(&mut self.ws, d_out, &mut self.grads, None);
+    }
+
+    /// One optimiser step along the last [`Self::backward`]'s gradient.
+    pub fn step(&mut self) {
+        self.opt
+            .step_parameters(self.net.parameters_mut(), &self.grads);
+    }
+}
+
 /// Which of the critics' networks to evaluate.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub(crate) enum Net {
@@ -158,21 +215,19 @@ impl Persist for Critics {
 pub const PROBE_OFFSET: f32 = 0.5;
 
 impl Critics {
-    /// Critics with `hidden` widths and `heads` heads, initialised from `rng`, for batches of at most `max_batch`
-    /// rows.
+    /// Critics of `sizes` for actions of `act_dim` values, with `heads` heads, initialised from `rng`.
     pub fn new(
-        obs_dim: usize,
+        sizes: &Sizes<'_>,
         act_dim: usize,
-        hidden: &[usize],
         heads: usize,
         lr: f32,
-        max_batch: usize,
         rng: &mut impl Rng,
     ) -> Self {
-        let mut sizes = vec![obs_dim + act_dim];
-        sizes.extend(hidden);
-        sizes.push(heads);
-        let net = Mlp::new(&sizes, OutputActivation::Linear, rng);
+        let (obs_dim, max_batch) = (sizes.obs_dim, sizes.max_batch);
+        let mut widths = vec![obs_dim + act_dim];
+        widths.extend(sizes.hidden);
+        widths.push(heads);
+        let net = Mlp::new(&widths, OutputActivation::Linear, rng);
         // The probes of `argmax_disagreement` are one batch too.
         let rows = max_batch.max(2 * act_dim + 1);
         Critics {
@@ -326,6 +381,143 @@ impl Critics {
             variance += (0..k).map(|h| (picked(h) - mean).powi(2)).sum::<f32>() / k as f32;
         }
         (variance / a as f32).sqrt()
+    }
+}
+
+/// What TD3 and SAC both hold: the observation length, the box, the actor, the critics, the generator, the update
+/// count, and the per-sample buffers of an update (TD targets, the Q-filter's values, the new priorities).
+pub(crate) struct ActorCritic<R> {
+    pub obs_dim: usize,
+    pub action_box: ActionBox,
+    pub actor: Actor,
+    pub critics: Critics,
+    pub rng: R,
+    pub updates: u64,
+    pub targets: Vec<f32>,
+    /// The critics' values of the demonstrated actions and of the actor's, for the Q-filter.
+    pub q_demo: Vec<f32>,
+    pub q_pi: Vec<f32>,
+    pub priorities: Vec<f32>,
+}
+
+impl<R: serde::Serialize + serde::de::DeserializeOwned> Persist for ActorCritic<R> {
+    /// Writes the actor and its optimiser, the critics (with their target and optimiser), the generator and
+    /// the update count under `prefix` (the learner adds what is its own).
+    fn save_state<'a>(&'a self, prefix: &str, state: &mut StateDict<'a>) {
+        self.actor.net.save_state(&format!("{prefix}.actor"), state);
+        self.actor
+            .opt
+            .save_state(&format!("{prefix}.actor_adam"), state);
+        self.critics.save_state(&format!("{prefix}.critics"), state);
+        state.put_text(&format!("{prefix}.rng"), &self.rng);
+        state.put_value(&format!("{prefix}.updates"), &self.updates);
+    }
+
+    /// Reads what [`ActorCritic::save_state`] wrote.
+    fn load_state(&mut self, prefix: &str, state: &StateDict<'_>) -> Result<(), StateError> {
+        self.actor
+            .net
+            .load_state(&format!("{prefix}.actor"), state)?;
+        self.actor
+            .opt
+            .load_state(&format!("{prefix}.actor_adam"), state)?;
+        self.critics
+            .load_state(&format!("{prefix}.critics"), state)?;
+        self.rng = state.text(&format!("{prefix}.rng"))?;
+        self.updates = state.value(&format!("{prefix}.updates"))?;
+        Ok(())
+    }
+}
+
+impl<R: Rng> ActorCritic<R> {
+    /// The parts of a learner of `sizes` in `action_box`, their weights drawn from `rng`, actor first: `actor` is
+    /// its outputs per action dimension, their activation and its learning rate; `critics` the heads and their
+    /// learning rate.
+    pub fn new(
+        sizes: &Sizes<'_>,
+        action_box: ActionBox,
+        (per_dim, activation, actor_lr): (usize, OutputActivation, f32),
+        (heads, critic_lr): (usize, f32),
+        mut rng: R,
+    ) -> Self {
+        let (a, n) = (action_box.dim(), sizes.max_batch);
+        let actor = Actor::new(sizes, per_dim * a, activation, actor_lr, &mut rng);
+        let critics = Critics::new(sizes, a, heads, critic_lr, &mut rng);
+        ActorCritic {
+            obs_dim: sizes.obs_dim,
+            action_box,
+            actor,
+            critics,
+            rng,
+            updates: 0,
+            targets: vec![0.0; n],
+            q_demo: vec![0.0; n],
+            q_pi: vec![0.0; n],
+            priorities: vec![0.0; n],
+        }
+    }
+
+    /// Action dimension.
+    pub fn action_dim(&self) -> usize {
+        self.action_box.dim()
+    }
+
+    /// One regression step of the critics ([`Critics::update`]) towards the clipped double-Q target
+    /// `r + gamma^n (min(Q'_1, Q'_2)(s', a') - alpha log_probs)` at the next actions `next_actions` (`entropy`
+    /// holds `(alpha, log_probs)`; without it the target has no entropy term). Returns the loss; the new
+    /// priorities are in `priorities`.
+    pub fn critic_step(
+        &mut self,
+        batch: &BoxBatch,
+        next_actions: &[f32],
+        entropy: Option<(f32, &[f32])>,
+        demo_bonus: f32,
+    ) -> f32 {
+        let (n, k) = (batch.len(), self.critics.heads);
+        let q_next = self
+            .critics
+            .evaluate(Net::Target, &batch.next_obs, next_actions, n);
+        for r in 0..n {
+            let pair = q_next[r * k].min(q_next[r * k + 1]);
+            let soft = match entropy {
+                Some((alpha, log_probs)) => pair - alpha * log_probs[r],
+                None => pair,
+            };
+            self.targets[r] = batch.rewards[r] + batch.discounts[r] * soft;
+        }
+        self.critics.update(
+            batch,
+            &self.targets[..n],
+            &mut self.priorities[..n],
+            demo_bonus,
+        )
+    }
+
+    /// The critics' value of each demonstrated action of `batch` (`value` aggregates a row of the heads), into
+    /// `q_demo`, for the Q-filter.
+    pub fn value_demonstrations(&mut self, batch: &BoxBatch, value: impl Fn(&[f32]) -> f32) {
+        let (n, k) = (batch.len(), self.critics.heads);
+        let q = self
+            .critics
+            .evaluate(Net::Online, &batch.obs, &batch.actions, n);
+        for (r, v) in self.q_demo[..n].iter_mut().enumerate() {
+            *v = value(&q[r * k..(r + 1) * k]);
+        }
+    }
+
+    /// [`behaviour_cloning`] of the actor's tanh outputs `y` at `batch`, with the Q-filter of `q_demo` and
+    /// `q_pi` when `filtering`.
+    pub fn behaviour_cloning(
+        &self,
+        weight: f32,
+        batch: &BoxBatch,
+        filtering: bool,
+        y: &[f32],
+        d_y: &mut [f32],
+    ) -> BcStats {
+        let n = batch.len();
+        let q_filter = filtering.then_some((&self.q_demo[..n], &self.q_pi[..n]));
+        behaviour_cloning(weight, batch, q_filter, y, &self.action_box, d_y)
     }
 }
 

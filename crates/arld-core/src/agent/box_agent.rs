@@ -1,5 +1,5 @@
 //! The actor-critic family behind the [`Learner`] interface: [`BoxAgent`] acts and learns in a box of float32
-//! actions with any [`ActorCritic`] learner (TD3, [`super::td3`]; SAC, [`super::sac`]), from the same replay
+//! actions with any [`ActorCriticLearner`] learner (TD3, [`super::td3`]; SAC, [`super::sac`]), from the same replay
 //! batches, schedules and snapshots as the DQN family.
 //!
 //! - Acting: at ε = 1 (a run acting at random before learning starts) a uniform draw from the box, otherwise
@@ -30,7 +30,7 @@ use std::path::Path;
 
 /// What a run needs of an actor-critic learner of box actions: acting, learning from a batch, the critics'
 /// disagreement, its generator, its policy network and its state.
-pub trait ActorCritic: Persist + Send {
+pub trait ActorCriticLearner: Persist + Send {
     /// The behaviour action at `obs` (with the learner's own exploration), into `action`.
     fn act(&mut self, obs: &[f32], action: &mut [f32]);
     /// The test-time action at `obs` (no exploration), into `action`.
@@ -47,7 +47,7 @@ pub trait ActorCritic: Persist + Send {
     fn name(&self) -> &'static str;
 }
 
-impl ActorCritic for Td3<Pcg64> {
+impl ActorCriticLearner for Td3<Pcg64> {
     fn act(&mut self, obs: &[f32], action: &mut [f32]) {
         Td3::act(self, obs, action);
     }
@@ -72,7 +72,7 @@ impl ActorCritic for Td3<Pcg64> {
     }
 }
 
-impl ActorCritic for Sac<Pcg64> {
+impl ActorCriticLearner for Sac<Pcg64> {
     fn act(&mut self, obs: &[f32], action: &mut [f32]) {
         Sac::act(self, obs, action);
     }
@@ -97,9 +97,9 @@ impl ActorCritic for Sac<Pcg64> {
     }
 }
 
-/// A learner of actions in a box: an [`ActorCritic`] learner behind [`Learner`].
+/// A learner of actions in a box: an [`ActorCriticLearner`] learner behind [`Learner`].
 pub struct BoxAgent {
-    learner: Box<dyn ActorCritic>,
+    learner: Box<dyn ActorCriticLearner>,
     obs_dim: usize,
     low: Vec<f32>,
     high: Vec<f32>,
@@ -137,7 +137,7 @@ impl BoxAgent {
     }
 
     fn with_learner(
-        learner: Box<dyn ActorCritic>,
+        learner: Box<dyn ActorCriticLearner>,
         obs_dim: usize,
         low: &[f32],
         high: &[f32],

@@ -24,9 +24,9 @@
 use rand::Rng;
 use rand_distr::StandardNormal;
 
-use super::actor_critic::{ActionBox, Critics, Net, behaviour_cloning};
+use super::actor_critic::{ActionBox, ActorCritic, Net, Sizes};
 pub use super::actor_critic::{BcStats, BoxBatch};
-use crate::nn::{Adam, Mlp, MlpWorkspace, OutputActivation};
+use crate::nn::{Adam, Mlp, OutputActivation};
 use crate::state::{Persist, StateDict, StateError};
 use serde::{Serialize, de::DeserializeOwned};
 
@@ -104,18 +104,12 @@ pub struct SacStats {
 /// an update.
 pub struct Sac<R: Rng> {
     config: SacConfig,
-    obs_dim: usize,
-    action_box: ActionBox,
+    /// The box, the actor, the critics (with their target), the generator and the per-sample buffers.
+    ac: ActorCritic<R>,
     target_entropy: f32,
-    actor: Mlp,
-    critics: Critics,
-    actor_opt: Adam,
     log_alpha: f32,
     alpha_opt: Adam,
-    rng: R,
-    updates: u64,
     // Buffers, sized for `max_batch`.
-    actor_ws: MlpWorkspace,
     /// The actor's outputs, rows `[mu | log sigma]`, and their loss gradient, `max_batch * 2 dim(A)`.
     out: Vec<f32>,
     d_out: Vec<f32>,
@@ -127,14 +121,8 @@ pub struct Sac<R: Rng> {
     y_mean: Vec<f32>,
     d_y_mean: Vec<f32>,
     log_probs: Vec<f32>,
-    targets: Vec<f32>,
     /// The head (0 or 1) with the smaller value at each sampled action.
     min_head: Vec<usize>,
-    /// The critic's values of the demonstrated actions and of the test actions, for the Q-filter.
-    q_demo: Vec<f32>,
-    q_pi: Vec<f32>,
-    actor_grads: Vec<f32>,
-    priorities: Vec<f32>,
 }
 
 /// `log(1 - tanh(u)^2)`, as `2 (log 2 - u - softplus(-2u))` (finite for every finite `u`).
@@ -179,33 +167,25 @@ impl<R: Rng> Sac<R> {
     /// # Panics
     /// If the box is empty or inverted, or the configuration has fewer than two heads, a zero batch or a
     /// non-positive initial temperature (callers validate configurations first).
-    pub fn new(config: SacConfig, obs_dim: usize, low: &[f32], high: &[f32], mut rng: R) -> Self {
+    pub fn new(config: SacConfig, obs_dim: usize, low: &[f32], high: &[f32], rng: R) -> Self {
         let action_box = ActionBox::new(low, high);
         assert!(
             config.heads >= 2 && config.max_batch > 0 && config.initial_alpha > 0.0,
             "SAC needs two critic heads, a batch and a positive temperature"
         );
-        let a = low.len();
-        let mut sizes = vec![obs_dim];
-        sizes.extend(&config.hidden);
-        sizes.push(2 * a);
-        let actor = Mlp::new(&sizes, OutputActivation::Linear, &mut rng);
-        let n = config.max_batch;
-        let critics = Critics::new(
+        let (a, n) = (low.len(), config.max_batch);
+        let sizes = Sizes {
             obs_dim,
-            a,
-            &config.hidden,
-            config.heads,
-            config.critic_lr,
-            n,
-            &mut rng,
-        );
+            hidden: &config.hidden,
+            max_batch: n,
+        };
+        let actor = (2, OutputActivation::Linear, config.actor_lr);
+        let critics = (config.heads, config.critic_lr);
         Sac {
+            ac: ActorCritic::new(&sizes, action_box, actor, critics, rng),
             target_entropy: config.target_entropy.unwrap_or(-(a as f32)),
-            actor_opt: Adam::for_parameters(actor.parameters().len(), config.actor_lr),
             log_alpha: config.initial_alpha.ln(),
             alpha_opt: Adam::for_parameters(1, config.alpha_lr),
-            actor_ws: MlpWorkspace::new(&actor, n),
             out: vec![0.0; n * 2 * a],
             d_out: vec![0.0; n * 2 * a],
             noise: vec![0.0; n * a],
@@ -214,30 +194,19 @@ impl<R: Rng> Sac<R> {
             y_mean: vec![0.0; n * a],
             d_y_mean: vec![0.0; n * a],
             log_probs: vec![0.0; n],
-            targets: vec![0.0; n],
             min_head: vec![0; n],
-            q_demo: vec![0.0; n],
-            q_pi: vec![0.0; n],
-            actor_grads: vec![0.0; actor.parameters().len()],
-            priorities: vec![0.0; n],
-            actor,
-            critics,
-            obs_dim,
-            action_box,
-            rng,
-            updates: 0,
             config,
         }
     }
 
     /// Action dimension.
     pub fn action_dim(&self) -> usize {
-        self.action_box.dim()
+        self.ac.action_dim()
     }
 
     /// Number of updates so far.
     pub fn updates(&self) -> u64 {
-        self.updates
+        self.ac.updates
     }
 
     /// The entropy temperature `alpha`.
@@ -248,54 +217,67 @@ impl<R: Rng> Sac<R> {
     /// The test-time action at `obs`: `tanh(mu)` scaled to the box.
     pub fn test_action(&mut self, obs: &[f32], action: &mut [f32]) {
         let a = self.action_dim();
-        let out = self.actor.forward(obs, 1, &mut self.actor_ws);
+        let out = self.ac.actor.forward(obs, 1);
         for (v, mu) in action.iter_mut().zip(&out[..a]) {
             *v = mu.tanh();
         }
-        self.action_box.to_box(action);
+        self.ac.action_box.to_box(action);
     }
 
     /// The behaviour action at `obs`: a sample of the policy.
     pub fn act(&mut self, obs: &[f32], action: &mut [f32]) {
         let a = self.action_dim();
-        let out = self.actor.forward(obs, 1, &mut self.actor_ws);
-        self.out[..2 * a].copy_from_slice(out);
-        for eps in &mut self.noise[..a] {
-            *eps = self.rng.sample(StandardNormal);
-        }
-        squash(
-            &self.out[..2 * a],
-            &self.noise[..a],
-            &self.action_box,
-            &mut self.y[..a],
-            action,
-            &mut self.log_probs[..1],
-        );
+        self.actor_outputs(obs, 1);
+        self.draw_noise(a);
+        self.sample_policy(1);
+        action.copy_from_slice(&self.actions[..a]);
     }
 
     /// The critics' disagreement at `(obs, action)`: the standard deviation of the heads' values (the
     /// uncertainty a query rule can read). Draws no random number.
     pub fn critic_spread(&mut self, obs: &[f32], action: &[f32]) -> f32 {
-        self.critics.spread(obs, action)
+        self.ac.critics.spread(obs, action)
     }
 
     /// The critics' disagreement about the best action near the test action at `obs`, in half-widths of the box
     /// (see `Critics::argmax_disagreement`; 0 when every head prefers the same probe). Draws no random number.
     pub fn action_disagreement(&mut self, obs: &[f32]) -> f32 {
         let a = self.action_dim();
-        let out = self.actor.forward(obs, 1, &mut self.actor_ws);
+        let out = self.ac.actor.forward(obs, 1);
         for (y, mu) in self.y_mean[..a].iter_mut().zip(&out[..a]) {
             *y = mu.tanh();
         }
-        self.critics
-            .argmax_disagreement(obs, &self.y_mean[..a], &self.action_box)
+        self.ac
+            .critics
+            .argmax_disagreement(obs, &self.y_mean[..a], &self.ac.action_box)
     }
 
     /// Fills the first `count` noise values from the generator.
     fn draw_noise(&mut self, count: usize) {
         for eps in &mut self.noise[..count] {
-            *eps = self.rng.sample(StandardNormal);
+            *eps = self.ac.rng.sample(StandardNormal);
         }
+    }
+
+    /// The actor's outputs at `n` rows of `obs`, into `self.out` (the pass stays in the actor's workspace).
+    fn actor_outputs(&mut self, obs: &[f32], n: usize) {
+        let a = self.action_dim();
+        let out = self.ac.actor.forward(obs, n);
+        self.out[..2 * n * a].copy_from_slice(out);
+    }
+
+    /// Samples the policy ([`squash`]) at the first `n` rows of `self.out` with the noise in `self.noise`, into
+    /// `self.y`, `self.actions` and `self.log_probs`.
+    fn sample_policy(&mut self, n: usize) {
+        let a = self.action_dim();
+        squash(
+            &self.out[..2 * n * a],
+            &self.noise[..n * a],
+            &self.ac.action_box,
+            &mut self.y[..n * a],
+            &mut self.actions[..n * a],
+            &mut self.log_probs[..n],
+        );
     }
 
     /// One update from `batch` (critics, actor, temperature, target). Returns what it measured and the new
@@ -306,50 +288,32 @@ impl<R: Rng> Sac<R> {
     pub fn learn(&mut self, batch: &BoxBatch) -> (SacStats, &[f32]) {
         let n = batch.len();
         let a = self.action_dim();
-        batch.check(self.obs_dim, a, self.config.max_batch);
-        let k = self.config.heads;
+        batch.check(self.ac.obs_dim, a, self.config.max_batch);
         let alpha = self.alpha();
 
         // The soft target: r + gamma^n (min(Q'_1, Q'_2)(s', a') - alpha log pi(a'|s')), a' ~ pi(s').
-        let out = self.actor.forward(&batch.next_obs, n, &mut self.actor_ws);
-        self.out[..2 * n * a].copy_from_slice(out);
+        self.actor_outputs(&batch.next_obs, n);
         self.draw_noise(n * a);
-        squash(
-            &self.out[..2 * n * a],
-            &self.noise[..n * a],
-            &self.action_box,
-            &mut self.y[..n * a],
-            &mut self.actions[..n * a],
-            &mut self.log_probs[..n],
-        );
-        let q_next = self
-            .critics
-            .evaluate(Net::Target, &batch.next_obs, &self.actions[..n * a], n);
-        for r in 0..n {
-            let pair = q_next[r * k].min(q_next[r * k + 1]);
-            self.targets[r] =
-                batch.rewards[r] + batch.discounts[r] * (pair - alpha * self.log_probs[r]);
-        }
-        let critic_loss = self.critics.update(
+        self.sample_policy(n);
+        let critic_loss = self.ac.critic_step(
             batch,
-            &self.targets[..n],
-            &mut self.priorities[..n],
+            &self.actions[..n * a],
+            Some((alpha, &self.log_probs[..n])),
             self.config.demo_priority_bonus,
         );
 
         // The actor, on fresh samples at the batch's states.
         self.draw_noise(n * a);
         let (actor_loss, bc) = self.actor_gradient(batch, alpha);
-        self.actor_opt
-            .step_parameters(self.actor.parameters_mut(), &self.actor_grads);
+        self.ac.actor.step();
 
         // The temperature, from the same samples' log-probabilities.
         let (entropy, d_log_alpha) = self.temperature_gradient(n);
         self.alpha_opt
             .step_parameters(std::slice::from_mut(&mut self.log_alpha), &[d_log_alpha]);
 
-        self.critics.soft_update(self.config.tau);
-        self.updates += 1;
+        self.ac.critics.soft_update(self.config.tau);
+        self.ac.updates += 1;
         let stats = SacStats {
             critic_loss,
             actor_loss,
@@ -357,7 +321,7 @@ impl<R: Rng> Sac<R> {
             entropy,
             bc,
         };
-        (stats, &self.priorities[..n])
+        (stats, &self.ac.priorities[..n])
     }
 
     /// The entropy estimate `-mean log pi` of the last actor step's `n` samples and the temperature loss's
@@ -370,24 +334,18 @@ impl<R: Rng> Sac<R> {
     /// The actor's loss at the batch's states with the noise in `self.noise` and temperature `alpha`:
     /// `mean_b [alpha log pi(a_b|s_b) - min(Q_1, Q_2)(s_b, a_b)]` plus the behaviour cloning term with the
     /// Q-filter (the demonstrated action against `tanh(mu)`, each valued by `min(Q_1, Q_2)`), and its gradient
-    /// with respect to the actor's parameters in `self.actor_grads`. Returns the first part and the cloning
+    /// with respect to the actor's parameters in `self.ac.actor.grads`. Returns the first part and the cloning
     /// term's measures; leaves the samples' log-probabilities in `self.log_probs`.
     fn actor_gradient(&mut self, batch: &BoxBatch, alpha: f32) -> (f32, Option<BcStats>) {
         let n = batch.len();
-        let (d, a, k) = (self.obs_dim, self.action_dim(), self.config.heads);
+        let (d, a, k) = (self.ac.obs_dim, self.action_dim(), self.config.heads);
         let pair_min = |q: &[f32], r: usize| q[r * k].min(q[r * k + 1]);
         let cloning = self.config.bc_weight > 0.0 && batch.has_demos();
         let filtering = cloning && self.config.q_filter;
         if filtering {
-            let q = self
-                .critics
-                .evaluate(Net::Online, &batch.obs, &batch.actions, n);
-            for r in 0..n {
-                self.q_demo[r] = pair_min(q, r);
-            }
+            self.ac.value_demonstrations(batch, |q| q[0].min(q[1]));
         }
-        let out = self.actor.forward(&batch.obs, n, &mut self.actor_ws);
-        self.out[..2 * n * a].copy_from_slice(out);
+        self.actor_outputs(&batch.obs, n);
         if cloning {
             for r in 0..n {
                 for dim in 0..a {
@@ -398,21 +356,18 @@ impl<R: Rng> Sac<R> {
         if filtering {
             let actions = &mut self.actions[..n * a];
             actions.copy_from_slice(&self.y_mean[..n * a]);
-            self.action_box.to_box(actions);
-            let q = self.critics.evaluate(Net::Online, &batch.obs, actions, n);
+            self.ac.action_box.to_box(actions);
+            let q = self
+                .ac
+                .critics
+                .evaluate(Net::Online, &batch.obs, actions, n);
             for r in 0..n {
-                self.q_pi[r] = pair_min(q, r);
+                self.ac.q_pi[r] = pair_min(q, r);
             }
         }
-        squash(
-            &self.out[..2 * n * a],
-            &self.noise[..n * a],
-            &self.action_box,
-            &mut self.y[..n * a],
-            &mut self.actions[..n * a],
-            &mut self.log_probs[..n],
-        );
+        self.sample_policy(n);
         let q = self
+            .ac
             .critics
             .evaluate(Net::Online, &batch.obs, &self.actions[..n * a], n);
         let mut loss = 0.0f32;
@@ -420,12 +375,12 @@ impl<R: Rng> Sac<R> {
             loss += alpha * self.log_probs[r] - pair_min(q, r);
             self.min_head[r] = usize::from(q[r * k + 1] < q[r * k]);
         }
-        let d_q = self.critics.d_q(n);
+        let d_q = self.ac.critics.d_q(n);
         d_q.fill(0.0);
         for r in 0..n {
             d_q[r * k + self.min_head[r]] = -1.0 / n as f32;
         }
-        let d_input = self.critics.backward_to_actions(n);
+        let d_input = self.ac.critics.backward_to_actions(n);
         let inv_n = 1.0 / n as f32;
         for r in 0..n {
             for dim in 0..a {
@@ -434,8 +389,8 @@ impl<R: Rng> Sac<R> {
                 let raw_log_std = self.out[r * 2 * a + a + dim];
                 let d_action = d_input[r * (d + a) + d + dim];
                 // dL/du: the entropy term's (d/du of -log(1 - tanh(u)^2) is 2 tanh(u)) and the critic's.
-                let d_u =
-                    alpha * 2.0 * y * inv_n + d_action * self.action_box.half[dim] * (1.0 - y * y);
+                let d_u = alpha * 2.0 * y * inv_n
+                    + d_action * self.ac.action_box.half[dim] * (1.0 - y * y);
                 self.d_out[r * 2 * a + dim] = d_u;
                 // u = mu + exp(log sigma) eps, and log N contributes -log sigma; the clip passes no gradient.
                 self.d_out[r * 2 * a + a + dim] =
@@ -449,14 +404,10 @@ impl<R: Rng> Sac<R> {
         let bc = if cloning {
             let d_y = &mut self.d_y_mean[..n * a];
             d_y.fill(0.0);
-            let stats = behaviour_cloning(
-                self.config.bc_weight,
-                batch,
-                filtering.then_some((&self.q_demo[..n], &self.q_pi[..n])),
-                &self.y_mean[..n * a],
-                &self.action_box,
-                d_y,
-            );
+            let y = &self.y_mean[..n * a];
+            let stats = self
+                .ac
+                .behaviour_cloning(self.config.bc_weight, batch, filtering, y, d_y);
             for r in 0..n {
                 for dim in 0..a {
                     let y = self.y_mean[r * a + dim];
@@ -467,12 +418,7 @@ impl<R: Rng> Sac<R> {
         } else {
             None
         };
-        self.actor.backward(
-            &mut self.actor_ws,
-            &self.d_out[..2 * n * a],
-            &mut self.actor_grads,
-            None,
-        );
+        self.ac.actor.backward(&self.d_out[..2 * n * a]);
         (loss * inv_n, bc)
     }
 }
@@ -480,43 +426,31 @@ impl<R: Rng> Sac<R> {
 impl<R: Rng> Sac<R> {
     /// The learner's generator, for a caller's draws in sequence with the learner's own.
     pub fn rng(&mut self) -> &mut R {
-        &mut self.rng
+        &mut self.ac.rng
     }
 
     /// The actor network (the policy: the mean and log standard deviation of each action dimension).
     pub fn actor(&self) -> &Mlp {
-        &self.actor
+        &self.ac.actor.net
     }
 }
 
 impl<R: Rng + Serialize + DeserializeOwned> Persist for Sac<R> {
     /// Writes everything that changes while SAC learns and acts: the actor, the critics with their target and
-    /// optimiser, the temperature and its optimiser, the generator and the update count.
+    /// optimisers, the temperature and its optimiser, the generator and the update count.
     fn save_state<'a>(&'a self, prefix: &str, state: &mut StateDict<'a>) {
-        self.actor.save_state(&format!("{prefix}.actor"), state);
-        self.critics.save_state(&format!("{prefix}.critics"), state);
-        self.actor_opt
-            .save_state(&format!("{prefix}.actor_adam"), state);
+        self.ac.save_state(prefix, state);
         state.put_value(&format!("{prefix}.log_alpha"), &self.log_alpha);
         self.alpha_opt
             .save_state(&format!("{prefix}.alpha_adam"), state);
-        state.put_text(&format!("{prefix}.rng"), &self.rng);
-        state.put_value(&format!("{prefix}.updates"), &self.updates);
     }
 
     /// Reads what [`Sac::save_state`] wrote into a learner of the same configuration.
     fn load_state(&mut self, prefix: &str, state: &StateDict<'_>) -> Result<(), StateError> {
-        self.actor.load_state(&format!("{prefix}.actor"), state)?;
-        self.critics
-            .load_state(&format!("{prefix}.critics"), state)?;
-        self.actor_opt
-            .load_state(&format!("{prefix}.actor_adam"), state)?;
+        self.ac.load_state(prefix, state)?;
         self.log_alpha = state.value(&format!("{prefix}.log_alpha"))?;
         self.alpha_opt
-            .load_state(&format!("{prefix}.alpha_adam"), state)?;
-        self.rng = state.text(&format!("{prefix}.rng"))?;
-        self.updates = state.value(&format!("{prefix}.updates"))?;
-        Ok(())
+            .load_state(&format!("{prefix}.alpha_adam"), state)
     }
 }
 
@@ -526,6 +460,7 @@ mod tests {
     use crate::agent::actor_critic::testing::{
         evaluate_pendulum, pretraining_imitates, train_pendulum,
     };
+    use crate::nn::MlpWorkspace;
     use rand::SeedableRng;
 
     type Pcg = rand_pcg::Pcg64;
@@ -565,20 +500,20 @@ mod tests {
 
     /// The first two heads' minimum at `(state, action)`, in float64.
     fn pair_min(agent: &Sac<Pcg>, state: &[f32], action: &[f32]) -> f64 {
-        let mut ws = MlpWorkspace::new(&agent.critics.net, 1);
+        let mut ws = MlpWorkspace::new(&agent.ac.critics.net, 1);
         let mut input = state.to_vec();
         input.extend(action);
-        let q = agent.critics.net.forward(&input, 1, &mut ws);
+        let q = agent.ac.critics.net.forward(&input, 1, &mut ws);
         f64::from(q[0].min(q[1]))
     }
 
     /// One sample of the policy at `state` for the noise `eps`, in float64 with the textbook formulas: the
     /// action (in the box) and `log N(u; mu, sigma) - log(1 - tanh(u)^2)` summed over the dimensions.
     fn sample(agent: &Sac<Pcg>, state: &[f32], eps: &[f32]) -> (Vec<f32>, f64, Vec<f64>) {
-        let mut ws = MlpWorkspace::new(&agent.actor, 1);
-        let out = agent.actor.forward(state, 1, &mut ws).to_vec();
+        let mut ws = MlpWorkspace::new(&agent.ac.actor.net, 1);
+        let out = agent.ac.actor.net.forward(state, 1, &mut ws).to_vec();
         let a = eps.len();
-        let (low, high) = (&agent.action_box.low, &agent.action_box.high);
+        let (low, high) = (&agent.ac.action_box.low, &agent.ac.action_box.high);
         let mut action = vec![0.0; a];
         let mut means = vec![0.0; a];
         let mut log_prob = 0.0f64;
@@ -608,7 +543,7 @@ mod tests {
         agent.noise[..2 * n].copy_from_slice(&noise);
         let alpha = 0.3f32;
         let (_, bc) = agent.actor_gradient(&batch, alpha);
-        let grads = agent.actor_grads.clone();
+        let grads = agent.ac.actor.grads.clone();
         // The Q-filter's outcome at the unperturbed parameters (a selection, not differentiated).
         let filter: Vec<bool> = (0..n)
             .map(|r| {
@@ -651,13 +586,13 @@ mod tests {
         // disagree and the point is skipped; with eight rows through 16 ReLUs there are a few, at most one in ten.
         let mut skipped = 0;
         for (i, analytic) in grads.iter().enumerate() {
-            let original = agent.actor.parameters()[i];
+            let original = agent.ac.actor.net.parameters()[i];
             let mut central = |h: f32| {
-                agent.actor.parameters_mut()[i] = original + h;
+                agent.ac.actor.net.parameters_mut()[i] = original + h;
                 let up = loss(&agent);
-                agent.actor.parameters_mut()[i] = original - h;
+                agent.ac.actor.net.parameters_mut()[i] = original - h;
                 let down = loss(&agent);
-                agent.actor.parameters_mut()[i] = original;
+                agent.ac.actor.net.parameters_mut()[i] = original;
                 (up - down) / (2.0 * f64::from(h))
             };
             let (coarse, numeric) = (central(1e-2), central(5e-3));
@@ -762,8 +697,16 @@ mod tests {
                 trace.push(agent.critic_spread(&[0.1, -0.2], &action).to_bits());
                 trace.push(agent.action_disagreement(&[0.1, -0.2]).to_bits());
             }
-            trace.extend(agent.actor.parameters().iter().map(|p| p.to_bits()));
-            trace.extend(agent.critics.net.parameters().iter().map(|p| p.to_bits()));
+            trace.extend(agent.ac.actor.net.parameters().iter().map(|p| p.to_bits()));
+            trace.extend(
+                agent
+                    .ac
+                    .critics
+                    .net
+                    .parameters()
+                    .iter()
+                    .map(|p| p.to_bits()),
+            );
             trace
         };
         let (first, second, other) = (run(21), run(21), run(22));
@@ -793,13 +736,13 @@ mod tests {
                     probes.push(p);
                 }
             }
-            let mut ws = MlpWorkspace::new(&agent.critics.net, 1);
+            let mut ws = MlpWorkspace::new(&agent.ac.critics.net, 1);
             let values: Vec<Vec<f32>> = probes
                 .iter()
                 .map(|p| {
                     let mut input = state.to_vec();
                     input.extend([-1.0 + (p[0] + 1.0) * 2.0, (p[1] + 1.0) * 0.25]);
-                    agent.critics.net.forward(&input, 1, &mut ws).to_vec()
+                    agent.ac.critics.net.forward(&input, 1, &mut ws).to_vec()
                 })
                 .collect();
             let picks: Vec<&Vec<f32>> = (0..3)
@@ -833,18 +776,23 @@ mod tests {
         eprintln!("the heads disagreed on {nonzero} of 8 states");
     }
 
-    #[test]
-    fn sac_learns_pendulum() {
-        // 64-64 networks, batch 128, 10,000 steps (the first 1,000 uniformly random), one update a step; the
-        // policy's mean action must then hold Pendulum-v1 above -200 on ten evaluation seeds it never trained on.
-        let config = SacConfig {
+    /// The settings of the Pendulum-v1 tests: 64-64 networks, batch 128, learning rates 1e-3.
+    fn pendulum_config() -> SacConfig {
+        SacConfig {
             hidden: vec![64, 64],
             max_batch: 128,
             actor_lr: 1e-3,
             critic_lr: 1e-3,
             alpha_lr: 1e-3,
             ..SacConfig::default()
-        };
+        }
+    }
+
+    #[test]
+    fn sac_learns_pendulum() {
+        // 64-64 networks, batch 128, 10,000 steps (the first 1,000 uniformly random), one update a step; the
+        // policy's mean action must then hold Pendulum-v1 above -200 on ten evaluation seeds it never trained on.
+        let config = pendulum_config();
         let mut agent = Sac::new(config, 3, &[-2.0], &[2.0], Pcg::seed_from_u64(0));
         train_pendulum(&mut agent, 10_000, 128);
         let score = evaluate_pendulum(&mut agent, 1000..1010);
@@ -858,14 +806,9 @@ mod tests {
     #[test]
     fn pretraining_on_demonstrations_imitates_the_swing_up() {
         let config = SacConfig {
-            hidden: vec![64, 64],
-            max_batch: 128,
-            actor_lr: 1e-3,
-            critic_lr: 1e-3,
-            alpha_lr: 1e-3,
             bc_weight: 100.0,
             q_filter: false,
-            ..SacConfig::default()
+            ..pendulum_config()
         };
         let mut agent = Sac::new(config, 3, &[-2.0], &[2.0], Pcg::seed_from_u64(3));
         pretraining_imitates(&mut agent, 2_000, "SAC");

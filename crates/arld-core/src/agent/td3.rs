@@ -19,9 +19,9 @@
 use rand::Rng;
 use rand_distr::StandardNormal;
 
-use super::actor_critic::{ActionBox, Critics, Net, behaviour_cloning};
+use super::actor_critic::{ActionBox, ActorCritic, Net, Sizes};
 pub use super::actor_critic::{BcStats, BoxBatch};
-use crate::nn::{Adam, Mlp, MlpWorkspace, OutputActivation};
+use crate::nn::{Mlp, OutputActivation};
 use crate::state::{Persist, StateDict, StateError};
 use serde::{Serialize, de::DeserializeOwned};
 
@@ -89,26 +89,14 @@ pub struct Td3Stats {
 /// The TD3 learner: actor, critics, their targets and optimisers, and the buffers of an update.
 pub struct Td3<R: Rng> {
     config: Td3Config,
-    obs_dim: usize,
-    action_box: ActionBox,
-    actor: Mlp,
+    /// The box, the actor, the critics (with their target), the generator and the per-sample buffers.
+    ac: ActorCritic<R>,
     actor_target: Mlp,
-    critics: Critics,
-    actor_opt: Adam,
-    rng: R,
-    updates: u64,
     // Buffers, sized for `max_batch`.
-    actor_ws: MlpWorkspace,
     /// Actions (in the box), the actor's tanh outputs and their loss gradient, `max_batch * dim(A)`.
     actions: Vec<f32>,
     y: Vec<f32>,
     d_y: Vec<f32>,
-    targets: Vec<f32>,
-    /// The critic's values of the demonstrated actions and of the actor's, for the Q-filter.
-    q_demo: Vec<f32>,
-    q_pi: Vec<f32>,
-    actor_grads: Vec<f32>,
-    priorities: Vec<f32>,
 }
 
 impl<R: Rng> Td3<R> {
@@ -118,72 +106,54 @@ impl<R: Rng> Td3<R> {
     /// # Panics
     /// If the box is empty or inverted, or the configuration has fewer than two heads or a zero batch (callers
     /// validate configurations first).
-    pub fn new(config: Td3Config, obs_dim: usize, low: &[f32], high: &[f32], mut rng: R) -> Self {
+    pub fn new(config: Td3Config, obs_dim: usize, low: &[f32], high: &[f32], rng: R) -> Self {
         let action_box = ActionBox::new(low, high);
         assert!(
             config.heads >= 2 && config.max_batch > 0,
             "TD3 needs two critic heads and a batch"
         );
-        let act_dim = low.len();
-        let mut sizes = vec![obs_dim];
-        sizes.extend(&config.hidden);
-        sizes.push(act_dim);
-        let actor = Mlp::new(&sizes, OutputActivation::Tanh, &mut rng);
-        let n = config.max_batch;
-        let critics = Critics::new(
+        let (act_dim, n) = (low.len(), config.max_batch);
+        let sizes = Sizes {
             obs_dim,
-            act_dim,
-            &config.hidden,
-            config.heads,
-            config.critic_lr,
-            n,
-            &mut rng,
-        );
+            hidden: &config.hidden,
+            max_batch: n,
+        };
+        let actor = (1, OutputActivation::Tanh, config.actor_lr);
+        let critics = (config.heads, config.critic_lr);
+        let ac = ActorCritic::new(&sizes, action_box, actor, critics, rng);
         Td3 {
-            actor_opt: Adam::for_parameters(actor.parameters().len(), config.actor_lr),
-            actor_ws: MlpWorkspace::new(&actor, n),
             actions: vec![0.0; n * act_dim],
             y: vec![0.0; n * act_dim],
             d_y: vec![0.0; n * act_dim],
-            targets: vec![0.0; n],
-            q_demo: vec![0.0; n],
-            q_pi: vec![0.0; n],
-            actor_grads: vec![0.0; actor.parameters().len()],
-            priorities: vec![0.0; n],
-            actor_target: actor.clone(),
-            actor,
-            critics,
-            obs_dim,
-            action_box,
-            rng,
-            updates: 0,
+            actor_target: ac.actor.net.clone(),
+            ac,
             config,
         }
     }
 
     /// Action dimension.
     pub fn action_dim(&self) -> usize {
-        self.action_box.dim()
+        self.ac.action_dim()
     }
 
     /// Number of critic updates so far.
     pub fn updates(&self) -> u64 {
-        self.updates
+        self.ac.updates
     }
 
     /// The test-time action at `obs`: the actor's, without noise.
     pub fn test_action(&mut self, obs: &[f32], action: &mut [f32]) {
-        let y = self.actor.forward(obs, 1, &mut self.actor_ws);
+        let y = self.ac.actor.forward(obs, 1);
         action.copy_from_slice(y);
-        self.action_box.to_box(action);
+        self.ac.action_box.to_box(action);
     }
 
     /// The behaviour action at `obs`: the actor's plus Gaussian exploration noise, clipped to the box.
     pub fn act(&mut self, obs: &[f32], action: &mut [f32]) {
         self.test_action(obs, action);
-        let b = &self.action_box;
+        let b = &self.ac.action_box;
         for (d, a) in action.iter_mut().enumerate() {
-            let z: f32 = self.rng.sample(StandardNormal);
+            let z: f32 = self.ac.rng.sample(StandardNormal);
             let noisy = *a + z * self.config.exploration_noise * b.half[d];
             *a = noisy.clamp(b.low[d], b.high[d]);
         }
@@ -192,17 +162,18 @@ impl<R: Rng> Td3<R> {
     /// The critics' disagreement at `(obs, action)`: the standard deviation of the heads' values (the
     /// uncertainty a query rule can read). Draws no random number.
     pub fn critic_spread(&mut self, obs: &[f32], action: &[f32]) -> f32 {
-        self.critics.spread(obs, action)
+        self.ac.critics.spread(obs, action)
     }
 
     /// The critics' disagreement about the best action near the actor's at `obs`, in half-widths of the box
     /// (see `Critics::argmax_disagreement`; 0 when every head prefers the same probe). Draws no random number.
     pub fn action_disagreement(&mut self, obs: &[f32]) -> f32 {
         let a = self.action_dim();
-        let y = self.actor.forward(obs, 1, &mut self.actor_ws);
+        let y = self.ac.actor.forward(obs, 1);
         self.y[..a].copy_from_slice(y);
-        self.critics
-            .argmax_disagreement(obs, &self.y[..a], &self.action_box)
+        self.ac
+            .critics
+            .argmax_disagreement(obs, &self.y[..a], &self.ac.action_box)
     }
 
     /// One update from `batch`: the critics always, the actor and the targets every `policy_delay` updates.
@@ -213,111 +184,94 @@ impl<R: Rng> Td3<R> {
     pub fn learn(&mut self, batch: &BoxBatch) -> (Td3Stats, &[f32]) {
         let n = batch.len();
         let a = self.action_dim();
-        batch.check(self.obs_dim, a, self.config.max_batch);
-        let k = self.config.heads;
+        batch.check(self.ac.obs_dim, a, self.config.max_batch);
 
         // The target: r + gamma^n * min(Q'_1, Q'_2)(s', pi'(s') + clipped noise).
         let y = self
             .actor_target
-            .forward(&batch.next_obs, n, &mut self.actor_ws);
+            .forward(&batch.next_obs, n, &mut self.ac.actor.ws);
         let next_actions = &mut self.actions[..n * a];
         next_actions.copy_from_slice(y);
-        self.action_box.to_box(next_actions);
-        let b = &self.action_box;
+        self.ac.action_box.to_box(next_actions);
+        let b = &self.ac.action_box;
         for (i, v) in next_actions.iter_mut().enumerate() {
             let dim = i % a;
             let scale = b.half[dim];
-            let z: f32 = self.rng.sample(StandardNormal);
+            let z: f32 = self.ac.rng.sample(StandardNormal);
             let clip = self.config.noise_clip * scale;
             let noise = (z * self.config.target_noise * scale).clamp(-clip, clip);
             *v = (*v + noise).clamp(b.low[dim], b.high[dim]);
         }
-        let q_next = self
-            .critics
-            .evaluate(Net::Target, &batch.next_obs, next_actions, n);
-        for r in 0..n {
-            let pair = q_next[r * k].min(q_next[r * k + 1]);
-            self.targets[r] = batch.rewards[r] + batch.discounts[r] * pair;
-        }
-
         // The critics: weighted squared TD error of every head, averaged over the batch.
-        let critic_loss = self.critics.update(
-            batch,
-            &self.targets[..n],
-            &mut self.priorities[..n],
-            self.config.demo_priority_bonus,
-        );
-        self.updates += 1;
+        let critic_loss =
+            self.ac
+                .critic_step(batch, next_actions, None, self.config.demo_priority_bonus);
+        self.ac.updates += 1;
         let mut stats = Td3Stats {
             critic_loss,
             actor_loss: None,
             bc: None,
         };
 
-        if self.updates.is_multiple_of(self.config.policy_delay) {
+        if self.ac.updates.is_multiple_of(self.config.policy_delay) {
             let (actor_loss, bc) = self.actor_gradient(batch);
-            self.actor_opt
-                .step_parameters(self.actor.parameters_mut(), &self.actor_grads);
+            self.ac.actor.step();
             stats.actor_loss = Some(actor_loss);
             stats.bc = bc;
-            self.actor_target.soft_update(&self.actor, self.config.tau);
-            self.critics.soft_update(self.config.tau);
+            self.actor_target
+                .soft_update(&self.ac.actor.net, self.config.tau);
+            self.ac.critics.soft_update(self.config.tau);
         }
-        (stats, &self.priorities[..n])
+        (stats, &self.ac.priorities[..n])
     }
 
     /// The actor's loss at the batch's observations, `-mean over the batch and the heads of Q(s, pi(s))` plus the
     /// behaviour cloning term with the Q-filter on its demonstrated samples (the heads' mean compares the
     /// demonstrated action with the actor's), and its gradient with respect to the actor's parameters in
-    /// `self.actor_grads` (through the critic's input gradient and the box's scaling). Returns the Q part of
+    /// `self.ac.actor.grads` (through the critic's input gradient and the box's scaling). Returns the Q part of
     /// the loss and the cloning term's measures.
     fn actor_gradient(&mut self, batch: &BoxBatch) -> (f32, Option<BcStats>) {
         let n = batch.len();
-        let (d, a, k) = (self.obs_dim, self.action_dim(), self.config.heads);
+        let (d, a, k) = (self.ac.obs_dim, self.action_dim(), self.config.heads);
         let cloning = self.config.bc_weight > 0.0 && batch.has_demos();
         let filtering = cloning && self.config.q_filter;
         if filtering {
-            let q = self
-                .critics
-                .evaluate(Net::Online, &batch.obs, &batch.actions, n);
-            for r in 0..n {
-                self.q_demo[r] = q[r * k..(r + 1) * k].iter().sum::<f32>() / k as f32;
-            }
+            self.ac
+                .value_demonstrations(batch, |q| q.iter().sum::<f32>() / k as f32);
         }
-        let y = self.actor.forward(&batch.obs, n, &mut self.actor_ws);
+        let y = self.ac.actor.forward(&batch.obs, n);
         self.y[..n * a].copy_from_slice(y);
         let actions = &mut self.actions[..n * a];
         actions.copy_from_slice(y);
-        self.action_box.to_box(actions);
-        let q = self.critics.evaluate(Net::Online, &batch.obs, actions, n);
+        self.ac.action_box.to_box(actions);
+        let q = self
+            .ac
+            .critics
+            .evaluate(Net::Online, &batch.obs, actions, n);
         let loss = -q.iter().sum::<f32>() / (n * k) as f32;
         if filtering {
             for r in 0..n {
-                self.q_pi[r] = q[r * k..(r + 1) * k].iter().sum::<f32>() / k as f32;
+                self.ac.q_pi[r] = q[r * k..(r + 1) * k].iter().sum::<f32>() / k as f32;
             }
         }
-        self.critics.d_q(n).fill(-1.0 / (n * k) as f32);
-        let d_input = self.critics.backward_to_actions(n);
+        self.ac.critics.d_q(n).fill(-1.0 / (n * k) as f32);
+        let d_input = self.ac.critics.backward_to_actions(n);
         let d_y = &mut self.d_y[..n * a];
         for r in 0..n {
             for dim in 0..a {
-                d_y[r * a + dim] = d_input[r * (d + a) + d + dim] * self.action_box.half[dim];
+                d_y[r * a + dim] = d_input[r * (d + a) + d + dim] * self.ac.action_box.half[dim];
             }
         }
         let bc = if cloning {
-            Some(behaviour_cloning(
-                self.config.bc_weight,
-                batch,
-                filtering.then_some((&self.q_demo[..n], &self.q_pi[..n])),
-                &self.y[..n * a],
-                &self.action_box,
-                d_y,
-            ))
+            let y = &self.y[..n * a];
+            Some(
+                self.ac
+                    .behaviour_cloning(self.config.bc_weight, batch, filtering, y, d_y),
+            )
         } else {
             None
         };
-        self.actor
-            .backward(&mut self.actor_ws, d_y, &mut self.actor_grads, None);
+        self.ac.actor.backward(d_y);
         (loss, bc)
     }
 }
@@ -325,41 +279,30 @@ impl<R: Rng> Td3<R> {
 impl<R: Rng> Td3<R> {
     /// The learner's generator, for a caller's draws in sequence with the learner's own.
     pub fn rng(&mut self) -> &mut R {
-        &mut self.rng
+        &mut self.ac.rng
     }
 
     /// The actor network (the policy).
     pub fn actor(&self) -> &Mlp {
-        &self.actor
+        &self.ac.actor.net
     }
 }
 
 impl<R: Rng + Serialize + DeserializeOwned> Persist for Td3<R> {
-    /// Writes everything that changes while TD3 learns and acts: the actor, the critics, their targets and optimisers, the
-    /// generator and the update count. Buffers are left out: every use overwrites them.
+    /// Writes everything that changes while TD3 learns and acts: the actor and its target, the critics with
+    /// their target, both optimisers, the generator and the update count. Buffers are left out: every use
+    /// overwrites them.
     fn save_state<'a>(&'a self, prefix: &str, state: &mut StateDict<'a>) {
-        self.actor.save_state(&format!("{prefix}.actor"), state);
+        self.ac.save_state(prefix, state);
         self.actor_target
             .save_state(&format!("{prefix}.actor_target"), state);
-        self.critics.save_state(&format!("{prefix}.critics"), state);
-        self.actor_opt
-            .save_state(&format!("{prefix}.actor_adam"), state);
-        state.put_text(&format!("{prefix}.rng"), &self.rng);
-        state.put_value(&format!("{prefix}.updates"), &self.updates);
     }
 
     /// Reads what [`Td3::save_state`] wrote into a learner of the same configuration.
     fn load_state(&mut self, prefix: &str, state: &StateDict<'_>) -> Result<(), StateError> {
-        self.actor.load_state(&format!("{prefix}.actor"), state)?;
+        self.ac.load_state(prefix, state)?;
         self.actor_target
-            .load_state(&format!("{prefix}.actor_target"), state)?;
-        self.critics
-            .load_state(&format!("{prefix}.critics"), state)?;
-        self.actor_opt
-            .load_state(&format!("{prefix}.actor_adam"), state)?;
-        self.rng = state.text(&format!("{prefix}.rng"))?;
-        self.updates = state.value(&format!("{prefix}.updates"))?;
-        Ok(())
+            .load_state(&format!("{prefix}.actor_target"), state)
     }
 }
 
@@ -369,7 +312,19 @@ mod tests {
     use crate::agent::actor_critic::testing::{
         evaluate_pendulum, pretraining_imitates, train_pendulum,
     };
+    use crate::nn::MlpWorkspace;
     use rand::SeedableRng;
+
+    /// A learner for Pendulum-v1 (3 observations, one action in [-2, 2]) from `seed`.
+    fn pendulum_agent(config: Td3Config, seed: u64) -> Td3<rand_pcg::Pcg64> {
+        Td3::new(
+            config,
+            3,
+            &[-2.0],
+            &[2.0],
+            rand_pcg::Pcg64::seed_from_u64(seed),
+        )
+    }
 
     #[test]
     fn td3_learns_pendulum() {
@@ -380,13 +335,7 @@ mod tests {
             max_batch: 128,
             ..Td3Config::default()
         };
-        let mut agent = Td3::new(
-            config,
-            3,
-            &[-2.0],
-            &[2.0],
-            rand_pcg::Pcg64::seed_from_u64(0),
-        );
+        let mut agent = pendulum_agent(config, 0);
         train_pendulum(&mut agent, 12_000, 128);
         let score = evaluate_pendulum(&mut agent, 1000..1010);
         eprintln!(
@@ -404,13 +353,7 @@ mod tests {
             q_filter: false,
             ..Td3Config::default()
         };
-        let mut agent = Td3::new(
-            config,
-            3,
-            &[-2.0],
-            &[2.0],
-            rand_pcg::Pcg64::seed_from_u64(3),
-        );
+        let mut agent = pendulum_agent(config, 3);
         pretraining_imitates(&mut agent, 2_000, "TD3");
     }
 
@@ -456,14 +399,14 @@ mod tests {
             is_demo: is_demo.to_vec(),
         };
         let (_, bc) = agent.actor_gradient(&batch);
-        let grads = agent.actor_grads.clone();
+        let grads = agent.ac.actor.grads.clone();
         // The Q-filter's outcome at the unperturbed parameters (a selection, not differentiated).
         let heads_mean =
             |agent: &Td3<rand_pcg::Pcg64>, state: &[f32], action: &[f32]| -> (f64, f64) {
-                let mut ws = MlpWorkspace::new(&agent.critics.net, 1);
+                let mut ws = MlpWorkspace::new(&agent.ac.critics.net, 1);
                 let mut input = state.to_vec();
                 input.extend(action);
-                let q = agent.critics.net.forward(&input, 1, &mut ws);
+                let q = agent.ac.critics.net.forward(&input, 1, &mut ws);
                 let sum = q.iter().map(|v| f64::from(*v)).sum::<f64>();
                 (sum, sum / q.len() as f64)
             };
@@ -511,12 +454,12 @@ mod tests {
         };
         let h = 1e-2f32;
         for (i, analytic) in grads.iter().enumerate() {
-            let original = agent.actor.parameters()[i];
-            agent.actor.parameters_mut()[i] = original + h;
+            let original = agent.ac.actor.net.parameters()[i];
+            agent.ac.actor.net.parameters_mut()[i] = original + h;
             let up = loss(&mut agent);
-            agent.actor.parameters_mut()[i] = original - h;
+            agent.ac.actor.net.parameters_mut()[i] = original - h;
             let down = loss(&mut agent);
-            agent.actor.parameters_mut()[i] = original;
+            agent.ac.actor.net.parameters_mut()[i] = original;
             let numeric = (up - down) / (2.0 * f64::from(h));
             assert!(
                 (f64::from(*analytic) - numeric).abs() < 2e-3 * numeric.abs().max(0.1),
@@ -559,8 +502,8 @@ mod tests {
             assert_eq!(bonus[r], expected, "sample {r}");
         }
         assert_eq!(
-            agents[0].critics.net.parameters(),
-            agents[1].critics.net.parameters()
+            agents[0].ac.critics.net.parameters(),
+            agents[1].ac.critics.net.parameters()
         );
     }
 }

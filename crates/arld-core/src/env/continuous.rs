@@ -8,7 +8,7 @@
 //! follows NumPy's types step for step, float32 where NumPy computes in float32 (see each task's docs), so the
 //! conformance traces recorded from Gymnasium 1.4.0 are reproduced bit for bit (`tests/continuous_conformance.rs`).
 
-use super::{BoxSpec, Env, EnvError, EnvRng, Outcome};
+use super::{BoxSpec, Env, EnvError, EnvRng, EpisodeClock, Outcome};
 use crate::rng::NumpyRng;
 
 /// Every continuous-action task, in the order `known_continuous_ids` lists them.
@@ -65,8 +65,7 @@ pub struct ContinuousEnv {
     spec: &'static BoxSpec,
     rng: EnvRng,
     physics: Box<dyn ContinuousDynamics>,
-    elapsed_steps: usize,
-    running: bool,
+    clock: EpisodeClock,
 }
 
 impl ContinuousEnv {
@@ -76,8 +75,7 @@ impl ContinuousEnv {
             spec,
             rng: EnvRng::default(),
             physics,
-            elapsed_steps: 0,
-            running: false,
+            clock: EpisodeClock::new(spec.id, spec.max_episode_steps),
         }
     }
 }
@@ -87,8 +85,7 @@ impl Env<Vec<f32>> for ContinuousEnv {
     /// continues the current generator).
     fn reset_into(&mut self, seed: Option<u64>, obs: &mut [f32]) {
         self.physics.reset(self.rng.reseed(seed));
-        self.elapsed_steps = 0;
-        self.running = true;
+        self.clock.start();
         self.physics.observe(obs);
     }
 
@@ -96,24 +93,16 @@ impl Env<Vec<f32>> for ContinuousEnv {
     /// length or with a value that is not finite is an error naming it, and so is a step outside an episode.
     fn step_into(&mut self, action: &[f32], obs: &mut [f32]) -> Result<Outcome, EnvError> {
         let env = self.spec.id;
-        if !self.running {
-            return Err(EnvError::NeedsReset { env });
-        }
+        self.clock.check_running()?;
         <Vec<f32> as super::Action>::check(action, self.spec)
             .map_err(|msg| EnvError::BadState { env, msg })?;
         let Some(rng) = self.rng.current() else {
             return Err(EnvError::NeedsReset { env });
         };
         let (reward, terminated) = self.physics.step(action, rng);
-        self.elapsed_steps += 1;
-        let truncated = self.elapsed_steps >= self.spec.max_episode_steps;
-        self.running = !(terminated || truncated);
+        let outcome = self.clock.finish_step(reward, terminated);
         self.physics.observe(obs);
-        Ok(Outcome {
-            reward,
-            terminated,
-            truncated,
-        })
+        Ok(outcome)
     }
 
     fn spec(&self) -> &'static BoxSpec {
@@ -136,8 +125,7 @@ impl Env<Vec<f32>> for ContinuousEnv {
                 env: self.spec.id,
                 msg,
             })?;
-        self.elapsed_steps = 0;
-        self.running = true;
+        self.clock.start();
         let mut obs = vec![0.0; self.spec.obs_dim];
         self.physics.observe(&mut obs);
         Ok(obs)

@@ -482,7 +482,7 @@ impl<D> Simulated<D> {
         Simulated {
             spec,
             rng: EnvRng::default(),
-            clock: EpisodeClock::new(spec.id, spec.n_actions, spec.max_episode_steps),
+            clock: EpisodeClock::new(spec.id, spec.max_episode_steps),
             physics,
         }
     }
@@ -501,15 +501,18 @@ impl<D: Dynamics> Env for Simulated<D> {
     }
 
     fn step_into(&mut self, action: usize, obs: &mut [f32]) -> Result<Outcome, EnvError> {
-        self.clock.check_step(action)?;
+        self.clock.check_running()?;
+        if action >= self.spec.n_actions {
+            return Err(EnvError::ActionOutOfRange {
+                env: self.spec.id,
+                action,
+                n_actions: self.spec.n_actions,
+            });
+        }
         let (reward, terminated) = self.physics.step(action, &mut self.rng);
-        let truncated = self.clock.finish_step(terminated);
+        let outcome = self.clock.finish_step(reward, terminated);
         self.physics.observe(obs);
-        Ok(Outcome {
-            reward,
-            terminated,
-            truncated,
-        })
+        Ok(outcome)
     }
 
     fn spec(&self) -> &'static EnvSpec {
@@ -588,17 +591,15 @@ impl EnvRng {
 #[derive(Debug, Clone)]
 pub struct EpisodeClock {
     env: &'static str,
-    n_actions: usize,
     max_episode_steps: usize,
     elapsed_steps: usize,
     running: bool,
 }
 
 impl EpisodeClock {
-    pub fn new(env: &'static str, n_actions: usize, max_episode_steps: usize) -> Self {
+    pub fn new(env: &'static str, max_episode_steps: usize) -> Self {
         Self {
             env,
-            n_actions,
             max_episode_steps,
             elapsed_steps: 0,
             running: false,
@@ -612,32 +613,31 @@ impl EpisodeClock {
         self.running = true;
     }
 
-    /// Checks that a step with `action` may run now.
+    /// Checks that a step may run now (an episode is running).
     #[inline]
-    pub fn check_step(&self, action: usize) -> Result<(), EnvError> {
-        if !self.running {
-            return Err(EnvError::NeedsReset { env: self.env });
+    pub fn check_running(&self) -> Result<(), EnvError> {
+        if self.running {
+            Ok(())
+        } else {
+            Err(EnvError::NeedsReset { env: self.env })
         }
-        if action >= self.n_actions {
-            return Err(EnvError::ActionOutOfRange {
-                env: self.env,
-                action,
-                n_actions: self.n_actions,
-            });
-        }
-        Ok(())
     }
 
-    /// Counts a finished step; returns `truncated` (`elapsed >= max_episode_steps`, as `TimeLimit` does).
-    /// After a terminal or truncated step the episode needs a reset.
+    /// Counts a finished step with `reward` that `terminated` the task or not; returns its outcome, truncated
+    /// when `elapsed >= max_episode_steps` (as `TimeLimit` does). After a terminal or truncated step the episode
+    /// needs a reset.
     #[inline]
-    pub fn finish_step(&mut self, terminated: bool) -> bool {
+    pub fn finish_step(&mut self, reward: f64, terminated: bool) -> Outcome {
         self.elapsed_steps += 1;
         let truncated = self.elapsed_steps >= self.max_episode_steps;
         if terminated || truncated {
             self.running = false;
         }
-        truncated
+        Outcome {
+            reward,
+            terminated,
+            truncated,
+        }
     }
 
     /// Steps taken in the current episode.

@@ -339,22 +339,18 @@ const EXTERNAL_TASK: (crate::paper::TaskParameters, TaskSchedule) = (
 /// General defaults for a task with actions in a box (learned by TD3, [`crate::agent::box_agent`]): TD3's
 /// discount and learning rate (Fujimoto et al. 2018), a replay of every step and 1,000 steps before learning
 /// starts \[OURS\]. The target networks follow by Polyak averaging, so the target period is unused.
+/// The rest (discount, replay size, margin weight, query thresholds, evaluation period) is [`EXTERNAL_TASK`]'s.
 const BOX_TASK: (crate::paper::TaskParameters, TaskSchedule) = (
     crate::paper::TaskParameters {
-        gamma: 0.99,
         lr: 1e-3,
         train_steps: 20_000,
         n_demo: 1_000,
-        replay_size: 100_000,
         pretrain_steps: 1_000,
-        lambda: 1.0,
-        t_query_bootstrap: 0.1,
-        t_query_noisy: 0.3,
+        ..EXTERNAL_TASK.0
     },
     TaskSchedule {
-        eval_period: 1_000,
-        learning_starts: 1_000,
         target_period: 1,
+        ..EXTERNAL_TASK.1
     },
 );
 

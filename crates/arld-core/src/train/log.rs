@@ -6,6 +6,7 @@ use super::run_dir::{
     self, ANSWERS_FILE, AnswerStep, CONFIG_FILE, EPISODES_FILE, EPISODES_HEADER, EvalPoint,
     QUERIES_FILE, QUERIES_HEADER, QueryEvent, SUMMARY_FILE, Summary, write_atomic,
 };
+use crate::replay::Transition;
 use crate::task::Action;
 use crate::tboard::EventWriter;
 use anyhow::{Context, Result};
@@ -268,33 +269,18 @@ impl<A: Action> RunLog<A> {
         Ok(())
     }
 
-    /// A step the expert took: written to the answer log with the question that opened its segment (the last
-    /// query logged).
-    #[allow(clippy::too_many_arguments)]
+    /// A step the expert took (`taken` as the run stored it at `(step, episode)`, `ended` its `(terminated,
+    /// truncated)`): written to the answer log with the question that opened its segment (the last query logged).
     pub fn answered(
         &mut self,
-        step: usize,
-        episode: usize,
-        obs: &[f32],
-        action: A::Ref<'_>,
-        reward: f64,
-        next_obs: &[f32],
+        at: (usize, usize),
+        taken: &Transition<'_, A>,
         ended: (bool, bool),
     ) -> Result<()> {
         let Some(f) = &mut self.answers else {
             return Ok(());
         };
-        let line = AnswerStep::<A>::new(
-            step,
-            episode,
-            obs,
-            action,
-            reward,
-            next_obs,
-            ended,
-            self.query_events.last(),
-        )
-        .json_line()?;
+        let line = AnswerStep::<A>::new(at, taken, ended, self.query_events.last()).json_line()?;
         f.write_all(line.as_bytes())?;
         Ok(())
     }

@@ -727,25 +727,19 @@ impl<'a, L: Learner> Run<'a, L> {
             parts.queries.record_expert_step();
             st.ep_demo += 1;
         }
-        if by_expert {
-            self.log.answered(
-                st.step,
-                st.episode,
-                &parts.obs,
-                action.borrow(),
-                s.reward,
-                &self.next_obs,
-                (s.terminated, s.truncated),
-            )?;
-        }
-        parts.replay.push(Transition {
+        let taken = Transition {
             obs: &parts.obs,
             action: action.borrow(),
             reward: s.reward as f32,
             next_obs: &self.next_obs,
             terminal: s.terminated || (s.truncated && cfg.timeout_as_terminal),
             is_demo: by_expert,
-        })?;
+        };
+        if by_expert {
+            let ended = (s.terminated, s.truncated);
+            self.log.answered((st.step, st.episode), &taken, ended)?;
+        }
+        parts.replay.push(taken)?;
         st.ep_actions.push(action);
         st.ep_return += s.reward;
         st.ep_len += 1;

@@ -14,8 +14,10 @@
 //! complete runs below a directory and reads each into a [`RunRecord`] for reports.
 
 use super::config::{ConfigInput, Method, NetKind, TrainConfig};
+use crate::expert::demos::DemoStep;
 pub use crate::files::write_atomic;
 use crate::query::RuleSpec;
+use crate::replay::Transition;
 use crate::task::Action;
 use anyhow::{Context, Result, bail};
 use serde::{Deserialize, Serialize};
@@ -357,13 +359,9 @@ pub const STARTED_BY_RULE: &str = "rule";
 #[serde(bound = "")]
 pub struct AnswerStep<A: Action = usize> {
     pub step: usize,
-    pub episode: usize,
-    pub obs: Vec<f32>,
-    pub action: A,
-    pub reward: f32,
-    pub next_obs: Vec<f32>,
-    pub terminated: bool,
-    pub truncated: bool,
+    /// The transition, written as the fields of a demonstration file's line (`episode` to `truncated`).
+    #[serde(flatten)]
+    pub taken: DemoStep<A>,
     /// The step of the question that opened this segment (`None` when the run does not know it: a run continued
     /// from a snapshot written before queries were kept in snapshots).
     pub question_step: Option<usize>,
@@ -380,27 +378,25 @@ pub struct AnswerStep<A: Action = usize> {
 }
 
 impl<A: Action> AnswerStep<A> {
-    /// The step taken by the expert, tied to `question` (the last question asked, which opened its segment).
-    #[allow(clippy::too_many_arguments)]
+    /// The step taken by the expert at `step` of the run in `episode` (`taken` as the run stored it, `ended` its
+    /// `(terminated, truncated)`), tied to `question` (the last question asked, which opened its segment).
     pub fn new(
-        step: usize,
-        episode: usize,
-        obs: &[f32],
-        action: A::Ref<'_>,
-        reward: f64,
-        next_obs: &[f32],
+        (step, episode): (usize, usize),
+        taken: &Transition<'_, A>,
         (terminated, truncated): (bool, bool),
         question: Option<&QueryEvent<A>>,
     ) -> Self {
         Self {
             step,
-            episode,
-            obs: obs.to_vec(),
-            action: A::owned(action),
-            reward: reward as f32,
-            next_obs: next_obs.to_vec(),
-            terminated,
-            truncated,
+            taken: DemoStep {
+                episode,
+                obs: taken.obs.to_vec(),
+                action: A::owned(taken.action),
+                reward: taken.reward,
+                next_obs: taken.next_obs.to_vec(),
+                terminated,
+                truncated,
+            },
             question_step: question.map(|q| q.step),
             agent_action: question.map(|q| q.agent_action.clone()),
             uncertainty: question.and_then(|q| q.uncertainty),
