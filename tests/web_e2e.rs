@@ -473,7 +473,7 @@ fn answer_lines(run: &Path) -> Vec<serde_json::Value> {
 #[test]
 fn a_person_takes_over_unasked_in_real_time_and_hands_back() {
     check_prerequisites();
-    // CartPole-v0 in real time at 40 steps per second, a budget of 60 transitions: the agent asks (the rule's
+    // CartPole-v0 in real time at 20 steps per second, a budget of 60 transitions: the agent asks (the rule's
     // questions), and in between the person presses T, acts for a while and hands back with Esc.
     const TRAIN_STEPS: u64 = 4000;
     const BUDGET: u64 = 60;
@@ -492,7 +492,7 @@ fn a_person_takes_over_unasked_in_real_time_and_hands_back() {
         "--expert",
         "web",
         "--web-fps",
-        "40",
+        "20",
         "--listen",
         "127.0.0.1:0",
         "--set",

@@ -4,7 +4,7 @@
 // opening prompt with a fresh key, holds the controller's keys for a while, saves a screenshot of the takeover in
 // progress (takeover.png) and hands back with Esc; then answers the agent's questions until the run ends. Usage:
 //   node takeover.mjs --url URL --shots DIR [--hold N]
-// (--hold N: hand back after N running steps of the takeover; 15 by default.)
+// (--hold N: hand back after the person's N-th step of the takeover; 15 by default.)
 // Prints one JSON line: {"takeover": {...what the page showed of it...}, "questions": N, "endScreen": {...}}.
 import { chromium } from "playwright-core";
 import fs from "node:fs";
@@ -97,8 +97,9 @@ for (;;) {
       lastId = p.id;
       const a = cartpole(p.obs);
       await holdKey(a === hello.noop ? null : a);
-      running++;
-      if (running === Math.ceil(holdSteps / 2)) {
+      // Steps the person took so far, from the run's status (a loaded machine may miss some of the prompts).
+      running = s.status.step - takeover.openedAtStep;
+      if (running >= 3 && !takeover.inProgress) {
         takeover.inProgress = await panel();
         await page.screenshot({ path: path.join(shots, "takeover.png") });
       }

@@ -211,7 +211,7 @@ function showPrompt() {
   $("pass").disabled = !p || !(p.waits || p.takeover) || !controls() || arld.ended !== null;
   $("pass").textContent = p && p.takeover ? "Hand back [Esc]" : "Let the agent decide [Esc]";
   const t = $("takeover");
-  t.hidden = !h.fps || !controls() || arld.ended !== null || arld.handed !== null;
+  t.hidden = !h.fps || !controls() || arld.ended !== null || arld.handed !== null || !!(p && p.takeover);
   t.disabled = !!p || noneLeft() || arld.paused || !!replay;
   $("undo").disabled = !p || !p.undo || !controls() || arld.ended !== null || !!replay;
   $("undo").hidden = !!h.fps || !h.undo;
