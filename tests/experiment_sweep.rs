@@ -108,6 +108,7 @@ fn write_fake_run(spec: &RunSpec, dir: &Path, interrupt: bool) -> Result<()> {
                 expert: "checkpoint".into(),
                 response_s: None,
                 answered: true,
+                started_by: run_dir::StartedBy::Rule,
             };
             queries.push_str(&event.csv_row());
         }

@@ -205,3 +205,128 @@ fn an_expert_that_shows_the_uncertainty_sees_it_after_the_budget_is_spent() {
         );
     }
 }
+
+/// Answers the rule's questions with action 0; takes over unasked once, at the first step the agent is about to
+/// act after step `at` was reported, answers action 1 for `hold` steps and hands back.
+struct TakesOver {
+    at: usize,
+    hold: usize,
+    last_step: usize,
+    asked: bool,
+    held: usize,
+}
+
+impl Expert for TakesOver {
+    fn act(&mut self, _obs: &[f32]) -> Result<usize> {
+        Ok(0)
+    }
+    fn describe(&self) -> String {
+        "takes-over:test".into()
+    }
+    fn observe(&mut self, p: &Progress) {
+        self.last_step = p.step;
+    }
+    fn wants_control(&mut self) -> bool {
+        let now = !self.asked && self.last_step >= self.at;
+        self.asked |= now;
+        now
+    }
+    fn answer(&mut self, query: &Query) -> Result<Answer> {
+        if !query.taken_over {
+            return Ok(Answer::Action {
+                action: 0,
+                response_s: None,
+            });
+        }
+        if self.held == self.hold {
+            return Ok(Answer::Unanswered { waited_s: 0.0 });
+        }
+        self.held += 1;
+        Ok(Answer::Action {
+            action: 1,
+            response_s: Some(0.5),
+        })
+    }
+}
+
+#[test]
+fn a_takeover_is_charged_like_a_question_and_leaves_the_rule_alone() {
+    let mut input = ConfigInput::new("CartPole-v0", Method::Adqn, NetKind::Bootstrap, 7);
+    for o in [
+        "budget=100",
+        "train_steps=600",
+        "learning_starts=100",
+        "eval_period=600",
+        "eval_episodes=1",
+    ] {
+        input.apply_override(o).unwrap();
+    }
+    let cfg = input.resolve().unwrap();
+    let run = |at: usize| {
+        let dir = tempfile::tempdir().unwrap();
+        let mut log = RunLog::create(dir.path(), &cfg.to_toml(), 600, false).unwrap();
+        let mut expert = TakesOver {
+            at,
+            hold: 3,
+            last_step: 0,
+            asked: false,
+            held: 0,
+        };
+        let (summary, _) = RunBuilder::new(&cfg)
+            .expert(Some(&mut expert))
+            .train(&mut log)
+            .unwrap();
+        let read = |name: &str| std::fs::read_to_string(dir.path().join(name)).unwrap();
+        (summary, read("queries.csv"), read("answers.jsonl"))
+    };
+    // No takeover (step 10^6 never comes): the run as it always was.
+    let (plain, plain_queries, _) = run(1_000_000);
+    let at = 150;
+    let (summary, queries, answers) = run(at);
+    let lines: Vec<serde_json::Value> = answers
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    let person: Vec<&serde_json::Value> = lines
+        .iter()
+        .filter(|l| l["started_by"] == "person")
+        .collect();
+    // Three steps in a row from where the person took over, tied to the takeover (no threshold), with action 1.
+    assert_eq!(person.len(), 3, "{answers}");
+    let opened = person[0]["question_step"].as_u64().unwrap() as usize;
+    assert!((at..at + 20).contains(&opened), "took over at {opened}");
+    for (k, l) in person.iter().enumerate() {
+        assert_eq!(l["step"].as_u64(), Some((opened + k) as u64));
+        assert_eq!(l["question_step"].as_u64(), Some(opened as u64));
+        assert_eq!(l["action"], 1);
+        assert!(l["threshold"].is_null() && l["uncertainty"].is_number());
+        assert_eq!(l["expert"], "takes-over");
+        assert_eq!(l["response_s"], 0.5);
+    }
+    assert!(lines.iter().any(|l| l["started_by"] == "rule"));
+    // Charged like answers: every demonstrated step is one unit of the budget.
+    assert_eq!(summary.demos_queried, lines.len());
+    // queries.csv holds the rule's questions only: up to the takeover, the same rows as the run without it (the
+    // takeover's poll changed nothing before it), and no row at its step, the hand-back included.
+    let steps = |csv: &str| -> Vec<usize> {
+        csv.lines()
+            .skip(1)
+            .map(|l| l.split(',').next().unwrap().parse().unwrap())
+            .collect()
+    };
+    let before = |csv: &str, at: usize| -> Vec<String> {
+        csv.lines()
+            .skip(1)
+            .filter(|l| l.split(',').next().unwrap().parse::<usize>().unwrap() < at)
+            .map(str::to_string)
+            .collect()
+    };
+    assert_eq!(before(&queries, opened), before(&plain_queries, opened));
+    assert!(
+        !before(&queries, opened).is_empty(),
+        "no question before the takeover"
+    );
+    assert!(!steps(&queries).contains(&opened));
+    assert!(!steps(&queries).contains(&(opened + 3)));
+    assert!(plain.demos_queried > 0);
+}

@@ -1,6 +1,7 @@
 //! End-to-end test of the web expert in a real headless Chromium: `arld train --expert web` runs short ADQN runs
 //! on CartPole-v0 (turn-based, with a question left unanswered until its timeout) and LunarLander-v2 (real time),
-//! and a scripted person (tests/e2e/person.mjs, Playwright) answers by pressing keys. The runs must complete, and
+//! and a scripted person (tests/e2e/person.mjs, Playwright) answers by pressing keys; in a real-time CartPole run
+//! another (tests/e2e/takeover.mjs) also takes over unasked and hands back. The runs must complete, and
 //! queries.csv must show the person's answers. The script itself checks the drawing is not blank, that requests
 //! without the token get 403 and that a watching tab's messages are refused; screenshots go to
 //! target/e2e-screenshots/.
@@ -434,6 +435,157 @@ fn a_stop_while_a_question_is_open_loses_nothing_and_resume_asks_it_again() {
         [answered, later].concat()
     );
     assert_eq!(summary(&run)["train_steps"], TRAIN_STEPS);
+}
+
+/// Runs tests/e2e/takeover.mjs on `url`; its report (the last JSON line it printed).
+fn run_takeover_person(url: &str, shots: &Path) -> serde_json::Value {
+    let out = Command::new("node")
+        .current_dir(e2e_dir())
+        .arg("takeover.mjs")
+        .args(["--url", url, "--shots"])
+        .arg(shots)
+        .output()
+        .expect("start node");
+    assert!(
+        out.status.success(),
+        "the person who takes over failed: {}{}",
+        String::from_utf8_lossy(&out.stderr),
+        String::from_utf8_lossy(&out.stdout)
+    );
+    serde_json::from_slice(
+        out.stdout
+            .split(|&b| b == b'\n')
+            .rfind(|l| l.starts_with(b"{"))
+            .expect("the person's report"),
+    )
+    .unwrap()
+}
+
+/// The lines of `answers.jsonl`.
+fn answer_lines(run: &Path) -> Vec<serde_json::Value> {
+    std::fs::read_to_string(run.join("answers.jsonl"))
+        .unwrap()
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect()
+}
+
+#[test]
+fn a_person_takes_over_unasked_in_real_time_and_hands_back() {
+    check_prerequisites();
+    // CartPole-v0 in real time at 20 steps per second, a budget of 60 transitions: the agent asks (the rule's
+    // questions), and in between the person presses T, acts for a while and hands back with Esc.
+    const TRAIN_STEPS: u64 = 4000;
+    const BUDGET: u64 = 60;
+    let train_steps = format!("train_steps={TRAIN_STEPS}");
+    let budget = format!("budget={BUDGET}");
+    let run = tempfile::tempdir().unwrap().keep().join("run");
+    let run_arg = run.clone().into_os_string();
+    let words = [
+        "train",
+        "--env",
+        "CartPole-v0",
+        "--method",
+        "adqn",
+        "--net",
+        "bootstrap",
+        "--expert",
+        "web",
+        "--web-fps",
+        "20",
+        "--listen",
+        "127.0.0.1:0",
+        "--set",
+        train_steps.as_str(),
+        "--set",
+        budget.as_str(),
+        "--set",
+        "eval_period=2000",
+        "-o",
+    ];
+    let mut args: Vec<&std::ffi::OsStr> = words.iter().map(std::ffi::OsStr::new).collect();
+    args.push(&run_arg);
+    let (mut arld, url) = start_arld(&args, Stdio::inherit());
+    let shots = shots_dir("takeover");
+    let report = run_takeover_person(&url, &shots);
+    let status = wait(&mut arld, Duration::from_secs(180), "arld");
+    assert!(status.success(), "arld failed: {report}");
+    assert!(shots.join("takeover.png").is_file());
+    let t = &report["takeover"];
+
+    // The page offered the button while the agent acted, and showed the takeover with the hand-back control.
+    assert_eq!(t["offered"]["takeoverButton"]["disabled"], false, "{t}");
+    let during = &t["inProgress"];
+    assert_eq!(during["className"], "takeover", "{t}");
+    assert!(
+        during["text"]
+            .as_str()
+            .unwrap()
+            .starts_with("You have control"),
+        "{t}"
+    );
+    assert_eq!(during["pass"]["text"], "Hand back [Esc]");
+    assert_eq!(during["pass"]["disabled"], false);
+    assert_ne!(
+        t["after"]["className"], "takeover",
+        "the takeover did not end: {t}"
+    );
+    assert_eq!(t["after"]["pass"], "Let the agent decide [Esc]", "{t}");
+
+    // answers.jsonl: the person's steps, started by them, in one stretch from the state they took over in.
+    let lines = answer_lines(&run);
+    let (person, rule): (Vec<_>, Vec<_>) = lines.iter().partition(|l| l["started_by"] == "person");
+    assert!(!rule.is_empty(), "no question of the rule was answered");
+    assert!(rule.iter().all(|l| l["started_by"] == "rule"));
+    let opened = person[0]["question_step"].as_u64().unwrap();
+    assert!(
+        person.len() >= 5,
+        "the takeover held {} steps",
+        person.len()
+    );
+    for (k, l) in person.iter().enumerate() {
+        assert_eq!(l["question_step"].as_u64(), Some(opened), "{l}");
+        assert_eq!(l["step"].as_u64(), Some(opened + k as u64), "{l}");
+        assert_eq!(l["episode"], person[0]["episode"]);
+        assert_eq!(l["expert"], "web");
+        assert!(l["threshold"].is_null(), "a takeover has no threshold: {l}");
+        assert_eq!(l["agent_action"], t["agentAction"]);
+    }
+    // It began in the state the page showed when the person took over, with the key they pressed first.
+    assert_eq!(floats(&person[0]["obs"]), floats(&t["obs"]));
+    assert_eq!(person[0]["action"], t["first"]);
+    assert!(person[0]["uncertainty"].is_number());
+    if t["endedByEpisode"].is_null() {
+        // Handed back: the takeover ended at the step the page showed then (give or take the steps in flight).
+        let back = t["handedBackAtStep"].as_u64().unwrap();
+        let last = person.last().unwrap()["step"].as_u64().unwrap();
+        assert!(
+            last + 1 >= back && last < back + 40,
+            "last step {last}, handed back at {back}"
+        );
+    }
+
+    // queries.csv holds the rule's questions only (its columns unchanged); the takeover is not one of them.
+    let csv = std::fs::read_to_string(run.join("queries.csv")).unwrap();
+    assert!(csv.starts_with(
+        "step,episode,uncertainty,threshold,expert_action,agent_action,expert,response_s,answered\n"
+    ));
+    let asked: Vec<u64> = csv::Reader::from_path(run.join("queries.csv"))
+        .unwrap()
+        .records()
+        .map(|r| r.unwrap()[0].parse().unwrap())
+        .collect();
+    assert!(!asked.contains(&opened));
+    for l in &rule {
+        assert!(asked.contains(&l["question_step"].as_u64().unwrap()));
+    }
+
+    // The budget: every step the expert took (asked or taken over) is one unit, within the budget.
+    let s = summary(&run);
+    assert_eq!(s["demos_queried"].as_u64(), Some(lines.len() as u64));
+    assert!(lines.len() as u64 <= BUDGET);
+    assert_eq!(s["train_steps"], TRAIN_STEPS);
+    assert_eq!(report["endScreen"]["rows"]["Takeovers"], "1", "{report}");
 }
 
 /// One HTTP GET of `url` (`http://IP:PORT/PATH`) with plain sockets; the status code.

@@ -16,8 +16,8 @@ bootstraps there. `infos` has one row per observation: `step` (the run's step th
 after the last step, one more) and the segment's question, the same in every row: `episode` (the run's episode),
 `question_step`, `agent_action` (what the agent proposed; -1 when not known), `uncertainty` and `threshold`
 (NaN when the rule computed none), `response_s` (seconds the answer took; NaN for a program), `expert` (who
-answered) and `started_by` (`rule`: the query rule asked). Observations are arld's flat float32 vectors (a Box),
-actions are discrete. The dataset's metadata also holds `arld_env` (the run's environment) and `arld_run`.
+answered) and `started_by` (`rule`: the query rule asked; `person`: a person took over unasked on the web page).
+Observations are arld's flat float32 vectors (a Box), actions are discrete. The dataset's metadata also holds `arld_env` (the run's environment) and `arld_run`.
 """
 
 from __future__ import annotations

@@ -19,7 +19,11 @@
 //! can show such a copy. Undo works one key ahead: the page shows the state after a key on a copy, and the run
 //! takes that key only when the next one comes, so an undone key never reaches the training loop. A question goes back to the agent ([`Answer::Unanswered`]) when the person hands
 //! it back or, with a `timeout`, when nobody answers in time (after a hand-back the agent's questions in the next
-//! [`HANDBACK_QUIET_STEPS`] steps of the episode go back to it unasked). The person may pause the run; their time
+//! [`HANDBACK_QUIET_STEPS`] steps of the episode go back to it unasked). In real time the person may also take
+//! over unasked ("Take over", key T, while the agent acts: [`Expert::wants_control`]): from the state the agent is
+//! in, a segment opens as a question's does (a fresh key, the countdown, then the held key), charged to the budget
+//! the same way and logged with `started_by: "person"`, until they hand back (Esc), the episode ends or the budget
+//! is spent. The person may pause the run; their time
 //! leaves out pauses and time with no tab open. A Python program's run handed back to it between two steps
 //! ([`Expert::handed_over`]: `learn` returned, or a stop) shows where it stands until it goes on. A stop request
 //! (Ctrl-C, SIGTERM) ends any wait at once with [`arld_core::interrupt::Interrupted`], so that the run snapshots with
@@ -237,6 +241,13 @@ struct Effort {
     /// Keys taken back (turn-based).
     #[serde(default)]
     undone: usize,
+    /// Segments the person took over unasked (absent from the state of runs without any).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    takeovers: usize,
+}
+
+fn is_zero(n: &usize) -> bool {
+    *n == 0
 }
 
 /// A person in a browser, as an [`Expert`].
@@ -273,6 +284,8 @@ pub struct WebExpert {
     handing_back: bool,
     /// The question being asked went back to the agent unasked (within [`HANDBACK_QUIET_STEPS`]).
     declined: bool,
+    /// The segment in progress is the person's takeover ([`Query::taken_over`]).
+    taking_over: bool,
 }
 
 impl WebExpert {
@@ -327,6 +340,7 @@ impl WebExpert {
             segment_ended: None,
             handing_back: false,
             declined: false,
+            taking_over: false,
         }
     }
 
@@ -398,6 +412,7 @@ impl WebExpert {
             undo,
             starts_in: None,
             obs: obs.to_vec(),
+            takeover: self.taking_over,
         }));
         Ok(id)
     }
@@ -606,6 +621,7 @@ impl WebExpert {
                 undo: false,
                 starts_in: Some(REALTIME_COUNTDOWN.as_secs_f64()),
                 obs: query.obs.to_vec(),
+                takeover: self.taking_over,
             }));
             let started = Instant::now();
             let mut paused = Duration::ZERO;
@@ -631,11 +647,17 @@ impl WebExpert {
             undo: false,
             starts_in: None,
             obs: query.obs.to_vec(),
+            takeover: self.taking_over,
         }));
         self.stopped("during a real-time segment")?;
         self.wait_while_paused()?;
         let next = self.last_tick + period;
         std::thread::sleep(next.saturating_duration_since(Instant::now()));
+        // A takeover goes on until the person hands back (from any of its prompts).
+        if self.taking_over && self.handed_back_now() {
+            self.handing_back = true;
+            return Ok(Answer::Unanswered { waited_s: 0.0 });
+        }
         // Keep the rate, but do not race to catch up after a slow step (or a pause).
         self.last_tick = Instant::now()
             .checked_sub(period)
@@ -646,11 +668,34 @@ impl WebExpert {
         })
     }
 
+    /// Real time, during a takeover: whether the person handed back since the last step (keys meant for
+    /// anything else are dropped: only the held key acts in a running segment).
+    fn handed_back_now(&mut self) -> bool {
+        let mut handed = false;
+        while let Ok(key) = self.server.keys.try_recv() {
+            handed |= key.input == Input::HandBack;
+        }
+        handed
+    }
+
     /// One step of a question: the agent's steps since the person's last one replayed first (on the step that
-    /// opens a segment), then the person's answer.
+    /// opens a segment), then the person's answer. A takeover opens at once: the person watched the agent's
+    /// steps and asked for it, so there is no replay, no breath and no quiet interval.
     fn ask(&mut self, query: &Query) -> Result<Answer> {
         self.lift_hand_over();
-        if query.agent_action.is_some() {
+        self.taking_over = query.taken_over;
+        if query.agent_action.is_some() && query.taken_over {
+            self.carried = None;
+            // What the person saw the agent do is the latest status.
+            if let Some(status) = self.unsent.take() {
+                let msg = ServerMsg::Status(&status).to_json();
+                self.server
+                    .shared
+                    .publish(msg, |b, m| b.status = Some(m.clone()));
+            }
+        } else if query.agent_action.is_some() {
+            // A request to take over made while the agent asks is answered by the question itself.
+            self.server.shared.take_takeover();
             // Shortly after a hand-back in the same episode the question is not asked again.
             if let Some((episode, at)) = self.handed_back {
                 if episode == self.episode
@@ -723,6 +768,7 @@ impl WebExpert {
             unanswered: self.effort.unanswered,
             keys: self.effort.keys,
             undone: self.effort.undone,
+            takeovers: self.effort.takeovers,
             person_s: self.effort.person_s,
         }
     }
@@ -762,7 +808,11 @@ impl Expert for WebExpert {
         // The person's time: the whole wait, less the time they were absent (the run paused, or no tab open).
         let present = self.server.shared.present_since(started, absent_before);
         self.effort.person_s += present.as_secs_f64();
-        if query.agent_action.is_some() && !std::mem::take(&mut self.declined) {
+        if query.agent_action.is_some() && query.taken_over {
+            if let Ok(Answer::Action { .. }) = result {
+                self.effort.takeovers += 1;
+            }
+        } else if query.agent_action.is_some() && !std::mem::take(&mut self.declined) {
             match result {
                 Ok(Answer::Action { .. }) => self.effort.answered += 1,
                 Ok(Answer::Unanswered { .. }) => self.effort.unanswered += 1,
@@ -788,6 +838,11 @@ impl Expert for WebExpert {
 
     fn shows_uncertainty(&self) -> bool {
         true
+    }
+    /// Real time only: the page's "Take over (T)" asked since the last step (turn-based, every step waits for
+    /// the agent's questions anyway).
+    fn wants_control(&mut self) -> bool {
+        self.server.options.fps.is_some() && self.server.shared.take_takeover()
     }
     fn observe(&mut self, p: &Progress) {
         self.lift_hand_over();
@@ -823,6 +878,7 @@ impl Expert for WebExpert {
             person_s: self.effort.person_s,
             keys: self.effort.keys,
             answered: self.effort.answered,
+            takeovers: self.effort.takeovers,
             // Each question takes at least one unit of the budget.
             questions_left_max: left,
             // This person's pace so far: their seconds per unit of budget spent.

@@ -110,6 +110,8 @@ pub struct Status {
     pub person_s: f64,
     pub keys: usize,
     pub answered: usize,
+    /// Segments the person took over unasked.
+    pub takeovers: usize,
     /// The questions that can still come, at most (0: the agent trains on its own from here).
     pub questions_left_max: usize,
     /// The person's time still needed at their pace so far, if the budget were spent (`None` before any).
@@ -129,6 +131,8 @@ pub struct EndScreen {
     pub keys: usize,
     /// Keys taken back.
     pub undone: usize,
+    /// Segments the person took over unasked.
+    pub takeovers: usize,
     pub person_s: f64,
 }
 
@@ -148,6 +152,8 @@ pub struct Prompt {
     /// Real time: the segment starts after this many seconds (a countdown once the person pressed a key).
     pub starts_in: Option<f64>,
     pub obs: Vec<f32>,
+    /// The segment is the person's takeover (not a question of the agent): they hand back when done.
+    pub takeover: bool,
 }
 
 /// Everything the server sends.
@@ -230,7 +236,8 @@ pub enum ClientMsg {
         id: u64,
         action: usize,
     },
-    /// Hand question `id` back to the agent (logged unanswered, nothing charged).
+    /// Hand question `id` back to the agent (logged unanswered, nothing charged); during a takeover, any
+    /// prompt of it: the person hands back.
     Pass {
         id: u64,
     },
@@ -246,6 +253,9 @@ pub enum ClientMsg {
         action: Option<usize>,
     },
     Control,
+    /// Take over unasked from the state the agent is in (real time): a segment opens at the next step, charged
+    /// like a question's, until the person hands back.
+    Takeover,
 }
 
 impl ClientMsg {
@@ -257,6 +267,7 @@ impl ClientMsg {
             ClientMsg::Key { action, .. } => Some(*action),
             ClientMsg::Hold { action } => *action,
             ClientMsg::Control
+            | ClientMsg::Takeover
             | ClientMsg::Pass { .. }
             | ClientMsg::Undo { .. }
             | ClientMsg::Pause { .. } => None,

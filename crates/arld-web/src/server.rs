@@ -16,7 +16,7 @@ use axum::http::{StatusCode, header};
 use axum::middleware::{self, Next};
 use axum::response::{IntoResponse, Response};
 use axum::routing::get;
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, mpsc};
 use tokio::sync::{broadcast, oneshot};
 
@@ -162,6 +162,9 @@ pub struct Shared {
     updates: broadcast::Sender<Arc<str>>,
     keys: Mutex<mpsc::Sender<KeyInput>>,
     next_client: AtomicU64,
+    /// The controlling tab asked to take over (real time): read and cleared by the training thread once per
+    /// step ([`Shared::take_takeover`]).
+    takeover: AtomicBool,
 }
 
 impl Shared {
@@ -177,6 +180,7 @@ impl Shared {
             updates: broadcast::channel(256).0,
             keys: Mutex::new(keys),
             next_client: AtomicU64::new(1),
+            takeover: AtomicBool::new(false),
         }
     }
 
@@ -199,6 +203,11 @@ impl Shared {
             board.uncertainty.remove(0);
         }
         board.uncertainty.push(sample);
+    }
+
+    /// Whether the controlling tab asked to take over since the last call (the request is used up).
+    pub fn take_takeover(&self) -> bool {
+        self.takeover.swap(false, Ordering::Relaxed)
     }
 
     pub fn held(&self) -> Option<usize> {
@@ -585,6 +594,10 @@ fn handle(shared: &Shared, id: u64, text: &str) -> Result<(), String> {
         }
         ClientMsg::Key { id, action } => send_key(shared, board, id, Input::Action(action)),
         ClientMsg::Pass { id } => send_key(shared, board, id, Input::HandBack),
+        ClientMsg::Takeover => {
+            shared.takeover.store(true, Ordering::Relaxed);
+            Ok(())
+        }
         ClientMsg::Undo { id } => send_key(shared, board, id, Input::Undo),
     }
 }

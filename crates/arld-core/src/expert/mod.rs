@@ -58,6 +58,15 @@ pub trait Expert<A: Action = usize>: Send {
     /// Called by the training loop after every step, so that an interactive expert can show the run as it goes.
     /// It must be cheap and must not change anything the run depends on.
     fn observe(&mut self, _progress: &Progress<'_, A>) {}
+    /// Polled once per step where the agent is about to act and budget is left: whether the expert takes over
+    /// unasked from this state (a person pressed "Take over" on the page; human-gated control as in HG-DAgger and
+    /// HIL-SERL). When it says yes, the run opens a segment charged like a question's (the query rule does not
+    /// see it) and asks [`Expert::answer`] at once, with the agent's proposal, until the expert hands back
+    /// ([`Answer::Unanswered`]), the episode ends or the budget is spent. It must be cheap and draw nothing;
+    /// programs never take over.
+    fn wants_control(&mut self) -> bool {
+        false
+    }
     /// Whether the expert shows the agent's uncertainty at every step (a person's page): the agent then
     /// computes it even where no query rule reads it (a segment aside), so that it goes on after the budget is
     /// spent. Programs say no: the agent computes only what its rule needs.
@@ -101,6 +110,9 @@ pub struct Query<'a, A: Action = usize> {
     pub agent_action: Option<A::Ref<'a>>,
     /// Expert steps left in the segment, this one included.
     pub steps_left: usize,
+    /// Whether the segment is a takeover the expert asked for ([`Expert::wants_control`]), not a question of the
+    /// query rule.
+    pub taken_over: bool,
 }
 
 /// The episode in progress: how it began and the actions taken since.

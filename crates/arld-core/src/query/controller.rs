@@ -4,7 +4,10 @@
 //! *transitions* (or, as an ablation, queries: [`BudgetUnit`]) and is never exceeded; one query hands the expert
 //! control for `segment_len` consecutive steps (the paper's "five consecutive expert demonstrations"), cut short
 //! by the end of the episode or of the budget. The rule is only consulted when the agent is about to act, never
-//! during expert control, and not once the budget is spent.
+//! during expert control, and not once the budget is spent. A person may also take over unasked
+//! ([`QueryController::open_segment_by_person`]): that segment is charged exactly like a query's, but the rule
+//! does not see it (no decision, no statistics) and it lasts until the person hands back, the episode ends or
+//! the budget is spent.
 //!
 //! One step of the training loop, in terms of this module:
 //!
@@ -83,6 +86,8 @@ pub struct QueryController {
     /// Expert steps left in the current segment; the expert is in control while this is positive.
     segment_left: usize,
     queries: usize,
+    /// Segments a person opened unasked ([`Self::open_segment_by_person`]); not queries of the rule.
+    takeovers: usize,
 }
 
 impl QueryController {
@@ -107,6 +112,7 @@ impl QueryController {
             segment_len,
             segment_left: 0,
             queries: 0,
+            takeovers: 0,
         })
     }
 
@@ -190,6 +196,32 @@ impl QueryController {
         }
     }
 
+    /// A person takes over unasked, as the agent is about to act (human-gated control: HG-DAgger, HIL-SERL): a
+    /// segment opens as a query's would and is charged the same way (one unit per demonstrated transition, or one
+    /// query), but the rule is not consulted and does not see it. Counting transitions, it may last the whole
+    /// budget left (the person hands back when done, [`withdraw`](Self::withdraw)); counting queries, it costs
+    /// one query and lasts `segment_len` steps, as a query's segment does (the replay holds that many
+    /// demonstrations per query). Returns the steps granted.
+    ///
+    /// # Panics
+    /// Programming errors in the caller: calling this during expert control or with no budget left.
+    pub fn open_segment_by_person(&mut self) -> usize {
+        assert!(
+            !self.expert_in_control(),
+            "open_segment_by_person called during expert control"
+        );
+        assert!(
+            self.budget_left() > 0,
+            "open_segment_by_person called with no budget left"
+        );
+        self.takeovers += 1;
+        self.segment_left = match self.unit {
+            BudgetUnit::Transitions => self.budget_left(),
+            BudgetUnit::Queries => self.segment_len,
+        };
+        self.segment_left
+    }
+
     /// Records one demonstrated transition: spends one unit of budget and advances the segment.
     ///
     /// # Panics
@@ -235,11 +267,12 @@ impl QueryController {
         self.budget_used
     }
 
-    /// Budget spent, in its unit: demonstrated transitions, or queries asked (a query nobody answered included).
+    /// Budget spent, in its unit: demonstrated transitions, or queries asked (a query nobody answered included)
+    /// and takeovers.
     pub fn budget_spent(&self) -> usize {
         match self.unit {
             BudgetUnit::Transitions => self.budget_used,
-            BudgetUnit::Queries => self.queries,
+            BudgetUnit::Queries => self.queries + self.takeovers,
         }
     }
 
@@ -249,9 +282,14 @@ impl QueryController {
         self.budget - self.budget_spent()
     }
 
-    /// Number of queries made so far.
+    /// Number of queries made so far (by the rule; takeovers are counted apart).
     pub fn queries(&self) -> usize {
         self.queries
+    }
+
+    /// Number of segments a person opened unasked ([`Self::open_segment_by_person`]).
+    pub fn takeovers(&self) -> usize {
+        self.takeovers
     }
 
     /// Steps per query.
@@ -262,21 +300,37 @@ impl QueryController {
 
 impl Persist for QueryController {
     /// Writes the controller's position into `state` under `prefix`: budget used, segment in progress,
-    /// queries, and the rule's own state (the adaptive rule's window, under `{prefix}.window` as before rules
-    /// were an interface).
+    /// queries (and takeovers, once there were any: a run without them writes what it always did), and the
+    /// rule's own state (the adaptive rule's window, under `{prefix}.window` as before rules were an interface).
     fn save_state<'a>(&'a self, prefix: &str, state: &mut StateDict<'a>) {
-        state.put_value(
-            &format!("{prefix}.counters"),
-            &[self.budget_used, self.segment_left, self.queries],
-        );
+        let mut counters = vec![self.budget_used, self.segment_left, self.queries];
+        if self.takeovers > 0 {
+            counters.push(self.takeovers);
+        }
+        state.put_value(&format!("{prefix}.counters"), &counters);
         self.rule.save_state(prefix, state);
     }
 
     /// Reads what [`QueryController::save_state`] wrote into a controller built with the same rule.
     fn load_state(&mut self, prefix: &str, state: &StateDict<'_>) -> Result<(), StateError> {
-        let [budget_used, segment_left, queries]: [usize; 3] =
-            state.value(&format!("{prefix}.counters"))?;
-        (self.budget_used, self.segment_left, self.queries) = (budget_used, segment_left, queries);
+        let name = format!("{prefix}.counters");
+        let counters: Vec<usize> = state.value(&name)?;
+        let (budget_used, segment_left, queries, takeovers) = match counters[..] {
+            [b, s, q] => (b, s, q, 0),
+            [b, s, q, t] => (b, s, q, t),
+            _ => {
+                return Err(StateError::Value {
+                    name,
+                    msg: format!("{} counters, expected 3 or 4", counters.len()),
+                });
+            }
+        };
+        (
+            self.budget_used,
+            self.segment_left,
+            self.queries,
+            self.takeovers,
+        ) = (budget_used, segment_left, queries, takeovers);
         self.rule.load_state(prefix, state)
     }
 }
@@ -507,6 +561,53 @@ mod tests {
         controller.record_expert_step();
         controller.withdraw();
         assert_eq!((controller.budget_used(), controller.budget_left()), (2, 8));
+    }
+
+    #[test]
+    fn a_takeover_is_charged_like_a_query_and_unseen_by_the_rule() {
+        let mut rng = Pcg64::seed_from_u64(5);
+        let mut controller =
+            QueryController::new(rule("adaptive(n_r=10000,t_query=0.5)"), 12, 5).unwrap();
+        // Three agent decisions the rule sees (low uncertainty: no query), then a person takes over.
+        for _ in 0..3 {
+            assert!(!decide_with(&mut controller, Some(0.0), &mut rng).query);
+        }
+        assert_eq!(controller.open_segment_by_person(), 12);
+        assert!(controller.expert_in_control());
+        (0..4).for_each(|_| controller.record_expert_step());
+        controller.withdraw();
+        // Four transitions charged (12 - 4 left), no query of the rule, one takeover.
+        assert_eq!(
+            (
+                controller.budget_used(),
+                controller.budget_left(),
+                controller.queries(),
+                controller.takeovers()
+            ),
+            (4, 8, 0, 1)
+        );
+        // The rule's window holds its three decisions only.
+        let mut state = StateDict::default();
+        controller.save_state("q", &mut state);
+        assert_eq!(state.f32s("q.window").unwrap().len(), 3);
+        // The takeover survives a snapshot; a snapshot without takeovers keeps its three counters.
+        let mut back =
+            QueryController::new(rule("adaptive(n_r=10000,t_query=0.5)"), 12, 5).unwrap();
+        back.load_state("q", &state).unwrap();
+        assert_eq!((back.budget_used(), back.takeovers()), (4, 1));
+        let fresh = QueryController::new(rule("greedy"), 12, 5).unwrap();
+        let mut plain = StateDict::default();
+        fresh.save_state("q", &mut plain);
+        assert_eq!(plain.value::<Vec<usize>>("q.counters").unwrap().len(), 3);
+        // Counting queries, a takeover costs one query and lasts a segment.
+        let mut queries = QueryController::new(rule("greedy"), 2, 5)
+            .unwrap()
+            .counting(BudgetUnit::Queries);
+        assert_eq!(queries.open_segment_by_person(), 5);
+        assert_eq!((queries.budget_spent(), queries.queries()), (1, 0));
+        queries.end_episode();
+        assert!(decide_with(&mut queries, None, &mut rng).query);
+        assert_eq!(queries.budget_left(), 0);
     }
 
     #[test]

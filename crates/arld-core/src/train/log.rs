@@ -261,12 +261,18 @@ impl<A: Action> RunLog<A> {
         self.scalar("train/episode_return", step, ret as f32)
     }
 
+    /// A question of the rule (a row of the query log), or a person's takeover (kept for the answer log only).
     pub fn query(&mut self, q: &QueryEvent<A>) -> Result<()> {
         self.query_events.push(q.clone());
-        if let Some(f) = &mut self.queries {
+        if let (Some(f), true) = (&mut self.queries, q.started_by.is_rule()) {
             f.write_all(q.csv_row().as_bytes())?;
         }
         Ok(())
+    }
+
+    /// What opened the segment in progress (the last query or takeover logged).
+    pub fn last_started_by(&self) -> Option<super::run_dir::StartedBy> {
+        self.query_events.last().map(|q| q.started_by)
     }
 
     /// A step the expert took (`taken` as the run stored it at `(step, episode)`, `ended` its `(terminated,

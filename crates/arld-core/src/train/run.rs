@@ -3,10 +3,11 @@
 //! command line, sweeps, Slurm shards and Python. [`Run::execute`] is the whole algorithm of every method in the
 //! paper (DQN, DQfD, GDQN, BDQN, ADQN and ADQNP, with a plain, bootstrapped or noisy network): `resume`,
 //! `pretrain`, `begin_training`, then for each environment step `choose` (the agent acts, or the query rule asks
-//! the expert), `step_env`, `learn`, `report`, `snapshot_point` and `drive`, then `finish`. Each step returns what
+//! the expert, or a person takes over unasked), `step_env`, `learn`, `report`, `snapshot_point` and `drive`, then `finish`. Each step returns what
 //! the loop does next ([`Choice`], [`Flow`]); none hides a `return`, `break` or `continue`.
 
 use super::eval::Evaluator;
+use super::run_dir::StartedBy;
 use super::{
     Algo, Checkpointer, QueryEvent, RunLog, SeedPurpose, Summary, TrainConfig, epsilon_at,
     pretrain_update, push_demos, record_failure, run_dir, seed_for, steps_to_solve, update_checked,
@@ -563,9 +564,12 @@ impl<'a, L: Learner> Run<'a, L> {
         }
     }
 
-    /// The agent's action and whether the query rule asks the expert instead; the agent's uncertainty when it
-    /// was computed.
+    /// The agent's action and whether the query rule asks the expert instead (or the expert takes over unasked:
+    /// [`Self::take_over`]); the agent's uncertainty when it was computed.
     fn decide(&mut self) -> Result<(Turn<L::Action>, Option<f32>)> {
+        if let Some(turn) = self.take_over() {
+            return Ok(turn);
+        }
         let (cfg, step) = (self.cfg, self.st.step);
         let parts = &mut self.parts;
         let epsilon = acting_epsilon(cfg, step);
@@ -602,11 +606,42 @@ impl<'a, L: Learner> Run<'a, L> {
                 agent_action,
                 score: decision.score,
                 threshold: decision.threshold,
+                started_by: StartedBy::Rule,
             })
         } else {
             Turn::Agent(agent_action)
         };
         Ok((turn, signals.uncertainty))
+    }
+
+    /// A person takes over unasked ([`Expert::wants_control`], polled only while budget is left): a segment
+    /// opens, charged like a question's ([`QueryController::open_segment_by_person`]), and the expert is asked
+    /// with the agent's proposal. The query rule does not decide at this step and its statistics (the adaptive
+    /// window) do not see it. `None`: the agent (or the rule) decides as usual.
+    fn take_over(&mut self) -> Option<(Turn<L::Action>, Option<f32>)> {
+        let parts = &mut self.parts;
+        if parts.queries.budget_left() == 0 {
+            return None;
+        }
+        let expert = self.expert.as_deref_mut()?;
+        if !expert.wants_control() {
+            return None;
+        }
+        // The agent's uncertainty at the takeover is logged with it, where the rule or the page reads it.
+        let want = Needs {
+            uncertainty: parts.queries.needs().uncertainty || expert.shows_uncertainty(),
+            ..Needs::NOTHING
+        };
+        let epsilon = acting_epsilon(self.cfg, self.st.step);
+        let (agent_action, signals) = parts.agent.act(&parts.obs, epsilon, want);
+        parts.queries.open_segment_by_person();
+        let question = OpenQuestion {
+            agent_action,
+            score: signals.uncertainty,
+            threshold: None,
+            started_by: StartedBy::Person,
+        };
+        Some((Turn::Ask(question), signals.uncertainty))
     }
 
     /// Asks the question that opens a segment; its answer (or the agent's action, when nobody answered) acts.
@@ -620,6 +655,7 @@ impl<'a, L: Learner> Run<'a, L> {
             self.st.episode(self.env_seed),
             Some(agent_action.borrow()),
             &self.parts.queries,
+            !question.started_by.is_rule(),
         );
         let answer = match asked {
             Ok(answer) => answer,
@@ -648,12 +684,14 @@ impl<'a, L: Learner> Run<'a, L> {
             expert: self.expert_kind(),
             response_s,
             answered,
+            started_by: question.started_by,
         })?;
         Ok(action_taken.unwrap_or(agent_action))
     }
 
     /// The expert's action at a later step of its segment; when nobody answers, the agent takes the rest of the
-    /// segment back, and the log says so.
+    /// segment back, and the log says so (a person's takeover ends so: they hand back when done, and the query
+    /// log, which holds the rule's questions, has nothing to say).
     fn ask_in_segment(&mut self) -> Result<L::Action> {
         let answer = ask_expert(
             &mut self.expert,
@@ -662,6 +700,7 @@ impl<'a, L: Learner> Run<'a, L> {
             self.st.episode(self.env_seed),
             None,
             &self.parts.queries,
+            self.log.last_started_by() == Some(StartedBy::Person),
         )?;
         let waited_s = match answer {
             Answer::Action { action, .. } => return Ok(action),
@@ -671,6 +710,9 @@ impl<'a, L: Learner> Run<'a, L> {
         parts.queries.withdraw();
         let epsilon = acting_epsilon(self.cfg, self.st.step);
         let agent_action = parts.agent.act(&parts.obs, epsilon, Needs::NOTHING).0;
+        if self.log.last_started_by() == Some(StartedBy::Person) {
+            return Ok(agent_action);
+        }
         self.log.query(&QueryEvent {
             step: self.st.step,
             episode: self.st.episode,
@@ -681,6 +723,7 @@ impl<'a, L: Learner> Run<'a, L> {
             expert: self.expert_kind(),
             response_s: Some(waited_s),
             answered: false,
+            started_by: StartedBy::Rule,
         })?;
         Ok(agent_action)
     }
@@ -1162,13 +1205,17 @@ enum EnvRetry<A: Action> {
     Reset { uncertainty: Option<f32> },
 }
 
-/// A query the agent decided on at the step in progress, before the expert's answer.
+/// A query the agent decided on at the step in progress (or a person's takeover), before the expert's answer.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(bound = "")]
 struct OpenQuestion<A: Action> {
     agent_action: A,
     score: Option<f32>,
     threshold: Option<f32>,
+    /// Who opened the segment (a resumed run asks a takeover open at the stop again as a takeover); absent
+    /// from snapshots of the rule's questions, as before takeovers.
+    #[serde(default, skip_serializing_if = "StartedBy::is_rule")]
+    started_by: StartedBy,
 }
 
 /// The time a run has taken: wall-clock seconds, and CPU seconds of the thread that trains it (which a paused
@@ -1340,6 +1387,7 @@ fn ask_expert<'q, A: Action>(
     episode: EpisodeTrace<'q, A>,
     agent_action: Option<A::Ref<'q>>,
     queries: &QueryController,
+    taken_over: bool,
 ) -> Result<Answer<A>> {
     let expert = expert
         .as_deref_mut()
@@ -1350,6 +1398,7 @@ fn ask_expert<'q, A: Action>(
         episode,
         agent_action,
         steps_left: queries.segment_left(),
+        taken_over,
     };
     let answer = expert
         .answer(&query)

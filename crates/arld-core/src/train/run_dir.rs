@@ -305,7 +305,10 @@ impl EvalPoint {
     }
 }
 
-/// One query: the agent asked the expert to take over (a row of [`QUERIES_FILE`]).
+/// One query: the agent asked the expert to take over (a row of [`QUERIES_FILE`]), or a person took over unasked
+/// (`started_by` [`StartedBy::Person`]: kept with the run's questions, and in its snapshots, so that the
+/// person's steps in [`ANSWERS_FILE`] are tied to it, but never a row of [`QUERIES_FILE`], which holds the
+/// rule's questions only and keeps its columns).
 ///
 /// Its actions are of the run's kind `A`: a discrete run's columns are the indices as they always were, a box
 /// run's the numbers of each action separated by spaces ([`Action::to_field`]).
@@ -326,6 +329,36 @@ pub struct QueryEvent<A: Action = usize> {
     pub response_s: Option<f64>,
     /// Whether the expert answered (`false`: the query went back to the agent and cost no budget).
     pub answered: bool,
+    /// What opened the segment: the query rule, or a person who took over (absent from the rule's events in
+    /// snapshots, as before takeovers).
+    #[serde(default, skip_serializing_if = "StartedBy::is_rule")]
+    pub started_by: StartedBy,
+}
+
+/// What opened an expert's segment.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum StartedBy {
+    /// The query rule asked.
+    #[default]
+    Rule,
+    /// A person took over unasked (the web page's "Take over").
+    Person,
+}
+
+impl StartedBy {
+    /// Whether the query rule opened the segment.
+    pub fn is_rule(&self) -> bool {
+        *self == StartedBy::Rule
+    }
+
+    /// The name written to [`AnswerStep::started_by`].
+    pub fn as_str(self) -> &'static str {
+        match self {
+            StartedBy::Rule => STARTED_BY_RULE,
+            StartedBy::Person => STARTED_BY_PERSON,
+        }
+    }
 }
 
 impl<A: Action> QueryEvent<A> {
@@ -347,13 +380,16 @@ impl<A: Action> QueryEvent<A> {
     }
 }
 
-/// Who started the expert's segment a step belongs to, as [`AnswerStep::started_by`] says it.
+/// Who started the expert's segment a step belongs to, as [`AnswerStep::started_by`] says it: the query rule.
 pub const STARTED_BY_RULE: &str = "rule";
+/// ... or a person who took over unasked.
+pub const STARTED_BY_PERSON: &str = "person";
 
 /// One line of [`ANSWERS_FILE`]: a step the expert took, as the transition the run stored as a demonstration
 /// (observation, action, reward, next observation, how the episode ended there), with the question that opened
-/// the expert's segment (the row of [`QUERIES_FILE`] at `question_step`): the agent's proposal then, its
-/// uncertainty and the rule's threshold, who answered and how long the answer took. These are the person's
+/// the expert's segment (the row of [`QUERIES_FILE`] at `question_step`; for a person's takeover, the step they
+/// took over at, which has no row there): the agent's proposal then, its uncertainty and the rule's threshold
+/// (none for a takeover), who answered and how long the answer took. These are the person's
 /// answers kept for use again (`python -m arld.minari export` writes them as a Minari dataset).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(bound = "")]
@@ -373,7 +409,8 @@ pub struct AnswerStep<A: Action = usize> {
     pub response_s: Option<f64>,
     /// Who answered: the expert's kind (`scripted`, `web`, ...).
     pub expert: String,
-    /// What opened the segment: [`STARTED_BY_RULE`], the query rule asked.
+    /// What opened the segment: [`STARTED_BY_RULE`], the query rule asked, or [`STARTED_BY_PERSON`], a person
+    /// took over unasked.
     pub started_by: String,
 }
 
@@ -403,7 +440,10 @@ impl<A: Action> AnswerStep<A> {
             threshold: question.and_then(|q| q.threshold),
             response_s: question.and_then(|q| q.response_s),
             expert: question.map(|q| q.expert.clone()).unwrap_or_default(),
-            started_by: STARTED_BY_RULE.to_string(),
+            started_by: question
+                .map_or(StartedBy::Rule, |q| q.started_by)
+                .as_str()
+                .to_string(),
         }
     }
 

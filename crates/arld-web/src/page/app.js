@@ -8,7 +8,7 @@ const token = new URLSearchParams(location.search).get("token") || "";
 const arld = (window.arld = {
   client: null, hello: null, controller: null, status: null, frame: null, prompt: null, paused: false,
   uncertainty: [], curve: [], ended: null, outcome: null, errors: [], connected: false, obsHistory: [],
-  replaying: false, replays: [], countdowns: 0, undos: 0, handed: null,
+  replaying: false, replays: [], countdowns: 0, undos: 0, handed: null, takeovers: 0,
 });
 let socket = null;
 let replay = null; // the replay being played: {frames, at, timer, live}
@@ -109,7 +109,7 @@ function setup() {
     box.appendChild(b);
   });
   $("keys-help").textContent = h.fps
-    ? `A fresh key press starts your segment after a short countdown; then hold a key to act (with no key held the environment takes "${h.actions[h.noop].label}"). P pauses.`
+    ? `A fresh key press starts your segment after a short countdown; then hold a key to act (with no key held the environment takes "${h.actions[h.noop].label}"). T takes over from the agent at any time (Esc hands back). P pauses.`
     : h.undo
       ? "Each key (or button) takes one step; Backspace undoes your last key of the segment. P pauses, Esc lets the agent decide."
       : "Each key (or button) takes one step. P pauses, Esc lets the agent decide.";
@@ -153,6 +153,7 @@ function showStatus() {
   $("s-budget").textContent = `${s.budget_used} / ${s.budget}`;
   $("s-left").textContent = s.budget - s.budget_used;
   $("s-queries").textContent = s.queries;
+  $("s-takeovers").textContent = s.takeovers;
   $("s-eval").textContent = s.last_eval ? `${fmt(s.last_eval[1], 1)} (step ${s.last_eval[0]})` : "–";
   if (s.uncertainty !== null) {
     arld.uncertainty.push([s.step, s.uncertainty, s.threshold]);
@@ -171,6 +172,19 @@ function showPrompt() {
   else if (arld.handed) { text = arld.handed.message; box.className = arld.handed.stopped ? "stopped" : "idle"; }
   else if (!p && noneLeft()) { text = "No questions left: the agent trains on its own."; box.className = "idle"; }
   else if (!p) { text = "Training runs. When the agent is unsure it asks you here."; box.className = "idle"; }
+  else if (p.takeover && p.starts_in) {
+    text = "Get ready: you take over in a moment. Hold the key you want; Esc hands back.";
+    box.className = "takeover";
+  }
+  else if (p.takeover && p.waits) {
+    text = `You take over from here: press the key of your first action (the agent would "${h.actions[p.agent_action].label}"). ` +
+      "Esc hands back.";
+    box.className = "takeover";
+  }
+  else if (p.takeover) {
+    text = `You have control: hold a key to act (budget for ${p.steps_left} more step${p.steps_left > 1 ? "s" : ""}). Esc hands back to the agent.`;
+    box.className = "takeover";
+  }
   else if (p.starts_in) {
     text = `Get ready: your ${p.steps_left} step${p.steps_left > 1 ? "s" : ""} start in a moment. Hold the key you want.`;
     box.className = "running";
@@ -194,7 +208,11 @@ function showPrompt() {
     b.classList.toggle("proposed", !!p && p.agent_action === Number(b.dataset.action));
     b.classList.toggle("held", held === Number(b.dataset.action));
   });
-  $("pass").disabled = !p || !p.waits || !controls() || arld.ended !== null;
+  $("pass").disabled = !p || !(p.waits || p.takeover) || !controls() || arld.ended !== null;
+  $("pass").textContent = p && p.takeover ? "Hand back [Esc]" : "Let the agent decide [Esc]";
+  const t = $("takeover");
+  t.hidden = !h.fps || !controls() || arld.ended !== null || arld.handed !== null || !!(p && p.takeover);
+  t.disabled = !!p || noneLeft() || arld.paused || !!replay;
   $("undo").disabled = !p || !p.undo || !controls() || arld.ended !== null || !!replay;
   $("undo").hidden = !!h.fps || !h.undo;
   if (p && p.starts_in && startsAt.id !== p.id) startsAt = { id: p.id, at: performance.now() + p.starts_in * 1000 };
@@ -282,10 +300,19 @@ setInterval(() => {
   el.textContent = ` ${Math.max(0, Math.ceil(asked.left))} s left to answer`;
 }, 200);
 
-// Hands the open question back to the agent.
+// Real time: takes over from the state the agent is in (the run opens the segment at its next step).
+function takeOver() {
+  const h = arld.hello;
+  if (!h || !h.fps || arld.prompt || !controls() || arld.ended || arld.handed || arld.paused || noneLeft()) return;
+  arld.takeovers++;
+  send({ type: "takeover" });
+}
+$("takeover").addEventListener("click", () => takeOver());
+
+// Hands the open question (or the person's takeover) back to the agent.
 function pass() {
   const p = arld.prompt;
-  if (!p || !p.waits || !controls() || answered === p.id) return;
+  if (!p || !(p.waits || p.takeover) || !controls() || answered === p.id) return;
   answered = p.id;
   send({ type: "pass", id: p.id });
 }
@@ -313,6 +340,7 @@ function showEnd() {
     ["Final score", fmt(o.final_score, 1)],
     ["Questions answered", `${o.answered}` + (o.unanswered ? ` (${o.unanswered} left to the agent)` : "")],
     ["Keys pressed", `${o.keys}` + (o.undone ? ` (and ${o.undone} undone)` : "")],
+    ["Takeovers", `${o.takeovers}`],
     ["Your time", `${duration(o.person_s)} (${o.person_s.toFixed(1)} s)`],
     ["Run directory", o.run_dir || "– (not saved)"],
   ];
@@ -346,6 +374,7 @@ document.addEventListener("keydown", (e) => {
   if (e.key === "Escape") { pass(); return; }
   if (e.key === "Backspace" || ((e.ctrlKey || e.metaKey) && (e.key === "z" || e.key === "Z"))) { e.preventDefault(); undo(); return; }
   if ((e.key === "p" || e.key === "P") && actionOfKey(e.key) === null) { $("pause").click(); return; }
+  if ((e.key === "t" || e.key === "T") && actionOfKey(e.key) === null) { if (!e.repeat) takeOver(); return; }
   const a = actionOfKey(e.key);
   if (a === null) return;
   e.preventDefault();

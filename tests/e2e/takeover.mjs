@@ -1,0 +1,153 @@
+// A scripted person who takes over unasked, for arld's web expert in real time: opens the page in headless
+// Chromium (Playwright), answers the agent's questions with a controller that reads the state the page received,
+// and once a question was answered and the agent acts again, presses T ("Take over"), answers the takeover's
+// opening prompt with a fresh key, holds the controller's keys for a while, saves a screenshot of the takeover in
+// progress (takeover.png) and hands back with Esc; then answers the agent's questions until the run ends. Usage:
+//   node takeover.mjs --url URL --shots DIR [--hold N]
+// (--hold N: hand back after the person's N-th step of the takeover; 15 by default.)
+// Prints one JSON line: {"takeover": {...what the page showed of it...}, "questions": N, "endScreen": {...}}.
+import { chromium } from "playwright-core";
+import fs from "node:fs";
+import path from "node:path";
+
+const args = Object.fromEntries(
+  process.argv.slice(2).reduce((acc, a, i, all) => {
+    if (a.startsWith("--")) acc.push([a.slice(2), all[i + 1] && !all[i + 1].startsWith("--") ? all[i + 1] : true]);
+    return acc;
+  }, []),
+);
+const url = new URL(args.url);
+const shots = args.shots;
+const holdSteps = Number(args.hold || 15);
+fs.mkdirSync(shots, { recursive: true });
+const fail = (msg) => { console.error(`takeover: ${msg}`); process.exit(1); };
+const cartpole = (s) => (0.1 * s[0] + 0.5 * s[1] + 10 * s[2] + 2 * s[3] > 0 ? 1 : 0);
+
+const userDataDir = fs.mkdtempSync(path.join(shots, ".chromium-"));
+const browser = await chromium.launchPersistentContext(userDataDir, {
+  executablePath: process.env.CHROMIUM || "/usr/bin/chromium",
+  headless: true,
+  args: ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run", "--disable-background-networking",
+    "--disable-component-update", "--disable-sync"],
+  viewport: { width: 1000, height: 720 },
+});
+const page = browser.pages()[0] || (await browser.newPage());
+const pageErrors = [];
+page.on("pageerror", (e) => pageErrors.push(String(e)));
+await page.goto(url.href);
+await page.waitForFunction(() => window.arld && arld.hello && arld.controller === arld.hello.client, null, { timeout: 30000 });
+const hello = await page.evaluate(() => arld.hello);
+if (!hello.fps) fail("the run is not in real time");
+if (hello.env !== "CartPole-v0") fail(`no controller for ${hello.env}`);
+const keyOf = (a) => hello.actions[a].keys[0];
+let held = null;
+async function holdKey(a) {
+  if (held === a) return;
+  if (held !== null) await page.keyboard.up(keyOf(held));
+  held = a;
+  if (a !== null) await page.keyboard.down(keyOf(a));
+}
+const state = () => page.evaluate(() => ({
+  prompt: arld.prompt, status: arld.status, ended: arld.ended, replaying: arld.replaying,
+  button: { hidden: document.getElementById("takeover").hidden, disabled: document.getElementById("takeover").disabled },
+}));
+const panel = () => page.evaluate(() => ({
+  text: document.getElementById("prompt-text").textContent,
+  className: document.getElementById("prompt").className,
+  pass: { text: document.getElementById("pass").textContent, disabled: document.getElementById("pass").disabled },
+  takeoverButton: { hidden: document.getElementById("takeover").hidden, disabled: document.getElementById("takeover").disabled },
+  budget: document.getElementById("s-budget").textContent,
+  takeovers: document.getElementById("s-takeovers").textContent,
+}));
+
+let lastId = 0, questions = 0, takeover = null, phase = "before";
+let running = 0;
+for (;;) {
+  await page.waitForTimeout(5);
+  const s = await state();
+  if (s.ended) break;
+  if (s.replaying) { await page.keyboard.press("Shift"); continue; }
+  const p = s.prompt;
+  if (!p) {
+    await holdKey(null);
+    if (phase === "before" && questions >= 1 && s.status && s.status.budget - s.status.budget_used > holdSteps + 10) {
+      // The agent acts: the button is offered, and T takes over from here.
+      if (s.button.hidden || s.button.disabled) continue;
+      takeover = { ...(takeover || {}), pressedAtStep: s.status.step, offered: await panel() };
+      await page.keyboard.press("t");
+      phase = "asked";
+    }
+    continue;
+  }
+  if (p.takeover) {
+    if (p.waits && p.agent_action !== null && p.id > lastId) {
+      if (!takeover || phase === "after") fail(`a takeover nobody asked for: ${JSON.stringify(p)}`);
+      // The takeover's opening prompt: the state the agent was in, with its proposal; a fresh key starts it.
+      const first = cartpole(p.obs);
+      Object.assign(takeover, { openedAtStep: s.status.step, obs: p.obs, agentAction: p.agent_action, stepsLeft: p.steps_left,
+        first, opening: await panel() });
+      await page.screenshot({ path: path.join(shots, "takeover-asking.png") });
+      lastId = p.id;
+      await holdKey(null);
+      if (first === hello.noop) await page.keyboard.press(keyOf(first)); else await holdKey(first);
+      phase = "running";
+      continue;
+    }
+    if (phase === "running" && !p.waits && !p.starts_in && p.id > lastId) {
+      lastId = p.id;
+      const a = cartpole(p.obs);
+      await holdKey(a === hello.noop ? null : a);
+      // Steps the person took so far, from the run's status (a loaded machine may miss some of the prompts).
+      running = s.status.step - takeover.openedAtStep;
+      if (running >= 3 && !takeover.inProgress) {
+        takeover.inProgress = await panel();
+        await page.screenshot({ path: path.join(shots, "takeover.png") });
+      }
+      if (running >= holdSteps) {
+        await holdKey(null);
+        await page.keyboard.press("Escape");
+        takeover.handedBackAtStep = s.status.step;
+        // The page as the takeover ends (read at that moment: the agent may ask again soon after).
+        const after = await page.waitForFunction(() => (arld.ended || !arld.prompt || !arld.prompt.takeover) && {
+          prompt: arld.prompt ? "a question" : "none",
+          className: document.getElementById("prompt").className,
+          pass: document.getElementById("pass").textContent,
+        }, null, { timeout: 10000, polling: 5 }).catch(() => fail("the takeover did not end after Esc"));
+        takeover.after = await after.jsonValue();
+        phase = "after";
+      }
+    }
+    continue;
+  }
+  if (phase === "running") {
+    // The episode ended during the takeover (its segment ends there) and the agent asks: say so, go on.
+    takeover.endedByEpisode = true;
+    phase = "after";
+  }
+  // T was pressed while the agent was about to ask (between two of its segments): its question comes first and
+  // the request is used up; T is pressed again once the agent acts.
+  if (phase === "asked") { phase = "before"; takeover.retried = (takeover.retried || 0) + 1; }
+  if (p.agent_action !== null && p.waits) {
+    if (p.id <= lastId) continue;
+    lastId = p.id;
+    questions++;
+    const a = cartpole(p.obs);
+    await holdKey(null);
+    if (a === hello.noop) await page.keyboard.press(keyOf(a)); else await holdKey(a);
+    continue;
+  }
+  const a = cartpole(p.obs);
+  await holdKey(a === hello.noop ? null : a);
+}
+await holdKey(null);
+const endScreen = await page.evaluate(() => ({
+  shown: !document.getElementById("end").hidden,
+  rows: Object.fromEntries([...document.querySelectorAll("#end-table tr")].map((r) => [r.cells[0].textContent, r.cells[1].textContent])),
+  outcome: arld.outcome,
+}));
+await page.screenshot({ path: path.join(shots, "takeover-end.png") });
+await browser.close();
+fs.rmSync(userDataDir, { recursive: true, force: true });
+if (pageErrors.length) fail(`the page threw: ${pageErrors.join("; ")}`);
+if (!takeover || !takeover.inProgress) fail(`the person never had control long enough: ${JSON.stringify({ takeover, questions })}`);
+console.log(JSON.stringify({ takeover, questions, running, endScreen }));
