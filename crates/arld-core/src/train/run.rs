@@ -85,7 +85,7 @@ impl<'a> RunBuilder<'a, BoxAgent> {
 
 /// TD3 for the task `spec` with the configuration's networks (its hidden widths, at least two critic heads:
 /// more heads are a larger ensemble), learning rate and batch, seeded from the run's seed.
-fn box_agent(cfg: &TrainConfig, spec: &'static BoxSpec) -> BoxAgent {
+pub fn box_agent(cfg: &TrainConfig, spec: &'static BoxSpec) -> BoxAgent {
     let config = Td3Config {
         hidden: cfg.hidden.clone(),
         heads: cfg.heads.max(2),
