@@ -70,9 +70,9 @@ def test_pendulum_with_an_sb3_td3_model_as_the_expert_learns(tmp_path, sb3_td3):
     assert expert_score > -400, f"the SB3 expert itself did not learn Pendulum-v1: {expert_score:.0f}"
 
     untrained = arld.Agent("dqn", gym.make("Pendulum-v1"), seed=5, **TD3).learn(1)
-    trained = arld.Agent("adqn", gym.make("Pendulum-v1"), expert=sb3_td3, seed=5, train_steps=8000, budget=1500,
-                         eval_period=2000, **TD3)
-    trained.learn(8000, log_dir=tmp_path / "run")
+    trained = arld.Agent("adqn", gym.make("Pendulum-v1"), expert=sb3_td3, seed=5, train_steps=12000, budget=1500,
+                         eval_period=2000, batch_size=128, **TD3)
+    trained.learn(12000, log_dir=tmp_path / "run")
 
     # predict: the space's shape and dtype, one observation or a batch.
     action, state = trained.predict(np.zeros(3, dtype=np.float32))
@@ -85,9 +85,9 @@ def test_pendulum_with_an_sb3_td3_model_as_the_expert_learns(tmp_path, sb3_td3):
     after = np.mean(returns(lambda o: trained.predict(o)[0], seeds))
     print(f"Pendulum-v1 from Gymnasium: untrained {before:.0f}, trained with the SB3 TD3 expert {after:.0f} "
           f"(expert {expert_score:.0f}), {trained.summary['demos_queried']} expert steps")
-    assert after > before + 400 and after > -500, (before, after)
+    assert after > before + 500 and after > -400, (before, after)
     # The run's own last evaluation agrees that it learned.
-    assert trained.evaluations[-1]["step"] == 8000 and trained.evaluations[-1]["mean"] > -500
+    assert trained.evaluations[-1]["step"] == 12000 and trained.evaluations[-1]["mean"] > -400
 
     # The expert was asked, within the budget, and answered what the SB3 model answers at each observation.
     asked = answers(tmp_path / "run")
