@@ -20,7 +20,7 @@ import numpy as np
 from . import _arld
 from .callbacks import _Callbacks, _EpisodeLog, _Logger, _ProgressBar, _stop_on_sigterm
 from .experts import ExpertLike, WebExpert, _demos, _expert_callable, _shown_raw, gym_spaces
-from .envs import (BuiltinEnv, EnvBridge, ObsCodec, as_env as _as_env, codec_of as _codec_of,
+from .envs import (BoxActions, BuiltinEnv, EnvBridge, ObsCodec, as_env as _as_env, codec_of as _codec_of,
                    copy_env as _copy_env, env_facts as _env_facts, make, register as _register)
 
 Method = Literal["dqn", "dqfd", "gdqn", "bdqn", "adqn", "adqnp"]
@@ -117,7 +117,9 @@ class Agent:
 
     method: dqn, dqfd, gdqn, bdqn, adqn, adqnp (DQfD and ADQNP pre-train on demonstrations; GDQN, BDQN, ADQN,
     ADQNP ask the expert during training). net: plain, bootstrap (10 heads), noisy. env: a Gymnasium environment
-    with a Discrete action space, exactly as given (wrappers, time limits), an id string (made with gym.make), or
+    with a Discrete action space, or a Box one (continuous actions: TD3 learns them, with the same methods'
+    queries; `predict` and experts give actions in the space's shape; dqfd and adqnp, which pre-train, and a
+    WebExpert are not available there yet), exactly as given (wrappers, time limits), an id string (made with gym.make), or
     `arld.make(id)` (the built-in one: trained entirely in Rust). Observations reach the network as SB3's policies
     see them (a vector Box as it is, Discrete one-hot, MultiDiscrete/MultiBinary/Dict/Tuple flattened; images are
     refused: see arld.envs); experts and `predict` take them as the environment gives them. The time limit is the
@@ -350,8 +352,15 @@ class Agent:
         self._set_env(env)
         self.eval_env = None if eval_env is None else _as_env(eval_env, max_episode_steps)
         self._check_eval_env()
+        if self._box is not None:
+            if method in ("dqfd", "adqnp"):
+                raise ValueError(f"{method} pre-trains on demonstrations, which arld cannot do yet for actions in a "
+                                 "Box; use dqn, gdqn, bdqn or adqn")
+            if isinstance(expert, WebExpert):
+                raise ValueError("a person in the browser (WebExpert) cannot answer actions in a Box yet: give a "
+                                 "callable or a model with predict (e.g. an SB3 TD3 or SAC model)")
         if expert is not None:
-            self._expert, name = _expert_callable(expert)
+            self._expert, name = _expert_callable(expert, self._box)
             self._expert_name = name
             if self._expert is not None and not isinstance(expert, WebExpert):
                 # Asked with the observation as the environment gives it (arld's loop holds flat vectors).
@@ -404,6 +413,8 @@ class Agent:
         self.env_id = facts[0] if self._builtin else _register(facts)
         self._base_id = facts[0]
         self._facts = facts
+        # The Box of a task with continuous actions (None for discrete actions).
+        self._box: Optional[BoxActions] = facts[2] if isinstance(facts[2], BoxActions) else None
         self._codec = _codec_of(env)
         self.env = env
         self._vec_env = None
@@ -715,7 +726,9 @@ class Agent:
         """(action, None) for one observation, or (array of actions, None) for a batch of them (rows).
         deterministic=True: the test policy (greedy, bootstrap heads voting, mean noisy weights);
         False: the exploration policy of training at the run's current step (ε-greedy with the current ε, the
-        episode's bootstrap head, sampled noise; `episode_start` begins a new episode)."""
+        episode's bootstrap head, sampled noise; `episode_start` begins a new episode). For a Box action space
+        the actions are arrays of the space's shape and dtype (a batch: one more leading axis), the actor's
+        action in either case (as SB3's TD3: its exploration noise belongs to training)."""
         rows, batch = self._codec.rows(observation)
         live = self._run.live_actions(rows) if deterministic and self._in_callback() else None
         if live is not None:
@@ -728,6 +741,10 @@ class Agent:
                 starts = np.zeros(len(rows), dtype=bool) if episode_start is None else np.broadcast_to(
                     np.asarray(episode_start, dtype=bool).reshape(-1), (len(rows),))
                 actions = [policy.explore(r, bool(s)) for r, s in zip(rows, starts)]
+        if self._box is not None:
+            shaped = np.asarray(actions, dtype=np.float32).reshape((len(rows),) + self._box.shape)
+            shaped = shaped.astype(self._box.dtype, copy=False)
+            return (shaped if batch else shaped[0]), None
         out = np.asarray(actions, dtype=np.int64)
         return (out if batch else out.reshape(())), None
 
@@ -744,6 +761,9 @@ class Agent:
     def set_parameters(self, load_path_or_dict: Any, exact_match: bool = True) -> None:
         """Sets the weights `predict` (and a weights-only `save`) use, from `get_parameters()`'s dict or a weights
         file. A live run keeps training its own network: this changes what the agent acts with, not the run."""
+        if self._box is not None:
+            raise RuntimeError("set_parameters is not available for actions in a Box (TD3) yet: Agent.save writes "
+                               "the run's snapshot and Agent.load reads it")
         if isinstance(load_path_or_dict, (str, os.PathLike)):
             policy, _meta = _arld.Policy.load(str(load_path_or_dict))
         else:
@@ -809,7 +829,7 @@ class Agent:
             agent.env = env
             agent._codec = _codec_of(env) if env is not None else ObsCodec(
                 gym_spaces().Box(-np.inf, np.inf, (policy.obs_dim,), np.float32), path)
-            agent._max_episode_steps, agent._vec_env = None, None
+            agent._max_episode_steps, agent._vec_env, agent._box = None, None, None
             agent.env_id = meta.get("env", "")
             agent.eval_env = eval_env
             agent._policy, agent._run, agent._resume, agent._live_step = policy, None, None, 0
@@ -833,14 +853,14 @@ class Agent:
                 raise ValueError(f"{path} was trained with the Python expert {spec[7:]}: pass it as expert=")
             expert = spec
         agent = cls(cfg["method"], env, cfg["net"], expert, seed=cfg["seed"], eval_env=eval_env, **kwargs)
-        policy, _cfg, step, curve, queries = _arld.snapshot_policy(path)
+        run_policy, _cfg, step, curve, queries = _arld.snapshot_policy(path)
         agent.config = cfg
         # The evaluations and the queries travel in the snapshot.
         agent._evaluations = list(json.loads(curve))
         agent._queries = list(queries)
         agent._prior_evaluations = list(agent._evaluations)
         agent.policy_kwargs = {"net_arch": list(cfg["hidden"])}
-        agent._policy, agent._resume, agent._live_step = policy, path, step
+        agent._policy, agent._resume, agent._live_step = run_policy, path, step
         return agent
 
     def __repr__(self) -> str:

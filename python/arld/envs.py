@@ -11,12 +11,17 @@ Observation spaces, as Stable-Baselines3's policies see them:
 - images (a `Box` of three dimensions, or of `uint8` with two or more) are refused: wrap the environment in
   `gymnasium.wrappers.FlattenObservation` to train on the pixels as one vector, or give arld features.
 Experts and `predict` take observations as the environment gives them.
+
+Action spaces: `Discrete` (starting at 0: the DQN family learns) or a `Box` with finite bounds (TD3 learns). A `Box`
+of more dimensions is flattened for arld's loop (`BoxActions`); the environment, `predict` and experts see actions
+in the space's shape and dtype.
 """
 
 from __future__ import annotations
 
 import copy
-from typing import Any, Dict, List, Optional, Sequence, Tuple
+from dataclasses import dataclass
+from typing import Any, Dict, List, Optional, Sequence, Tuple, Union
 
 import gymnasium as gym
 import numpy as np
@@ -24,8 +29,55 @@ from gymnasium import spaces
 
 from . import _arld
 
-# (id, obs_dim, n_actions, max_episode_steps, reward_threshold): what arld's registry knows of an environment.
-Facts = Tuple[str, int, int, int, Optional[float]]
+
+
+@dataclass(frozen=True)
+class BoxActions:
+    """A `Box` action space as arld's loop sees it: flat vectors of float32 numbers in [low, high] (the bounds
+    flattened in C order), shaped back as the space (`shape`, `dtype`) for the environment and for `predict`."""
+
+    shape: Tuple[int, ...]
+    low: Tuple[float, ...]
+    high: Tuple[float, ...]
+    dtype: str = "float32"
+
+    @property
+    def dim(self) -> int:
+        return len(self.low)
+
+    def flat(self, action: Any, who: str = "the expert") -> List[float]:
+        """An action in the space's shape (or any array of `dim` numbers) as arld's flat vector."""
+        try:
+            a = np.asarray(action, dtype=np.float32).reshape(-1)
+        except (TypeError, ValueError):
+            raise TypeError(f"{who} must answer an action of shape {self.shape} (numbers), got {action!r}") from None
+        if a.size != self.dim:
+            raise TypeError(f"{who} must answer an action of shape {self.shape} ({self.dim} numbers), got "
+                            f"{np.shape(action)}: {action!r}")
+        return [float(v) for v in a]
+
+    def shaped(self, flat: Sequence[float]) -> np.ndarray:
+        """arld's flat vector as an action of the space (its shape and dtype)."""
+        return np.asarray(flat, dtype=np.float32).reshape(self.shape).astype(self.dtype, copy=False)
+
+
+def box_actions(space: Any, name: str) -> BoxActions:
+    """The `BoxActions` of a `Box` action space, or ValueError when a bound is not finite (TD3's actor maps into
+    the box)."""
+    low = np.asarray(space.low, dtype=np.float64).reshape(-1)
+    high = np.asarray(space.high, dtype=np.float64).reshape(-1)
+    if not (np.all(np.isfinite(low)) and np.all(np.isfinite(high)) and np.all(low < high)):
+        raise ValueError(
+            f"{name}'s action space {space!r} needs finite bounds with low < high in every dimension (arld's actor "
+            "acts inside the box): rescale it, e.g. with gymnasium.wrappers.RescaleAction, or clip it")
+    return BoxActions(tuple(int(n) for n in space.shape), tuple(float(np.float32(v)) for v in low),
+                      tuple(float(np.float32(v)) for v in high), str(np.dtype(space.dtype)))
+
+
+# What a task's actions are: the number of discrete actions, or a box.
+Actions = Union[int, BoxActions]
+# (id, obs_dim, actions, max_episode_steps, reward_threshold): what arld's registry knows of an environment.
+Facts = Tuple[str, int, Actions, int, Optional[float]]
 
 _SUPPORTED = "supported: a Box, Discrete (one-hot), MultiDiscrete, MultiBinary, and Dict or Tuple of these (flattened)"
 
@@ -132,12 +184,17 @@ class EnvBridge:
     def __init__(self, env: Any, codec: ObsCodec) -> None:
         self.env = env
         self.flat = codec.flat
+        space = getattr(env, "action_space", None)
+        self.box = box_actions(space, env_name(env)) if isinstance(space, spaces.Box) else None
 
     def reset(self, seed: Optional[int]) -> List[float]:
         obs, _info = self.env.reset() if seed is None else self.env.reset(seed=int(seed))
         return self.flat(obs)
 
-    def step(self, action: int) -> Tuple[List[float], float, bool, bool]:
+    def step(self, action: Any) -> Tuple[List[float], float, bool, bool]:
+        """One step with arld's action: an int, or a flat list of floats for a Box (shaped as the space)."""
+        if self.box is not None:
+            action = self.box.shaped(action)
         obs, reward, terminated, truncated, _info = self.env.step(action)
         return self.flat(obs), float(reward), bool(terminated), bool(truncated)
 
@@ -217,13 +274,21 @@ def env_name(env: Any) -> str:
 
 
 def env_facts(env: Any) -> Facts:
-    """(id, obs_dim, n_actions, max_episode_steps, reward_threshold) of a Gymnasium environment, or ValueError."""
+    """(id, obs_dim, actions, max_episode_steps, reward_threshold) of a Gymnasium environment, or ValueError;
+    `actions` is the number of discrete actions, or the `BoxActions` of a Box."""
     if isinstance(env, BuiltinEnv):
-        return env._core.spec
+        spec: Facts = env._core.spec
+        return spec
     act_space: Any = getattr(env, "action_space", None)
     name = env_name(env)
-    if type(act_space).__name__ != "Discrete" or getattr(act_space, "start", 0) != 0:
-        raise ValueError(f"arld needs a Discrete action space starting at 0; {name} has {act_space!r}")
+    actions: Actions
+    if isinstance(act_space, spaces.Box):
+        actions = box_actions(act_space, name)
+    elif type(act_space).__name__ != "Discrete" or getattr(act_space, "start", 0) != 0:
+        raise ValueError(
+            f"arld needs a Discrete action space starting at 0 or a Box with finite bounds; {name} has {act_space!r}")
+    else:
+        actions = int(act_space.n)
     codec = ObsCodec(getattr(env, "observation_space", None), name)
     limit = time_limit(env)
     if limit is None:
@@ -232,7 +297,7 @@ def env_facts(env: Any) -> Facts:
             "gymnasium.wrappers.TimeLimit, or Agent(..., max_episode_steps=N)"
         )
     threshold = getattr(getattr(env, "spec", None), "reward_threshold", None)
-    return (name, codec.dim, int(act_space.n), limit, threshold)
+    return (name, codec.dim, actions, limit, threshold)
 
 
 def codec_of(env: Any) -> ObsCodec:
@@ -243,15 +308,22 @@ def register(facts: Facts) -> str:
     """Registers a Python environment's facts; returns the id arld knows it by: the Gymnasium id, or, when that
     id is known with other facts (a built-in task re-limited or wrapped, or another wrapper of the same id in
     this process), the id with the facts that tell it apart."""
-    name, obs_dim, n_actions, limit, threshold = facts
+    name, obs_dim, actions, limit, threshold = facts
+    if isinstance(actions, BoxActions):
+        shown = f"action_low={list(actions.low)},action_high={list(actions.high)}"
+    else:
+        shown = f"n_actions={actions}"
     candidates = [
         name,
         f"{name}[max_episode_steps={limit},reward_threshold={threshold}]",
-        f"{name}[max_episode_steps={limit},reward_threshold={threshold},obs_dim={obs_dim},n_actions={n_actions}]",
+        f"{name}[max_episode_steps={limit},reward_threshold={threshold},obs_dim={obs_dim},{shown}]",
     ]
     for i, candidate in enumerate(candidates):
         try:
-            _arld.register_env(candidate, obs_dim, n_actions, limit, threshold)
+            if isinstance(actions, BoxActions):
+                _arld.register_box_env(candidate, obs_dim, list(actions.low), list(actions.high), limit, threshold)
+            else:
+                _arld.register_env(candidate, obs_dim, actions, limit, threshold)
             return candidate
         except ValueError:
             if i == len(candidates) - 1:

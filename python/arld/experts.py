@@ -18,7 +18,7 @@ from typing import Any, Callable, Dict, List, Literal, Optional, Protocol, Seque
 import numpy as np
 
 from . import _arld
-from .envs import ObsCodec, as_env as _as_env, codec_of as _codec_of
+from .envs import BoxActions, ObsCodec, as_env as _as_env, codec_of as _codec_of
 
 # A person answering in the browser: arld.WebExpert(listen="127.0.0.1:0", fps=None, timeout=None, keys=None,
 # wait=True, labels=None) serves the page (its URL is .url, printed when learn starts the run); pass it as expert=
@@ -43,9 +43,10 @@ def _qualified(obj: Any) -> str:
     return f"{module}.{name}"
 
 
-def _expert_callable(expert: Any) -> Tuple[Optional[Callable[[Any], int]], str]:
-    """(callable obs -> int, name) for a Python expert (given observations as the environment gives them), or
-    (None, spec) for an arld expert spec."""
+def _expert_callable(expert: Any, box: Optional[BoxActions] = None) -> Tuple[Optional[Callable[[Any], Any]], str]:
+    """(callable obs -> action, name) for a Python expert (given observations as the environment gives them), or
+    (None, spec) for an arld expert spec. The callable answers an int, or, for a task with actions in the box
+    `box`, the action as a flat list of floats (the expert answers it in the space's shape)."""
     if isinstance(expert, str):
         return None, expert
     if isinstance(expert, WebExpert):
@@ -53,24 +54,25 @@ def _expert_callable(expert: Any) -> Tuple[Optional[Callable[[Any], int]], str]:
         return cast(Callable[[Any], int], expert), "web"
     from .agent import Agent  # the agent module imports this one
 
+    convert: Callable[[Any], Any] = _as_action if box is None else box.flat
     if isinstance(expert, Agent):
         agent = expert
 
-        def ask_agent(obs: Any) -> int:
-            return int(agent.predict(obs)[0])
+        def ask_agent(obs: Any) -> Any:
+            return convert(agent.predict(obs)[0])
 
         return ask_agent, "arld.Agent"
     if hasattr(expert, "predict") and callable(expert.predict):
         # Stable-Baselines3's predict(obs, deterministic=True) -> (action, state).
-        def ask(obs: Any) -> int:
+        def ask(obs: Any) -> Any:
             action, _state = expert.predict(obs, deterministic=True)
-            return _as_action(action)
+            return convert(action)
 
         return ask, _qualified(type(expert))
     if callable(expert):
 
-        def ask_callable(obs: Any) -> int:
-            return _as_action(expert(obs))
+        def ask_callable(obs: Any) -> Any:
+            return convert(expert(obs))
 
         return ask_callable, _qualified(expert)
     raise TypeError(
@@ -85,7 +87,7 @@ def gym_spaces() -> Any:
     return spaces
 
 
-def _shown_raw(ask: Callable[[Any], int], codec: ObsCodec) -> Callable[[Any], int]:
+def _shown_raw(ask: Callable[[Any], Any], codec: ObsCodec) -> Callable[[Any], Any]:
     """`ask` given arld's flat vector as the environment gives the observation."""
     if codec.flat_box:
         return lambda flat: ask(np.asarray(flat, dtype=np.float32))

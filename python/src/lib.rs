@@ -4,7 +4,10 @@
 //!
 //! The training loop is the library's ([`arld::train::RunBuilder`]). Python is called back only to step an
 //! environment ([`PyEnv`]: any object with `reset(seed) -> list[float]` and `step(action) -> (obs, reward,
-//! terminated, truncated)`) and to ask an expert ([`PyExpert`]: a callable `obs -> int`). An exception raised
+//! terminated, truncated)`) and to ask an expert ([`PyExpert`]: a callable `obs -> action`). Both are generic over
+//! the kind of action ([`PyAction`]): a discrete index (the DQN family learns) or a list of floats in a box (TD3
+//! learns, [`BoxAgent`]); a run's kind follows from its task's registration (`register_env` or
+//! `register_box_env`). An exception raised
 //! there is kept in an [`ErrorSlot`]. An exception from an expert or a callback pauses the run whole (the
 //! expert's question stays open and is asked again when the run goes on); `advance` then raises the original
 //! exception with a note saying where the run paused. An exception from the environment ends the run (its state
@@ -16,14 +19,14 @@
 //! step, without a copy per step. A `save` inside a callback is written at a pause right after the callback
 //! returns (the run's replay and generators are reachable only there); the run then goes on by itself.
 
-use arld::agent::Agent;
-use arld::env::{self, Env, EnvError, EnvSpec, Outcome};
+use arld::agent::box_agent::BoxAgent;
+use arld::agent::{Agent, Learner};
+use arld::env::{self, Action, Env, EnvError, Outcome, TaskSpec};
 use arld::expert::Expert;
 use arld::expert::demos::{DemoColumns, Demonstrations};
 use arld::interrupt::Interrupted;
-use arld::nn::QNet;
+use arld::nn::{Mlp, MlpWorkspace, QNet};
 use arld::rng::NumpyRng;
-use arld::state::Persist;
 use arld::train::{
     self, Checkpointer, ConfigInput, Control, Driver, EvalPoint, PausedRun, QueryEvent, RunBuilder,
     RunLog, SeedPurpose, StepView, Summary, TrainConfig, seed_for,
@@ -88,44 +91,203 @@ fn runtime_error(msg: String) -> PyErr {
     PyRuntimeError::new_err(msg)
 }
 
-/// A Python environment behind the library's [`Env`] trait.
-struct PyEnv {
+/// A kind of action as it crosses to Python and back, and what a run of that kind needs besides (its built-in
+/// environments, its experts from a spec, its demonstrations).
+trait PyAction: Action {
+    /// The action as the Python environment's `step` is given it: an int, or a list of floats (the Python side
+    /// shapes it as its space).
+    fn to_py<'py>(py: Python<'py>, action: Self::Ref<'_>) -> PyResult<Bound<'py, PyAny>>;
+    /// An expert's answer (made a Python int, or a flat list of floats, by the Python side), checked against
+    /// `spec`; the error says what is wrong.
+    fn answer(obj: &Bound<'_, PyAny>, spec: &Self::Spec) -> Result<Self, String>;
+    /// The built-in task `id` of this kind.
+    fn builtin(id: &str) -> anyhow::Result<Box<dyn Env<Self>>>;
+    /// The expert of the configuration's spec (`cfg.expert`), for a run without a Python expert.
+    fn spec_expert(cfg: &TrainConfig) -> anyhow::Result<Box<dyn Expert<Self>>>;
+    /// The queries of a run of this kind, kept for Python.
+    fn records(events: &[QueryEvent<Self>]) -> Records;
+    /// The registered facts of the task `id` of this kind.
+    fn spec_of(id: &str) -> Result<&'static Self::Spec, EnvError>;
+    /// The demonstrations a run that pre-trains starts from: `given` as rows, or collected from `expert` on the
+    /// environment `demo_env` makes.
+    fn demonstrations(
+        cfg: &TrainConfig,
+        given: Option<DemoArrays>,
+        expert: Option<&mut dyn Expert<Self>>,
+        demo_env: &mut dyn FnMut() -> anyhow::Result<Box<dyn Env<Self>>>,
+    ) -> anyhow::Result<Demonstrations<Self>>;
+}
+
+impl PyAction for usize {
+    fn to_py<'py>(py: Python<'py>, action: usize) -> PyResult<Bound<'py, PyAny>> {
+        Ok(action.into_pyobject(py)?.into_any())
+    }
+
+    fn answer(obj: &Bound<'_, PyAny>, spec: &env::EnvSpec) -> Result<usize, String> {
+        let answer = obj.extract::<i64>().map_err(|e| e.to_string())?;
+        if !(0..spec.n_actions as i64).contains(&answer) {
+            return Err(format!(
+                "it answered action {answer}, but the environment has {} actions (0 to {})",
+                spec.n_actions,
+                spec.n_actions.saturating_sub(1)
+            ));
+        }
+        Ok(answer as usize)
+    }
+
+    fn builtin(id: &str) -> anyhow::Result<Box<dyn Env>> {
+        Ok(env::make(id)?)
+    }
+
+    fn spec_expert(cfg: &TrainConfig) -> anyhow::Result<Box<dyn Expert>> {
+        arld_web::from_spec(
+            &cfg.expert,
+            &cfg.env,
+            seed_for(cfg.seed, SeedPurpose::Expert),
+            cfg.expert_timeout,
+        )
+    }
+
+    fn records(events: &[QueryEvent]) -> Records {
+        Records::Discrete(events.to_vec())
+    }
+
+    fn spec_of(id: &str) -> Result<&'static env::EnvSpec, EnvError> {
+        env::spec(id)
+    }
+
+    fn demonstrations(
+        cfg: &TrainConfig,
+        given: Option<DemoArrays>,
+        expert: Option<&mut dyn Expert>,
+        demo_env: &mut dyn FnMut() -> anyhow::Result<Box<dyn Env>>,
+    ) -> anyhow::Result<Demonstrations> {
+        match given {
+            Some(d) => d.into_demonstrations(cfg),
+            None => {
+                let e = expert.expect("methods that pre-train need an expert");
+                let mut demo_env = demo_env()?;
+                Demonstrations::collect_in(
+                    demo_env.as_mut(),
+                    e,
+                    cfg.n_demo,
+                    seed_for(cfg.seed, SeedPurpose::Demonstrations),
+                )
+            }
+        }
+    }
+}
+
+impl PyAction for Vec<f32> {
+    fn to_py<'py>(py: Python<'py>, action: &[f32]) -> PyResult<Bound<'py, PyAny>> {
+        Ok(action.into_pyobject(py)?.into_any())
+    }
+
+    fn answer(obj: &Bound<'_, PyAny>, spec: &env::BoxSpec) -> Result<Vec<f32>, String> {
+        let answer = obj.extract::<Vec<f32>>().map_err(|e| e.to_string())?;
+        Vec::<f32>::check(&answer, spec).map_err(|m| format!("it answered {answer:?}: {m}"))?;
+        Ok(answer)
+    }
+
+    fn builtin(id: &str) -> anyhow::Result<Box<dyn Env<Vec<f32>>>> {
+        Ok(env::make_box(id)?)
+    }
+
+    fn spec_expert(cfg: &TrainConfig) -> anyhow::Result<Box<dyn Expert<Vec<f32>>>> {
+        anyhow::ensure!(
+            cfg.expert == "scripted",
+            "the expert '{}' cannot answer in {} (actions in a box): give a Python expert (a callable, an SB3 \
+             model) or \"scripted\" for a built-in task",
+            cfg.expert,
+            cfg.env
+        );
+        Ok(Box::new(arld::expert::scripted::ScriptedBoxExpert::new(
+            &cfg.env,
+        )?))
+    }
+
+    fn records(events: &[QueryEvent<Vec<f32>>]) -> Records {
+        Records::Box(events.to_vec())
+    }
+
+    fn spec_of(id: &str) -> Result<&'static env::BoxSpec, EnvError> {
+        env::box_spec(id)
+    }
+
+    fn demonstrations(
+        cfg: &TrainConfig,
+        _given: Option<DemoArrays>,
+        _expert: Option<&mut dyn Expert<Vec<f32>>>,
+        _demo_env: &mut dyn FnMut() -> anyhow::Result<Box<dyn Env<Vec<f32>>>>,
+    ) -> anyhow::Result<Demonstrations<Vec<f32>>> {
+        anyhow::bail!(
+            "{} pre-trains on demonstrations, which runs in {} (actions in a box) cannot do yet; use a method \
+             without pre-training (dqn, gdqn, bdqn, adqn)",
+            cfg.method,
+            cfg.env
+        )
+    }
+}
+
+/// A run's queries as Python reads them, of either kind of action.
+#[derive(Clone)]
+enum Records {
+    Discrete(Vec<QueryEvent>),
+    Box(Vec<QueryEvent<Vec<f32>>>),
+}
+
+impl Records {
+    /// Appends every query to `list` as a dict.
+    fn fill(&self, py: Python<'_>, list: &Bound<'_, PyList>) -> PyResult<()> {
+        match self {
+            Records::Discrete(events) => events
+                .iter()
+                .try_for_each(|q| list.append(query_dict(py, q)?)),
+            Records::Box(events) => events
+                .iter()
+                .try_for_each(|q| list.append(query_dict(py, q)?)),
+        }
+    }
+}
+
+/// A Python environment behind the library's [`Env`] trait, for actions of the kind `A`.
+struct PyEnv<A: PyAction> {
     obj: Py<PyAny>,
-    spec: &'static EnvSpec,
+    spec: &'static A::Spec,
     errors: ErrorSlot,
     /// Why the last `reset` failed: the loop takes it after an episode's reset (and pauses when the environment
     /// raised); otherwise the next step reports it (the trait's `reset` cannot fail).
     reset_failed: Option<EnvError>,
 }
 
-impl PyEnv {
+impl<A: PyAction> PyEnv<A> {
     fn error(&self, msg: String) -> EnvError {
         EnvError::External {
-            env: self.spec.id.to_string(),
+            env: self.spec.id().to_string(),
             msg,
         }
     }
 
     fn checked_obs(&self, obs: Vec<f32>) -> Result<Vec<f32>, String> {
-        if obs.len() != self.spec.obs_dim {
+        if obs.len() != self.spec.obs_dim() {
             return Err(format!(
                 "the observation has {} values, but the environment declared {}",
                 obs.len(),
-                self.spec.obs_dim
+                self.spec.obs_dim()
             ));
         }
         Ok(obs)
     }
 }
 
-impl Env for PyEnv {
+impl<A: PyAction> Env<A> for PyEnv<A> {
     fn reset_into(&mut self, seed: Option<u64>, obs: &mut [f32]) {
         let result = Python::attach(|py| {
             self.obj
                 .call_method1(py, "reset", (seed,))
                 .and_then(|o| o.extract::<Vec<f32>>(py))
                 .map_err(|e| EnvError::Raised {
-                    env: self.spec.id.to_string(),
+                    env: self.spec.id().to_string(),
                     msg: format!("reset failed: {}", self.errors.keep(e)),
                 })
         })
@@ -149,7 +311,7 @@ impl Env for PyEnv {
         self.reset_failed.take()
     }
 
-    fn step_into(&mut self, action: usize, obs: &mut [f32]) -> Result<Outcome, EnvError> {
+    fn step_into(&mut self, action: A::Ref<'_>, obs: &mut [f32]) -> Result<Outcome, EnvError> {
         // A failed reset that the loop did not take (the first one, or one while an episode is replayed) ends
         // the run.
         if let Some(err) = &self.reset_failed {
@@ -157,12 +319,14 @@ impl Env for PyEnv {
         }
         let result = Python::attach(|py| {
             py.check_signals()?;
-            let out = self.obj.call_method1(py, "step", (action,))?;
+            let out = self
+                .obj
+                .call_method1(py, "step", (A::to_py(py, action)?,))?;
             out.extract::<(Vec<f32>, f64, bool, bool)>(py)
         });
         // An exception (the environment's own, or a value of the wrong type) pauses the run whole.
         let (next, reward, terminated, truncated) = result.map_err(|e| EnvError::Raised {
-            env: self.spec.id.to_string(),
+            env: self.spec.id().to_string(),
             msg: self.errors.keep(e),
         })?;
         let next = self.checked_obs(next).map_err(|m| self.error(m))?;
@@ -174,7 +338,7 @@ impl Env for PyEnv {
         })
     }
 
-    fn spec(&self) -> &'static EnvSpec {
+    fn spec(&self) -> &'static A::Spec {
         self.spec
     }
 
@@ -205,40 +369,31 @@ impl Env for PyEnv {
     }
 }
 
-/// A Python callable `obs -> int` as an [`Expert`].
-struct PyExpert {
+/// A Python callable `obs -> action` as an [`Expert`] of actions of the kind `A`.
+struct PyExpert<A: PyAction> {
     call: Py<PyAny>,
     name: String,
-    n_actions: usize,
+    spec: &'static A::Spec,
     errors: ErrorSlot,
 }
 
-impl Expert for PyExpert {
-    fn act(&mut self, obs: &[f32]) -> anyhow::Result<usize> {
+impl<A: PyAction> Expert<A> for PyExpert<A> {
+    fn act(&mut self, obs: &[f32]) -> anyhow::Result<A> {
         // An exception pauses the run whole with the question open (a stop, for the loop), so that the next
-        // `learn` asks the same question again; `advance` raises the exception.
+        // `learn` asks the same question again; `advance` raises the exception. A bad answer is raised as a
+        // ValueError from `learn` (a bad value from the caller's code); the run pauses too.
         let answer = Python::attach(|py| {
-            self.call
-                .call1(py, (obs.to_vec(),))
-                .and_then(|a| a.extract::<i64>(py))
-                .map_err(|e| {
-                    let note = format!("arld: raised by the expert python:{}", self.name);
-                    let _ = e.value(py).call_method1("add_note", (note,));
-                    self.errors.keep(e)
-                })
-        })
-        .map_err(|msg| Interrupted(format!("the expert raised {msg}")))?;
-        if !(0..self.n_actions as i64).contains(&answer) {
-            let msg = format!(
-                "it answered action {answer}, but the environment has {} actions (0 to {})",
-                self.n_actions,
-                self.n_actions.saturating_sub(1)
-            );
-            // Raised as a ValueError from `learn` (a bad value from the caller's code); the run pauses.
-            self.errors.keep(PyValueError::new_err(msg.clone()));
-            return Err(Interrupted(msg).into());
-        }
-        Ok(answer as usize)
+            let answer = self.call.call1(py, (obs.to_vec(),)).map_err(|e| {
+                let note = format!("arld: raised by the expert python:{}", self.name);
+                let _ = e.value(py).call_method1("add_note", (note,));
+                Interrupted(format!("the expert raised {}", self.errors.keep(e)))
+            })?;
+            A::answer(answer.bind(py), self.spec).map_err(|msg| {
+                self.errors.keep(PyValueError::new_err(msg.clone()));
+                Interrupted(msg)
+            })
+        })?;
+        Ok(answer)
     }
     fn describe(&self) -> String {
         format!("python:{}", self.name)
@@ -258,6 +413,36 @@ fn register_env(
     env::register(id, obs_dim, n_actions, max_episode_steps, reward_threshold)
         .map(|_| ())
         .map_err(|e| value_error(e.to_string()))
+}
+
+/// Registers the facts of a Python environment with actions in a box (`low`, `high`: the flattened bounds) so
+/// configurations can name it; returns nothing, fails on a clash or bad bounds.
+#[pyfunction]
+#[pyo3(signature = (id, obs_dim, low, high, max_episode_steps, reward_threshold=None))]
+fn register_box_env(
+    id: &str,
+    obs_dim: usize,
+    low: Vec<f32>,
+    high: Vec<f32>,
+    max_episode_steps: usize,
+    reward_threshold: Option<f64>,
+) -> PyResult<()> {
+    env::register_box(
+        id,
+        obs_dim,
+        &low,
+        &high,
+        max_episode_steps,
+        reward_threshold,
+    )
+    .map(|_| ())
+    .map_err(|e| value_error(e.to_string()))
+}
+
+/// Whether `id` names a task with actions in a box (built in or registered).
+#[pyfunction]
+fn is_box_env(id: &str) -> bool {
+    env::box_spec(id).is_ok()
 }
 
 /// The ids of the built-in environments.
@@ -446,6 +631,95 @@ impl Policy {
     }
 }
 
+/// A TD3 actor acting with the test policy (no exploration noise): the actor's tanh outputs mapped into the box,
+/// `low + (y + 1) (high - low) / 2`, as the run's test episodes act.
+#[pyclass(module = "arld._arld")]
+#[derive(Clone)]
+struct BoxPolicy {
+    actor: Mlp,
+    ws: MlpWorkspace,
+    low: Vec<f32>,
+    half: Vec<f32>,
+    /// The learner: `td3` (the actor's outputs are the tanh of the action) or `sac` (its first half are the
+    /// means, whose tanh is the test action).
+    learner: &'static str,
+}
+
+impl BoxPolicy {
+    fn of(agent: &BoxAgent, spec: &env::BoxSpec) -> Self {
+        let actor = agent.actor().clone();
+        BoxPolicy {
+            learner: agent.learner_name(),
+            ws: MlpWorkspace::new(&actor, 1),
+            actor,
+            low: spec.action_low.to_vec(),
+            half: spec
+                .action_low
+                .iter()
+                .zip(spec.action_high)
+                .map(|(l, h)| 0.5 * (h - l))
+                .collect(),
+        }
+    }
+}
+
+#[pymethods]
+impl BoxPolicy {
+    /// The test policy's action for one observation (flat, as many numbers as the box has dimensions).
+    fn act(&mut self, obs: Vec<f32>) -> PyResult<Vec<f32>> {
+        if obs.len() != self.actor.input_dim() {
+            return Err(value_error(format!(
+                "the observation has {} values, but the network takes {}",
+                obs.len(),
+                self.actor.input_dim()
+            )));
+        }
+        let y = self.actor.forward(&obs, 1, &mut self.ws);
+        let squash = |y: f32| if self.learner == "sac" { y.tanh() } else { y };
+        Ok(y.iter()
+            .zip(self.low.iter().zip(&self.half))
+            .map(|(&y, (low, half))| low + (squash(y) + 1.0) * half)
+            .collect())
+    }
+
+    /// As `act`: TD3's policy is deterministic (its exploration noise belongs to the run), as in
+    /// Stable-Baselines3's TD3, whose `predict(deterministic=False)` is the actor's action too.
+    fn explore(&mut self, obs: Vec<f32>, _episode_start: bool) -> PyResult<Vec<f32>> {
+        self.act(obs)
+    }
+
+    /// The learner: "td3" or "sac".
+    #[getter]
+    fn net(&self) -> &'static str {
+        self.learner
+    }
+
+    /// Plain weights of a box policy are not written alone: the run's snapshot holds them.
+    fn save(&self, path: &str, _meta: std::collections::BTreeMap<String, String>) -> PyResult<()> {
+        Err(runtime_error(format!(
+            "cannot write {path}: a TD3 policy is saved with its run (Agent.save after learn writes the run's \
+             snapshot, which Agent.load reads); its weights alone are not written from Python"
+        )))
+    }
+
+    #[getter]
+    fn obs_dim(&self) -> usize {
+        self.actor.input_dim()
+    }
+
+    #[getter]
+    fn action_dim(&self) -> usize {
+        self.low.len()
+    }
+}
+
+/// A run's current network as Python acts with it: a DQN-family network or a TD3 actor.
+#[derive(Clone)]
+enum Net {
+    Q(QNet),
+    Box(BoxPolicy),
+}
+
 /// A built-in environment (`arld.make`), stepped from Python (also from a run's thread, when wrapped).
 #[pyclass(module = "arld._arld")]
 struct BuiltinEnv {
@@ -511,9 +785,9 @@ enum Command {
 
 /// Where a paused (or finished) run stands, sent to Python.
 struct Pause {
-    net: QNet,
+    net: Net,
     curve: Vec<EvalPoint>,
-    queries: Vec<QueryEvent>,
+    queries: Records,
     summary: Summary,
     /// The run ended (by error, or stopped): it cannot go on.
     finished: bool,
@@ -532,8 +806,30 @@ enum Waited {
     Saved(Result<(), String>),
 }
 
+/// The live agent and log of a run, lent to a callback while it runs on the run's thread.
+#[derive(Clone, Copy)]
+enum LentParts {
+    Discrete(*const Agent, *const RunLog),
+    Box(*const BoxAgent, *const RunLog<Vec<f32>>),
+}
+
+/// The live agent and log of a run, borrowed for the length of a call from its callback.
+enum LentRef<'a> {
+    Discrete(&'a Agent, &'a RunLog),
+    Box(&'a BoxAgent, &'a RunLog<Vec<f32>>),
+}
+
+impl LentRef<'_> {
+    fn curve(&self) -> &[EvalPoint] {
+        match self {
+            LentRef::Discrete(_, log) => log.curve(),
+            LentRef::Box(_, log) => log.curve(),
+        }
+    }
+}
+
 /// The live run lent to a callback while it runs on the run's thread: which run, its agent and its log.
-type LentRun = (u64, *const Agent, *const RunLog);
+type LentRun = (u64, LentParts);
 
 thread_local! {
     /// Set only by [`Lent`], for the length of one callback call on the run's thread.
@@ -544,14 +840,8 @@ thread_local! {
 struct Lent;
 
 impl Lent {
-    fn new(run: u64, at: &StepView<'_>) -> Self {
-        LENT.with(|l| {
-            l.set(Some((
-                run,
-                at.agent as *const Agent,
-                at.log as *const RunLog,
-            )))
-        });
+    fn new(run: u64, parts: LentParts) -> Self {
+        LENT.with(|l| l.set(Some((run, parts))));
         Lent
     }
 }
@@ -563,15 +853,20 @@ impl Drop for Lent {
 }
 
 /// `f` of the live agent and log of run `run`, when called from inside that run's callback; `None` otherwise.
-fn with_lent<R>(run: u64, f: impl FnOnce(&Agent, &RunLog) -> R) -> Option<R> {
-    let (id, agent, log) = LENT.with(|l| l.get())?;
+fn with_lent<R>(run: u64, f: impl FnOnce(LentRef<'_>) -> R) -> Option<R> {
+    let (id, parts) = LENT.with(|l| l.get())?;
     if id != run {
         return None;
     }
     // SAFETY: the pointers are set by `Lent` from the `StepView` of the callback call that is running on this
     // thread (thread-local, so no other thread sees them) and cleared when it returns; the loop holds only shared
     // borrows of the agent and the log meanwhile, so both are alive and unchanged while `f` reads them.
-    Some(unsafe { f(&*agent, &*log) })
+    Some(unsafe {
+        match parts {
+            LentParts::Discrete(agent, log) => f(LentRef::Discrete(&*agent, &*log)),
+            LentParts::Box(agent, log) => f(LentRef::Box(&*agent, &*log)),
+        }
+    })
 }
 
 /// Whether this thread is inside a callback of any run (a run's thread, waiting for it).
@@ -579,8 +874,58 @@ fn in_callback() -> bool {
     LENT.with(|l| l.get()).is_some()
 }
 
+/// A learner that Python runs drive: how its run starts, how it is lent to a callback, and what Python keeps
+/// of it at a pause.
+trait PyLearner: Learner<Action: PyAction> + Sized + 'static {
+    /// A run of `cfg` with this learner.
+    fn builder(cfg: &TrainConfig) -> RunBuilder<'_, Self>;
+    /// The agent and log as a callback borrows them.
+    fn lend(agent: &Self, log: &RunLog<Self::Action>) -> LentParts;
+    /// The network Python acts with, for the task `id`.
+    fn net(&self, id: &str) -> Net;
+    /// A learner of `cfg`'s shape, to load a snapshot's state into.
+    fn for_snapshot(cfg: &TrainConfig) -> anyhow::Result<Self>;
+}
+
+impl PyLearner for Agent {
+    fn builder(cfg: &TrainConfig) -> RunBuilder<'_, Self> {
+        RunBuilder::new(cfg)
+    }
+    fn lend(agent: &Self, log: &RunLog) -> LentParts {
+        LentParts::Discrete(agent as *const Agent, log as *const RunLog)
+    }
+    fn net(&self, _id: &str) -> Net {
+        Net::Q(self.network().clone())
+    }
+    fn for_snapshot(cfg: &TrainConfig) -> anyhow::Result<Self> {
+        let spec = env::spec(&cfg.env)?;
+        Ok(Agent::new(
+            &cfg.agent_config(),
+            spec.obs_dim,
+            spec.n_actions,
+            0,
+        ))
+    }
+}
+
+impl PyLearner for BoxAgent {
+    fn builder(cfg: &TrainConfig) -> RunBuilder<'_, Self> {
+        RunBuilder::for_box(cfg)
+    }
+    fn lend(agent: &Self, log: &RunLog<Vec<f32>>) -> LentParts {
+        LentParts::Box(agent as *const BoxAgent, log as *const RunLog<Vec<f32>>)
+    }
+    fn net(&self, id: &str) -> Net {
+        let spec = env::box_spec(id).expect("a box run's task is registered");
+        Net::Box(BoxPolicy::of(self, spec))
+    }
+    fn for_snapshot(cfg: &TrainConfig) -> anyhow::Result<Self> {
+        Ok(train::run::box_agent(cfg, env::box_spec(&cfg.env)?))
+    }
+}
+
 /// Writes a paused run's snapshot into the file `path` (through a directory of its own, the snapshot's format).
-fn write_snapshot(run: &mut PausedRun<'_>, path: &Path) -> anyhow::Result<()> {
+fn write_snapshot<L: Learner>(run: &mut PausedRun<'_, L>, path: &Path) -> anyhow::Result<()> {
     let dir = tempfile::tempdir()?;
     run.snapshot(dir.path())?;
     std::fs::copy(dir.path().join(train::snapshot::SNAPSHOT_FILE), path)
@@ -604,17 +949,19 @@ struct Remote {
     saves: Arc<Mutex<Vec<PathBuf>>>,
     /// The pause under way only writes `saves`: the run goes on by itself afterwards.
     only_saving: bool,
+    /// The run's task.
+    env_id: String,
 }
 
 impl Remote {
     /// Python's callback after a step, with the live run lent to it: anything but `False` goes on. An exception
     /// is kept (with a note of the step) and pauses the run.
-    fn call_back(&self, at: &StepView<'_>) -> bool {
+    fn call_back<L: PyLearner>(&self, at: &StepView<'_, L>) -> bool {
         let Some(cb) = &self.callback else {
             return true;
         };
         let last_eval = at.log.curve().last().map(|p| (p.step, p.mean));
-        let _lent = Lent::new(self.id, at);
+        let _lent = Lent::new(self.id, L::lend(at.agent, at.log));
         Python::attach(|py| {
             let answer = cb.call1(
                 py,
@@ -645,8 +992,8 @@ impl Remote {
     }
 }
 
-impl Driver for Remote {
-    fn after_step(&mut self, at: &StepView<'_>) -> anyhow::Result<Control> {
+impl<L: PyLearner> Driver<L> for Remote {
+    fn after_step(&mut self, at: &StepView<'_, L>) -> anyhow::Result<Control> {
         self.step.store(at.step, Ordering::Relaxed);
         let pause =
             !self.call_back(at) || self.interrupt.load(Ordering::Relaxed) || at.step >= self.until;
@@ -667,7 +1014,7 @@ impl Driver for Remote {
         })
     }
 
-    fn paused(&mut self, run: &mut PausedRun<'_>) -> anyhow::Result<Control> {
+    fn paused(&mut self, run: &mut PausedRun<'_, L>) -> anyhow::Result<Control> {
         let mut failed = false;
         for path in self.pending_saves() {
             if let Err(e) = write_snapshot(run, &path) {
@@ -695,9 +1042,9 @@ impl Driver for Remote {
         };
         run.hand_over(&note);
         let pause = Pause {
-            net: run.agent.network().clone(),
+            net: run.agent.net(&self.env_id),
             curve: run.log.curve().to_vec(),
-            queries: run.log.query_events().to_vec(),
+            queries: L::Action::records(run.log.query_events()),
             summary: run.summary.clone(),
             finished: false,
         };
@@ -816,28 +1163,6 @@ impl Run {
             .ok_or_else(|| runtime_error("the run has not trained yet: call learn() first".into()))
     }
 
-    /// A list of dicts (made by `dict`) of records of the run: of its log while it runs (inside a callback, `live`),
-    /// else of its last pause (`paused`).
-    fn record_list<'py, T>(
-        &self,
-        py: Python<'py>,
-        live: impl FnOnce(&RunLog) -> &[T],
-        paused: impl FnOnce(&Pause) -> &[T],
-        dict: impl Fn(Python<'py>, &T) -> PyResult<Bound<'py, PyDict>>,
-    ) -> PyResult<Py<PyList>> {
-        let list = PyList::empty(py);
-        let fill = |records: &[T]| {
-            records
-                .iter()
-                .try_for_each(|record| list.append(dict(py, record)?))
-        };
-        match with_lent(self.id, |_, log| fill(live(log))) {
-            Some(filled) => filled?,
-            None => self.with_last(|last| fill(paused(last)))??,
-        }
-        Ok(list.unbind())
-    }
-
     fn refuse_in_callback(&self, what: &str) -> PyResult<()> {
         if in_callback() {
             return Err(runtime_error(format!(
@@ -847,6 +1172,15 @@ impl Run {
         }
         Ok(())
     }
+}
+
+/// The policy Python acts with for `net`: a DQN-family network exploring as the run `cfg` does at `step`, or a
+/// TD3 actor.
+fn net_policy(py: Python<'_>, net: Net, cfg: &TrainConfig, step: usize) -> PyResult<Py<PyAny>> {
+    Ok(match net {
+        Net::Q(net) => Py::new(py, Policy::exploring(net, cfg, step))?.into_any(),
+        Net::Box(policy) => Py::new(py, policy)?.into_any(),
+    })
 }
 
 fn eval_dict<'py>(py: Python<'py>, p: &EvalPoint) -> PyResult<Bound<'py, PyDict>> {
@@ -859,14 +1193,17 @@ fn eval_dict<'py>(py: Python<'py>, p: &EvalPoint) -> PyResult<Bound<'py, PyDict>
     Ok(d)
 }
 
-fn query_dict<'py>(py: Python<'py>, q: &QueryEvent) -> PyResult<Bound<'py, PyDict>> {
+fn query_dict<'py, A>(py: Python<'py>, q: &QueryEvent<A>) -> PyResult<Bound<'py, PyDict>>
+where
+    A: Action + for<'a> IntoPyObject<'a>,
+{
     let d = PyDict::new(py);
     d.set_item("step", q.step)?;
     d.set_item("episode", q.episode)?;
     d.set_item("uncertainty", q.uncertainty)?;
     d.set_item("threshold", q.threshold)?;
-    d.set_item("expert_action", q.expert_action)?;
-    d.set_item("agent_action", q.agent_action)?;
+    d.set_item("expert_action", q.expert_action.clone())?;
+    d.set_item("agent_action", q.agent_action.clone())?;
     Ok(d)
 }
 
@@ -903,7 +1240,7 @@ impl Run {
     /// Writes the run's full snapshot (network, optimiser, replay, query state, generators) to the file `path`;
     /// inside a callback, at a pause right after the callback returns.
     fn save(&self, py: Python<'_>, path: &str) -> PyResult<()> {
-        if with_lent(self.id, |_, _| ()).is_some() {
+        if with_lent(self.id, |_| ()).is_some() {
             self.saves
                 .lock()
                 .unwrap_or_else(|e| e.into_inner())
@@ -939,68 +1276,110 @@ impl Run {
     }
 
     /// The current policy (a copy of the network, with the exploration of training at its step): the live one
-    /// inside a callback, the last pause's otherwise.
-    fn policy(&self) -> PyResult<Policy> {
-        if let Some(p) = self.live_policy() {
+    /// inside a callback, the last pause's otherwise. A `Policy`, or a `BoxPolicy` for actions in a box.
+    fn policy(&self, py: Python<'_>) -> PyResult<Py<PyAny>> {
+        if let Some(p) = self.live_policy(py)? {
             return Ok(p);
         }
         let (net, step) = self.with_last(|p| (p.net.clone(), p.summary.train_steps))?;
-        Ok(Policy::exploring(net, &self.cfg, step))
+        net_policy(py, net, &self.cfg, step)
     }
 
     /// The live network as a policy, inside this run's callback; `None` elsewhere.
-    fn live_policy(&self) -> Option<Policy> {
+    fn live_policy(&self, py: Python<'_>) -> PyResult<Option<Py<PyAny>>> {
         let step = self.step.load(Ordering::Relaxed);
-        with_lent(self.id, |agent, _| {
-            Policy::exploring(agent.network().clone(), &self.cfg, step)
+        with_lent(self.id, |lent| {
+            let net = match lent {
+                LentRef::Discrete(agent, _) => Net::Q(agent.network().clone()),
+                LentRef::Box(agent, _) => agent.net(&self.cfg.env),
+            };
+            net_policy(py, net, &self.cfg, step)
         })
+        .transpose()
     }
 
-    /// The live target network (as a policy), inside this run's callback; `None` elsewhere. It changes only at
-    /// a target copy.
+    /// The live target network (as a policy), inside this run's callback of a DQN-family run; `None` elsewhere
+    /// (TD3's targets follow by Polyak averaging and are not shown). It changes only at a target copy.
     fn live_target_policy(&self) -> Option<Policy> {
         let step = self.step.load(Ordering::Relaxed);
-        with_lent(self.id, |agent, _| {
-            Policy::exploring(agent.target_network().clone(), &self.cfg, step)
+        with_lent(self.id, |lent| match lent {
+            LentRef::Discrete(agent, _) => Some(Policy::exploring(
+                agent.target_network().clone(),
+                &self.cfg,
+                step,
+            )),
+            LentRef::Box(..) => None,
         })
+        .flatten()
     }
 
-    /// The live network's test-policy actions for rows of observations, inside this run's callback; `None`
-    /// elsewhere.
-    fn live_actions(&self, rows: Vec<Vec<f32>>) -> PyResult<Option<Vec<usize>>> {
-        with_lent(self.id, |agent, _| {
-            let net = agent.network();
-            let mut q = vec![0.0; net.heads() * net.n_actions()];
-            rows.iter()
-                .map(|obs| {
-                    if obs.len() != net.obs_dim() {
-                        return Err(value_error(format!(
-                            "the observation has {} values, but the network takes {}",
-                            obs.len(),
-                            net.obs_dim()
-                        )));
-                    }
-                    Ok(arld::agent::test_policy_action(net, &mut q, obs))
-                })
-                .collect()
+    /// The live network's test-policy actions for rows of observations (ints, or lists of floats for actions
+    /// in a box), inside this run's callback; `None` elsewhere.
+    fn live_actions(&self, py: Python<'_>, rows: Vec<Vec<f32>>) -> PyResult<Option<Py<PyAny>>> {
+        let check = |obs: &[f32], dim: usize| {
+            if obs.len() != dim {
+                return Err(value_error(format!(
+                    "the observation has {} values, but the network takes {dim}",
+                    obs.len()
+                )));
+            }
+            Ok(())
+        };
+        with_lent(self.id, |lent| match lent {
+            LentRef::Discrete(agent, _) => {
+                let net = agent.network();
+                let mut q = vec![0.0; net.heads() * net.n_actions()];
+                let actions = rows
+                    .iter()
+                    .map(|obs| {
+                        check(obs, net.obs_dim())?;
+                        Ok(arld::agent::test_policy_action(net, &mut q, obs))
+                    })
+                    .collect::<PyResult<Vec<usize>>>()?;
+                Ok(actions.into_pyobject(py)?.into_any().unbind())
+            }
+            LentRef::Box(agent, _) => {
+                let Net::Box(mut policy) = agent.net(&self.cfg.env) else {
+                    unreachable!("a box agent's network is a box policy")
+                };
+                let actions = rows
+                    .into_iter()
+                    .map(|obs| policy.act(obs))
+                    .collect::<PyResult<Vec<Vec<f32>>>>()?;
+                Ok(actions.into_pyobject(py)?.into_any().unbind())
+            }
         })
         .transpose()
     }
 
     /// The evaluations so far (live inside a callback): dicts of step, mean, std, min, max.
     fn evaluations(&self, py: Python<'_>) -> PyResult<Py<PyList>> {
-        self.record_list(py, |log| log.curve(), |last| &last.curve, eval_dict)
+        let list = PyList::empty(py);
+        let fill = |curve: &[EvalPoint]| {
+            curve
+                .iter()
+                .try_for_each(|p| list.append(eval_dict(py, p)?))
+        };
+        match with_lent(self.id, |lent| fill(lent.curve())) {
+            Some(filled) => filled?,
+            None => self.with_last(|last| fill(&last.curve))??,
+        }
+        Ok(list.unbind())
     }
 
     /// The queries so far (live inside a callback): dicts of step, episode, uncertainty, threshold,
-    /// expert_action, agent_action.
+    /// expert_action, agent_action (ints, or lists of floats for actions in a box).
     fn queries(&self, py: Python<'_>) -> PyResult<Py<PyList>> {
-        self.record_list(
-            py,
-            |log| log.query_events(),
-            |last| &last.queries,
-            query_dict,
-        )
+        let list = PyList::empty(py);
+        let live = with_lent(self.id, |lent| match lent {
+            LentRef::Discrete(_, log) => usize::records(log.query_events()),
+            LentRef::Box(_, log) => Vec::<f32>::records(log.query_events()),
+        });
+        match live {
+            Some(records) => records.fill(py, &list)?,
+            None => self.with_last(|last| last.queries.fill(py, &list))??,
+        }
+        Ok(list.unbind())
     }
 
     /// The summary at the last pause, as JSON text.
@@ -1024,7 +1403,7 @@ impl Run {
     /// Whether this run's callback is running on this thread (the live run is lent to it).
     #[getter]
     fn in_callback(&self) -> bool {
-        with_lent(self.id, |_, _| ()).is_some()
+        with_lent(self.id, |_| ()).is_some()
     }
 }
 
@@ -1091,12 +1470,23 @@ fn start_run(
         interrupt: interrupt.clone(),
         step: step.clone(),
         errors: errors.clone(),
+        env_id: cfg.env.clone(),
     };
     // A person's page is built here, where Python can be asked about the environment (its frames, its keys),
     // and the run waits for the page to open before its thread starts.
-    let spec = env::spec(&cfg.env).map_err(|e| value_error(e.to_string()))?;
+    let boxed = env::box_spec(&cfg.env).is_ok();
     let web_expert = match &expert {
+        Some(call) if boxed => {
+            if call.bind(py).cast::<web::PyWebExpert>().is_ok() {
+                return Err(value_error(format!(
+                    "a person in the browser (WebExpert) cannot answer in {} yet: its actions are in a box",
+                    cfg.env
+                )));
+            }
+            None
+        }
         Some(call) => {
+            let spec = env::spec(&cfg.env).map_err(|e| value_error(e.to_string()))?;
             let keep = {
                 let errors = errors.clone();
                 move |e| errors.keep(e)
@@ -1120,12 +1510,20 @@ fn start_run(
         }
         None => None,
     };
-    let thread_cfg = cfg.clone();
-    let thread_errors = errors.clone();
+    let inputs = RunInputs {
+        cfg: cfg.clone(),
+        env,
+        test_envs,
+        expert,
+        expert_name,
+        demos,
+        log_dir,
+        resume,
+        demo_env,
+        errors: errors.clone(),
+    };
     let body = move || -> anyhow::Result<()> {
         let _lock = lock;
-        let cfg = thread_cfg;
-        let errors = thread_errors;
         // Wait for the first command: the run starts on the first `advance`.
         match remote.commands.recv() {
             Ok(Command::Advance { until, callback }) => {
@@ -1133,109 +1531,11 @@ fn start_run(
             }
             _ => return Ok(()),
         }
-        let make = |obj: Option<Py<PyAny>>| -> anyhow::Result<Box<dyn Env>> {
-            Ok(match obj {
-                Some(obj) => Box::new(PyEnv {
-                    obj,
-                    spec,
-                    errors: errors.clone(),
-                    reset_failed: None,
-                }),
-                None => env::make(&cfg.env)?,
-            })
-        };
-        let env = make(env)?;
-        let test_envs = match test_envs {
-            Some(objs) => objs
-                .into_iter()
-                .map(|obj| make(Some(obj)))
-                .collect::<anyhow::Result<Vec<_>>>()?,
-            None => (0..cfg.eval_episodes)
-                .map(|_| make(None))
-                .collect::<anyhow::Result<Vec<_>>>()?,
-        };
-        let mut expert: Option<Box<dyn Expert>> = match (web_expert, expert) {
-            (Some(web), _) => Some(web),
-            (None, Some(call)) => Some(Box::new(PyExpert {
-                call,
-                name: expert_name,
-                n_actions: spec.n_actions,
-                errors: errors.clone(),
-            })),
-            (None, None) if cfg.expert_used().is_some() => Some(arld_web::from_spec(
-                &cfg.expert,
-                &cfg.env,
-                seed_for(cfg.seed, SeedPurpose::Expert),
-                cfg.expert_timeout,
-            )?),
-            (None, None) => None,
-        };
-        let resume_state = match &resume {
-            None => None,
-            Some(path) => {
-                // The snapshot machinery reads `snapshot.safetensors` in a directory: a private copy there.
-                let dir = tempfile::tempdir()?;
-                std::fs::copy(path, dir.path().join(train::snapshot::SNAPSHOT_FILE))?;
-                let mut ck = Checkpointer::new(dir.path(), &cfg);
-                ck.load()?
-            }
-        };
-        let demos = match (cfg.method.pretrains(), demos) {
-            (false, _) => None,
-            (true, _) if resume_state.is_some() => None,
-            (true, Some(d)) => Some(d.into_demonstrations(&cfg)?),
-            (true, None) => {
-                let e = expert
-                    .as_deref_mut()
-                    .expect("methods that pre-train need an expert");
-                let mut demo_env = make(demo_env)?;
-                Some(Demonstrations::collect_in(
-                    demo_env.as_mut(),
-                    e,
-                    cfg.n_demo,
-                    seed_for(cfg.seed, SeedPurpose::Demonstrations),
-                )?)
-            }
-        };
-        let mut log = match (&log_dir, &resume_state) {
-            // Continuing a run in its own directory continues its logs (the CLI's --resume does the same).
-            (Some(dir), Some(state))
-                if Path::new(dir).join(train::run_dir::CONFIG_FILE).is_file() =>
-            {
-                let dir = Path::new(dir);
-                let recorded = train::run_dir::read_written_config(dir)?;
-                let differences = recorded.differences(&cfg);
-                anyhow::ensure!(
-                    differences.is_empty(),
-                    "{} holds another run (its config.toml differs: {}); give another log_dir",
-                    dir.display(),
-                    differences.join(", ")
-                );
-                RunLog::resume(
-                    dir,
-                    &train::resume_position(state)?,
-                    cfg.train_steps as u64,
-                    false,
-                )?
-            }
-            (Some(dir), _) => RunLog::create(
-                Path::new(dir),
-                &cfg.to_toml(),
-                cfg.train_steps as u64,
-                false,
-            )?,
-            (None, Some(state)) => RunLog::in_memory_resumed(&train::resume_position(state)?),
-            (None, None) => RunLog::in_memory(),
-        };
-        RunBuilder::new(&cfg)
-            .env(env)
-            .test_envs(test_envs)
-            .expert(expert.as_mut().map(|e| &mut **e as &mut dyn Expert))
-            .demos(demos.as_ref())
-            .driver(&mut remote)
-            .resume_from(resume_state.as_ref())
-            .train(&mut log)?;
-        Ok(())
+        if boxed {
+            train_in_thread::<BoxAgent>(inputs, &mut remote, None)
+        } else {
+            train_in_thread::<Agent>(inputs, &mut remote, web_expert)
+        }
     };
     let thread = std::thread::Builder::new()
         .name("arld-run".into())
@@ -1260,46 +1560,186 @@ fn start_run(
     })
 }
 
+/// What a run's thread is given to train with (see [`start_run`]).
+struct RunInputs {
+    cfg: TrainConfig,
+    env: Option<Py<PyAny>>,
+    test_envs: Option<Vec<Py<PyAny>>>,
+    expert: Option<Py<PyAny>>,
+    expert_name: String,
+    demos: Option<DemoArrays>,
+    log_dir: Option<String>,
+    resume: Option<String>,
+    demo_env: Option<Py<PyAny>>,
+    errors: ErrorSlot,
+}
+
+/// Trains the run of `inputs` with the learner `L`, driven by `remote`, on the run's thread (after its first
+/// command). `web_expert`: a person's page already built, which takes the place of the Python expert.
+fn train_in_thread<L: PyLearner>(
+    inputs: RunInputs,
+    remote: &mut Remote,
+    web_expert: Option<Box<dyn Expert<L::Action>>>,
+) -> anyhow::Result<()> {
+    let RunInputs {
+        cfg,
+        env,
+        test_envs,
+        expert,
+        expert_name,
+        demos,
+        log_dir,
+        resume,
+        demo_env,
+        errors,
+    } = inputs;
+    let spec = L::Action::spec_of(&cfg.env)?;
+    let make = |obj: Option<Py<PyAny>>| -> anyhow::Result<Box<dyn Env<L::Action>>> {
+        Ok(match obj {
+            Some(obj) => Box::new(PyEnv::<L::Action> {
+                obj,
+                spec,
+                errors: errors.clone(),
+                reset_failed: None,
+            }),
+            None => L::Action::builtin(&cfg.env)?,
+        })
+    };
+    let env = make(env)?;
+    let test_envs = match test_envs {
+        Some(objs) => objs
+            .into_iter()
+            .map(|obj| make(Some(obj)))
+            .collect::<anyhow::Result<Vec<_>>>()?,
+        None => (0..cfg.eval_episodes)
+            .map(|_| make(None))
+            .collect::<anyhow::Result<Vec<_>>>()?,
+    };
+    let mut expert: Option<Box<dyn Expert<L::Action>>> = match (web_expert, expert) {
+        (Some(web), _) => Some(web),
+        (None, Some(call)) => Some(Box::new(PyExpert::<L::Action> {
+            call,
+            name: expert_name,
+            spec,
+            errors: errors.clone(),
+        })),
+        (None, None) if cfg.expert_used().is_some() => Some(L::Action::spec_expert(&cfg)?),
+        (None, None) => None,
+    };
+    let resume_state = match &resume {
+        None => None,
+        Some(path) => {
+            // The snapshot machinery reads `snapshot.safetensors` in a directory: a private copy there.
+            let dir = tempfile::tempdir()?;
+            std::fs::copy(path, dir.path().join(train::snapshot::SNAPSHOT_FILE))?;
+            let mut ck = Checkpointer::new(dir.path(), &cfg);
+            ck.load()?
+        }
+    };
+    let demos = match (cfg.method.pretrains(), demos) {
+        (false, _) => None,
+        (true, _) if resume_state.is_some() => None,
+        (true, given) => {
+            let mut demo_env = demo_env;
+            let e = expert
+                .as_mut()
+                .map(|e| &mut **e as &mut dyn Expert<L::Action>);
+            Some(L::Action::demonstrations(&cfg, given, e, &mut || {
+                make(demo_env.take())
+            })?)
+        }
+    };
+    let mut log = match (&log_dir, &resume_state) {
+        // Continuing a run in its own directory continues its logs (the CLI's --resume does the same).
+        (Some(dir), Some(state)) if Path::new(dir).join(train::run_dir::CONFIG_FILE).is_file() => {
+            let dir = Path::new(dir);
+            let recorded = train::run_dir::read_written_config(dir)?;
+            let differences = recorded.differences(&cfg);
+            anyhow::ensure!(
+                differences.is_empty(),
+                "{} holds another run (its config.toml differs: {}); give another log_dir",
+                dir.display(),
+                differences.join(", ")
+            );
+            RunLog::resume(
+                dir,
+                &train::resume_position(state)?,
+                cfg.train_steps as u64,
+                false,
+            )?
+        }
+        (Some(dir), _) => RunLog::create(
+            Path::new(dir),
+            &cfg.to_toml(),
+            cfg.train_steps as u64,
+            false,
+        )?,
+        (None, Some(state)) => RunLog::in_memory_resumed(&train::resume_position(state)?),
+        (None, None) => RunLog::in_memory(),
+    };
+    L::builder(&cfg)
+        .env(env)
+        .test_envs(test_envs)
+        .expert(
+            expert
+                .as_mut()
+                .map(|e| &mut **e as &mut dyn Expert<L::Action>),
+        )
+        .demos(demos.as_ref())
+        .driver(remote)
+        .resume_from(resume_state.as_ref())
+        .train(&mut log)?;
+    Ok(())
+}
+
+/// What `snapshot_policy` returns: the policy, the configuration (JSON), the step, the evaluations (JSON), the
+/// queries.
+type SnapshotPolicy = (Py<PyAny>, String, usize, String, Py<PyList>);
+
 /// The network of a run's snapshot file, acting (and exploring) as the run did at its step; returns the policy,
 /// the configuration as JSON text, the step and the run's evaluations so far (JSON text: step, mean, std, min,
 /// max of each) and its queries so far (as [`Run::queries`]; none from a snapshot of an arld that did not keep
 /// them).
 #[pyfunction]
-fn snapshot_policy(
-    py: Python<'_>,
-    path: &str,
-) -> PyResult<(Policy, String, usize, String, Py<PyList>)> {
-    let read = || -> anyhow::Result<(Policy, String, usize, String, Vec<QueryEvent>)> {
+fn snapshot_policy(py: Python<'_>, path: &str) -> PyResult<SnapshotPolicy> {
+    let read = || -> anyhow::Result<(Net, TrainConfig, usize, String, Records)> {
         let text = train::snapshot::recorded_config(Path::new(path))?;
         let cfg: TrainConfig = toml::from_str(&text)?;
-        let spec = env::spec(&cfg.env)?;
         let dir = tempfile::tempdir()?;
         std::fs::copy(path, dir.path().join(train::snapshot::SNAPSHOT_FILE))?;
         let state = Checkpointer::new(dir.path(), &cfg)
             .load()?
             .ok_or_else(|| anyhow::anyhow!("no snapshot"))?;
-        let mut agent =
-            arld::agent::Agent::new(&cfg.agent_config(), spec.obs_dim, spec.n_actions, 0);
-        agent.load_state("agent", &state)?;
         let st: serde_json::Value = state.value("loop")?;
         let step = st["step"].as_u64().unwrap_or(0) as usize;
-        let policy = Policy::exploring(agent.network().clone(), &cfg, step);
-        let position = train::resume_position(&state)?;
-        Ok((
-            policy,
-            cfg.to_json(),
-            step,
-            serde_json::to_string(&position.curve)?,
-            position.query_events,
-        ))
+        let (net, curve, queries) = if env::box_spec(&cfg.env).is_ok() {
+            snapshot_parts::<BoxAgent>(&cfg, &state)?
+        } else {
+            snapshot_parts::<Agent>(&cfg, &state)?
+        };
+        Ok((net, cfg, step, curve, queries))
     };
-    let (policy, cfg, step, curve, queries) =
+    let (net, cfg, step, curve, queries) =
         read().map_err(|e| value_error(format!("cannot load {path}: {e:#}")))?;
     let list = PyList::empty(py);
-    for q in &queries {
-        list.append(query_dict(py, q)?)?;
-    }
-    Ok((policy, cfg, step, curve, list.unbind()))
+    queries.fill(py, &list)?;
+    let policy = net_policy(py, net, &cfg, step)?;
+    Ok((policy, cfg.to_json(), step, curve, list.unbind()))
+}
+
+/// The network, the evaluations (JSON text) and the queries of a run's snapshot `state`, for the learner `L`.
+fn snapshot_parts<L: PyLearner>(
+    cfg: &TrainConfig,
+    state: &arld::state::StateDict<'_>,
+) -> anyhow::Result<(Net, String, Records)> {
+    let mut agent = L::for_snapshot(cfg)?;
+    agent.load_state("agent", state)?;
+    let position = train::resume_position::<L::Action>(state)?;
+    Ok((
+        agent.net(&cfg.env),
+        serde_json::to_string(&position.curve)?,
+        L::Action::records(&position.query_events),
+    ))
 }
 
 /// The configuration a snapshot file recorded, as JSON text (`None` when the file is plain weights).
@@ -1348,6 +1788,8 @@ fn _arld(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", arld::VERSION)?;
     m.add("git_commit", arld::GIT_COMMIT)?;
     m.add_function(wrap_pyfunction!(register_env, m)?)?;
+    m.add_function(wrap_pyfunction!(register_box_env, m)?)?;
+    m.add_function(wrap_pyfunction!(is_box_env, m)?)?;
     m.add_function(wrap_pyfunction!(builtin_env_ids, m)?)?;
     m.add_function(wrap_pyfunction!(config_keys, m)?)?;
     m.add_function(wrap_pyfunction!(resolve_config, m)?)?;
@@ -1356,6 +1798,7 @@ fn _arld(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(snapshot_policy, m)?)?;
     m.add_class::<Run>()?;
     m.add_class::<Policy>()?;
+    m.add_class::<BoxPolicy>()?;
     m.add_class::<BuiltinEnv>()?;
     m.add_class::<web::PyWebExpert>()?;
     Ok(())

@@ -81,8 +81,10 @@ def test_a_trained_stable_baselines3_model_is_an_expert():
 
 
 def test_spaces_arld_cannot_use_are_value_errors():
-    with pytest.raises(ValueError, match="Discrete action space.*MountainCarContinuous-v0.*Box"):
-        arld.Agent("adqn", gym.make("MountainCarContinuous-v0"), expert=lambda obs: 0)
+    multi = gym.make("CartPole-v1")
+    multi.action_space = gym.spaces.MultiDiscrete([2, 3])
+    with pytest.raises(ValueError, match="Discrete action space starting at 0 or a Box.*CartPole-v1.*MultiDiscrete"):
+        arld.Agent("adqn", multi, expert=lambda obs: 0)
     env = gym.make("CartPole-v1")
     env.observation_space = gym.spaces.Box(0, 255, (84, 84, 3), np.uint8)
     with pytest.raises(ValueError, match="are images .*FlattenObservation"):

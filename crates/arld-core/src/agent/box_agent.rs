@@ -136,6 +136,17 @@ impl BoxAgent {
         Self::with_learner(Box::new(sac), obs_dim, low, high, gamma)
     }
 
+    /// The policy network of the learner inside (TD3: the tanh actor; SAC: the means and log standard
+    /// deviations of its Gaussian).
+    pub fn actor(&self) -> &Mlp {
+        self.learner.actor()
+    }
+
+    /// The learner inside: `td3` or `sac`.
+    pub fn learner_name(&self) -> &'static str {
+        self.learner.name()
+    }
+
     fn with_learner(
         learner: Box<dyn ActorCriticLearner>,
         obs_dim: usize,

@@ -336,6 +336,11 @@ pub fn register(
             Err(bad(clash(describe(known))))
         }
     };
+    if box_spec(id).is_ok() {
+        return Err(bad(
+            "the id names a task with actions in a box; register the discrete task under another id".into(),
+        ));
+    }
     if let Some(builtin) = SPECS.iter().find(|s| s.id == id) {
         return in_use(builtin, &|had| {
             format!("the built-in {id} has {had}, this one {given}; register it under another id")
@@ -382,12 +387,126 @@ pub fn continuous_id(id: &str) -> Option<&'static str> {
     }
 }
 
-/// The registered facts of a continuous-action task (its id as [`make_continuous`] takes it).
+/// The registered facts of a continuous-action task: a built-in one (its id as [`make_continuous`] takes it) or
+/// one [`register_box`]ed.
 pub fn box_spec(id: &str) -> Result<&'static BoxSpec, EnvError> {
     continuous::CONTINUOUS_SPECS
         .iter()
         .find(|s| s.id == id)
+        .or_else(|| external_box_specs().iter().copied().find(|s| s.id == id))
         .ok_or_else(|| EnvError::UnknownId { id: id.to_string() })
+}
+
+/// The specs of continuous-action tasks implemented outside the library, registered at run time (each distinct
+/// spec, bounds included, allocated once for the life of the process).
+fn external_box_specs() -> std::sync::MutexGuard<'static, Vec<&'static BoxSpec>> {
+    static EXTERNAL: std::sync::Mutex<Vec<&'static BoxSpec>> = std::sync::Mutex::new(Vec::new());
+    EXTERNAL.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+/// Registers a task with actions in a box, implemented outside the library (a Gymnasium environment with a
+/// `Box` action space, from Python), so that configurations can name it and an [`Env`] implementation can
+/// return its spec: `low` and `high` are the box's bounds (finite, `low < high` in every dimension).
+/// `reward_threshold: None` means the task has no solve threshold. As for [`register`]: the id of a built-in
+/// task is accepted only with its built-in facts, an id registered again must come with the same facts, and an
+/// id known for discrete actions is refused.
+pub fn register_box(
+    id: &str,
+    obs_dim: usize,
+    low: &[f32],
+    high: &[f32],
+    max_episode_steps: usize,
+    reward_threshold: Option<f64>,
+) -> Result<&'static BoxSpec, EnvError> {
+    let bad = |msg: String| EnvError::Register {
+        id: id.to_string(),
+        msg,
+    };
+    if id.trim().is_empty() {
+        return Err(bad("the id is empty".into()));
+    }
+    if obs_dim == 0 || low.is_empty() || max_episode_steps == 0 {
+        return Err(bad(format!(
+            "observation size ({obs_dim}), action dimension ({}) and time limit ({max_episode_steps}) must all \
+             be positive",
+            low.len()
+        )));
+    }
+    if low.len() != high.len() {
+        return Err(bad(format!(
+            "the action box has {} lower and {} upper bounds",
+            low.len(),
+            high.len()
+        )));
+    }
+    if let Some(d) =
+        (0..low.len()).find(|&d| !(low[d].is_finite() && high[d].is_finite() && low[d] < high[d]))
+    {
+        return Err(bad(format!(
+            "the action box's dimension {d} is [{}, {}]; every dimension needs finite bounds, low below high \
+             (rescale an unbounded action, e.g. with gymnasium.wrappers.RescaleAction or ClipAction)",
+            low[d], high[d]
+        )));
+    }
+    if reward_threshold.is_some_and(f64::is_nan) {
+        return Err(bad("the reward threshold is NaN".into()));
+    }
+    if spec(id).is_ok() {
+        return Err(bad(
+            "the id names a task with discrete actions; register the box task under another id"
+                .into(),
+        ));
+    }
+    let describe = |s: &BoxSpec| {
+        format!(
+            "{} observation values, actions in [{:?}, {:?}], time limit {}, threshold {:?}",
+            s.obs_dim, s.action_low, s.action_high, s.max_episode_steps, s.solve_threshold
+        )
+    };
+    let same = |s: &BoxSpec| {
+        (
+            s.obs_dim,
+            s.action_low,
+            s.action_high,
+            s.max_episode_steps,
+            s.solve_threshold,
+        ) == (obs_dim, low, high, max_episode_steps, reward_threshold)
+    };
+    let given = format!(
+        "{obs_dim} observation values, actions in [{low:?}, {high:?}], time limit {max_episode_steps}, \
+         threshold {reward_threshold:?}"
+    );
+    if let Some(builtin) = continuous::CONTINUOUS_SPECS.iter().find(|s| s.id == id) {
+        return if same(builtin) {
+            Ok(builtin)
+        } else {
+            Err(bad(format!(
+                "the built-in {id} has {}, this one {given}; register it under another id",
+                describe(builtin)
+            )))
+        };
+    }
+    let mut external = external_box_specs();
+    if let Some(&known) = external.iter().find(|s| s.id == id) {
+        return if same(known) {
+            Ok(known)
+        } else {
+            Err(bad(format!(
+                "it was registered before with {}, now with {given}",
+                describe(known)
+            )))
+        };
+    }
+    let spec: &'static BoxSpec = Box::leak(Box::new(BoxSpec {
+        id: Box::leak(id.to_string().into_boxed_str()),
+        obs_dim,
+        action_low: Box::leak(low.to_vec().into_boxed_slice()),
+        action_high: Box::leak(high.to_vec().into_boxed_slice()),
+        max_episode_steps,
+        solve_threshold: reward_threshold,
+    }));
+    external.push(spec);
+    Ok(spec)
 }
 
 /// The facts of any task, discrete (built in or registered) or continuous, by id.
@@ -706,6 +825,48 @@ mod tests {
                 assert_eq!(bits(&obs), bits(&before), "{} failed step", spec.id);
             }
         }
+    }
+
+    /// A box task registered from outside is found by `box_spec` and `task_spec` with the facts given (bounds
+    /// kept), again for the same facts, and refused for other facts, bad bounds, or an id of the other kind.
+    #[test]
+    fn box_tasks_register_once_with_their_bounds() {
+        let id = "TestBoxTask-v0";
+        let spec = register_box(id, 11, &[-3.0, -1.0], &[3.0, 1.0], 1000, Some(950.0)).unwrap();
+        assert_eq!(spec.action_low, &[-3.0, -1.0]);
+        assert_eq!(spec.action_high, &[3.0, 1.0]);
+        assert!(std::ptr::eq(box_spec(id).unwrap(), spec));
+        let any = task_spec(id).unwrap();
+        assert_eq!(
+            (any.obs_dim(), any.action_width(), any.solve_threshold()),
+            (11, 2, 950.0)
+        );
+        let again = register_box(id, 11, &[-3.0, -1.0], &[3.0, 1.0], 1000, Some(950.0)).unwrap();
+        assert!(
+            std::ptr::eq(again, spec),
+            "the same facts are the same spec"
+        );
+        let clash =
+            register_box(id, 11, &[-3.0, -1.0], &[3.0, 2.0], 1000, Some(950.0)).unwrap_err();
+        assert!(clash.to_string().contains("registered before"), "{clash}");
+        // Gymnasium's Pendulum-v1 is the built-in one; other bounds under its id are refused.
+        let pendulum = register_box("Pendulum-v1", 3, &[-2.0], &[2.0], 200, None).unwrap();
+        assert!(std::ptr::eq(pendulum, box_spec("Pendulum-v1").unwrap()));
+        assert!(register_box("Pendulum-v1", 3, &[-1.0], &[1.0], 200, None).is_err());
+        for (low, high) in [(-f32::INFINITY, 1.0), (1.0, 1.0), (f32::NAN, 1.0)] {
+            let err = register_box("TestBoxBad-v0", 2, &[low], &[high], 10, None).unwrap_err();
+            assert!(err.to_string().contains("finite bounds"), "{err}");
+        }
+        assert!(register_box("TestBoxBad-v0", 2, &[0.0], &[1.0, 2.0], 10, None).is_err());
+        assert!(
+            box_spec("TestBoxBad-v0").is_err(),
+            "nothing is registered on an error"
+        );
+        assert!(register_box("CartPole-v1", 4, &[-1.0], &[1.0], 500, None).is_err());
+        assert!(
+            register(id, 11, 3, 1000, None).is_err(),
+            "a box id is not a discrete one"
+        );
     }
 
     fn bits(values: &[f32]) -> Vec<u32> {

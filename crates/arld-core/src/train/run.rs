@@ -88,7 +88,7 @@ impl<'a> RunBuilder<'a, BoxAgent> {
 /// The configuration's actor-critic learner (`algo`: TD3 or SAC) for the task `spec`, with its networks (the
 /// hidden widths, at least two critic heads: more heads are a larger ensemble), learning rate and batch, seeded
 /// from the run's seed.
-fn box_agent(cfg: &TrainConfig, spec: &'static BoxSpec) -> BoxAgent {
+pub fn box_agent(cfg: &TrainConfig, spec: &'static BoxSpec) -> BoxAgent {
     let (obs_dim, low, high) = (spec.obs_dim, spec.action_low, spec.action_high);
     let (gamma, seed) = (cfg.gamma as f32, seed_for(cfg.seed, SeedPurpose::Agent));
     match cfg.algo {

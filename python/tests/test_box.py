@@ -1,0 +1,206 @@
+"""Gymnasium environments with a `Box` action space: TD3 learns them through `arld.Agent` with the habits of the
+discrete tasks (`predict` in the space's shape, SB3 models and callables as experts, learn in stretches, save and
+load of the whole run), Gymnasium's own Pendulum-v1 learns from a Stable-Baselines3 TD3 model as the expert, and a
+MuJoCo task (InvertedPendulum-v5) runs with a scripted expert."""
+
+import json
+import math
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import arld
+
+# TD3's settings that learn Pendulum-v1 (one-step returns, two critic heads), small enough for a test.
+TD3 = dict(n_step=1, heads=2, eval_episodes=3)
+
+
+def swing_up(obs):
+    """An energy-based swing-up with a PD balance near the top (written here, independently of arld's)."""
+    cos, sin, thdot = (float(v) for v in obs)
+    theta = math.atan2(sin, cos)
+    if cos > 0.8:
+        u = -10.0 * theta - 2.0 * thdot
+    else:
+        energy = 0.5 * thdot**2 + 10.0 * (cos - 1.0)
+        u = -2.0 * energy * (1.0 if thdot * cos >= 0 else -1.0)
+    return np.array([min(2.0, max(-2.0, u))], dtype=np.float32)
+
+
+def returns(policy, seeds, env_id="Pendulum-v1"):
+    """Returns of `policy` (obs -> action) on Gymnasium's own environment, one episode per seed."""
+    env = gym.make(env_id)
+    out = []
+    for seed in seeds:
+        obs, _ = env.reset(seed=seed)
+        total, done = 0.0, False
+        while not done:
+            obs, r, te, tr, _ = env.step(policy(obs))
+            total += float(r)
+            done = te or tr
+        out.append(total)
+    return out
+
+
+def answers(run_dir):
+    with open(run_dir / "answers.jsonl") as f:
+        return [json.loads(line) for line in f]
+
+
+@pytest.fixture(scope="module")
+def sb3_td3():
+    """A Stable-Baselines3 TD3 model trained briefly on Pendulum-v1 (8,000 steps: about three minutes on one
+    busy core)."""
+    import torch
+    from stable_baselines3 import TD3 as SB3TD3
+    from stable_baselines3.common.noise import NormalActionNoise
+
+    torch.set_num_threads(1)
+    model = SB3TD3("MlpPolicy", gym.make("Pendulum-v1"), learning_rate=1e-3, learning_starts=1000, batch_size=128,
+                   policy_kwargs=dict(net_arch=[64, 64]), action_noise=NormalActionNoise(np.zeros(1), 0.1 * np.ones(1)),
+                   seed=0)
+    model.learn(8000)
+    return model
+
+
+def test_pendulum_with_an_sb3_td3_model_as_the_expert_learns(tmp_path, sb3_td3):
+    seeds = range(100, 110)
+    expert_score = np.mean(returns(lambda o: sb3_td3.predict(o, deterministic=True)[0], seeds))
+    assert expert_score > -400, f"the SB3 expert itself did not learn Pendulum-v1: {expert_score:.0f}"
+
+    untrained = arld.Agent("dqn", gym.make("Pendulum-v1"), seed=5, **TD3).learn(1)
+    trained = arld.Agent("adqn", gym.make("Pendulum-v1"), expert=sb3_td3, seed=5, train_steps=12000, budget=1500,
+                         eval_period=2000, batch_size=128, **TD3)
+    trained.learn(12000, log_dir=tmp_path / "run")
+
+    # predict: the space's shape and dtype, one observation or a batch.
+    action, state = trained.predict(np.zeros(3, dtype=np.float32))
+    assert state is None and action.shape == (1,) and action.dtype == np.float32
+    assert -2.0 <= float(action[0]) <= 2.0
+    batch, _ = trained.predict(np.zeros((4, 3), dtype=np.float32))
+    assert batch.shape == (4, 1) and np.array_equal(batch[0], action)
+
+    before = np.mean(returns(lambda o: untrained.predict(o)[0], seeds))
+    after = np.mean(returns(lambda o: trained.predict(o)[0], seeds))
+    print(f"Pendulum-v1 from Gymnasium: untrained {before:.0f}, trained with the SB3 TD3 expert {after:.0f} "
+          f"(expert {expert_score:.0f}), {trained.summary['demos_queried']} expert steps")
+    assert after > before + 500 and after > -400, (before, after)
+    # The run's own last evaluation agrees that it learned.
+    assert trained.evaluations[-1]["step"] == 12000 and trained.evaluations[-1]["mean"] > -400
+
+    # The expert was asked, within the budget, and answered what the SB3 model answers at each observation.
+    asked = answers(tmp_path / "run")
+    assert 0 < len(asked) == trained.summary["demos_queried"] <= 1500
+    for step in asked[:50]:
+        expected, _ = sb3_td3.predict(np.asarray(step["obs"], dtype=np.float32), deterministic=True)
+        assert np.allclose(step["action"], expected, atol=1e-6), step
+    queries = trained.queries
+    assert queries and all(len(q["agent_action"]) == 1 for q in queries)
+    assert all(q["expert_action"] is None or -2.0 <= q["expert_action"][0] <= 2.0 for q in queries)
+
+
+def test_callables_sb3_models_and_agents_answer_in_the_space(tmp_path):
+    from stable_baselines3 import SAC
+
+    sac = SAC("MlpPolicy", gym.make("Pendulum-v1"), seed=1, policy_kwargs=dict(net_arch=[16, 16]))
+    for name, expert in (("callable", swing_up), ("sac", sac)):
+        model = arld.Agent("gdqn", gym.make("Pendulum-v1"), expert=expert, seed=3, train_steps=1200, budget=40,
+                           eval_period=600, learning_starts=200, **TD3)
+        model.learn(1200, log_dir=tmp_path / name)
+        asked = answers(tmp_path / name)
+        assert len(asked) == model.summary["demos_queried"] > 0
+        for step in asked:
+            obs = np.asarray(step["obs"], dtype=np.float32)
+            expected = swing_up(obs) if name == "callable" else sac.predict(obs, deterministic=True)[0]
+            assert np.allclose(step["action"], expected, atol=1e-6), (name, step)
+        assert model.summary["expert"].startswith("python:")
+    # An answer of the wrong shape is refused, naming the shape.
+    bad = arld.Agent("gdqn", gym.make("Pendulum-v1"), expert=lambda obs: np.zeros(2), seed=3, learning_starts=10,
+                     **TD3)
+    with pytest.raises(TypeError, match=r"shape \(1,\)"):
+        bad.learn(200)
+
+
+def test_box_runs_learn_in_stretches_and_save_and_load_whole(tmp_path):
+    def agent():
+        return arld.Agent("adqn", gym.make("Pendulum-v1"), expert=swing_up, seed=7, train_steps=1600, budget=100,
+                          eval_period=400, learning_starts=300, **TD3)
+
+    one = agent().learn(1600)
+    two = agent().learn(700)
+    two.save(tmp_path / "half.arld")
+    loaded = arld.Agent.load(tmp_path / "half.arld", env=gym.make("Pendulum-v1"), expert=swing_up)
+    two.learn(900, reset_num_timesteps=False)
+    loaded.learn(900)
+    obs = np.random.default_rng(0).uniform(-1, 1, (20, 3)).astype(np.float32)
+    for other in (two, loaded):
+        assert other.evaluations == one.evaluations
+        assert other.queries == one.queries
+        assert other.summary["demos_queried"] == one.summary["demos_queried"]
+        assert np.array_equal(other.predict(obs)[0], one.predict(obs)[0])
+    assert len(one.evaluations) == 4 and one.queries
+
+
+def test_box_spaces_of_more_dimensions_and_refusals():
+    class Plane(gym.Env):
+        """A point pushed in the plane by a (2, 1) Box action, back to the origin."""
+
+        observation_space = gym.spaces.Box(-10, 10, (2,), np.float32)
+        action_space = gym.spaces.Box(np.array([[-1.0], [-0.5]], np.float32), np.array([[1.0], [0.5]], np.float32))
+
+        def reset(self, *, seed=None, options=None):
+            super().reset(seed=seed)
+            self.p = self.np_random.uniform(-1, 1, 2).astype(np.float32)
+            return self.p.copy(), {}
+
+        def step(self, action):
+            assert action.shape == (2, 1) and action.dtype == np.float32
+            self.p = np.clip(self.p + 0.1 * action.reshape(2), -10, 10).astype(np.float32)
+            return self.p.copy(), -float(np.abs(self.p).sum()), False, False, {}
+
+    def towards_origin(obs):
+        return np.clip(-np.asarray(obs).reshape(2, 1), [[-1.0], [-0.5]], [[1.0], [0.5]]).astype(np.float32)
+
+    model = arld.Agent("gdqn", Plane(), expert=towards_origin, max_episode_steps=50, seed=0, learning_starts=50,
+                       eval_period=100, **TD3)
+    model.learn(200)
+    assert model.env_id.startswith("Plane")
+    action, _ = model.predict(np.zeros(2, dtype=np.float32))
+    assert action.shape == (2, 1) and -1.0 <= action[0, 0] <= 1.0 and -0.5 <= action[1, 0] <= 0.5
+    assert all(len(q["agent_action"]) == 2 for q in model.queries)
+
+    with pytest.raises(ValueError, match="pre-trains"):
+        arld.Agent("dqfd", gym.make("Pendulum-v1"), expert=swing_up)
+    with pytest.raises(ValueError, match="finite bounds"):
+        unbounded = gym.make("Pendulum-v1")
+        unbounded.action_space = gym.spaces.Box(-np.inf, np.inf, (1,), np.float32)
+        arld.Agent("dqn", unbounded)
+    with pytest.raises(RuntimeError, match="saved with its run"):
+        model.get_parameters()
+
+
+def test_a_mujoco_task_runs_with_a_scripted_expert(tmp_path):
+    try:
+        import mujoco  # noqa: F401
+    except ImportError as e:
+        pytest.fail(f"gymnasium[mujoco] is not installed ({e}); scripts/test installs it with pip install "
+                    "'gymnasium[mujoco]' (it needs the mujoco wheel for this platform)")
+
+    def balance(obs):
+        """PD on the pole's angle and angular velocity, with a little pull of the cart to the centre."""
+        x, angle, x_dot, angle_dot = (float(v) for v in obs)
+        return np.array([np.clip(x + 10.0 * angle + 0.5 * x_dot + angle_dot, -3.0, 3.0)], dtype=np.float32)
+
+    assert returns(balance, range(3), "InvertedPendulum-v5") == [1000.0] * 3, "the scripted expert balances"
+    model = arld.Agent("adqn", gym.make("InvertedPendulum-v5"), expert=balance, seed=0, train_steps=1500,
+                       budget=300, eval_period=500, learning_starts=300, eval_episodes=2, n_step=1, heads=2)
+    model.learn(1500, log_dir=tmp_path / "run")
+    assert model.env_id == "InvertedPendulum-v5" and model.summary["train_steps"] == 1500
+    assert [e["step"] for e in model.evaluations] == [500, 1000, 1500]
+    asked = answers(tmp_path / "run")
+    assert 0 < len(asked) == model.summary["demos_queried"] <= 300
+    for step in asked:
+        assert np.allclose(step["action"], balance(step["obs"]), atol=1e-6), step
+    action, _ = model.predict(np.zeros(4))
+    assert action.shape == (1,) and -3.0 <= float(action[0]) <= 3.0
