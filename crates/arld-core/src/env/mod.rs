@@ -476,8 +476,15 @@ pub fn register_box(
         "{obs_dim} observation values, actions in [{low:?}, {high:?}], time limit {max_episode_steps}, \
          threshold {reward_threshold:?}"
     );
+    // A built-in task registered without a threshold keeps its own (Gymnasium registers none for Pendulum-v1;
+    // arld's is -200).
+    let same_as_builtin = |s: &BoxSpec| {
+        (s.obs_dim, s.action_low, s.action_high, s.max_episode_steps)
+            == (obs_dim, low, high, max_episode_steps)
+            && (reward_threshold.is_none() || s.solve_threshold == reward_threshold)
+    };
     if let Some(builtin) = continuous::CONTINUOUS_SPECS.iter().find(|s| s.id == id) {
-        return if same(builtin) {
+        return if same_as_builtin(builtin) {
             Ok(builtin)
         } else {
             Err(bad(format!(
@@ -853,6 +860,9 @@ mod tests {
         let pendulum = register_box("Pendulum-v1", 3, &[-2.0], &[2.0], 200, None).unwrap();
         assert!(std::ptr::eq(pendulum, box_spec("Pendulum-v1").unwrap()));
         assert!(register_box("Pendulum-v1", 3, &[-1.0], &[1.0], 200, None).is_err());
+        // With a threshold it must be the built-in's (-200, ours: Gymnasium's has none).
+        assert!(register_box("Pendulum-v1", 3, &[-2.0], &[2.0], 200, Some(-200.0)).is_ok());
+        assert!(register_box("Pendulum-v1", 3, &[-2.0], &[2.0], 200, Some(-100.0)).is_err());
         for (low, high) in [(-f32::INFINITY, 1.0), (1.0, 1.0), (f32::NAN, 1.0)] {
             let err = register_box("TestBoxBad-v0", 2, &[low], &[high], 10, None).unwrap_err();
             assert!(err.to_string().contains("finite bounds"), "{err}");
