@@ -181,6 +181,7 @@ class Agent:
       target_period_in_steps
     - target_period_in_steps: target_update_interval counts environment steps from the first, as SB3 [False]
     - random_before_learning: uniformly random actions before learning_starts, as SB3 [False]
+    - algo: the learner of an environment with a Box action space, "td3" or "sac" ["td3"]
     - learning_starts: environment steps before the first update [500/1000]
     - train_freq: environment steps per update [1]
     - max_grad_norm: global gradient-norm clip (grad_clip) [10]
@@ -274,6 +275,7 @@ class Agent:
         pretrain_steps: Optional[int] = None,
         queries_from_learning_starts: Optional[bool] = None,
         random_before_learning: Optional[bool] = None,
+        algo: Optional[str] = None,
         target_period_in_steps: Optional[bool] = None,
         exact_factorised_var: Optional[bool] = None,
         expert_timeout: Optional[float] = None,

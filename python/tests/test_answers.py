@@ -34,7 +34,7 @@ def answered_run(tmp_path, monkeypatch):
     run = tmp_path / "run"
     model = arld.Agent("adqn", gym.make("CartPole-v0"), net="bootstrap", expert=weak_expert(), seed=2)
     model.learn(total_timesteps=3000, log_dir=run)
-    assert model.summary["queries_used"] > 0
+    assert model.summary["demos_queried"] > 0
     return run, tmp_path / "datasets"
 
 
