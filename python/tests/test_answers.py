@@ -4,6 +4,7 @@ with `minari.load_dataset` and compared with what the run's other logs say, and 
 
 import csv
 import json
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -18,7 +19,7 @@ from arld import answers
 
 REPO = Path(__file__).resolve().parents[2]
 WEAK = REPO / "experts" / "CartPole-v0" / "weak.safetensors"
-ARLD = REPO / "target" / "release" / "arld"
+ARLD = Path(os.environ.get("CARGO_TARGET_DIR", REPO / "target")) / "release" / "arld"
 DATASET = "arld-test/cartpole-answers-v0"
 
 
