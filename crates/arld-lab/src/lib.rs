@@ -91,15 +91,7 @@ fn run_in<L: Learner>(
     // A run directory with a snapshot continues from it (refused if it belongs to another configuration).
     let mut checkpointer = Checkpointer::new(dir, cfg);
     let opened = checkpointer.load().and_then(|snapshot| {
-        let log = match &snapshot {
-            Some(state) => RunLog::resume(
-                dir,
-                &train::resume_position(state)?,
-                cfg.train_steps as u64,
-                progress,
-            )?,
-            None => RunLog::create(dir, &cfg.to_toml(), cfg.train_steps as u64, progress)?,
-        };
+        let log = train::open_log(Some(dir), cfg, snapshot.as_ref(), progress)?;
         Ok((snapshot, log))
     });
     let (snapshot, mut log) = match opened {

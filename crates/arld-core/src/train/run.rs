@@ -230,6 +230,9 @@ impl<'a, L: Learner> RunBuilder<'a, L> {
     /// The environment and the parts of the run a snapshot holds, each from the run's seed.
     fn prepare(&mut self) -> Result<Prepared<L>> {
         let cfg = self.cfg;
+        // Every way in (the command line, sweeps, Slurm shards, Python) builds its run here, so this is where a
+        // configuration that did not come through `ConfigInput::resolve` (a snapshot's, Python's) is checked.
+        cfg.validate()?;
         ensure!(
             !cfg.method.queries() || self.expert.is_some(),
             "{} asks an expert during training, but none was given",
