@@ -150,7 +150,13 @@ fn setup(cfg: &TrainConfig) -> Result<Setup> {
         None
     };
     let demos = if cfg.method.pretrains() {
-        Some(if cfg.demo_file.is_empty() {
+        Some(if let Some(path) = cfg.demo_path()? {
+            Demonstrations::load(path, Some(&cfg.env))?.truncated_to(if cfg.n_demo > 0 {
+                cfg.n_demo
+            } else {
+                usize::MAX
+            })
+        } else {
             let e = expert
                 .as_deref_mut()
                 .context("pre-training needs an expert")?;
@@ -160,14 +166,6 @@ fn setup(cfg: &TrainConfig) -> Result<Setup> {
                 cfg.n_demo,
                 seed_for(cfg.seed, SeedPurpose::Demonstrations),
             )?
-        } else {
-            Demonstrations::load(Path::new(&cfg.demo_file), Some(&cfg.env))?.truncated_to(
-                if cfg.n_demo > 0 {
-                    cfg.n_demo
-                } else {
-                    usize::MAX
-                },
-            )
         })
     } else {
         None
