@@ -17,24 +17,7 @@ steps="${1:-20000}"
 out=bench/out
 mkdir -p "$out"
 
-has_sb3() { [ -x "$1/bin/python" ] && "$1/bin/python" -c "import torch, gymnasium, stable_baselines3" 2>/dev/null; }
-if [ -n "${VENV:-}" ]; then
-  venv="$VENV"
-  has_sb3 "$venv" || { echo "VENV=$venv: no python there with torch, gymnasium and stable_baselines3" >&2; exit 1; }
-elif has_sb3 .venv; then
-  venv=.venv
-else
-  venv=bench/.venv
-fi
-if ! has_sb3 "$venv"; then
-  echo "== installing Stable-Baselines3 into $venv (CPU-only torch)"
-  python3 -m venv "$venv"
-  "$venv/bin/pip" install --quiet --upgrade pip
-  # PyTorch's CPU-only wheel (~200 MB); PyPI's Linux wheel needs the CUDA libraries (several GB) even to import.
-  "$venv/bin/pip" install --quiet torch --index-url https://download.pytorch.org/whl/cpu ||
-    "$venv/bin/pip" install --quiet torch
-  "$venv/bin/pip" install --quiet stable-baselines3 gymnasium
-fi
+source bench/sb3_venv.sh
 
 cargo build --release --quiet
 echo "== arld: CartPole-v1, dqn, plain 64-64, batch 32, train_freq 1, uniform replay, $steps steps (median of 3 runs)"
@@ -80,16 +63,4 @@ model.learn(total_timesteps=steps)
 print(steps / (time.perf_counter() - start), time.process_time() - cpu_start)
 PY
 )
-python3 - "$arld_sps" "$sb3_sps" "$arld_cpu" "$sb3_cpu" "$steps" "$out/sb3_cartpole.json" <<'PY'
-import json, os, sys
-arld, sb3, arld_cpu, sb3_cpu = map(float, sys.argv[1:5])
-steps, path = int(sys.argv[5]), sys.argv[6]
-load = os.getloadavg()[0]
-print(f"wall clock: arld {arld:,.0f} steps/s, Stable-Baselines3 {sb3:,.0f} steps/s: {arld / sb3:.1f}x")
-print(f"CPU time:   arld {steps / arld_cpu:,.0f} steps/s, Stable-Baselines3 {steps / sb3_cpu:,.0f} steps/s: "
-      f"{sb3_cpu / arld_cpu:.1f}x")
-print(f"({steps} steps each, load average {load:.2f} on {os.cpu_count()} cores)")
-json.dump({"steps": steps, "arld_steps_per_s": arld, "sb3_steps_per_s": sb3, "ratio": arld / sb3,
-           "arld_cpu_s": arld_cpu, "sb3_cpu_s": sb3_cpu, "cpu_ratio": sb3_cpu / arld_cpu,
-           "load_average": load}, open(path, "w"), indent=2)
-PY
+python3 bench/ratio.py "$arld_sps" "$sb3_sps" "$arld_cpu" "$sb3_cpu" "$steps" "$out/sb3_cartpole.json"

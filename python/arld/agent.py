@@ -381,7 +381,7 @@ class Agent:
         if demos is not None and method == "dqfd":
             # DQfD never asks during training: with demos= no expert runs, and the records say where the
             # demonstrations came from instead of naming one.
-            self._hyper["demo_file"] = "python: demos="
+            self._hyper["demo_file"] = "python:demos"
             self._expert, self._expert_name = None, ""
         try:
             self.config = self._resolve(self._hyper)  # fails early on a bad value

@@ -1649,34 +1649,12 @@ fn train_in_thread<L: PyLearner>(
             })?)
         }
     };
-    let mut log = match (&log_dir, &resume_state) {
-        // Continuing a run in its own directory continues its logs (the CLI's --resume does the same).
-        (Some(dir), Some(state)) if Path::new(dir).join(train::run_dir::CONFIG_FILE).is_file() => {
-            let dir = Path::new(dir);
-            let recorded = train::run_dir::read_written_config(dir)?;
-            let differences = recorded.differences(&cfg);
-            anyhow::ensure!(
-                differences.is_empty(),
-                "{} holds another run (its config.toml differs: {}); give another log_dir",
-                dir.display(),
-                differences.join(", ")
-            );
-            RunLog::resume(
-                dir,
-                &train::resume_position(state)?,
-                cfg.train_steps as u64,
-                false,
-            )?
-        }
-        (Some(dir), _) => RunLog::create(
-            Path::new(dir),
-            &cfg.to_toml(),
-            cfg.train_steps as u64,
-            false,
-        )?,
-        (None, Some(state)) => RunLog::in_memory_resumed(&train::resume_position(state)?),
-        (None, None) => RunLog::in_memory(),
-    };
+    let mut log = train::open_log(
+        log_dir.as_deref().map(Path::new),
+        &cfg,
+        resume_state.as_ref(),
+        false,
+    )?;
     L::builder(&cfg)
         .env(env)
         .test_envs(test_envs)

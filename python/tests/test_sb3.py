@@ -175,7 +175,7 @@ def test_dqfd_on_given_demonstrations_runs_no_expert_and_records_none(tmp_path):
     summary = json.loads((tmp_path / "a" / "summary.json").read_text())
     assert summary["demos_pretrain"] == 200 and "expert" not in summary
     config = (tmp_path / "a" / "config.toml").read_text()
-    assert 'demo_file = "python: demos="' in config
+    assert 'demo_file = "python:demos"' in config
     # With an expert= beside demos=, the expert is never asked and not named.
     arld.Agent("dqfd", gym.make("CartPole-v1"), expert=never, demos=demos, seed=0,
                pretrain_steps=20).learn(600, log_dir=tmp_path / "b")

@@ -91,15 +91,7 @@ fn run_in<L: Learner>(
     // A run directory with a snapshot continues from it (refused if it belongs to another configuration).
     let mut checkpointer = Checkpointer::new(dir, cfg);
     let opened = checkpointer.load().and_then(|snapshot| {
-        let log = match &snapshot {
-            Some(state) => RunLog::resume(
-                dir,
-                &train::resume_position(state)?,
-                cfg.train_steps as u64,
-                progress,
-            )?,
-            None => RunLog::create(dir, &cfg.to_toml(), cfg.train_steps as u64, progress)?,
-        };
+        let log = train::open_log(Some(dir), cfg, snapshot.as_ref(), progress)?;
         Ok((snapshot, log))
     });
     let (snapshot, mut log) = match opened {
@@ -158,7 +150,13 @@ fn setup(cfg: &TrainConfig) -> Result<Setup> {
         None
     };
     let demos = if cfg.method.pretrains() {
-        Some(if cfg.demo_file.is_empty() {
+        Some(if let Some(path) = cfg.demo_path()? {
+            Demonstrations::load(path, Some(&cfg.env))?.truncated_to(if cfg.n_demo > 0 {
+                cfg.n_demo
+            } else {
+                usize::MAX
+            })
+        } else {
             let e = expert
                 .as_deref_mut()
                 .context("pre-training needs an expert")?;
@@ -168,14 +166,6 @@ fn setup(cfg: &TrainConfig) -> Result<Setup> {
                 cfg.n_demo,
                 seed_for(cfg.seed, SeedPurpose::Demonstrations),
             )?
-        } else {
-            Demonstrations::load(Path::new(&cfg.demo_file), Some(&cfg.env))?.truncated_to(
-                if cfg.n_demo > 0 {
-                    cfg.n_demo
-                } else {
-                    usize::MAX
-                },
-            )
         })
     } else {
         None

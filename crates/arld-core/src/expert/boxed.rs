@@ -46,6 +46,7 @@ fn build(
             let inner = build(inner, text, spec, seed)?;
             Box::new(GaussianNoise::new(inner, *p as f32, spec, seed)?)
         }
+        ExpertSpec::Python(_) => bail!(super::PYTHON_ONLY),
         _ => bail!(
             "the expert '{text}' cannot answer in {} (actions in a box): use scripted, checkpoint:PATH (a TD3 or \
              SAC run's weights) or noisy:S:SPEC",

@@ -305,7 +305,8 @@ pub const SPEC_HELP: &str = "Expert specs: `shipped:weak` or `shipped:perfect` (
 heuristic lander, simple controllers for CartPole, MountainCar and Acrobot), `noisy:P:SPEC` (SPEC acting at random \
 with probability P), `web[:OPTIONS]` (a person answering in a browser; see `arld train --help`), `cmd:COMMAND` (a \
 program in any language speaking JSON lines on stdin/stdout, e.g. cmd:\"python examples/expert.py\"; the protocol \
-is in src/expert/process.rs and the README).";
+is in crates/arld-core/src/expert/process.rs and the README), `python:NAME` (an expert given to arld.Agent in \
+Python; it names that expert in the run's records).";
 
 /// An expert spec, parsed: which expert [`from_spec`] builds. Parsing checks the form of every part, so that a
 /// configuration can be refused before any work (a run validates its spec first); building then loads
@@ -324,6 +325,9 @@ pub enum ExpertSpec {
     Web(web_options::WebOptions),
     /// `noisy:P:SPEC`.
     Noisy { p: f64, inner: Box<ExpertSpec> },
+    /// `python:NAME`: an expert given in Python (`arld.Agent(expert=...)`), named in a run's records; only the
+    /// Python package can supply it.
+    Python(String),
 }
 
 impl std::str::FromStr for ExpertSpec {
@@ -338,6 +342,7 @@ impl std::str::FromStr for ExpertSpec {
             "cmd" if !rest.trim().is_empty() => Self::Command(rest.to_string()),
             "scripted" if rest.is_empty() => Self::Scripted,
             "web" => Self::Web(rest.parse()?),
+            "python" if !rest.trim().is_empty() => Self::Python(rest.to_string()),
             "noisy" => {
                 let (p, inner) = rest
                     .split_once(':')
@@ -394,6 +399,10 @@ pub fn build(
     build_with(spec, env_id, seed, timeout_s, no_web)
 }
 
+/// Why a `python:NAME` expert cannot be built here: the object it names lives in a Python process.
+pub(crate) const PYTHON_ONLY: &str = "an expert given in Python (`python:NAME`) is answered by that Python object: \
+    continue its run from Python (arld.Agent.load(..., expert=...)), or name another expert";
+
 /// Builds the expert of a parsed spec, starting a web expert with `web`.
 pub fn build_with(
     spec: &ExpertSpec,
@@ -419,6 +428,7 @@ pub fn build_with(
         )?),
         ExpertSpec::Scripted => Box::new(scripted::ScriptedExpert::new(env_id)?),
         ExpertSpec::Web(options) => web(options, env_id)?,
+        ExpertSpec::Python(_) => bail!(PYTHON_ONLY),
         ExpertSpec::Noisy { p, inner } => {
             let inner = build_with(inner, env_id, seed.wrapping_add(1), timeout_s, web)?;
             Box::new(NoisyExpert::new(inner, *p, env_spec.n_actions, seed)?)

@@ -290,7 +290,9 @@ pub struct TrainConfig {
     /// Seconds an expert may take to answer one query; an expert process (`cmd:...`) slower than this is stopped
     /// and the run fails \[OURS: 30\].
     pub expert_timeout: f64,
-    /// Demonstration file for pre-training; empty: collect from the expert at the start of the run.
+    /// Demonstration file for pre-training; empty: collect from the expert at the start of the run;
+    /// `python:demos` ([`DEMOS_FROM_PYTHON`]): given to `arld.Agent(demos=...)` in Python, which only Python
+    /// can supply again.
     pub demo_file: String,
 
     /// Environment steps between evaluations \[P-inf, per task\].
@@ -576,6 +578,10 @@ impl ConfigInput {
         Ok(cfg)
     }
 }
+
+/// `demo_file` of a run whose demonstrations were given in Python (`arld.Agent(demos=...)`): a record of where
+/// they came from, not a path.
+pub const DEMOS_FROM_PYTHON: &str = "python:demos";
 
 /// The paper's hidden widths (docs/algorithm.md §2), also those of a configuration that names none.
 fn paper_hidden() -> Vec<usize> {
@@ -1045,6 +1051,19 @@ impl TrainConfig {
         }
     }
 
+    /// The demonstration file the run pre-trains on (`demo_file`), if it names one; an error for demonstrations
+    /// that were given in Python ([`DEMOS_FROM_PYTHON`]), which a run outside Python cannot read again.
+    pub fn demo_path(&self) -> Result<Option<&std::path::Path>> {
+        match self.demo_file.as_str() {
+            "" => Ok(None),
+            DEMOS_FROM_PYTHON => anyhow::bail!(
+                "this run pre-trained on demonstrations given in Python (demo_file = \"{DEMOS_FROM_PYTHON}\"): \
+                 continue it from Python with the same demos=, or give a demonstration file (--demos FILE)"
+            ),
+            path => Ok(Some(std::path::Path::new(path))),
+        }
+    }
+
     /// The expert the run asks (`expert`): during training, or for the demonstrations it pre-trains on unless
     /// they come from `demo_file`; `None` when it asks none.
     pub fn expert_used(&self) -> Option<&str> {
@@ -1351,6 +1370,28 @@ mod tests {
         }
         let err = error("CartPole-v0", Method::Adqn, NetKind::Plain, &[]);
         assert!(err.contains("plain network"), "{err}");
+    }
+
+    #[test]
+    fn demo_file_is_a_path_or_the_record_of_demonstrations_given_in_python() {
+        let mut cfg = ConfigInput::new("CartPole-v0", Method::Dqfd, NetKind::Plain, 0)
+            .resolve()
+            .unwrap();
+        assert_eq!(cfg.demo_path().unwrap(), None);
+        cfg.demo_file = "runs/demos.safetensors".into();
+        assert_eq!(
+            cfg.demo_path().unwrap(),
+            Some(std::path::Path::new("runs/demos.safetensors"))
+        );
+        cfg.demo_file = DEMOS_FROM_PYTHON.into();
+        let err = cfg.demo_path().unwrap_err().to_string();
+        assert!(
+            err.contains("given in Python") && err.contains("--demos FILE"),
+            "{err}"
+        );
+        // The record passes validation, and the run asks no expert for demonstrations.
+        cfg.validate().unwrap();
+        assert_eq!(cfg.expert_used(), None);
     }
 
     #[test]

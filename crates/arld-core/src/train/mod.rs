@@ -41,6 +41,37 @@ pub fn resume_position<A: crate::task::Action>(state: &StateDict) -> Result<log:
     Ok(state.value("log")?)
 }
 
+/// The log of a run of `cfg`: in memory without `dir`; in `dir`, continuing its files when the run continues
+/// from `snapshot` and `dir` holds that run (its config.toml must record `cfg`, or the run is refused, naming the
+/// keys that differ), else a new run's files. The command line, sweeps and Python all open a run's log here.
+pub fn open_log<A: crate::task::Action>(
+    dir: Option<&std::path::Path>,
+    cfg: &TrainConfig,
+    snapshot: Option<&StateDict>,
+    progress: bool,
+) -> Result<RunLog<A>> {
+    let steps = cfg.train_steps as u64;
+    let Some(dir) = dir else {
+        return Ok(match snapshot {
+            Some(state) => RunLog::in_memory_resumed(&resume_position(state)?),
+            None => RunLog::in_memory_with_progress(steps, progress),
+        });
+    };
+    match snapshot {
+        Some(state) if dir.join(run_dir::CONFIG_FILE).is_file() => {
+            let differences = run_dir::read_written_config(dir)?.differences(cfg);
+            ensure!(
+                differences.is_empty(),
+                "{} holds another run (its config.toml differs: {}); give another directory",
+                dir.display(),
+                differences.join(", ")
+            );
+            RunLog::resume(dir, &resume_position(state)?, steps, progress)
+        }
+        _ => RunLog::create(dir, &cfg.to_toml(), steps, progress),
+    }
+}
+
 /// Writes `failed.json` for the error `err` into the run directory `dir`, unless `err` is a stop request (the
 /// run is then interrupted, not failed). The run's own error matters more than this file: a write that fails
 /// is only warned about.

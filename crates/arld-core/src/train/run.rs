@@ -230,6 +230,9 @@ impl<'a, L: Learner> RunBuilder<'a, L> {
     /// The environment and the parts of the run a snapshot holds, each from the run's seed.
     fn prepare(&mut self) -> Result<Prepared<L>> {
         let cfg = self.cfg;
+        // Every way in (the command line, sweeps, Slurm shards, Python) builds its run here, so this is where a
+        // configuration that did not come through `ConfigInput::resolve` (a snapshot's, Python's) is checked.
+        cfg.validate()?;
         ensure!(
             !cfg.method.queries() || self.expert.is_some(),
             "{} asks an expert during training, but none was given",
@@ -1418,6 +1421,7 @@ fn ask_expert<'q, A: Action>(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::train::{ConfigInput, Method, NetKind};
 
     /// A resumed run's time is what its snapshot carried plus this session's; the CPU time of an idle thread
     /// does not grow with the wall clock.
@@ -1445,5 +1449,33 @@ mod tests {
         )
         .unwrap();
         assert_eq!((old.elapsed_s, old.cpu_s), (0.0, 0.0));
+    }
+
+    /// A configuration that did not come through `ConfigInput::resolve` (as Python's and a snapshot's do not)
+    /// is checked where every run starts: the error is `validate`'s own, and nothing is written.
+    #[test]
+    fn a_run_refuses_a_configuration_that_validate_refuses() {
+        let input = ConfigInput::new("CartPole-v0", Method::Adqn, NetKind::Bootstrap, 0);
+        let good = input.resolve().unwrap();
+        for (key, change) in [
+            (
+                "gamma",
+                (|c: &mut TrainConfig| c.gamma = 1.5) as fn(&mut TrainConfig),
+            ),
+            ("batch_size", |c| c.batch_size = 0),
+            ("expert", |c| c.expert = "no-such-expert".into()),
+        ] {
+            let mut cfg = good.clone();
+            change(&mut cfg);
+            let expected = cfg.validate().unwrap_err().to_string();
+            assert!(expected.contains(key), "{key}: {expected}");
+            let dir = tempfile::tempdir().unwrap();
+            let mut log = RunLog::create(dir.path(), &cfg.to_toml(), 10, false).unwrap();
+            let err = RunBuilder::new(&cfg)
+                .train(&mut log)
+                .err()
+                .expect("refused");
+            assert_eq!(err.to_string(), expected, "{key}");
+        }
     }
 }
