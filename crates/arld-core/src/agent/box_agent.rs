@@ -13,7 +13,7 @@
 //!   bootstrap cut); demonstrated samples are flagged for the cloning loss. The priorities are the absolute TD
 //!   errors of the first critic head.
 
-use super::actor_critic::BoxBatch;
+use super::actor_critic::{ActorCriticLearner, BoxBatch};
 use super::sac::{Sac, SacConfig};
 use super::td3::{Td3, Td3Config};
 use super::{Learner, UpdateStats};
@@ -27,75 +27,6 @@ use rand_pcg::Pcg64;
 use safetensors::{Dtype, tensor::TensorView};
 use std::collections::{BTreeMap, HashMap};
 use std::path::Path;
-
-/// What a run needs of an actor-critic learner of box actions: acting, learning from a batch, the critics'
-/// disagreement, its generator, its policy network and its state.
-pub trait ActorCriticLearner: Persist + Send {
-    /// The behaviour action at `obs` (with the learner's own exploration), into `action`.
-    fn act(&mut self, obs: &[f32], action: &mut [f32]);
-    /// The test-time action at `obs` (no exploration), into `action`.
-    fn test_action(&mut self, obs: &[f32], action: &mut [f32]);
-    /// The standard deviation of the critic heads at `(obs, action)`. Draws no random number.
-    fn critic_spread(&mut self, obs: &[f32], action: &[f32]) -> f32;
-    /// One update: the critics' loss and the new priority of each sample.
-    fn learn(&mut self, batch: &BoxBatch) -> (f32, &[f32]);
-    /// The learner's generator.
-    fn rng(&mut self) -> &mut Pcg64;
-    /// The policy network a run keeps.
-    fn actor(&self) -> &Mlp;
-    /// The learner's name in a weights file.
-    fn name(&self) -> &'static str;
-}
-
-impl ActorCriticLearner for Td3<Pcg64> {
-    fn act(&mut self, obs: &[f32], action: &mut [f32]) {
-        Td3::act(self, obs, action);
-    }
-    fn test_action(&mut self, obs: &[f32], action: &mut [f32]) {
-        Td3::test_action(self, obs, action);
-    }
-    fn critic_spread(&mut self, obs: &[f32], action: &[f32]) -> f32 {
-        Td3::critic_spread(self, obs, action)
-    }
-    fn learn(&mut self, batch: &BoxBatch) -> (f32, &[f32]) {
-        let (stats, priorities) = Td3::learn(self, batch);
-        (stats.critic_loss, priorities)
-    }
-    fn rng(&mut self) -> &mut Pcg64 {
-        Td3::rng(self)
-    }
-    fn actor(&self) -> &Mlp {
-        Td3::actor(self)
-    }
-    fn name(&self) -> &'static str {
-        "td3"
-    }
-}
-
-impl ActorCriticLearner for Sac<Pcg64> {
-    fn act(&mut self, obs: &[f32], action: &mut [f32]) {
-        Sac::act(self, obs, action);
-    }
-    fn test_action(&mut self, obs: &[f32], action: &mut [f32]) {
-        Sac::test_action(self, obs, action);
-    }
-    fn critic_spread(&mut self, obs: &[f32], action: &[f32]) -> f32 {
-        Sac::critic_spread(self, obs, action)
-    }
-    fn learn(&mut self, batch: &BoxBatch) -> (f32, &[f32]) {
-        let (stats, priorities) = Sac::learn(self, batch);
-        (stats.critic_loss, priorities)
-    }
-    fn rng(&mut self) -> &mut Pcg64 {
-        Sac::rng(self)
-    }
-    fn actor(&self) -> &Mlp {
-        Sac::actor(self)
-    }
-    fn name(&self) -> &'static str {
-        "sac"
-    }
-}
 
 /// A learner of actions in a box: an [`ActorCriticLearner`] learner behind [`Learner`].
 pub struct BoxAgent {
@@ -211,9 +142,9 @@ impl Learner for BoxAgent {
             b.next_obs.clone_from(&batch.nstep_next_obs);
             b.discounts.clone_from(&batch.nstep_discounts);
         }
-        let (critic_loss, priorities) = self.learner.learn(&self.batch);
+        let (update, priorities) = self.learner.learn(&self.batch);
         let stats = UpdateStats {
-            td_loss: critic_loss,
+            td_loss: update.critic_loss,
             margin_loss: 0.0,
             nstep_loss: 0.0,
             grad_norm: 0.0,
