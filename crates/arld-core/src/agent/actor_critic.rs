@@ -652,7 +652,7 @@ pub(crate) fn behaviour_cloning(
 pub(crate) mod testing {
     use super::{ActorCriticLearner, BoxBatch};
     use crate::env::pendulum::swing_up;
-    use crate::env::{Env, make_continuous};
+    use crate::env::{Env, Outcome, make_continuous};
     use rand::{Rng, SeedableRng};
 
     /// One-step transitions, one vector per sample.
@@ -666,6 +666,16 @@ pub(crate) mod testing {
     }
 
     impl Transitions {
+        /// Adds the transition from `obs` by `action` to `next_obs` with `out`'s reward (discount 0.99, 0 at a
+        /// terminal state).
+        fn push(&mut self, obs: Vec<f32>, action: Vec<f32>, out: &Outcome, next_obs: &[f32]) {
+            self.obs.push(obs);
+            self.actions.push(action);
+            self.rewards.push(out.reward as f32);
+            self.next_obs.push(next_obs.to_vec());
+            self.discounts.push(if out.terminated { 0.0 } else { 0.99 });
+        }
+
         /// Fills `batch` with `size` samples drawn uniformly by `draw`, flagged `demo`.
         pub fn sample(&self, draw: &mut impl Rng, size: usize, demo: bool, batch: &mut BoxBatch) {
             batch.obs.clear();
@@ -734,13 +744,7 @@ pub(crate) mod testing {
             }
             let before = obs.clone();
             let out = env.step_into(&action, &mut obs).unwrap();
-            replay.obs.push(before);
-            replay.actions.push(action.clone());
-            replay.rewards.push(out.reward as f32);
-            replay.next_obs.push(obs.clone());
-            replay
-                .discounts
-                .push(if out.terminated { 0.0 } else { 0.99 });
+            replay.push(before, action.clone(), &out, &obs);
             if out.terminated || out.truncated {
                 env.reset_into(None, &mut obs);
             }
@@ -762,13 +766,7 @@ pub(crate) mod testing {
                 let action = swing_up(&obs).to_vec();
                 let before = obs.clone();
                 let out = env.step_into(&action, &mut obs).unwrap();
-                demos.obs.push(before);
-                demos.actions.push(action);
-                demos.rewards.push(out.reward as f32);
-                demos.next_obs.push(obs.clone());
-                demos
-                    .discounts
-                    .push(if out.terminated { 0.0 } else { 0.99 });
+                demos.push(before, action, &out, &obs);
                 if out.terminated || out.truncated {
                     break;
                 }

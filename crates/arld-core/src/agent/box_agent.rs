@@ -39,32 +39,37 @@ pub struct BoxAgent {
     batch: BoxBatch,
 }
 
-impl BoxAgent {
-    /// TD3 with `config` for observations of `obs_dim` numbers and actions in `[low, high]`, discounting by
-    /// `gamma`, its weights and every later draw from `seed`.
-    pub fn new(
-        config: Td3Config,
-        obs_dim: usize,
-        low: &[f32],
-        high: &[f32],
-        gamma: f32,
-        seed: u64,
-    ) -> Self {
-        let td3 = Td3::new(config, obs_dim, low, high, Pcg64::seed_from_u64(seed));
-        Self::with_learner(Box::new(td3), obs_dim, low, high, gamma)
-    }
+/// Which actor-critic learner a [`BoxAgent`] holds, with its settings.
+#[derive(Debug, Clone, PartialEq)]
+pub enum BoxLearnerConfig {
+    Td3(Td3Config),
+    Sac(SacConfig),
+}
 
-    /// SAC with `config`, otherwise as [`BoxAgent::new`].
-    pub fn sac(
-        config: SacConfig,
+impl BoxAgent {
+    /// The learner of `config` for observations of `obs_dim` numbers and actions in `[low, high]`, discounting
+    /// by `gamma`, its weights and every later draw from `seed`.
+    pub fn new(
+        config: BoxLearnerConfig,
         obs_dim: usize,
         low: &[f32],
         high: &[f32],
         gamma: f32,
         seed: u64,
     ) -> Self {
-        let sac = Sac::new(config, obs_dim, low, high, Pcg64::seed_from_u64(seed));
-        Self::with_learner(Box::new(sac), obs_dim, low, high, gamma)
+        let rng = Pcg64::seed_from_u64(seed);
+        let learner: Box<dyn ActorCriticLearner> = match config {
+            BoxLearnerConfig::Td3(config) => Box::new(Td3::new(config, obs_dim, low, high, rng)),
+            BoxLearnerConfig::Sac(config) => Box::new(Sac::new(config, obs_dim, low, high, rng)),
+        };
+        BoxAgent {
+            learner,
+            obs_dim,
+            low: low.to_vec(),
+            high: high.to_vec(),
+            gamma,
+            batch: BoxBatch::default(),
+        }
     }
 
     /// The policy network of the learner inside (TD3: the tanh actor; SAC: the means and log standard
@@ -76,23 +81,6 @@ impl BoxAgent {
     /// The learner inside: `td3` or `sac`.
     pub fn learner_name(&self) -> &'static str {
         self.learner.name()
-    }
-
-    fn with_learner(
-        learner: Box<dyn ActorCriticLearner>,
-        obs_dim: usize,
-        low: &[f32],
-        high: &[f32],
-        gamma: f32,
-    ) -> Self {
-        BoxAgent {
-            learner,
-            obs_dim,
-            low: low.to_vec(),
-            high: high.to_vec(),
-            gamma,
-            batch: BoxBatch::default(),
-        }
     }
 }
 
@@ -214,11 +202,21 @@ mod tests {
     use crate::replay::{Replay, ReplayConfig, Transition};
     use crate::train::eval::Evaluator;
 
-    fn agent(seed: u64) -> BoxAgent {
-        let config = Td3Config {
-            hidden: vec![64, 64],
-            max_batch: 128,
-            ..Td3Config::default()
+    /// A learner for Pendulum-v1 from `seed` with 64-64 networks and batches of 128: TD3, or SAC when `sac`.
+    fn pendulum_agent(sac: bool, seed: u64) -> BoxAgent {
+        let (hidden, max_batch) = (vec![64, 64], 128);
+        let config = if sac {
+            BoxLearnerConfig::Sac(SacConfig {
+                hidden,
+                max_batch,
+                ..SacConfig::default()
+            })
+        } else {
+            BoxLearnerConfig::Td3(Td3Config {
+                hidden,
+                max_batch,
+                ..Td3Config::default()
+            })
         };
         BoxAgent::new(config, 3, &[-2.0], &[2.0], 0.99, seed)
     }
@@ -273,7 +271,7 @@ mod tests {
 
     #[test]
     fn learns_pendulum_from_a_prioritized_n_step_replay_of_box_actions() {
-        let mut learner = agent(0);
+        let mut learner = pendulum_agent(false, 0);
         let mut memory = replay();
         train(&mut learner, &mut memory, 0..12_000);
         let envs: Vec<Box<dyn Env<Vec<f32>>>> = (0..10)
@@ -285,24 +283,15 @@ mod tests {
         assert!(score > -250.0, "TD3 did not learn Pendulum-v1: {score}");
     }
 
-    fn sac_agent(seed: u64) -> BoxAgent {
-        let config = SacConfig {
-            hidden: vec![64, 64],
-            max_batch: 128,
-            ..SacConfig::default()
-        };
-        BoxAgent::sac(config, 3, &[-2.0], &[2.0], 0.99, seed)
-    }
-
     #[test]
     fn a_snapshot_continues_to_the_same_bytes() {
         // Two learners act and learn 1,200 steps; one is saved at step 1,100 and loaded into a third, fresh
         // learner built from another seed. The third and the first must then be equal to the last bit; for TD3
         // and for SAC.
-        for (make, name) in [(agent as fn(u64) -> BoxAgent, "td3"), (sac_agent, "sac")] {
-            let (mut a, mut memory_a) = (make(3), replay());
+        for (sac, name) in [(false, "td3"), (true, "sac")] {
+            let (mut a, mut memory_a) = (pendulum_agent(sac, 3), replay());
             train(&mut a, &mut memory_a, 0..1_100);
-            let mut b = make(99);
+            let mut b = pendulum_agent(sac, 99);
             {
                 let mut state = StateDict::default();
                 a.save_state("agent", &mut state);
