@@ -4,6 +4,11 @@
 //! line by line (float64 for classic control, Box2D 2.3 in float32 for LunarLander), and every random draw
 //! comes from [`crate::rng::NumpyRng`], a bit-exact port of NumPy's `PCG64(SeedSequence(seed))`.
 //! `../conformance` traces recorded from Gymnasium are the test (see [`conformance`]).
+//!
+//! One environment type serves every task, [`Simulated`]: a task's [`Physics`] (any discrete task's
+//! [`Dynamics`], or a boxed [`continuous::ContinuousDynamics`]) with its registered facts, the reset generator
+//! and the step bookkeeping. The registered facts of tasks implemented elsewhere (Python) are kept by
+//! [`register`] and [`register_box`].
 
 use crate::rng::NumpyRng;
 pub use crate::task::{Action, ActionColumn, BoxSpec, EnvSpec, TaskSpec};
@@ -441,7 +446,7 @@ pub fn make_continuous(id: &str) -> Result<continuous::ContinuousEnv, EnvError> 
         "LunarLanderContinuous-v3" => Box::new(lunar_lander::LunarLanderContinuous::default()),
         _ => Box::new(mountain_car_continuous::MountainCarContinuous::default()),
     };
-    Ok(continuous::ContinuousEnv::new(spec, physics))
+    Ok(continuous::ContinuousEnv::with_spec(spec, physics))
 }
 
 /// The registered id of `gym.make(id, continuous=True)` where a task has both kinds of action
@@ -629,57 +634,128 @@ pub trait Dynamics: Send {
     }
 }
 
-/// A built-in environment: a task's [`Dynamics`] with what every task keeps besides its physics, its
-/// registered facts, the reset generator ([`EnvRng`]) and the step bookkeeping ([`EpisodeClock`]).
-#[derive(Debug, Clone)]
-pub struct Simulated<D> {
-    spec: &'static EnvSpec,
-    rng: EnvRng,
-    clock: EpisodeClock,
-    physics: D,
+/// What [`Simulated`] needs of a task's physics, whatever its kind of action: every [`Dynamics`] of discrete
+/// actions has it, and so has a [`continuous::ContinuousDynamics`] of actions in a box (boxed).
+pub trait Physics: Send {
+    /// The kind of the task's actions.
+    type Action: Action;
+    /// Draws the initial state from the reset's generator.
+    fn reset(&mut self, rng: &mut NumpyRng);
+    /// Checks `action` against `spec` (an error names it) and takes one step with it, drawing from the
+    /// episode's generator `rng` what the step draws; returns the reward and whether the task terminated.
+    fn step(
+        &mut self,
+        spec: &'static <Self::Action as Action>::Spec,
+        action: <Self::Action as Action>::Ref<'_>,
+        rng: &mut EnvRng,
+    ) -> Result<(f64, bool), EnvError>;
+    /// Writes the observation of the current state into `obs`.
+    fn observe(&self, obs: &mut [f32]);
+    /// Overwrites the internal float64 state (see [`Env::set_state`]) of the task `env`.
+    fn set_state(&mut self, env: &'static str, state: &[f64]) -> Result<(), EnvError>;
+    /// See [`Env::geometry`].
+    fn geometry(&self) -> Option<Geometry> {
+        None
+    }
 }
 
-impl<D> Simulated<D> {
-    /// The registered environment `id` with `physics`; panics if `id` is not registered (built-in ids are).
-    pub fn with_physics(id: &str, physics: D) -> Self {
-        let spec = spec(id).unwrap_or_else(|err| panic!("{err}"));
+impl<D: Dynamics> Physics for D {
+    type Action = usize;
+
+    fn reset(&mut self, rng: &mut NumpyRng) {
+        Dynamics::reset(self, rng);
+    }
+
+    fn step(
+        &mut self,
+        spec: &'static EnvSpec,
+        action: usize,
+        rng: &mut EnvRng,
+    ) -> Result<(f64, bool), EnvError> {
+        if action >= spec.n_actions {
+            return Err(EnvError::ActionOutOfRange {
+                env: spec.id,
+                action,
+                n_actions: spec.n_actions,
+            });
+        }
+        Ok(Dynamics::step(self, action, rng))
+    }
+
+    fn observe(&self, obs: &mut [f32]) {
+        Dynamics::observe(self, obs);
+    }
+
+    fn set_state(&mut self, env: &'static str, state: &[f64]) -> Result<(), EnvError> {
+        let target = self.state_mut().ok_or_else(|| state_not_supported(env))?;
+        check_state(env, state, target.len())?;
+        target.copy_from_slice(state);
+        Ok(())
+    }
+
+    fn geometry(&self) -> Option<Geometry> {
+        Dynamics::geometry(self)
+    }
+}
+
+/// A built-in environment: a task's [`Physics`] with what every task keeps besides its physics, its
+/// registered facts, the reset generator ([`EnvRng`]) and the step bookkeeping ([`EpisodeClock`]).
+#[derive(Debug, Clone)]
+pub struct Simulated<P: Physics> {
+    spec: &'static <P::Action as Action>::Spec,
+    rng: EnvRng,
+    clock: EpisodeClock,
+    physics: P,
+}
+
+impl<P: Physics> Simulated<P> {
+    /// The task `spec` with `physics`.
+    pub fn with_spec(spec: &'static <P::Action as Action>::Spec, physics: P) -> Self {
         Simulated {
             spec,
             rng: EnvRng::default(),
-            clock: EpisodeClock::new(spec.id, spec.max_episode_steps),
+            clock: EpisodeClock::new(spec.id(), spec.max_episode_steps()),
             physics,
         }
     }
 
     /// The task's physics (its state).
-    pub fn physics(&self) -> &D {
+    pub fn physics(&self) -> &P {
         &self.physics
     }
 }
 
-impl<D: Dynamics> Env for Simulated<D> {
+impl<D: Dynamics> Simulated<D> {
+    /// The registered environment `id` with `physics`; panics if `id` is not registered (built-in ids are).
+    pub fn with_physics(id: &str, physics: D) -> Self {
+        Simulated::with_spec(spec(id).unwrap_or_else(|err| panic!("{err}")), physics)
+    }
+}
+
+impl<P: Physics> Env<P::Action> for Simulated<P> {
+    /// Starts an episode and writes its first observation into `obs` (`reset(seed=seed)` in Gymnasium; `None`
+    /// continues the current generator).
     fn reset_into(&mut self, seed: Option<u64>, obs: &mut [f32]) {
         self.physics.reset(self.rng.reseed(seed));
         self.clock.start();
         self.physics.observe(obs);
     }
 
-    fn step_into(&mut self, action: usize, obs: &mut [f32]) -> Result<Outcome, EnvError> {
+    /// Advances one step with `action` and writes the observation after it into `obs`. An action the task does
+    /// not take is an error naming it, and so is a step outside an episode.
+    fn step_into(
+        &mut self,
+        action: <P::Action as Action>::Ref<'_>,
+        obs: &mut [f32],
+    ) -> Result<Outcome, EnvError> {
         self.clock.check_running()?;
-        if action >= self.spec.n_actions {
-            return Err(EnvError::ActionOutOfRange {
-                env: self.spec.id,
-                action,
-                n_actions: self.spec.n_actions,
-            });
-        }
-        let (reward, terminated) = self.physics.step(action, &mut self.rng);
+        let (reward, terminated) = self.physics.step(self.spec, action, &mut self.rng)?;
         let outcome = self.clock.finish_step(reward, terminated);
         self.physics.observe(obs);
         Ok(outcome)
     }
 
-    fn spec(&self) -> &'static EnvSpec {
+    fn spec(&self) -> &'static <P::Action as Action>::Spec {
         self.spec
     }
 
@@ -691,16 +767,11 @@ impl<D: Dynamics> Env for Simulated<D> {
         self.rng.set(rng);
     }
 
+    /// Overwrites the internal float64 state (a new episode starts at it) and returns its observation.
     fn set_state(&mut self, state: &[f64]) -> Result<Vec<f32>, EnvError> {
-        let id = self.spec.id;
-        let target = self
-            .physics
-            .state_mut()
-            .ok_or_else(|| state_not_supported(id))?;
-        check_state(id, state, target.len())?;
-        target.copy_from_slice(state);
+        self.physics.set_state(self.spec.id(), state)?;
         self.clock.start();
-        let mut obs = vec![0.0; self.spec.obs_dim];
+        let mut obs = vec![0.0; self.spec.obs_dim()];
         self.physics.observe(&mut obs);
         Ok(obs)
     }
