@@ -655,6 +655,29 @@ pub(crate) mod testing {
     use crate::env::{Env, Outcome, make_continuous};
     use rand::{Rng, SeedableRng};
 
+    /// Checks an update's cloning term against the Q-filter computed by the test (`filter`: whether each sample
+    /// passes it): with the term on (`bc_weight > 0`), some but not all demonstrated samples pass and the update
+    /// counted the same; with it off, the update reports no term.
+    pub(crate) fn check_filter_counts(
+        bc_weight: f32,
+        is_demo: &[bool],
+        filter: &[bool],
+        bc: Option<super::BcStats>,
+    ) {
+        if bc_weight > 0.0 {
+            let cloned = filter.iter().filter(|&&f| f).count();
+            let demos = is_demo.iter().filter(|&&d| d).count();
+            assert!(
+                cloned > 0 && cloned < demos,
+                "the filter passed {cloned} of {demos}"
+            );
+            let bc = bc.expect("the update reports the cloning term");
+            assert_eq!((bc.cloned, bc.demos), (cloned, demos));
+        } else {
+            assert!(bc.is_none());
+        }
+    }
+
     /// One-step transitions, one vector per sample.
     #[derive(Default)]
     pub(crate) struct Transitions {

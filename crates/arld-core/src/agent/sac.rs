@@ -416,7 +416,7 @@ impl ActorCriticLearner for Sac<Pcg64> {
 mod tests {
     use super::*;
     use crate::agent::actor_critic::testing::{
-        evaluate_pendulum, pretraining_imitates, train_pendulum,
+        check_filter_counts, evaluate_pendulum, pretraining_imitates, train_pendulum,
     };
     use crate::nn::MlpWorkspace;
     use rand::SeedableRng;
@@ -513,16 +513,7 @@ mod tests {
                         > pair_min(&agent, state, &test)
             })
             .collect();
-        let cloned = filter.iter().filter(|&&f| f).count();
-        if bc_weight > 0.0 {
-            let demos = is_demo.iter().filter(|&&d| d).count();
-            assert!(
-                cloned > 0 && cloned < demos,
-                "the filter passed {cloned} of {demos}"
-            );
-            let bc = bc.unwrap();
-            assert_eq!((bc.cloned, bc.demos), (cloned, demos));
-        }
+        check_filter_counts(bc_weight, is_demo, &filter, bc);
         let half = [2.0f64, 0.25];
         let low = [-1.0f64, 0.0];
         let loss = |agent: &Sac<Pcg>| -> f64 {

@@ -273,7 +273,7 @@ impl ActorCriticLearner for Td3<Pcg64> {
 mod tests {
     use super::*;
     use crate::agent::actor_critic::testing::{
-        evaluate_pendulum, pretraining_imitates, train_pendulum,
+        check_filter_counts, evaluate_pendulum, pretraining_imitates, train_pendulum,
     };
     use crate::nn::MlpWorkspace;
     use rand::SeedableRng;
@@ -383,18 +383,7 @@ mod tests {
                     && heads_mean(&agent, state, demo).1 > heads_mean(&agent, state, &action).1
             })
             .collect();
-        let cloned = filter.iter().filter(|&&f| f).count();
-        if bc_weight > 0.0 {
-            let demos = is_demo.iter().filter(|&&d| d).count();
-            assert!(
-                cloned > 0 && cloned < demos,
-                "the filter passed {cloned} of {demos}"
-            );
-            let bc = bc.unwrap();
-            assert_eq!((bc.cloned, bc.demos), (cloned, demos));
-        } else {
-            assert!(bc.is_none());
-        }
+        check_filter_counts(bc_weight, is_demo, &filter, bc);
         let loss = |agent: &mut Td3<rand_pcg::Pcg64>| -> f64 {
             let mut q_total = 0.0f64;
             let mut cloning = 0.0f64;
