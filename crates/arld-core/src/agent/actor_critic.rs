@@ -1,5 +1,5 @@
 //! What the actor-critic learners for actions in a box (TD3 in `td3.rs`, SAC in `sac.rs`) share: the interface a
-//! run drives them through ([`ActorCriticLearner`], whose shared methods read the core), the batch they learn from
+//! run drives them through (`ActorCriticLearner`, whose shared methods read the core), the batch they learn from
 //! ([`BoxBatch`]) and what an update measures ([`BoxUpdate`]), what both hold ([`ActorCritic`]: the box, the actor, the critics, the generator and
 //! the per-sample buffers, with the critics' regression towards the clipped double-Q target), the sizes their
 //! networks are built to ([`Sizes`]), the actor with its optimiser and buffers ([`Actor`]), the box itself ([`ActionBox`]: the map between a tanh output in (-1, 1) and an

@@ -1,5 +1,5 @@
 //! The actor-critic family behind the [`Learner`] interface: [`BoxAgent`] acts and learns in a box of float32
-//! actions with any [`ActorCriticLearner`] learner (TD3, [`super::td3`]; SAC, [`super::sac`]), from the same replay
+//! actions with any `ActorCriticLearner` learner (TD3, [`super::td3`]; SAC, [`super::sac`]), from the same replay
 //! batches, schedules and snapshots as the DQN family.
 //!
 //! - Acting: at ε = 1 (a run acting at random before learning starts) a uniform draw from the box, otherwise
@@ -28,7 +28,7 @@ use safetensors::{Dtype, tensor::TensorView};
 use std::collections::{BTreeMap, HashMap};
 use std::path::Path;
 
-/// A learner of actions in a box: an [`ActorCriticLearner`] learner behind [`Learner`].
+/// A learner of actions in a box: an `ActorCriticLearner` learner behind [`Learner`].
 pub struct BoxAgent {
     learner: Box<dyn ActorCriticLearner>,
     obs_dim: usize,

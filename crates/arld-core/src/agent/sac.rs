@@ -9,7 +9,7 @@
 //! term computed as `2 (u + softplus(-2u) - log 2)` so that it stays finite where `tanh(u)` rounds to ±1.
 //!
 //! The critics are the ensemble of `actor_critic.rs` (K heads on a shared torso; the soft target takes the first
-//! two, and their spread is an uncertainty). One update ([`Sac::learn`]), in the order of the paper's algorithm:
+//! two, and their spread is an uncertainty). One update (`learn`), in the order of the paper's algorithm:
 //! - critics: regress every head on `y = r + gamma^n (min(Q'_1, Q'_2)(s', a') - alpha log pi(a'|s'))`, `a' ~
 //!   pi(s')`, weighted by the replay's importance weights; the priority is the first head's absolute TD error
 //!   (plus the demonstration bonus on demonstrated samples);
@@ -54,7 +54,7 @@ pub struct SacConfig {
     pub initial_alpha: f32,
     /// The entropy the temperature steers towards; `None` for the paper's `-dim(A)`.
     pub target_entropy: Option<f32>,
-    /// The largest batch [`Sac::learn`] accepts.
+    /// The largest batch an update (`learn`) accepts.
     pub max_batch: usize,
     /// Weight of the behaviour cloning loss on demonstrated samples (with the Q-filter; 0 turns it off).
     pub bc_weight: f32,

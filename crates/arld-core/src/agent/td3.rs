@@ -10,7 +10,7 @@
 //! exploration noise, target smoothing) comes from the generator the learner was built with.
 //!
 //! A batch ([`BoxBatch`]) carries n-step transitions with their discount `gamma^n` (0 at a terminal state), and
-//! per-sample importance weights for a prioritized replay; [`Td3::learn`] returns the new priorities (the
+//! per-sample importance weights for a prioritized replay; `learn` returns the new priorities (the
 //! absolute TD errors of the first head, plus `demo_priority_bonus` on demonstrated samples). On demonstrated
 //! samples the actor's loss gains the behaviour cloning term of Nair et al. 2018, with or without their Q-filter
 //! (`bc_weight`, `q_filter`; docs/algorithm.md §17). The critics, the batch and the box map are shared with SAC
@@ -43,7 +43,7 @@ pub struct Td3Config {
     pub noise_clip: f32,
     /// Standard deviation of the exploration noise, as a fraction of the box's half-width.
     pub exploration_noise: f32,
-    /// The largest batch [`Td3::learn`] accepts.
+    /// The largest batch an update (`learn`) accepts.
     pub max_batch: usize,
     /// Weight of the behaviour cloning loss on demonstrated samples (with the Q-filter; 0 turns it off).
     pub bc_weight: f32,

@@ -4,7 +4,7 @@
 //! the time limit, as for the discrete tasks).
 //!
 //! They share with the discrete tasks the reset generator ([`EnvRng`]: NumPy's `PCG64(SeedSequence(seed))`),
-//! Gymnasium's `TimeLimit` (truncated on the limit step) and the outcome of a step ([`Outcome`]); an action is a
+//! Gymnasium's `TimeLimit` (truncated on the limit step) and the outcome of a step ([`super::Outcome`]); an action is a
 //! slice of `f32` of the task's action dimension, as Gymnasium passes a float32 array. Each task's arithmetic
 //! follows NumPy's types step for step, float32 where NumPy computes in float32 (see each task's docs), so the
 //! conformance traces recorded from Gymnasium 1.4.0 are reproduced bit for bit (`tests/continuous_conformance.rs`).
