@@ -329,30 +329,27 @@ impl<S: TaskSpec> Registered<S> {
         make: impl FnOnce(&'static str) -> S,
     ) -> Result<&'static S, EnvError> {
         let Registration { id, given, .. } = &new;
-        if let Some(known) = builtin.iter().find(|spec| spec.id() == *id) {
-            return if (new.fits_builtin)(known) {
-                Ok(known)
-            } else {
-                let had = (new.describe)(known);
-                Err(registration_error(
-                    id,
-                    format!(
-                        "the built-in {id} has {had}, this one {given}; register it under another id"
-                    ),
-                ))
+        // An id in use: a spec with the facts given is the answer, another an error naming both.
+        let in_use =
+            |known: &'static S, fits: &dyn Fn(&S) -> bool, clash: &dyn Fn(String) -> String| {
+                if fits(known) {
+                    Ok(known)
+                } else {
+                    Err(registration_error(id, clash((new.describe)(known))))
+                }
             };
+        if let Some(known) = builtin.iter().find(|spec| spec.id() == *id) {
+            return in_use(known, new.fits_builtin, &|had| {
+                format!(
+                    "the built-in {id} has {had}, this one {given}; register it under another id"
+                )
+            });
         }
         let mut registered = self.lock();
         if let Some(&known) = registered.iter().find(|spec| spec.id() == *id) {
-            return if (new.fits)(known) {
-                Ok(known)
-            } else {
-                let had = (new.describe)(known);
-                Err(registration_error(
-                    id,
-                    format!("it was registered before with {had}, now with {given}"),
-                ))
-            };
+            return in_use(known, new.fits, &|had| {
+                format!("it was registered before with {had}, now with {given}")
+            });
         }
         let spec: &'static S =
             Box::leak(Box::new(make(Box::leak(id.to_string().into_boxed_str()))));
