@@ -7,9 +7,10 @@
 //! what CMake's Release build used) and hands the archive to the linker after every Rust library, where the
 //! front end's references to Box2D are resolved. A C++ compiler is all it needs.
 //!
-//! For every `extern "C" fn __wrap_<name>` defined in `src/math.rs`, the linker gets `--wrap=<name>` (every
-//! reference to `<name>`, from Rust, the standard library or the bundled Box2D, goes to `__wrap_<name>`) and
-//! `--undefined=__wrap_<name>` (so the definition is taken from this crate's library whatever the link order).
+//! For every `__wrap_<name>` that `src/math.rs` defines (written out or by its macro), the linker gets
+//! `--wrap=<name>` (every reference to `<name>`, from Rust, the standard library or the bundled Box2D, goes to
+//! `__wrap_<name>`) and `--undefined=__wrap_<name>` (so the definition is taken from this crate's library whatever
+//! the link order).
 //! Every package of the workspace that links a program runs this same script (the command line, the web expert's and
 //! the laboratory's tests, the Python extension, the fuzz targets): each finds `crates/arld-core/src/math.rs`, and
 //! reuses the Box2D archive that arld-core's own run compiled (`links = "arld_box2d"`).
@@ -266,18 +267,24 @@ fn metadata_dir() -> PathBuf {
         .to_path_buf()
 }
 
-/// The `<name>` of every `fn __wrap_<name>` in `source`, also those a macro defines (`/ __wrap_<name> =`).
+/// The `<name>` of every `fn __wrap_<name>` in `source` and of every name a `correctly_rounded!` group defines.
 fn wrapped_names(source: &str) -> Vec<String> {
-    let mut names: Vec<String> = source
-        .split("__wrap_")
-        .skip(1)
-        .map(|rest| {
-            rest.chars()
-                .take_while(|c| c.is_ascii_alphanumeric() || *c == '_')
-                .collect::<String>()
-        })
-        .filter(|name| !name.is_empty() && name != "name")
-        .collect();
+    let ident = |rest: &str| {
+        rest.chars()
+            .take_while(|c| c.is_ascii_alphanumeric() || *c == '_')
+            .collect::<String>()
+    };
+    // The functions written out, `fn __wrap_<name>`.
+    let mut names: Vec<String> = source.split("fn __wrap_").skip(1).map(ident).collect();
+    // The groups of the `correctly_rounded!` macro, one a line: `correctly_rounded!(type, (arguments): names);`.
+    for line in source.lines() {
+        if let Some(group) = line.trim().strip_prefix("correctly_rounded!(")
+            && let Some((_, list)) = group.split_once("):")
+        {
+            names.extend(list.trim_end_matches(");").split_whitespace().map(ident));
+        }
+    }
+    names.retain(|name| !name.is_empty());
     names.sort();
     names.dedup();
     names

@@ -35,89 +35,26 @@
 /// rounded, by CORE-MATH (Box2D's `sinf`/`cosf` aside, see the module docs). Runs of arld before this module have no such field.
 pub const NUMERICS: &str = "correctly-rounded";
 
-/// `__wrap_<name>(x: $t) -> $t` for each `name = core_math::function`, and the plain Rust name.
-macro_rules! unary {
-    ($t:ty { $($name:ident / $wrap:ident = $cr:ident),+ $(,)? }) => {$(
-        #[doc = concat!("`", stringify!($name), "`, correctly rounded (CORE-MATH `cr_", stringify!($cr), "`).")]
-        #[inline]
-        pub fn $name(x: $t) -> $t {
-            core_math::$cr(x)
-        }
-
-        #[doc(hidden)]
-        #[unsafe(no_mangle)]
-        pub extern "C" fn $wrap(x: $t) -> $t {
-            core_math::$cr(x)
-        }
+/// For each `name` of a group `type, (arguments): names`: CORE-MATH's correctly rounded `name` of those
+/// arguments, callable from Rust as `math::name` and exported as the C symbol `__wrap_<name>`, which `build.rs`
+/// (reading these groups) has the linker call in place of the C library's `name`.
+macro_rules! correctly_rounded {
+    ($t:ty, $args:tt: $($name:ident)+) => {$(
+        correctly_rounded!(@one $t, $args, $name);
     )+};
+    (@one $t:ty, ($($arg:ident),+), $name:ident) => {
+        #[doc = concat!("`", stringify!($name), "`, correctly rounded (CORE-MATH `cr_", stringify!($name), "`).")]
+        #[unsafe(export_name = concat!("__wrap_", stringify!($name)))]
+        pub extern "C" fn $name($($arg: $t),+) -> $t {
+            core_math::$name($($arg),+)
+        }
+    };
 }
 
-/// As `unary!`, for functions of two arguments.
-macro_rules! binary {
-    ($t:ty { $($name:ident / $wrap:ident = $cr:ident),+ $(,)? }) => {$(
-        #[doc = concat!("`", stringify!($name), "`, correctly rounded (CORE-MATH `cr_", stringify!($cr), "`).")]
-        #[inline]
-        pub fn $name(x: $t, y: $t) -> $t {
-            core_math::$cr(x, y)
-        }
-
-        #[doc(hidden)]
-        #[unsafe(no_mangle)]
-        pub extern "C" fn $wrap(x: $t, y: $t) -> $t {
-            core_math::$cr(x, y)
-        }
-    )+};
-}
-
-unary!(f64 {
-    sin / __wrap_sin = sin,
-    cos / __wrap_cos = cos,
-    tan / __wrap_tan = tan,
-    asin / __wrap_asin = asin,
-    acos / __wrap_acos = acos,
-    atan / __wrap_atan = atan,
-    sinh / __wrap_sinh = sinh,
-    cosh / __wrap_cosh = cosh,
-    tanh / __wrap_tanh = tanh,
-    exp / __wrap_exp = exp,
-    exp2 / __wrap_exp2 = exp2,
-    expm1 / __wrap_expm1 = expm1,
-    log / __wrap_log = log,
-    log2 / __wrap_log2 = log2,
-    log10 / __wrap_log10 = log10,
-    log1p / __wrap_log1p = log1p,
-    cbrt / __wrap_cbrt = cbrt,
-});
-
-unary!(f32 {
-    tanf / __wrap_tanf = tanf,
-    asinf / __wrap_asinf = asinf,
-    acosf / __wrap_acosf = acosf,
-    atanf / __wrap_atanf = atanf,
-    sinhf / __wrap_sinhf = sinhf,
-    coshf / __wrap_coshf = coshf,
-    tanhf / __wrap_tanhf = tanhf,
-    expf / __wrap_expf = expf,
-    exp2f / __wrap_exp2f = exp2f,
-    expm1f / __wrap_expm1f = expm1f,
-    logf / __wrap_logf = logf,
-    log2f / __wrap_log2f = log2f,
-    log10f / __wrap_log10f = log10f,
-    log1pf / __wrap_log1pf = log1pf,
-    cbrtf / __wrap_cbrtf = cbrtf,
-});
-
-binary!(f64 {
-    pow / __wrap_pow = pow,
-    atan2 / __wrap_atan2 = atan2,
-    hypot / __wrap_hypot = hypot,
-});
-
-binary!(f32 {
-    powf / __wrap_powf = powf,
-    atan2f / __wrap_atan2f = atan2f,
-    hypotf / __wrap_hypotf = hypotf,
-});
+correctly_rounded!(f64, (x): sin cos tan asin acos atan sinh cosh tanh exp exp2 expm1 log log2 log10 log1p cbrt);
+correctly_rounded!(f32, (x): tanf asinf acosf atanf sinhf coshf tanhf expf exp2f expm1f logf log2f log10f log1pf cbrtf);
+correctly_rounded!(f64, (x, y): pow atan2 hypot);
+correctly_rounded!(f32, (x, y): powf atan2f hypotf);
 
 /// `sincos` (LLVM merges a `sin` and a `cos` of one argument into it): both results correctly rounded, so the
 /// same as the two calls.

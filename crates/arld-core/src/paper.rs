@@ -174,26 +174,25 @@ pub const TABLE5_METHODS: [&str; 6] = ["dqn", "gdqn", "bdqn", "adqn", "dqfd", "a
 /// The two network groups of Table 5: the config name and the suffix the paper prints (DQN-B, DQN-N).
 pub const TABLE5_NETS: [(&str, &str); 2] = [("bootstrap", "B"), ("noisy", "N")];
 
-/// Table 5: median environment steps to solve over 20 seeds, indexed `[net group][method][task]` in the orders
-/// of [`TABLE5_NETS`], [`TABLE5_METHODS`] and [`PAPER_TASKS`]. 500000 on Lunar Lander means no solve within
-/// the training budget for at least half of the seeds.
-pub const TABLE5_MEDIAN_STEPS: [[[u64; 4]; 6]; 2] = [
+/// Table 5: median environment steps to solve over 20 seeds, indexed `[method][net group][task]` in the orders
+/// of [`TABLE5_METHODS`], [`TABLE5_NETS`] and [`PAPER_TASKS`] (a row holds a method's `-B` and `-N` lines of the
+/// table). 500000 on Lunar Lander means no solve within the training budget for at least half of the seeds.
+pub const TABLE5_MEDIAN_STEPS: [[[u64; 4]; 2]; 6] = [
     [
-        [8000, 57000, 210000, 260000], // DQN-B
-        [8000, 45000, 170000, 310000], // GDQN-B
-        [7500, 31000, 100000, 217500], // BDQN-B
-        [7000, 25000, 85000, 205000],  // ADQN-B
-        [7500, 38000, 140000, 500000], // DQfD-B
-        [6000, 49000, 135000, 267500], // ADQNP-B
-    ],
+        [8000, 57000, 210000, 260000],
+        [13000, 114000, 190000, 355000],
+    ], // DQN
     [
-        [13000, 114000, 190000, 355000], // DQN-N
-        [10000, 73000, 295000, 500000],  // GDQN-N
-        [10000, 55000, 170000, 160000],  // BDQN-N
-        [9500, 8000, 230000, 47500],     // ADQN-N
-        [8000, 95000, 300000, 402500],   // DQfD-N
-        [8000, 75000, 255000, 212500],   // ADQNP-N
-    ],
+        [8000, 45000, 170000, 310000],
+        [10000, 73000, 295000, 500000],
+    ], // GDQN
+    [
+        [7500, 31000, 100000, 217500],
+        [10000, 55000, 170000, 160000],
+    ], // BDQN
+    [[7000, 25000, 85000, 205000], [9500, 8000, 230000, 47500]], // ADQN
+    [[7500, 38000, 140000, 500000], [8000, 95000, 300000, 402500]], // DQfD
+    [[6000, 49000, 135000, 267500], [8000, 75000, 255000, 212500]], // ADQNP
 ];
 
 /// The paper's Table 5 entry for an environment id, method and network names, if the paper reports one.
@@ -201,7 +200,7 @@ pub fn median_steps(env_id: &str, method: &str, net: &str) -> Option<u64> {
     let task = task_index(env_id)?;
     let net_index = TABLE5_NETS.iter().position(|(name, _)| *name == net)?;
     let method_index = TABLE5_METHODS.iter().position(|m| *m == method)?;
-    Some(TABLE5_MEDIAN_STEPS[net_index][method_index][task])
+    Some(TABLE5_MEDIAN_STEPS[method_index][net_index][task])
 }
 
 #[cfg(test)]

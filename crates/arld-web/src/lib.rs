@@ -668,6 +668,21 @@ impl WebExpert {
         })
     }
 
+    /// Shows `status` on the page (and keeps it for a page that connects later).
+    fn publish_status(&self, status: &Status) {
+        let msg = ServerMsg::Status(status).to_json();
+        self.server
+            .shared
+            .publish(msg, |b, m| b.status = Some(m.clone()));
+    }
+
+    /// Shows the status held back by the throttle of updates, if any.
+    fn publish_unsent_status(&mut self) {
+        if let Some(status) = self.unsent.take() {
+            self.publish_status(&status);
+        }
+    }
+
     /// Real time, during a takeover: whether the person handed back since the last step (keys meant for
     /// anything else are dropped: only the held key acts in a running segment).
     fn handed_back_now(&mut self) -> bool {
@@ -687,12 +702,7 @@ impl WebExpert {
         if query.agent_action.is_some() && query.taken_over {
             self.carried = None;
             // What the person saw the agent do is the latest status.
-            if let Some(status) = self.unsent.take() {
-                let msg = ServerMsg::Status(&status).to_json();
-                self.server
-                    .shared
-                    .publish(msg, |b, m| b.status = Some(m.clone()));
-            }
+            self.publish_unsent_status();
         } else if query.agent_action.is_some() {
             // A request to take over made while the agent asks is answered by the question itself.
             self.server.shared.take_takeover();
@@ -717,12 +727,7 @@ impl WebExpert {
             }
             // A segment opens: nothing can be carried over from the last one (it ended with its last step).
             self.carried = None;
-            if let Some(status) = self.unsent.take() {
-                let msg = ServerMsg::Status(&status).to_json();
-                self.server
-                    .shared
-                    .publish(msg, |b, m| b.status = Some(m.clone()));
-            }
+            self.publish_unsent_status();
             self.replay_agent_steps(query)?;
         }
         let answer = match self.server.options.fps {
@@ -900,10 +905,7 @@ impl Expert for WebExpert {
             self.server.shared.push_uncertainty((p.step, u, threshold));
         }
         self.unsent = None;
-        let msg = ServerMsg::Status(&status).to_json();
-        self.server
-            .shared
-            .publish(msg, |b, m| b.status = Some(m.clone()));
+        self.publish_status(&status);
         // The frame shows the state the agent acts in next (a table source needs no observation here: it
         // shows the one of the last question), unless the page is a step ahead, showing the state after the
         // person's next key (carried to the next step).
@@ -917,12 +919,7 @@ impl Expert for WebExpert {
 
     fn handed_over(&mut self, end: &RunEnd, note: &str) {
         // The page's status shows where the run stands (the latest one may wait, throttled).
-        if let Some(status) = self.unsent.take() {
-            let msg = ServerMsg::Status(&status).to_json();
-            self.server
-                .shared
-                .publish(msg, |b, m| b.status = Some(m.clone()));
-        }
+        self.publish_unsent_status();
         let stopped = (self.stop_requested)();
         let outcome = self.end_screen(end);
         let msg = ServerMsg::Handed {

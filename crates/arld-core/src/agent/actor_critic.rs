@@ -1,5 +1,6 @@
-//! What the actor-critic learners for actions in a box (TD3 in `td3.rs`, SAC in `sac.rs`) share: the batch they
-//! learn from ([`BoxBatch`]), what both hold ([`ActorCritic`]: the box, the actor, the critics, the generator and
+//! What the actor-critic learners for actions in a box (TD3 in `td3.rs`, SAC in `sac.rs`) share: the interface a
+//! run drives them through (`ActorCriticLearner`, whose shared methods read the core), the batch they learn from
+//! ([`BoxBatch`]) and what an update measures ([`BoxUpdate`]), what both hold ([`ActorCritic`]: the box, the actor, the critics, the generator and
 //! the per-sample buffers, with the critics' regression towards the clipped double-Q target), the sizes their
 //! networks are built to ([`Sizes`]), the actor with its optimiser and buffers ([`Actor`]), the box itself ([`ActionBox`]: the map between a tanh output in (-1, 1) and an
 //! action), the critic ensemble with its target and optimiser ([`Critics`]: K heads on a shared torso, the
@@ -10,9 +11,79 @@
 //! Every buffer is sized once for the largest batch, so an update allocates nothing.
 
 use rand::Rng;
+use rand_pcg::Pcg64;
 
 use crate::nn::{Adam, Mlp, MlpWorkspace, OutputActivation};
 use crate::state::{Persist, StateDict, StateError};
+
+/// What a run needs of an actor-critic learner of box actions (TD3, SAC): acting, learning from a batch, the
+/// critics' disagreement, its generator, its policy network and its state. A learner gives its own acting,
+/// learning and state beyond the shared [`ActorCritic`]; the rest is read from that core.
+pub(crate) trait ActorCriticLearner: Send {
+    /// The learner's name in a weights file and a snapshot.
+    fn name(&self) -> &'static str;
+    /// The parts every actor-critic learner holds.
+    fn core(&self) -> &ActorCritic<Pcg64>;
+    /// The parts every actor-critic learner holds, to change.
+    fn core_mut(&mut self) -> &mut ActorCritic<Pcg64>;
+    /// The behaviour action at `obs` (with the learner's own exploration), into `action`.
+    fn act(&mut self, obs: &[f32], action: &mut [f32]);
+    /// The test-time action at `obs` (no exploration), into `action`.
+    fn test_action(&mut self, obs: &[f32], action: &mut [f32]);
+    /// One update from `batch`: what it measured and the new priority of each sample.
+    ///
+    /// # Panics
+    /// If the batch is larger than the configured maximum or its vectors disagree in length.
+    fn learn(&mut self, batch: &BoxBatch) -> (BoxUpdate, &[f32]);
+    /// Writes what the learner holds beyond [`Self::core`] under `prefix`.
+    fn save_own<'a>(&'a self, prefix: &str, state: &mut StateDict<'a>);
+    /// Reads what [`Self::save_own`] wrote.
+    fn load_own(&mut self, prefix: &str, state: &StateDict<'_>) -> Result<(), StateError>;
+
+    /// The standard deviation of the critic heads at `(obs, action)` (the uncertainty a query rule can read).
+    /// Draws no random number.
+    fn critic_spread(&mut self, obs: &[f32], action: &[f32]) -> f32 {
+        self.core_mut().critics.spread(obs, action)
+    }
+
+    /// The learner's generator, for a caller's draws in sequence with the learner's own.
+    fn rng(&mut self) -> &mut Pcg64 {
+        &mut self.core_mut().rng
+    }
+
+    /// The policy network a run keeps (TD3: the tanh actor; SAC: the means and log standard deviations of its
+    /// Gaussian).
+    fn actor(&self) -> &Mlp {
+        &self.core().actor.net
+    }
+
+    /// Writes everything that changes while the learner learns and acts: the core ([`ActorCritic`]'s state) and
+    /// the learner's own. Buffers are left out: every use overwrites them.
+    fn save_state<'a>(&'a self, prefix: &str, state: &mut StateDict<'a>) {
+        self.core().save_state(prefix, state);
+        self.save_own(prefix, state);
+    }
+
+    /// Reads what [`Self::save_state`] wrote into a learner of the same configuration.
+    fn load_state(&mut self, prefix: &str, state: &StateDict<'_>) -> Result<(), StateError> {
+        self.core_mut().load_state(prefix, state)?;
+        self.load_own(prefix, state)
+    }
+}
+
+/// What one actor-critic update measured.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct BoxUpdate {
+    /// Mean over the batch and the heads of the weighted squared TD error.
+    pub critic_loss: f32,
+    /// The actor's loss without the cloning term, when the actor moved in this update (TD3: `-mean Q` of its
+    /// actions; SAC: `mean [alpha log pi - min(Q_1, Q_2)]` of its sampled actions).
+    pub actor_loss: Option<f32>,
+    /// SAC: `-mean log pi` of the actor's sampled actions, the policy's entropy estimate.
+    pub entropy: Option<f32>,
+    /// The behaviour cloning term, when the actor moved on a batch with demonstrations and it is on.
+    pub bc: Option<BcStats>,
+}
 
 /// A batch of transitions in a box action space, row-major.
 #[derive(Debug, Clone, Default)]
@@ -462,6 +533,14 @@ impl<R: Rng> ActorCritic<R> {
         self.action_box.dim()
     }
 
+    /// Checks `batch` against the learner's shapes ([`BoxBatch::check`]; the per-sample buffers hold the largest
+    /// batch) and returns its length and the action dimension.
+    pub fn check(&self, batch: &BoxBatch) -> (usize, usize) {
+        let a = self.action_dim();
+        batch.check(self.obs_dim, a, self.priorities.len());
+        (batch.len(), a)
+    }
+
     /// One regression step of the critics ([`Critics::update`]) towards the clipped double-Q target
     /// `r + gamma^n (min(Q'_1, Q'_2)(s', a') - alpha log_probs)` at the next actions `next_actions` (`entropy`
     /// holds `(alpha, log_probs)`; without it the target has no entropy term). Returns the loss; the new
@@ -571,39 +650,31 @@ pub(crate) fn behaviour_cloning(
 /// demonstrations of the scripted swing-up.
 #[cfg(test)]
 pub(crate) mod testing {
-    use super::BoxBatch;
+    use super::{ActorCriticLearner, BoxBatch};
     use crate::env::pendulum::swing_up;
-    use crate::env::{Env, make_continuous};
+    use crate::env::{Env, Outcome, make_continuous};
     use rand::{Rng, SeedableRng};
 
-    /// The part of a box learner's interface the tests drive.
-    pub(crate) trait BoxLearner {
-        fn act(&mut self, obs: &[f32], action: &mut [f32]);
-        fn test_action(&mut self, obs: &[f32], action: &mut [f32]);
-        fn learn_batch(&mut self, batch: &BoxBatch) -> Option<super::BcStats>;
-    }
-
-    impl<R: Rng> BoxLearner for crate::agent::td3::Td3<R> {
-        fn act(&mut self, obs: &[f32], action: &mut [f32]) {
-            self.act(obs, action)
-        }
-        fn test_action(&mut self, obs: &[f32], action: &mut [f32]) {
-            self.test_action(obs, action)
-        }
-        fn learn_batch(&mut self, batch: &BoxBatch) -> Option<super::BcStats> {
-            self.learn(batch).0.bc
-        }
-    }
-
-    impl<R: Rng> BoxLearner for crate::agent::sac::Sac<R> {
-        fn act(&mut self, obs: &[f32], action: &mut [f32]) {
-            self.act(obs, action)
-        }
-        fn test_action(&mut self, obs: &[f32], action: &mut [f32]) {
-            self.test_action(obs, action)
-        }
-        fn learn_batch(&mut self, batch: &BoxBatch) -> Option<super::BcStats> {
-            self.learn(batch).0.bc
+    /// Checks an update's cloning term against the Q-filter computed by the test (`filter`: whether each sample
+    /// passes it): with the term on (`bc_weight > 0`), some but not all demonstrated samples pass and the update
+    /// counted the same; with it off, the update reports no term.
+    pub(crate) fn check_filter_counts(
+        bc_weight: f32,
+        is_demo: &[bool],
+        filter: &[bool],
+        bc: Option<super::BcStats>,
+    ) {
+        if bc_weight > 0.0 {
+            let cloned = filter.iter().filter(|&&f| f).count();
+            let demos = is_demo.iter().filter(|&&d| d).count();
+            assert!(
+                cloned > 0 && cloned < demos,
+                "the filter passed {cloned} of {demos}"
+            );
+            let bc = bc.expect("the update reports the cloning term");
+            assert_eq!((bc.cloned, bc.demos), (cloned, demos));
+        } else {
+            assert!(bc.is_none());
         }
     }
 
@@ -618,6 +689,16 @@ pub(crate) mod testing {
     }
 
     impl Transitions {
+        /// Adds the transition from `obs` by `action` to `next_obs` with `out`'s reward (discount 0.99, 0 at a
+        /// terminal state).
+        fn push(&mut self, obs: Vec<f32>, action: Vec<f32>, out: &Outcome, next_obs: &[f32]) {
+            self.obs.push(obs);
+            self.actions.push(action);
+            self.rewards.push(out.reward as f32);
+            self.next_obs.push(next_obs.to_vec());
+            self.discounts.push(if out.terminated { 0.0 } else { 0.99 });
+        }
+
         /// Fills `batch` with `size` samples drawn uniformly by `draw`, flagged `demo`.
         pub fn sample(&self, draw: &mut impl Rng, size: usize, demo: bool, batch: &mut BoxBatch) {
             batch.obs.clear();
@@ -642,7 +723,7 @@ pub(crate) mod testing {
 
     /// The mean return of the greedy policy on Pendulum-v1 over the episodes of `seeds`.
     pub(crate) fn evaluate_pendulum(
-        agent: &mut impl BoxLearner,
+        agent: &mut impl ActorCriticLearner,
         seeds: std::ops::Range<u64>,
     ) -> f64 {
         let mut env = make_continuous("Pendulum-v1").unwrap();
@@ -666,7 +747,11 @@ pub(crate) mod testing {
 
     /// Trains on Pendulum-v1 (seed 0) for `steps` steps, the first 1,000 uniformly random, one update of a
     /// uniform batch of `batch_size` one-step transitions (gamma 0.99) a step after those.
-    pub(crate) fn train_pendulum(agent: &mut impl BoxLearner, steps: usize, batch_size: usize) {
+    pub(crate) fn train_pendulum(
+        agent: &mut impl ActorCriticLearner,
+        steps: usize,
+        batch_size: usize,
+    ) {
         let mut env = make_continuous("Pendulum-v1").unwrap();
         let mut draw = rand_pcg::Pcg64::seed_from_u64(1);
         let mut replay = Transitions::default();
@@ -682,19 +767,13 @@ pub(crate) mod testing {
             }
             let before = obs.clone();
             let out = env.step_into(&action, &mut obs).unwrap();
-            replay.obs.push(before);
-            replay.actions.push(action.clone());
-            replay.rewards.push(out.reward as f32);
-            replay.next_obs.push(obs.clone());
-            replay
-                .discounts
-                .push(if out.terminated { 0.0 } else { 0.99 });
+            replay.push(before, action.clone(), &out, &obs);
             if out.terminated || out.truncated {
                 env.reset_into(None, &mut obs);
             }
             if step >= 1_000 {
                 replay.sample(&mut draw, batch_size, false, &mut batch);
-                agent.learn_batch(&batch);
+                agent.learn(&batch);
             }
         }
     }
@@ -710,13 +789,7 @@ pub(crate) mod testing {
                 let action = swing_up(&obs).to_vec();
                 let before = obs.clone();
                 let out = env.step_into(&action, &mut obs).unwrap();
-                demos.obs.push(before);
-                demos.actions.push(action);
-                demos.rewards.push(out.reward as f32);
-                demos.next_obs.push(obs.clone());
-                demos
-                    .discounts
-                    .push(if out.terminated { 0.0 } else { 0.99 });
+                demos.push(before, action, &out, &obs);
                 if out.terminated || out.truncated {
                     break;
                 }
@@ -726,7 +799,7 @@ pub(crate) mod testing {
     }
 
     /// The mean absolute difference between the learner's test action and the demonstrated action over `demos`.
-    pub(crate) fn imitation_error(agent: &mut impl BoxLearner, demos: &Transitions) -> f64 {
+    pub(crate) fn imitation_error(agent: &mut impl ActorCriticLearner, demos: &Transitions) -> f64 {
         let mut action = vec![0.0; 1];
         let mut total = 0.0f64;
         for (obs, expert) in demos.obs.iter().zip(&demos.actions) {
@@ -752,7 +825,11 @@ pub(crate) mod testing {
     /// Pre-trains `agent` with `updates` updates on batches of 128 demonstrated transitions of the swing-up on
     /// seeds 0-9; returns the mean |pi(s) - a_E| on those states and on seeds 100-102 it never saw, and the
     /// best constant action's on each.
-    pub(crate) fn pretrain(agent: &mut impl BoxLearner, updates: usize, name: &str) -> [f64; 4] {
+    pub(crate) fn pretrain(
+        agent: &mut impl ActorCriticLearner,
+        updates: usize,
+        name: &str,
+    ) -> [f64; 4] {
         let demos = swing_up_demonstrations(0..10);
         let unseen = swing_up_demonstrations(100..103);
         let before = imitation_error(agent, &demos);
@@ -761,7 +838,7 @@ pub(crate) mod testing {
         let (mut cloned, mut demos_seen) = (0, 0);
         for _ in 0..updates {
             demos.sample(&mut draw, 128, true, &mut batch);
-            if let Some(bc) = agent.learn_batch(&batch) {
+            if let Some(bc) = agent.learn(&batch).0.bc {
                 cloned += bc.cloned;
                 demos_seen += bc.demos;
             }
@@ -781,7 +858,11 @@ pub(crate) mod testing {
 
     /// Pre-trains `agent` ([`pretrain`]) and checks that its test actions then follow the demonstrator, on the
     /// demonstrated states and on unseen episodes, with at most half the error of the best constant action.
-    pub(crate) fn pretraining_imitates(agent: &mut impl BoxLearner, updates: usize, name: &str) {
+    pub(crate) fn pretraining_imitates(
+        agent: &mut impl ActorCriticLearner,
+        updates: usize,
+        name: &str,
+    ) {
         let [seen, held_out, constant, constant_unseen] = pretrain(agent, updates, name);
         assert!(
             seen < 0.5 * constant && held_out < 0.5 * constant_unseen,

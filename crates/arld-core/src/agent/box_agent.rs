@@ -1,5 +1,5 @@
 //! The actor-critic family behind the [`Learner`] interface: [`BoxAgent`] acts and learns in a box of float32
-//! actions with any [`ActorCriticLearner`] learner (TD3, [`super::td3`]; SAC, [`super::sac`]), from the same replay
+//! actions with any `ActorCriticLearner` learner (TD3, [`super::td3`]; SAC, [`super::sac`]), from the same replay
 //! batches, schedules and snapshots as the DQN family.
 //!
 //! - Acting: at ε = 1 (a run acting at random before learning starts) a uniform draw from the box, otherwise
@@ -13,7 +13,7 @@
 //!   bootstrap cut); demonstrated samples are flagged for the cloning loss. The priorities are the absolute TD
 //!   errors of the first critic head.
 
-use super::actor_critic::BoxBatch;
+use super::actor_critic::{ActorCriticLearner, BoxBatch};
 use super::sac::{Sac, SacConfig};
 use super::td3::{Td3, Td3Config};
 use super::{Learner, UpdateStats};
@@ -28,76 +28,7 @@ use safetensors::{Dtype, tensor::TensorView};
 use std::collections::{BTreeMap, HashMap};
 use std::path::Path;
 
-/// What a run needs of an actor-critic learner of box actions: acting, learning from a batch, the critics'
-/// disagreement, its generator, its policy network and its state.
-pub trait ActorCriticLearner: Persist + Send {
-    /// The behaviour action at `obs` (with the learner's own exploration), into `action`.
-    fn act(&mut self, obs: &[f32], action: &mut [f32]);
-    /// The test-time action at `obs` (no exploration), into `action`.
-    fn test_action(&mut self, obs: &[f32], action: &mut [f32]);
-    /// The standard deviation of the critic heads at `(obs, action)`. Draws no random number.
-    fn critic_spread(&mut self, obs: &[f32], action: &[f32]) -> f32;
-    /// One update: the critics' loss and the new priority of each sample.
-    fn learn(&mut self, batch: &BoxBatch) -> (f32, &[f32]);
-    /// The learner's generator.
-    fn rng(&mut self) -> &mut Pcg64;
-    /// The policy network a run keeps.
-    fn actor(&self) -> &Mlp;
-    /// The learner's name in a weights file.
-    fn name(&self) -> &'static str;
-}
-
-impl ActorCriticLearner for Td3<Pcg64> {
-    fn act(&mut self, obs: &[f32], action: &mut [f32]) {
-        Td3::act(self, obs, action);
-    }
-    fn test_action(&mut self, obs: &[f32], action: &mut [f32]) {
-        Td3::test_action(self, obs, action);
-    }
-    fn critic_spread(&mut self, obs: &[f32], action: &[f32]) -> f32 {
-        Td3::critic_spread(self, obs, action)
-    }
-    fn learn(&mut self, batch: &BoxBatch) -> (f32, &[f32]) {
-        let (stats, priorities) = Td3::learn(self, batch);
-        (stats.critic_loss, priorities)
-    }
-    fn rng(&mut self) -> &mut Pcg64 {
-        Td3::rng(self)
-    }
-    fn actor(&self) -> &Mlp {
-        Td3::actor(self)
-    }
-    fn name(&self) -> &'static str {
-        "td3"
-    }
-}
-
-impl ActorCriticLearner for Sac<Pcg64> {
-    fn act(&mut self, obs: &[f32], action: &mut [f32]) {
-        Sac::act(self, obs, action);
-    }
-    fn test_action(&mut self, obs: &[f32], action: &mut [f32]) {
-        Sac::test_action(self, obs, action);
-    }
-    fn critic_spread(&mut self, obs: &[f32], action: &[f32]) -> f32 {
-        Sac::critic_spread(self, obs, action)
-    }
-    fn learn(&mut self, batch: &BoxBatch) -> (f32, &[f32]) {
-        let (stats, priorities) = Sac::learn(self, batch);
-        (stats.critic_loss, priorities)
-    }
-    fn rng(&mut self) -> &mut Pcg64 {
-        Sac::rng(self)
-    }
-    fn actor(&self) -> &Mlp {
-        Sac::actor(self)
-    }
-    fn name(&self) -> &'static str {
-        "sac"
-    }
-}
-
-/// A learner of actions in a box: an [`ActorCriticLearner`] learner behind [`Learner`].
+/// A learner of actions in a box: an `ActorCriticLearner` learner behind [`Learner`].
 pub struct BoxAgent {
     learner: Box<dyn ActorCriticLearner>,
     obs_dim: usize,
@@ -108,32 +39,37 @@ pub struct BoxAgent {
     batch: BoxBatch,
 }
 
-impl BoxAgent {
-    /// TD3 with `config` for observations of `obs_dim` numbers and actions in `[low, high]`, discounting by
-    /// `gamma`, its weights and every later draw from `seed`.
-    pub fn new(
-        config: Td3Config,
-        obs_dim: usize,
-        low: &[f32],
-        high: &[f32],
-        gamma: f32,
-        seed: u64,
-    ) -> Self {
-        let td3 = Td3::new(config, obs_dim, low, high, Pcg64::seed_from_u64(seed));
-        Self::with_learner(Box::new(td3), obs_dim, low, high, gamma)
-    }
+/// Which actor-critic learner a [`BoxAgent`] holds, with its settings.
+#[derive(Debug, Clone, PartialEq)]
+pub enum BoxLearnerConfig {
+    Td3(Td3Config),
+    Sac(SacConfig),
+}
 
-    /// SAC with `config`, otherwise as [`BoxAgent::new`].
-    pub fn sac(
-        config: SacConfig,
+impl BoxAgent {
+    /// The learner of `config` for observations of `obs_dim` numbers and actions in `[low, high]`, discounting
+    /// by `gamma`, its weights and every later draw from `seed`.
+    pub fn new(
+        config: BoxLearnerConfig,
         obs_dim: usize,
         low: &[f32],
         high: &[f32],
         gamma: f32,
         seed: u64,
     ) -> Self {
-        let sac = Sac::new(config, obs_dim, low, high, Pcg64::seed_from_u64(seed));
-        Self::with_learner(Box::new(sac), obs_dim, low, high, gamma)
+        let rng = Pcg64::seed_from_u64(seed);
+        let learner: Box<dyn ActorCriticLearner> = match config {
+            BoxLearnerConfig::Td3(config) => Box::new(Td3::new(config, obs_dim, low, high, rng)),
+            BoxLearnerConfig::Sac(config) => Box::new(Sac::new(config, obs_dim, low, high, rng)),
+        };
+        BoxAgent {
+            learner,
+            obs_dim,
+            low: low.to_vec(),
+            high: high.to_vec(),
+            gamma,
+            batch: BoxBatch::default(),
+        }
     }
 
     /// The policy network of the learner inside (TD3: the tanh actor; SAC: the means and log standard
@@ -145,23 +81,6 @@ impl BoxAgent {
     /// The learner inside: `td3` or `sac`.
     pub fn learner_name(&self) -> &'static str {
         self.learner.name()
-    }
-
-    fn with_learner(
-        learner: Box<dyn ActorCriticLearner>,
-        obs_dim: usize,
-        low: &[f32],
-        high: &[f32],
-        gamma: f32,
-    ) -> Self {
-        BoxAgent {
-            learner,
-            obs_dim,
-            low: low.to_vec(),
-            high: high.to_vec(),
-            gamma,
-            batch: BoxBatch::default(),
-        }
     }
 }
 
@@ -211,9 +130,9 @@ impl Learner for BoxAgent {
             b.next_obs.clone_from(&batch.nstep_next_obs);
             b.discounts.clone_from(&batch.nstep_discounts);
         }
-        let (critic_loss, priorities) = self.learner.learn(&self.batch);
+        let (update, priorities) = self.learner.learn(&self.batch);
         let stats = UpdateStats {
-            td_loss: critic_loss,
+            td_loss: update.critic_loss,
             margin_loss: 0.0,
             nstep_loss: 0.0,
             grad_norm: 0.0,
@@ -283,11 +202,21 @@ mod tests {
     use crate::replay::{Replay, ReplayConfig, Transition};
     use crate::train::eval::Evaluator;
 
-    fn agent(seed: u64) -> BoxAgent {
-        let config = Td3Config {
-            hidden: vec![64, 64],
-            max_batch: 128,
-            ..Td3Config::default()
+    /// A learner for Pendulum-v1 from `seed` with 64-64 networks and batches of 128: TD3, or SAC when `sac`.
+    fn pendulum_agent(sac: bool, seed: u64) -> BoxAgent {
+        let (hidden, max_batch) = (vec![64, 64], 128);
+        let config = if sac {
+            BoxLearnerConfig::Sac(SacConfig {
+                hidden,
+                max_batch,
+                ..SacConfig::default()
+            })
+        } else {
+            BoxLearnerConfig::Td3(Td3Config {
+                hidden,
+                max_batch,
+                ..Td3Config::default()
+            })
         };
         BoxAgent::new(config, 3, &[-2.0], &[2.0], 0.99, seed)
     }
@@ -342,7 +271,7 @@ mod tests {
 
     #[test]
     fn learns_pendulum_from_a_prioritized_n_step_replay_of_box_actions() {
-        let mut learner = agent(0);
+        let mut learner = pendulum_agent(false, 0);
         let mut memory = replay();
         train(&mut learner, &mut memory, 0..12_000);
         let envs: Vec<Box<dyn Env<Vec<f32>>>> = (0..10)
@@ -354,24 +283,15 @@ mod tests {
         assert!(score > -250.0, "TD3 did not learn Pendulum-v1: {score}");
     }
 
-    fn sac_agent(seed: u64) -> BoxAgent {
-        let config = SacConfig {
-            hidden: vec![64, 64],
-            max_batch: 128,
-            ..SacConfig::default()
-        };
-        BoxAgent::sac(config, 3, &[-2.0], &[2.0], 0.99, seed)
-    }
-
     #[test]
     fn a_snapshot_continues_to_the_same_bytes() {
         // Two learners act and learn 1,200 steps; one is saved at step 1,100 and loaded into a third, fresh
         // learner built from another seed. The third and the first must then be equal to the last bit; for TD3
         // and for SAC.
-        for (make, name) in [(agent as fn(u64) -> BoxAgent, "td3"), (sac_agent, "sac")] {
-            let (mut a, mut memory_a) = (make(3), replay());
+        for (sac, name) in [(false, "td3"), (true, "sac")] {
+            let (mut a, mut memory_a) = (pendulum_agent(sac, 3), replay());
             train(&mut a, &mut memory_a, 0..1_100);
-            let mut b = make(99);
+            let mut b = pendulum_agent(sac, 99);
             {
                 let mut state = StateDict::default();
                 a.save_state("agent", &mut state);

@@ -9,7 +9,7 @@
 //! term computed as `2 (u + softplus(-2u) - log 2)` so that it stays finite where `tanh(u)` rounds to ±1.
 //!
 //! The critics are the ensemble of `actor_critic.rs` (K heads on a shared torso; the soft target takes the first
-//! two, and their spread is an uncertainty). One update ([`Sac::learn`]), in the order of the paper's algorithm:
+//! two, and their spread is an uncertainty). One update (`learn`), in the order of the paper's algorithm:
 //! - critics: regress every head on `y = r + gamma^n (min(Q'_1, Q'_2)(s', a') - alpha log pi(a'|s'))`, `a' ~
 //!   pi(s')`, weighted by the replay's importance weights; the priority is the first head's absolute TD error
 //!   (plus the demonstration bonus on demonstrated samples);
@@ -24,11 +24,11 @@
 use rand::Rng;
 use rand_distr::StandardNormal;
 
-use super::actor_critic::{ActionBox, ActorCritic, Net, Sizes};
+use super::actor_critic::{ActionBox, ActorCritic, ActorCriticLearner, BoxUpdate, Net, Sizes};
 pub use super::actor_critic::{BcStats, BoxBatch};
-use crate::nn::{Adam, Mlp, OutputActivation};
+use crate::nn::{Adam, OutputActivation};
 use crate::state::{Persist, StateDict, StateError};
-use serde::{Serialize, de::DeserializeOwned};
+use rand_pcg::Pcg64;
 
 /// The clip of the actor's log standard deviation (the authors' code).
 pub const LOG_STD_MIN: f32 = -20.0;
@@ -54,7 +54,7 @@ pub struct SacConfig {
     pub initial_alpha: f32,
     /// The entropy the temperature steers towards; `None` for the paper's `-dim(A)`.
     pub target_entropy: Option<f32>,
-    /// The largest batch [`Sac::learn`] accepts.
+    /// The largest batch an update (`learn`) accepts.
     pub max_batch: usize,
     /// Weight of the behaviour cloning loss on demonstrated samples (with the Q-filter; 0 turns it off).
     pub bc_weight: f32,
@@ -83,21 +83,6 @@ impl Default for SacConfig {
             demo_priority_bonus: 0.0,
         }
     }
-}
-
-/// What one update measured.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct SacStats {
-    /// Mean over the batch and the heads of the weighted squared TD error.
-    pub critic_loss: f32,
-    /// `mean [alpha log pi - min(Q_1, Q_2)]` of the actor's sampled actions (without the cloning term).
-    pub actor_loss: f32,
-    /// The temperature this update used.
-    pub alpha: f32,
-    /// `-mean log pi` of the actor's sampled actions: the policy's entropy estimate.
-    pub entropy: f32,
-    /// The behaviour cloning term, when the batch has demonstrations and it is on.
-    pub bc: Option<BcStats>,
 }
 
 /// The SAC learner: actor, critics, the critics' target, the temperature, their optimisers and the buffers of
@@ -199,50 +184,15 @@ impl<R: Rng> Sac<R> {
         }
     }
 
-    /// Action dimension.
-    pub fn action_dim(&self) -> usize {
-        self.ac.action_dim()
-    }
-
-    /// Number of updates so far.
-    pub fn updates(&self) -> u64 {
-        self.ac.updates
-    }
-
     /// The entropy temperature `alpha`.
     pub fn alpha(&self) -> f32 {
         self.log_alpha.exp()
     }
 
-    /// The test-time action at `obs`: `tanh(mu)` scaled to the box.
-    pub fn test_action(&mut self, obs: &[f32], action: &mut [f32]) {
-        let a = self.action_dim();
-        let out = self.ac.actor.forward(obs, 1);
-        for (v, mu) in action.iter_mut().zip(&out[..a]) {
-            *v = mu.tanh();
-        }
-        self.ac.action_box.to_box(action);
-    }
-
-    /// The behaviour action at `obs`: a sample of the policy.
-    pub fn act(&mut self, obs: &[f32], action: &mut [f32]) {
-        let a = self.action_dim();
-        self.actor_outputs(obs, 1);
-        self.draw_noise(a);
-        self.sample_policy(1);
-        action.copy_from_slice(&self.actions[..a]);
-    }
-
-    /// The critics' disagreement at `(obs, action)`: the standard deviation of the heads' values (the
-    /// uncertainty a query rule can read). Draws no random number.
-    pub fn critic_spread(&mut self, obs: &[f32], action: &[f32]) -> f32 {
-        self.ac.critics.spread(obs, action)
-    }
-
     /// The critics' disagreement about the best action near the test action at `obs`, in half-widths of the box
     /// (see `Critics::argmax_disagreement`; 0 when every head prefers the same probe). Draws no random number.
     pub fn action_disagreement(&mut self, obs: &[f32]) -> f32 {
-        let a = self.action_dim();
+        let a = self.ac.action_dim();
         let out = self.ac.actor.forward(obs, 1);
         for (y, mu) in self.y_mean[..a].iter_mut().zip(&out[..a]) {
             *y = mu.tanh();
@@ -261,7 +211,7 @@ impl<R: Rng> Sac<R> {
 
     /// The actor's outputs at `n` rows of `obs`, into `self.out` (the pass stays in the actor's workspace).
     fn actor_outputs(&mut self, obs: &[f32], n: usize) {
-        let a = self.action_dim();
+        let a = self.ac.action_dim();
         let out = self.ac.actor.forward(obs, n);
         self.out[..2 * n * a].copy_from_slice(out);
     }
@@ -269,7 +219,7 @@ impl<R: Rng> Sac<R> {
     /// Samples the policy ([`squash`]) at the first `n` rows of `self.out` with the noise in `self.noise`, into
     /// `self.y`, `self.actions` and `self.log_probs`.
     fn sample_policy(&mut self, n: usize) {
-        let a = self.action_dim();
+        let a = self.ac.action_dim();
         squash(
             &self.out[..2 * n * a],
             &self.noise[..n * a],
@@ -278,50 +228,6 @@ impl<R: Rng> Sac<R> {
             &mut self.actions[..n * a],
             &mut self.log_probs[..n],
         );
-    }
-
-    /// One update from `batch` (critics, actor, temperature, target). Returns what it measured and the new
-    /// priority of each sample.
-    ///
-    /// # Panics
-    /// If the batch is larger than the configured maximum or its vectors disagree in length.
-    pub fn learn(&mut self, batch: &BoxBatch) -> (SacStats, &[f32]) {
-        let n = batch.len();
-        let a = self.action_dim();
-        batch.check(self.ac.obs_dim, a, self.config.max_batch);
-        let alpha = self.alpha();
-
-        // The soft target: r + gamma^n (min(Q'_1, Q'_2)(s', a') - alpha log pi(a'|s')), a' ~ pi(s').
-        self.actor_outputs(&batch.next_obs, n);
-        self.draw_noise(n * a);
-        self.sample_policy(n);
-        let critic_loss = self.ac.critic_step(
-            batch,
-            &self.actions[..n * a],
-            Some((alpha, &self.log_probs[..n])),
-            self.config.demo_priority_bonus,
-        );
-
-        // The actor, on fresh samples at the batch's states.
-        self.draw_noise(n * a);
-        let (actor_loss, bc) = self.actor_gradient(batch, alpha);
-        self.ac.actor.step();
-
-        // The temperature, from the same samples' log-probabilities.
-        let (entropy, d_log_alpha) = self.temperature_gradient(n);
-        self.alpha_opt
-            .step_parameters(std::slice::from_mut(&mut self.log_alpha), &[d_log_alpha]);
-
-        self.ac.critics.soft_update(self.config.tau);
-        self.ac.updates += 1;
-        let stats = SacStats {
-            critic_loss,
-            actor_loss,
-            alpha,
-            entropy,
-            bc,
-        };
-        (stats, &self.ac.priorities[..n])
     }
 
     /// The entropy estimate `-mean log pi` of the last actor step's `n` samples and the temperature loss's
@@ -338,7 +244,7 @@ impl<R: Rng> Sac<R> {
     /// term's measures; leaves the samples' log-probabilities in `self.log_probs`.
     fn actor_gradient(&mut self, batch: &BoxBatch, alpha: f32) -> (f32, Option<BcStats>) {
         let n = batch.len();
-        let (d, a, k) = (self.ac.obs_dim, self.action_dim(), self.config.heads);
+        let (d, a, k) = (self.ac.obs_dim, self.ac.action_dim(), self.config.heads);
         let pair_min = |q: &[f32], r: usize| q[r * k].min(q[r * k + 1]);
         let cloning = self.config.bc_weight > 0.0 && batch.has_demos();
         let filtering = cloning && self.config.q_filter;
@@ -423,34 +329,86 @@ impl<R: Rng> Sac<R> {
     }
 }
 
-impl<R: Rng> Sac<R> {
-    /// The learner's generator, for a caller's draws in sequence with the learner's own.
-    pub fn rng(&mut self) -> &mut R {
-        &mut self.ac.rng
+impl ActorCriticLearner for Sac<Pcg64> {
+    fn name(&self) -> &'static str {
+        "sac"
     }
 
-    /// The actor network (the policy: the mean and log standard deviation of each action dimension).
-    pub fn actor(&self) -> &Mlp {
-        &self.ac.actor.net
+    /// The behaviour action at `obs`: a sample of the policy.
+    fn act(&mut self, obs: &[f32], action: &mut [f32]) {
+        let a = self.ac.action_dim();
+        self.actor_outputs(obs, 1);
+        self.draw_noise(a);
+        self.sample_policy(1);
+        action.copy_from_slice(&self.actions[..a]);
     }
-}
 
-impl<R: Rng + Serialize + DeserializeOwned> Persist for Sac<R> {
-    /// Writes everything that changes while SAC learns and acts: the actor, the critics with their target and
-    /// optimisers, the temperature and its optimiser, the generator and the update count.
-    fn save_state<'a>(&'a self, prefix: &str, state: &mut StateDict<'a>) {
-        self.ac.save_state(prefix, state);
+    /// The test-time action at `obs`: `tanh(mu)` scaled to the box.
+    fn test_action(&mut self, obs: &[f32], action: &mut [f32]) {
+        let a = self.ac.action_dim();
+        let out = self.ac.actor.forward(obs, 1);
+        for (v, mu) in action.iter_mut().zip(&out[..a]) {
+            *v = mu.tanh();
+        }
+        self.ac.action_box.to_box(action);
+    }
+
+    /// One update from `batch`: critics, actor, temperature, target.
+    fn learn(&mut self, batch: &BoxBatch) -> (BoxUpdate, &[f32]) {
+        let (n, a) = self.ac.check(batch);
+        let alpha = self.alpha();
+
+        // The soft target: r + gamma^n (min(Q'_1, Q'_2)(s', a') - alpha log pi(a'|s')), a' ~ pi(s').
+        self.actor_outputs(&batch.next_obs, n);
+        self.draw_noise(n * a);
+        self.sample_policy(n);
+        let critic_loss = self.ac.critic_step(
+            batch,
+            &self.actions[..n * a],
+            Some((alpha, &self.log_probs[..n])),
+            self.config.demo_priority_bonus,
+        );
+
+        // The actor, on fresh samples at the batch's states.
+        self.draw_noise(n * a);
+        let (actor_loss, bc) = self.actor_gradient(batch, alpha);
+        self.ac.actor.step();
+
+        // The temperature, from the same samples' log-probabilities.
+        let (entropy, d_log_alpha) = self.temperature_gradient(n);
+        self.alpha_opt
+            .step_parameters(std::slice::from_mut(&mut self.log_alpha), &[d_log_alpha]);
+
+        self.ac.critics.soft_update(self.config.tau);
+        self.ac.updates += 1;
+        let stats = BoxUpdate {
+            critic_loss,
+            actor_loss: Some(actor_loss),
+            entropy: Some(entropy),
+            bc,
+        };
+        (stats, &self.ac.priorities[..n])
+    }
+
+    /// Writes the temperature and its optimiser (the core holds the rest).
+    fn save_own<'a>(&'a self, prefix: &str, state: &mut StateDict<'a>) {
         state.put_value(&format!("{prefix}.log_alpha"), &self.log_alpha);
         self.alpha_opt
             .save_state(&format!("{prefix}.alpha_adam"), state);
     }
 
-    /// Reads what [`Sac::save_state`] wrote into a learner of the same configuration.
-    fn load_state(&mut self, prefix: &str, state: &StateDict<'_>) -> Result<(), StateError> {
-        self.ac.load_state(prefix, state)?;
+    fn load_own(&mut self, prefix: &str, state: &StateDict<'_>) -> Result<(), StateError> {
         self.log_alpha = state.value(&format!("{prefix}.log_alpha"))?;
         self.alpha_opt
             .load_state(&format!("{prefix}.alpha_adam"), state)
+    }
+
+    fn core(&self) -> &ActorCritic<Pcg64> {
+        &self.ac
+    }
+
+    fn core_mut(&mut self) -> &mut ActorCritic<Pcg64> {
+        &mut self.ac
     }
 }
 
@@ -458,7 +416,7 @@ impl<R: Rng + Serialize + DeserializeOwned> Persist for Sac<R> {
 mod tests {
     use super::*;
     use crate::agent::actor_critic::testing::{
-        evaluate_pendulum, pretraining_imitates, train_pendulum,
+        check_filter_counts, evaluate_pendulum, pretraining_imitates, train_pendulum,
     };
     use crate::nn::MlpWorkspace;
     use rand::SeedableRng;
@@ -555,16 +513,7 @@ mod tests {
                         > pair_min(&agent, state, &test)
             })
             .collect();
-        let cloned = filter.iter().filter(|&&f| f).count();
-        if bc_weight > 0.0 {
-            let demos = is_demo.iter().filter(|&&d| d).count();
-            assert!(
-                cloned > 0 && cloned < demos,
-                "the filter passed {cloned} of {demos}"
-            );
-            let bc = bc.unwrap();
-            assert_eq!((bc.cloned, bc.demos), (cloned, demos));
-        }
+        check_filter_counts(bc_weight, is_demo, &filter, bc);
         let half = [2.0f64, 0.25];
         let low = [-1.0f64, 0.0];
         let loss = |agent: &Sac<Pcg>| -> f64 {
@@ -688,10 +637,11 @@ mod tests {
                     &[true, false, true, false, false, true, true, false],
                     step,
                 );
+                let alpha = agent.alpha();
                 let (stats, priorities) = agent.learn(&batch);
                 trace.extend(priorities.iter().map(|p| p.to_bits()));
                 trace.push(stats.critic_loss.to_bits());
-                trace.push(stats.alpha.to_bits());
+                trace.push(alpha.to_bits());
                 agent.act(&[0.1, -0.2], &mut action);
                 trace.extend(action.map(f32::to_bits));
                 trace.push(agent.critic_spread(&[0.1, -0.2], &action).to_bits());

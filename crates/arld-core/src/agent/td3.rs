@@ -5,12 +5,12 @@
 //!
 //! The critics are `heads` outputs of one network on a shared torso, `Q(s, a) -> [Q_1 .. Q_K]`: with two heads it
 //! is TD3's pair, and more heads give the ensemble whose disagreement is an uncertainty signal
-//! ([`Td3::critic_spread`]). The target takes the minimum over the first two heads. The actor `pi(s)` is a tanh
+//! (`critic_spread`). The target takes the minimum over the first two heads. The actor `pi(s)` is a tanh
 //! network scaled to the box. Every parameter lives in an [`Mlp`]; every random draw (initial weights,
 //! exploration noise, target smoothing) comes from the generator the learner was built with.
 //!
 //! A batch ([`BoxBatch`]) carries n-step transitions with their discount `gamma^n` (0 at a terminal state), and
-//! per-sample importance weights for a prioritized replay; [`Td3::learn`] returns the new priorities (the
+//! per-sample importance weights for a prioritized replay; `learn` returns the new priorities (the
 //! absolute TD errors of the first head, plus `demo_priority_bonus` on demonstrated samples). On demonstrated
 //! samples the actor's loss gains the behaviour cloning term of Nair et al. 2018, with or without their Q-filter
 //! (`bc_weight`, `q_filter`; docs/algorithm.md §17). The critics, the batch and the box map are shared with SAC
@@ -19,11 +19,11 @@
 use rand::Rng;
 use rand_distr::StandardNormal;
 
-use super::actor_critic::{ActionBox, ActorCritic, Net, Sizes};
+use super::actor_critic::{ActionBox, ActorCritic, ActorCriticLearner, BoxUpdate, Net, Sizes};
 pub use super::actor_critic::{BcStats, BoxBatch};
 use crate::nn::{Mlp, OutputActivation};
 use crate::state::{Persist, StateDict, StateError};
-use serde::{Serialize, de::DeserializeOwned};
+use rand_pcg::Pcg64;
 
 /// TD3's settings (the paper's defaults where it has them).
 #[derive(Debug, Clone, PartialEq)]
@@ -43,7 +43,7 @@ pub struct Td3Config {
     pub noise_clip: f32,
     /// Standard deviation of the exploration noise, as a fraction of the box's half-width.
     pub exploration_noise: f32,
-    /// The largest batch [`Td3::learn`] accepts.
+    /// The largest batch an update (`learn`) accepts.
     pub max_batch: usize,
     /// Weight of the behaviour cloning loss on demonstrated samples (with the Q-filter; 0 turns it off).
     pub bc_weight: f32,
@@ -73,17 +73,6 @@ impl Default for Td3Config {
             demo_priority_bonus: 0.0,
         }
     }
-}
-
-/// What one update measured.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct Td3Stats {
-    /// Mean over the batch and the heads of the weighted squared TD error.
-    pub critic_loss: f32,
-    /// `-mean Q` of the actor's actions, when the actor moved in this update.
-    pub actor_loss: Option<f32>,
-    /// The behaviour cloning term, when the actor moved on a batch with demonstrations and it is on.
-    pub bc: Option<BcStats>,
 }
 
 /// The TD3 learner: actor, critics, their targets and optimisers, and the buffers of an update.
@@ -131,98 +120,15 @@ impl<R: Rng> Td3<R> {
         }
     }
 
-    /// Action dimension.
-    pub fn action_dim(&self) -> usize {
-        self.ac.action_dim()
-    }
-
-    /// Number of critic updates so far.
-    pub fn updates(&self) -> u64 {
-        self.ac.updates
-    }
-
-    /// The test-time action at `obs`: the actor's, without noise.
-    pub fn test_action(&mut self, obs: &[f32], action: &mut [f32]) {
-        let y = self.ac.actor.forward(obs, 1);
-        action.copy_from_slice(y);
-        self.ac.action_box.to_box(action);
-    }
-
-    /// The behaviour action at `obs`: the actor's plus Gaussian exploration noise, clipped to the box.
-    pub fn act(&mut self, obs: &[f32], action: &mut [f32]) {
-        self.test_action(obs, action);
-        let b = &self.ac.action_box;
-        for (d, a) in action.iter_mut().enumerate() {
-            let z: f32 = self.ac.rng.sample(StandardNormal);
-            let noisy = *a + z * self.config.exploration_noise * b.half[d];
-            *a = noisy.clamp(b.low[d], b.high[d]);
-        }
-    }
-
-    /// The critics' disagreement at `(obs, action)`: the standard deviation of the heads' values (the
-    /// uncertainty a query rule can read). Draws no random number.
-    pub fn critic_spread(&mut self, obs: &[f32], action: &[f32]) -> f32 {
-        self.ac.critics.spread(obs, action)
-    }
-
     /// The critics' disagreement about the best action near the actor's at `obs`, in half-widths of the box
     /// (see `Critics::argmax_disagreement`; 0 when every head prefers the same probe). Draws no random number.
     pub fn action_disagreement(&mut self, obs: &[f32]) -> f32 {
-        let a = self.action_dim();
+        let a = self.ac.action_dim();
         let y = self.ac.actor.forward(obs, 1);
         self.y[..a].copy_from_slice(y);
         self.ac
             .critics
             .argmax_disagreement(obs, &self.y[..a], &self.ac.action_box)
-    }
-
-    /// One update from `batch`: the critics always, the actor and the targets every `policy_delay` updates.
-    /// Returns what it measured and the new priority of each sample.
-    ///
-    /// # Panics
-    /// If the batch is larger than the configured maximum or its vectors disagree in length.
-    pub fn learn(&mut self, batch: &BoxBatch) -> (Td3Stats, &[f32]) {
-        let n = batch.len();
-        let a = self.action_dim();
-        batch.check(self.ac.obs_dim, a, self.config.max_batch);
-
-        // The target: r + gamma^n * min(Q'_1, Q'_2)(s', pi'(s') + clipped noise).
-        let y = self
-            .actor_target
-            .forward(&batch.next_obs, n, &mut self.ac.actor.ws);
-        let next_actions = &mut self.actions[..n * a];
-        next_actions.copy_from_slice(y);
-        self.ac.action_box.to_box(next_actions);
-        let b = &self.ac.action_box;
-        for (i, v) in next_actions.iter_mut().enumerate() {
-            let dim = i % a;
-            let scale = b.half[dim];
-            let z: f32 = self.ac.rng.sample(StandardNormal);
-            let clip = self.config.noise_clip * scale;
-            let noise = (z * self.config.target_noise * scale).clamp(-clip, clip);
-            *v = (*v + noise).clamp(b.low[dim], b.high[dim]);
-        }
-        // The critics: weighted squared TD error of every head, averaged over the batch.
-        let critic_loss =
-            self.ac
-                .critic_step(batch, next_actions, None, self.config.demo_priority_bonus);
-        self.ac.updates += 1;
-        let mut stats = Td3Stats {
-            critic_loss,
-            actor_loss: None,
-            bc: None,
-        };
-
-        if self.ac.updates.is_multiple_of(self.config.policy_delay) {
-            let (actor_loss, bc) = self.actor_gradient(batch);
-            self.ac.actor.step();
-            stats.actor_loss = Some(actor_loss);
-            stats.bc = bc;
-            self.actor_target
-                .soft_update(&self.ac.actor.net, self.config.tau);
-            self.ac.critics.soft_update(self.config.tau);
-        }
-        (stats, &self.ac.priorities[..n])
     }
 
     /// The actor's loss at the batch's observations, `-mean over the batch and the heads of Q(s, pi(s))` plus the
@@ -232,7 +138,7 @@ impl<R: Rng> Td3<R> {
     /// the loss and the cloning term's measures.
     fn actor_gradient(&mut self, batch: &BoxBatch) -> (f32, Option<BcStats>) {
         let n = batch.len();
-        let (d, a, k) = (self.ac.obs_dim, self.action_dim(), self.config.heads);
+        let (d, a, k) = (self.ac.obs_dim, self.ac.action_dim(), self.config.heads);
         let cloning = self.config.bc_weight > 0.0 && batch.has_demos();
         let filtering = cloning && self.config.q_filter;
         if filtering {
@@ -276,33 +182,90 @@ impl<R: Rng> Td3<R> {
     }
 }
 
-impl<R: Rng> Td3<R> {
-    /// The learner's generator, for a caller's draws in sequence with the learner's own.
-    pub fn rng(&mut self) -> &mut R {
-        &mut self.ac.rng
+impl ActorCriticLearner for Td3<Pcg64> {
+    fn name(&self) -> &'static str {
+        "td3"
     }
 
-    /// The actor network (the policy).
-    pub fn actor(&self) -> &Mlp {
-        &self.ac.actor.net
+    /// The behaviour action at `obs`: the actor's plus Gaussian exploration noise, clipped to the box.
+    fn act(&mut self, obs: &[f32], action: &mut [f32]) {
+        self.test_action(obs, action);
+        let b = &self.ac.action_box;
+        for (d, a) in action.iter_mut().enumerate() {
+            let z: f32 = self.ac.rng.sample(StandardNormal);
+            let noisy = *a + z * self.config.exploration_noise * b.half[d];
+            *a = noisy.clamp(b.low[d], b.high[d]);
+        }
     }
-}
 
-impl<R: Rng + Serialize + DeserializeOwned> Persist for Td3<R> {
-    /// Writes everything that changes while TD3 learns and acts: the actor and its target, the critics with
-    /// their target, both optimisers, the generator and the update count. Buffers are left out: every use
-    /// overwrites them.
-    fn save_state<'a>(&'a self, prefix: &str, state: &mut StateDict<'a>) {
-        self.ac.save_state(prefix, state);
+    /// The test-time action at `obs`: the actor's, without noise.
+    fn test_action(&mut self, obs: &[f32], action: &mut [f32]) {
+        let y = self.ac.actor.forward(obs, 1);
+        action.copy_from_slice(y);
+        self.ac.action_box.to_box(action);
+    }
+
+    /// One update from `batch`: the critics always, the actor and the targets every `policy_delay` updates.
+    fn learn(&mut self, batch: &BoxBatch) -> (BoxUpdate, &[f32]) {
+        let (n, a) = self.ac.check(batch);
+
+        // The target: r + gamma^n * min(Q'_1, Q'_2)(s', pi'(s') + clipped noise).
+        let y = self
+            .actor_target
+            .forward(&batch.next_obs, n, &mut self.ac.actor.ws);
+        let next_actions = &mut self.actions[..n * a];
+        next_actions.copy_from_slice(y);
+        self.ac.action_box.to_box(next_actions);
+        let b = &self.ac.action_box;
+        for (i, v) in next_actions.iter_mut().enumerate() {
+            let dim = i % a;
+            let scale = b.half[dim];
+            let z: f32 = self.ac.rng.sample(StandardNormal);
+            let clip = self.config.noise_clip * scale;
+            let noise = (z * self.config.target_noise * scale).clamp(-clip, clip);
+            *v = (*v + noise).clamp(b.low[dim], b.high[dim]);
+        }
+        // The critics: weighted squared TD error of every head, averaged over the batch.
+        let critic_loss =
+            self.ac
+                .critic_step(batch, next_actions, None, self.config.demo_priority_bonus);
+        self.ac.updates += 1;
+        let mut stats = BoxUpdate {
+            critic_loss,
+            actor_loss: None,
+            entropy: None,
+            bc: None,
+        };
+
+        if self.ac.updates.is_multiple_of(self.config.policy_delay) {
+            let (actor_loss, bc) = self.actor_gradient(batch);
+            self.ac.actor.step();
+            stats.actor_loss = Some(actor_loss);
+            stats.bc = bc;
+            self.actor_target
+                .soft_update(&self.ac.actor.net, self.config.tau);
+            self.ac.critics.soft_update(self.config.tau);
+        }
+        (stats, &self.ac.priorities[..n])
+    }
+
+    /// Writes the actor's target (the core holds the rest).
+    fn save_own<'a>(&'a self, prefix: &str, state: &mut StateDict<'a>) {
         self.actor_target
             .save_state(&format!("{prefix}.actor_target"), state);
     }
 
-    /// Reads what [`Td3::save_state`] wrote into a learner of the same configuration.
-    fn load_state(&mut self, prefix: &str, state: &StateDict<'_>) -> Result<(), StateError> {
-        self.ac.load_state(prefix, state)?;
+    fn load_own(&mut self, prefix: &str, state: &StateDict<'_>) -> Result<(), StateError> {
         self.actor_target
             .load_state(&format!("{prefix}.actor_target"), state)
+    }
+
+    fn core(&self) -> &ActorCritic<Pcg64> {
+        &self.ac
+    }
+
+    fn core_mut(&mut self) -> &mut ActorCritic<Pcg64> {
+        &mut self.ac
     }
 }
 
@@ -310,7 +273,7 @@ impl<R: Rng + Serialize + DeserializeOwned> Persist for Td3<R> {
 mod tests {
     use super::*;
     use crate::agent::actor_critic::testing::{
-        evaluate_pendulum, pretraining_imitates, train_pendulum,
+        check_filter_counts, evaluate_pendulum, pretraining_imitates, train_pendulum,
     };
     use crate::nn::MlpWorkspace;
     use rand::SeedableRng;
@@ -420,18 +383,7 @@ mod tests {
                     && heads_mean(&agent, state, demo).1 > heads_mean(&agent, state, &action).1
             })
             .collect();
-        let cloned = filter.iter().filter(|&&f| f).count();
-        if bc_weight > 0.0 {
-            let demos = is_demo.iter().filter(|&&d| d).count();
-            assert!(
-                cloned > 0 && cloned < demos,
-                "the filter passed {cloned} of {demos}"
-            );
-            let bc = bc.unwrap();
-            assert_eq!((bc.cloned, bc.demos), (cloned, demos));
-        } else {
-            assert!(bc.is_none());
-        }
+        check_filter_counts(bc_weight, is_demo, &filter, bc);
         let loss = |agent: &mut Td3<rand_pcg::Pcg64>| -> f64 {
             let mut q_total = 0.0f64;
             let mut cloning = 0.0f64;

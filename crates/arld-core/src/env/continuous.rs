@@ -1,15 +1,17 @@
 //! Gymnasium-exact tasks whose action is a vector of float32 in a box (`Pendulum-v1`, `MountainCarContinuous-v0`
 //! and `LunarLanderContinuous-v3`, found by id in [`super::make_continuous`]): their registered facts, the interface of
-//! their physics, and the environment that adds the reset generator and the time limit.
+//! their physics, and the environment of it ([`ContinuousEnv`], the [`Simulated`] that adds the reset generator and
+//! the time limit, as for the discrete tasks).
 //!
 //! They share with the discrete tasks the reset generator ([`EnvRng`]: NumPy's `PCG64(SeedSequence(seed))`),
-//! Gymnasium's `TimeLimit` (truncated on the limit step) and the outcome of a step ([`Outcome`]); an action is a
+//! Gymnasium's `TimeLimit` (truncated on the limit step) and the outcome of a step ([`super::Outcome`]); an action is a
 //! slice of `f32` of the task's action dimension, as Gymnasium passes a float32 array. Each task's arithmetic
 //! follows NumPy's types step for step, float32 where NumPy computes in float32 (see each task's docs), so the
 //! conformance traces recorded from Gymnasium 1.4.0 are reproduced bit for bit (`tests/continuous_conformance.rs`).
 
-use super::{BoxSpec, Env, EnvError, EnvRng, EpisodeClock, Outcome};
+use super::{BoxSpec, EnvError, EnvRng, Physics, Simulated};
 use crate::rng::NumpyRng;
+use crate::task::Action;
 
 /// Every continuous-action task, in the order `known_continuous_ids` lists them.
 pub static CONTINUOUS_SPECS: [BoxSpec; 3] = [
@@ -60,75 +62,40 @@ pub trait ContinuousDynamics: Send {
     fn set_state(&mut self, state: &[f64]) -> Result<(), String>;
 }
 
-/// An episodic task with a box of float32 actions: a task's physics, its reset generator and its time limit.
-pub struct ContinuousEnv {
-    spec: &'static BoxSpec,
-    rng: EnvRng,
-    physics: Box<dyn ContinuousDynamics>,
-    clock: EpisodeClock,
-}
+/// An episodic task with a box of float32 actions: a task's physics, its reset generator and its time limit
+/// ([`Simulated::with_spec`] of the task's spec and physics; the registry, [`super::make_continuous`], pairs them).
+pub type ContinuousEnv = Simulated<Box<dyn ContinuousDynamics>>;
 
-impl ContinuousEnv {
-    /// The task `spec` with `physics` (the registry, [`super::make_continuous`], pairs them).
-    pub fn new(spec: &'static BoxSpec, physics: Box<dyn ContinuousDynamics>) -> Self {
-        ContinuousEnv {
-            spec,
-            rng: EnvRng::default(),
-            physics,
-            clock: EpisodeClock::new(spec.id, spec.max_episode_steps),
-        }
-    }
-}
+impl Physics for Box<dyn ContinuousDynamics> {
+    type Action = Vec<f32>;
 
-impl Env<Vec<f32>> for ContinuousEnv {
-    /// Starts an episode and writes its first observation into `obs` (`reset(seed=seed)` in Gymnasium; `None`
-    /// continues the current generator).
-    fn reset_into(&mut self, seed: Option<u64>, obs: &mut [f32]) {
-        self.physics.reset(self.rng.reseed(seed));
-        self.clock.start();
-        self.physics.observe(obs);
+    fn reset(&mut self, rng: &mut NumpyRng) {
+        self.as_mut().reset(rng);
     }
 
-    /// Advances one step with `action` and writes the observation after it into `obs`. An action of another
-    /// length or with a value that is not finite is an error naming it, and so is a step outside an episode.
-    fn step_into(&mut self, action: &[f32], obs: &mut [f32]) -> Result<Outcome, EnvError> {
-        let env = self.spec.id;
-        self.clock.check_running()?;
-        <Vec<f32> as super::Action>::check(action, self.spec)
-            .map_err(|msg| EnvError::BadState { env, msg })?;
-        let Some(rng) = self.rng.current() else {
+    /// A finite action of the task's dimension, in an episode the generator has started.
+    fn step(
+        &mut self,
+        spec: &'static BoxSpec,
+        action: &[f32],
+        rng: &mut EnvRng,
+    ) -> Result<(f64, bool), EnvError> {
+        let env = spec.id;
+        <Vec<f32> as Action>::check(action, spec).map_err(|msg| EnvError::BadState { env, msg })?;
+        let Some(rng) = rng.current() else {
             return Err(EnvError::NeedsReset { env });
         };
-        let (reward, terminated) = self.physics.step(action, rng);
-        let outcome = self.clock.finish_step(reward, terminated);
-        self.physics.observe(obs);
-        Ok(outcome)
+        Ok(self.as_mut().step(action, rng))
     }
 
-    fn spec(&self) -> &'static BoxSpec {
-        self.spec
+    fn observe(&self, obs: &mut [f32]) {
+        self.as_ref().observe(obs);
     }
 
-    fn generator(&self) -> Option<NumpyRng> {
-        self.rng.get()
-    }
-
-    fn set_generator(&mut self, rng: Option<NumpyRng>) {
-        self.rng.set(rng);
-    }
-
-    /// Overwrites the internal float64 state (a new episode starts at it) and returns its observation.
-    fn set_state(&mut self, state: &[f64]) -> Result<Vec<f32>, EnvError> {
-        self.physics
+    fn set_state(&mut self, env: &'static str, state: &[f64]) -> Result<(), EnvError> {
+        self.as_mut()
             .set_state(state)
-            .map_err(|msg| EnvError::BadState {
-                env: self.spec.id,
-                msg,
-            })?;
-        self.clock.start();
-        let mut obs = vec![0.0; self.spec.obs_dim];
-        self.physics.observe(&mut obs);
-        Ok(obs)
+            .map_err(|msg| EnvError::BadState { env, msg })
     }
 }
 

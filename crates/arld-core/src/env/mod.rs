@@ -4,6 +4,11 @@
 //! line by line (float64 for classic control, Box2D 2.3 in float32 for LunarLander), and every random draw
 //! comes from [`crate::rng::NumpyRng`], a bit-exact port of NumPy's `PCG64(SeedSequence(seed))`.
 //! `../conformance` traces recorded from Gymnasium are the test (see [`conformance`]).
+//!
+//! One environment type serves every task, [`Simulated`]: a task's [`Physics`] (any discrete task's
+//! [`Dynamics`], or a boxed [`continuous::ContinuousDynamics`]) with its registered facts, the reset generator
+//! and the step bookkeeping. The registered facts of tasks implemented elsewhere (Python) are kept by
+//! [`register`] and [`register_box`].
 
 use crate::rng::NumpyRng;
 pub use crate::task::{Action, ActionColumn, BoxSpec, EnvSpec, TaskSpec};
@@ -271,18 +276,103 @@ pub fn known_ids() -> Vec<&'static str> {
 
 /// The static facts of a built-in or [`register`]ed environment, or `UnknownId`.
 pub fn spec(id: &str) -> Result<&'static EnvSpec, EnvError> {
-    SPECS
-        .iter()
-        .find(|spec| spec.id == id)
-        .or_else(|| external_specs().iter().copied().find(|spec| spec.id == id))
-        .ok_or_else(|| EnvError::UnknownId { id: id.to_string() })
+    REGISTERED.find(&SPECS, id)
 }
 
-/// The specs of environments implemented outside the library (e.g. Gymnasium environments from Python),
-/// registered at run time. Each distinct spec is allocated once for the life of the process.
-fn external_specs() -> std::sync::MutexGuard<'static, Vec<&'static EnvSpec>> {
-    static EXTERNAL: std::sync::Mutex<Vec<&'static EnvSpec>> = std::sync::Mutex::new(Vec::new());
-    EXTERNAL.lock().unwrap_or_else(|e| e.into_inner())
+/// The environments with discrete actions implemented outside the library (e.g. Gymnasium environments from
+/// Python), registered at run time.
+static REGISTERED: Registered<EnvSpec> = Registered::new();
+
+/// The specs of tasks of one kind of action implemented outside the library, registered at run time. Each
+/// distinct spec is allocated once for the life of the process.
+struct Registered<S: 'static>(std::sync::Mutex<Vec<&'static S>>);
+
+/// What a registration gives, to compare with a spec already known under its id.
+struct Registration<'a, S> {
+    id: &'a str,
+    /// The facts given, in words.
+    given: String,
+    /// Whether a built-in spec has the facts given (a registration may leave some out).
+    fits_builtin: &'a dyn Fn(&S) -> bool,
+    /// Whether a registered spec has the facts given.
+    fits: &'a dyn Fn(&S) -> bool,
+    /// A known spec's facts, in words.
+    describe: &'a dyn Fn(&S) -> String,
+}
+
+impl<S> Registered<S> {
+    const fn new() -> Self {
+        Registered(std::sync::Mutex::new(Vec::new()))
+    }
+
+    fn lock(&self) -> std::sync::MutexGuard<'_, Vec<&'static S>> {
+        self.0.lock().unwrap_or_else(|e| e.into_inner())
+    }
+}
+
+impl<S: TaskSpec> Registered<S> {
+    /// The spec `id` among `builtin` and the registered ones, or `UnknownId`.
+    fn find(&self, builtin: &'static [S], id: &str) -> Result<&'static S, EnvError> {
+        builtin
+            .iter()
+            .find(|spec| spec.id() == id)
+            .or_else(|| self.lock().iter().copied().find(|spec| spec.id() == id))
+            .ok_or_else(|| EnvError::UnknownId { id: id.to_string() })
+    }
+
+    /// The spec of a checked registration: the built-in or registered spec of its id when that has the facts
+    /// given (an error naming both when not), else a new spec, `make` of the id, registered.
+    fn register(
+        &self,
+        builtin: &'static [S],
+        new: Registration<'_, S>,
+        make: impl FnOnce(&'static str) -> S,
+    ) -> Result<&'static S, EnvError> {
+        let Registration { id, given, .. } = &new;
+        // An id in use: a spec with the facts given is the answer, another an error naming both.
+        let in_use =
+            |known: &'static S, fits: &dyn Fn(&S) -> bool, clash: &dyn Fn(String) -> String| {
+                if fits(known) {
+                    Ok(known)
+                } else {
+                    Err(registration_error(id, clash((new.describe)(known))))
+                }
+            };
+        if let Some(known) = builtin.iter().find(|spec| spec.id() == *id) {
+            return in_use(known, new.fits_builtin, &|had| {
+                format!(
+                    "the built-in {id} has {had}, this one {given}; register it under another id"
+                )
+            });
+        }
+        let mut registered = self.lock();
+        if let Some(&known) = registered.iter().find(|spec| spec.id() == *id) {
+            return in_use(known, new.fits, &|had| {
+                format!("it was registered before with {had}, now with {given}")
+            });
+        }
+        let spec: &'static S =
+            Box::leak(Box::new(make(Box::leak(id.to_string().into_boxed_str()))));
+        registered.push(spec);
+        Ok(spec)
+    }
+}
+
+/// The error of registering `id` for the reason `msg`.
+fn registration_error(id: &str, msg: String) -> EnvError {
+    EnvError::Register {
+        id: id.to_string(),
+        msg,
+    }
+}
+
+/// The first check of every registration, that the id is not empty; then the error of registering `id` for a
+/// reason.
+fn registering(id: &str) -> Result<impl Fn(String) -> EnvError + '_, EnvError> {
+    if id.trim().is_empty() {
+        return Err(registration_error(id, "the id is empty".into()));
+    }
+    Ok(move |msg| registration_error(id, msg))
 }
 
 /// Registers an environment implemented outside the library so that configurations can name it and an
@@ -296,13 +386,7 @@ pub fn register(
     max_episode_steps: usize,
     reward_threshold: Option<f64>,
 ) -> Result<&'static EnvSpec, EnvError> {
-    let bad = |msg: String| EnvError::Register {
-        id: id.to_string(),
-        msg,
-    };
-    if id.trim().is_empty() {
-        return Err(bad("the id is empty".into()));
-    }
+    let bad = registering(id)?;
     if obs_dim == 0 || n_actions == 0 || max_episode_steps == 0 {
         return Err(bad(format!(
             "observation size ({obs_dim}), number of actions ({n_actions}) and time limit \
@@ -328,39 +412,25 @@ pub fn register(
         "{obs_dim} observation values, {n_actions} actions, time limit {max_episode_steps}, threshold \
          {solve_threshold}"
     );
-    // An id already in use: the same shape is that spec, another shape an error naming both.
-    let in_use = |known: &'static EnvSpec, clash: &dyn Fn(String) -> String| {
-        if same(known) {
-            Ok(known)
-        } else {
-            Err(bad(clash(describe(known))))
-        }
-    };
     if box_spec(id).is_ok() {
         return Err(bad(
             "the id names a task with actions in a box; register the discrete task under another id".into(),
         ));
     }
-    if let Some(builtin) = SPECS.iter().find(|s| s.id == id) {
-        return in_use(builtin, &|had| {
-            format!("the built-in {id} has {had}, this one {given}; register it under another id")
-        });
-    }
-    let mut external = external_specs();
-    if let Some(&known) = external.iter().find(|s| s.id == id) {
-        return in_use(known, &|had| {
-            format!("it was registered before with {had}, now with {given}")
-        });
-    }
-    let spec: &'static EnvSpec = Box::leak(Box::new(EnvSpec {
-        id: Box::leak(id.to_string().into_boxed_str()),
+    let new = Registration {
+        id,
+        given,
+        fits_builtin: &same,
+        fits: &same,
+        describe: &describe,
+    };
+    REGISTERED.register(&SPECS, new, |id| EnvSpec {
+        id,
         obs_dim,
         n_actions,
         max_episode_steps,
         solve_threshold,
-    }));
-    external.push(spec);
-    Ok(spec)
+    })
 }
 
 /// The continuous-action task registered as `id` (Gymnasium's spelling; see [`continuous`]).
@@ -373,7 +443,7 @@ pub fn make_continuous(id: &str) -> Result<continuous::ContinuousEnv, EnvError> 
         "LunarLanderContinuous-v3" => Box::new(lunar_lander::LunarLanderContinuous::default()),
         _ => Box::new(mountain_car_continuous::MountainCarContinuous::default()),
     };
-    Ok(continuous::ContinuousEnv::new(spec, physics))
+    Ok(continuous::ContinuousEnv::with_spec(spec, physics))
 }
 
 /// The registered id of `gym.make(id, continuous=True)` where a task has both kinds of action
@@ -390,19 +460,11 @@ pub fn continuous_id(id: &str) -> Option<&'static str> {
 /// The registered facts of a continuous-action task: a built-in one (its id as [`make_continuous`] takes it) or
 /// one [`register_box`]ed.
 pub fn box_spec(id: &str) -> Result<&'static BoxSpec, EnvError> {
-    continuous::CONTINUOUS_SPECS
-        .iter()
-        .find(|s| s.id == id)
-        .or_else(|| external_box_specs().iter().copied().find(|s| s.id == id))
-        .ok_or_else(|| EnvError::UnknownId { id: id.to_string() })
+    REGISTERED_BOXES.find(&continuous::CONTINUOUS_SPECS, id)
 }
 
-/// The specs of continuous-action tasks implemented outside the library, registered at run time (each distinct
-/// spec, bounds included, allocated once for the life of the process).
-fn external_box_specs() -> std::sync::MutexGuard<'static, Vec<&'static BoxSpec>> {
-    static EXTERNAL: std::sync::Mutex<Vec<&'static BoxSpec>> = std::sync::Mutex::new(Vec::new());
-    EXTERNAL.lock().unwrap_or_else(|e| e.into_inner())
-}
+/// The continuous-action tasks implemented outside the library, registered at run time (bounds included).
+static REGISTERED_BOXES: Registered<BoxSpec> = Registered::new();
 
 /// Registers a task with actions in a box, implemented outside the library (a Gymnasium environment with a
 /// `Box` action space, from Python), so that configurations can name it and an [`Env`] implementation can
@@ -418,13 +480,7 @@ pub fn register_box(
     max_episode_steps: usize,
     reward_threshold: Option<f64>,
 ) -> Result<&'static BoxSpec, EnvError> {
-    let bad = |msg: String| EnvError::Register {
-        id: id.to_string(),
-        msg,
-    };
-    if id.trim().is_empty() {
-        return Err(bad("the id is empty".into()));
-    }
+    let bad = registering(id)?;
     if obs_dim == 0 || low.is_empty() || max_episode_steps == 0 {
         return Err(bad(format!(
             "observation size ({obs_dim}), action dimension ({}) and time limit ({max_episode_steps}) must all \
@@ -483,37 +539,21 @@ pub fn register_box(
             == (obs_dim, low, high, max_episode_steps)
             && (reward_threshold.is_none() || s.solve_threshold == reward_threshold)
     };
-    if let Some(builtin) = continuous::CONTINUOUS_SPECS.iter().find(|s| s.id == id) {
-        return if same_as_builtin(builtin) {
-            Ok(builtin)
-        } else {
-            Err(bad(format!(
-                "the built-in {id} has {}, this one {given}; register it under another id",
-                describe(builtin)
-            )))
-        };
-    }
-    let mut external = external_box_specs();
-    if let Some(&known) = external.iter().find(|s| s.id == id) {
-        return if same(known) {
-            Ok(known)
-        } else {
-            Err(bad(format!(
-                "it was registered before with {}, now with {given}",
-                describe(known)
-            )))
-        };
-    }
-    let spec: &'static BoxSpec = Box::leak(Box::new(BoxSpec {
-        id: Box::leak(id.to_string().into_boxed_str()),
+    let new = Registration {
+        id,
+        given,
+        fits_builtin: &same_as_builtin,
+        fits: &same,
+        describe: &describe,
+    };
+    REGISTERED_BOXES.register(&continuous::CONTINUOUS_SPECS, new, |id| BoxSpec {
+        id,
         obs_dim,
         action_low: Box::leak(low.to_vec().into_boxed_slice()),
         action_high: Box::leak(high.to_vec().into_boxed_slice()),
         max_episode_steps,
         solve_threshold: reward_threshold,
-    }));
-    external.push(spec);
-    Ok(spec)
+    })
 }
 
 /// The facts of any task, discrete (built in or registered) or continuous, by id.
@@ -591,57 +631,128 @@ pub trait Dynamics: Send {
     }
 }
 
-/// A built-in environment: a task's [`Dynamics`] with what every task keeps besides its physics, its
-/// registered facts, the reset generator ([`EnvRng`]) and the step bookkeeping ([`EpisodeClock`]).
-#[derive(Debug, Clone)]
-pub struct Simulated<D> {
-    spec: &'static EnvSpec,
-    rng: EnvRng,
-    clock: EpisodeClock,
-    physics: D,
+/// What [`Simulated`] needs of a task's physics, whatever its kind of action: every [`Dynamics`] of discrete
+/// actions has it, and so has a [`continuous::ContinuousDynamics`] of actions in a box (boxed).
+pub trait Physics: Send {
+    /// The kind of the task's actions.
+    type Action: Action;
+    /// Draws the initial state from the reset's generator.
+    fn reset(&mut self, rng: &mut NumpyRng);
+    /// Checks `action` against `spec` (an error names it) and takes one step with it, drawing from the
+    /// episode's generator `rng` what the step draws; returns the reward and whether the task terminated.
+    fn step(
+        &mut self,
+        spec: &'static <Self::Action as Action>::Spec,
+        action: <Self::Action as Action>::Ref<'_>,
+        rng: &mut EnvRng,
+    ) -> Result<(f64, bool), EnvError>;
+    /// Writes the observation of the current state into `obs`.
+    fn observe(&self, obs: &mut [f32]);
+    /// Overwrites the internal float64 state (see [`Env::set_state`]) of the task `env`.
+    fn set_state(&mut self, env: &'static str, state: &[f64]) -> Result<(), EnvError>;
+    /// See [`Env::geometry`].
+    fn geometry(&self) -> Option<Geometry> {
+        None
+    }
 }
 
-impl<D> Simulated<D> {
-    /// The registered environment `id` with `physics`; panics if `id` is not registered (built-in ids are).
-    pub fn with_physics(id: &str, physics: D) -> Self {
-        let spec = spec(id).unwrap_or_else(|err| panic!("{err}"));
+impl<D: Dynamics> Physics for D {
+    type Action = usize;
+
+    fn reset(&mut self, rng: &mut NumpyRng) {
+        Dynamics::reset(self, rng);
+    }
+
+    fn step(
+        &mut self,
+        spec: &'static EnvSpec,
+        action: usize,
+        rng: &mut EnvRng,
+    ) -> Result<(f64, bool), EnvError> {
+        if action >= spec.n_actions {
+            return Err(EnvError::ActionOutOfRange {
+                env: spec.id,
+                action,
+                n_actions: spec.n_actions,
+            });
+        }
+        Ok(Dynamics::step(self, action, rng))
+    }
+
+    fn observe(&self, obs: &mut [f32]) {
+        Dynamics::observe(self, obs);
+    }
+
+    fn set_state(&mut self, env: &'static str, state: &[f64]) -> Result<(), EnvError> {
+        let target = self.state_mut().ok_or_else(|| state_not_supported(env))?;
+        check_state(env, state, target.len())?;
+        target.copy_from_slice(state);
+        Ok(())
+    }
+
+    fn geometry(&self) -> Option<Geometry> {
+        Dynamics::geometry(self)
+    }
+}
+
+/// A built-in environment: a task's [`Physics`] with what every task keeps besides its physics, its
+/// registered facts, the reset generator ([`EnvRng`]) and the step bookkeeping ([`EpisodeClock`]).
+#[derive(Debug, Clone)]
+pub struct Simulated<P: Physics> {
+    spec: &'static <P::Action as Action>::Spec,
+    rng: EnvRng,
+    clock: EpisodeClock,
+    physics: P,
+}
+
+impl<P: Physics> Simulated<P> {
+    /// The task `spec` with `physics`.
+    pub fn with_spec(spec: &'static <P::Action as Action>::Spec, physics: P) -> Self {
         Simulated {
             spec,
             rng: EnvRng::default(),
-            clock: EpisodeClock::new(spec.id, spec.max_episode_steps),
+            clock: EpisodeClock::new(spec.id(), spec.max_episode_steps()),
             physics,
         }
     }
 
     /// The task's physics (its state).
-    pub fn physics(&self) -> &D {
+    pub fn physics(&self) -> &P {
         &self.physics
     }
 }
 
-impl<D: Dynamics> Env for Simulated<D> {
+impl<D: Dynamics> Simulated<D> {
+    /// The registered environment `id` with `physics`; panics if `id` is not registered (built-in ids are).
+    pub fn with_physics(id: &str, physics: D) -> Self {
+        Simulated::with_spec(spec(id).unwrap_or_else(|err| panic!("{err}")), physics)
+    }
+}
+
+impl<P: Physics> Env<P::Action> for Simulated<P> {
+    /// Starts an episode and writes its first observation into `obs` (`reset(seed=seed)` in Gymnasium; `None`
+    /// continues the current generator).
     fn reset_into(&mut self, seed: Option<u64>, obs: &mut [f32]) {
         self.physics.reset(self.rng.reseed(seed));
         self.clock.start();
         self.physics.observe(obs);
     }
 
-    fn step_into(&mut self, action: usize, obs: &mut [f32]) -> Result<Outcome, EnvError> {
+    /// Advances one step with `action` and writes the observation after it into `obs`. An action the task does
+    /// not take is an error naming it, and so is a step outside an episode.
+    fn step_into(
+        &mut self,
+        action: <P::Action as Action>::Ref<'_>,
+        obs: &mut [f32],
+    ) -> Result<Outcome, EnvError> {
         self.clock.check_running()?;
-        if action >= self.spec.n_actions {
-            return Err(EnvError::ActionOutOfRange {
-                env: self.spec.id,
-                action,
-                n_actions: self.spec.n_actions,
-            });
-        }
-        let (reward, terminated) = self.physics.step(action, &mut self.rng);
+        let (reward, terminated) = self.physics.step(self.spec, action, &mut self.rng)?;
         let outcome = self.clock.finish_step(reward, terminated);
         self.physics.observe(obs);
         Ok(outcome)
     }
 
-    fn spec(&self) -> &'static EnvSpec {
+    fn spec(&self) -> &'static <P::Action as Action>::Spec {
         self.spec
     }
 
@@ -653,16 +764,11 @@ impl<D: Dynamics> Env for Simulated<D> {
         self.rng.set(rng);
     }
 
+    /// Overwrites the internal float64 state (a new episode starts at it) and returns its observation.
     fn set_state(&mut self, state: &[f64]) -> Result<Vec<f32>, EnvError> {
-        let id = self.spec.id;
-        let target = self
-            .physics
-            .state_mut()
-            .ok_or_else(|| state_not_supported(id))?;
-        check_state(id, state, target.len())?;
-        target.copy_from_slice(state);
+        self.physics.set_state(self.spec.id(), state)?;
         self.clock.start();
-        let mut obs = vec![0.0; self.spec.obs_dim];
+        let mut obs = vec![0.0; self.spec.obs_dim()];
         self.physics.observe(&mut obs);
         Ok(obs)
     }

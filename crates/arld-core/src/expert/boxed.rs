@@ -256,7 +256,7 @@ impl Expert<Vec<f32>> for GaussianNoise {
 mod tests {
     use super::*;
     use crate::agent::Learner;
-    use crate::agent::box_agent::BoxAgent;
+    use crate::agent::box_agent::{BoxAgent, BoxLearnerConfig};
     use crate::agent::sac::SacConfig;
     use crate::agent::td3::Td3Config;
     use crate::env::box_spec;
@@ -267,32 +267,20 @@ mod tests {
     fn a_saved_actor_answers_as_the_agent_that_saved_it() {
         let spec = box_spec("LunarLanderContinuous-v3").unwrap();
         let (low, high) = (spec.action_low, spec.action_high);
-        let agents = [
-            BoxAgent::new(
-                Td3Config {
-                    hidden: vec![16, 8],
-                    ..Td3Config::default()
-                },
-                8,
-                low,
-                high,
-                0.99,
-                1,
-            ),
-            BoxAgent::sac(
-                SacConfig {
-                    hidden: vec![16, 8],
-                    ..SacConfig::default()
-                },
-                8,
-                low,
-                high,
-                0.99,
-                2,
-            ),
+        let hidden = vec![16, 8];
+        let configs = [
+            BoxLearnerConfig::Td3(Td3Config {
+                hidden: hidden.clone(),
+                ..Td3Config::default()
+            }),
+            BoxLearnerConfig::Sac(SacConfig {
+                hidden,
+                ..SacConfig::default()
+            }),
         ];
         let dir = tempfile::tempdir().unwrap();
-        for (i, mut agent) in agents.into_iter().enumerate() {
+        for (i, config) in configs.into_iter().enumerate() {
+            let mut agent = BoxAgent::new(config, 8, low, high, 0.99, 1 + i as u64);
             let path = dir.path().join(format!("actor{i}.safetensors"));
             agent.save_weights(&path, &Default::default()).unwrap();
             let mut expert = from_spec(&format!("checkpoint:{}", path.display()), spec, 0).unwrap();

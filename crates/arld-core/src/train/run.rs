@@ -12,7 +12,7 @@ use super::{
     Algo, Checkpointer, QueryEvent, RunLog, SeedPurpose, Summary, TrainConfig, epsilon_at,
     pretrain_update, push_demos, record_failure, run_dir, seed_for, steps_to_solve, update_checked,
 };
-use crate::agent::box_agent::BoxAgent;
+use crate::agent::box_agent::{BoxAgent, BoxLearnerConfig};
 use crate::agent::sac::SacConfig;
 use crate::agent::td3::Td3Config;
 use crate::agent::{Agent, Learner};
@@ -89,33 +89,35 @@ impl<'a> RunBuilder<'a, BoxAgent> {
 /// hidden widths, at least two critic heads: more heads are a larger ensemble), learning rate and batch, seeded
 /// from the run's seed.
 pub fn box_agent(cfg: &TrainConfig, spec: &'static BoxSpec) -> BoxAgent {
-    let (obs_dim, low, high) = (spec.obs_dim, spec.action_low, spec.action_high);
-    let (gamma, seed) = (cfg.gamma as f32, seed_for(cfg.seed, SeedPurpose::Agent));
-    match cfg.algo {
-        Algo::Td3 => {
-            let config = Td3Config {
-                hidden: cfg.hidden.clone(),
-                heads: cfg.heads.max(2),
-                actor_lr: cfg.lr as f32,
-                critic_lr: cfg.lr as f32,
-                max_batch: cfg.batch_size,
-                ..Td3Config::default()
-            };
-            BoxAgent::new(config, obs_dim, low, high, gamma, seed)
-        }
-        Algo::Sac => {
-            let config = SacConfig {
-                hidden: cfg.hidden.clone(),
-                heads: cfg.heads.max(2),
-                actor_lr: cfg.lr as f32,
-                critic_lr: cfg.lr as f32,
-                alpha_lr: cfg.lr as f32,
-                max_batch: cfg.batch_size,
-                ..SacConfig::default()
-            };
-            BoxAgent::sac(config, obs_dim, low, high, gamma, seed)
-        }
-    }
+    let (hidden, heads, lr) = (cfg.hidden.clone(), cfg.heads.max(2), cfg.lr as f32);
+    let config = match cfg.algo {
+        Algo::Td3 => BoxLearnerConfig::Td3(Td3Config {
+            hidden,
+            heads,
+            actor_lr: lr,
+            critic_lr: lr,
+            max_batch: cfg.batch_size,
+            ..Td3Config::default()
+        }),
+        Algo::Sac => BoxLearnerConfig::Sac(SacConfig {
+            hidden,
+            heads,
+            actor_lr: lr,
+            critic_lr: lr,
+            alpha_lr: lr,
+            max_batch: cfg.batch_size,
+            ..SacConfig::default()
+        }),
+    };
+    let seed = seed_for(cfg.seed, SeedPurpose::Agent);
+    BoxAgent::new(
+        config,
+        spec.obs_dim,
+        spec.action_low,
+        spec.action_high,
+        cfg.gamma as f32,
+        seed,
+    )
 }
 
 /// The continuous-action task `id`, as a run makes it.
