@@ -37,6 +37,12 @@ const N_BATCHES: usize = 8;
 const FMA_ROUNDS: usize = 4096;
 const ACCUMULATORS: usize = 12;
 
+/// One call of a level's peak loop.
+type FmaRounds = unsafe fn(f32) -> f32;
+
+/// A learner's settings at a hidden width.
+type ConfigOfWidth = fn(usize) -> BoxLearnerConfig;
+
 /// Multiply-adds with 8 lanes; returns a value that depends on every one.
 ///
 /// # Safety
@@ -90,7 +96,7 @@ fn fma_peak(c: &mut Criterion) {
     let mut group = c.benchmark_group("fma_peak");
     #[cfg(target_arch = "x86_64")]
     {
-        let levels: [(&str, usize, bool, unsafe fn(f32) -> f32); 2] = [
+        let levels: [(&str, usize, bool, FmaRounds); 2] = [
             (
                 "avx2",
                 8,
@@ -188,7 +194,7 @@ fn batches(rng: &mut Pcg64) -> Vec<Batch<Vec<f32>>> {
 
 fn updates(c: &mut Criterion) {
     let data = batches(&mut Pcg64::seed_from_u64(7));
-    let learners: [(&str, fn(usize) -> BoxLearnerConfig); 2] = [
+    let learners: [(&str, ConfigOfWidth); 2] = [
         ("td3_update", |width| {
             BoxLearnerConfig::Td3(Td3Config {
                 hidden: vec![width, width],
