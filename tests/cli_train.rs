@@ -399,6 +399,91 @@ fn expert_process_runs_and_its_failures_are_clear() {
     }
 }
 
+/// The example expert's Pendulum-v1 controller (examples/expert.py), computed here again in f64.
+fn example_pendulum(obs: &[f32]) -> f64 {
+    let (cos, sin, speed) = (obs[0] as f64, obs[1] as f64, obs[2] as f64);
+    let torque = if cos > 0.85 {
+        -(10.0 * sin.atan2(cos) + 2.0 * speed)
+    } else if speed * (10.0 - (0.5 * speed * speed + 10.0 * cos)) >= 0.0 {
+        2.0
+    } else {
+        -2.0
+    };
+    torque.clamp(-2.0, 2.0)
+}
+
+/// An expert process answers a task whose actions are in a box (Pendulum-v1) with lists of numbers: every
+/// answered step in answers.jsonl is the example expert's torque at its observation, and an answer outside the box
+/// stops the run with a message naming the expert and the bounds.
+#[test]
+fn an_expert_process_answers_box_actions() {
+    let dir = tempfile::tempdir().unwrap();
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/expert.py");
+    let run = |expert: &str, name: &str| {
+        let out = dir.path().join(name);
+        let args = [
+            "train",
+            "--env",
+            "Pendulum-v1",
+            "--method",
+            "adqn",
+            "--quiet",
+            "--expert",
+            expert,
+            "--set",
+            "train_steps=1500",
+            "--set",
+            "eval_period=1500",
+            "--set",
+            "eval_episodes=1",
+            "--set",
+            "budget=100",
+            "-o",
+            out.to_str().unwrap(),
+        ];
+        (arld(&args), out)
+    };
+    let (ok, out) = run(&format!("cmd:python3 {}", script.display()), "good");
+    assert!(
+        ok.status.success(),
+        "{}",
+        String::from_utf8_lossy(&ok.stderr)
+    );
+    let answers = std::fs::read_to_string(out.join("answers.jsonl")).unwrap();
+    let steps: Vec<serde_json::Value> = answers
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    assert_eq!(
+        steps.len(),
+        100,
+        "the budget of 100 answered steps is spent"
+    );
+    for step in &steps {
+        let obs: Vec<f32> = serde_json::from_value(step["obs"].clone()).unwrap();
+        let action: Vec<f32> = serde_json::from_value(step["action"].clone()).unwrap();
+        assert_eq!(action, vec![example_pendulum(&obs) as f32], "{step}");
+        assert_eq!(step["expert"], "cmd", "{step}");
+    }
+
+    let (bad, out) = run(
+        "cmd:sh -c 'read h; while read l; do echo {\\\"action\\\":[2.5]}; done'",
+        "bad",
+    );
+    let stderr = String::from_utf8_lossy(&bad.stderr);
+    assert!(
+        !bad.status.success() && !stderr.contains("panicked"),
+        "{stderr}"
+    );
+    for needle in ["expert process", "answered action 2.5", "lies in [-2, 2]"] {
+        assert!(stderr.contains(needle), "expected '{needle}' in: {stderr}");
+    }
+    assert!(
+        !out.join("summary.json").exists(),
+        "the run must stay incomplete"
+    );
+}
+
 #[test]
 fn expert_train_reuses_only_a_run_of_the_same_configuration_and_writes_into_the_working_directory()
 {

@@ -194,16 +194,12 @@ impl PyAction for Vec<f32> {
     }
 
     fn spec_expert(cfg: &TrainConfig) -> anyhow::Result<Box<dyn Expert<Vec<f32>>>> {
-        anyhow::ensure!(
-            cfg.expert == "scripted",
-            "the expert '{}' cannot answer in {} (actions in a box): give a Python expert (a callable, an SB3 \
-             model) or \"scripted\" for a built-in task",
-            cfg.expert,
-            cfg.env
-        );
-        Ok(Box::new(arld::expert::scripted::ScriptedBoxExpert::new(
-            &cfg.env,
-        )?))
+        arld::expert::boxed::from_spec(
+            &cfg.expert,
+            env::box_spec(&cfg.env)?,
+            seed_for(cfg.seed, SeedPurpose::Expert),
+            cfg.expert_timeout,
+        )
     }
 
     fn records(events: &[QueryEvent<Vec<f32>>]) -> Records {

@@ -131,6 +131,7 @@ fn box_setup(cfg: &TrainConfig) -> Result<Option<Box<dyn expert::Expert<Vec<f32>
         &cfg.expert,
         spec,
         seed_for(cfg.seed, SeedPurpose::Expert),
+        cfg.expert_timeout,
     )?))
 }
 

@@ -8,7 +8,9 @@
 //!   every action, clipped to the box (for a discrete task `noisy:P:SPEC` is a random action with probability
 //!   `P`; a box has no single "random action" a weaker expert would take, so the weakening is noise).
 //!
-//! The other kinds (`shipped`, `cmd`, `web`) do not answer with box actions yet, and say so.
+//! - `cmd:COMMAND`: a program answering with lists of numbers ([`super::process`]).
+//!
+//! The other kinds (`shipped`, `web`) do not answer with box actions yet, and say so.
 
 use super::scripted::ScriptedBoxExpert;
 use super::{Expert, ExpertSpec};
@@ -24,13 +26,15 @@ use std::path::{Path, PathBuf};
 /// The largest actor file read (an actor of 4096-wide layers is far below it).
 const MAX_ACTOR_FILE_BYTES: u64 = 1 << 30;
 
-/// The expert `spec` for the box task `spec`, its random draws (noise) from `seed`.
+/// The expert `spec` for the box task `spec`, its random draws (noise) from `seed`; an expert process may take
+/// `timeout_s` seconds per answer.
 pub fn from_spec(
     expert: &str,
     spec: &'static BoxSpec,
     seed: u64,
+    timeout_s: f64,
 ) -> Result<Box<dyn Expert<Vec<f32>>>> {
-    build(&expert.parse()?, expert, spec, seed)
+    build(&expert.parse()?, expert, spec, seed, timeout_s)
 }
 
 fn build(
@@ -38,18 +42,22 @@ fn build(
     text: &str,
     spec: &'static BoxSpec,
     seed: u64,
+    timeout_s: f64,
 ) -> Result<Box<dyn Expert<Vec<f32>>>> {
     Ok(match parsed {
         ExpertSpec::Scripted => Box::new(ScriptedBoxExpert::new(spec.id)?),
         ExpertSpec::Checkpoint(path) => Box::new(ActorExpert::load(path, spec)?),
+        ExpertSpec::Command(command) => Box::new(super::process::ProcessExpert::<Vec<f32>>::spawn(
+            command, spec, timeout_s,
+        )?),
         ExpertSpec::Noisy { p, inner } => {
-            let inner = build(inner, text, spec, seed)?;
+            let inner = build(inner, text, spec, seed, timeout_s)?;
             Box::new(GaussianNoise::new(inner, *p as f32, spec, seed)?)
         }
         ExpertSpec::Python(_) => bail!(super::PYTHON_ONLY),
         _ => bail!(
             "the expert '{text}' cannot answer in {} (actions in a box): use scripted, checkpoint:PATH (a TD3 or \
-             SAC run's weights) or noisy:S:SPEC",
+             SAC run's weights), cmd:COMMAND (a program answering lists of numbers) or noisy:S:SPEC",
             spec.id
         ),
     })
@@ -283,7 +291,8 @@ mod tests {
             let mut agent = BoxAgent::new(config, 8, low, high, 0.99, 1 + i as u64);
             let path = dir.path().join(format!("actor{i}.safetensors"));
             agent.save_weights(&path, &Default::default()).unwrap();
-            let mut expert = from_spec(&format!("checkpoint:{}", path.display()), spec, 0).unwrap();
+            let mut expert =
+                from_spec(&format!("checkpoint:{}", path.display()), spec, 0, 30.0).unwrap();
             let obs: Vec<f32> = (0..8).map(|k| (k as f32 * 0.37 + i as f32).sin()).collect();
             let mut column = BoxColumn::default();
             agent.test_actions(&obs, &mut column);
@@ -309,7 +318,7 @@ mod tests {
     #[test]
     fn noisy_box_experts_spread_as_asked_and_stay_in_the_box() {
         let spec = box_spec("Pendulum-v1").unwrap();
-        let mut expert = from_spec("noisy:0.1:scripted", spec, 5).unwrap();
+        let mut expert = from_spec("noisy:0.1:scripted", spec, 5, 30.0).unwrap();
         let obs = [1.0f32, 0.0, 0.0];
         let clean = crate::env::pendulum::swing_up(&obs)[0];
         let draws: Vec<f32> = (0..20_000).map(|_| expert.act(&obs).unwrap()[0]).collect();
@@ -319,6 +328,6 @@ mod tests {
         let sd = (draws.iter().map(|a| (a - mean).powi(2)).sum::<f32>() / n).sqrt();
         assert!((mean - clean).abs() < 0.01, "mean {mean}, clean {clean}");
         assert!((sd - 0.2).abs() < 0.01, "sd {sd} for 0.1 half-widths of 2");
-        assert!(from_spec("shipped:weak", spec, 0).is_err());
+        assert!(from_spec("shipped:weak", spec, 0, 30.0).is_err());
     }
 }

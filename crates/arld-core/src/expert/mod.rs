@@ -423,8 +423,10 @@ pub fn build_with(
             );
             Box::new(CheckpointExpert::load(&path, &env_spec)?)
         }
-        ExpertSpec::Command(command) => Box::new(process::ProcessExpert::spawn(
-            command, &env_spec, timeout_s,
+        ExpertSpec::Command(command) => Box::new(process::ProcessExpert::<usize>::spawn(
+            command,
+            crate::env::spec(env_id)?,
+            timeout_s,
         )?),
         ExpertSpec::Scripted => Box::new(scripted::ScriptedExpert::new(env_id)?),
         ExpertSpec::Web(options) => web(options, env_id)?,

@@ -8,10 +8,14 @@
 //! - arld -> expert, per query: `{"type": "query", "obs": [0.01, -0.02, 0.03, 0.04]}`.
 //! - expert -> arld, per query: `{"action": 1}` (an integer in `0..n`).
 //!
+//! In a task whose actions are in a box (Pendulum-v1, ...), the hello's action space is
+//! `{"type": "box", "shape": [1], "low": [-2.0], "high": [2.0]}` and an answer is `{"action": [0.5]}`: one finite
+//! number per dimension, within the bounds ([`WireAction`] is how each kind of action travels).
+//!
 //! At the end arld closes the expert's standard input (end of file); an expert should then exit. Anything the
 //! expert writes to standard error is kept (the last lines) and shown if it fails. A crash, an answer slower than
-//! the timeout, a line that is not such an object (or longer than [`MAX_ANSWER_BYTES`]), or an action out of
-//! range is an error naming the expert: the run stops there and, lacking its summary, stays incomplete.
+//! the timeout, a line that is not such an object (or longer than [`MAX_ANSWER_BYTES`]), or an action the task
+//! does not accept (out of range, of the wrong length, not finite) is an error naming the expert: the run stops there and, lacking its summary, stays incomplete.
 //! `examples/expert.py` is a complete expert.
 //!
 //! The expert runs in a process group of its own, and is stopped as a group (on a timeout, and at the end): a
@@ -20,7 +24,8 @@
 //! snapshots with the question open.
 
 use super::Expert;
-use crate::env::EnvSpec;
+use crate::env::{BoxSpec, EnvSpec};
+use crate::task::{Action, TaskSpec};
 use anyhow::{Context, Result, anyhow, bail};
 use std::collections::VecDeque;
 use std::io::{BufRead, BufReader, Write};
@@ -49,8 +54,76 @@ const MAX_STDERR_LINE_BYTES: usize = 4096;
 /// How often a wait for an answer looks whether a stop was requested.
 const STOP_POLL: Duration = Duration::from_millis(20);
 
-/// An external expert process speaking the JSON-lines protocol of this module.
-pub struct ProcessExpert {
+/// How actions of one kind travel in the protocol: the hello's `action_space` and an answer's `action`.
+pub trait WireAction: Action {
+    /// The task's action space as the hello describes it.
+    fn action_space(spec: &Self::Spec) -> serde_json::Value;
+    /// The `action` of an answer as an action of this kind (whether the task accepts it is checked after), or
+    /// `None` when it has another shape.
+    fn from_wire(value: &serde_json::Value) -> Option<Self>;
+    /// An answer of the right shape, for error messages.
+    const EXAMPLE: &'static str;
+    /// Whether the task accepts `action` as an expert's answer; the error says why not.
+    fn check_answer(action: Self::Ref<'_>, spec: &Self::Spec) -> Result<(), String> {
+        Self::check(action, spec)
+    }
+}
+
+impl WireAction for usize {
+    fn action_space(spec: &EnvSpec) -> serde_json::Value {
+        serde_json::json!({"type": "discrete", "n": spec.n_actions})
+    }
+
+    fn from_wire(value: &serde_json::Value) -> Option<usize> {
+        value.as_u64().and_then(|a| usize::try_from(a).ok())
+    }
+
+    const EXAMPLE: &'static str =
+        "{\"action\": 1} (a JSON object with a non-negative integer action)";
+}
+
+impl WireAction for Vec<f32> {
+    fn action_space(spec: &BoxSpec) -> serde_json::Value {
+        serde_json::json!({
+            "type": "box",
+            "shape": [spec.action_dim()],
+            "low": spec.action_low,
+            "high": spec.action_high,
+        })
+    }
+
+    fn from_wire(value: &serde_json::Value) -> Option<Vec<f32>> {
+        value
+            .as_array()?
+            .iter()
+            .map(|v| v.as_f64().map(|x| x as f32))
+            .collect()
+    }
+
+    const EXAMPLE: &'static str =
+        "{\"action\": [0.5]} (a JSON object with a list of numbers, one per action dimension)";
+
+    /// An expert's answer must lie in the box (Gymnasium clips an agent's action into it, but an expert outside
+    /// it is asked something it does not know).
+    fn check_answer(action: &[f32], spec: &BoxSpec) -> Result<(), String> {
+        Self::check(action, spec)?;
+        let bounds = spec.action_low.iter().zip(spec.action_high);
+        match action
+            .iter()
+            .zip(bounds)
+            .position(|(a, (lo, hi))| !(lo..=hi).contains(&a))
+        {
+            Some(d) => Err(format!(
+                "dimension {d} of {}'s actions lies in [{}, {}]",
+                spec.id, spec.action_low[d], spec.action_high[d]
+            )),
+            None => Ok(()),
+        }
+    }
+}
+
+/// An external expert process speaking the JSON-lines protocol of this module, answering actions of kind `A`.
+pub struct ProcessExpert<A: WireAction = usize> {
     command: String,
     child: Child,
     stdin: Option<ChildStdin>,
@@ -58,13 +131,13 @@ pub struct ProcessExpert {
     stderr: Arc<Mutex<VecDeque<String>>>,
     stderr_thread: Option<JoinHandle<()>>,
     timeout: Duration,
-    n_actions: usize,
+    spec: &'static A::Spec,
 }
 
-impl ProcessExpert {
-    /// Starts `command` (run by `sh -c`, so quoting works as in a shell) and sends it the hello for `env`.
-    /// `timeout_s` bounds the wait for each answer.
-    pub fn spawn(command: &str, env: &EnvSpec, timeout_s: f64) -> Result<Self> {
+impl<A: WireAction> ProcessExpert<A> {
+    /// Starts `command` (run by `sh -c`, so quoting works as in a shell) and sends it the hello for the task
+    /// `spec`. `timeout_s` bounds the wait for each answer.
+    pub fn spawn(command: &str, spec: &'static A::Spec, timeout_s: f64) -> Result<Self> {
         if !(timeout_s.is_finite() && timeout_s > 0.0) {
             bail!("the expert timeout must be a positive number of seconds, got {timeout_s}");
         }
@@ -138,14 +211,14 @@ impl ProcessExpert {
             stderr,
             stderr_thread: Some(stderr_thread),
             timeout: Duration::from_secs_f64(timeout_s),
-            n_actions: env.n_actions,
+            spec,
         };
         let hello = serde_json::json!({
             "type": "hello",
             "protocol": 1,
-            "env": env.id,
-            "observation_space": {"type": "box", "shape": [env.obs_dim]},
-            "action_space": {"type": "discrete", "n": env.n_actions},
+            "env": spec.id(),
+            "observation_space": {"type": "box", "shape": [spec.obs_dim()]},
+            "action_space": A::action_space(spec),
         });
         expert.send(&hello)?;
         Ok(expert)
@@ -222,7 +295,7 @@ impl ProcessExpert {
         let _ = self.child.kill();
     }
 
-    fn read_answer(&mut self) -> Result<usize> {
+    fn read_answer(&mut self) -> Result<A> {
         let line = match self.next_line() {
             Err(RecvTimeoutError::Disconnected) if crate::interrupt::requested() => {
                 return Err(crate::interrupt::Interrupted(format!(
@@ -248,22 +321,19 @@ impl ProcessExpert {
         };
         let action = serde_json::from_str::<serde_json::Value>(&line)
             .ok()
-            .and_then(|v| v.get("action").and_then(serde_json::Value::as_u64));
+            .and_then(|v| v.get("action").and_then(A::from_wire));
         let Some(action) = action else {
             let shown: String = line.chars().take(200).collect();
             return Err(self.failure(&format!(
-                "answered {shown:?}, which is not a line like {{\"action\": 1}} (a JSON object with a \
-                 non-negative integer action)"
+                "answered {shown:?}, which is not a line like {}",
+                A::EXAMPLE
             )));
         };
-        if action >= self.n_actions as u64 {
-            return Err(self.failure(&format!(
-                "answered action {action}, but the environment has {} actions (0 to {})",
-                self.n_actions,
-                self.n_actions.saturating_sub(1)
-            )));
+        if let Err(why) = A::check_answer(action.borrow(), self.spec) {
+            let shown: String = A::to_field(action.borrow()).chars().take(200).collect();
+            return Err(self.failure(&format!("answered action {shown}, but {why}")));
         }
-        Ok(action as usize)
+        Ok(action)
     }
 }
 
@@ -284,8 +354,8 @@ impl WaitTimeout for Child {
     }
 }
 
-impl Expert for ProcessExpert {
-    fn act(&mut self, obs: &[f32]) -> Result<usize> {
+impl<A: WireAction> Expert<A> for ProcessExpert<A> {
+    fn act(&mut self, obs: &[f32]) -> Result<A> {
         self.send(&serde_json::json!({"type": "query", "obs": obs}))?;
         self.read_answer()
     }
@@ -294,7 +364,7 @@ impl Expert for ProcessExpert {
     }
 }
 
-impl Drop for ProcessExpert {
+impl<A: WireAction> Drop for ProcessExpert<A> {
     /// Closes the expert's input (its signal to exit), gives it a moment, then stops it.
     fn drop(&mut self) {
         drop(self.stdin.take());
@@ -357,6 +427,40 @@ mod tests {
         let msg = format!("{:#}", e.act(&[0.0; 4]).unwrap_err());
         assert!(msg.contains("answered action 7"), "{msg}");
         assert!(msg.contains("2 actions"), "{msg}");
+    }
+
+    /// A box task's hello names its bounds; answers are lists of numbers, and one of the wrong length, outside
+    /// the box, too large for an f32 or not a list is an error naming the expert and the task.
+    #[test]
+    fn box_actions_are_lists_of_numbers_within_the_box() {
+        let pendulum = crate::env::box_spec("Pendulum-v1").unwrap();
+        let boxed =
+            |script: &str| ProcessExpert::<Vec<f32>>::spawn(script, pendulum, 10.0).unwrap();
+        // Checks the hello, then answers the torque 0.5 to a positive first observation value, -1.5 otherwise.
+        let script = r#"sh -c 'read hello; case "$hello" in *'"'"'"action_space":{"high":[2.0],"low":[-2.0],"shape":[1],"type":"box"}'"'"'*) ;; *) echo "$hello" >&2; exit 3;; esac;
+            while read q; do case "$q" in *'"'"'"obs":[-'"'"'*) echo "{\"action\": [-1.5]}";; *) echo "{\"action\": [0.5]}";; esac; done'"#;
+        let mut e = boxed(script);
+        assert_eq!(e.act(&[0.5, 0.0, 0.0]).unwrap(), vec![0.5]);
+        assert_eq!(e.act(&[-0.5, 0.0, 0.0]).unwrap(), vec![-1.5]);
+        for (answer, expected) in [
+            ("[0.1, 0.2]", "an action has 2 values, not 1"),
+            (
+                "[2.5]",
+                "dimension 0 of Pendulum-v1's actions lies in [-2, 2]",
+            ),
+            ("[1e40]", "not a finite number"),
+            ("1", "a list of numbers"),
+            ("[\\\"a\\\"]", "a list of numbers"),
+        ] {
+            let script = format!(
+                "sh -c 'read h; while read l; do echo \"{{\\\"action\\\": {answer}}}\"; done'"
+            );
+            let msg = format!("{:#}", boxed(&script).act(&[0.0; 3]).unwrap_err());
+            assert!(
+                msg.contains(expected) && msg.contains("expert process"),
+                "{answer}: {msg}"
+            );
+        }
     }
 
     #[test]
