@@ -2,8 +2,8 @@
 use anyhow::{Context, Result};
 use arld::experiment::run_or_reuse;
 use arld::expert::demos::Demonstrations;
-use arld::expert::pipeline::{Candidate, evaluate_expert, select_experts};
-use arld::expert::{self, CheckpointExpert, SPEC_HELP};
+use arld::expert::pipeline::{Candidate, evaluate_spec, select_experts};
+use arld::expert::{self, SPEC_HELP};
 use arld::train::{ConfigInput, Method, NetKind};
 use clap::{Args, Subcommand};
 use std::path::{Path, PathBuf};
@@ -31,8 +31,8 @@ impl ExpertArgs {
 
 #[derive(Subcommand)]
 pub enum ExpertCommand {
-    /// Train prioritized double DQN, checkpoint it, evaluate every checkpoint over 100 episodes, and select a
-    /// weak (paper-like) and a perfect expert.
+    /// Train prioritized double DQN (TD3 for a task with actions in a box), checkpoint it, evaluate every
+    /// checkpoint over 100 episodes, and select a weak (paper-like) and a perfect expert.
     Train {
         #[arg(long)]
         env: String,
@@ -42,6 +42,11 @@ pub enum ExpertCommand {
         /// heads explore deeper, which MountainCar needs).
         #[arg(long, value_enum, default_value_t = NetKind::Plain)]
         net: NetKind,
+        /// How the candidate learns: `dqn` alone (the paper's experts), or a method that learns from its own
+        /// expert (`--set expert=...`; the shipped MountainCarContinuous-v0 and LunarLanderContinuous-v3 experts
+        /// are TD3 runs that asked the scripted controller, `adqn`).
+        #[arg(long, value_enum, default_value_t = Method::Dqn)]
+        method: Method,
         /// Where the selected experts go [default: experts/<env> in the working directory; the shipped experts
         /// are never replaced].
         #[arg(long)]
@@ -104,10 +109,13 @@ pub fn run_expert(cmd: ExpertCommand) -> Result<ExitCode> {
             json,
         } => {
             super::last_seed(seed, episodes)?;
-            let mut e = args.build(seed)?;
-            let ExpertArgs { env, expert, .. } = args;
-            let s = evaluate_expert(e.as_mut(), &env, episodes, seed)?;
-            let target = arld::env::make(&env)?.solve_threshold();
+            let ExpertArgs {
+                env,
+                expert,
+                expert_timeout,
+            } = args;
+            let s = evaluate_spec(&expert, &env, episodes, seed, expert_timeout)?;
+            let target = arld::env::task_spec(&env)?.solve_threshold();
             if json {
                 println!(
                     "{}",
@@ -133,13 +141,14 @@ pub fn run_expert(cmd: ExpertCommand) -> Result<ExitCode> {
             env,
             seed,
             net,
+            method,
             out,
             run_dir,
             checkpoint_every,
             episodes,
             overrides,
         } => {
-            let mut input = ConfigInput::new(&env, Method::Dqn, net, seed);
+            let mut input = ConfigInput::new(&env, method, net, seed);
             for o in &overrides {
                 input.apply_override(o)?;
             }
@@ -198,8 +207,9 @@ pub fn run_expert(cmd: ExpertCommand) -> Result<ExitCode> {
     }
 }
 
+/// The statistics of every checkpoint in `dir` (a discrete run's Q-networks or a box run's actors), over
+/// `episodes` episodes from seed 10,000.
 fn evaluate_checkpoints(dir: &Path, env: &str, episodes: usize) -> Result<Vec<Candidate>> {
-    let spec = *arld::env::spec(env)?;
     let mut paths: Vec<PathBuf> = std::fs::read_dir(dir)
         .with_context(|| format!("no checkpoints in {}", dir.display()))?
         .flatten()
@@ -215,8 +225,14 @@ fn evaluate_checkpoints(dir: &Path, env: &str, episodes: usize) -> Result<Vec<Ca
             .and_then(|s| s.strip_prefix("step_"))
             .and_then(|s| s.parse().ok())
             .unwrap_or(0);
-        let mut e = CheckpointExpert::load(&path, &spec)?;
-        let stats = evaluate_expert(&mut e, env, episodes, 10_000)?;
+        let spec = format!("checkpoint:{}", path.display());
+        let stats = evaluate_spec(
+            &spec,
+            env,
+            episodes,
+            10_000,
+            expert::process::DEFAULT_TIMEOUT_S,
+        )?;
         out.push(Candidate { path, step, stats });
     }
     Ok(out)

@@ -149,7 +149,7 @@ fn references(env: &str) -> Result<(f64, f64)> {
     let mut expert = arld_core::expert::from_spec("shipped:weak", env, REFERENCE_SEED, 30.0)?;
     let stats = arld_core::expert::pipeline::evaluate_expert(
         expert.as_mut(),
-        env,
+        arld_core::env::make(env)?.as_mut(),
         REFERENCE_EPISODES,
         REFERENCE_SEED,
     )?;

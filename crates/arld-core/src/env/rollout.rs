@@ -2,7 +2,7 @@
 //! expert statistics. A policy is any function from an observation to an action; one that may fail (an
 //! expert) returns its error, which ends the rollout.
 
-use super::{Env, EnvError};
+use super::{Action, Env, EnvError};
 
 /// One finished episode.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -15,12 +15,13 @@ pub struct Episode {
     pub terminated: bool,
 }
 
-/// Plays `episodes` episodes of `policy` on `env`; episode `i` starts with `reset(seed(i))`.
-pub fn rollouts<E: From<EnvError>>(
-    env: &mut dyn Env,
+/// Plays `episodes` episodes of `policy` on `env` (of either kind of action); episode `i` starts with
+/// `reset(seed(i))`.
+pub fn rollouts<A: Action, E: From<EnvError>>(
+    env: &mut dyn Env<A>,
     episodes: usize,
     seed: impl Fn(usize) -> Option<u64>,
-    mut policy: impl FnMut(&[f32]) -> Result<usize, E>,
+    mut policy: impl FnMut(&[f32]) -> Result<A, E>,
 ) -> Result<Vec<Episode>, E> {
     // Capacity is only a hint: a huge `episodes` must not abort on allocation before the first episode.
     let mut out = Vec::with_capacity(episodes.min(1 << 16));
@@ -34,7 +35,7 @@ pub fn rollouts<E: From<EnvError>>(
         };
         loop {
             let action = policy(&obs)?;
-            let s = env.step_into(action, &mut obs)?;
+            let s = env.step_into(action.borrow(), &mut obs)?;
             episode.ret += s.reward;
             episode.length += 1;
             if s.terminated || s.truncated {

@@ -2,6 +2,8 @@
 //! the kind makes sense for a box.
 //!
 //! - `scripted`: the task's controller ([`super::scripted::ScriptedBoxExpert`]).
+//! - `shipped:weak`, `shipped:perfect`: the actors the expert pipeline selected for the task (`arld expert train`,
+//!   in `experts/<env>/`).
 //! - `checkpoint:PATH`: a trained actor, as a run saves it (`weights.safetensors` or a checkpoint of a TD3 or SAC
 //!   run: [`crate::agent::box_agent::BoxAgent`]'s weights file), acting without exploration.
 //! - `noisy:S:SPEC`: the expert `SPEC` with Gaussian noise of standard deviation `S` half-widths of the box on
@@ -10,7 +12,7 @@
 //!
 //! - `cmd:COMMAND`: a program answering with lists of numbers ([`super::process`]).
 //!
-//! The other kinds (`shipped`, `web`) do not answer with box actions yet, and say so.
+//! The person's page (`web`) does not answer with box actions yet, and says so.
 
 use super::scripted::ScriptedBoxExpert;
 use super::{Expert, ExpertSpec};
@@ -47,6 +49,16 @@ fn build(
     Ok(match parsed {
         ExpertSpec::Scripted => Box::new(ScriptedBoxExpert::new(spec.id)?),
         ExpertSpec::Checkpoint(path) => Box::new(ActorExpert::load(path, spec)?),
+        ExpertSpec::Shipped(quality) => {
+            let path = super::shipped_path(spec.id, quality);
+            ensure!(
+                path.exists(),
+                "no shipped {quality} expert for {} (looked for {})",
+                spec.id,
+                path.display()
+            );
+            Box::new(ActorExpert::load(&path, spec)?)
+        }
         ExpertSpec::Command(command) => Box::new(super::process::ProcessExpert::<Vec<f32>>::spawn(
             command, spec, timeout_s,
         )?),
@@ -56,8 +68,8 @@ fn build(
         }
         ExpertSpec::Python(_) => bail!(super::PYTHON_ONLY),
         _ => bail!(
-            "the expert '{text}' cannot answer in {} (actions in a box): use scripted, checkpoint:PATH (a TD3 or \
-             SAC run's weights), cmd:COMMAND (a program answering lists of numbers) or noisy:S:SPEC",
+            "the expert '{text}' cannot answer in {} (actions in a box): use scripted, shipped:weak, shipped:perfect, \
+             checkpoint:PATH (a TD3 or SAC run's weights), cmd:COMMAND (a program answering lists of numbers) or noisy:S:SPEC",
             spec.id
         ),
     })
@@ -328,6 +340,28 @@ mod tests {
         let sd = (draws.iter().map(|a| (a - mean).powi(2)).sum::<f32>() / n).sqrt();
         assert!((mean - clean).abs() < 0.01, "mean {mean}, clean {clean}");
         assert!((sd - 0.2).abs() < 0.01, "sd {sd} for 0.1 half-widths of 2");
-        assert!(from_spec("shipped:weak", spec, 0, 30.0).is_err());
+    }
+
+    /// The shipped actors of every box task load as experts and act in their task's box.
+    #[test]
+    fn shipped_box_experts_act_in_the_box() {
+        for id in [
+            "Pendulum-v1",
+            "MountainCarContinuous-v0",
+            "LunarLanderContinuous-v3",
+        ] {
+            let spec = box_spec(id).unwrap();
+            for quality in ["shipped:weak", "shipped:perfect"] {
+                let mut expert = from_spec(quality, spec, 0, 30.0).unwrap();
+                let action = expert.act(&vec![0.1; spec.obs_dim]).unwrap();
+                assert_eq!(action.len(), spec.action_dim());
+                for (a, (lo, hi)) in action
+                    .iter()
+                    .zip(spec.action_low.iter().zip(spec.action_high))
+                {
+                    assert!((*lo..=*hi).contains(a), "{id} {quality}: {action:?}");
+                }
+            }
+        }
     }
 }
