@@ -106,3 +106,52 @@ fn a_box_run_refuses_what_it_cannot_do_yet() {
     let err = String::from_utf8_lossy(&res.stderr);
     assert!(err.contains("pre-trains on demonstrations"), "{err}");
 }
+
+/// `arld report` reads runs of a box task like any other: the table's cell for an active TD3 run on Pendulum-v1
+/// is the run's own steps to solve (its summary), with one solved seed of one.
+#[test]
+fn a_report_reads_box_runs() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("runs").join("pendulum");
+    let res = arld(&[
+        "train",
+        "--env",
+        "Pendulum-v1",
+        "--method",
+        "adqn",
+        "--set",
+        "train_steps=10000",
+        "-o",
+        run.to_str().unwrap(),
+    ]);
+    assert!(
+        res.status.success(),
+        "{}",
+        String::from_utf8_lossy(&res.stderr)
+    );
+    let summary: Value =
+        serde_json::from_str(&std::fs::read_to_string(run.join("summary.json")).unwrap()).unwrap();
+    let steps = summary["steps_to_solve"].as_u64().unwrap();
+    assert!(
+        steps < 10_000,
+        "the shipped weak expert's run did not solve: {summary}"
+    );
+    let report = dir.path().join("report");
+    let res = arld(&[
+        "report",
+        dir.path().join("runs").to_str().unwrap(),
+        "-o",
+        report.to_str().unwrap(),
+    ]);
+    assert!(
+        res.status.success(),
+        "{}",
+        String::from_utf8_lossy(&res.stderr)
+    );
+    let table = std::fs::read_to_string(report.join("table.md")).unwrap();
+    let row = table
+        .lines()
+        .find(|l| l.starts_with("| ADQN-B |"))
+        .unwrap_or_else(|| panic!("no ADQN-B row in\n{table}"));
+    assert!(row.contains(&format!("{steps}** (-) 1/1")), "{row}");
+}

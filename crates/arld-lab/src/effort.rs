@@ -135,23 +135,37 @@ fn rule_and_budget(run: &RunRecord) -> Option<(String, usize)> {
     Some((label, budget))
 }
 
-/// Mean returns of the random policy and of the shipped weak expert on `env`.
+/// Mean returns of the random policy (a uniform draw from the actions, or from the box) and of the shipped weak
+/// expert on `env`.
 fn references(env: &str) -> Result<(f64, f64)> {
-    let mut e = arld_core::env::make(env)?;
-    let n_actions = e.n_actions();
+    use arld_core::env::{self, rollouts};
     let mut rng = rand_pcg::Pcg64::seed_from_u64(REFERENCE_SEED);
-    let random = arld_core::env::rollouts(
-        e.as_mut(),
-        REFERENCE_EPISODES,
-        |i| Some(REFERENCE_SEED + i as u64),
-        |_| Ok::<_, anyhow::Error>(rng.random_range(0..n_actions)),
-    )?;
-    let mut expert = arld_core::expert::from_spec("shipped:weak", env, REFERENCE_SEED, 30.0)?;
-    let stats = arld_core::expert::pipeline::evaluate_expert(
-        expert.as_mut(),
-        arld_core::env::make(env)?.as_mut(),
+    let seeds = |i: usize| Some(REFERENCE_SEED + i as u64);
+    let random = match env::box_spec(env) {
+        Ok(spec) => rollouts(
+            env::make_box(env)?.as_mut(),
+            REFERENCE_EPISODES,
+            seeds,
+            |_| {
+                let (low, high) = (spec.action_low.iter(), spec.action_high.iter());
+                let action = low.zip(high).map(|(&l, &h)| rng.random_range(l..=h));
+                Ok::<_, anyhow::Error>(action.collect())
+            },
+        )?,
+        Err(_) => {
+            let mut e = env::make(env)?;
+            let n_actions = e.n_actions();
+            rollouts(e.as_mut(), REFERENCE_EPISODES, seeds, |_| {
+                Ok::<_, anyhow::Error>(rng.random_range(0..n_actions))
+            })?
+        }
+    };
+    let stats = arld_core::expert::pipeline::evaluate_spec(
+        "shipped:weak",
+        env,
         REFERENCE_EPISODES,
         REFERENCE_SEED,
+        30.0,
     )?;
     let random_mean = random.iter().map(|e| e.ret).sum::<f64>() / random.len() as f64;
     Ok((random_mean, stats.mean))
