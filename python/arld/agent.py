@@ -753,7 +753,9 @@ class Agent:
     # --- parameters, saving, loading
 
     def get_parameters(self) -> Dict[str, Dict[str, np.ndarray]]:
-        """The network's weights: {"policy": {name: array}} (PyTorch's layout and names, as in saved files)."""
+        """The network's weights: {"policy": {name: array}}, as in saved files: a DQN-family network's in PyTorch's
+        layout and names; a TD3/SAC actor's as one flat `actor.params` (layer by layer, the weight `[in][out]`
+        then the bias)."""
         policy = self._require_policy()
         with tempfile.TemporaryDirectory() as tmp:
             path = os.path.join(tmp, "w.safetensors")
@@ -762,24 +764,21 @@ class Agent:
 
     def set_parameters(self, load_path_or_dict: Any, exact_match: bool = True) -> None:
         """Sets the weights `predict` (and a weights-only `save`) use, from `get_parameters()`'s dict or a weights
-        file. A live run keeps training its own network: this changes what the agent acts with, not the run."""
-        if self._box is not None:
-            raise RuntimeError("set_parameters is not available for actions in a Box (TD3) yet: Agent.save writes "
-                               "the run's snapshot and Agent.load reads it")
+        file (a DQN-family network, or a TD3/SAC actor for actions in a Box). A live run keeps training its own
+        network: this changes what the agent acts with, not the run."""
         if isinstance(load_path_or_dict, (str, os.PathLike)):
-            policy, _meta = _arld.Policy.load(str(load_path_or_dict))
+            policy, _meta = _load_policy(str(load_path_or_dict))
         else:
             params = load_path_or_dict.get("policy", load_path_or_dict)
             with tempfile.TemporaryDirectory() as tmp:
                 path = os.path.join(tmp, "w.safetensors")
-                # The network's description (kind, heads, widths) from the current weights' file.
+                # The network's description (kind, heads or layer widths, box) from the current weights' file.
                 self._require_policy().save(path, {})
                 metadata = _read_safetensors_metadata(path)
                 _write_safetensors(path, params, metadata)
-                policy, _meta = _arld.Policy.load(path)
-        if self._policy is not None and (policy.obs_dim, policy.n_actions) != (
-                self._policy.obs_dim, self._policy.n_actions):
-            raise ValueError("the parameters are for another observation size or number of actions")
+                policy, _meta = _load_policy(path)
+        if self._policy is not None and _policy_shape(policy) != _policy_shape(self._policy):
+            raise ValueError("the parameters are for another observation size, number of actions or action box")
         self._policy = policy
 
     def save(self, path: Union[str, os.PathLike]) -> None:  # type: ignore[type-arg]
@@ -816,14 +815,17 @@ class Agent:
             env_id = facts[0] if isinstance(env, _BuiltinEnv) else _register(facts)
         config = _arld.snapshot_config(path)
         if config is None:
-            policy, meta = _arld.Policy.load(path)
+            policy, meta = _load_policy(path)
+            box = _box_of(policy)
             if env is not None:
-                _id, obs_dim, n_actions, _limit, _thr = _env_facts(env)
-                if (obs_dim, n_actions) != (policy.obs_dim, policy.n_actions):
-                    raise ValueError(
-                        f"{path} has {policy.obs_dim} inputs and {policy.n_actions} actions, the environment "
-                        f"{obs_dim} and {n_actions}"
-                    )
+                _id, obs_dim, actions, _limit, _thr = _env_facts(env)
+                if isinstance(actions, BoxActions) != (box is not None) or (
+                        box is not None and (obs_dim, actions.low, actions.high) != (policy.obs_dim, box.low, box.high)
+                ) or (box is None and (obs_dim, actions) != (policy.obs_dim, policy.n_actions)):
+                    raise ValueError(f"{path} has {policy.obs_dim} inputs and acts in "
+                                     f"{_actions_text(box or policy.n_actions)}; the environment has {obs_dim} "
+                                     f"and {_actions_text(actions)}")
+                box = actions if isinstance(actions, BoxActions) else None
             agent = cls.__new__(cls)
             agent.method = cast(Method, meta.get("method", "dqn"))
             agent.net = cast(Net, policy.net)
@@ -831,7 +833,7 @@ class Agent:
             agent.env = env
             agent._codec = _codec_of(env) if env is not None else ObsCodec(
                 gym_spaces().Box(-np.inf, np.inf, (policy.obs_dim,), np.float32), path)
-            agent._max_episode_steps, agent._vec_env, agent._box = None, None, None
+            agent._max_episode_steps, agent._vec_env, agent._box = None, None, box
             agent.env_id = meta.get("env", "")
             agent.eval_env = eval_env
             agent._policy, agent._run, agent._resume, agent._live_step = policy, None, None, 0
@@ -867,6 +869,34 @@ class Agent:
 
     def __repr__(self) -> str:
         return f"arld.Agent({self.method!r}, {self.env_id!r}, net={self.net!r}, seed={self.seed})"
+
+
+def _load_policy(path: str) -> Tuple[Any, Dict[str, str]]:
+    """The policy of a weights file: a TD3/SAC actor (`BoxPolicy`) or a DQN-family network (`Policy`), with the
+    file's metadata."""
+    cls = _arld.BoxPolicy if _arld.holds_an_actor(path) else _arld.Policy
+    policy, meta = cls.load(path)
+    return policy, dict(meta)
+
+
+def _box_of(policy: Any) -> Optional[BoxActions]:
+    """The Box a TD3/SAC policy acts in (flat, float32), None for a DQN-family network."""
+    if not isinstance(policy, _arld.BoxPolicy):
+        return None
+    low, high = policy.bounds
+    return BoxActions((len(low),), tuple(low), tuple(high))
+
+
+def _policy_shape(policy: Any) -> Tuple[Any, ...]:
+    """What two policies must share to stand for each other: inputs, and the actions or the box."""
+    box = _box_of(policy)
+    return (policy.obs_dim, policy.n_actions) if box is None else (policy.obs_dim, box.low, box.high)
+
+
+def _actions_text(actions: Any) -> str:
+    if isinstance(actions, BoxActions):
+        return f"a Box of {actions.dim} dimensions from {list(actions.low)} to {list(actions.high)}"
+    return f"{actions} discrete actions"
 
 
 def _read_safetensors(path: str) -> Dict[str, np.ndarray]:

@@ -19,13 +19,14 @@
 //! step, without a copy per step. A `save` inside a callback is written at a pause right after the callback
 //! returns (the run's replay and generators are reachable only there); the run then goes on by itself.
 
+use arld::agent::actor_file::{ActorKind, TrainedActor};
 use arld::agent::box_agent::BoxAgent;
 use arld::agent::{Agent, Learner};
 use arld::env::{self, Action, Env, EnvError, Outcome, TaskSpec};
 use arld::expert::Expert;
 use arld::expert::demos::{DemoColumns, Demonstrations};
 use arld::interrupt::Interrupted;
-use arld::nn::{Mlp, MlpWorkspace, QNet};
+use arld::nn::QNet;
 use arld::rng::NumpyRng;
 use arld::train::{
     self, Checkpointer, ConfigInput, Control, Driver, EvalPoint, PausedRun, QueryEvent, RunBuilder,
@@ -518,6 +519,56 @@ fn toml_value(key: &str, value: serde_json::Value) -> anyhow::Result<toml::Value
     })
 }
 
+/// A weights file's metadata (the caller's keys).
+type Metadata = std::collections::BTreeMap<String, String>;
+
+/// The two kinds of weights file Python reads and writes: a DQN-family network and a TD3/SAC actor.
+trait WeightsFile: Sized {
+    fn save_file(&self, path: &Path, meta: &Metadata) -> anyhow::Result<()>;
+    fn load_file(path: &Path) -> anyhow::Result<(Self, Metadata)>;
+}
+
+impl WeightsFile for QNet {
+    fn save_file(&self, path: &Path, meta: &Metadata) -> anyhow::Result<()> {
+        self.save(path, meta)
+    }
+    fn load_file(path: &Path) -> anyhow::Result<(Self, Metadata)> {
+        QNet::load(path)
+    }
+}
+
+impl WeightsFile for TrainedActor {
+    fn save_file(&self, path: &Path, meta: &Metadata) -> anyhow::Result<()> {
+        self.save(path, meta)
+    }
+    fn load_file(path: &Path) -> anyhow::Result<(Self, Metadata)> {
+        TrainedActor::load(path)
+    }
+}
+
+/// Writes `weights` to `path` with `meta`; a failure is Python's RuntimeError.
+fn save_weights(weights: &impl WeightsFile, path: &str, meta: &Metadata) -> PyResult<()> {
+    weights
+        .save_file(Path::new(path), meta)
+        .map_err(|e| runtime_error(format!("{e:#}")))
+}
+
+/// Reads the weights at `path`; a file that is not such weights is Python's ValueError, naming it.
+fn load_weights<W: WeightsFile>(path: &str) -> PyResult<(W, Metadata)> {
+    W::load_file(Path::new(path)).map_err(|e| value_error(format!("cannot load {path}: {e:#}")))
+}
+
+/// Refuses an observation of another length than the network's `inputs`.
+fn check_obs(obs: &[f32], inputs: usize) -> PyResult<()> {
+    if obs.len() != inputs {
+        return Err(value_error(format!(
+            "the observation has {} values, but the network takes {inputs}",
+            obs.len()
+        )));
+    }
+    Ok(())
+}
+
 /// A trained network acting with the test policy (no exploration), or, when it comes from a run, also with
 /// the run's exploration policy at the step it stands at.
 #[pyclass(module = "arld._arld")]
@@ -554,13 +605,7 @@ impl Policy {
 impl Policy {
     /// The test policy's action for one observation.
     fn act(&mut self, obs: Vec<f32>) -> PyResult<usize> {
-        if obs.len() != self.net.obs_dim() {
-            return Err(value_error(format!(
-                "the observation has {} values, but the network takes {}",
-                obs.len(),
-                self.net.obs_dim()
-            )));
-        }
+        check_obs(&obs, self.net.obs_dim())?;
         Ok(arld::agent::test_policy_action(
             &self.net,
             &mut self.q,
@@ -571,13 +616,7 @@ impl Policy {
     /// The exploration policy's action (ε-greedy with the run's current ε, the episode's bootstrap head, the
     /// noisy layer's sampled noise); `episode_start` begins a new episode (a new head, new noise).
     fn explore(&mut self, obs: Vec<f32>, episode_start: bool) -> PyResult<usize> {
-        if obs.len() != self.net.obs_dim() {
-            return Err(value_error(format!(
-                "the observation has {} values, but the network takes {}",
-                obs.len(),
-                self.net.obs_dim()
-            )));
-        }
+        check_obs(&obs, self.net.obs_dim())?;
         match &mut self.explorer {
             None => Err(value_error(
                 "this policy has no exploration (loaded weights, not a run): use deterministic=True".into(),
@@ -602,18 +641,15 @@ impl Policy {
     }
 
     /// Saves the weights (safetensors) with `meta` as metadata.
-    fn save(&self, path: &str, meta: std::collections::BTreeMap<String, String>) -> PyResult<()> {
-        self.net
-            .save(Path::new(path), &meta)
-            .map_err(|e| runtime_error(format!("{e:#}")))
+    fn save(&self, path: &str, meta: Metadata) -> PyResult<()> {
+        save_weights(&self.net, path, &meta)
     }
 
     /// Loads weights saved by `save` (or by `arld train`); returns the policy and the file's metadata.
     #[staticmethod]
-    fn load(path: &str) -> PyResult<(Policy, std::collections::BTreeMap<String, String>)> {
-        let (net, meta) = QNet::load(Path::new(path))
-            .map_err(|e| value_error(format!("cannot load {path}: {e:#}")))?;
-        Ok((Policy::new(net), meta.into_iter().collect()))
+    fn load(path: &str) -> PyResult<(Policy, Metadata)> {
+        let (net, meta) = load_weights(path)?;
+        Ok((Policy::new(net), meta))
     }
 
     #[getter]
@@ -627,34 +663,25 @@ impl Policy {
     }
 }
 
-/// A TD3 actor acting with the test policy (no exploration noise): the actor's tanh outputs mapped into the box,
-/// `low + (y + 1) (high - low) / 2`, as the run's test episodes act.
+/// A TD3 or SAC actor acting with the test policy (no exploration noise), as the run's test episodes act
+/// ([`TrainedActor`]): TD3's action or SAC's `tanh` of its means, mapped into the box.
 #[pyclass(module = "arld._arld")]
 #[derive(Clone)]
 struct BoxPolicy {
-    actor: Mlp,
-    ws: MlpWorkspace,
-    low: Vec<f32>,
-    half: Vec<f32>,
-    /// The learner: `td3` (the actor's outputs are the tanh of the action) or `sac` (its first half are the
-    /// means, whose tanh is the test action).
-    learner: &'static str,
+    actor: TrainedActor,
 }
 
 impl BoxPolicy {
     fn of(agent: &BoxAgent, spec: &env::BoxSpec) -> Self {
-        let actor = agent.actor().clone();
+        let kind = ActorKind::of_learner(agent.learner_name())
+            .expect("a box agent's learner is TD3 or SAC");
         BoxPolicy {
-            learner: agent.learner_name(),
-            ws: MlpWorkspace::new(&actor, 1),
-            actor,
-            low: spec.action_low.to_vec(),
-            half: spec
-                .action_low
-                .iter()
-                .zip(spec.action_high)
-                .map(|(l, h)| 0.5 * (h - l))
-                .collect(),
+            actor: TrainedActor::new(
+                kind,
+                agent.actor().clone(),
+                spec.action_low,
+                spec.action_high,
+            ),
         }
     }
 }
@@ -663,19 +690,8 @@ impl BoxPolicy {
 impl BoxPolicy {
     /// The test policy's action for one observation (flat, as many numbers as the box has dimensions).
     fn act(&mut self, obs: Vec<f32>) -> PyResult<Vec<f32>> {
-        if obs.len() != self.actor.input_dim() {
-            return Err(value_error(format!(
-                "the observation has {} values, but the network takes {}",
-                obs.len(),
-                self.actor.input_dim()
-            )));
-        }
-        let y = self.actor.forward(&obs, 1, &mut self.ws);
-        let squash = |y: f32| if self.learner == "sac" { y.tanh() } else { y };
-        Ok(y.iter()
-            .zip(self.low.iter().zip(&self.half))
-            .map(|(&y, (low, half))| low + (squash(y) + 1.0) * half)
-            .collect())
+        check_obs(&obs, self.actor.obs_dim())?;
+        Ok(self.actor.act(&obs))
     }
 
     /// As `act`: TD3's policy is deterministic (its exploration noise belongs to the run), as in
@@ -687,26 +703,46 @@ impl BoxPolicy {
     /// The learner: "td3" or "sac".
     #[getter]
     fn net(&self) -> &'static str {
-        self.learner
+        self.actor.kind().learner()
     }
 
-    /// Plain weights of a box policy are not written alone: the run's snapshot holds them.
-    fn save(&self, path: &str, _meta: std::collections::BTreeMap<String, String>) -> PyResult<()> {
-        Err(runtime_error(format!(
-            "cannot write {path}: a TD3 policy is saved with its run (Agent.save after learn writes the run's \
-             snapshot, which Agent.load reads); its weights alone are not written from Python"
-        )))
+    /// Saves the actor's weights (the run's weights file format, which `checkpoint:PATH` experts read) with
+    /// `meta` as metadata.
+    fn save(&self, path: &str, meta: Metadata) -> PyResult<()> {
+        save_weights(&self.actor, path, &meta)
+    }
+
+    /// Loads an actor saved by `save` (or by `arld train` on a box task); returns the policy and the file's
+    /// metadata.
+    #[staticmethod]
+    fn load(path: &str) -> PyResult<(BoxPolicy, Metadata)> {
+        let (actor, meta) = load_weights(path)?;
+        Ok((BoxPolicy { actor }, meta))
     }
 
     #[getter]
     fn obs_dim(&self) -> usize {
-        self.actor.input_dim()
+        self.actor.obs_dim()
     }
 
     #[getter]
     fn action_dim(&self) -> usize {
-        self.low.len()
+        self.actor.action_dim()
     }
+
+    /// The box: `(low, high)`, flat.
+    #[getter]
+    fn bounds(&self) -> (Vec<f32>, Vec<f32>) {
+        let (low, high) = self.actor.bounds();
+        (low.to_vec(), high.to_vec())
+    }
+}
+
+/// Whether the weights file at `path` holds a TD3 or SAC actor (a box policy) rather than a DQN-family network.
+#[pyfunction]
+fn holds_an_actor(path: &str) -> PyResult<bool> {
+    arld::agent::actor_file::holds_an_actor(Path::new(path))
+        .map_err(|e| value_error(format!("cannot read {path}: {e:#}")))
 }
 
 /// A run's current network as Python acts with it: a DQN-family network or a TD3 actor.
@@ -1773,6 +1809,7 @@ fn _arld(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<Run>()?;
     m.add_class::<Policy>()?;
     m.add_class::<BoxPolicy>()?;
+    m.add_function(wrap_pyfunction!(holds_an_actor, m)?)?;
     m.add_class::<BuiltinEnv>()?;
     m.add_class::<web::PyWebExpert>()?;
     Ok(())

@@ -176,8 +176,46 @@ def test_box_spaces_of_more_dimensions_and_refusals():
         unbounded = gym.make("Pendulum-v1")
         unbounded.action_space = gym.spaces.Box(-np.inf, np.inf, (1,), np.float32)
         arld.Agent("dqn", unbounded)
-    with pytest.raises(RuntimeError, match="saved with its run"):
-        model.get_parameters()
+
+
+def test_box_weights_travel_like_sb3_parameters(tmp_path):
+    """get_parameters/set_parameters and weights files for a TD3 actor: another agent given the weights acts as
+    the trained one, a run's weights.safetensors loads as an acting agent (and as a checkpoint expert of the
+    same numbers), and weights for another box are refused."""
+    trained = arld.Agent("dqn", gym.make("Pendulum-v1"), seed=4, learning_starts=200, eval_period=500, **TD3)
+    trained.learn(600, log_dir=tmp_path / "run")
+    obs = np.random.default_rng(1).uniform(-1, 1, (16, 3)).astype(np.float32)
+    acted = trained.predict(obs)[0]
+    params = trained.get_parameters()
+    assert set(params["policy"]) == {"actor.params"}
+    # 3 -> 64 -> 64 -> 1 with biases.
+    assert params["policy"]["actor.params"].shape == (3 * 64 + 64 + 64 * 64 + 64 + 64 + 1,)
+
+    other = arld.Agent("dqn", gym.make("Pendulum-v1"), seed=99, learning_starts=50, **TD3).learn(60)
+    assert not np.array_equal(other.predict(obs)[0], acted)
+    other.set_parameters(params)
+    assert np.array_equal(other.predict(obs)[0], acted)
+
+    # The run's weights file: an agent that acts, and the actor computed here from the flat parameters.
+    loaded = arld.Agent.load(tmp_path / "run" / "weights.safetensors", env=gym.make("Pendulum-v1"))
+    assert np.array_equal(loaded.predict(obs)[0], acted)
+    flat, layers, at = params["policy"]["actor.params"], [(3, 64), (64, 64), (64, 1)], 0
+    h = obs.astype(np.float64)
+    for i, (n_in, n_out) in enumerate(layers):
+        w = flat[at:at + n_in * n_out].reshape(n_in, n_out)
+        b = flat[at + n_in * n_out:at + n_in * n_out + n_out]
+        at += n_in * n_out + n_out
+        h = h @ w + b
+        h = np.maximum(h, 0.0) if i < len(layers) - 1 else np.tanh(h)
+    assert np.allclose(-2.0 + (h + 1.0) * 2.0, acted, atol=1e-5)
+    loaded.save(tmp_path / "again.safetensors")
+    assert np.array_equal(arld.Agent.load(tmp_path / "again.safetensors").predict(obs)[0], acted)
+
+    with pytest.raises(ValueError, match="Box of 1 dimensions"):
+        arld.Agent.load(tmp_path / "run" / "weights.safetensors", env=gym.make("CartPole-v1"))
+    arld.Agent("dqn", gym.make("CartPole-v1"), seed=0, learning_starts=50).learn(60, log_dir=tmp_path / "cartpole")
+    with pytest.raises(ValueError, match="another observation size"):
+        other.set_parameters(tmp_path / "cartpole" / "weights.safetensors")
 
 
 def test_a_mujoco_task_runs_with_a_scripted_expert(tmp_path):

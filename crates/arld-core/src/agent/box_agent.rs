@@ -14,6 +14,7 @@
 //!   errors of the first critic head.
 
 use super::actor_critic::{ActorCriticLearner, BoxBatch};
+use super::actor_file::{self, ActorKind};
 use super::sac::{Sac, SacConfig};
 use super::td3::{Td3, Td3Config};
 use super::{Learner, UpdateStats};
@@ -24,8 +25,7 @@ use crate::state::{Persist, StateDict, StateError};
 use crate::task::BoxColumn;
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64;
-use safetensors::{Dtype, tensor::TensorView};
-use std::collections::{BTreeMap, HashMap};
+use std::collections::BTreeMap;
 use std::path::Path;
 
 /// A learner of actions in a box: an `ActorCriticLearner` learner behind [`Learner`].
@@ -156,30 +156,15 @@ impl Learner for BoxAgent {
     /// Writes the actor (the policy a run keeps) as safetensors: one tensor `actor.params` with every weight
     /// and bias layer by layer, its layer sizes, the learner and the box in the header.
     fn save_weights(&self, path: &Path, metadata: &BTreeMap<String, String>) -> anyhow::Result<()> {
-        let actor = self.learner.actor();
-        let bytes: Vec<u8> = actor
-            .parameters()
-            .iter()
-            .flat_map(|p| p.to_le_bytes())
-            .collect();
-        let view = TensorView::new(Dtype::F32, vec![actor.parameters().len()], &bytes)?;
-        let mut header: HashMap<String, String> = metadata.clone().into_iter().collect();
-        let list = |v: &[f32]| v.iter().map(f32::to_string).collect::<Vec<_>>().join(",");
-        header.insert("kind".into(), format!("{}-actor", self.learner.name()));
-        header.insert(
-            "sizes".into(),
-            actor
-                .sizes()
-                .iter()
-                .map(usize::to_string)
-                .collect::<Vec<_>>()
-                .join(","),
-        );
-        header.insert("action_low".into(), list(&self.low));
-        header.insert("action_high".into(), list(&self.high));
-        let file = safetensors::serialize([("actor.params", view)], Some(header))?;
-        crate::files::write_atomic(path, &file)?;
-        Ok(())
+        let kind = ActorKind::of_learner(self.learner.name())?;
+        actor_file::write(
+            path,
+            kind,
+            self.learner.actor(),
+            &self.low,
+            &self.high,
+            metadata,
+        )
     }
 }
 

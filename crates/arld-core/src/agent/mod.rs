@@ -8,6 +8,7 @@
 //! `L_E = max_a [Q(s, a) + M·1(a ≠ a_E)] − Q(s, a_E)`.
 
 pub mod actor_critic;
+pub mod actor_file;
 pub mod box_agent;
 mod learner;
 pub mod sac;

@@ -17,16 +17,13 @@
 use super::scripted::ScriptedBoxExpert;
 use super::{Expert, ExpertSpec};
 use crate::agent::actor_critic::ActionBox;
+use crate::agent::actor_file::TrainedActor;
 use crate::env::BoxSpec;
-use crate::nn::{Mlp, MlpWorkspace, OutputActivation};
 use anyhow::{Context, Result, bail, ensure};
 use rand::SeedableRng;
 use rand_distr::{Distribution, Normal};
 use rand_pcg::Pcg64;
 use std::path::{Path, PathBuf};
-
-/// The largest actor file read (an actor of 4096-wide layers is far below it).
-const MAX_ACTOR_FILE_BYTES: u64 = 1 << 30;
 
 /// The expert `spec` for the box task `spec`, its random draws (noise) from `seed`; an expert process may take
 /// `timeout_s` seconds per answer.
@@ -75,140 +72,44 @@ fn build(
     })
 }
 
-/// Which actor a weights file holds: TD3's (tanh of every output) or SAC's (tanh of the means, the first half of
-/// the outputs).
-#[derive(Clone, Copy, Debug, PartialEq)]
-enum ActorKind {
-    Td3,
-    Sac,
-}
-
-/// A trained actor acting without exploration.
+/// A trained actor acting without exploration ([`TrainedActor`]).
 pub struct ActorExpert {
     path: PathBuf,
-    kind: ActorKind,
-    net: Mlp,
-    ws: MlpWorkspace,
-    action_box: ActionBox,
+    actor: TrainedActor,
 }
 
 impl ActorExpert {
-    /// Reads the actor saved at `path` for the task `spec`: the file must be an actor's weights file of a run
-    /// of the same task (observation size, box), whole and finite.
+    /// Reads the actor saved at `path` for the task `spec`: the file must be an actor's weights file
+    /// ([`crate::agent::actor_file`]) of a run of the same task (observation size, box).
     pub fn load(path: &Path, spec: &BoxSpec) -> Result<Self> {
-        let bytes = crate::files::read_bounded(path, MAX_ACTOR_FILE_BYTES)
-            .with_context(|| format!("cannot read the expert's actor {}", path.display()))?;
-        let what = || format!("the expert's actor {}", path.display());
-        let (_, header) = safetensors::SafeTensors::read_metadata(&bytes)
-            .with_context(|| format!("{} is not a safetensors file", what()))?;
-        let meta = header.metadata().clone().unwrap_or_default();
-        let field = |key: &str| {
-            meta.get(key).with_context(|| {
-                format!(
-                    "{} has no `{key}` in its header: it is not an actor's weights file",
-                    what()
-                )
-            })
-        };
-        let kind = match field("kind")?.as_str() {
-            "td3-actor" => ActorKind::Td3,
-            "sac-actor" => ActorKind::Sac,
-            other => bail!("{} holds a `{other}`, not a TD3 or SAC actor", what()),
-        };
-        let sizes = field("sizes")?
-            .split(',')
-            .map(|w| {
-                w.trim()
-                    .parse::<usize>()
-                    .ok()
-                    .filter(|&w| (1..=1 << 16).contains(&w))
-            })
-            .collect::<Option<Vec<usize>>>()
-            .filter(|s| s.len() >= 2)
-            .with_context(|| format!("{}: bad layer sizes `{}`", what(), meta["sizes"]))?;
-        let floats = |key: &str| -> Result<Vec<f32>> {
-            field(key)?
-                .split(',')
-                .map(|v| {
-                    v.trim()
-                        .parse::<f32>()
-                        .with_context(|| format!("{}: bad `{key}`", what()))
-                })
-                .collect()
-        };
-        let (low, high) = (floats("action_low")?, floats("action_high")?);
+        let (actor, _) = TrainedActor::load(path).context("cannot load the expert")?;
+        let (low, high) = actor.bounds();
         ensure!(
             low == spec.action_low && high == spec.action_high,
-            "{} acts in the box {low:?} to {high:?}, but {} has {:?} to {:?}",
-            what(),
+            "the expert's actor {} acts in the box {low:?} to {high:?}, but {} has {:?} to {:?}",
+            path.display(),
             spec.id,
             spec.action_low,
             spec.action_high
         );
-        let outputs = match kind {
-            ActorKind::Td3 => spec.action_dim(),
-            ActorKind::Sac => 2 * spec.action_dim(),
-        };
         ensure!(
-            sizes[0] == spec.obs_dim && sizes[sizes.len() - 1] == outputs,
-            "{} has {} inputs and {} outputs, but {} needs {} and {outputs}",
-            what(),
-            sizes[0],
-            sizes[sizes.len() - 1],
+            actor.obs_dim() == spec.obs_dim,
+            "the expert's actor {} takes {} inputs, but {} has {} observation values",
+            path.display(),
+            actor.obs_dim(),
             spec.id,
             spec.obs_dim
         );
-        let tensors = safetensors::SafeTensors::deserialize(&bytes)
-            .with_context(|| format!("{} is not a whole safetensors file", what()))?;
-        let params = tensors
-            .tensor("actor.params")
-            .with_context(|| format!("{} has no tensor `actor.params`", what()))?;
-        let output = match kind {
-            ActorKind::Td3 => OutputActivation::Tanh,
-            ActorKind::Sac => OutputActivation::Linear,
-        };
-        let mut net = Mlp::new(&sizes, output, &mut Pcg64::seed_from_u64(0));
-        ensure!(
-            params.dtype() == safetensors::Dtype::F32
-                && params.data().len() == 4 * net.parameters().len(),
-            "{}: `actor.params` holds {} bytes, but layers {sizes:?} need {} float32 numbers",
-            what(),
-            params.data().len(),
-            net.parameters().len()
-        );
-        for (p, b) in net
-            .parameters_mut()
-            .iter_mut()
-            .zip(params.data().chunks_exact(4))
-        {
-            *p = f32::from_le_bytes([b[0], b[1], b[2], b[3]]);
-        }
-        ensure!(
-            net.parameters().iter().all(|p| p.is_finite()),
-            "{} holds a weight that is not a finite number",
-            what()
-        );
-        let ws = MlpWorkspace::new(&net, 1);
         Ok(ActorExpert {
             path: path.to_path_buf(),
-            kind,
-            net,
-            ws,
-            action_box: ActionBox::new(spec.action_low, spec.action_high),
+            actor,
         })
     }
 }
 
 impl Expert<Vec<f32>> for ActorExpert {
     fn act(&mut self, obs: &[f32]) -> Result<Vec<f32>> {
-        let a = self.action_box.dim();
-        let out = self.net.forward(obs, 1, &mut self.ws);
-        let mut action = match self.kind {
-            ActorKind::Td3 => out.to_vec(),
-            ActorKind::Sac => out[..a].iter().map(|mu| mu.tanh()).collect(),
-        };
-        self.action_box.to_box(&mut action);
-        Ok(action)
+        Ok(self.actor.act(obs))
     }
 
     fn describe(&self) -> String {

@@ -207,7 +207,7 @@ fn kind_name(kind: OutputKind) -> &'static str {
 /// Rewrites a safetensors file's header with its `__metadata__` keys in sorted order. `safetensors::serialize`
 /// takes the metadata as a `HashMap`, whose order changes from process to process; sorting makes the same network
 /// give the same bytes. The header is padded with spaces to keep the data 8-byte aligned, as the format requires.
-fn with_sorted_metadata(bytes: Vec<u8>) -> anyhow::Result<Vec<u8>> {
+pub(crate) fn with_sorted_metadata(bytes: Vec<u8>) -> anyhow::Result<Vec<u8>> {
     #[derive(serde::Serialize, serde::Deserialize)]
     #[serde(untagged)]
     enum Entry {

@@ -49,6 +49,7 @@ mod workspace;
 use rand::Rng;
 
 pub use adam::{Adam, Grads, clip_grad_norm};
+pub(crate) use io::with_sorted_metadata;
 pub use io::{ModelFileError, parse_model};
 pub use layout::OutputKind;
 pub use mlp::{Mlp, MlpWorkspace, OutputActivation};

@@ -356,31 +356,29 @@ const BOX_TASK: (crate::paper::TaskParameters, TaskSchedule) = (
     },
 );
 
-/// MountainCarContinuous-v0: [`BOX_TASK`] for 100,000 steps, tested every 5,000 (an active TD3 asking the scripted
-/// controller solved both design seeds within them; TD3 alone solved neither) \[OURS\].
-const CAR_TASK: (crate::paper::TaskParameters, TaskSchedule) = (
-    crate::paper::TaskParameters {
-        train_steps: 100_000,
-        ..BOX_TASK.0
-    },
-    TaskSchedule {
-        eval_period: 5_000,
-        ..BOX_TASK.1
-    },
-);
+/// [`BOX_TASK`] trained for `train_steps` environment steps and tested every `eval_period`.
+const fn box_task_for(
+    train_steps: usize,
+    eval_period: usize,
+) -> (crate::paper::TaskParameters, TaskSchedule) {
+    (
+        crate::paper::TaskParameters {
+            train_steps,
+            ..BOX_TASK.0
+        },
+        TaskSchedule {
+            eval_period,
+            ..BOX_TASK.1
+        },
+    )
+}
 
-/// LunarLanderContinuous-v3: [`BOX_TASK`] for 300,000 steps, tested every 10,000 (the runs of docs/algorithm.md
-/// §18) \[OURS\].
-const LANDER_TASK: (crate::paper::TaskParameters, TaskSchedule) = (
-    crate::paper::TaskParameters {
-        train_steps: 300_000,
-        ..BOX_TASK.0
-    },
-    TaskSchedule {
-        eval_period: 10_000,
-        ..BOX_TASK.1
-    },
-);
+/// MountainCarContinuous-v0: 100,000 steps, tested every 5,000 (an active TD3 asking the scripted controller
+/// solved both design seeds within them; TD3 alone solved neither) \[OURS\].
+const CAR_TASK: (crate::paper::TaskParameters, TaskSchedule) = box_task_for(100_000, 5_000);
+
+/// LunarLanderContinuous-v3: 300,000 steps, tested every 10,000 (the runs of docs/algorithm.md §18) \[OURS\].
+const LANDER_TASK: (crate::paper::TaskParameters, TaskSchedule) = box_task_for(300_000, 10_000);
 
 /// The paper's parameters and our schedule for a Gymnasium id (CartPole-v1 reuses the CartPole-v0 row); an
 /// environment registered at run time gets [`EXTERNAL_TASK`] ([`BOX_TASK`] for actions in a box).
