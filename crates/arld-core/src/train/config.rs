@@ -356,6 +356,10 @@ const BOX_TASK: (crate::paper::TaskParameters, TaskSchedule) = (
     },
 );
 
+/// The weight of the behaviour cloning loss (`lambda`) of dqfd and adqnp in a task with actions in a box: with
+/// 100 pre-training imitates the demonstrator, with 1 or 10 it does not (docs/algorithm.md §17) \[OURS\].
+const BOX_CLONING_WEIGHT: f64 = 100.0;
+
 /// The paper's parameters and our schedule for a Gymnasium id (CartPole-v1 reuses the CartPole-v0 row); an
 /// environment registered at run time gets [`EXTERNAL_TASK`].
 fn task_preset(env: &str) -> Result<(&'static crate::paper::TaskParameters, TaskSchedule)> {
@@ -698,7 +702,12 @@ impl TrainConfig {
             eps_agent: 0.001,
             eps_demo: 1.0,
             margin: 0.8,
-            lambda: p.lambda,
+            // In a box task the weight of the cloning loss of the methods that pre-train (§17: 100 imitates).
+            lambda: if boxed && method.pretrains() {
+                BOX_CLONING_WEIGHT
+            } else {
+                p.lambda
+            },
             lambda_n: 0.0,
             n_step: if boxed { 1 } else { 10 },
             l2: 0.0,
@@ -861,6 +870,12 @@ impl TrainConfig {
         non_negative("lambda", self.lambda)?;
         non_negative("lambda_n", self.lambda_n)?;
         count("n_step", self.n_step, MAX_N_STEP)?;
+        ensure!(
+            self.lambda_n == 0.0 || !self.boxed(),
+            "lambda_n weighs the DQN family's extra n-step loss, which TD3 and SAC do not have: in {} (actions in \
+             a box) n_step > 1 makes the n-step return the critics' target instead; leave lambda_n at 0",
+            self.env
+        );
         non_negative("l2", self.l2)?;
         // Demonstrations and queries.
         ensure!(
@@ -1012,10 +1027,21 @@ impl TrainConfig {
             alpha: self.alpha as f32,
             eps_agent: self.eps_agent as f32,
             eps_demo: self.eps_demo as f32,
-            // DQfD's optional n-step loss needs each transition's n-step return.
-            n_step: if self.lambda_n > 0.0 { self.n_step } else { 0 },
+            // DQfD's optional n-step loss needs each transition's n-step return; the actor-critic learners of a
+            // box task take the n-step return as their critics' target when `n_step` > 1 (§17). With one step
+            // the memory keeps none, and their target is the one-step one.
+            n_step: if self.lambda_n > 0.0 || (self.n_step > 1 && self.boxed()) {
+                self.n_step
+            } else {
+                0
+            },
             gamma: self.gamma as f32,
         }
+    }
+
+    /// Whether the run's task has actions in a box (learned by TD3 or SAC).
+    pub fn boxed(&self) -> bool {
+        crate::env::box_spec(&self.env).is_ok()
     }
 
     /// The agent's part of the configuration.
