@@ -12,8 +12,8 @@ use arld::env::pendulum::swing_up;
 use arld::expert;
 use arld::expert::demos::Demonstrations;
 use arld::task::{ActionColumn, BoxColumn};
-use arld::train::{self, ConfigInput, Method, NetKind, RunBuilder, RunLog, TrainConfig};
 use arld::train::run::box_agent;
+use arld::train::{self, ConfigInput, Method, NetKind, RunBuilder, RunLog, TrainConfig};
 use common::arld;
 use serde_json::Value;
 
@@ -181,8 +181,11 @@ fn a_dqfd_run_pre_trains_an_actor_that_imitates_the_scripted_expert() {
     let mut actions: Vec<f32> = held_out.iter().map(|s| swing_up(s)[0]).collect();
     actions.sort_by(f32::total_cmp);
     let median = actions[actions.len() / 2];
-    let constant =
-        actions.iter().map(|a| f64::from((a - median).abs())).sum::<f64>() / actions.len() as f64;
+    let constant = actions
+        .iter()
+        .map(|a| f64::from((a - median).abs()))
+        .sum::<f64>()
+        / actions.len() as f64;
     let before = imitation_error(&mut box_agent(&cfg, spec), &held_out);
     let (summary, mut agent) = RunBuilder::for_box(&cfg)
         .demos(Some(&demos))
@@ -301,7 +304,13 @@ fn box_demonstration_files_round_trip_and_bad_ones_are_refused_by_line() {
     let bits = |d: &Demonstrations<Vec<f32>>| -> Vec<u32> {
         d.transitions
             .iter()
-            .flat_map(|t| t.obs.iter().chain(&t.action).chain(&t.next_obs).chain([&t.reward]))
+            .flat_map(|t| {
+                t.obs
+                    .iter()
+                    .chain(&t.action)
+                    .chain(&t.next_obs)
+                    .chain([&t.reward])
+            })
             .map(|v| v.to_bits())
             .collect()
     };
@@ -311,9 +320,15 @@ fn box_demonstration_files_round_trip_and_bad_ones_are_refused_by_line() {
     let discrete = Demonstrations::collect("CartPole-v0", cart.as_mut(), 20, 0).unwrap();
     let cart_path = dir.path().join("cart.jsonl");
     discrete.save(&cart_path).unwrap();
-    let err = format!("{:#}", Demonstrations::<Vec<f32>>::load(&cart_path, None).unwrap_err());
+    let err = format!(
+        "{:#}",
+        Demonstrations::<Vec<f32>>::load(&cart_path, None).unwrap_err()
+    );
     assert!(err.contains("cart.jsonl:1:"), "{err}");
-    let err = format!("{:#}", Demonstrations::<usize>::load(&path, None).unwrap_err());
+    let err = format!(
+        "{:#}",
+        Demonstrations::<usize>::load(&path, None).unwrap_err()
+    );
     assert!(err.contains("demos.jsonl:1:"), "{err}");
 
     // Line 4 (the third transition) spoiled in one way each: the error names the line and the problem.
@@ -339,11 +354,48 @@ fn box_demonstration_files_round_trip_and_bad_ones_are_refused_by_line() {
         ("text", "[\"a\"]", "malformed transition"),
         ("index", "1", "malformed transition"),
     ] {
-        let err = spoil(name, &format!("\"action\":{action}"), &format!("\"action\":{to}"));
+        let err = spoil(
+            name,
+            &format!("\"action\":{action}"),
+            &format!("\"action\":{to}"),
+        );
         assert!(err.contains(":4:"), "{name}: {err}");
         assert!(err.contains(says), "{name}: {err}");
     }
     let obs = serde_json::to_string(&demos.transitions[2].obs).unwrap();
     let err = spoil("short_obs", &format!("\"obs\":{obs}"), "\"obs\":[0.0,1.0]");
-    assert!(err.contains(":4:") && err.contains("observation of length 2"), "{err}");
+    assert!(
+        err.contains(":4:") && err.contains("observation of length 2"),
+        "{err}"
+    );
+}
+
+/// `n_step` acts for TD3: a run with three-step returns learns another actor than the same run with one-step
+/// ones (before, the replay kept n-step returns only for the DQN family's n-step loss and the two were equal).
+#[test]
+fn n_step_changes_what_td3_learns() {
+    let actor = |n_step: usize| {
+        let cfg = box_config(
+            Method::Dqn,
+            &[
+                ("n_step", (n_step as i64).into()),
+                ("train_steps", 700.into()),
+                ("learning_starts", 300.into()),
+                ("eval_period", 700.into()),
+                ("eval_episodes", 1.into()),
+                ("hidden", toml::Value::Array(vec![16.into(), 16.into()])),
+                ("batch_size", 32.into()),
+            ],
+        );
+        let (_, mut agent) = RunBuilder::for_box(&cfg)
+            .train(&mut RunLog::in_memory())
+            .unwrap();
+        let mut column = BoxColumn::default();
+        let obs: Vec<f32> = (0..30).map(|k| (k as f32 * 0.7).sin()).collect();
+        agent.test_actions(&obs, &mut column);
+        (0..10).map(|r| column.get(r)[0]).collect::<Vec<f32>>()
+    };
+    let (one, again, three) = (actor(1), actor(1), actor(3));
+    assert_eq!(one, again, "a run is reproducible");
+    assert_ne!(one, three, "n_step = 3 was ignored");
 }

@@ -246,11 +246,14 @@ pub struct TrainConfig {
 
     /// Large-margin loss margin M \[DQfD: 0.8\].
     pub margin: f64,
-    /// Weight λ of the margin loss \[P, per task\].
+    /// Weight λ of the margin loss \[P, per task\]; in a box task, the weight of dqfd's and adqnp's behaviour
+    /// cloning loss (docs/algorithm.md §17) \[OURS: 100\].
     pub lambda: f64,
-    /// Weight λ1 of DQfD's n-step TD loss; 0 turns it off \[P: 0, the paper drops it; DQfD used 1\].
+    /// Weight λ1 of DQfD's n-step TD loss; 0 turns it off \[P: 0, the paper drops it; DQfD used 1\]. Refused in a
+    /// box task (TD3 and SAC have no second loss).
     pub lambda_n: f64,
-    /// Horizon n of the n-step loss \[DQfD: 10\].
+    /// Horizon n of the n-step loss \[DQfD: 10\]; in a box task, of the critics' n-step target (1: the one-step
+    /// target) \[OURS: 1\].
     pub n_step: usize,
     /// L2 regularisation weight λ3 on all weights \[P: 0, the paper drops it; DQfD used 1e-5\].
     pub l2: f64,
@@ -1109,6 +1112,30 @@ impl TrainConfig {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// In a box task `n_step` > 1 makes the replay keep n-step returns (which TD3 and SAC take as their target),
+    /// `n_step` = 1 keeps none; in a discrete task only the n-step loss (`lambda_n` > 0) needs them. lambda_n is
+    /// refused for a box task, with its reason.
+    #[test]
+    fn n_step_acts_for_box_learners_and_lambda_n_is_refused_there() {
+        let box_run =
+            |sets: &[&str]| resolve("Pendulum-v1", Method::Adqn, NetKind::Bootstrap, sets);
+        assert_eq!(box_run(&["n_step=3"]).unwrap().replay_config().n_step, 3);
+        assert_eq!(box_run(&["n_step=1"]).unwrap().replay_config().n_step, 0);
+        assert_eq!(box_run(&[]).unwrap().replay_config().n_step, 0);
+        let err = format!("{:#}", box_run(&["lambda_n=0.5"]).unwrap_err());
+        assert!(err.contains("lambda_n") && err.contains("n-step"), "{err}");
+        let discrete =
+            |sets: &[&str]| resolve("CartPole-v0", Method::Dqfd, NetKind::Bootstrap, sets);
+        assert_eq!(discrete(&["n_step=3"]).unwrap().replay_config().n_step, 0);
+        assert_eq!(
+            discrete(&["n_step=3", "lambda_n=1"])
+                .unwrap()
+                .replay_config()
+                .n_step,
+            3
+        );
+    }
 
     fn resolve(env: &str, method: Method, net: NetKind, sets: &[&str]) -> Result<TrainConfig> {
         let mut input = ConfigInput::new(env, method, net, 0);
