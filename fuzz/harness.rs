@@ -53,15 +53,13 @@ pub fn config(data: &[u8]) -> bool {
     true
 }
 
-/// A demonstration file (JSON lines).
+/// A demonstration file (JSON lines), read as discrete actions and as actions in a box.
 pub fn demos(data: &[u8]) -> bool {
-    arld::expert::demos::Demonstrations::read(
-        data,
-        data.len() as u64,
-        Path::new("fuzz.jsonl"),
-        None,
-    )
-    .is_ok()
+    use arld::expert::demos::Demonstrations;
+    let path = Path::new("fuzz.jsonl");
+    let discrete = Demonstrations::<usize>::read(data, data.len() as u64, path, None).is_ok();
+    let boxed = Demonstrations::<Vec<f32>>::read(data, data.len() as u64, path, None).is_ok();
+    discrete || boxed
 }
 
 /// A model file (safetensors with arld's metadata).

@@ -5,7 +5,15 @@
 
 mod common;
 
+use arld::agent::Learner;
+use arld::agent::box_agent::BoxAgent;
+use arld::env::box_spec;
 use arld::env::pendulum::swing_up;
+use arld::expert;
+use arld::expert::demos::Demonstrations;
+use arld::task::{ActionColumn, BoxColumn};
+use arld::train::run::box_agent;
+use arld::train::{self, ConfigInput, Method, NetKind, RunBuilder, RunLog, TrainConfig};
 use common::arld;
 use serde_json::Value;
 
@@ -87,8 +95,9 @@ fn an_active_td3_run_asks_the_scripted_swing_up_and_logs_box_actions() {
     }
 }
 
+/// A box run refuses lambda_n (the DQN family's extra n-step loss, which TD3 has not) with its reason.
 #[test]
-fn a_box_run_refuses_what_it_cannot_do_yet() {
+fn a_box_run_refuses_what_it_cannot_do() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("run");
     let res = arld(&[
@@ -96,15 +105,299 @@ fn a_box_run_refuses_what_it_cannot_do_yet() {
         "--env",
         "Pendulum-v1",
         "--method",
-        "dqfd",
-        "--expert",
-        "scripted",
+        "dqn",
+        "--set",
+        "lambda_n=1",
         "-o",
         out.to_str().unwrap(),
     ]);
     assert!(!res.status.success());
     let err = String::from_utf8_lossy(&res.stderr);
-    assert!(err.contains("pre-trains on demonstrations"), "{err}");
+    assert!(err.contains("lambda_n"), "{err}");
+    assert!(!out.join("summary.json").exists());
+}
+
+/// The configuration of a short box run of `method` over the preset, with `sets` on top.
+fn box_config(method: Method, sets: &[(&str, toml::Value)]) -> TrainConfig {
+    let mut input = ConfigInput::new("Pendulum-v1", method, NetKind::Bootstrap, 3);
+    for (key, value) in sets {
+        input.set(key, value.clone()).unwrap();
+    }
+    input.resolve().unwrap()
+}
+
+/// The mean |pi(s) - a_E| of `agent`'s test actions against the swing-up's on `states`.
+fn imitation_error(agent: &mut BoxAgent, states: &[Vec<f32>]) -> f64 {
+    let mut column = BoxColumn::default();
+    let obs: Vec<f32> = states.concat();
+    agent.test_actions(&obs, &mut column);
+    states
+        .iter()
+        .enumerate()
+        .map(|(i, s)| f64::from((column.get(i)[0] - swing_up(s)[0]).abs()))
+        .sum::<f64>()
+        / states.len() as f64
+}
+
+/// A dqfd run on Pendulum-v1 collects its demonstrations from the scripted swing-up and pre-trains on them
+/// (cloning without the Q-filter): its actor then imitates the expert on states of episodes it never saw, far
+/// better than the best constant action and than the same agent before pre-training.
+#[test]
+fn a_dqfd_run_pre_trains_an_actor_that_imitates_the_scripted_expert() {
+    let cfg = box_config(
+        Method::Dqfd,
+        &[
+            ("pretrain_steps", 2_000.into()),
+            ("train_steps", 1.into()),
+            ("eval_period", 1.into()),
+            ("eval_episodes", 1.into()),
+        ],
+    );
+    assert_eq!(cfg.lambda, 100.0, "the box preset's cloning weight");
+    let spec = box_spec("Pendulum-v1").unwrap();
+    let mut expert = expert::boxed::from_spec("scripted", spec, 0, 30.0).unwrap();
+    let demos = train::run_demonstrations(&cfg, Some(expert.as_mut()), || {
+        Ok(arld::env::make_box("Pendulum-v1")?)
+    })
+    .unwrap()
+    .expect("dqfd pre-trains");
+    assert_eq!(demos.transitions.len(), cfg.n_demo);
+    // Every demonstrated action is the controller's at its observation.
+    assert!(
+        demos
+            .transitions
+            .iter()
+            .all(|t| t.action == swing_up(&t.obs).to_vec())
+    );
+    // Held-out states: the swing-up's own episodes from seeds the run never used.
+    let mut scripted = expert::boxed::from_spec("scripted", spec, 0, 30.0).unwrap();
+    let held_out: Vec<Vec<f32>> =
+        Demonstrations::collect("Pendulum-v1", scripted.as_mut(), 600, 1_000)
+            .unwrap()
+            .transitions
+            .into_iter()
+            .map(|t| t.obs)
+            .collect();
+    let mut actions: Vec<f32> = held_out.iter().map(|s| swing_up(s)[0]).collect();
+    actions.sort_by(f32::total_cmp);
+    let median = actions[actions.len() / 2];
+    let constant = actions
+        .iter()
+        .map(|a| f64::from((a - median).abs()))
+        .sum::<f64>()
+        / actions.len() as f64;
+    let before = imitation_error(&mut box_agent(&cfg, spec), &held_out);
+    let (summary, mut agent) = RunBuilder::for_box(&cfg)
+        .demos(Some(&demos))
+        .train(&mut RunLog::in_memory())
+        .unwrap();
+    assert_eq!(summary.demos_pretrain, cfg.n_demo);
+    let after = imitation_error(&mut agent, &held_out);
+    eprintln!(
+        "mean |pi(s) - a_E| on held-out states: {before:.3} before pre-training, {after:.3} after; the best \
+         constant action {constant:.3}"
+    );
+    assert!(
+        after < 0.5 * constant && after < 0.5 * before,
+        "the pre-trained actor does not imitate: {after} against {constant} (constant) and {before} (before)"
+    );
+}
+
+/// `arld train --method adqnp` on Pendulum-v1 pre-trains on half the demonstrations, then asks the scripted
+/// expert within the other half as its budget; demonstrations from a file (`--demos`) give the same run as
+/// the same ones collected by the run itself.
+#[test]
+fn adqnp_on_pendulum_pre_trains_then_asks_within_its_budget() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = |out: &std::path::Path, extra: &[&str]| {
+        let mut args = vec![
+            "train",
+            "--env",
+            "Pendulum-v1",
+            "--method",
+            "adqnp",
+            "--expert",
+            "scripted",
+            "--seed",
+            "4",
+            "--set",
+            "train_steps=1500",
+            "--set",
+            "learning_starts=500",
+            "--set",
+            "n_demo=200",
+            "--set",
+            "budget=100",
+            "--set",
+            "pretrain_steps=100",
+            "--set",
+            "eval_period=500",
+            "--set",
+            "eval_episodes=2",
+            "--set",
+            "hidden=[32,32]",
+            "--set",
+            "batch_size=32",
+            "-o",
+            out.to_str().unwrap(),
+        ];
+        args.extend_from_slice(extra);
+        let res = arld(&args);
+        assert!(
+            res.status.success(),
+            "{}",
+            String::from_utf8_lossy(&res.stderr)
+        );
+        serde_json::from_str::<Value>(&std::fs::read_to_string(out.join("summary.json")).unwrap())
+            .unwrap()
+    };
+    let out = dir.path().join("run");
+    let summary = run(&out, &[]);
+    assert_eq!(summary["demos_pretrain"], 200);
+    assert_eq!(summary["demos_queried"], 100, "{summary}");
+    let answers = std::fs::read_to_string(out.join("answers.jsonl")).unwrap();
+    assert_eq!(answers.lines().count(), 100);
+    for line in answers.lines() {
+        let step: Value = serde_json::from_str(line).unwrap();
+        let obs: Vec<f32> = serde_json::from_value(step["obs"].clone()).unwrap();
+        let action: Vec<f32> = serde_json::from_value(step["action"].clone()).unwrap();
+        assert_eq!(action, swing_up(&obs).to_vec());
+    }
+    // The same 200 transitions as a file: the run collects them with the demonstration seed of seed 4.
+    let spec = box_spec("Pendulum-v1").unwrap();
+    let mut expert = expert::boxed::from_spec("scripted", spec, 0, 30.0).unwrap();
+    let seed = train::seed_for(4, train::SeedPurpose::Demonstrations);
+    let demos = Demonstrations::collect("Pendulum-v1", expert.as_mut(), 200, seed).unwrap();
+    let file = dir.path().join("demos.jsonl");
+    demos.save(&file).unwrap();
+    let from_file = dir.path().join("from_file");
+    let summary = run(&from_file, &["--demos", file.to_str().unwrap()]);
+    assert_eq!(summary["demos_pretrain"], 200);
+    for name in ["eval.csv", "episodes.csv", "answers.jsonl"] {
+        assert_eq!(
+            std::fs::read(out.join(name)).unwrap(),
+            std::fs::read(from_file.join(name)).unwrap(),
+            "{name}"
+        );
+    }
+}
+
+/// Demonstrations of box actions survive a round trip through their file (every number to the bit), and the
+/// header says the box; a malformed file is refused with the line named.
+#[test]
+fn box_demonstration_files_round_trip_and_bad_ones_are_refused_by_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let spec = box_spec("Pendulum-v1").unwrap();
+    let mut expert = expert::boxed::from_spec("noisy:0.3:scripted", spec, 9, 30.0).unwrap();
+    let demos = Demonstrations::collect("Pendulum-v1", expert.as_mut(), 450, 7).unwrap();
+    assert_eq!(demos.episodes(), 3, "whole episodes of 200, the last cut");
+    let path = dir.path().join("demos.jsonl");
+    demos.save(&path).unwrap();
+    let text = std::fs::read_to_string(&path).unwrap();
+    let header: Value = serde_json::from_str(text.lines().next().unwrap()).unwrap();
+    assert_eq!(header["action_dim"], 1);
+    assert_eq!(header["low"], serde_json::json!([-2.0]));
+    assert_eq!(header["high"], serde_json::json!([2.0]));
+    assert!(header.get("n_actions").is_none());
+    let back = Demonstrations::<Vec<f32>>::load(&path, Some("Pendulum-v1")).unwrap();
+    assert_eq!(back, demos);
+    let bits = |d: &Demonstrations<Vec<f32>>| -> Vec<u32> {
+        d.transitions
+            .iter()
+            .flat_map(|t| {
+                t.obs
+                    .iter()
+                    .chain(&t.action)
+                    .chain(&t.next_obs)
+                    .chain([&t.reward])
+            })
+            .map(|v| v.to_bits())
+            .collect()
+    };
+    assert_eq!(bits(&back), bits(&demos));
+    // A discrete file read as box demonstrations, and a box file read as discrete ones, are refused.
+    let mut cart = expert::from_spec("scripted", "CartPole-v0", 0, 30.0).unwrap();
+    let discrete = Demonstrations::collect("CartPole-v0", cart.as_mut(), 20, 0).unwrap();
+    let cart_path = dir.path().join("cart.jsonl");
+    discrete.save(&cart_path).unwrap();
+    let err = format!(
+        "{:#}",
+        Demonstrations::<Vec<f32>>::load(&cart_path, None).unwrap_err()
+    );
+    assert!(err.contains("cart.jsonl:1:"), "{err}");
+    let err = format!(
+        "{:#}",
+        Demonstrations::<usize>::load(&path, None).unwrap_err()
+    );
+    assert!(err.contains("demos.jsonl:1:"), "{err}");
+
+    // Line 4 (the third transition) spoiled in one way each: the error names the line and the problem.
+    let lines: Vec<&str> = text.lines().collect();
+    let spoil = |name: &str, from: &str, to: &str| -> String {
+        let mut changed = lines.clone();
+        let line = lines[3].replacen(from, to, 1);
+        assert_ne!(line, lines[3], "{name}: nothing replaced");
+        changed[3] = &line;
+        let bad = dir.path().join(format!("{name}.jsonl"));
+        std::fs::write(&bad, changed.join("\n") + "\n").unwrap();
+        format!(
+            "{:#}",
+            Demonstrations::<Vec<f32>>::load(&bad, Some("Pendulum-v1")).unwrap_err()
+        )
+    };
+    let action = serde_json::to_string(&demos.transitions[2].action).unwrap();
+    for (name, to, says) in [
+        ("outside", "[2.5]", "dimension 0"),
+        ("two_values", "[0.5,0.5]", "2 values"),
+        ("huge", "[1e40]", "out of range"),
+        ("empty", "[]", "0 values"),
+        ("text", "[\"a\"]", "malformed transition"),
+        ("index", "1", "malformed transition"),
+    ] {
+        let err = spoil(
+            name,
+            &format!("\"action\":{action}"),
+            &format!("\"action\":{to}"),
+        );
+        assert!(err.contains(":4:"), "{name}: {err}");
+        assert!(err.contains(says), "{name}: {err}");
+    }
+    let obs = serde_json::to_string(&demos.transitions[2].obs).unwrap();
+    let err = spoil("short_obs", &format!("\"obs\":{obs}"), "\"obs\":[0.0,1.0]");
+    assert!(
+        err.contains(":4:") && err.contains("observation of length 2"),
+        "{err}"
+    );
+}
+
+/// `n_step` acts for TD3: a run with three-step returns learns another actor than the same run with one-step
+/// ones (before, the replay kept n-step returns only for the DQN family's n-step loss and the two were equal).
+#[test]
+fn n_step_changes_what_td3_learns() {
+    let actor = |n_step: usize| {
+        let cfg = box_config(
+            Method::Dqn,
+            &[
+                ("n_step", (n_step as i64).into()),
+                ("train_steps", 700.into()),
+                ("learning_starts", 300.into()),
+                ("eval_period", 700.into()),
+                ("eval_episodes", 1.into()),
+                ("hidden", toml::Value::Array(vec![16.into(), 16.into()])),
+                ("batch_size", 32.into()),
+            ],
+        );
+        let (_, mut agent) = RunBuilder::for_box(&cfg)
+            .train(&mut RunLog::in_memory())
+            .unwrap();
+        let mut column = BoxColumn::default();
+        let obs: Vec<f32> = (0..30).map(|k| (k as f32 * 0.7).sin()).collect();
+        agent.test_actions(&obs, &mut column);
+        (0..10).map(|r| column.get(r)[0]).collect::<Vec<f32>>()
+    };
+    let (one, again, three) = (actor(1), actor(1), actor(3));
+    assert_eq!(one, again, "a run is reproducible");
+    assert_ne!(one, three, "n_step = 3 was ignored");
 }
 
 /// `arld report` reads runs of a box task like any other: the table's cell for an active TD3 run on Pendulum-v1

@@ -130,13 +130,13 @@ fn demonstrations_round_trip_and_are_checked() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("demos.jsonl");
     demos.save(&path).unwrap();
-    let back = Demonstrations::load(&path, Some("MountainCar-v0")).unwrap();
+    let back = Demonstrations::<usize>::load(&path, Some("MountainCar-v0")).unwrap();
     assert_eq!(back.transitions.len(), 300);
     assert_eq!(back.transitions[17].obs, demos.transitions[17].obs);
     // For another environment: refused, naming both.
     let e = format!(
         "{:#}",
-        Demonstrations::load(&path, Some("CartPole-v0")).unwrap_err()
+        Demonstrations::<usize>::load(&path, Some("CartPole-v0")).unwrap_err()
     );
     assert!(
         e.contains("MountainCar-v0") && e.contains("CartPole-v0"),
@@ -146,17 +146,26 @@ fn demonstrations_round_trip_and_are_checked() {
     let text = std::fs::read_to_string(&path).unwrap();
     let cut: String = text.lines().take(100).map(|l| format!("{l}\n")).collect();
     std::fs::write(&path, cut).unwrap();
-    let e = format!("{:#}", Demonstrations::load(&path, None).unwrap_err());
+    let e = format!(
+        "{:#}",
+        Demonstrations::<usize>::load(&path, None).unwrap_err()
+    );
     assert!(e.contains("truncated"), "{e}");
     // Malformed line: refused with its line number.
     std::fs::write(&path, text.replacen("\"action\":", "\"action\"", 1)).unwrap();
-    let e = format!("{:#}", Demonstrations::load(&path, None).unwrap_err());
+    let e = format!(
+        "{:#}",
+        Demonstrations::<usize>::load(&path, None).unwrap_err()
+    );
     assert!(e.contains(":2:"), "{e}");
     // A Minari dataset's directory: refused, saying how to use it.
     let minari = dir.path().join("answers-v0");
     std::fs::create_dir_all(minari.join("data")).unwrap();
     std::fs::write(minari.join("data").join("metadata.json"), "{}").unwrap();
-    let e = format!("{:#}", Demonstrations::load(&minari, None).unwrap_err());
+    let e = format!(
+        "{:#}",
+        Demonstrations::<usize>::load(&minari, None).unwrap_err()
+    );
     assert!(
         e.contains("Minari dataset") && e.contains("arld.answers to-demos"),
         "{e}"

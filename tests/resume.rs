@@ -1,5 +1,5 @@
 //! Runs that survive SIGKILL: a run is killed at several moments (mid-pre-training, mid-episode, while the expert
-//! drives a query segment, and at seeded random delays), continued each time with `arld train --resume`, and its
+//! drives a query segment, and at seeded random delays; discrete runs and a box run that pre-trains), continued each time with `arld train --resume`, and its
 //! outputs compared byte for byte with an uninterrupted run of the same configuration (summary: all but the wall
 //! time and steps/s; weights: every tensor and the metadata).
 
@@ -268,6 +268,49 @@ fn a_lunarlander_adqn_bootstrap_run_killed_five_times_ends_byte_identical() {
     );
     assert!(hits[0].contains("\"expert_in_control\":true"), "{hits:#?}");
     eprintln!("LunarLander-v2 ADQN-B kills: {hits:#?}");
+}
+
+/// A box run that pre-trains (adqnp: TD3 cloning the swing-up's demonstrations, then asking it) survives kills
+/// in pre-training, mid-episode and in a query segment.
+#[test]
+fn a_pendulum_adqnp_td3_run_killed_in_pre_training_ends_byte_identical() {
+    let mut moments = vec![
+        Moment::When("mid-pre-training", in_pretraining),
+        Moment::When("mid-query-segment", mid_segment),
+        Moment::When("mid-episode", mid_episode),
+    ];
+    moments.extend(delays(13, 2, 300));
+    let hits = survives(
+        &[
+            "--env",
+            "Pendulum-v1",
+            "--method",
+            "adqnp",
+            "--expert",
+            "scripted",
+            "--seed",
+            "5",
+            "--set",
+            "train_steps=2500",
+            "--set",
+            "learning_starts=300",
+            "--set",
+            "pretrain_steps=1200",
+            "--set",
+            "n_demo=400",
+            "--set",
+            "budget=200",
+            "--set",
+            "eval_period=1000",
+            "--set",
+            "eval_episodes=2",
+            "--set",
+            "snapshot_every=97",
+        ],
+        &moments,
+    );
+    assert!(hits[0].contains("\"pretrain\""), "{hits:#?}");
+    eprintln!("Pendulum-v1 ADQNP (TD3) kills: {hits:#?}");
 }
 
 #[test]

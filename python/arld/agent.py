@@ -118,8 +118,8 @@ class Agent:
     method: dqn, dqfd, gdqn, bdqn, adqn, adqnp (DQfD and ADQNP pre-train on demonstrations; GDQN, BDQN, ADQN,
     ADQNP ask the expert during training). net: plain, bootstrap (10 heads), noisy. env: a Gymnasium environment
     with a Discrete action space, or a Box one (continuous actions: TD3 learns them, with the same methods'
-    queries; `predict` and experts give actions in the space's shape; dqfd and adqnp, which pre-train, and a
-    WebExpert are not available there yet), exactly as given (wrappers, time limits), an id string (made with gym.make), or
+    queries; `predict`, experts and demos= give actions in the space's shape; dqfd and adqnp pre-train the actor
+    by cloning the demonstrations; a WebExpert is not available there yet), exactly as given (wrappers, time limits), an id string (made with gym.make), or
     `arld.make(id)` (the built-in one: trained entirely in Rust). Observations reach the network as SB3's policies
     see them (a vector Box as it is, Discrete one-hot, MultiDiscrete/MultiBinary/Dict/Tuple flattened; images are
     refused: see arld.envs); experts and `predict` take them as the environment gives them. The time limit is the
@@ -355,9 +355,6 @@ class Agent:
         self.eval_env = None if eval_env is None else _as_env(eval_env, max_episode_steps)
         self._check_eval_env()
         if self._box is not None:
-            if method in ("dqfd", "adqnp"):
-                raise ValueError(f"{method} pre-trains on demonstrations, which arld cannot do yet for actions in a "
-                                 "Box; use dqn, gdqn, bdqn or adqn")
             if isinstance(expert, WebExpert):
                 raise ValueError("a person in the browser (WebExpert) cannot answer actions in a Box yet: give a "
                                  "callable or a model with predict (e.g. an SB3 TD3 or SAC model)")
@@ -377,7 +374,7 @@ class Agent:
                 raise ValueError(f"{method} needs an expert: pass expert= (or demos= for dqfd)")
         if demos is not None and method not in ("dqfd", "adqnp"):
             raise ValueError(f"{method} does not pre-train on demonstrations; demos= is for dqfd and adqnp")
-        self._demos = None if demos is None else _demos(demos)
+        self._demos = None if demos is None else _demos(demos, self._box)
         if demos is not None and method == "dqfd":
             # DQfD never asks during training: with demos= no expert runs, and the records say where the
             # demonstrations came from instead of naming one.

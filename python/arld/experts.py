@@ -18,7 +18,7 @@ from typing import Any, Callable, Dict, List, Literal, Optional, Protocol, Seque
 import numpy as np
 
 from . import _arld
-from .envs import BoxActions, ObsCodec, as_env as _as_env, codec_of as _codec_of
+from .envs import BoxActions, ObsCodec, as_env as _as_env, box_actions as _box_actions, codec_of as _codec_of
 
 # A person answering in the browser: arld.WebExpert(listen="127.0.0.1:0", fps=None, timeout=None, keys=None,
 # wait=True, labels=None) serves the page (its URL is .url, printed when learn starts the run); pass it as expert=
@@ -104,25 +104,33 @@ def _as_action(action: Any) -> int:
 
 
 class _Demos:
-    def __init__(self, obs: Any, actions: Any, rewards: Any, next_obs: Any, terminated: Any, truncated: Any = None):
+    """Demonstrations as rows for the compiled part: an int action per transition, or, for a task with actions in
+    a box (`box`), a flat row of float32 numbers per transition (checked against the box there)."""
+
+    def __init__(self, obs: Any, actions: Any, rewards: Any, next_obs: Any, terminated: Any, truncated: Any = None,
+                 box: Optional[BoxActions] = None):
         n = len(actions)
         self.obs = np.asarray(obs, dtype=np.float32).reshape(n, -1).tolist()
-        self.actions = [int(a) for a in np.asarray(actions).reshape(-1)]
+        if box is None:
+            self.actions: List[Any] = [int(a) for a in np.asarray(actions).reshape(-1)]
+        else:
+            self.actions = [[float(v) for v in row] for row in np.asarray(actions, dtype=np.float32).reshape(n, -1)]
         self.rewards = np.asarray(rewards, dtype=np.float32).reshape(-1).tolist()
         self.next_obs = np.asarray(next_obs, dtype=np.float32).reshape(n, -1).tolist()
         self.terminated = [bool(t) for t in np.asarray(terminated).reshape(-1)]
         self.truncated = [False] * n if truncated is None else [bool(t) for t in np.asarray(truncated).reshape(-1)]
 
 
-def _demos(demos: Any) -> _Demos:
+def _demos(demos: Any, box: Optional[BoxActions] = None) -> _Demos:
     """Demonstrations from a dict of columns, from imitation's transitions (duck-typed: obs, acts, next_obs,
     dones, and rews; `infos[i]["TimeLimit.truncated"]` marks a truncation), or from a Minari dataset (a
-    MinariDataset, a dataset id or a dataset's directory: `arld.answers.minari_columns`)."""
+    MinariDataset, a dataset id or a dataset's directory: `arld.answers.minari_columns`). With `box` (a task with
+    actions in a box) each action is a row of numbers in the space's shape."""
     from . import answers
     if answers.is_dataset(demos):
-        return _Demos(**answers.minari_columns(demos))
+        return _Demos(**answers.minari_columns(demos), box=box)
     if isinstance(demos, dict):
-        return _Demos(**demos)
+        return _Demos(**demos, box=box)
     if all(hasattr(demos, k) for k in ("obs", "acts", "next_obs", "dones")):
         rews = getattr(demos, "rews", None)
         if rews is None:
@@ -135,17 +143,19 @@ def _demos(demos: Any) -> _Demos:
         truncated = np.zeros_like(dones)
         if infos is not None:
             truncated = np.array([bool(dict(i or {}).get("TimeLimit.truncated", False)) for i in infos], dtype=bool)
-        return _Demos(demos.obs, demos.acts, rews, demos.next_obs, dones & ~truncated, truncated)
+        return _Demos(demos.obs, demos.acts, rews, demos.next_obs, dones & ~truncated, truncated, box=box)
     raise TypeError("demos must be a dict of columns (obs, actions, rewards, next_obs, terminated[, truncated]), "
                     "imitation's transitions (obs, acts, rews, next_obs, dones) or a Minari dataset (its id or path)")
 
 
 def collect_demos(env: Any, expert: Any, n: int, seed: int = 0) -> Dict[str, np.ndarray]:
     """`n` demonstration transitions of `expert` on `env` as given (wrappers applied): the first episode reset with
-    `seed`, the next ones without; a dict of columns for `demos=`."""
+    `seed`, the next ones without; a dict of columns for `demos=`. In a task with actions in a `Box` the actions
+    are rows of float32 numbers (the space's shape flattened)."""
     env = _as_env(env)
     codec = _codec_of(env)
-    ask, _name = _expert_callable(expert)
+    box = _box_actions(env.action_space, "the environment") if isinstance(env.action_space, gym_spaces().Box) else None
+    ask, _name = _expert_callable(expert, box)
     if ask is None or isinstance(expert, WebExpert):
         raise TypeError("collect_demos needs a Python expert (a callable, an SB3 model or an arld.Agent)")
     cols: Dict[str, List[Any]] = {k: [] for k in ("obs", "actions", "rewards", "next_obs", "terminated", "truncated")}
@@ -153,13 +163,13 @@ def collect_demos(env: Any, expert: Any, n: int, seed: int = 0) -> Dict[str, np.
     while len(cols["actions"]) < n:
         flat = codec.flat(obs)
         a = ask(codec.raw(flat))  # what the expert sees during training
-        nxt, r, te, tr, _ = env.step(a)
+        nxt, r, te, tr, _ = env.step(a if box is None else box.shaped(a))
         for k, v in zip(cols, (flat, a, r, codec.flat(nxt), te, tr)):
             cols[k].append(v)
         obs = env.reset()[0] if te or tr else nxt
     return {
         "obs": np.asarray(cols["obs"], dtype=np.float32),
-        "actions": np.asarray(cols["actions"], dtype=np.int64),
+        "actions": np.asarray(cols["actions"], dtype=np.int64 if box is None else np.float32),
         "rewards": np.asarray(cols["rewards"], dtype=np.float32),
         "next_obs": np.asarray(cols["next_obs"], dtype=np.float32),
         "terminated": np.asarray(cols["terminated"], dtype=bool),

@@ -24,7 +24,7 @@ use arld::agent::box_agent::BoxAgent;
 use arld::agent::{Agent, Learner};
 use arld::env::{self, Action, Env, EnvError, Outcome, TaskSpec};
 use arld::expert::Expert;
-use arld::expert::demos::{DemoColumns, Demonstrations};
+use arld::expert::demos::{DemoAction, DemoColumns, Demonstrations};
 use arld::interrupt::Interrupted;
 use arld::nn::QNet;
 use arld::rng::NumpyRng;
@@ -94,7 +94,7 @@ fn runtime_error(msg: String) -> PyErr {
 
 /// A kind of action as it crosses to Python and back, and what a run of that kind needs besides (its built-in
 /// environments, its experts from a spec, its demonstrations).
-trait PyAction: Action {
+trait PyAction: DemoAction {
     /// The action as the Python environment's `step` is given it: an int, or a list of floats (the Python side
     /// shapes it as its space).
     fn to_py<'py>(py: Python<'py>, action: Self::Ref<'_>) -> PyResult<Bound<'py, PyAny>>;
@@ -109,14 +109,8 @@ trait PyAction: Action {
     fn records(events: &[QueryEvent<Self>]) -> Records;
     /// The registered facts of the task `id` of this kind.
     fn spec_of(id: &str) -> Result<&'static Self::Spec, EnvError>;
-    /// The demonstrations a run that pre-trains starts from: `given` as rows, or collected from `expert` on the
-    /// environment `demo_env` makes.
-    fn demonstrations(
-        cfg: &TrainConfig,
-        given: Option<DemoArrays>,
-        expert: Option<&mut dyn Expert<Self>>,
-        demo_env: &mut dyn FnMut() -> anyhow::Result<Box<dyn Env<Self>>>,
-    ) -> anyhow::Result<Demonstrations<Self>>;
+    /// The actions of demonstrations given in Python, as actions of this kind; the error says why they are not.
+    fn demo_actions(actions: DemoActions) -> anyhow::Result<Vec<Self>>;
 }
 
 impl PyAction for usize {
@@ -157,24 +151,13 @@ impl PyAction for usize {
         env::spec(id)
     }
 
-    fn demonstrations(
-        cfg: &TrainConfig,
-        given: Option<DemoArrays>,
-        expert: Option<&mut dyn Expert>,
-        demo_env: &mut dyn FnMut() -> anyhow::Result<Box<dyn Env>>,
-    ) -> anyhow::Result<Demonstrations> {
-        match given {
-            Some(d) => d.into_demonstrations(cfg),
-            None => {
-                let e = expert.expect("methods that pre-train need an expert");
-                let mut demo_env = demo_env()?;
-                Demonstrations::collect_in(
-                    demo_env.as_mut(),
-                    e,
-                    cfg.n_demo,
-                    seed_for(cfg.seed, SeedPurpose::Demonstrations),
-                )
-            }
+    fn demo_actions(actions: DemoActions) -> anyhow::Result<Vec<usize>> {
+        match actions {
+            DemoActions::Indices(actions) => Ok(actions),
+            DemoActions::Vectors(_) => anyhow::bail!(
+                "the demonstrations' actions are vectors, but the environment's actions are discrete: give one \
+                 integer action per transition"
+            ),
         }
     }
 }
@@ -211,18 +194,16 @@ impl PyAction for Vec<f32> {
         env::box_spec(id)
     }
 
-    fn demonstrations(
-        cfg: &TrainConfig,
-        _given: Option<DemoArrays>,
-        _expert: Option<&mut dyn Expert<Vec<f32>>>,
-        _demo_env: &mut dyn FnMut() -> anyhow::Result<Box<dyn Env<Vec<f32>>>>,
-    ) -> anyhow::Result<Demonstrations<Vec<f32>>> {
-        anyhow::bail!(
-            "{} pre-trains on demonstrations, which runs in {} (actions in a box) cannot do yet; use a method \
-             without pre-training (dqn, gdqn, bdqn, adqn)",
-            cfg.method,
-            cfg.env
-        )
+    fn demo_actions(actions: DemoActions) -> anyhow::Result<Vec<Vec<f32>>> {
+        match actions {
+            DemoActions::Vectors(actions) => Ok(actions),
+            // No transitions at all extract as the first kind.
+            DemoActions::Indices(actions) if actions.is_empty() => Ok(Vec::new()),
+            DemoActions::Indices(_) => anyhow::bail!(
+                "the demonstrations' actions are single numbers, but the environment's actions are in a box: \
+                 give one row of numbers per transition"
+            ),
+        }
     }
 }
 
@@ -1668,18 +1649,20 @@ fn train_in_thread<L: PyLearner>(
             ck.load()?
         }
     };
-    let demos = match (cfg.method.pretrains(), demos) {
-        (false, _) => None,
-        (true, _) if resume_state.is_some() => None,
-        (true, given) => {
-            let mut demo_env = demo_env;
-            let e = expert
-                .as_mut()
-                .map(|e| &mut **e as &mut dyn Expert<L::Action>);
-            Some(L::Action::demonstrations(&cfg, given, e, &mut || {
-                make(demo_env.take())
-            })?)
+    // Demonstrations given as rows, else the run's own (its demo_file, or collected from the expert on
+    // `demo_env`): `train::run_demonstrations`, as for the command line.
+    let demos = match demos {
+        _ if resume_state.is_some() => None,
+        Some(given) if cfg.method.pretrains() => {
+            Some(given.into_demonstrations::<L::Action>(&cfg)?)
         }
+        _ => train::run_demonstrations(
+            &cfg,
+            expert
+                .as_mut()
+                .map(|e| &mut **e as &mut dyn Expert<L::Action>),
+            || make(demo_env),
+        )?,
     };
     let mut log = train::open_log(
         log_dir.as_deref().map(Path::new),
@@ -1770,19 +1753,29 @@ fn snapshot_config(path: &str) -> PyResult<Option<String>> {
 #[derive(FromPyObject)]
 struct DemoArrays {
     obs: Vec<Vec<f32>>,
-    actions: Vec<usize>,
+    actions: DemoActions,
     rewards: Vec<f32>,
     next_obs: Vec<Vec<f32>>,
     terminated: Vec<bool>,
     truncated: Vec<bool>,
 }
 
+/// The actions of demonstrations given in Python: one integer per transition, or one row of numbers (a box).
+#[derive(FromPyObject)]
+enum DemoActions {
+    Indices(Vec<usize>),
+    Vectors(Vec<Vec<f32>>),
+}
+
 impl DemoArrays {
-    /// The library's [`DemoColumns`], checked and read into demonstrations there.
-    fn into_demonstrations(self, cfg: &TrainConfig) -> anyhow::Result<Demonstrations> {
+    /// The library's [`DemoColumns`] of actions of the kind `A`, checked and read into demonstrations there.
+    fn into_demonstrations<A: PyAction>(
+        self,
+        cfg: &TrainConfig,
+    ) -> anyhow::Result<Demonstrations<A>> {
         let columns = DemoColumns {
             obs: self.obs,
-            actions: self.actions,
+            actions: A::demo_actions(self.actions)?,
             rewards: self.rewards,
             next_obs: self.next_obs,
             terminated: self.terminated,

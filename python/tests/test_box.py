@@ -170,8 +170,6 @@ def test_box_spaces_of_more_dimensions_and_refusals():
     assert action.shape == (2, 1) and -1.0 <= action[0, 0] <= 1.0 and -0.5 <= action[1, 0] <= 0.5
     assert all(len(q["agent_action"]) == 2 for q in model.queries)
 
-    with pytest.raises(ValueError, match="pre-trains"):
-        arld.Agent("dqfd", gym.make("Pendulum-v1"), expert=swing_up)
     with pytest.raises(ValueError, match="finite bounds"):
         unbounded = gym.make("Pendulum-v1")
         unbounded.action_space = gym.spaces.Box(-np.inf, np.inf, (1,), np.float32)
@@ -242,3 +240,75 @@ def test_a_mujoco_task_runs_with_a_scripted_expert(tmp_path):
         assert np.allclose(step["action"], balance(step["obs"]), atol=1e-6), step
     action, _ = model.predict(np.zeros(4))
     assert action.shape == (1,) and -3.0 <= float(action[0]) <= 3.0
+
+
+def imitation_error(model, states):
+    """Mean |pi(s) - a_E| of the model's test actions against the swing-up's on `states`."""
+    actions, _ = model.predict(np.asarray(states, dtype=np.float32))
+    return float(np.mean([abs(float(a[0]) - float(swing_up(s)[0])) for a, s in zip(actions, states)]))
+
+
+def test_pendulum_dqfd_pre_trains_from_a_callable_an_sb3_style_expert_and_demos(tmp_path):
+    """dqfd on Gymnasium's Pendulum-v1 collects its demonstrations from a callable or from a model with SB3's
+    predict, or takes them as arrays (demos=): the pre-trained actor follows the swing-up, closer than the best
+    constant action and than the same agent untrained."""
+
+    class Predicting:
+        """A model with Stable-Baselines3's predict, answering the swing-up in the space's shape."""
+
+        def predict(self, obs, deterministic=False):
+            return swing_up(obs), None
+
+    def episodes(seeds):
+        """Whole episodes of the swing-up, each reset with its seed, as one dict of columns."""
+        parts = [arld.collect_demos(gym.make("Pendulum-v1"), swing_up, 200, seed=s) for s in seeds]
+        return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
+
+    def constant_error(states):
+        targets = np.array([swing_up(s)[0] for s in states])
+        return float(np.mean(np.abs(targets - np.median(targets))))
+
+    short = dict(pretrain_steps=2000, learning_starts=1000, eval_period=1, eval_episodes=1, seed=3)
+    # Held-out states: the swing-up's own episodes on seeds no run uses.
+    held_out = episodes(range(1000, 1003))["obs"]
+    untrained = imitation_error(arld.Agent("dqn", gym.make("Pendulum-v1"), seed=3).learn(1), held_out)
+    errors = {}
+    for name, expert in (("callable", swing_up), ("sb3-style", Predicting())):
+        model = arld.Agent("dqfd", gym.make("Pendulum-v1"), expert=expert, **short)
+        model.learn(1, log_dir=tmp_path / name)
+        assert model.summary["demos_pretrain"] == 1000
+        errors[name] = imitation_error(model, held_out)
+    print(f"Pendulum-v1 dqfd, mean |pi(s) - a_E| on held-out states: {errors}; untrained {untrained:.3f}, the "
+          f"best constant {constant_error(held_out):.3f}")
+    assert errors["callable"] == errors["sb3-style"], "the same expert in two forms gives the same run"
+    bound = 0.8 * min(untrained, constant_error(held_out))
+    assert errors["callable"] < bound, (errors, bound)
+
+    # Demonstrations given as arrays (the actions as rows of the space's shape): the actor clones them.
+    demos = episodes(range(5))
+    assert demos["actions"].shape == (1000, 1) and demos["actions"].dtype == np.float32
+    model = arld.Agent("dqfd", gym.make("Pendulum-v1"), demos=demos, **short)
+    model.learn(1)
+    assert model.summary["demos_pretrain"] == 1000 and model.config["demo_file"] == "python:demos"
+    seen, constant = imitation_error(model, demos["obs"]), constant_error(demos["obs"])
+    print(f"demos=: {seen:.3f} on the demonstrated states, the best constant {constant:.3f}")
+    assert seen < 0.25 * constant, (seen, constant)
+
+    # Demonstrations outside the box or of the wrong width are refused, naming the problem.
+    for actions, says in ((np.full((1000, 1), 2.5, np.float32), "out of range"),
+                          (np.zeros((1000, 2), np.float32), "2 values")):
+        bad = dict(demos, actions=actions)
+        with pytest.raises(RuntimeError, match=says):
+            arld.Agent("dqfd", gym.make("Pendulum-v1"), demos=bad, **short).learn(1)
+
+
+def test_pendulum_adqnp_pre_trains_then_asks_within_its_budget(tmp_path):
+    model = arld.Agent("adqnp", gym.make("Pendulum-v1"), expert=swing_up, seed=2, n_demo=200, budget=100,
+                       pretrain_steps=200, learning_starts=300, train_steps=1500, eval_period=500, eval_episodes=2,
+                       hidden=[32, 32], batch_size=32)
+    model.learn(1500, log_dir=tmp_path / "run")
+    assert model.summary["demos_pretrain"] == 200 and model.summary["demos_queried"] == 100
+    asked = answers(tmp_path / "run")
+    assert len(asked) == 100
+    for step in asked:
+        assert np.allclose(step["action"], swing_up(step["obs"]), atol=1e-6), step

@@ -1,7 +1,7 @@
 //! `arld expert ...` and `arld demo ...`: the expert pipeline, expert statistics, and demonstration collection.
 use anyhow::{Context, Result};
 use arld::experiment::run_or_reuse;
-use arld::expert::demos::Demonstrations;
+use arld::expert::demos::{DemoAction, Demonstrations};
 use arld::expert::pipeline::{Candidate, evaluate_spec, select_experts};
 use arld::expert::{self, SPEC_HELP};
 use arld::train::{ConfigInput, Method, NetKind};
@@ -238,6 +238,28 @@ fn evaluate_checkpoints(dir: &Path, env: &str, episodes: usize) -> Result<Vec<Ca
     Ok(out)
 }
 
+/// Collects `transitions` demonstrations of `expert` on `env` (episode i reset with seed `seed + i`) into `out`,
+/// and says what they hold.
+fn collect_into<A: DemoAction>(
+    env: &str,
+    expert: &mut dyn expert::Expert<A>,
+    transitions: usize,
+    seed: u64,
+    out: &Path,
+) -> Result<ExitCode> {
+    let demos = Demonstrations::collect(env, expert, transitions, seed)?;
+    demos.save(out)?;
+    let ret: f32 = demos.transitions.iter().map(|t| t.reward).sum();
+    println!(
+        "{} transitions in {} episodes (mean return per episode {:.2}) -> {}",
+        demos.transitions.len(),
+        demos.episodes(),
+        ret / demos.episodes().max(1) as f32,
+        out.display()
+    );
+    Ok(ExitCode::SUCCESS)
+}
+
 pub fn run_demo(cmd: DemoCommand) -> Result<ExitCode> {
     match cmd {
         DemoCommand::Collect {
@@ -246,18 +268,15 @@ pub fn run_demo(cmd: DemoCommand) -> Result<ExitCode> {
             seed,
             out,
         } => {
-            let mut e = expert.build(seed)?;
-            let demos = Demonstrations::collect(&expert.env, e.as_mut(), transitions, seed)?;
-            demos.save(&out)?;
-            let ret: f32 = demos.transitions.iter().map(|t| t.reward).sum();
-            println!(
-                "{} transitions in {} episodes (mean return per episode {:.2}) -> {}",
-                demos.transitions.len(),
-                demos.episodes(),
-                ret / demos.episodes().max(1) as f32,
-                out.display()
-            );
-            Ok(ExitCode::SUCCESS)
+            // A task with actions in a box asks its experts of box actions.
+            if let Ok(spec) = arld::env::box_spec(&expert.env) {
+                let mut e =
+                    expert::boxed::from_spec(&expert.expert, spec, seed, expert.expert_timeout)?;
+                collect_into(&expert.env, e.as_mut(), transitions, seed, &out)
+            } else {
+                let mut e = expert.build(seed)?;
+                collect_into(&expert.env, e.as_mut(), transitions, seed, &out)
+            }
         }
     }
 }

@@ -27,7 +27,10 @@ pub mod verdict;
 use anyhow::{Context, Result};
 use arld_core::agent::Learner;
 use arld_core::env;
-use arld_core::expert::{self, demos::Demonstrations};
+use arld_core::expert::{
+    self,
+    demos::{DemoAction, Demonstrations},
+};
 use arld_core::train::{
     self, Checkpointer, RunBuilder, RunLog, SeedPurpose, Summary, TrainConfig, seed_for,
 };
@@ -48,18 +51,25 @@ pub fn run_one(cfg: &TrainConfig, out_dir: Option<&Path>, progress: bool) -> Res
         }
         err
     };
-    if env::box_spec(&cfg.env).is_ok() {
-        let expert = box_setup(cfg).map_err(record_setup_failure)?;
+    let expert_seed = seed_for(cfg.seed, SeedPurpose::Expert);
+    if let Ok(spec) = env::box_spec(&cfg.env) {
+        let (expert, demos) = setup(cfg, || {
+            expert::boxed::from_spec(&cfg.expert, spec, expert_seed, cfg.expert_timeout)
+        })
+        .map_err(record_setup_failure)?;
         return run_in(
             |cfg| RunBuilder::for_box(cfg),
             expert,
-            None,
+            demos,
             cfg,
             out_dir,
             progress,
         );
     }
-    let (expert, demos) = setup(cfg).map_err(record_setup_failure)?;
+    let (expert, demos) = setup(cfg, || {
+        arld_web::from_spec(&cfg.expert, &cfg.env, expert_seed, cfg.expert_timeout)
+    })
+    .map_err(record_setup_failure)?;
     run_in(
         |cfg| RunBuilder::new(cfg),
         expert,
@@ -113,64 +123,29 @@ fn run_in<L: Learner>(
     Ok(summary)
 }
 
-/// The expert a run in a continuous-action task asks ([`expert::boxed`]: scripted, a trained actor, noisy), when
-/// its method asks one. Pre-training on demonstrations of box actions is not built yet.
-fn box_setup(cfg: &TrainConfig) -> Result<Option<Box<dyn expert::Expert<Vec<f32>>>>> {
-    anyhow::ensure!(
-        !cfg.method.pretrains(),
-        "{} pre-trains on demonstrations, which runs in {} (actions in a box) cannot do yet; use a method \
-         without pre-training (dqn, gdqn, bdqn, adqn)",
-        cfg.method,
-        cfg.env
-    );
-    if cfg.expert_used().is_none() {
-        return Ok(None);
-    }
-    let spec = env::box_spec(&cfg.env)?;
-    Ok(Some(expert::boxed::from_spec(
-        &cfg.expert,
-        spec,
-        seed_for(cfg.seed, SeedPurpose::Expert),
-        cfg.expert_timeout,
-    )?))
-}
-
 /// What a run is given before training: its expert and its pre-training demonstrations, each if it needs them.
-type Setup = (Option<Box<dyn expert::Expert>>, Option<Demonstrations>);
+type Setup<A> = (
+    Option<Box<dyn expert::Expert<A>>>,
+    Option<Demonstrations<A>>,
+);
 
-/// The expert and the demonstrations `cfg` needs (none for a method that needs none).
-fn setup(cfg: &TrainConfig) -> Result<Setup> {
-    let mut expert = if cfg.expert_used().is_some() {
-        Some(arld_web::from_spec(
-            &cfg.expert,
-            &cfg.env,
-            seed_for(cfg.seed, SeedPurpose::Expert),
-            cfg.expert_timeout,
-        )?)
-    } else {
-        None
+/// The expert (built by `build_expert`, when `cfg` asks one) and the demonstrations (when its method
+/// pre-trains: [`train::run_demonstrations`]) a run of `cfg` needs, for either kind of action.
+fn setup<A: DemoAction>(
+    cfg: &TrainConfig,
+    build_expert: impl FnOnce() -> Result<Box<dyn expert::Expert<A>>>,
+) -> Result<Setup<A>> {
+    let mut expert = match cfg.expert_used() {
+        Some(_) => Some(build_expert()?),
+        None => None,
     };
-    let demos = if cfg.method.pretrains() {
-        Some(if let Some(path) = cfg.demo_path()? {
-            Demonstrations::load(path, Some(&cfg.env))?.truncated_to(if cfg.n_demo > 0 {
-                cfg.n_demo
-            } else {
-                usize::MAX
-            })
-        } else {
-            let e = expert
-                .as_deref_mut()
-                .context("pre-training needs an expert")?;
-            Demonstrations::collect(
-                &cfg.env,
-                e,
-                cfg.n_demo,
-                seed_for(cfg.seed, SeedPurpose::Demonstrations),
-            )?
-        })
-    } else {
-        None
-    };
+    let demos = train::run_demonstrations(
+        cfg,
+        expert
+            .as_mut()
+            .map(|e| &mut **e as &mut dyn expert::Expert<A>),
+        || A::make_env(&cfg.env),
+    )?;
     Ok((expert, demos))
 }
 

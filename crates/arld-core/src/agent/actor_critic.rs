@@ -39,6 +39,8 @@ pub(crate) trait ActorCriticLearner: Send {
     fn save_own<'a>(&'a self, prefix: &str, state: &mut StateDict<'a>);
     /// Reads what [`Self::save_own`] wrote.
     fn load_own(&mut self, prefix: &str, state: &StateDict<'_>) -> Result<(), StateError>;
+    /// Turns the cloning loss's Q-filter on or off (pre-training on demonstrations alone clones without it).
+    fn set_q_filter(&mut self, on: bool);
 
     /// The standard deviation of the critic heads at `(obs, action)` (the uncertainty a query rule can read).
     /// Draws no random number.

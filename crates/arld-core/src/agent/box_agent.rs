@@ -35,6 +35,8 @@ pub struct BoxAgent {
     low: Vec<f32>,
     high: Vec<f32>,
     gamma: f32,
+    /// Whether the learner's cloning loss is configured with the Q-filter (off during pre-training).
+    q_filter: bool,
     /// The replay batch in the learner's layout, reused from update to update.
     batch: BoxBatch,
 }
@@ -58,6 +60,10 @@ impl BoxAgent {
         seed: u64,
     ) -> Self {
         let rng = Pcg64::seed_from_u64(seed);
+        let q_filter = match &config {
+            BoxLearnerConfig::Td3(config) => config.q_filter,
+            BoxLearnerConfig::Sac(config) => config.q_filter,
+        };
         let learner: Box<dyn ActorCriticLearner> = match config {
             BoxLearnerConfig::Td3(config) => Box::new(Td3::new(config, obs_dim, low, high, rng)),
             BoxLearnerConfig::Sac(config) => Box::new(Sac::new(config, obs_dim, low, high, rng)),
@@ -68,6 +74,7 @@ impl BoxAgent {
             low: low.to_vec(),
             high: high.to_vec(),
             gamma,
+            q_filter,
             batch: BoxBatch::default(),
         }
     }
@@ -138,6 +145,10 @@ impl Learner for BoxAgent {
             grad_norm: 0.0,
         };
         (stats, priorities)
+    }
+
+    fn set_pretraining(&mut self, on: bool) {
+        self.learner.set_q_filter(self.q_filter && !on);
     }
 
     /// The targets follow the online networks by Polyak averaging inside every update: nothing to copy.

@@ -28,6 +28,11 @@ pub trait Learner: Persist {
     /// One update from a replay batch: what it measured, and the new priority of each of the batch's samples.
     fn learn(&mut self, batch: &Batch<Self::Action>) -> (UpdateStats, &[f32]);
 
+    /// Pre-training on demonstrations alone begins (`true`) or ends (`false`). An actor-critic learner then
+    /// clones every demonstrated action, its Q-filter off (docs/algorithm.md §17); the DQN family changes
+    /// nothing.
+    fn set_pretraining(&mut self, _on: bool) {}
+
     /// The end of a target period (every `target_period` updates, and after pre-training): a DQN copies its
     /// online weights into its target network.
     fn end_target_period(&mut self);

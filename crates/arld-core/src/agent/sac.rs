@@ -410,6 +410,10 @@ impl ActorCriticLearner for Sac<Pcg64> {
     fn core_mut(&mut self) -> &mut ActorCritic<Pcg64> {
         &mut self.ac
     }
+
+    fn set_q_filter(&mut self, on: bool) {
+        self.config.q_filter = on;
+    }
 }
 
 #[cfg(test)]

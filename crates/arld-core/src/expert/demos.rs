@@ -4,15 +4,19 @@
 //! `{"format": "arld-demos", "version": 1, "env": ID, "expert": SPEC, "seed": S, "obs_dim": D, "n_actions": A,
 //! "transitions": N, "episodes": E}`, then one object per transition in order:
 //! `{"episode": e, "obs": [...], "action": a, "reward": r, "next_obs": [...], "terminated": bool,
-//! "truncated": bool}`. `terminated` is the true end of the task; time-limit truncation is kept apart so that
+//! "truncated": bool}`. In a task with actions in a box the header says the box instead of `n_actions`
+//! (`"action_dim": K, "low": [...], "high": [...]`, in that place) and each `action` is a list of K numbers
+//! within it ([`DemoAction`]: what each kind of action brings; one reader and writer for both). `terminated` is the true end of the task; time-limit truncation is kept apart so that
 //! training can bootstrap through it. Collection follows DQfD: whole episodes from the start state, in order,
 //! until `N` transitions are gathered (the last episode is cut at `N`). A Minari dataset (a person's answers
 //! exported from a run, or any other with discrete actions) becomes such a file with
 //! `python -m arld.answers to-demos`; [`Demonstrations::load`] given one says so.
 
 use super::Expert;
+use super::process::WireAction;
 use crate::env::{self, Action, Env};
 use crate::replay::Transition;
+use crate::task::{BoxSpec, EnvSpec, TaskSpec};
 use anyhow::{Context, Result, bail, ensure};
 use serde::{Deserialize, Serialize};
 use std::io::{BufRead, BufReader};
@@ -47,17 +51,107 @@ impl<A: Action> DemoStep<A> {
     }
 }
 
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-struct Header {
+/// The first line of a demonstration file. The actions are described by `n_actions` (discrete) or by
+/// `action_dim`, `low` and `high` (a box); the fields of the other kind are left out, so a file of discrete
+/// actions is what it always was.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Header {
     format: String,
     version: u32,
     env: String,
     expert: String,
     seed: u64,
     obs_dim: usize,
-    n_actions: usize,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    n_actions: Option<usize>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    action_dim: Option<usize>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    low: Option<Vec<f32>>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    high: Option<Vec<f32>>,
     transitions: usize,
     episodes: usize,
+}
+
+/// What a kind of action brings to demonstrations: its tasks' facts and environments by id, and how a file's
+/// header describes its actions. Whether a demonstrated action is one the task accepts is the expert's answer
+/// check ([`WireAction::check_answer`]: in range, or of the box's dimension, finite and within the box).
+pub trait DemoAction: WireAction {
+    /// The registered task `id` with actions of this kind.
+    fn task(id: &str) -> Result<&'static Self::Spec>;
+    /// The task `id`, made to collect demonstrations in.
+    fn make_env(id: &str) -> Result<Box<dyn Env<Self>>>;
+    /// Writes the description of `spec`'s actions into `header`.
+    fn describe(spec: &Self::Spec, header: &mut Header);
+    /// Checks that `header` describes `spec`'s actions; the error says how it differs.
+    fn check_header(header: &Header, spec: &Self::Spec) -> std::result::Result<(), String>;
+}
+
+impl DemoAction for usize {
+    fn task(id: &str) -> Result<&'static EnvSpec> {
+        Ok(env::spec(id)?)
+    }
+
+    fn make_env(id: &str) -> Result<Box<dyn Env>> {
+        Ok(env::make(id)?)
+    }
+
+    fn describe(spec: &EnvSpec, header: &mut Header) {
+        header.n_actions = Some(spec.n_actions);
+    }
+
+    fn check_header(header: &Header, spec: &EnvSpec) -> std::result::Result<(), String> {
+        match header.n_actions {
+            Some(n) if n == spec.n_actions => Ok(()),
+            Some(n) => Err(format!(
+                "the header says {n} actions, but {} has {}",
+                spec.id, spec.n_actions
+            )),
+            None => Err(format!(
+                "the header has no `n_actions`, which {} (discrete actions) needs",
+                spec.id
+            )),
+        }
+    }
+}
+
+impl DemoAction for Vec<f32> {
+    fn task(id: &str) -> Result<&'static BoxSpec> {
+        Ok(env::box_spec(id)?)
+    }
+
+    fn make_env(id: &str) -> Result<Box<dyn Env<Vec<f32>>>> {
+        Ok(env::make_box(id)?)
+    }
+
+    fn describe(spec: &BoxSpec, header: &mut Header) {
+        header.action_dim = Some(spec.action_dim());
+        header.low = Some(spec.action_low.to_vec());
+        header.high = Some(spec.action_high.to_vec());
+    }
+
+    fn check_header(header: &Header, spec: &BoxSpec) -> std::result::Result<(), String> {
+        let (Some(dim), Some(low), Some(high)) = (header.action_dim, &header.low, &header.high)
+        else {
+            return Err(format!(
+                "the header needs `action_dim`, `low` and `high`: {} has actions in a box",
+                spec.id
+            ));
+        };
+        if dim != spec.action_dim() || low[..] != *spec.action_low || high[..] != *spec.action_high
+        {
+            return Err(format!(
+                "the header's box ({dim} dimensions, {low:?} to {high:?}) is not {}'s ({} dimensions, {:?} to \
+                 {:?})",
+                spec.id,
+                spec.action_dim(),
+                spec.action_low,
+                spec.action_high
+            ));
+        }
+        Ok(())
+    }
 }
 
 /// The most transitions a demonstration set is collected with (about 2 GB in memory for LunarLander).
@@ -70,20 +164,31 @@ const MIN_TRANSITION_BYTES: u64 = 64;
 /// Demonstrations as columns, one entry per transition in episode order (an episode ends at a terminated or
 /// truncated transition): how another language hands them over (the Python bindings' `demos=`), read by
 /// [`Demonstrations::from_columns`].
-#[derive(Clone, Debug, Default, PartialEq)]
-pub struct DemoColumns {
+#[derive(Clone, Debug, PartialEq)]
+pub struct DemoColumns<A: Action = usize> {
     pub obs: Vec<Vec<f32>>,
-    pub actions: Vec<usize>,
+    pub actions: Vec<A>,
     pub rewards: Vec<f32>,
     pub next_obs: Vec<Vec<f32>>,
     pub terminated: Vec<bool>,
     pub truncated: Vec<bool>,
 }
 
-/// A set of demonstrations for one environment.
-///
-/// Demonstrations of discrete actions are collected, saved and loaded here; a set of box actions
-/// (`Demonstrations<Vec<f32>>`) is built from its steps.
+impl<A: Action> Default for DemoColumns<A> {
+    fn default() -> Self {
+        Self {
+            obs: Vec::new(),
+            actions: Vec::new(),
+            rewards: Vec::new(),
+            next_obs: Vec::new(),
+            terminated: Vec::new(),
+            truncated: Vec::new(),
+        }
+    }
+}
+
+/// A set of demonstrations for one environment, of discrete actions (the default) or of actions in a box
+/// (`Demonstrations<Vec<f32>>`): collected, given as columns, saved and loaded the same way.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Demonstrations<A: Action = usize> {
     pub env: String,
@@ -92,17 +197,17 @@ pub struct Demonstrations<A: Action = usize> {
     pub transitions: Vec<DemoStep<A>>,
 }
 
-impl Demonstrations {
+impl<A: DemoAction> Demonstrations<A> {
     /// Collects `n` transitions from `expert` on `env_id` in whole episodes; episode i resets with seed `seed + i`.
-    pub fn collect(env_id: &str, expert: &mut dyn Expert, n: usize, seed: u64) -> Result<Self> {
-        let mut env = env::make(env_id)?;
+    pub fn collect(env_id: &str, expert: &mut dyn Expert<A>, n: usize, seed: u64) -> Result<Self> {
+        let mut env = A::make_env(env_id)?;
         Self::collect_in(env.as_mut(), expert, n, seed)
     }
 
     /// [`Demonstrations::collect`] in a given environment.
     pub fn collect_in(
-        env: &mut dyn Env,
-        expert: &mut dyn Expert,
+        env: &mut dyn Env<A>,
+        expert: &mut dyn Expert<A>,
         n: usize,
         seed: u64,
     ) -> Result<Self> {
@@ -114,7 +219,7 @@ impl Demonstrations {
                 let action = expert
                     .act(&obs)
                     .with_context(|| format!("expert {} failed", expert.describe()))?;
-                let s = env.step(action)?;
+                let s = env.step(action.borrow())?;
                 transitions.push(DemoStep {
                     episode,
                     obs: std::mem::take(&mut obs),
@@ -141,7 +246,7 @@ impl Demonstrations {
 
     /// Demonstrations given as columns (see [`DemoColumns`]). Checks lengths, sizes and actions against
     /// `env_id`.
-    pub fn from_columns(env_id: &str, columns: DemoColumns) -> Result<Self> {
+    pub fn from_columns(env_id: &str, columns: DemoColumns<A>) -> Result<Self> {
         let DemoColumns {
             obs,
             actions,
@@ -150,7 +255,7 @@ impl Demonstrations {
             terminated,
             truncated,
         } = columns;
-        let spec = env::spec(env_id)?;
+        let spec = A::task(env_id)?;
         let n = actions.len();
         ensure!(
             [
@@ -182,15 +287,16 @@ impl Demonstrations {
             .enumerate()
         {
             ensure!(
-                obs.len() == spec.obs_dim && next_obs.len() == spec.obs_dim,
+                obs.len() == spec.obs_dim() && next_obs.len() == spec.obs_dim(),
                 "demonstration {i}: observations of {} values expected for {env_id}",
-                spec.obs_dim
+                spec.obs_dim()
             );
-            ensure!(
-                action < spec.n_actions,
-                "demonstration {i}: action {action} is out of range for {env_id} ({} actions)",
-                spec.n_actions
-            );
+            if let Err(why) = A::check_answer(action.borrow(), spec) {
+                bail!(
+                    "demonstration {i}: action {} is out of range for {env_id}: {why}",
+                    A::to_field(action.borrow())
+                );
+            }
             ensure!(
                 reward.is_finite(),
                 "demonstration {i}: reward {reward} is not finite"
@@ -231,18 +337,19 @@ impl Demonstrations {
 
     /// Writes the set atomically ([`crate::files::write_atomic`]).
     pub fn save(&self, path: &Path) -> Result<()> {
-        let e = env::make(&self.env)?;
-        let header = Header {
+        let spec = A::task(&self.env)?;
+        let mut header = Header {
             format: "arld-demos".into(),
             version: 1,
             env: self.env.clone(),
             expert: self.expert.clone(),
             seed: self.seed,
-            obs_dim: e.obs_dim(),
-            n_actions: e.n_actions(),
+            obs_dim: spec.obs_dim(),
             transitions: self.transitions.len(),
             episodes: self.episodes(),
+            ..Header::default()
         };
+        A::describe(spec, &mut header);
         let mut buf = Vec::new();
         serde_json::to_writer(&mut buf, &header)?;
         buf.push(b'\n');
@@ -339,8 +446,10 @@ impl Demonstrations {
             path.display(),
             header.transitions
         );
-        let e =
-            env::make(&header.env).map_err(|err| anyhow::anyhow!("{}:1: {err}", path.display()))?;
+        let spec =
+            A::task(&header.env).map_err(|err| anyhow::anyhow!("{}:1: {err:#}", path.display()))?;
+        A::check_header(&header, spec)
+            .map_err(|why| anyhow::anyhow!("{}:1: {why}", path.display()))?;
         // Capacity is a hint only: the vector grows with what the file really holds.
         let mut transitions = Vec::with_capacity(header.transitions.min(1 << 16));
         for (i, line) in lines.enumerate() {
@@ -349,23 +458,32 @@ impl Demonstrations {
                 continue;
             }
             let lineno = i + 2;
-            let t: DemoStep = serde_json::from_str(&line)
+            let t: DemoStep<A> = serde_json::from_str(&line)
                 .with_context(|| format!("{}:{lineno}: malformed transition", path.display()))?;
+            let obs_dim = spec.obs_dim();
             ensure!(
-                t.obs.len() == e.obs_dim() && t.next_obs.len() == e.obs_dim(),
-                "{}:{lineno}: observation of length {} where {} has {}",
+                t.obs.len() == obs_dim && t.next_obs.len() == obs_dim,
+                "{}:{lineno}: observation of length {} where {} has {obs_dim}",
                 path.display(),
-                t.obs.len(),
+                if t.obs.len() != obs_dim {
+                    t.obs.len()
+                } else {
+                    t.next_obs.len()
+                },
                 header.env,
-                e.obs_dim()
             );
+            if let Err(why) = A::check_answer(t.action.borrow(), spec) {
+                bail!(
+                    "{}:{lineno}: action {} out of range: {why}",
+                    path.display(),
+                    A::to_field(t.action.borrow())
+                );
+            }
             ensure!(
-                t.action < e.n_actions(),
-                "{}:{lineno}: action {} out of range ({} has {} actions)",
+                t.reward.is_finite(),
+                "{}:{lineno}: reward {} is not a finite number",
                 path.display(),
-                t.action,
-                header.env,
-                e.n_actions()
+                t.reward
             );
             transitions.push(t);
         }

@@ -246,11 +246,14 @@ pub struct TrainConfig {
 
     /// Large-margin loss margin M \[DQfD: 0.8\].
     pub margin: f64,
-    /// Weight λ of the margin loss \[P, per task\].
+    /// Weight λ of the margin loss \[P, per task\]; in a box task, the weight of dqfd's and adqnp's behaviour
+    /// cloning loss (docs/algorithm.md §17) \[OURS: 100\].
     pub lambda: f64,
-    /// Weight λ1 of DQfD's n-step TD loss; 0 turns it off \[P: 0, the paper drops it; DQfD used 1\].
+    /// Weight λ1 of DQfD's n-step TD loss; 0 turns it off \[P: 0, the paper drops it; DQfD used 1\]. Refused in a
+    /// box task (TD3 and SAC have no second loss).
     pub lambda_n: f64,
-    /// Horizon n of the n-step loss \[DQfD: 10\].
+    /// Horizon n of the n-step loss \[DQfD: 10\]; in a box task, of the critics' n-step target (1: the one-step
+    /// target) \[OURS: 1\].
     pub n_step: usize,
     /// L2 regularisation weight λ3 on all weights \[P: 0, the paper drops it; DQfD used 1e-5\].
     pub l2: f64,
@@ -379,6 +382,10 @@ const CAR_TASK: (crate::paper::TaskParameters, TaskSchedule) = box_task_for(100_
 
 /// LunarLanderContinuous-v3: 300,000 steps, tested every 10,000 (the runs of docs/algorithm.md §18) \[OURS\].
 const LANDER_TASK: (crate::paper::TaskParameters, TaskSchedule) = box_task_for(300_000, 10_000);
+
+/// The weight of the behaviour cloning loss (`lambda`) of dqfd and adqnp in a task with actions in a box: with
+/// 100 pre-training imitates the demonstrator, with 1 or 10 it does not (docs/algorithm.md §17) \[OURS\].
+const BOX_CLONING_WEIGHT: f64 = 100.0;
 
 /// The paper's parameters and our schedule for a Gymnasium id (CartPole-v1 reuses the CartPole-v0 row); an
 /// environment registered at run time gets [`EXTERNAL_TASK`] ([`BOX_TASK`] for actions in a box).
@@ -726,7 +733,12 @@ impl TrainConfig {
             eps_agent: 0.001,
             eps_demo: 1.0,
             margin: 0.8,
-            lambda: p.lambda,
+            // In a box task the weight of the cloning loss of the methods that pre-train (§17: 100 imitates).
+            lambda: if boxed && method.pretrains() {
+                BOX_CLONING_WEIGHT
+            } else {
+                p.lambda
+            },
             lambda_n: 0.0,
             n_step: if boxed { 1 } else { 10 },
             l2: 0.0,
@@ -889,6 +901,12 @@ impl TrainConfig {
         non_negative("lambda", self.lambda)?;
         non_negative("lambda_n", self.lambda_n)?;
         count("n_step", self.n_step, MAX_N_STEP)?;
+        ensure!(
+            self.lambda_n == 0.0 || !self.boxed(),
+            "lambda_n weighs the DQN family's extra n-step loss, which TD3 and SAC do not have: in {} (actions in \
+             a box) n_step > 1 makes the n-step return the critics' target instead; leave lambda_n at 0",
+            self.env
+        );
         non_negative("l2", self.l2)?;
         // Demonstrations and queries.
         ensure!(
@@ -1040,10 +1058,21 @@ impl TrainConfig {
             alpha: self.alpha as f32,
             eps_agent: self.eps_agent as f32,
             eps_demo: self.eps_demo as f32,
-            // DQfD's optional n-step loss needs each transition's n-step return.
-            n_step: if self.lambda_n > 0.0 { self.n_step } else { 0 },
+            // DQfD's optional n-step loss needs each transition's n-step return; the actor-critic learners of a
+            // box task take the n-step return as their critics' target when `n_step` > 1 (§17). With one step
+            // the memory keeps none, and their target is the one-step one.
+            n_step: if self.lambda_n > 0.0 || (self.n_step > 1 && self.boxed()) {
+                self.n_step
+            } else {
+                0
+            },
             gamma: self.gamma as f32,
         }
+    }
+
+    /// Whether the run's task has actions in a box (learned by TD3 or SAC).
+    pub fn boxed(&self) -> bool {
+        crate::env::box_spec(&self.env).is_ok()
     }
 
     /// The agent's part of the configuration.
@@ -1111,6 +1140,30 @@ impl TrainConfig {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// In a box task `n_step` > 1 makes the replay keep n-step returns (which TD3 and SAC take as their target),
+    /// `n_step` = 1 keeps none; in a discrete task only the n-step loss (`lambda_n` > 0) needs them. lambda_n is
+    /// refused for a box task, with its reason.
+    #[test]
+    fn n_step_acts_for_box_learners_and_lambda_n_is_refused_there() {
+        let box_run =
+            |sets: &[&str]| resolve("Pendulum-v1", Method::Adqn, NetKind::Bootstrap, sets);
+        assert_eq!(box_run(&["n_step=3"]).unwrap().replay_config().n_step, 3);
+        assert_eq!(box_run(&["n_step=1"]).unwrap().replay_config().n_step, 0);
+        assert_eq!(box_run(&[]).unwrap().replay_config().n_step, 0);
+        let err = format!("{:#}", box_run(&["lambda_n=0.5"]).unwrap_err());
+        assert!(err.contains("lambda_n") && err.contains("n-step"), "{err}");
+        let discrete =
+            |sets: &[&str]| resolve("CartPole-v0", Method::Dqfd, NetKind::Bootstrap, sets);
+        assert_eq!(discrete(&["n_step=3"]).unwrap().replay_config().n_step, 0);
+        assert_eq!(
+            discrete(&["n_step=3", "lambda_n=1"])
+                .unwrap()
+                .replay_config()
+                .n_step,
+            3
+        );
+    }
 
     fn resolve(env: &str, method: Method, net: NetKind, sets: &[&str]) -> Result<TrainConfig> {
         let mut input = ConfigInput::new(env, method, net, 0);

@@ -20,7 +20,9 @@ pub use seeds::{SeedPurpose, seed_for};
 pub use snapshot::Checkpointer;
 
 use crate::agent::Learner;
-use crate::expert::demos::Demonstrations;
+use crate::env::Env;
+use crate::expert::Expert;
+use crate::expert::demos::{DemoAction, Demonstrations};
 use crate::replay::{Batch, Replay};
 use crate::state::StateDict;
 use anyhow::{Result, ensure};
@@ -96,11 +98,51 @@ pub fn pretrain<L: Learner>(
     batch: &mut Batch<L::Action>,
 ) -> Result<()> {
     push_demos(cfg, replay, demos)?;
+    agent.set_pretraining(true);
     for update in 1..=cfg.pretrain_steps {
         pretrain_update(cfg, agent, replay, rng, batch, update)?;
     }
+    agent.set_pretraining(false);
     agent.end_target_period();
     Ok(())
+}
+
+/// The demonstrations a run of `cfg` pre-trains on, whatever the kind of its actions: none for a method that
+/// does not pre-train; else those of `demo_file` (its first `n_demo` transitions when `n_demo` is positive),
+/// else `n_demo` transitions collected from `expert` in the environment `make_env` makes (episode i reset with
+/// the run's demonstration seed plus i). The command line, sweeps and Python (unless given `demos=`) all take a
+/// run's demonstrations here.
+pub fn run_demonstrations<A: DemoAction>(
+    cfg: &TrainConfig,
+    expert: Option<&mut dyn Expert<A>>,
+    make_env: impl FnOnce() -> Result<Box<dyn Env<A>>>,
+) -> Result<Option<Demonstrations<A>>> {
+    if !cfg.method.pretrains() {
+        return Ok(None);
+    }
+    if let Some(path) = cfg.demo_path()? {
+        let keep = if cfg.n_demo > 0 {
+            cfg.n_demo
+        } else {
+            usize::MAX
+        };
+        return Ok(Some(
+            Demonstrations::load(path, Some(&cfg.env))?.truncated_to(keep),
+        ));
+    }
+    let expert = expert.ok_or_else(|| {
+        anyhow::anyhow!(
+            "{} pre-trains on demonstrations collected from an expert, but none was given",
+            cfg.method
+        )
+    })?;
+    let mut env = make_env()?;
+    Ok(Some(Demonstrations::collect_in(
+        env.as_mut(),
+        expert,
+        cfg.n_demo,
+        seed_for(cfg.seed, SeedPurpose::Demonstrations),
+    )?))
 }
 
 /// The demonstrations enter replay permanently, episode by episode.

@@ -87,9 +87,15 @@ impl<'a> RunBuilder<'a, BoxAgent> {
 
 /// The configuration's actor-critic learner (`algo`: TD3 or SAC) for the task `spec`, with its networks (the
 /// hidden widths, at least two critic heads: more heads are a larger ensemble), learning rate and batch, seeded
-/// from the run's seed.
+/// from the run's seed. A method that pre-trains (dqfd, adqnp) clones the demonstrated actions with the weight
+/// `lambda` and the Q-filter (off while pre-training; docs/algorithm.md §17); the others do not clone.
 pub fn box_agent(cfg: &TrainConfig, spec: &'static BoxSpec) -> BoxAgent {
     let (hidden, heads, lr) = (cfg.hidden.clone(), cfg.heads.max(2), cfg.lr as f32);
+    let bc_weight = if cfg.method.pretrains() {
+        cfg.lambda as f32
+    } else {
+        0.0
+    };
     let config = match cfg.algo {
         Algo::Td3 => BoxLearnerConfig::Td3(Td3Config {
             hidden,
@@ -97,6 +103,7 @@ pub fn box_agent(cfg: &TrainConfig, spec: &'static BoxSpec) -> BoxAgent {
             actor_lr: lr,
             critic_lr: lr,
             max_batch: cfg.batch_size,
+            bc_weight,
             ..Td3Config::default()
         }),
         Algo::Sac => BoxLearnerConfig::Sac(SacConfig {
@@ -106,6 +113,7 @@ pub fn box_agent(cfg: &TrainConfig, spec: &'static BoxSpec) -> BoxAgent {
             critic_lr: lr,
             alpha_lr: lr,
             max_batch: cfg.batch_size,
+            bc_weight,
             ..SacConfig::default()
         }),
     };
@@ -507,6 +515,7 @@ impl<'a, L: Learner> Run<'a, L> {
         if self.resume_from.is_none() {
             push_demos(cfg, &mut self.parts.replay, demos)?;
         }
+        self.parts.agent.set_pretraining(true);
         while self.st.pretrain_done < cfg.pretrain_steps {
             let parts = &mut self.parts;
             pretrain_update(
@@ -523,6 +532,7 @@ impl<'a, L: Learner> Run<'a, L> {
                 format!("stopped after {done} pre-training updates")
             })?;
         }
+        self.parts.agent.set_pretraining(false);
         self.parts.agent.end_target_period();
         Ok(())
     }
