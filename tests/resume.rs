@@ -236,6 +236,63 @@ fn a_cartpole_dqfd_noisy_run_killed_five_times_ends_byte_identical() {
     eprintln!("CartPole-v0 DQfD-N kills: {hits:#?}");
 }
 
+/// A network of three hidden layers learns CartPole a little and, killed and resumed, ends as the run never
+/// stopped; its weights file holds the third layer, `fc3`.
+#[test]
+fn a_cartpole_dqn_with_three_hidden_layers_learns_and_resumes_byte_identical() {
+    let args = [
+        "--env",
+        "CartPole-v0",
+        "--method",
+        "dqn",
+        "--net",
+        "plain",
+        "--seed",
+        "3",
+        "--set",
+        "hidden=[32, 32, 32]",
+        "--set",
+        "train_steps=10000",
+        "--set",
+        "eval_period=2000",
+        "--set",
+        "eval_episodes=5",
+        "--set",
+        "snapshot_every=211",
+    ];
+    let mut moments = vec![Moment::When("mid-episode", mid_episode)];
+    moments.extend(delays(11, 2, 300));
+    let hits = survives(&args, &moments);
+    eprintln!("CartPole-v0 DQN 32-32-32 kills: {hits:#?}");
+
+    // survives() compared this run with an uninterrupted one; read that run again to look at what it learned.
+    let work = tempfile::tempdir().unwrap();
+    let dir = work.path().join("run");
+    finish(spawn(&train_args(&args, &dir)));
+    let eval = std::fs::read_to_string(dir.join("eval.csv")).unwrap();
+    let means: Vec<f64> = eval
+        .lines()
+        .skip(1)
+        .map(|line| line.split(',').nth(1).unwrap().parse().unwrap())
+        .collect();
+    assert_eq!(means.len(), 5, "{eval}");
+    // A policy that ignores the pole holds it for about 20 steps; the best test here must do three times better.
+    let best = means.iter().copied().fold(f64::MIN, f64::max);
+    assert!(best >= 60.0, "the 32-32-32 network did not learn: {eval}");
+
+    let bytes = std::fs::read(dir.join("weights.safetensors")).unwrap();
+    let file = safetensors::SafeTensors::deserialize(&bytes).unwrap();
+    for (name, shape) in [
+        ("fc1.weight", [32, 4]),
+        ("fc2.weight", [32, 32]),
+        ("fc3.weight", [32, 32]),
+        ("out.weight", [2, 32]),
+    ] {
+        assert_eq!(file.tensor(name).unwrap().shape(), shape, "{name}");
+    }
+    assert!(file.tensor("fc4.weight").is_err());
+}
+
 #[test]
 fn a_lunarlander_adqn_bootstrap_run_killed_five_times_ends_byte_identical() {
     let mut moments = vec![

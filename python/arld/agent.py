@@ -166,7 +166,8 @@ class Agent:
     split. To have SB3's schedule of one learn(total), give train_steps=total when making the agent.
 
     Network: two hidden layers, 64 and 64 wide as in the paper; `hidden=[256, 256]` (or SB3's
-    `policy_kwargs=dict(net_arch=[256, 256])`) sets their widths.
+    `policy_kwargs=dict(net_arch=[256, 256])`) sets their widths, and `hidden=[64, 64, 64]` adds a layer
+    (1 to 8 layers).
 
     Hyperparameters (keywords; [default], "preset" when it depends on the task and method):
 
@@ -193,7 +194,7 @@ class Agent:
     - query_rule: when to ask, as a rule spec, e.g. "paced(horizon=0.1)" (docs/algorithm.md) [the method's own]
     - n_r: window of recent uncertainties [1000]
     - heads: bootstrapped heads [10]
-    - hidden: widths of the two hidden layers (net_arch) [64, 64]
+    - hidden: widths of the hidden layers, 1 to 8 of them (net_arch) [64, 64]
     - loss: TD loss: "mse" or "huber" [mse]
     - double_q: double DQN targets [True]
     - timeout_as_terminal: treat truncation as terminal [False]
@@ -317,7 +318,7 @@ class Agent:
                 arch = policy_kwargs["net_arch"]
                 if isinstance(arch, (dict, str, bytes)) or not hasattr(arch, "__iter__"):
                     raise TypeError(
-                        f"policy_kwargs: net_arch is the list of the two hidden layers' widths, e.g. [256, 256]; "
+                        f"policy_kwargs: net_arch is the list of the hidden layers' widths, e.g. [256, 256]; "
                         f"got {arch!r}"
                     )
                 arch = list(arch)

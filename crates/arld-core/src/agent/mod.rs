@@ -16,7 +16,9 @@ pub mod td3;
 
 pub use learner::Learner;
 
-use crate::nn::{Adam, Grads, NoiseSample, OutputKind, QNet, Workspace, argmax, clip_grad_norm};
+use crate::nn::{
+    Adam, Grads, HiddenLayers, NoiseSample, OutputKind, QNet, Workspace, argmax, clip_grad_norm,
+};
 use crate::query::{Needs, Signals, head_variance, js_divergence, noisy_variance, q_gap};
 use crate::replay::Batch;
 use crate::state::{Persist, StateDict, StateError};
@@ -38,8 +40,8 @@ pub enum TdLoss {
 pub struct AgentConfig {
     /// Plain, K bootstrapped heads, or noisy output.
     pub output: OutputKind,
-    /// Widths of the two hidden layers (the paper's: 64 and 64).
-    pub hidden: [usize; 2],
+    /// Widths of the hidden layers, 1 to [`crate::nn::MAX_DEPTH`] of them (the paper's: 64 and 64).
+    pub hidden: HiddenLayers,
     /// Minibatch size the update buffers are sized for.
     pub batch_size: usize,
     /// Adam learning rate.
@@ -78,7 +80,7 @@ pub struct Agent {
     adam: Adam,
     grads: Grads,
     q_act: Vec<f32>,
-    /// The features `phi(s)` of the last acting pass (the second hidden layer's width).
+    /// The features `phi(s)` of the last acting pass (the last hidden layer's width).
     phi: Vec<f32>,
     ws_batch: Workspace,
     ws_next_online: Workspace,
@@ -112,7 +114,7 @@ impl Agent {
     /// A freshly initialised agent for an environment with `obs_dim` inputs and `n_actions` actions.
     pub fn new(cfg: &AgentConfig, obs_dim: usize, n_actions: usize, seed: u64) -> Self {
         let mut rng = Pcg64::seed_from_u64(seed);
-        let online = QNet::with_hidden(obs_dim, n_actions, cfg.output, cfg.hidden, &mut rng);
+        let online = QNet::with_hidden(obs_dim, n_actions, cfg.output, &cfg.hidden, &mut rng);
         Self::from_network(cfg, online, rng)
     }
 
@@ -120,7 +122,7 @@ impl Agent {
     pub fn from_network(cfg: &AgentConfig, online: QNet, mut rng: Pcg64) -> Self {
         let target = online.clone();
         let n_actions = online.n_actions();
-        let [_, features] = online.hidden();
+        let features = online.features_len();
         let batch = cfg.batch_size;
         let mut noise = || {
             let mut n = NoiseSample::with_inputs(features, n_actions);
@@ -758,7 +760,7 @@ mod tests {
         for double_q in [false, true] {
             let cfg = AgentConfig {
                 output: OutputKind::Plain,
-                hidden: [crate::nn::HIDDEN; 2],
+                hidden: HiddenLayers::new(&[crate::nn::HIDDEN; 2]).unwrap(),
                 batch_size: b,
                 lr: 1e-3,
                 gamma,

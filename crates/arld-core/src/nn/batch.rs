@@ -43,28 +43,28 @@ impl QNet {
             "forward: x must hold batch * obs_dim values"
         );
         let (d, a, width) = (l.obs_dim, l.n_actions, l.out_width);
-        let [n1, n2] = l.hidden;
+        let (depth, n_last) = (l.depth(), l.last_width());
         ws.batch = batch;
 
-        let x_copy = &mut ws.x[..batch * d];
-        x_copy.copy_from_slice(x);
-        let h1 = &mut ws.h1[..batch * n1];
-        product::<S>(
-            h1,
-            Strided::row_major(x_copy, batch, d),
-            self.tensor(l.fc1_w),
-            Some(self.tensor(l.fc1_b)),
-        );
-        relu_in_place(h1);
-        let h2 = &mut ws.h2[..batch * n2];
-        product::<S>(
-            h2,
-            Strided::row_major(h1, batch, n1),
-            self.tensor(l.fc2_w),
-            Some(self.tensor(l.fc2_b)),
-        );
-        relu_in_place(h2);
-        let h2 = Strided::row_major(h2, batch, n2);
+        ws.x[..batch * d].copy_from_slice(x);
+        // The trunk, layer by layer: h[i] = relu(input · W_i + b_i), the input being x or h[i-1].
+        for i in 0..depth {
+            let (before, rest) = ws.h.split_at_mut(i);
+            let n_in = l.input_width(i);
+            let input = match before.last() {
+                Some(previous) => &previous[..batch * n_in],
+                None => &ws.x[..batch * d],
+            };
+            let h = &mut rest[0][..batch * l.hidden[i]];
+            product::<S>(
+                h,
+                Strided::row_major(input, batch, n_in),
+                self.tensor(l.fc_w[i]),
+                Some(self.tensor(l.fc_b[i])),
+            );
+            relu_in_place(h);
+        }
+        let h2 = Strided::row_major(&ws.h[depth - 1][..batch * n_last], batch, n_last);
 
         let q = &mut ws.q[..batch * width];
         match l.kind {
@@ -113,7 +113,7 @@ impl QNet {
                     &mut ws.w_eff,
                     &mut ws.b_eff,
                 );
-                transpose(&ws.w_eff, a, n2, &mut ws.w_eff_t);
+                transpose(&ws.w_eff, a, n_last, &mut ws.w_eff_t);
                 product::<S>(q, h2, &ws.w_eff_t, Some(&ws.b_eff));
             }
         }
@@ -139,7 +139,7 @@ impl QNet {
         assert!(batch > 0, "backward: the workspace holds no forward pass");
         ws.check_shape(l, batch);
         let (d, a, width) = (l.obs_dim, l.n_actions, l.out_width);
-        let [n1, n2] = l.hidden;
+        let (depth, n2) = (l.depth(), l.last_width());
         assert_eq!(
             dq.len(),
             batch * width,
@@ -167,14 +167,14 @@ impl QNet {
             }
             OutputKind::Plain | OutputKind::Noisy => dq,
         };
-        let h1 = &ws.h1[..batch * n1];
-        let h2 = &ws.h2[..batch * n2];
-        let d_h2 = &mut ws.d_h2[..batch * n2];
+        // `h2`/`d_h2`: the last hidden layer (the second in the paper's network) and its gradient.
+        let h2 = &ws.h[depth - 1][..batch * n2];
+        let d_h2 = &mut ws.d_h[depth - 1][..batch * n2];
         let w_t = &mut ws.w_t;
         column_sums(d_out, g.out_b);
         match l.kind {
             OutputKind::Noisy => {
-                // dL/dW_eff as [A][h2] = d_out^T · h2; it is also dL/dmu_w.
+                // dL/dW_eff as [A][h_L] = d_out^T · h_L; it is also dL/dmu_w.
                 product::<S>(g.out_w, Strided::transposed(d_out, batch, a), h2, None);
                 noisy::sigma_gradients(
                     g.out_w,
@@ -197,20 +197,29 @@ impl QNet {
                 }
             }
         }
-        relu_backward::<S>(d_h2, h2);
-        column_sums(d_h2, g.fc2_b);
-        product::<S>(g.fc2_w, Strided::transposed(h1, batch, n1), d_h2, None);
-        let d_h1 = &mut ws.d_h1[..batch * n1];
-        transpose(self.tensor(l.fc2_w), n1, n2, w_t);
-        product::<S>(d_h1, Strided::row_major(d_h2, batch, n2), w_t, None);
-        relu_backward::<S>(d_h1, h1);
-        column_sums(d_h1, g.fc1_b);
-        product::<S>(
-            g.fc1_w,
-            Strided::transposed(&ws.x[..batch * d], batch, d),
-            d_h1,
-            None,
-        );
+        // The trunk, last layer first: through the ReLU, the layer's gradients, then its input's gradient.
+        let fc = g.fc;
+        for i in (0..depth).rev() {
+            let (n_in, n) = (l.input_width(i), l.hidden[i]);
+            let (d_before, d_rest) = ws.d_h.split_at_mut(i);
+            let d_h = &mut d_rest[0][..batch * n];
+            relu_backward::<S>(d_h, &ws.h[i][..batch * n]);
+            column_sums(d_h, fc[i].b);
+            let input = match i {
+                0 => &ws.x[..batch * d],
+                _ => &ws.h[i - 1][..batch * n_in],
+            };
+            product::<S>(fc[i].w, Strided::transposed(input, batch, n_in), d_h, None);
+            if let Some(d_input) = d_before.last_mut() {
+                transpose(self.tensor(l.fc_w[i]), n_in, n, &mut ws.w_t);
+                product::<S>(
+                    &mut d_input[..batch * n_in],
+                    Strided::row_major(d_h, batch, n),
+                    &ws.w_t,
+                    None,
+                );
+            }
+        }
     }
 }
 

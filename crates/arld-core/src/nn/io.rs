@@ -2,13 +2,15 @@
 //!
 //! Every tensor is written in PyTorch's `nn.Linear` layout (`weight [out][in]`, `bias [out]`) under a
 //! readable name, whatever the in-memory layout:
-//! - trunk: `fc1.weight [h1][obs_dim]`, `fc1.bias`, `fc2.weight [h2][h1]`, `fc2.bias` (64 and 64 in the paper);
-//! - `Plain`: `out.weight [A][h2]`, `out.bias [A]`;
-//! - `Bootstrap`: `heads.{k}.weight [A][h2]`, `heads.{k}.bias [A]` for k = 0..K;
-//! - `Noisy`: `noisy.mu_w [A][h2]`, `noisy.sigma_w [A][h2]`, `noisy.mu_b [A]`, `noisy.sigma_b [A]`.
+//! - trunk: `fc1.weight [h1][obs_dim]`, `fc1.bias`, `fc2.weight [h2][h1]`, `fc2.bias`, ... up to `fc{L}` for L
+//!   hidden layers (two of 64 in the paper; at most [`MAX_DEPTH`]);
+//! - `Plain`: `out.weight [A][h_L]`, `out.bias [A]`;
+//! - `Bootstrap`: `heads.{k}.weight [A][h_L]`, `heads.{k}.bias [A]` for k = 0..K;
+//! - `Noisy`: `noisy.mu_w [A][h_L]`, `noisy.sigma_w [A][h_L]`, `noisy.mu_b [A]`, `noisy.sigma_b [A]`.
 //!
 //! The header metadata holds `kind` (`plain`/`bootstrap`/`noisy`), `heads`, `obs_dim` and `n_actions`, plus
-//! the caller's own keys, which [`QNet::load`] hands back; the hidden widths are the trunk tensors' shapes. Files are written atomically (temporary file in
+//! the caller's own keys, which [`QNet::load`] hands back; the depth and the hidden widths are the trunk tensors'
+//! names and shapes. Files are written atomically (temporary file in
 //! the same directory, then rename), and loading validates everything before building a network.
 
 use std::collections::{BTreeMap, HashMap};
@@ -20,7 +22,7 @@ use safetensors::{Dtype, SafeTensors};
 use thiserror::Error;
 
 use super::linear::MatView;
-use super::{HIDDEN, Layout, MAX_HIDDEN, OutputKind, QNet};
+use super::{HIDDEN, HiddenLayers, Layout, MAX_DEPTH, MAX_HIDDEN, OutputKind, QNet};
 
 /// Metadata keys the network itself writes; callers may not use them.
 const RESERVED_KEYS: [&str; 4] = ["kind", "heads", "obs_dim", "n_actions"];
@@ -75,6 +77,11 @@ pub enum ModelFileError {
     },
     #[error("{path}: tensor '{name}' contains a non-finite value")]
     NonFinite { path: PathBuf, name: String },
+    #[error(
+        "{path}: the network has {depth} hidden layers (fc1 to fc{depth}), more than the {max} supported",
+        max = MAX_DEPTH
+    )]
+    TooDeep { path: PathBuf, depth: usize },
     #[error("metadata key '{key}' is reserved for the network description")]
     ReservedKey { key: String },
 }
@@ -129,16 +136,27 @@ impl FileTensor {
 
 /// The file's tensors for a network layout (see the module docs).
 fn file_tensors(layout: &Layout) -> Vec<FileTensor> {
-    let (d, a, width) = (layout.obs_dim, layout.n_actions, layout.out_width);
-    let [n1, n2] = layout.hidden;
+    let (a, width) = (layout.n_actions, layout.out_width);
+    let n2 = layout.last_width();
     // Storage is [in][out]: the file's [out][in] element (o, i) sits at i*out + o.
     let transposed = |outputs: usize, inputs: usize| MatView::row_major(inputs, outputs).t();
-    let mut tensors = vec![
-        FileTensor::matrix("fc1.weight", n1, d, layout.fc1_w.start, transposed(n1, d)),
-        FileTensor::vector("fc1.bias", n1, layout.fc1_b.start),
-        FileTensor::matrix("fc2.weight", n2, n1, layout.fc2_w.start, transposed(n2, n1)),
-        FileTensor::vector("fc2.bias", n2, layout.fc2_b.start),
-    ];
+    let mut tensors = Vec::new();
+    for (i, &n) in layout.hidden.iter().enumerate() {
+        let n_in = layout.input_width(i);
+        let name = format!("fc{}", i + 1);
+        tensors.push(FileTensor::matrix(
+            format!("{name}.weight"),
+            n,
+            n_in,
+            layout.fc_w[i].start,
+            transposed(n, n_in),
+        ));
+        tensors.push(FileTensor::vector(
+            format!("{name}.bias"),
+            n,
+            layout.fc_b[i].start,
+        ));
+    }
     match layout.kind {
         OutputKind::Plain => {
             tensors.push(FileTensor::matrix(
@@ -376,20 +394,36 @@ pub fn parse_model(
         ));
     }
 
-    // The hidden widths: the trunk's output sizes, `fc1.weight [h1][..]` and `fc2.weight [h2][..]`. A tensor
-    // missing, or a width out of range, leaves the paper's width, and the shape checks below name the tensor.
-    let width = |name: &str| {
-        file.tensor(name)
+    // The depth: the trunk layers `fc1.weight`, `fc2.weight`, ... present in an unbroken run from `fc1` (at
+    // least one: a file without `fc1.weight` is refused below for the missing tensor).
+    let depth = (1..)
+        .take_while(|i| file.tensor(&format!("fc{i}.weight")).is_ok())
+        .count()
+        .max(1);
+    if depth > MAX_DEPTH {
+        return Err(ModelFileError::TooDeep {
+            path: path_buf(),
+            depth,
+        });
+    }
+    // The hidden widths: the trunk's output sizes, `fc{i}.weight [h_i][..]`. A tensor missing, or a width out
+    // of range, leaves the paper's width, and the shape checks below name the tensor.
+    let width = |i: usize| {
+        file.tensor(&format!("fc{}.weight", i + 1))
             .ok()
             .and_then(|t| t.shape().first().copied())
             .filter(|w| (1..=MAX_HIDDEN).contains(w))
             .unwrap_or(HIDDEN)
     };
-    let hidden = [width("fc1.weight"), width("fc2.weight")];
-    let [n1, n2] = hidden;
+    let widths: Vec<usize> = (0..depth).map(width).collect();
+    let hidden = HiddenLayers::new(&widths).expect("depth is 1..=MAX_DEPTH");
+    let n2 = widths[depth - 1];
     // Parameters the declared sizes need, against the data the file really holds (before allocating them).
-    let needed = (obs_dim * n1 + n1 * n2 + n1 + n2)
-        + heads * n_actions * (n2 + 1) * if kind == OutputKind::Noisy { 2 } else { 1 };
+    let trunk: usize = (0..depth)
+        .map(|i| (if i == 0 { obs_dim } else { widths[i - 1] } + 1) * widths[i])
+        .sum();
+    let needed =
+        trunk + heads * n_actions * (n2 + 1) * if kind == OutputKind::Noisy { 2 } else { 1 };
     if needed.saturating_mul(4) > bytes.len() {
         return Err(metadata_error(
             "n_actions",
@@ -516,7 +550,7 @@ mod tests {
         ];
         for (kind, hidden) in kinds
             .into_iter()
-            .flat_map(|k| [(k, [HIDDEN, HIDDEN]), (k, [256, 9])])
+            .flat_map(|k| [&[HIDDEN, HIDDEN][..], &[256, 9], &[6], &[5, 7, 3]].map(move |h| (k, h)))
         {
             let mut net = QNet::with_hidden(5, 3, kind, hidden, &mut rng);
             // Make sigma distinct from its constant initial value so a mix-up would show.
@@ -525,14 +559,16 @@ mod tests {
             }
             let path = dir.path().join(format!("{kind:?}{hidden:?}.safetensors"));
             net.save(&path, &example_metadata()).unwrap();
-            // The file holds PyTorch's shapes for these widths.
+            // The file holds PyTorch's shapes for these widths, `fc{i}.weight [h_i][h_{i-1}]`, and no more layers.
             let bytes = fs::read(&path).unwrap();
             let file = SafeTensors::deserialize(&bytes).unwrap();
-            assert_eq!(file.tensor("fc1.weight").unwrap().shape(), &[hidden[0], 5]);
-            assert_eq!(
-                file.tensor("fc2.weight").unwrap().shape(),
-                &hidden[..].iter().rev().copied().collect::<Vec<_>>()[..]
-            );
+            let inputs = std::iter::once(5).chain(hidden.iter().copied());
+            for (i, (&n, n_in)) in hidden.iter().zip(inputs).enumerate() {
+                let name = format!("fc{}.weight", i + 1);
+                assert_eq!(file.tensor(&name).unwrap().shape(), &[n, n_in], "{name}");
+            }
+            let beyond = format!("fc{}.weight", hidden.len() + 1);
+            assert!(file.tensor(&beyond).is_err());
             let (loaded, metadata) = QNet::load(&path).unwrap();
             assert_eq!(loaded.hidden(), hidden);
             assert_eq!(loaded.kind(), kind);
@@ -717,6 +753,35 @@ mod tests {
         });
         assert!(
             matches!(&error, ModelFileError::NonFinite { .. }),
+            "{error}"
+        );
+    }
+
+    /// A file with more trunk layers than a network may have is refused by name, before any shape check.
+    #[test]
+    fn a_file_deeper_than_the_deepest_network_is_refused() {
+        let (dir, _, bytes) = saved_net(2, OutputKind::Plain, 16);
+        let original = SafeTensors::deserialize(&bytes).unwrap();
+        let header = SafeTensors::read_metadata(&bytes)
+            .unwrap()
+            .1
+            .metadata()
+            .clone();
+        let square = vec![0u8; HIDDEN * HIDDEN * 4];
+        let mut views: Vec<(String, TensorView)> = original.tensors();
+        for layer in 3..=MAX_DEPTH + 1 {
+            let view = TensorView::new(Dtype::F32, vec![HIDDEN, HIDDEN], &square).unwrap();
+            views.push((format!("fc{layer}.weight"), view));
+        }
+        let path = dir.path().join("deep.safetensors");
+        fs::write(&path, safetensors::serialize(views, header).unwrap()).unwrap();
+        let error = load_error(&path);
+        assert!(
+            matches!(error, ModelFileError::TooDeep { depth, .. } if depth == MAX_DEPTH + 1),
+            "{error}"
+        );
+        assert!(
+            error.to_string().contains("more than the 8 supported"),
             "{error}"
         );
     }

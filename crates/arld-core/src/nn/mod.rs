@@ -1,23 +1,23 @@
-//! The Q-network: an MLP `obs_dim -> h1 -> ReLU -> h2 -> ReLU -> output stage` (docs/algorithm.md §2), with
-//! forward and backward written by hand on the matrix kernels of `kernels.rs`. The paper's widths are
-//! `h1 = h2 = 64` ([`HIDDEN`]); other widths ([`QNet::with_hidden`]) run on the same kernels, in the same fixed
-//! order of operations.
+//! The Q-network: an MLP `obs_dim -> h1 -> ReLU -> ... -> h_L -> ReLU -> output stage` (docs/algorithm.md §2),
+//! with forward and backward written by hand on the matrix kernels of `kernels.rs`. The paper's network has
+//! two hidden layers, `h1 = h2 = 64` ([`HIDDEN`]); any other depth from 1 to [`MAX_DEPTH`] and widths
+//! ([`QNet::with_hidden`]) run on the same kernels, in the same fixed order of operations.
 //!
 //! The output stage is one of ([`OutputKind`]):
-//! - `Plain`: one linear layer `h2 -> A`;
-//! - `Bootstrap { heads: K }`: K independent linear heads `h2 -> A` on the shared trunk; in the backward
+//! - `Plain`: one linear layer `h_L -> A` (`h_L`: the last hidden layer's width);
+//! - `Bootstrap { heads: K }`: K independent linear heads `h_L -> A` on the shared trunk; in the backward
 //!   pass the gradient entering the trunk is scaled by `1/K` while the heads get their full gradient
 //!   (docs/algorithm.md §4, Osband et al. 2016);
-//! - `Noisy`: a factorised NoisyLinear `h2 -> A` (docs/algorithm.md §6), the only noisy layer.
+//! - `Noisy`: a factorised NoisyLinear `h_L -> A` (docs/algorithm.md §6), the only noisy layer.
 //!
 //! How the parts fit:
 //! - [`QNet`] (this file) holds the parameters only, in one flat `Vec<f32>` (so Adam, clipping and target
 //!   copies are single loops over one slice), and initialises them. `layout.rs` says where each tensor
 //!   lives: trunk and plain/bootstrap weights are stored transposed, `[in][out]`, so the batch product is
 //!   `x · W` with `W`'s rows contiguous (the kernels vectorise across output columns); the K heads are fused
-//!   into one `[h2][K*A]` matrix so the output stage is one product. The noisy layer keeps PyTorch's
+//!   into one `[h_L][K*A]` matrix so the output stage is one product. The noisy layer keeps PyTorch's
 //!   `[out][in]` layout (its effective weights are rebuilt every pass anyway, and [`QNet::noisy_sigmas`]
-//!   hands out `sigma_w` as `[A][h2]`). Files use PyTorch's layout for every tensor.
+//!   hands out `sigma_w` as `[A][h_L]`). Files use PyTorch's layout for every tensor.
 //! - `batch.rs`: [`QNet::forward`] and [`QNet::backward`] of a batch; `single.rs`: [`QNet::q_values_single`],
 //!   one state for acting, the same numbers as its row of a batch.
 //! - [`Workspace`] (`workspace.rs`) holds every buffer a forward/backward pair needs, sized once for a
@@ -51,7 +51,7 @@ use rand::Rng;
 pub use adam::{Adam, Grads, clip_grad_norm};
 pub(crate) use io::with_sorted_metadata;
 pub use io::{ModelFileError, parse_model};
-pub use layout::OutputKind;
+pub use layout::{HiddenLayers, MAX_DEPTH, OutputKind};
 pub use mlp::{Mlp, MlpWorkspace, OutputActivation};
 pub use noisy::{NoiseSample, noise_transform};
 pub use simd::{SimdCapError, SimdLevel, simd_level};
@@ -81,24 +81,25 @@ impl QNet {
     /// A freshly initialised network of the paper's widths (both hidden layers [`HIDDEN`] wide); see
     /// [`Self::with_hidden`].
     pub fn new(obs_dim: usize, n_actions: usize, kind: OutputKind, rng: &mut impl Rng) -> Self {
-        Self::with_hidden(obs_dim, n_actions, kind, [HIDDEN, HIDDEN], rng)
+        Self::with_hidden(obs_dim, n_actions, kind, &[HIDDEN, HIDDEN], rng)
     }
 
-    /// A freshly initialised network with hidden layers `hidden = [h1, h2]` wide.
+    /// A freshly initialised network with hidden layers `hidden = [h1, ..., h_L]` wide (1 to [`MAX_DEPTH`]
+    /// layers).
     ///
     /// Hidden layers and plain/bootstrap heads use PyTorch's `nn.Linear` default,
     /// `U[-1/sqrt(fan_in), 1/sqrt(fan_in)]` for weights and biases, drawn layer by layer in PyTorch order
-    /// (fc1, fc2, then head 0, 1, ...: each head independently, Osband et al.). The noisy layer draws
-    /// `mu ~ U[-1/sqrt(h2), 1/sqrt(h2)]` and sets `sigma = 0.5/sqrt(h2)` (docs/algorithm.md §6).
+    /// (fc1, fc2, ..., then head 0, 1, ...: each head independently, Osband et al.). The noisy layer draws
+    /// `mu ~ U[-1/sqrt(h_L), 1/sqrt(h_L)]` and sets `sigma = 0.5/sqrt(h_L)` (docs/algorithm.md §6).
     ///
     /// # Panics
-    /// If `obs_dim`, `n_actions`, the number of heads or a width is zero, or a width exceeds [`MAX_HIDDEN`]
-    /// (configurations are validated upstream).
+    /// If `obs_dim`, `n_actions`, the number of heads or a width is zero, a width exceeds [`MAX_HIDDEN`], or
+    /// there are no or more than [`MAX_DEPTH`] hidden layers (configurations are validated upstream).
     pub fn with_hidden(
         obs_dim: usize,
         n_actions: usize,
         kind: OutputKind,
-        hidden: [usize; 2],
+        hidden: &[usize],
         rng: &mut impl Rng,
     ) -> Self {
         assert!(obs_dim > 0, "QNet: obs_dim must be positive");
@@ -106,7 +107,9 @@ impl QNet {
             hidden.iter().all(|&h| (1..=MAX_HIDDEN).contains(&h)),
             "QNet: hidden widths must be 1..={MAX_HIDDEN}, got {hidden:?}"
         );
-        let [n1, n2] = hidden;
+        let hidden = HiddenLayers::new(hidden).unwrap_or_else(|| {
+            panic!("QNet: a network has 1 to {MAX_DEPTH} hidden layers, got {hidden:?}")
+        });
         assert!(n_actions > 0, "QNet: n_actions must be positive");
         assert!(
             kind.heads() > 0,
@@ -116,13 +119,16 @@ impl QNet {
         let mut params = vec![0.0f32; layout.len];
         let t = TensorsMut::split(&layout, &mut params);
         // Stored transposed: the PyTorch [out][in] matrix is the transpose of our [in][out] storage.
-        init_linear(t.fc1_w, MatView::row_major(obs_dim, n1).t(), t.fc1_b, rng);
-        init_linear(t.fc2_w, MatView::row_major(n1, n2).t(), t.fc2_b, rng);
+        for (i, layer) in t.fc.into_iter().take(layout.depth()).enumerate() {
+            let view = MatView::row_major(layout.input_width(i), hidden[i]).t();
+            init_linear(layer.w, view, layer.b, rng);
+        }
+        let n2 = layout.last_width();
         match kind {
             OutputKind::Plain | OutputKind::Bootstrap { .. } => {
                 let width = layout.out_width;
                 for head in 0..kind.heads() {
-                    // Head k is columns k*A..(k+1)*A of the fused [h2][K*A] matrix: as an [A][h2]
+                    // Head k is columns k*A..(k+1)*A of the fused [h_L][K*A] matrix: as an [A][h_L]
                     // matrix it starts at column k*A with row stride 1 and column stride K*A.
                     let view = MatView {
                         rows: n_actions,
@@ -172,9 +178,14 @@ impl QNet {
         self.layout.kind
     }
 
-    /// Widths of the two hidden layers, `[h1, h2]`.
-    pub fn hidden(&self) -> [usize; 2] {
-        self.layout.hidden
+    /// Widths of the hidden layers, `[h1, ..., h_L]`.
+    pub fn hidden(&self) -> &[usize] {
+        self.layout.hidden.as_slice()
+    }
+
+    /// Width of the last hidden layer: the length of the features `phi(s)`.
+    pub fn features_len(&self) -> usize {
+        self.layout.last_width()
     }
 
     /// K for `Bootstrap`, 1 otherwise.
@@ -212,7 +223,7 @@ impl QNet {
         self.params.copy_from_slice(&other.params);
     }
 
-    /// `(sigma_w [A][h2] row-major, sigma_b [A])` of a noisy network; `None` otherwise.
+    /// `(sigma_w [A][h_L] row-major, sigma_b [A])` of a noisy network; `None` otherwise.
     pub fn noisy_sigmas(&self) -> Option<(&[f32], &[f32])> {
         match self.layout.kind {
             OutputKind::Noisy => Some((

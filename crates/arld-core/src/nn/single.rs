@@ -9,9 +9,10 @@ use super::simd::at_simd_level;
 use super::{MAX_HIDDEN, NoiseSample, OutputKind, QNet};
 
 thread_local! {
-    /// The first hidden layer's activations of the single-state pass, and the features when the caller keeps
-    /// none: grown to the widest network the thread has run, so acting allocates nothing after its first step.
-    static H1: RefCell<Vec<f32>> = const { RefCell::new(Vec::new()) };
+    /// The activations of the hidden layers before the last in the single-state pass (two halves, read from one
+    /// and written to the other in turn), and the features when the caller keeps none: grown to the widest
+    /// network the thread has run, so acting allocates nothing after its first step.
+    static TRUNK: RefCell<Vec<f32>> = const { RefCell::new(Vec::new()) };
     static FEATURES: RefCell<Vec<f32>> = const { RefCell::new(Vec::new()) };
 }
 
@@ -31,12 +32,12 @@ impl QNet {
     /// as that state's row of a batched [`Self::forward`]. `noise` as in [`Self::forward`].
     pub fn q_values_single(&self, obs: &[f32], noise: Option<&NoiseSample>, q_out: &mut [f32]) {
         let mut buffer = FEATURES.take();
-        let features = scratch(&mut buffer, self.layout.h2());
+        let features = scratch(&mut buffer, self.layout.last_width());
         self.q_values_single_with_features(obs, noise, q_out, features);
         FEATURES.set(buffer);
     }
 
-    /// [`Self::q_values_single`] that also returns the penultimate activations `phi(s)` (the second hidden
+    /// [`Self::q_values_single`] that also returns the penultimate activations `phi(s)` (the last hidden
     /// layer's width of values), which the noisy predictive-variance uncertainty needs (docs/algorithm.md §7).
     ///
     /// # Panics
@@ -60,7 +61,7 @@ impl QNet {
         features: &mut [f32],
     ) {
         let l = &self.layout;
-        let [n1, n2] = l.hidden;
+        let (depth, n2) = (l.depth(), l.last_width());
         assert_eq!(
             obs.len(),
             l.obs_dim,
@@ -74,27 +75,31 @@ impl QNet {
         assert_eq!(
             features.len(),
             n2,
-            "q_values_single: features must hold the second hidden layer's width"
+            "q_values_single: features must hold the last hidden layer's width"
         );
         // Taken out of the thread's slot rather than borrowed in a closure: the products stay in this function,
         // compiled for the SIMD level.
-        let mut buffer = H1.take();
-        let h1 = scratch(&mut buffer, n1);
-        product::<S>(
-            h1,
-            Strided::row_major(obs, 1, l.obs_dim),
-            self.tensor(l.fc1_w),
-            Some(self.tensor(l.fc1_b)),
-        );
-        relu_in_place(h1);
-        product::<S>(
-            features,
-            Strided::row_major(h1, 1, n1),
-            self.tensor(l.fc2_w),
-            Some(self.tensor(l.fc2_b)),
-        );
-        H1.set(buffer);
-        relu_in_place(features);
+        let mut buffer = TRUNK.take();
+        let widest = l.hidden[..depth - 1].iter().copied().max().unwrap_or(0);
+        let (mut input, mut output) = scratch(&mut buffer, 2 * widest).split_at_mut(widest);
+        for i in 0..depth {
+            let (n_in, n) = (l.input_width(i), l.hidden[i]);
+            let layer_input = if i == 0 { obs } else { &input[..n_in] };
+            let h = if i + 1 == depth {
+                &mut *features
+            } else {
+                &mut output[..n]
+            };
+            product::<S>(
+                h,
+                Strided::row_major(layer_input, 1, n_in),
+                self.tensor(l.fc_w[i]),
+                Some(self.tensor(l.fc_b[i])),
+            );
+            relu_in_place(h);
+            std::mem::swap(&mut input, &mut output);
+        }
+        TRUNK.set(buffer);
         match l.kind {
             OutputKind::Plain | OutputKind::Bootstrap { .. } => {
                 // With batch 1, [head][batch][action] is the fused [K*A] order.

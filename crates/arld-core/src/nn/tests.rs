@@ -24,13 +24,13 @@ struct Case {
 }
 
 fn case(kind: OutputKind, seed: u64, with_noise: bool) -> Case {
-    case_with(kind, seed, with_noise, [HIDDEN, HIDDEN])
+    case_with(kind, seed, with_noise, &[HIDDEN, HIDDEN])
 }
 
-/// Uneven widths other than the paper's, for the checks of configurable hidden layers.
-const OTHER_WIDTHS: [usize; 2] = [7, 13];
+/// Depths 1 to 4 with uneven widths other than the paper's, for the checks of configurable hidden layers.
+const OTHER_WIDTHS: [&[usize]; 4] = [&[7], &[7, 13], &[9, 5, 11], &[5, 7, 3, 9]];
 
-fn case_with(kind: OutputKind, seed: u64, with_noise: bool, hidden: [usize; 2]) -> Case {
+fn case_with(kind: OutputKind, seed: u64, with_noise: bool, hidden: &[usize]) -> Case {
     let mut rng = Pcg64::seed_from_u64(seed);
     let mut net = QNet::with_hidden(OBS_DIM, N_ACTIONS, kind, hidden, &mut rng);
     // Spread sigma so every sigma entry gets a distinct value (the initial value is a constant).
@@ -49,7 +49,7 @@ fn case_with(kind: OutputKind, seed: u64, with_noise: bool, hidden: [usize; 2]) 
         .map(|_| rng.random_range(-1.0f32..1.0))
         .collect();
     let noise = with_noise.then(|| {
-        let mut sample = NoiseSample::with_inputs(hidden[1], N_ACTIONS);
+        let mut sample = NoiseSample::with_inputs(net.features_len(), N_ACTIONS);
         sample.resample(&mut rng);
         sample
     });
@@ -83,25 +83,23 @@ fn sizes(layout: &Layout) -> (usize, usize, usize, usize) {
 /// with explicit index arithmetic. Returns Q in [head][batch][action] order.
 fn reference_q(layout: &Layout, p: &[f64], x: &[f64], noise: Option<&NoiseSample>) -> Vec<f64> {
     let (d, a, width, heads) = sizes(layout);
-    let [n1, n2] = layout.hidden;
+    let n2 = *layout.hidden.last().unwrap();
     let batch = x.len() / d;
     let mut q = vec![0.0; heads * batch * a];
     for b in 0..batch {
-        let mut h1 = vec![0.0f64; n1];
-        for (o, h) in h1.iter_mut().enumerate() {
-            let mut s = p[layout.fc1_b.start + o];
-            for i in 0..d {
-                s += x[b * d + i] * p[layout.fc1_w.start + i * n1 + o];
-            }
-            *h = s.max(0.0);
-        }
-        let mut h2 = vec![0.0f64; n2];
-        for (o, h) in h2.iter_mut().enumerate() {
-            let mut s = p[layout.fc2_b.start + o];
-            for (i, &h1_i) in h1.iter().enumerate() {
-                s += h1_i * p[layout.fc2_w.start + i * n2 + o];
-            }
-            *h = s.max(0.0);
+        // The trunk, layer by layer: weights `[in][out]` from `fc_w[layer].start`.
+        let mut h2 = x[b * d..(b + 1) * d].to_vec();
+        for (layer, &n) in layout.hidden.iter().enumerate() {
+            let input = std::mem::take(&mut h2);
+            h2 = (0..n)
+                .map(|o| {
+                    let mut s = p[layout.fc_b[layer].start + o];
+                    for (i, &v) in input.iter().enumerate() {
+                        s += v * p[layout.fc_w[layer].start + i * n + o];
+                    }
+                    s.max(0.0)
+                })
+                .collect();
         }
         match layout.kind {
             OutputKind::Plain | OutputKind::Bootstrap { .. } => {
@@ -147,17 +145,21 @@ fn reference_loss(case: &Case, p: &[f64]) -> f64 {
 }
 
 /// `(segment, name, is_trunk)` for every tensor of the layout.
-fn segments(layout: &Layout) -> Vec<(Segment, &'static str, bool)> {
-    vec![
-        (layout.fc1_w, "fc1_w", true),
-        (layout.fc1_b, "fc1_b", true),
-        (layout.fc2_w, "fc2_w", true),
-        (layout.fc2_b, "fc2_b", true),
-        (layout.out_w, "out_w", false),
-        (layout.out_b, "out_b", false),
-        (layout.sigma_w, "sigma_w", false),
-        (layout.sigma_b, "sigma_b", false),
-    ]
+fn segments(layout: &Layout) -> Vec<(Segment, String, bool)> {
+    let mut all = Vec::new();
+    for layer in 0..layout.hidden.len() {
+        all.push((layout.fc_w[layer], format!("fc{}_w", layer + 1), true));
+        all.push((layout.fc_b[layer], format!("fc{}_b", layer + 1), true));
+    }
+    for (segment, name) in [
+        (layout.out_w, "out_w"),
+        (layout.out_b, "out_b"),
+        (layout.sigma_w, "sigma_w"),
+        (layout.sigma_b, "sigma_b"),
+    ] {
+        all.push((segment, name.to_string(), false));
+    }
+    all
 }
 
 fn assert_close(name: &str, actual: &[f32], expected: &[f64], rtol: f64) {
@@ -204,13 +206,14 @@ fn check_against_finite_differences(case: &Case) {
             .iter()
             .map(|&g| if is_trunk { g * trunk_factor } else { g })
             .collect();
-        assert_close(name, &analytic, &fd[segment.range()], 1e-3);
+        assert_close(&name, &analytic, &fd[segment.range()], 1e-3);
     }
 }
 
-/// The cases each oracle checks, with `seeds` in this order: Plain, Bootstrap (`heads[0]` heads) and Noisy (under a
-/// fixed noise sample) at the paper's widths, then the same kinds (Bootstrap with `heads[1]`) at [`OTHER_WIDTHS`].
-fn every_kind_and_width(seeds: [u64; 6], heads: [usize; 2]) -> Vec<Case> {
+/// The cases each oracle checks, with seeds from `seed` up in this order: Plain, Bootstrap (`heads[0]` heads) and
+/// Noisy (under a fixed noise sample) at the paper's widths, then the same kinds (Bootstrap with `heads[1]`) at
+/// each of [`OTHER_WIDTHS`] (depths 1 to 4).
+fn every_kind_and_width(seed: u64, heads: [usize; 2]) -> Vec<Case> {
     let kinds = |heads| {
         [
             OutputKind::Plain,
@@ -218,12 +221,14 @@ fn every_kind_and_width(seeds: [u64; 6], heads: [usize; 2]) -> Vec<Case> {
             OutputKind::Noisy,
         ]
     };
-    let paper = kinds(heads[0]).map(|kind| (kind, [HIDDEN, HIDDEN]));
-    let other = kinds(heads[1]).map(|kind| (kind, OTHER_WIDTHS));
+    let paper = kinds(heads[0]).map(|kind| (kind, &[HIDDEN, HIDDEN][..]));
+    let other = OTHER_WIDTHS
+        .into_iter()
+        .flat_map(|hidden| kinds(heads[1]).map(|kind| (kind, hidden)));
     paper
         .into_iter()
         .chain(other)
-        .zip(seeds)
+        .zip(seed..)
         .map(|((kind, hidden), seed)| {
             let c = case_with(kind, seed, kind == OutputKind::Noisy, hidden);
             assert_eq!(c.net.hidden(), hidden);
@@ -235,7 +240,7 @@ fn every_kind_and_width(seeds: [u64; 6], heads: [usize; 2]) -> Vec<Case> {
 /// For Bootstrap, the trunk's analytic gradient is scaled by 1/K (the check multiplies it back by K).
 #[test]
 fn gradients_match_finite_differences_for_every_kind_and_width() {
-    for c in every_kind_and_width([1, 2, 3, 21, 22, 23], [4, 3]) {
+    for c in every_kind_and_width(1, [4, 3]) {
         check_against_finite_differences(&c);
     }
 }
@@ -276,30 +281,29 @@ fn columns(m: &[f32], width: usize, cols: Range<usize>) -> Vec<f32> {
 fn check_against_candle(case: &Case) {
     let layout = *case.net.layout();
     let (d, a, width, heads) = sizes(&layout);
-    let [n1, n2] = layout.hidden;
+    let n2 = *layout.hidden.last().unwrap();
     let (q, grads) = analytic(case);
     let p = case.net.parameters();
     let t = |s: Segment| &p[s.range()];
 
-    let x = Tensor::from_slice(&case.x, (BATCH, d), &Device::Cpu).unwrap();
-    let w1 = var(t(layout.fc1_w), &[d, n1]);
-    let b1 = var(t(layout.fc1_b), &[n1]);
-    let w2 = var(t(layout.fc2_w), &[n1, n2]);
-    let b2 = var(t(layout.fc2_b), &[n2]);
-    let h1 = x
-        .matmul(&w1)
-        .unwrap()
-        .broadcast_add(&b1)
-        .unwrap()
-        .relu()
-        .unwrap();
-    let h2 = h1
-        .matmul(&w2)
-        .unwrap()
-        .broadcast_add(&b2)
-        .unwrap()
-        .relu()
-        .unwrap();
+    let mut h2 = Tensor::from_slice(&case.x, (BATCH, d), &Device::Cpu).unwrap();
+    let mut checks: Vec<(String, Vec<f32>, Var)> = Vec::new();
+    let mut n_in = d;
+    for (layer, &n) in layout.hidden.iter().enumerate() {
+        let w = var(t(layout.fc_w[layer]), &[n_in, n]);
+        let b = var(t(layout.fc_b[layer]), &[n]);
+        h2 = h2
+            .matmul(&w)
+            .unwrap()
+            .broadcast_add(&b)
+            .unwrap()
+            .relu()
+            .unwrap();
+        let name = |part: &str| format!("fc{}_{part}", layer + 1);
+        checks.push((name("w"), grads.tensor(layout.fc_w[layer]).to_vec(), w));
+        checks.push((name("b"), grads.tensor(layout.fc_b[layer]).to_vec(), b));
+        n_in = n;
+    }
     let loss_weights = |k: usize| {
         Tensor::from_slice(
             &case.w[k * BATCH * a..(k + 1) * BATCH * a],
@@ -309,12 +313,6 @@ fn check_against_candle(case: &Case) {
         .unwrap()
     };
 
-    let mut checks: Vec<(&str, Vec<f32>, Var)> = vec![
-        ("fc1_w", grads.tensor(layout.fc1_w).to_vec(), w1.clone()),
-        ("fc1_b", grads.tensor(layout.fc1_b).to_vec(), b1.clone()),
-        ("fc2_w", grads.tensor(layout.fc2_w).to_vec(), w2.clone()),
-        ("fc2_b", grads.tensor(layout.fc2_b).to_vec(), b2.clone()),
-    ];
     let mut q_parts = Vec::new();
     let mut loss = Tensor::zeros((), candle_core::DType::F32, &Device::Cpu).unwrap();
     match layout.kind {
@@ -332,11 +330,15 @@ fn check_against_candle(case: &Case) {
                 loss = (loss + (&qk * &loss_weights(k)).unwrap().sum_all().unwrap()).unwrap();
                 q_parts.push(qk);
                 checks.push((
-                    "head_w",
+                    format!("head{k}_w"),
                     columns(grads.tensor(layout.out_w), width, cols.clone()),
                     wk,
                 ));
-                checks.push(("head_b", grads.tensor(layout.out_b)[cols].to_vec(), bk));
+                checks.push((
+                    format!("head{k}_b"),
+                    grads.tensor(layout.out_b)[cols].to_vec(),
+                    bk,
+                ));
             }
         }
         OutputKind::Noisy => {
@@ -361,10 +363,14 @@ fn check_against_candle(case: &Case) {
                 .unwrap();
             loss = (&q0 * &loss_weights(0)).unwrap().sum_all().unwrap();
             q_parts.push(q0);
-            checks.push(("mu_w", grads.tensor(layout.out_w).to_vec(), mu_w));
-            checks.push(("sigma_w", grads.tensor(layout.sigma_w).to_vec(), sigma_w));
-            checks.push(("mu_b", grads.tensor(layout.out_b).to_vec(), mu_b));
-            checks.push(("sigma_b", grads.tensor(layout.sigma_b).to_vec(), sigma_b));
+            for (name, segment, variable) in [
+                ("mu_w", layout.out_w, mu_w),
+                ("sigma_w", layout.sigma_w, sigma_w),
+                ("mu_b", layout.out_b, mu_b),
+                ("sigma_b", layout.sigma_b, sigma_b),
+            ] {
+                checks.push((name.to_string(), grads.tensor(segment).to_vec(), variable));
+            }
         }
     }
     let candle_q: Vec<f64> = q_parts.iter().flat_map(to_vec).collect();
@@ -372,14 +378,14 @@ fn check_against_candle(case: &Case) {
     let store = loss.backward().unwrap();
     for (name, ours, variable) in checks {
         let reference = to_vec(store.get(variable.as_tensor()).expect("candle gradient"));
-        assert_close(name, &ours, &reference, 1e-4);
+        assert_close(&name, &ours, &reference, 1e-4);
     }
 }
 
 /// For Bootstrap, candle's network carries the trunk hook (1/K gradient).
 #[test]
 fn gradients_match_candle_for_every_kind_and_width() {
-    for c in every_kind_and_width([5, 6, 7, 24, 25, 26], [10, 4]) {
+    for c in every_kind_and_width(31, [10, 4]) {
         check_against_candle(&c);
     }
 }
@@ -397,10 +403,13 @@ fn single_state_forward_equals_the_batch_forward_bit_for_bit_for_every_kind() {
         (OutputKind::Noisy, true),
     ]
     .into_iter()
-    .flat_map(|k| [(k, [HIDDEN, HIDDEN]), (k, OTHER_WIDTHS)])
-    {
+    .flat_map(|k| {
+        std::iter::once(&[HIDDEN, HIDDEN][..])
+            .chain(OTHER_WIDTHS)
+            .map(move |h| (k, h))
+    }) {
         let c = case_with(kind, 8, with_noise, hidden);
-        let n2 = hidden[1];
+        let n2 = *hidden.last().unwrap();
         let mut ws = Workspace::new(&c.net, BATCH);
         let q = c
             .net
@@ -466,8 +475,8 @@ fn initialisation_follows_the_documented_ranges() {
     let l = *net.layout();
     let p = net.parameters();
     let within = |s: Segment, bound: f32| p[s.range()].iter().all(|v| v.abs() <= bound);
-    assert!(within(l.fc1_w, 1.0 / 6f32.sqrt()) && within(l.fc1_b, 1.0 / 6f32.sqrt()));
-    assert!(within(l.fc2_w, 0.125) && within(l.out_w, 0.125) && within(l.out_b, 0.125));
+    assert!(within(l.fc_w[0], 1.0 / 6f32.sqrt()) && within(l.fc_b[0], 1.0 / 6f32.sqrt()));
+    assert!(within(l.fc_w[1], 0.125) && within(l.out_w, 0.125) && within(l.out_b, 0.125));
     assert!(
         p[l.sigma_w.range()]
             .iter()
@@ -475,7 +484,7 @@ fn initialisation_follows_the_documented_ranges() {
             .all(|&s| s == 0.5 / 8.0)
     );
     // The draws fill the range (not, say, a tenth of it).
-    assert!(p[l.fc2_w.range()].iter().any(|v| v.abs() > 0.12));
+    assert!(p[l.fc_w[1].range()].iter().any(|v| v.abs() > 0.12));
 
     // Bootstrap heads are initialised independently: no two heads are equal.
     let boot = QNet::new(6, 4, OutputKind::Bootstrap { heads: 3 }, &mut rng);

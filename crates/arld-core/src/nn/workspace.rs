@@ -14,12 +14,12 @@ pub struct Workspace {
     /// Batch size of the last forward; 0 before the first.
     pub(super) batch: usize,
     pub(super) x: Vec<f32>,
-    pub(super) h1: Vec<f32>,
-    pub(super) h2: Vec<f32>,
+    /// The hidden layers' activations, `h[i]` as `[batch][n_i]`, one buffer per layer.
+    pub(super) h: Vec<Vec<f32>>,
     /// Output GEMM result `[batch][K*A]` before reordering (bootstrap only).
     pub(super) fused: Vec<f32>,
     pub(super) q: Vec<f32>,
-    /// Noise factors and effective output weights (`[A][h2]` and transposed `[h2][A]`) and bias of the
+    /// Noise factors and effective output weights (`[A][h_L]` and transposed `[h_L][A]`) and bias of the
     /// last noisy forward.
     pub(super) noise_in: Vec<f32>,
     pub(super) noise_out: Vec<f32>,
@@ -27,9 +27,9 @@ pub struct Workspace {
     pub(super) w_eff_t: Vec<f32>,
     pub(super) b_eff: Vec<f32>,
     pub(super) d_fused: Vec<f32>,
-    pub(super) d_h2: Vec<f32>,
-    pub(super) d_h1: Vec<f32>,
-    /// A transposed weight matrix for the input gradient of a layer (`[out][in]`, sized for the larger one).
+    /// The loss gradients of the hidden layers' activations, shaped as `h`.
+    pub(super) d_h: Vec<Vec<f32>>,
+    /// A transposed weight matrix for the input gradient of a layer (`[out][in]`, sized for the largest one).
     pub(super) w_t: Vec<f32>,
 }
 
@@ -37,7 +37,14 @@ impl Workspace {
     /// Buffers for `net`'s shape and batches of up to `max_batch` rows.
     pub fn new(net: &QNet, max_batch: usize) -> Self {
         let l = net.layout;
-        let [n1, n2] = l.hidden;
+        let n_last = l.last_width();
+        let per_layer =
+            || -> Vec<Vec<f32>> { l.hidden.iter().map(|&n| vec![0.0; max_batch * n]).collect() };
+        // The largest weight matrix whose transpose the backward pass takes: the output layer's or a trunk
+        // layer's past the first.
+        let widest_transpose = (1..l.depth())
+            .map(|i| l.hidden[i - 1] * l.hidden[i])
+            .fold(n_last * l.out_width, usize::max);
         let noisy = matches!(l.kind, OutputKind::Noisy);
         let bootstrap = matches!(l.kind, OutputKind::Bootstrap { .. });
         let noisy_len = |n: usize| if noisy { n } else { 0 };
@@ -47,19 +54,17 @@ impl Workspace {
             max_batch,
             batch: 0,
             x: vec![0.0; max_batch * l.obs_dim],
-            h1: vec![0.0; max_batch * n1],
-            h2: vec![0.0; max_batch * n2],
+            h: per_layer(),
             fused: vec![0.0; bootstrap_len(max_batch * l.out_width)],
             q: vec![0.0; max_batch * l.out_width],
-            noise_in: vec![0.0; noisy_len(n2)],
+            noise_in: vec![0.0; noisy_len(n_last)],
             noise_out: vec![0.0; noisy_len(l.n_actions)],
-            w_eff: vec![0.0; noisy_len(n2 * l.n_actions)],
-            w_eff_t: vec![0.0; noisy_len(n2 * l.n_actions)],
+            w_eff: vec![0.0; noisy_len(n_last * l.n_actions)],
+            w_eff_t: vec![0.0; noisy_len(n_last * l.n_actions)],
             b_eff: vec![0.0; noisy_len(l.n_actions)],
             d_fused: vec![0.0; bootstrap_len(max_batch * l.out_width)],
-            d_h2: vec![0.0; max_batch * n2],
-            d_h1: vec![0.0; max_batch * n1],
-            w_t: vec![0.0; (n2 * l.out_width).max(n1 * n2)],
+            d_h: per_layer(),
+            w_t: vec![0.0; widest_transpose],
         }
     }
 
@@ -88,9 +93,13 @@ impl Workspace {
         self.batch
     }
 
-    /// Penultimate activations `phi` of the last forward, `[batch][h2]`.
+    /// Penultimate activations `phi` of the last forward, `[batch][h_L]`.
     pub fn features(&self) -> &[f32] {
-        &self.h2[..self.batch * self.layout.h2()]
+        let last = self
+            .h
+            .last()
+            .expect("a network has at least one hidden layer");
+        &last[..self.batch * self.layout.last_width()]
     }
 
     /// Q-values of the last forward, `[head][batch][action]`.

@@ -16,7 +16,7 @@
 
 use crate::agent::AgentConfig;
 pub use crate::agent::TdLoss;
-use crate::nn::{HIDDEN, MAX_HIDDEN, OutputKind};
+use crate::nn::{HIDDEN, HiddenLayers, MAX_DEPTH, MAX_HIDDEN, OutputKind};
 use crate::query::{
     BudgetUnit, QueryController, QueryError, QueryRule, RuleDefaults, RuleSpec, check_signals,
 };
@@ -202,7 +202,8 @@ pub struct TrainConfig {
     pub target_period_in_steps: bool,
     /// Number of bootstrapped heads \[P: 10\].
     pub heads: usize,
-    /// Widths of the network's two hidden layers \[P: 64, 64\]; other widths run on the same kernels.
+    /// Widths of the network's hidden layers, first to last: 1 to 8 layers, each 1 to 4096 wide \[P: 64, 64\].
+    /// Any depth and widths run on the same kernels.
     #[serde(default = "paper_hidden")]
     pub hidden: Vec<usize>,
     /// TD loss \[P: squared error\].
@@ -877,9 +878,10 @@ impl TrainConfig {
         count("target_period", self.target_period, MAX_STEPS)?;
         count("heads", self.heads, MAX_HEADS)?;
         ensure!(
-            self.hidden.len() == 2 && self.hidden.iter().all(|w| (1..=MAX_HIDDEN).contains(w)),
-            "hidden must give the widths of the network's two hidden layers, each between 1 and {MAX_HIDDEN} \
-             (e.g. [256, 256]), got {:?}",
+            (1..=MAX_DEPTH).contains(&self.hidden.len())
+                && self.hidden.iter().all(|w| (1..=MAX_HIDDEN).contains(w)),
+            "hidden must give the widths of the network's hidden layers, 1 to {MAX_DEPTH} layers each between 1 \
+             and {MAX_HIDDEN} wide (e.g. [256, 256] or [64, 64, 64]), got {:?}",
             self.hidden
         );
         positive("grad_clip", self.grad_clip)?;
@@ -1098,14 +1100,14 @@ impl TrainConfig {
         }
     }
 
-    /// The two hidden widths of `hidden`. [`Self::validate`] checks them; a configuration read without that
-    /// check (a snapshot's own) gets the paper's widths for a malformed value, so that loading its weights fails
-    /// on their sizes instead of the network being built with impossible ones.
-    pub fn hidden_widths(&self) -> [usize; 2] {
-        match self.hidden[..] {
-            [h1, h2] if [h1, h2].iter().all(|w| (1..=MAX_HIDDEN).contains(w)) => [h1, h2],
-            _ => [HIDDEN, HIDDEN],
-        }
+    /// The hidden widths of `hidden`. [`Self::validate`] checks them; a configuration read without that check
+    /// (a snapshot's own) gets the paper's widths for a malformed value, so that loading its weights fails on
+    /// their sizes instead of the network being built with impossible ones.
+    pub fn hidden_widths(&self) -> HiddenLayers {
+        HiddenLayers::new(&self.hidden)
+            .filter(|h| h.iter().all(|w| (1..=MAX_HIDDEN).contains(w)))
+            .or_else(|| HiddenLayers::new(&[HIDDEN, HIDDEN]))
+            .expect("the paper's two widths")
     }
 
     /// The demonstration file the run pre-trains on (`demo_file`), if it names one; an error for demonstrations
@@ -1478,7 +1480,7 @@ mod tests {
     #[test]
     fn hidden_widths_are_configurable_and_the_paper_keeps_64_64() {
         let paper = resolve("CartPole-v0", Method::Adqn, NetKind::Noisy, &[]).unwrap();
-        assert_eq!(paper.agent_config().hidden, [HIDDEN, HIDDEN]);
+        assert_eq!(paper.agent_config().hidden.as_slice(), [HIDDEN, HIDDEN]);
         assert_eq!(HIDDEN, 64);
         let wide = resolve(
             "CartPole-v0",
@@ -1487,7 +1489,13 @@ mod tests {
             &["hidden=[256, 32]"],
         )
         .unwrap();
-        assert_eq!(wide.agent_config().hidden, [256, 32]);
+        assert_eq!(wide.agent_config().hidden.as_slice(), [256, 32]);
+        // Any depth from 1 to 8.
+        for widths in [&[7][..], &[64, 64, 64], &[5, 9, 3, 11, 2, 4, 6, 8]] {
+            let set = format!("hidden={widths:?}");
+            let deep = resolve("CartPole-v0", Method::Dqn, NetKind::Plain, &[&set]).unwrap();
+            assert_eq!(deep.agent_config().hidden.as_slice(), widths);
+        }
         // config.toml records the widths and gives them back.
         let back: TrainConfig = toml::from_str(&wide.to_toml()).unwrap();
         assert_eq!(back.hidden, vec![256, 32]);
@@ -1500,14 +1508,15 @@ mod tests {
             vec![64, 64]
         );
         for bad in [
-            "hidden=[256]",
-            "hidden=[64, 64, 64]",
+            "hidden=[]",
+            "hidden=[64, 64, 64, 64, 64, 64, 64, 64, 64]",
             "hidden=[0, 64]",
             "hidden=[64, 5000]",
+            "hidden=[64, 64, 0]",
         ] {
             let err = error("CartPole-v0", Method::Dqn, NetKind::Plain, &[bad]);
             assert!(
-                err.contains("two hidden layers") && err.contains("hidden"),
+                err.contains("1 to 8 layers") && err.contains("hidden"),
                 "{bad}: {err}"
             );
         }
@@ -1579,8 +1588,8 @@ mod tests {
                 // query_rule: empty means the method's own rule; an unknown rule is refused.
                 toml::Value::String(_) if key == "query_rule" => &["\"nope\""],
                 toml::Value::String(_) => &["\"\""],
-                // hidden: a width of zero, or too few layers.
-                toml::Value::Array(_) => &["[0, 64]", "[64]"],
+                // hidden: a width of zero, or no layer.
+                toml::Value::Array(_) => &["[0, 64]", "[]"],
                 other => panic!("{key}: unexpected type {other:?}"),
             };
             let rejected = bad.iter().any(|v| {
