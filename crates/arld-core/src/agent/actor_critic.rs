@@ -1,6 +1,6 @@
 //! What the actor-critic learners for actions in a box (TD3 in `td3.rs`, SAC in `sac.rs`) share: the interface a
-//! run drives them through (`ActorCriticLearner`, whose shared methods read the core), the batch they learn from
-//! ([`BoxBatch`]) and what an update measures ([`BoxUpdate`]), what both hold ([`ActorCritic`]: the box, the actor, the critics, the generator and
+//! run drives them through (`ActorCriticLearner`, whose shared methods read the core; they learn from the
+//! replay's batches, [`Batch`]) and what an update measures ([`BoxUpdate`]), what both hold ([`ActorCritic`]: the box, the actor, the critics, the generator and
 //! the per-sample buffers, with the critics' regression towards the clipped double-Q target), the sizes their
 //! networks are built to ([`Sizes`]), the actor with its optimiser and buffers ([`Actor`]), the box itself ([`ActionBox`]: the map between a tanh output in (-1, 1) and an
 //! action), the critic ensemble with its target and optimiser ([`Critics`]: K heads on a shared torso, the
@@ -14,6 +14,7 @@ use rand::Rng;
 use rand_pcg::Pcg64;
 
 use crate::nn::{Adam, Mlp, MlpWorkspace, OutputActivation};
+use crate::replay::Batch;
 use crate::state::{Persist, StateDict, StateError};
 
 /// What a run needs of an actor-critic learner of box actions (TD3, SAC): acting, learning from a batch, the
@@ -30,11 +31,12 @@ pub(crate) trait ActorCriticLearner: Send {
     fn act(&mut self, obs: &[f32], action: &mut [f32]);
     /// The test-time action at `obs` (no exploration), into `action`.
     fn test_action(&mut self, obs: &[f32], action: &mut [f32]);
-    /// One update from `batch`: what it measured and the new priority of each sample.
+    /// One update from `batch` (its targets discounted by `gamma` per step, [`Batch::discount`]): what it
+    /// measured and the new priority of each sample.
     ///
     /// # Panics
     /// If the batch is larger than the configured maximum or its vectors disagree in length.
-    fn learn(&mut self, batch: &BoxBatch) -> (BoxUpdate, &[f32]);
+    fn learn(&mut self, batch: &Batch<Vec<f32>>, gamma: f32) -> (BoxUpdate, &[f32]);
     /// Writes what the learner holds beyond [`Self::core`] under `prefix`.
     fn save_own<'a>(&'a self, prefix: &str, state: &mut StateDict<'a>);
     /// Reads what [`Self::save_own`] wrote.
@@ -85,64 +87,6 @@ pub struct BoxUpdate {
     pub entropy: Option<f32>,
     /// The behaviour cloning term, when the actor moved on a batch with demonstrations and it is on.
     pub bc: Option<BcStats>,
-}
-
-/// A batch of transitions in a box action space, row-major.
-#[derive(Debug, Clone, Default)]
-pub struct BoxBatch {
-    pub obs: Vec<f32>,
-    pub actions: Vec<f32>,
-    /// The n-step return of each sample.
-    pub rewards: Vec<f32>,
-    pub next_obs: Vec<f32>,
-    /// `gamma^n` of each sample, 0 where the n-step return reached a terminal state.
-    pub discounts: Vec<f32>,
-    /// Importance-sampling weights (1 without prioritized replay).
-    pub weights: Vec<f32>,
-    /// Whether each sample's action is a demonstrator's (the behaviour cloning loss reads them and their
-    /// priorities get the demonstration bonus). Empty means no sample is demonstrated.
-    pub is_demo: Vec<bool>,
-}
-
-impl BoxBatch {
-    /// Number of samples.
-    pub fn len(&self) -> usize {
-        self.rewards.len()
-    }
-
-    /// Whether the batch holds no sample.
-    pub fn is_empty(&self) -> bool {
-        self.rewards.is_empty()
-    }
-
-    /// Whether sample `r` is demonstrated.
-    pub fn is_demo(&self, r: usize) -> bool {
-        self.is_demo.get(r).copied().unwrap_or(false)
-    }
-
-    /// Whether any sample is demonstrated.
-    pub fn has_demos(&self) -> bool {
-        self.is_demo.iter().any(|&d| d)
-    }
-
-    /// Checks the batch against a learner's shapes.
-    ///
-    /// # Panics
-    /// If the batch is empty or larger than `max_batch`, or its vectors disagree in length (the replay builds
-    /// batches; a mismatch is a bug, not an input error).
-    pub(crate) fn check(&self, obs_dim: usize, act_dim: usize, max_batch: usize) {
-        let n = self.len();
-        assert!(n > 0 && n <= max_batch, "batch of {n} samples");
-        assert!(
-            self.obs.len() == n * obs_dim
-                && self.next_obs.len() == n * obs_dim
-                && self.actions.len() == n * act_dim
-                && self.discounts.len() == n
-                && self.weights.len() == n
-                && (self.is_demo.is_empty() || self.is_demo.len() == n),
-            "a batch's vectors disagree in length"
-        );
-    }
 }
 
 /// An action box `[low, high]` and the map from a tanh output `y` in (-1, 1) to an action,
@@ -345,14 +289,14 @@ impl Critics {
     /// demonstrated sample) into `priorities` and returns the loss averaged over the batch and the heads.
     pub fn update(
         &mut self,
-        batch: &BoxBatch,
+        batch: &Batch<Vec<f32>>,
         targets: &[f32],
         priorities: &mut [f32],
         demo_bonus: f32,
     ) -> f32 {
         let n = batch.len();
         let k = self.heads;
-        self.fill_inputs(&batch.obs, &batch.actions, n);
+        self.fill_inputs(&batch.obs, batch.actions.values(), n);
         let width = self.obs_dim + self.act_dim;
         let q = self.net.forward(&self.inputs[..n * width], n, &mut self.ws);
         let mut loss = 0.0f32;
@@ -364,7 +308,7 @@ impl Critics {
                 d_q[r * k + h] = 2.0 * batch.weights[r] * error / n as f32;
             }
             priorities[r] = (q[r * k] - targets[r]).abs();
-            if batch.is_demo(r) {
+            if batch.is_demo[r] {
                 priorities[r] += demo_bonus;
             }
         }
@@ -535,21 +479,36 @@ impl<R: Rng> ActorCritic<R> {
         self.action_box.dim()
     }
 
-    /// Checks `batch` against the learner's shapes ([`BoxBatch::check`]; the per-sample buffers hold the largest
-    /// batch) and returns its length and the action dimension.
-    pub fn check(&self, batch: &BoxBatch) -> (usize, usize) {
-        let a = self.action_dim();
-        batch.check(self.obs_dim, a, self.priorities.len());
-        (batch.len(), a)
+    /// Checks `batch` against the learner's shapes (the per-sample buffers hold the largest batch) and returns
+    /// its length and the action dimension.
+    ///
+    /// # Panics
+    /// If the batch is empty or larger than the buffers, or its vectors disagree in length (the replay builds
+    /// batches; a mismatch is a bug, not an input error).
+    pub fn check(&self, batch: &Batch<Vec<f32>>) -> (usize, usize) {
+        let (n, d, a) = (batch.len(), self.obs_dim, self.action_dim());
+        assert!(n > 0 && n <= self.priorities.len(), "batch of {n} samples");
+        assert!(
+            batch.obs.len() == n * d
+                && batch.bootstrap_obs().len() == n * d
+                && batch.actions.values().len() == n * a
+                && batch.returns().len() == n
+                && batch.terminal.len() == n
+                && batch.weights.len() == n
+                && batch.is_demo.len() == n,
+            "a batch's vectors disagree in length"
+        );
+        (n, a)
     }
 
     /// One regression step of the critics ([`Critics::update`]) towards the clipped double-Q target
     /// `r + gamma^n (min(Q'_1, Q'_2)(s', a') - alpha log_probs)` at the next actions `next_actions` (`entropy`
-    /// holds `(alpha, log_probs)`; without it the target has no entropy term). Returns the loss; the new
-    /// priorities are in `priorities`.
+    /// holds `(alpha, log_probs)`; without it the target has no entropy term), with `r`, `s'` and `gamma^n` of
+    /// [`Batch::returns`]. Returns the loss; the new priorities are in `priorities`.
     pub fn critic_step(
         &mut self,
-        batch: &BoxBatch,
+        batch: &Batch<Vec<f32>>,
+        gamma: f32,
         next_actions: &[f32],
         entropy: Option<(f32, &[f32])>,
         demo_bonus: f32,
@@ -557,14 +516,15 @@ impl<R: Rng> ActorCritic<R> {
         let (n, k) = (batch.len(), self.critics.heads);
         let q_next = self
             .critics
-            .evaluate(Net::Target, &batch.next_obs, next_actions, n);
+            .evaluate(Net::Target, batch.bootstrap_obs(), next_actions, n);
+        let returns = batch.returns();
         for r in 0..n {
             let pair = q_next[r * k].min(q_next[r * k + 1]);
             let soft = match entropy {
                 Some((alpha, log_probs)) => pair - alpha * log_probs[r],
                 None => pair,
             };
-            self.targets[r] = batch.rewards[r] + batch.discounts[r] * soft;
+            self.targets[r] = returns[r] + batch.discount(r, gamma) * soft;
         }
         self.critics.update(
             batch,
@@ -576,11 +536,11 @@ impl<R: Rng> ActorCritic<R> {
 
     /// The critics' value of each demonstrated action of `batch` (`value` aggregates a row of the heads), into
     /// `q_demo`, for the Q-filter.
-    pub fn value_demonstrations(&mut self, batch: &BoxBatch, value: impl Fn(&[f32]) -> f32) {
+    pub fn value_demonstrations(&mut self, batch: &Batch<Vec<f32>>, value: impl Fn(&[f32]) -> f32) {
         let (n, k) = (batch.len(), self.critics.heads);
         let q = self
             .critics
-            .evaluate(Net::Online, &batch.obs, &batch.actions, n);
+            .evaluate(Net::Online, &batch.obs, batch.actions.values(), n);
         for (r, v) in self.q_demo[..n].iter_mut().enumerate() {
             *v = value(&q[r * k..(r + 1) * k]);
         }
@@ -591,7 +551,7 @@ impl<R: Rng> ActorCritic<R> {
     pub fn behaviour_cloning(
         &self,
         weight: f32,
-        batch: &BoxBatch,
+        batch: &Batch<Vec<f32>>,
         filtering: bool,
         y: &[f32],
         d_y: &mut [f32],
@@ -620,7 +580,7 @@ pub struct BcStats {
 /// of the actor's, `(q_demo, q_pi)`; without it every demonstrated row counts.
 pub(crate) fn behaviour_cloning(
     weight: f32,
-    batch: &BoxBatch,
+    batch: &Batch<Vec<f32>>,
     q_filter: Option<(&[f32], &[f32])>,
     y: &[f32],
     action_box: &ActionBox,
@@ -630,8 +590,9 @@ pub(crate) fn behaviour_cloning(
     let a = action_box.dim();
     let mut stats = BcStats::default();
     let scale = weight / n as f32;
+    let actions = batch.actions.values();
     for r in 0..n {
-        if !batch.is_demo(r) {
+        if !batch.is_demo[r] {
             continue;
         }
         stats.demos += 1;
@@ -640,7 +601,7 @@ pub(crate) fn behaviour_cloning(
         }
         stats.cloned += 1;
         for dim in 0..a {
-            let diff = y[r * a + dim] - action_box.to_unit(batch.actions[r * a + dim], dim);
+            let diff = y[r * a + dim] - action_box.to_unit(actions[r * a + dim], dim);
             stats.loss += scale * diff * diff;
             d_y[r * a + dim] += 2.0 * scale * diff;
         }
@@ -652,10 +613,24 @@ pub(crate) fn behaviour_cloning(
 /// demonstrations of the scripted swing-up.
 #[cfg(test)]
 pub(crate) mod testing {
-    use super::{ActorCriticLearner, BoxBatch};
+    use super::ActorCriticLearner;
     use crate::env::pendulum::swing_up;
     use crate::env::{Env, Outcome, make_continuous};
+    use crate::replay::Batch;
+    use crate::task::BoxColumn;
     use rand::{Rng, SeedableRng};
+
+    /// The discount of the tests' transitions.
+    pub(crate) const GAMMA: f32 = 0.99;
+
+    /// A column of actions of `width` numbers each, row-major in `values`.
+    pub(crate) fn column(width: usize, values: &[f32]) -> BoxColumn {
+        let mut column = BoxColumn::default();
+        column
+            .rows_mut(values.len() / width, width)
+            .copy_from_slice(values);
+        column
+    }
 
     /// Checks an update's cloning term against the Q-filter computed by the test (`filter`: whether each sample
     /// passes it): with the term on (`bc_weight > 0`), some but not all demonstrated samples pass and the update
@@ -687,39 +662,41 @@ pub(crate) mod testing {
         pub actions: Vec<Vec<f32>>,
         pub rewards: Vec<f32>,
         pub next_obs: Vec<Vec<f32>>,
-        pub discounts: Vec<f32>,
+        pub terminal: Vec<bool>,
     }
 
     impl Transitions {
-        /// Adds the transition from `obs` by `action` to `next_obs` with `out`'s reward (discount 0.99, 0 at a
-        /// terminal state).
+        /// Adds the transition from `obs` by `action` to `next_obs` with `out`'s reward and termination.
         fn push(&mut self, obs: Vec<f32>, action: Vec<f32>, out: &Outcome, next_obs: &[f32]) {
             self.obs.push(obs);
             self.actions.push(action);
             self.rewards.push(out.reward as f32);
             self.next_obs.push(next_obs.to_vec());
-            self.discounts.push(if out.terminated { 0.0 } else { 0.99 });
+            self.terminal.push(out.terminated);
         }
 
         /// Fills `batch` with `size` samples drawn uniformly by `draw`, flagged `demo`.
-        pub fn sample(&self, draw: &mut impl Rng, size: usize, demo: bool, batch: &mut BoxBatch) {
-            batch.obs.clear();
-            batch.actions.clear();
-            batch.rewards.clear();
-            batch.next_obs.clear();
-            batch.discounts.clear();
-            batch.weights.clear();
-            batch.is_demo.clear();
+        pub fn sample(
+            &self,
+            draw: &mut impl Rng,
+            size: usize,
+            demo: bool,
+            batch: &mut Batch<Vec<f32>>,
+        ) {
+            *batch = Batch::default();
+            let mut actions = Vec::new();
             for _ in 0..size {
                 let i = draw.random_range(0..self.rewards.len());
+                batch.idx.push(i);
                 batch.obs.extend(&self.obs[i]);
-                batch.actions.extend(&self.actions[i]);
+                actions.extend(&self.actions[i]);
                 batch.rewards.push(self.rewards[i]);
                 batch.next_obs.extend(&self.next_obs[i]);
-                batch.discounts.push(self.discounts[i]);
+                batch.terminal.push(self.terminal[i]);
                 batch.weights.push(1.0);
                 batch.is_demo.push(demo);
             }
+            batch.actions = column(self.actions[0].len(), &actions);
         }
     }
 
@@ -748,7 +725,7 @@ pub(crate) mod testing {
     }
 
     /// Trains on Pendulum-v1 (seed 0) for `steps` steps, the first 1,000 uniformly random, one update of a
-    /// uniform batch of `batch_size` one-step transitions (gamma 0.99) a step after those.
+    /// uniform batch of `batch_size` one-step transitions (discounted by [`GAMMA`]) a step after those.
     pub(crate) fn train_pendulum(
         agent: &mut impl ActorCriticLearner,
         steps: usize,
@@ -759,7 +736,7 @@ pub(crate) mod testing {
         let mut replay = Transitions::default();
         let mut obs = vec![0.0; 3];
         let mut action = vec![0.0; 1];
-        let mut batch = BoxBatch::default();
+        let mut batch = Batch::default();
         env.reset_into(Some(0), &mut obs);
         for step in 0..steps {
             if step < 1_000 {
@@ -775,7 +752,7 @@ pub(crate) mod testing {
             }
             if step >= 1_000 {
                 replay.sample(&mut draw, batch_size, false, &mut batch);
-                agent.learn(&batch);
+                agent.learn(&batch, GAMMA);
             }
         }
     }
@@ -836,11 +813,11 @@ pub(crate) mod testing {
         let unseen = swing_up_demonstrations(100..103);
         let before = imitation_error(agent, &demos);
         let mut draw = rand_pcg::Pcg64::seed_from_u64(2);
-        let mut batch = BoxBatch::default();
+        let mut batch = Batch::default();
         let (mut cloned, mut demos_seen) = (0, 0);
         for _ in 0..updates {
             demos.sample(&mut draw, 128, true, &mut batch);
-            if let Some(bc) = agent.learn(&batch).0.bc {
+            if let Some(bc) = agent.learn(&batch, GAMMA).0.bc {
                 cloned += bc.cloned;
                 demos_seen += bc.demos;
             }

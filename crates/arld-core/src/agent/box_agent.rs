@@ -8,12 +8,12 @@
 //!   draw comes from the learner's generator, so the run's seed fixes the actions.
 //! - Uncertainty: the standard deviation of the critic heads at the action taken (`critic_spread`), computed
 //!   only when the query rule asks for it.
-//! - Learning: a replay batch becomes the learner's batch: the n-step return, its observation and `gamma^n`
+//! - Learning: the learner reads the replay batch as it is: the n-step return, its observation and `gamma^n`
 //!   when the replay keeps them, otherwise the one-step reward, the next observation and `gamma` (0 at a
-//!   bootstrap cut); demonstrated samples are flagged for the cloning loss. The priorities are the absolute TD
+//!   bootstrap cut; [`Batch::returns`]); demonstrated samples are flagged for the cloning loss. The priorities are the absolute TD
 //!   errors of the first critic head.
 
-use super::actor_critic::{ActorCriticLearner, BoxBatch};
+use super::actor_critic::ActorCriticLearner;
 use super::actor_file::{self, ActorKind};
 use super::sac::{Sac, SacConfig};
 use super::td3::{Td3, Td3Config};
@@ -37,8 +37,6 @@ pub struct BoxAgent {
     gamma: f32,
     /// Whether the learner's cloning loss is configured with the Q-filter (off during pre-training).
     q_filter: bool,
-    /// The replay batch in the learner's layout, reused from update to update.
-    batch: BoxBatch,
 }
 
 /// Which actor-critic learner a [`BoxAgent`] holds, with its settings.
@@ -75,7 +73,6 @@ impl BoxAgent {
             high: high.to_vec(),
             gamma,
             q_filter,
-            batch: BoxBatch::default(),
         }
     }
 
@@ -116,28 +113,7 @@ impl Learner for BoxAgent {
     }
 
     fn learn(&mut self, batch: &Batch<Vec<f32>>) -> (UpdateStats, &[f32]) {
-        let b = &mut self.batch;
-        b.obs.clone_from(&batch.obs);
-        b.actions.clear();
-        b.actions.extend_from_slice(batch.actions.values());
-        b.weights.clone_from(&batch.weights);
-        b.is_demo.clone_from(&batch.is_demo);
-        if batch.nstep_rewards.is_empty() {
-            b.rewards.clone_from(&batch.rewards);
-            b.next_obs.clone_from(&batch.next_obs);
-            b.discounts.clear();
-            b.discounts.extend(
-                batch
-                    .terminal
-                    .iter()
-                    .map(|&cut| if cut { 0.0 } else { self.gamma }),
-            );
-        } else {
-            b.rewards.clone_from(&batch.nstep_rewards);
-            b.next_obs.clone_from(&batch.nstep_next_obs);
-            b.discounts.clone_from(&batch.nstep_discounts);
-        }
-        let (update, priorities) = self.learner.learn(&self.batch);
+        let (update, priorities) = self.learner.learn(batch, self.gamma);
         let stats = UpdateStats {
             td_loss: update.critic_loss,
             margin_loss: 0.0,

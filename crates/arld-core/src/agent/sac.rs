@@ -24,9 +24,10 @@
 use rand::Rng;
 use rand_distr::StandardNormal;
 
+pub use super::actor_critic::BcStats;
 use super::actor_critic::{ActionBox, ActorCritic, ActorCriticLearner, BoxUpdate, Net, Sizes};
-pub use super::actor_critic::{BcStats, BoxBatch};
 use crate::nn::{Adam, OutputActivation};
+use crate::replay::Batch;
 use crate::state::{Persist, StateDict, StateError};
 use rand_pcg::Pcg64;
 
@@ -242,11 +243,11 @@ impl<R: Rng> Sac<R> {
     /// Q-filter (the demonstrated action against `tanh(mu)`, each valued by `min(Q_1, Q_2)`), and its gradient
     /// with respect to the actor's parameters in `self.ac.actor.grads`. Returns the first part and the cloning
     /// term's measures; leaves the samples' log-probabilities in `self.log_probs`.
-    fn actor_gradient(&mut self, batch: &BoxBatch, alpha: f32) -> (f32, Option<BcStats>) {
+    fn actor_gradient(&mut self, batch: &Batch<Vec<f32>>, alpha: f32) -> (f32, Option<BcStats>) {
         let n = batch.len();
         let (d, a, k) = (self.ac.obs_dim, self.ac.action_dim(), self.config.heads);
         let pair_min = |q: &[f32], r: usize| q[r * k].min(q[r * k + 1]);
-        let cloning = self.config.bc_weight > 0.0 && batch.has_demos();
+        let cloning = self.config.bc_weight > 0.0 && batch.is_demo.contains(&true);
         let filtering = cloning && self.config.q_filter;
         if filtering {
             self.ac.value_demonstrations(batch, |q| q[0].min(q[1]));
@@ -354,16 +355,17 @@ impl ActorCriticLearner for Sac<Pcg64> {
     }
 
     /// One update from `batch`: critics, actor, temperature, target.
-    fn learn(&mut self, batch: &BoxBatch) -> (BoxUpdate, &[f32]) {
+    fn learn(&mut self, batch: &Batch<Vec<f32>>, gamma: f32) -> (BoxUpdate, &[f32]) {
         let (n, a) = self.ac.check(batch);
         let alpha = self.alpha();
 
         // The soft target: r + gamma^n (min(Q'_1, Q'_2)(s', a') - alpha log pi(a'|s')), a' ~ pi(s').
-        self.actor_outputs(&batch.next_obs, n);
+        self.actor_outputs(batch.bootstrap_obs(), n);
         self.draw_noise(n * a);
         self.sample_policy(n);
         let critic_loss = self.ac.critic_step(
             batch,
+            gamma,
             &self.actions[..n * a],
             Some((alpha, &self.log_probs[..n])),
             self.config.demo_priority_bonus,
@@ -420,7 +422,7 @@ impl ActorCriticLearner for Sac<Pcg64> {
 mod tests {
     use super::*;
     use crate::agent::actor_critic::testing::{
-        check_filter_counts, evaluate_pendulum, pretraining_imitates, train_pendulum,
+        GAMMA, check_filter_counts, column, evaluate_pendulum, pretraining_imitates, train_pendulum,
     };
     use crate::nn::MlpWorkspace;
     use rand::SeedableRng;
@@ -445,18 +447,27 @@ mod tests {
         )
     }
 
-    fn random_batch(n: usize, is_demo: &[bool], seed: u64) -> BoxBatch {
+    /// `n` random one-step samples in the box of [`small`], flagged by `is_demo` (empty for none).
+    fn random_batch(n: usize, is_demo: &[bool], seed: u64) -> Batch<Vec<f32>> {
         let mut draw = Pcg::seed_from_u64(seed);
-        BoxBatch {
-            obs: (0..2 * n).map(|_| draw.random_range(-1.0..1.0)).collect(),
-            actions: (0..n)
-                .flat_map(|_| [draw.random_range(-1.0..3.0), draw.random_range(0.0..0.5)])
-                .collect(),
+        let obs = (0..2 * n).map(|_| draw.random_range(-1.0..1.0)).collect();
+        let actions: Vec<f32> = (0..n)
+            .flat_map(|_| [draw.random_range(-1.0..3.0), draw.random_range(0.0..0.5)])
+            .collect();
+        Batch {
+            idx: (0..n).collect(),
+            obs,
+            actions: column(2, &actions),
             rewards: (0..n).map(|_| draw.random_range(-1.0..1.0)).collect(),
             next_obs: (0..2 * n).map(|_| draw.random_range(-1.0..1.0)).collect(),
-            discounts: vec![0.99; n],
+            terminal: vec![false; n],
             weights: (0..n).map(|_| draw.random_range(0.5..1.0)).collect(),
-            is_demo: is_demo.to_vec(),
+            is_demo: if is_demo.is_empty() {
+                vec![false; n]
+            } else {
+                is_demo.to_vec()
+            },
+            ..Batch::default()
         }
     }
 
@@ -512,8 +523,8 @@ mod tests {
                 let state = &batch.obs[2 * r..2 * r + 2];
                 let mut test = vec![0.0; 2];
                 agent.test_action(state, &mut test);
-                batch.is_demo(r)
-                    && pair_min(&agent, state, &batch.actions[2 * r..2 * r + 2])
+                batch.is_demo[r]
+                    && pair_min(&agent, state, &batch.actions.values()[2 * r..2 * r + 2])
                         > pair_min(&agent, state, &test)
             })
             .collect();
@@ -528,7 +539,8 @@ mod tests {
                 total += f64::from(alpha) * log_prob - pair_min(agent, state, &action);
                 if filter[r] {
                     for d in 0..2 {
-                        let y_demo = (f64::from(batch.actions[2 * r + d]) - low[d]) / half[d] - 1.0;
+                        let y_demo =
+                            (f64::from(batch.actions.values()[2 * r + d]) - low[d]) / half[d] - 1.0;
                         total += f64::from(bc_weight) * (means[d] - y_demo).powi(2);
                     }
                 }
@@ -642,7 +654,7 @@ mod tests {
                     step,
                 );
                 let alpha = agent.alpha();
-                let (stats, priorities) = agent.learn(&batch);
+                let (stats, priorities) = agent.learn(&batch, GAMMA);
                 trace.extend(priorities.iter().map(|p| p.to_bits()));
                 trace.push(stats.critic_loss.to_bits());
                 trace.push(alpha.to_bits());
@@ -675,7 +687,7 @@ mod tests {
         let mut agent = small(0.0, 31);
         let batch = random_batch(8, &[], 32);
         for _ in 0..20 {
-            agent.learn(&batch);
+            agent.learn(&batch, GAMMA);
         }
         let mut nonzero = 0;
         for r in 0..8 {

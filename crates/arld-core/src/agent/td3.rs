@@ -9,8 +9,8 @@
 //! network scaled to the box. Every parameter lives in an [`Mlp`]; every random draw (initial weights,
 //! exploration noise, target smoothing) comes from the generator the learner was built with.
 //!
-//! A batch ([`BoxBatch`]) carries n-step transitions with their discount `gamma^n` (0 at a terminal state), and
-//! per-sample importance weights for a prioritized replay; `learn` returns the new priorities (the
+//! A batch (the replay's [`Batch`]) carries n-step transitions with their discount `gamma^n` (0 at a terminal
+//! state), and per-sample importance weights for a prioritized replay; `learn` returns the new priorities (the
 //! absolute TD errors of the first head, plus `demo_priority_bonus` on demonstrated samples). On demonstrated
 //! samples the actor's loss gains the behaviour cloning term of Nair et al. 2018, with or without their Q-filter
 //! (`bc_weight`, `q_filter`; docs/algorithm.md §17). The critics, the batch and the box map are shared with SAC
@@ -19,9 +19,10 @@
 use rand::Rng;
 use rand_distr::StandardNormal;
 
+pub use super::actor_critic::BcStats;
 use super::actor_critic::{ActionBox, ActorCritic, ActorCriticLearner, BoxUpdate, Net, Sizes};
-pub use super::actor_critic::{BcStats, BoxBatch};
 use crate::nn::{Mlp, OutputActivation};
+use crate::replay::Batch;
 use crate::state::{Persist, StateDict, StateError};
 use rand_pcg::Pcg64;
 
@@ -136,10 +137,10 @@ impl<R: Rng> Td3<R> {
     /// demonstrated action with the actor's), and its gradient with respect to the actor's parameters in
     /// `self.ac.actor.grads` (through the critic's input gradient and the box's scaling). Returns the Q part of
     /// the loss and the cloning term's measures.
-    fn actor_gradient(&mut self, batch: &BoxBatch) -> (f32, Option<BcStats>) {
+    fn actor_gradient(&mut self, batch: &Batch<Vec<f32>>) -> (f32, Option<BcStats>) {
         let n = batch.len();
         let (d, a, k) = (self.ac.obs_dim, self.ac.action_dim(), self.config.heads);
-        let cloning = self.config.bc_weight > 0.0 && batch.has_demos();
+        let cloning = self.config.bc_weight > 0.0 && batch.is_demo.contains(&true);
         let filtering = cloning && self.config.q_filter;
         if filtering {
             self.ac
@@ -206,13 +207,13 @@ impl ActorCriticLearner for Td3<Pcg64> {
     }
 
     /// One update from `batch`: the critics always, the actor and the targets every `policy_delay` updates.
-    fn learn(&mut self, batch: &BoxBatch) -> (BoxUpdate, &[f32]) {
+    fn learn(&mut self, batch: &Batch<Vec<f32>>, gamma: f32) -> (BoxUpdate, &[f32]) {
         let (n, a) = self.ac.check(batch);
 
         // The target: r + gamma^n * min(Q'_1, Q'_2)(s', pi'(s') + clipped noise).
         let y = self
             .actor_target
-            .forward(&batch.next_obs, n, &mut self.ac.actor.ws);
+            .forward(batch.bootstrap_obs(), n, &mut self.ac.actor.ws);
         let next_actions = &mut self.actions[..n * a];
         next_actions.copy_from_slice(y);
         self.ac.action_box.to_box(next_actions);
@@ -226,9 +227,8 @@ impl ActorCriticLearner for Td3<Pcg64> {
             *v = (*v + noise).clamp(b.low[dim], b.high[dim]);
         }
         // The critics: weighted squared TD error of every head, averaged over the batch.
-        let critic_loss =
-            self.ac
-                .critic_step(batch, next_actions, None, self.config.demo_priority_bonus);
+        let bonus = self.config.demo_priority_bonus;
+        let critic_loss = self.ac.critic_step(batch, gamma, next_actions, None, bonus);
         self.ac.updates += 1;
         let mut stats = BoxUpdate {
             critic_loss,
@@ -277,7 +277,7 @@ impl ActorCriticLearner for Td3<Pcg64> {
 mod tests {
     use super::*;
     use crate::agent::actor_critic::testing::{
-        check_filter_counts, evaluate_pendulum, pretraining_imitates, train_pendulum,
+        GAMMA, check_filter_counts, column, evaluate_pendulum, pretraining_imitates, train_pendulum,
     };
     use crate::nn::MlpWorkspace;
     use rand::SeedableRng;
@@ -354,16 +354,24 @@ mod tests {
         let mut agent = Td3::new(config, 2, &low, &high, rand_pcg::Pcg64::seed_from_u64(5));
         let mut draw = rand_pcg::Pcg64::seed_from_u64(6);
         let n = is_demo.len().max(3);
-        let batch = BoxBatch {
-            obs: (0..2 * n).map(|_| draw.random_range(-1.0..1.0)).collect(),
-            actions: (0..n)
-                .flat_map(|_| [draw.random_range(-1.0..3.0), draw.random_range(0.0..0.5)])
-                .collect(),
+        let obs = (0..2 * n).map(|_| draw.random_range(-1.0..1.0)).collect();
+        let actions: Vec<f32> = (0..n)
+            .flat_map(|_| [draw.random_range(-1.0..3.0), draw.random_range(0.0..0.5)])
+            .collect();
+        let batch = Batch {
+            idx: (0..n).collect(),
+            obs,
+            actions: column(2, &actions),
             rewards: vec![0.0; n],
             next_obs: vec![0.0; 2 * n],
-            discounts: vec![0.99; n],
+            terminal: vec![false; n],
             weights: vec![1.0; n],
-            is_demo: is_demo.to_vec(),
+            is_demo: if is_demo.is_empty() {
+                vec![false; n]
+            } else {
+                is_demo.to_vec()
+            },
+            ..Batch::default()
         };
         let (_, bc) = agent.actor_gradient(&batch);
         let grads = agent.ac.actor.grads.clone();
@@ -382,8 +390,8 @@ mod tests {
                 let state = &batch.obs[2 * r..2 * r + 2];
                 let mut action = vec![0.0; 2];
                 agent.test_action(state, &mut action);
-                let demo = &batch.actions[2 * r..2 * r + 2];
-                batch.is_demo(r)
+                let demo = &actions[2 * r..2 * r + 2];
+                batch.is_demo[r]
                     && heads_mean(&agent, state, demo).1 > heads_mean(&agent, state, &action).1
             })
             .collect();
@@ -400,8 +408,7 @@ mod tests {
                     for d in 0..2 {
                         let half = 0.5 * f64::from(high[d] - low[d]);
                         let y = (f64::from(action[d]) - f64::from(low[d])) / half;
-                        let y_demo =
-                            (f64::from(batch.actions[2 * r + d]) - f64::from(low[d])) / half;
+                        let y_demo = (f64::from(actions[2 * r + d]) - f64::from(low[d])) / half;
                         cloning += (y - y_demo).powi(2);
                     }
                 }
@@ -442,17 +449,19 @@ mod tests {
                 rand_pcg::Pcg64::seed_from_u64(9),
             )
         });
-        let batch = BoxBatch {
+        let batch = Batch {
+            idx: (0..4).collect(),
             obs: vec![0.1, -0.4, 0.9, 0.3],
-            actions: vec![1.0, -1.5, 0.2, 0.0],
+            actions: column(1, &[1.0, -1.5, 0.2, 0.0]),
             rewards: vec![1.0, 0.0, -1.0, 0.5],
             next_obs: vec![0.2, -0.3, 0.8, 0.2],
-            discounts: vec![0.99, 0.0, 0.99, 0.99],
+            terminal: vec![false, true, false, false],
             weights: vec![1.0; 4],
             is_demo: vec![true, false, false, true],
+            ..Batch::default()
         };
-        let plain = agents[0].learn(&batch).1.to_vec();
-        let bonus = agents[1].learn(&batch).1.to_vec();
+        let plain = agents[0].learn(&batch, GAMMA).1.to_vec();
+        let bonus = agents[1].learn(&batch, GAMMA).1.to_vec();
         for r in 0..4 {
             let expected = plain[r] + if batch.is_demo[r] { 0.5 } else { 0.0 };
             assert_eq!(bonus[r], expected, "sample {r}");

@@ -204,6 +204,33 @@ impl<A: Action> Batch<A> {
         self.idx.is_empty()
     }
 
+    /// The return each sample's target adds to its bootstrapped value, for a learner with one target: the
+    /// n-step return when the memory keeps them, otherwise the reward.
+    pub fn returns(&self) -> &[f32] {
+        match self.nstep_rewards.is_empty() {
+            true => &self.rewards,
+            false => &self.nstep_rewards,
+        }
+    }
+
+    /// The observations the targets of [`Self::returns`] bootstrap from, `[sample][obs_dim]`.
+    pub fn bootstrap_obs(&self) -> &[f32] {
+        match self.nstep_rewards.is_empty() {
+            true => &self.next_obs,
+            false => &self.nstep_next_obs,
+        }
+    }
+
+    /// The discount of sample `r`'s bootstrapped value in the target of [`Self::returns`]: `gamma^n` with
+    /// n-step returns, otherwise `gamma`; 0 at a bootstrap cut.
+    pub fn discount(&self, r: usize, gamma: f32) -> f32 {
+        match (self.nstep_rewards.is_empty(), self.terminal[r]) {
+            (false, _) => self.nstep_discounts[r],
+            (true, true) => 0.0,
+            (true, false) => gamma,
+        }
+    }
+
     fn clear(&mut self) {
         self.idx.clear();
         self.weights.clear();

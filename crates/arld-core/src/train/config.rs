@@ -1179,6 +1179,19 @@ mod tests {
         format!("{:#}", resolve(env, method, net, sets).unwrap_err())
     }
 
+    /// The errors of CartPole-v0 with `method` and `net` and each override of `cases`, each checked to contain
+    /// the words paired with its override.
+    fn errors_saying(method: Method, net: NetKind, cases: &[(&str, &str)]) -> Vec<String> {
+        cases
+            .iter()
+            .map(|&(set, words)| {
+                let err = error("CartPole-v0", method, net, &[set]);
+                assert!(err.contains(words), "{set}: {err}");
+                err
+            })
+            .collect()
+    }
+
     #[test]
     fn fixed_names_agree_with_serde_clap_display_and_from_str() {
         use clap::ValueEnum;
@@ -1433,7 +1446,7 @@ mod tests {
 
     #[test]
     fn bad_values_are_rejected_naming_the_key() {
-        for (set, key) in [
+        let cases = [
             ("train_steps=many", "train_steps"),
             ("budget=-5", "budget"),
             ("t_query=1.5", "t_query"),
@@ -1447,10 +1460,8 @@ mod tests {
             ("eval_episodes=0", "eval_episodes"),
             ("heads=0", "heads"),
             ("margin=-1", "margin"),
-        ] {
-            let err = error("CartPole-v0", Method::Adqn, NetKind::Bootstrap, &[set]);
-            assert!(err.contains(key), "{set}: {err}");
-        }
+        ];
+        errors_saying(Method::Adqn, NetKind::Bootstrap, &cases);
         let err = error("CartPole-v0", Method::Adqn, NetKind::Plain, &[]);
         assert!(err.contains("plain network"), "{err}");
     }
@@ -1524,17 +1535,16 @@ mod tests {
 
     #[test]
     fn type_errors_are_in_the_words_of_a_config_file_not_of_rust() {
-        for (set, words) in [
+        let cases = [
             ("batch_size=-1", "a whole number (0 or more)"),
             ("batch_size=1.5", "a whole number (0 or more)"),
             ("lr=\"x\"", "expected a number"),
             ("hidden=64", "expected a list"),
             ("hidden=[-64, 64]", "a whole number (0 or more)"),
-        ] {
-            let err = error("CartPole-v0", Method::Dqn, NetKind::Plain, &[set]);
-            assert!(err.contains(words), "{set}: {err}");
+        ];
+        for err in errors_saying(Method::Dqn, NetKind::Plain, &cases) {
             for rust in ["usize", "u64", "f64", "f32", "i64", "floating point"] {
-                assert!(!err.contains(rust), "{set}: {err}");
+                assert!(!err.contains(rust), "{err}");
             }
         }
     }

@@ -20,7 +20,7 @@
 
 use rand::RngCore;
 
-use super::paper::{AdaptiveQuantileRule, t_query};
+use super::paper::{AdaptiveQuantileRule, window};
 use super::{Needs, QueryContext, QueryError, QueryRule, RuleInfo, Verdict};
 use crate::query::OrderStatistics;
 use crate::state::{StateDict, StateError};
@@ -398,11 +398,10 @@ pub(super) const BUDGET_PACED: RuleInfo = RuleInfo {
     ],
     needs: Needs::UNCERTAINTY,
     build: |params, d| {
-        let t = t_query(params, d)?;
-        let n_r = params.count("n_r", d.n_r)?;
+        let window = window(params, d)?;
         Ok(Box::new(BudgetPacedRule {
             horizon: horizon(params)?,
-            window: AdaptiveQuantileRule::new(n_r, t)?,
+            window,
         }))
     },
 };
@@ -430,12 +429,10 @@ fn importance_rule(
     let threshold = params.get("threshold", -1.0, "at least 0 (or -1: adaptive)", |v| {
         v >= 0.0 || v == -1.0
     })?;
-    let t = t_query(params, d)?;
-    let n_r = params.count("n_r", d.n_r)?;
     Ok(Box::new(ImportanceRule {
         threshold: (threshold >= 0.0).then_some(threshold as f32),
         mistake,
-        window: AdaptiveQuantileRule::new(n_r, t)?,
+        window: window(params, d)?,
     }))
 }
 

@@ -205,11 +205,17 @@ impl QueryRule for AdaptiveQuantileRule {
     }
 }
 
-/// The t_query parameter: the paper's fraction in [0, 1].
-pub(super) fn t_query(params: &mut Params, d: &RuleDefaults) -> Result<f64, QueryError> {
-    params.get("t_query", d.t_query, "in [0, 1]", |v| {
+/// The paper's windowed test of the parameters `t_query` (its fraction in [0, 1]) and `n_r` (the window's
+/// length), the task's and the run's unless given.
+pub(super) fn window(
+    params: &mut Params,
+    d: &RuleDefaults,
+) -> Result<AdaptiveQuantileRule, QueryError> {
+    let t = params.get("t_query", d.t_query, "in [0, 1]", |v| {
         (0.0..=1.0).contains(&v)
-    })
+    })?;
+    let n_r = params.count("n_r", d.n_r)?;
+    AdaptiveQuantileRule::new(n_r, t)
 }
 
 /// The registry entry of a [`FixedRule`] answering `ASK`: no parameters, no signals.
@@ -243,11 +249,7 @@ pub(super) const ADAPTIVE: RuleInfo = RuleInfo {
     source: "the paper (ADQN, ADQNP; Algorithm 1)",
     params: &[("t_query", "the task's t_query"), ("n_r", "n_r (1000)")],
     needs: Needs::UNCERTAINTY,
-    build: |params, d| {
-        let t = t_query(params, d)?;
-        let n_r = params.count("n_r", d.n_r)?;
-        Ok(Box::new(AdaptiveQuantileRule::new(n_r, t)?))
-    },
+    build: |params, d| Ok(Box::new(window(params, d)?)),
 };
 
 #[cfg(test)]
