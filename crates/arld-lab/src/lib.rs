@@ -127,11 +127,12 @@ fn box_setup(cfg: &TrainConfig) -> Result<Option<Box<dyn expert::Expert<Vec<f32>
         return Ok(None);
     }
     let spec = env::box_spec(&cfg.env)?;
-    Ok(Some(expert::boxed::from_spec(
+    Ok(Some(expert::boxed::from_spec_with(
         &cfg.expert,
         spec,
         seed_for(cfg.seed, SeedPurpose::Expert),
         cfg.expert_timeout,
+        arld_web::start_box,
     )?))
 }
 
