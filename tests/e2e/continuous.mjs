@@ -97,7 +97,7 @@ for (;;) {
     q.padAfter = await page.evaluate(() => arld.pad);
     q.padTable = await page.evaluate(() => [...document.querySelectorAll("#pad-map tr")].map((tr) =>
       [tr.querySelector("th").textContent, tr.querySelector("select").selectedOptions[0].textContent]));
-    await page.screenshot({ path: path.join(shots, "gamepad-mapping.png") });
+    await page.screenshot({ path: path.join(shots, "gamepad-mapping.png"), fullPage: true });
     Object.assign(q, { control: "pad right stick", expected: -0.5 });
     await setPad([0.9, 0, -0.25, 0]);
   } else if (n === 3) {
