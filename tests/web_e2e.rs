@@ -439,16 +439,22 @@ fn a_stop_while_a_question_is_open_loses_nothing_and_resume_asks_it_again() {
 
 /// Runs tests/e2e/takeover.mjs on `url`; its report (the last JSON line it printed).
 fn run_takeover_person(url: &str, shots: &Path) -> serde_json::Value {
+    run_script("takeover.mjs", url, shots)
+}
+
+/// Runs the scripted person tests/e2e/`script` on `url` until it leaves; its report (the last JSON line it
+/// printed).
+fn run_script(script: &str, url: &str, shots: &Path) -> serde_json::Value {
     let out = Command::new("node")
         .current_dir(e2e_dir())
-        .arg("takeover.mjs")
+        .arg(script)
         .args(["--url", url, "--shots"])
         .arg(shots)
         .output()
         .expect("start node");
     assert!(
         out.status.success(),
-        "the person who takes over failed: {}{}",
+        "the scripted person of {script} failed: {}{}",
         String::from_utf8_lossy(&out.stderr),
         String::from_utf8_lossy(&out.stdout)
     );
@@ -586,6 +592,128 @@ fn a_person_takes_over_unasked_in_real_time_and_hands_back() {
     assert!(lines.len() as u64 <= BUDGET);
     assert_eq!(s["train_steps"], TRAIN_STEPS);
     assert_eq!(report["endScreen"]["rows"]["Takeovers"], "1", "{report}");
+}
+
+/// A person answers Pendulum-v1 (a torque in [-2, 2]) on the page in real time with each continuous control:
+/// a gamepad's stick (headless Chromium has no pad: tests/e2e/continuous.mjs feeds `navigator.getGamepads` a
+/// scripted pad through an init script), the same after changing the pad's mapping on the page, a held key and
+/// the slider; malformed answers sent on the page's socket are refused with errors naming the problem. Every step
+/// of each segment in answers.jsonl is the torque the person's control set, computed here from the control's
+/// position and the box: a stick at x gives x times the half-width, a held key the bound, the slider its value.
+#[test]
+fn a_person_answers_a_box_task_with_a_pad_keys_and_a_slider() {
+    check_prerequisites();
+    const TRAIN_STEPS: u64 = 3000;
+    const BUDGET: u64 = 100;
+    let sets = [
+        format!("train_steps={TRAIN_STEPS}"),
+        format!("budget={BUDGET}"),
+        "segment_len=20".to_string(),
+        "eval_period=1500".to_string(),
+    ];
+    let run = tempfile::tempdir().unwrap().keep().join("run");
+    let mut args: Vec<std::ffi::OsString> = [
+        "train",
+        "--env",
+        "Pendulum-v1",
+        "--method",
+        "adqn",
+        "--expert",
+        "web",
+        "--web-fps",
+        "20",
+        "--listen",
+        "127.0.0.1:0",
+    ]
+    .iter()
+    .map(|a| a.into())
+    .collect();
+    for s in &sets {
+        args.push("--set".into());
+        args.push(s.into());
+    }
+    args.push("-o".into());
+    args.push(run.clone().into_os_string());
+    let args: Vec<&std::ffi::OsStr> = args.iter().map(|a| a.as_os_str()).collect();
+    let (mut arld, url) = start_arld(&args, Stdio::inherit());
+    let shots = shots_dir("continuous");
+    let report = run_script("continuous.mjs", &url, &shots);
+    let status = wait(&mut arld, Duration::from_secs(240), "arld");
+    assert!(status.success(), "arld failed: {report}");
+    assert!(shots.join("gamepad-mapping.png").is_file());
+    assert!(shots.join("continuous-answer.png").is_file());
+
+    // The hello described the box, its bound read from the task's spec.
+    let spec = arld::env::box_spec("Pendulum-v1").unwrap();
+    let hello = &report["hello"];
+    assert_eq!(hello["box"]["names"], serde_json::json!(["torque"]));
+    assert_eq!(
+        floats(&hello["box"]["low"]),
+        [f64::from(spec.action_low[0])]
+    );
+    assert_eq!(
+        floats(&hello["box"]["high"]),
+        [f64::from(spec.action_high[0])]
+    );
+    let (low, high) = (
+        f64::from(spec.action_low[0]),
+        f64::from(spec.action_high[0]),
+    );
+    let half = (high - low) / 2.0;
+
+    let questions = report["questions"].as_array().unwrap();
+    assert!(questions.len() >= 5, "{report}");
+    // The mapping shown and changed on the page.
+    assert_eq!(questions[0]["padBefore"]["map"][0]["source"], 0, "{report}");
+    assert_eq!(questions[1]["padAfter"]["map"][0]["source"], 2, "{report}");
+    assert_eq!(questions[1]["padTable"][0][1], "right stick X", "{report}");
+    // The torque each control gives, from its position.
+    let expected = [0.5 * half, -0.25 * half, low, 0.8];
+    let lines = answer_lines(&run);
+    for (q, want) in questions.iter().zip(expected) {
+        // The question's segment: the lines whose first one starts at the state the page asked in.
+        let obs = floats(&q["obs"]);
+        let first = lines
+            .iter()
+            .position(|l| floats(&l["obs"]) == obs)
+            .unwrap_or_else(|| panic!("no answer for the question {q}"));
+        let question_step = &lines[first]["question_step"];
+        let segment: Vec<_> = lines
+            .iter()
+            .filter(|l| &l["question_step"] == question_step)
+            .collect();
+        assert!(!segment.is_empty());
+        for l in segment {
+            let action = floats(&l["action"]);
+            assert_eq!(action.len(), 1, "{l}");
+            assert!(
+                (action[0] - want).abs() < 1e-6,
+                "{}: torque {} where the control gave {want}",
+                q["control"],
+                action[0]
+            );
+            assert_eq!(l["started_by"], "rule");
+            assert_eq!(l["expert"], "web");
+        }
+    }
+    // The keyboard's segment in progress showed the torque at its bound.
+    let during = &questions[2]["inProgress"];
+    assert_eq!(during["axes"]["source"], "keys", "{report}");
+    assert_eq!(floats(&during["axes"]["values"]), [low], "{report}");
+    // Malformed answers: refused with their reasons, nothing charged for them.
+    let errors = report["errors"].as_array().unwrap();
+    let says = |i: usize, what: &str| {
+        let m = errors[i]["message"].as_str().unwrap();
+        assert!(m.contains(what), "{m}");
+    };
+    says(0, "not a list of 1 numbers");
+    says(1, "dimension 0");
+    says(2, "not 1");
+    // The handed-back questions cost nothing; every answered step is one unit of the budget.
+    let s = summary(&run);
+    assert_eq!(s["demos_queried"].as_u64(), Some(lines.len() as u64));
+    assert!(lines.len() as u64 <= BUDGET);
+    assert_eq!(s["train_steps"], TRAIN_STEPS);
 }
 
 /// One HTTP GET of `url` (`http://IP:PORT/PATH`) with plain sockets; the status code.

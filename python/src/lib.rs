@@ -729,8 +729,8 @@ fn holds_an_actor(path: &str) -> PyResult<bool> {
 /// A run's current network as Python acts with it: a DQN-family network or a TD3 actor.
 #[derive(Clone)]
 enum Net {
-    Q(QNet),
-    Box(BoxPolicy),
+    Q(Box<QNet>),
+    Box(Box<BoxPolicy>),
 }
 
 /// A built-in environment (`arld.make`), stepped from Python (also from a run's thread, when wrapped).
@@ -908,7 +908,7 @@ impl PyLearner for Agent {
         LentParts::Discrete(agent as *const Agent, log as *const RunLog)
     }
     fn net(&self, _id: &str) -> Net {
-        Net::Q(self.network().clone())
+        Net::Q(Box::new(self.network().clone()))
     }
     fn for_snapshot(cfg: &TrainConfig) -> anyhow::Result<Self> {
         let spec = env::spec(&cfg.env)?;
@@ -930,7 +930,7 @@ impl PyLearner for BoxAgent {
     }
     fn net(&self, id: &str) -> Net {
         let spec = env::box_spec(id).expect("a box run's task is registered");
-        Net::Box(BoxPolicy::of(self, spec))
+        Net::Box(Box::new(BoxPolicy::of(self, spec)))
     }
     fn for_snapshot(cfg: &TrainConfig) -> anyhow::Result<Self> {
         Ok(train::run::box_agent(cfg, env::box_spec(&cfg.env)?))
@@ -1191,8 +1191,8 @@ impl Run {
 /// TD3 actor.
 fn net_policy(py: Python<'_>, net: Net, cfg: &TrainConfig, step: usize) -> PyResult<Py<PyAny>> {
     Ok(match net {
-        Net::Q(net) => Py::new(py, Policy::exploring(net, cfg, step))?.into_any(),
-        Net::Box(policy) => Py::new(py, policy)?.into_any(),
+        Net::Q(net) => Py::new(py, Policy::exploring(*net, cfg, step))?.into_any(),
+        Net::Box(policy) => Py::new(py, *policy)?.into_any(),
     })
 }
 
@@ -1303,7 +1303,7 @@ impl Run {
         let step = self.step.load(Ordering::Relaxed);
         with_lent(self.id, |lent| {
             let net = match lent {
-                LentRef::Discrete(agent, _) => Net::Q(agent.network().clone()),
+                LentRef::Discrete(agent, _) => Net::Q(Box::new(agent.network().clone())),
                 LentRef::Box(agent, _) => agent.net(&self.cfg.env),
             };
             net_policy(py, net, &self.cfg, step)

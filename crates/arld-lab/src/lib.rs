@@ -54,7 +54,13 @@ pub fn run_one(cfg: &TrainConfig, out_dir: Option<&Path>, progress: bool) -> Res
     let expert_seed = seed_for(cfg.seed, SeedPurpose::Expert);
     if let Ok(spec) = env::box_spec(&cfg.env) {
         let (expert, demos) = setup(cfg, || {
-            expert::boxed::from_spec(&cfg.expert, spec, expert_seed, cfg.expert_timeout)
+            expert::boxed::from_spec_with(
+                &cfg.expert,
+                spec,
+                expert_seed,
+                cfg.expert_timeout,
+                arld_web::start_box,
+            )
         })
         .map_err(record_setup_failure)?;
         return run_in(

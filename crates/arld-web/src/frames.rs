@@ -13,13 +13,14 @@
 use super::protocol::ServerMsg;
 use anyhow::{Context, Result, ensure};
 use arld_core::env::Env;
+use arld_core::task::Action;
 use base64::Engine;
 
-/// The environment as the page shows it.
-pub trait FrameSource: Send {
+/// The environment as the page shows it (of actions of kind `A`: every source shows either kind).
+pub trait FrameSource<A: Action = usize>: Send {
     /// The message that shows the state of `env` (observation `obs`; empty when the caller has none at hand),
     /// or `None` when it would show what the page already has.
-    fn frame(&mut self, env: &dyn Env, obs: &[f32]) -> Result<Option<String>>;
+    fn frame(&mut self, env: &dyn Env<A>, obs: &[f32]) -> Result<Option<String>>;
     /// Whether the source draws the environment and observation it is given, so that it can show a copy of
     /// the environment (a replay of the agent's steps, the state after a key that may be undone). A source that
     /// asks the live environment for its picture cannot.
@@ -31,11 +32,11 @@ pub trait FrameSource: Send {
 /// The built-in tasks: their geometry, drawn by the page.
 pub struct GeometryFrames;
 
-impl FrameSource for GeometryFrames {
+impl<A: Action> FrameSource<A> for GeometryFrames {
     fn shows_copies(&self) -> bool {
         true
     }
-    fn frame(&mut self, env: &dyn Env, obs: &[f32]) -> Result<Option<String>> {
+    fn frame(&mut self, env: &dyn Env<A>, obs: &[f32]) -> Result<Option<String>> {
         let geometry = env.geometry();
         Ok(Some(
             ServerMsg::Frame {
@@ -70,8 +71,8 @@ impl RenderedFrames {
     }
 }
 
-impl FrameSource for RenderedFrames {
-    fn frame(&mut self, _env: &dyn Env, _obs: &[f32]) -> Result<Option<String>> {
+impl<A: Action> FrameSource<A> for RenderedFrames {
+    fn frame(&mut self, _env: &dyn Env<A>, _obs: &[f32]) -> Result<Option<String>> {
         let image = (self.render)().context("the environment could not render a frame")?;
         let hash = fnv1a(&image.pixels) ^ (u64::from(image.width) << 32 | u64::from(image.height));
         if self.last == Some(hash) {
@@ -132,11 +133,11 @@ impl ObservationTable {
     }
 }
 
-impl FrameSource for ObservationTable {
+impl<A: Action> FrameSource<A> for ObservationTable {
     fn shows_copies(&self) -> bool {
         true
     }
-    fn frame(&mut self, _env: &dyn Env, obs: &[f32]) -> Result<Option<String>> {
+    fn frame(&mut self, _env: &dyn Env<A>, obs: &[f32]) -> Result<Option<String>> {
         if obs.is_empty() || obs == self.last.as_slice() {
             return Ok(None);
         }

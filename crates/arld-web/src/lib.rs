@@ -30,6 +30,11 @@
 //! the question open. The page ([`protocol`] describes its messages) is plain HTML, CSS and JavaScript embedded
 //! in the binary; at the end it shows how the run ended and what the person gave ([`Expert::finish`]).
 //!
+//! Actions in a box (the continuous tasks: [`WebExpert::start_box`]) take the same path: [`PageAction`] says how
+//! each kind of action is described to the page, checked when it comes back and replayed on a copy; the page
+//! sets a box action with keys held toward a bound, a slider per dimension or a gamepad's sticks and triggers, and
+//! sends it as a list of numbers.
+//!
 //! The training thread never waits for the server except while a question is open (or the run is paused): it
 //! publishes to a shared board (throttled to about 15 updates a second) and reads keys from a channel.
 
@@ -39,10 +44,11 @@ pub mod server;
 
 use anyhow::{Context, Result, bail};
 use arld_core::env::{Env, EpisodeStart};
+use arld_core::expert::process::WireAction;
 pub use arld_core::expert::web_options::{DEFAULT_LISTEN, WebOptions};
 use arld_core::expert::{Answer, Expert, Progress, Query, RunEnd};
 use frames::FrameSource;
-use protocol::{ActionKeys, EndScreen, Hello, Prompt, ServerMsg, Status};
+use protocol::{ActionCheck, ActionKeys, BoxControls, EndScreen, Hello, Prompt, ServerMsg, Status};
 use server::{Input, KeyInput, Shared};
 use std::io::Write;
 use std::net::{IpAddr, SocketAddr};
@@ -200,14 +206,76 @@ impl Drop for WebServer {
     }
 }
 
+/// The kinds of action a person gives on the page: discrete actions (an index, keys and buttons) and actions in
+/// a box (a list of numbers, from keys, sliders and a pad's sticks), side by side. How an action travels and is
+/// checked is the core's [`WireAction`], as for an expert process.
+pub trait PageAction: WireAction {
+    /// How the page controls the task `env` (`n_actions` discrete actions): its box, or `None` for buttons.
+    fn controls(env: &str) -> Result<Option<BoxControls>>;
+    /// The check of an action the page sends.
+    fn checker(env: &str, n_actions: usize) -> Result<ActionCheck>;
+    /// A fresh copy of the built-in environment `env` (to replay the agent's steps, or show a key's result),
+    /// `None` for an environment arld does not build.
+    fn make(env: &str) -> Option<Box<dyn Env<Self>>>;
+}
+
+impl PageAction for usize {
+    fn controls(_: &str) -> Result<Option<BoxControls>> {
+        Ok(None)
+    }
+    fn checker(_: &str, n_actions: usize) -> Result<ActionCheck> {
+        Ok(protocol::discrete_check(n_actions))
+    }
+    fn make(env: &str) -> Option<Box<dyn Env>> {
+        arld_core::env::make(env).ok()
+    }
+}
+
+impl PageAction for Vec<f32> {
+    fn controls(env: &str) -> Result<Option<BoxControls>> {
+        Ok(Some(BoxControls::of(arld_core::env::box_spec(env)?)))
+    }
+    fn checker(env: &str, _: usize) -> Result<ActionCheck> {
+        Ok(protocol::box_check(arld_core::env::box_spec(env)?))
+    }
+    fn make(env: &str) -> Option<Box<dyn Env<Vec<f32>>>> {
+        arld_core::env::make_box(env).ok()
+    }
+}
+
 /// What the page shows of an environment and how the person acts in it.
-pub struct Page {
+pub struct Page<A: PageAction = usize> {
     pub env: String,
+    /// Discrete actions with their keys (none for a box: its controls come from the task's bounds).
     pub actions: Vec<ActionKeys>,
-    /// The action taken in real time when no key is held.
-    pub noop: usize,
+    /// The action taken in real time when nothing is held.
+    pub noop: A,
     pub solve_threshold: f64,
-    pub frames: Box<dyn FrameSource>,
+    pub frames: Box<dyn FrameSource<A>>,
+}
+
+impl Page<Vec<f32>> {
+    /// A built-in task with actions in a box: its observation as a labelled table; nothing held is the box's
+    /// centre.
+    pub fn builtin_box(env_id: &str) -> Result<Self> {
+        let spec = arld_core::env::box_spec(env_id)?;
+        let noop = spec
+            .action_low
+            .iter()
+            .zip(spec.action_high)
+            .map(|(lo, hi)| (lo + hi) / 2.0)
+            .collect();
+        Ok(Self {
+            env: env_id.to_string(),
+            actions: Vec::new(),
+            noop,
+            solve_threshold: spec.solve_threshold.unwrap_or(f64::INFINITY),
+            frames: Box::new(frames::ObservationTable::new(
+                spec.obs_dim,
+                protocol::box_obs_labels(env_id),
+            )),
+        })
+    }
 }
 
 impl Page {
@@ -250,11 +318,11 @@ fn is_zero(n: &usize) -> bool {
     *n == 0
 }
 
-/// A person in a browser, as an [`Expert`].
-pub struct WebExpert {
+/// A person in a browser, as an [`Expert`] of actions of kind `A` (discrete, or in a box).
+pub struct WebExpert<A: PageAction = usize> {
     server: WebServer,
-    frames: Box<dyn FrameSource>,
-    noop: usize,
+    frames: Box<dyn FrameSource<A>>,
+    noop: A,
     next_prompt: u64,
     prompt_open: bool,
     last_update: Option<Instant>,
@@ -263,7 +331,7 @@ pub struct WebExpert {
     last_tick: Instant,
     /// The person's next answer, given while the page showed the state after their previous key (which the
     /// run takes only now, so that the key could still be undone).
-    carried: Option<Answer>,
+    carried: Option<Answer<A>>,
     /// Where the person's last step left the episode: how it began and the number of its steps.
     last_person: Option<(EpisodeStart, usize)>,
     /// The run's latest status when it was not published yet (updates are throttled).
@@ -300,27 +368,45 @@ impl WebExpert {
 
     /// The expert of `server` for a run on the environment `page` describes; the open tabs learn of it at once.
     pub fn new(server: WebServer, page: Page) -> Self {
+        Self::for_page(server, page).expect("discrete actions always have a page")
+    }
+}
+
+impl WebExpert<Vec<f32>> {
+    /// Starts the server for the built-in task `env_id` of actions in a box ([`WebExpert::start`]).
+    pub fn start_box(options: &WebOptions, env_id: &str) -> Result<Self> {
+        let page = Page::builtin_box(env_id)?;
+        let mut expert = Self::for_page(WebServer::start(options)?, page)?;
+        expert.wait_for_page()?;
+        Ok(expert)
+    }
+}
+
+impl<A: PageAction> WebExpert<A> {
+    /// The expert of `server` for a run on the environment `page` describes; the open tabs learn of it at once.
+    pub fn for_page(server: WebServer, page: Page<A>) -> Result<Self> {
         // Undo needs a copy of the environment (see `copy_of`): a source that draws what it is given, of an
         // environment arld builds.
         let undo = server.options.fps.is_none()
             && page.frames.shows_copies()
-            && arld_core::env::make(&page.env).is_ok();
+            && A::make(&page.env).is_some();
+        let check = A::checker(&page.env, page.actions.len())?;
         let hello = Hello {
             undo,
+            controls: A::controls(&page.env)?,
+            noop: serde_json::to_value(&page.noop)?,
             env: page.env,
             actions: page.actions,
-            noop: page.noop,
             fps: server.options.fps,
             timeout: server.options.timeout,
             solve_threshold: page.solve_threshold,
         };
-        let n_actions = hello.actions.len();
         let msg = ServerMsg::Hello(&hello).to_json();
         server.shared.publish(msg, |b, m| {
             b.hello = Some(m.clone());
-            b.n_actions = n_actions;
+            b.check = Some(check);
         });
-        Self {
+        Ok(Self {
             server,
             frames: page.frames,
             noop: page.noop,
@@ -341,7 +427,7 @@ impl WebExpert {
             handing_back: false,
             declined: false,
             taking_over: false,
-        }
+        })
     }
 
     /// Replaces the check for a stop request (a Python program: its own signal handling).
@@ -375,7 +461,7 @@ impl WebExpert {
     }
 
     /// Publishes what the page shows of the environment, when it changed.
-    fn publish_frame(&mut self, env: &dyn arld_core::env::Env, obs: &[f32]) -> Result<()> {
+    fn publish_frame(&mut self, env: &dyn Env<A>, obs: &[f32]) -> Result<()> {
         if let Some(msg) = self.frames.frame(env, obs)? {
             self.server
                 .shared
@@ -395,9 +481,9 @@ impl WebExpert {
     /// Shows `obs` of `env` and opens a prompt for it; returns the prompt's id.
     fn show_question(
         &mut self,
-        env: &dyn Env,
+        env: &dyn Env<A>,
         obs: &[f32],
-        agent_action: Option<usize>,
+        agent_action: Option<serde_json::Value>,
         steps_left: usize,
         undo: bool,
     ) -> Result<u64> {
@@ -418,11 +504,11 @@ impl WebExpert {
     }
 
     /// Shows the query's own state and opens its prompt.
-    fn show_query(&mut self, query: &Query) -> Result<u64> {
+    fn show_query(&mut self, query: &Query<'_, A>) -> Result<u64> {
         self.show_question(
             query.env,
             query.obs,
-            query.agent_action,
+            agent_action(query),
             query.steps_left,
             false,
         )
@@ -440,7 +526,7 @@ impl WebExpert {
 
     /// Waits for the person's answer to prompt `id`, until the timeout if there is one (pauses do not count).
     /// `None`: the person took their last key back (only accepted when `undo` is).
-    fn wait_for_key(&mut self, id: u64, undo: bool) -> Result<Option<Answer>> {
+    fn wait_for_key(&mut self, id: u64, undo: bool) -> Result<Option<Answer<A>>> {
         let asked = Instant::now();
         let absent_before = self.server.shared.absent_at(asked);
         let mut paused = Duration::ZERO;
@@ -479,6 +565,7 @@ impl WebExpert {
                 Input::Undo if undo => return Ok(None),
                 Input::Undo => {}
                 Input::Action(action) => {
+                    let action = self.action_of(&action)?;
                     self.last_tick = Instant::now();
                     self.effort.keys += 1;
                     return Ok(Some(Answer::Action {
@@ -493,25 +580,25 @@ impl WebExpert {
     /// The query's environment rebuilt from the start of its episode through `actions` (a prefix of the
     /// episode's), when the page can show such a copy (its frames are drawn from the environment they are given)
     /// and arld can build the environment.
-    fn rebuild(&self, query: &Query, actions: &[usize]) -> Option<(Box<dyn Env>, Vec<f32>)> {
+    fn rebuild(&self, query: &Query<'_, A>, actions: &[A]) -> Option<(Box<dyn Env<A>>, Vec<f32>)> {
         if !self.frames.shows_copies() {
             return None;
         }
-        let mut env = arld_core::env::make(query.env.id()).ok()?;
+        let mut env = A::make(query.env.id())?;
         let mut obs = Vec::new();
         arld_core::env::replay_episode(&mut *env, query.episode.start, actions, &mut obs).ok()?;
         Some((env, obs))
     }
 
     /// A copy of the environment the query shows, when it can be rebuilt and reaches the query's observation.
-    fn copy_of(&self, query: &Query) -> Option<(Box<dyn Env>, Vec<f32>)> {
+    fn copy_of(&self, query: &Query<'_, A>) -> Option<(Box<dyn Env<A>>, Vec<f32>)> {
         self.rebuild(query, query.episode.actions)
             .filter(|(_, obs)| obs == query.obs)
     }
 
     /// Before a question: shows the person the agent's own steps since their last one in this episode (or since
     /// the episode began), at most [`REPLAY_MAX_STEPS`].
-    fn replay_agent_steps(&mut self, query: &Query) -> Result<()> {
+    fn replay_agent_steps(&mut self, query: &Query<'_, A>) -> Result<()> {
         let actions = query.episode.actions;
         let from = replay_from(
             self.last_person,
@@ -528,8 +615,8 @@ impl WebExpert {
         // The state the person left, then the state after each of the agent's steps: the last is the question's.
         let mut frames = Vec::with_capacity(actions.len() - from + 1);
         frames.extend(self.frames.frame(&*env, &obs)?);
-        for &a in &actions[from..] {
-            if env.step_into(a, &mut obs).is_err() {
+        for a in &actions[from..] {
+            if env.step_into(a.borrow(), &mut obs).is_err() {
                 return Ok(());
             }
             frames.extend(self.frames.frame(&*env, &obs)?);
@@ -550,7 +637,7 @@ impl WebExpert {
     /// Turn-based: the person's key for the query's state, with the chance to undo it. Where the environment can
     /// be copied and the segment goes on, the page shows the state after the key on a copy and waits for the
     /// next key: a key there is carried to the next step (the run takes this one), an undo asks this step again.
-    fn ask_turn(&mut self, query: &Query) -> Result<Answer> {
+    fn ask_turn(&mut self, query: &Query<'_, A>) -> Result<Answer<A>> {
         let mut carried = self.carried.take();
         loop {
             let answer = match carried.take() {
@@ -563,7 +650,7 @@ impl WebExpert {
                     }
                 }
             };
-            let Answer::Action { action, .. } = answer else {
+            let Answer::Action { action, .. } = &answer else {
                 return Ok(answer);
             };
             if query.steps_left <= 1 {
@@ -573,7 +660,7 @@ impl WebExpert {
                 return Ok(answer);
             };
             let ended = copy
-                .step_into(action, &mut obs)
+                .step_into(action.borrow(), &mut obs)
                 .map(|o| o.terminated || o.truncated)
                 .unwrap_or(true);
             if ended {
@@ -601,7 +688,7 @@ impl WebExpert {
 
     /// Real time: only the segment's opening question waits for a fresh key, then a countdown; the later steps
     /// take the held key (or the no-op action) at the set rate.
-    fn ask_realtime(&mut self, query: &Query, fps: f64) -> Result<Answer> {
+    fn ask_realtime(&mut self, query: &Query<'_, A>, fps: f64) -> Result<Answer<A>> {
         let period = Duration::from_secs_f64(1.0 / fps);
         if query.agent_action.is_some() {
             let id = self.show_query(query)?;
@@ -615,7 +702,7 @@ impl WebExpert {
             };
             self.publish_prompt(Some(&Prompt {
                 id,
-                agent_action: query.agent_action,
+                agent_action: agent_action(query),
                 steps_left: query.steps_left,
                 waits: false,
                 undo: false,
@@ -632,7 +719,7 @@ impl WebExpert {
             }
             self.last_tick = Instant::now();
             return Ok(Answer::Action {
-                action: self.server.shared.held().unwrap_or(self.noop),
+                action: self.held(),
                 response_s,
             });
         }
@@ -663,7 +750,7 @@ impl WebExpert {
             .checked_sub(period)
             .map_or(next, |late| next.max(late));
         Ok(Answer::Action {
-            action: self.server.shared.held().unwrap_or(self.noop),
+            action: self.held(),
             response_s: None,
         })
     }
@@ -696,7 +783,7 @@ impl WebExpert {
     /// One step of a question: the agent's steps since the person's last one replayed first (on the step that
     /// opens a segment), then the person's answer. A takeover opens at once: the person watched the agent's
     /// steps and asked for it, so there is no replay, no breath and no quiet interval.
-    fn ask(&mut self, query: &Query) -> Result<Answer> {
+    fn ask(&mut self, query: &Query<'_, A>) -> Result<Answer<A>> {
         self.lift_hand_over();
         self.taking_over = query.taken_over;
         if query.agent_action.is_some() && query.taken_over {
@@ -752,7 +839,22 @@ impl WebExpert {
     }
 }
 
-impl WebExpert {
+impl<A: PageAction> WebExpert<A> {
+    /// An action the page sent (the server checked it: see [`protocol::ActionCheck`]).
+    fn action_of(&self, value: &serde_json::Value) -> Result<A> {
+        A::from_wire(value)
+            .with_context(|| format!("the page sent an action of the wrong kind: {value}"))
+    }
+
+    /// Real time: the action held on the page, or the no-op action when nothing is held.
+    fn held(&self) -> A {
+        self.server
+            .shared
+            .held()
+            .and_then(|v| A::from_wire(&v))
+            .unwrap_or_else(|| self.noop.clone())
+    }
+
     /// The run goes on: the hand-over note leaves the page.
     fn lift_hand_over(&mut self) {
         if std::mem::take(&mut self.handed) {
@@ -794,8 +896,15 @@ fn replay_from(
     from.max(len.saturating_sub(cap))
 }
 
-impl Expert for WebExpert {
-    fn act(&mut self, _obs: &[f32]) -> Result<usize> {
+/// The agent's proposal of `query`, as the page shows it.
+fn agent_action<A: PageAction>(query: &Query<'_, A>) -> Option<serde_json::Value> {
+    query
+        .agent_action
+        .and_then(|a| serde_json::to_value(A::owned(a)).ok())
+}
+
+impl<A: PageAction> Expert<A> for WebExpert<A> {
+    fn act(&mut self, _obs: &[f32]) -> Result<A> {
         bail!(
             "the web expert answers the agent's queries during training only; it cannot give demonstrations \
              before training (give pre-training demonstrations with --demos FILE)"
@@ -806,7 +915,7 @@ impl Expert for WebExpert {
         self.server.options.to_spec()
     }
 
-    fn answer(&mut self, query: &Query) -> Result<Answer> {
+    fn answer(&mut self, query: &Query<'_, A>) -> Result<Answer<A>> {
         let started = Instant::now();
         let absent_before = self.server.shared.absent_at(started);
         let result = self.ask(query);
@@ -849,7 +958,7 @@ impl Expert for WebExpert {
     fn wants_control(&mut self) -> bool {
         self.server.options.fps.is_some() && self.server.shared.take_takeover()
     }
-    fn observe(&mut self, p: &Progress) {
+    fn observe(&mut self, p: &Progress<'_, A>) {
         self.lift_hand_over();
         self.episode = p.episode;
         if self.prompt_open && !p.queries.expert_in_control() && self.carried.is_none() {
@@ -958,6 +1067,12 @@ impl Expert for WebExpert {
 /// `arld_core::expert` takes it ([`arld_core::expert::WebStart`]).
 pub fn start(options: &WebOptions, env_id: &str) -> Result<Box<dyn Expert>> {
     Ok(Box::new(WebExpert::start(options, env_id)?))
+}
+
+/// Starts a web expert for the box task `env_id` ([`WebExpert::start_box`]), as the box experts' factory takes
+/// it ([`arld_core::expert::boxed::BoxWebStart`]).
+pub fn start_box(options: &WebOptions, env_id: &str) -> Result<Box<dyn Expert<Vec<f32>>>> {
+    Ok(Box::new(WebExpert::start_box(options, env_id)?))
 }
 
 /// Builds an expert from a spec, every kind including the web expert ([`arld_core::expert::from_spec`]).

@@ -10,11 +10,16 @@
 //!
 //! Page to server: `key` (answer prompt `id` with `action`), `pass` (hand prompt `id` back to the agent),
 //! `hold` (real time: the action held down, or `null`), `pause` (the run waits, or goes on), `control` (this
-//! tab takes control). Anything else, or an action out of range, gets an `error` frame and
-//! changes nothing.
+//! tab takes control). An action is an index for discrete actions, and for actions in a box a list of numbers,
+//! one per dimension, within the box the hello describes ([`BoxControls`]; checked by the core's
+//! [`WireAction::check_answer`], as an expert process's answer is). Anything else, or an action out of range (a
+//! number outside the box, or `null`: what `JSON.stringify` makes of NaN), gets an `error` frame and changes
+//! nothing.
 
 use arld_core::env::Geometry;
+use arld_core::expert::process::WireAction;
 use serde::{Deserialize, Serialize};
+use std::sync::Arc;
 
 /// One action as the page shows it: what it does and the keys that give it.
 #[derive(Clone, Debug, PartialEq, Serialize)]
@@ -75,12 +80,118 @@ pub fn action_keys(env_id: &str) -> Option<(Vec<ActionKeys>, usize)> {
     })
 }
 
+/// Actions in a box as the page controls them: the bounds and a name for each dimension.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct BoxControls {
+    pub low: Vec<f32>,
+    pub high: Vec<f32>,
+    pub names: Vec<String>,
+    /// Per dimension, the keys that push it toward its lower and its upper bound (`KeyboardEvent.key` values):
+    /// the arrows the way they point, and WASD.
+    pub keys: Vec<[Vec<String>; 2]>,
+}
+
+impl BoxControls {
+    /// The controls of the box task `spec`, its dimensions named where arld knows what they do.
+    pub fn of(spec: &arld_core::env::BoxSpec) -> Self {
+        let known: &[&str] = match spec.id {
+            "Pendulum-v1" => &["torque"],
+            "MountainCarContinuous-v0" => &["force"],
+            "LunarLanderContinuous-v3" => &["main engine", "lateral"],
+            _ => &[],
+        };
+        let names = (0..spec.action_dim())
+            .map(|d| {
+                known
+                    .get(d)
+                    .filter(|_| known.len() == spec.action_dim())
+                    .map_or_else(|| format!("action[{d}]"), |n| n.to_string())
+            })
+            .collect();
+        // The lander's main engine fires upward (up and down arrows), its lateral engines sideways.
+        let pairs: &[[&[&str]; 2]] = match spec.id {
+            "LunarLanderContinuous-v3" => &[UP_DOWN, LEFT_RIGHT],
+            _ => &[LEFT_RIGHT, UP_DOWN, [&["j"], &["l"]], [&["k"], &["i"]]],
+        };
+        let keys = (0..spec.action_dim())
+            .map(|d| {
+                pairs.get(d).map_or([Vec::new(), Vec::new()], |p| {
+                    p.map(|ks| ks.iter().map(|k| k.to_string()).collect())
+                })
+            })
+            .collect();
+        Self {
+            low: spec.action_low.to_vec(),
+            high: spec.action_high.to_vec(),
+            names,
+            keys,
+        }
+    }
+}
+
+const LEFT_RIGHT: [&[&str]; 2] = [&["ArrowLeft", "a"], &["ArrowRight", "d"]];
+const UP_DOWN: [&[&str]; 2] = [&["ArrowDown", "s"], &["ArrowUp", "w"]];
+
+/// The observation's labels of a built-in box task (for its table), where arld knows them.
+pub fn box_obs_labels(env_id: &str) -> Option<Vec<String>> {
+    let labels: &[&str] = match env_id {
+        "Pendulum-v1" => &["cos θ", "sin θ", "angular velocity"],
+        "MountainCarContinuous-v0" => &["position", "velocity"],
+        "LunarLanderContinuous-v3" => &[
+            "x",
+            "y",
+            "x velocity",
+            "y velocity",
+            "angle",
+            "angular velocity",
+            "left leg touches",
+            "right leg touches",
+        ],
+        _ => return None,
+    };
+    Some(labels.iter().map(|l| l.to_string()).collect())
+}
+
+/// Checks an action a page sent (a JSON value) against the run's actions; the error says why it is refused.
+pub type ActionCheck = Arc<dyn Fn(&serde_json::Value) -> Result<(), String> + Send + Sync>;
+
+/// The check of `n_actions` discrete actions.
+pub fn discrete_check(n_actions: usize) -> ActionCheck {
+    Arc::new(move |v| match usize::from_wire(v) {
+        Some(a) if a < n_actions => Ok(()),
+        Some(a) => Err(format!(
+            "action {a} is out of range: the environment has {n_actions} actions (0 to {})",
+            n_actions.saturating_sub(1)
+        )),
+        None => Err(format!("action {v} is not an action's index")),
+    })
+}
+
+/// The check of actions in the box `spec`: a list of finite numbers, one per dimension, within the bounds.
+pub fn box_check(spec: &'static arld_core::env::BoxSpec) -> ActionCheck {
+    Arc::new(move |v| {
+        let action = <Vec<f32>>::from_wire(v).ok_or_else(|| {
+            format!(
+                "action {v} is not a list of {} numbers (NaN and infinities are not numbers)",
+                spec.action_dim()
+            )
+        })?;
+        // A number beyond f32's range becomes an infinity here, which the check refuses.
+        <Vec<f32>>::check_answer(&action, spec).map_err(|e| format!("action {v} is refused: {e}"))
+    })
+}
+
 /// What the page needs to know of the run, sent to each tab once the run has started.
 #[derive(Clone, Debug, Serialize)]
 pub struct Hello {
     pub env: String,
+    /// Discrete actions with their keys (empty for actions in a box).
     pub actions: Vec<ActionKeys>,
-    pub noop: usize,
+    /// The action taken in real time when nothing is held: an index, or the box's centre.
+    pub noop: serde_json::Value,
+    /// Actions in a box: their bounds and names (absent for discrete actions).
+    #[serde(rename = "box", skip_serializing_if = "Option::is_none")]
+    pub controls: Option<BoxControls>,
     /// Real-time steps per second; `None`: turn-based (one step per key).
     pub fps: Option<f64>,
     /// Seconds a question stays open; `None`: the run waits.
@@ -140,8 +251,8 @@ pub struct EndScreen {
 #[derive(Clone, Debug, Serialize)]
 pub struct Prompt {
     pub id: u64,
-    /// The agent's own proposal (on the step that opens a segment).
-    pub agent_action: Option<usize>,
+    /// The agent's own proposal (on the step that opens a segment): an index, or a box's numbers.
+    pub agent_action: Option<serde_json::Value>,
     /// Expert steps left in the segment, this one included.
     pub steps_left: usize,
     /// Whether the run waits for a key (turn-based, or the first step in real time).
@@ -234,7 +345,7 @@ impl ServerMsg<'_> {
 pub enum ClientMsg {
     Key {
         id: u64,
-        action: usize,
+        action: serde_json::Value,
     },
     /// Hand question `id` back to the agent (logged unanswered, nothing charged); during a takeover, any
     /// prompt of it: the person hands back.
@@ -250,7 +361,7 @@ pub enum ClientMsg {
         paused: bool,
     },
     Hold {
-        action: Option<usize>,
+        action: Option<serde_json::Value>,
     },
     Control,
     /// Take over unasked from the state the agent is in (real time): a segment opens at the next step, charged
@@ -259,26 +370,21 @@ pub enum ClientMsg {
 }
 
 impl ClientMsg {
-    /// Parses and checks a page's message against the number of actions.
-    pub fn parse(text: &str, n_actions: usize) -> Result<Self, String> {
+    /// Parses and checks a page's message, its action by `check`.
+    pub fn parse(text: &str, check: &ActionCheck) -> Result<Self, String> {
         let msg: ClientMsg =
             serde_json::from_str(text).map_err(|e| format!("malformed message: {e}"))?;
         let action = match &msg {
-            ClientMsg::Key { action, .. } => Some(*action),
-            ClientMsg::Hold { action } => *action,
+            ClientMsg::Key { action, .. } => Some(action),
+            ClientMsg::Hold { action } => action.as_ref(),
             ClientMsg::Control
             | ClientMsg::Takeover
             | ClientMsg::Pass { .. }
             | ClientMsg::Undo { .. }
             | ClientMsg::Pause { .. } => None,
         };
-        if let Some(a) = action
-            && a >= n_actions
-        {
-            return Err(format!(
-                "action {a} is out of range: the environment has {n_actions} actions (0 to {})",
-                n_actions.saturating_sub(1)
-            ));
+        if let Some(a) = action {
+            check(a)?;
         }
         Ok(msg)
     }
@@ -290,16 +396,20 @@ mod tests {
 
     #[test]
     fn page_messages_are_checked() {
+        let two = discrete_check(2);
         assert_eq!(
-            ClientMsg::parse(r#"{"type":"key","id":3,"action":1}"#, 2),
-            Ok(ClientMsg::Key { id: 3, action: 1 })
+            ClientMsg::parse(r#"{"type":"key","id":3,"action":1}"#, &two),
+            Ok(ClientMsg::Key {
+                id: 3,
+                action: 1.into()
+            })
         );
         assert_eq!(
-            ClientMsg::parse(r#"{"type":"hold","action":null}"#, 2),
+            ClientMsg::parse(r#"{"type":"hold","action":null}"#, &two),
             Ok(ClientMsg::Hold { action: None })
         );
         assert_eq!(
-            ClientMsg::parse(r#"{"type":"control"}"#, 2),
+            ClientMsg::parse(r#"{"type":"control"}"#, &two),
             Ok(ClientMsg::Control)
         );
         for bad in [
@@ -309,11 +419,51 @@ mod tests {
             r#"{"type":"hold","action":7}"#,
             r#"{"type":"quit"}"#,
             r#"{"type":"key","id":1,"action":0,"extra":1}"#,
+            r#"{"type":"key","id":1,"action":[0.5]}"#,
             "not json",
             "",
         ] {
-            assert!(ClientMsg::parse(bad, 2).is_err(), "{bad} accepted");
+            assert!(ClientMsg::parse(bad, &two).is_err(), "{bad} accepted");
         }
+    }
+
+    /// Box actions: a list of numbers within the bounds (each refusal says why, checked against the bounds
+    /// read from the task's spec here).
+    #[test]
+    fn box_actions_from_the_page_are_checked_against_the_box() {
+        let spec = arld_core::env::box_spec("LunarLanderContinuous-v3").unwrap();
+        let check = box_check(spec);
+        let key = |a: &str| format!(r#"{{"type":"key","id":1,"action":{a}}}"#);
+        assert_eq!(
+            ClientMsg::parse(&key("[0.25,-1]"), &check),
+            Ok(ClientMsg::Key {
+                id: 1,
+                action: serde_json::json!([0.25, -1])
+            })
+        );
+        let hi = spec.action_high[1];
+        let just_out = format!("[0,{}]", f64::from(hi) + 0.01);
+        for (bad, says) in [
+            ("[0.5]", "2 (LunarLanderContinuous-v3"),
+            ("[0.5,0.5,0.5]", "not 2"),
+            ("[null,0]", "not a list of 2 numbers"),
+            ("[1e40,0]", "not a finite number"),
+            (just_out.as_str(), "dimension 1"),
+            ("[-1.5,0]", "dimension 0"),
+            ("1", "not a list"),
+            (r#"["0",0]"#, "not a list"),
+        ] {
+            let err = ClientMsg::parse(&key(bad), &check).expect_err(bad);
+            assert!(err.contains(says), "{bad}: {err}");
+        }
+        let hold = r#"{"type":"hold","action":[2,0]}"#;
+        assert!(ClientMsg::parse(hold, &check).is_err());
+        let c = BoxControls::of(spec);
+        assert_eq!(c.names, ["main engine", "lateral"]);
+        assert_eq!(
+            (c.low.as_slice(), c.high.as_slice()),
+            (spec.action_low, spec.action_high)
+        );
     }
 
     #[test]

@@ -8,7 +8,7 @@
 //! control); its keys go to the training thread over a channel, the others watch. At most [`MAX_CONNECTIONS`]
 //! connections are open at once.
 
-use super::protocol::{ClientMsg, ServerMsg};
+use super::protocol::{ActionCheck, ClientMsg, ServerMsg};
 use axum::Router;
 use axum::extract::ws::{Message, WebSocket, WebSocketUpgrade};
 use axum::extract::{Request, State};
@@ -35,16 +35,17 @@ pub const UNCERTAINTY_HISTORY: usize = 300;
 const MAX_CLIENT_MESSAGE: usize = 1024;
 
 /// What the controlling tab answered to prompt `id`.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct KeyInput {
     pub id: u64,
     pub input: Input,
 }
 
 /// An answer of the person.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq)]
 pub enum Input {
-    Action(usize),
+    /// An action as the page sent it (checked: an index, or a box's numbers).
+    Action(serde_json::Value),
     /// The question goes back to the agent.
     HandBack,
     /// Take back the last key.
@@ -54,9 +55,9 @@ pub enum Input {
 /// What the training thread last published, for tabs that connect later.
 #[derive(Default)]
 pub struct Board {
-    /// The run's `hello` message and its number of actions, once the run has started.
+    /// The run's `hello` message and the check of its actions, once the run has started.
     pub hello: Option<String>,
-    pub n_actions: usize,
+    pub check: Option<ActionCheck>,
     pub status: Option<String>,
     pub frame: Option<String>,
     pub prompt: Option<String>,
@@ -69,7 +70,7 @@ pub struct Board {
     clients: Vec<u64>,
     controller: Option<u64>,
     /// The action held down in the controlling tab (real time).
-    pub held: Option<usize>,
+    pub held: Option<serde_json::Value>,
     /// Whether the controlling tab paused the run.
     pub paused: bool,
     /// The person's absence (the run paused, or no tab open): the time absent before `absent_since`, and since
@@ -210,8 +211,8 @@ impl Shared {
         self.takeover.swap(false, Ordering::Relaxed)
     }
 
-    pub fn held(&self) -> Option<usize> {
-        self.board().held
+    pub fn held(&self) -> Option<serde_json::Value> {
+        self.board().held.clone()
     }
 
     pub fn paused(&self) -> bool {
@@ -566,7 +567,12 @@ async fn tab(mut socket: WebSocket, shared: Arc<Shared>) {
 /// Applies one message of tab `id`; an error is the message of the error frame sent back.
 fn handle(shared: &Shared, id: u64, text: &str) -> Result<(), String> {
     let mut board = shared.board();
-    let msg = ClientMsg::parse(text, board.n_actions)?;
+    // Before the run has started there is no action to give.
+    let check = board
+        .check
+        .clone()
+        .unwrap_or_else(|| super::protocol::discrete_check(0));
+    let msg = ClientMsg::parse(text, &check)?;
     let controls = board.controller == Some(id);
     match msg {
         ClientMsg::Control => {

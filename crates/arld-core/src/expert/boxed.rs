@@ -12,7 +12,8 @@
 //!
 //! - `cmd:COMMAND`: a program answering with lists of numbers ([`super::process`]).
 //!
-//! The person's page (`web`) does not answer with box actions yet, and says so.
+//! - `web[:OPTIONS]`: a person on the page, where the program has the web expert ([`from_spec_with`], given
+//!   its start: the `arld-web` crate); elsewhere refused with a reason.
 
 use super::scripted::ScriptedBoxExpert;
 use super::{Expert, ExpertSpec};
@@ -33,17 +34,37 @@ pub fn from_spec(
     seed: u64,
     timeout_s: f64,
 ) -> Result<Box<dyn Expert<Vec<f32>>>> {
-    build(&expert.parse()?, expert, spec, seed, timeout_s)
+    let no_web: BoxWebStart = |_, _| {
+        bail!("this program was built without the web expert (the arld-web crate builds it)")
+    };
+    from_spec_with(expert, spec, seed, timeout_s, no_web)
+}
+
+/// Starts the web expert with its options for the box task `env_id` (`arld_web::start_box`): the crate above
+/// this one builds it.
+pub type BoxWebStart =
+    fn(&super::web_options::WebOptions, &str) -> Result<Box<dyn Expert<Vec<f32>>>>;
+
+/// [`from_spec`], every kind including the web expert, which `web` starts.
+pub fn from_spec_with(
+    expert: &str,
+    spec: &'static BoxSpec,
+    seed: u64,
+    timeout_s: f64,
+    web: BoxWebStart,
+) -> Result<Box<dyn Expert<Vec<f32>>>> {
+    build(&expert.parse()?, spec, seed, timeout_s, web)
 }
 
 fn build(
     parsed: &ExpertSpec,
-    text: &str,
     spec: &'static BoxSpec,
     seed: u64,
     timeout_s: f64,
+    web: BoxWebStart,
 ) -> Result<Box<dyn Expert<Vec<f32>>>> {
     Ok(match parsed {
+        ExpertSpec::Web(options) => web(options, spec.id)?,
         ExpertSpec::Scripted => Box::new(ScriptedBoxExpert::new(spec.id)?),
         ExpertSpec::Checkpoint(path) => Box::new(ActorExpert::load(path, spec)?),
         ExpertSpec::Shipped(quality) => {
@@ -60,15 +81,10 @@ fn build(
             command, spec, timeout_s,
         )?),
         ExpertSpec::Noisy { p, inner } => {
-            let inner = build(inner, text, spec, seed, timeout_s)?;
+            let inner = build(inner, spec, seed, timeout_s, web)?;
             Box::new(GaussianNoise::new(inner, *p as f32, spec, seed)?)
         }
         ExpertSpec::Python(_) => bail!(super::PYTHON_ONLY),
-        _ => bail!(
-            "the expert '{text}' cannot answer in {} (actions in a box): use scripted, shipped:weak, shipped:perfect, \
-             checkpoint:PATH (a TD3 or SAC run's weights), cmd:COMMAND (a program answering lists of numbers) or noisy:S:SPEC",
-            spec.id
-        ),
     })
 }
 

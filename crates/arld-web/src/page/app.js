@@ -1,6 +1,7 @@
 // The web expert's page: shows the environment (drawn from the geometry the server sends, or the frames the
 // environment rendered, or its observation as a table), the run's status, the person's time and the charts,
-// and answers the agent's questions with the keyboard or the buttons.
+// and answers the agent's questions with the keyboard or the buttons, and for actions in a box (a list of numbers)
+// with keys held toward a bound, a slider per dimension or a gamepad's sticks and triggers.
 "use strict";
 
 const token = new URLSearchParams(location.search).get("token") || "";
@@ -98,6 +99,7 @@ function setup() {
   if (h.timeout) $("mode").textContent += `, questions wait ${h.timeout} s`;
   const box = $("buttons");
   box.textContent = "";
+  axesSetup();
   h.actions.forEach((a, i) => {
     const b = document.createElement("button");
     b.textContent = `${a.label} [${a.keys.map(keyName).join(" / ")}]`;
@@ -108,7 +110,7 @@ function setup() {
     b.addEventListener("pointerleave", () => { if (h.fps) release(i); });
     box.appendChild(b);
   });
-  $("keys-help").textContent = h.fps
+  $("keys-help").textContent = h.box ? axesHelp() : h.fps
     ? `A fresh key press starts your segment after a short countdown; then hold a key to act (with no key held the environment takes "${h.actions[h.noop].label}"). T takes over from the agent at any time (Esc hands back). P pauses.`
     : h.undo
       ? "Each key (or button) takes one step; Backspace undoes your last key of the segment. P pauses, Esc lets the agent decide."
@@ -116,6 +118,13 @@ function setup() {
   showRole();
   showPrompt();
   padSetup();
+}
+
+// What an action does, as the page names it: a discrete action's label, or a box's numbers by dimension.
+function actionName(a) {
+  const h = arld.hello;
+  if (h.box) return Array.isArray(a) ? h.box.names.map((n, d) => `${n} ${Number(a[d]).toFixed(2)}`).join(", ") : "–";
+  return h.actions[a] ? h.actions[a].label : `action ${a}`;
 }
 
 const keyName = (k) => ({ ArrowLeft: "←", ArrowRight: "→", ArrowUp: "↑", ArrowDown: "↓", " ": "Space" })[k] || k.toUpperCase();
@@ -177,7 +186,7 @@ function showPrompt() {
     box.className = "takeover";
   }
   else if (p.takeover && p.waits) {
-    text = `You take over from here: press the key of your first action (the agent would "${h.actions[p.agent_action].label}"). ` +
+    text = `You take over from here: press the key of your first action (the agent would "${actionName(p.agent_action)}"). ` +
       "Esc hands back.";
     box.className = "takeover";
   }
@@ -190,7 +199,7 @@ function showPrompt() {
     box.className = "running";
   }
   else if (p.agent_action !== null) {
-    text = `The agent asks: what would you do? It would "${h.actions[p.agent_action].label}". ` +
+    text = `The agent asks: what would you do? It would "${actionName(p.agent_action)}". ` +
       `You act for ${p.steps_left} step${p.steps_left > 1 ? "s" : ""}.`;
     box.className = "asking";
   } else if (p.undo) {
@@ -208,6 +217,7 @@ function showPrompt() {
     b.classList.toggle("proposed", !!p && p.agent_action === Number(b.dataset.action));
     b.classList.toggle("held", held === Number(b.dataset.action));
   });
+  showAxes();
   $("pass").disabled = !p || !(p.waits || p.takeover) || !controls() || arld.ended !== null;
   $("pass").textContent = p && p.takeover ? "Hand back [Esc]" : "Let the agent decide [Esc]";
   const t = $("takeover");
@@ -372,6 +382,7 @@ document.addEventListener("keydown", (e) => {
   // A key during a replay only skips it: it never answers a question the person has not seen yet.
   if (replay) { if (!e.repeat) { e.preventDefault(); stopReplay(); } return; }
   if (e.key === "Escape") { pass(); return; }
+  if (arld.hello && arld.hello.box) { if (boxKeyDown(e)) return; }
   if (e.key === "Backspace" || ((e.ctrlKey || e.metaKey) && (e.key === "z" || e.key === "Z"))) { e.preventDefault(); undo(); return; }
   if ((e.key === "p" || e.key === "P") && actionOfKey(e.key) === null) { $("pause").click(); return; }
   if ((e.key === "t" || e.key === "T") && actionOfKey(e.key) === null) { if (!e.repeat) takeOver(); return; }
@@ -382,10 +393,11 @@ document.addEventListener("keydown", (e) => {
   if (arld.hello.fps) { if (held !== a) hold(a); if (!e.repeat) press(a); } else if (!e.repeat) press(a);
 });
 document.addEventListener("keyup", (e) => {
+  if (arld.hello && arld.hello.box) { boxKeyUp(e); return; }
   const a = actionOfKey(e.key);
   if (a !== null && arld.hello.fps) release(a);
 });
-window.addEventListener("blur", () => { if (held !== null) release(held); });
+window.addEventListener("blur", () => { if (held !== null) release(held); axesKeys.clear(); });
 
 // ---- a gamepad (the browser's Gamepad API) ---------------------------------------------------------------
 // Discrete actions on buttons: by default the d-pad gives the actions whose keys are arrows (or WASD), the face
@@ -411,6 +423,7 @@ function padDefault(actions) {
 function padKey() { return `arld.pad:${padState.id}:${arld.hello.env}`; }
 function padSetup() {
   if (!arld.hello || padState.id === null) return;
+  if (arld.hello.box) { padAxesSetup(); return; }
   let map = null;
   try { map = JSON.parse(localStorage.getItem(padKey()) || "null"); } catch (e) { map = null; }
   padState.map = Array.isArray(map) && map.length === arld.hello.actions.length ? map : padDefault(arld.hello.actions);
@@ -419,6 +432,7 @@ function padSetup() {
 function showPad() {
   const box = $("pad");
   if (padState.id === null || !arld.hello) { box.hidden = true; return; }
+  if (arld.hello.box) { showPadAxes(); return; }
   box.hidden = false;
   $("pad-name").textContent = padState.id;
   const t = $("pad-map");
@@ -458,6 +472,7 @@ function padPoll() {
   if (fresh(PAD_START)) { $("pause").click(); return; }
   if (replay) { if (now.some((p, b) => fresh(b))) stopReplay(); return; }
   if (fresh(PAD_BACK)) { pass(); return; }
+  if (h.box) { padAxesPoll(pad, fresh); return; }
   padState.map.forEach((b, a) => {
     if (b === null || b === undefined) return;
     if (fresh(b)) { if (h.fps) { if (held !== a) hold(a); press(a); } else press(a); }
@@ -465,6 +480,220 @@ function padPoll() {
   });
 }
 setInterval(padPoll, 16);
+
+// ---- continuous controls: actions in a box -----------------------------------------------------------------
+// The action is a vector, one number per dimension of the box (`hello.box`: bounds, names, keys). Three controls
+// set it, the last one moved wins: keys held push a dimension toward a bound (from the centre to the bound in
+// KEY_RAMP_S; released, the dimension goes back to the centre or holds its value, as the person chooses on the
+// page), a slider per dimension, and a gamepad's sticks and triggers (mapped per dimension on the page, kept for
+// the pad in the browser). Enter (or "Send", or the pad's A button) answers with the vector shown; in real time a
+// fresh key (or a stick leaving the centre) answers the opening question too, then the vector held is the action
+// of each step (sent to the run whenever it changes).
+const KEY_RAMP_S = 0.4, STICK_DEADZONE = 0.1, PAD_A = 0;
+const axesKeys = new Set(); // keys held down (their `key` values)
+let axes = null; // the vector set now
+let axesSent = null; // the vector last sent as held (real time)
+const centre = (d) => (arld.hello.box.low[d] + arld.hello.box.high[d]) / 2;
+const clampTo = (d, v) => Math.min(arld.hello.box.high[d], Math.max(arld.hello.box.low[d], v));
+arld.axes = null;
+
+function axesSetup() {
+  const h = arld.hello, el = $("axes");
+  el.textContent = "";
+  el.hidden = !h.box;
+  $("release-mode").hidden = !h.box;
+  if (!h.box) return;
+  axes = h.box.names.map((_, d) => centre(d));
+  h.box.names.forEach((name, d) => {
+    const row = document.createElement("label");
+    row.className = "axis";
+    const title = document.createElement("span");
+    const [lo, hi] = h.box.keys[d] || [[], []];
+    title.textContent = `${name} [${lo.map(keyName).join("/")} ${hi.map(keyName).join("/")}]`;
+    const slider = document.createElement("input");
+    Object.assign(slider, { type: "range", min: h.box.low[d], max: h.box.high[d], step: (h.box.high[d] - h.box.low[d]) / 200 });
+    slider.dataset.dim = d;
+    slider.value = axes[d];
+    slider.addEventListener("input", () => setAxis(d, Number(slider.value), "slider"));
+    const value = document.createElement("output");
+    value.id = `axis-value-${d}`;
+    row.append(title, slider, value);
+    el.appendChild(row);
+  });
+  const sendButton = document.createElement("button");
+  sendButton.id = "send-axes";
+  sendButton.textContent = "Send [Enter]";
+  sendButton.addEventListener("click", () => pressAxes());
+  el.appendChild(sendButton);
+  showAxes();
+}
+function axesHelp() {
+  const h = arld.hello;
+  const centreText = h.box.names.map((n, d) => `${n} ${centre(d)}`).join(", ");
+  const keys = "Hold a dimension's keys to push it toward its bound; released, it goes back to the centre (or holds, as chosen below). The sliders set a value directly.";
+  return h.fps
+    ? `${keys} Enter (or a fresh key, or a pad's stick) starts your segment after a short countdown; then the values shown are the action of each step (nothing touched: ${centreText}). T takes over from the agent at any time (Esc hands back). P pauses.`
+    : `${keys} Enter (or Send) takes one step with the values shown. P pauses, Esc lets the agent decide${h.undo ? ", Backspace undoes your last step" : ""}.`;
+}
+function setAxis(d, v, source) {
+  if (!axes) return;
+  axes[d] = clampTo(d, v);
+  arld.axes = { values: axes.slice(), source };
+  showAxes();
+  sendHeld();
+}
+// Real time: the vector held goes to the run whenever it changes.
+function sendHeld() {
+  const h = arld.hello;
+  if (!h || !h.fps || !axes || !controls()) return;
+  if (axesSent && axesSent.every((v, d) => v === axes[d])) return;
+  axesSent = axes.slice();
+  send({ type: "hold", action: axesSent });
+}
+function showAxes() {
+  const h = arld.hello;
+  if (!h || !h.box || !axes) return;
+  const p = arld.prompt, off = !p || !controls() || arld.ended !== null || arld.handed !== null || !!replay;
+  document.querySelectorAll("#axes input[type=range]").forEach((s) => {
+    const d = Number(s.dataset.dim);
+    if (Number(s.value) !== axes[d]) s.value = axes[d];
+    s.disabled = !controls() || arld.ended !== null;
+    const proposed = p && Array.isArray(p.agent_action) ? ` (agent: ${Number(p.agent_action[d]).toFixed(2)})` : "";
+    $(`axis-value-${d}`).textContent = `${axes[d].toFixed(2)}${proposed}`;
+  });
+  $("send-axes").disabled = off || !p.waits;
+}
+// Answers the open question with the vector shown (once per prompt).
+function pressAxes() {
+  if (!axes) return;
+  const h = arld.hello;
+  if (h.fps) { axesSent = null; sendHeld(); }
+  press(axes.slice());
+}
+// The dimension and direction (-1 toward the lower bound, +1 the upper) of a key, or null.
+function axisOfKey(key) {
+  const k = key.length === 1 ? key.toLowerCase() : key, b = arld.hello.box;
+  for (let d = 0; d < b.keys.length; d++) {
+    if (b.keys[d][0].includes(k)) return { d, dir: -1, k };
+    if (b.keys[d][1].includes(k)) return { d, dir: 1, k };
+  }
+  return null;
+}
+function boxKeyDown(e) {
+  if (e.key === "Enter") { e.preventDefault(); if (!e.repeat) pressAxes(); return true; }
+  const a = axisOfKey(e.key);
+  if (!a) return false;
+  e.preventDefault();
+  axesKeys.add(a.k);
+  // Real time: a fresh key answers the opening question too (the value it pushes toward is held from then on).
+  if (arld.hello.fps && !e.repeat) { axesTick(); pressAxes(); }
+  return true;
+}
+function boxKeyUp(e) {
+  const a = axisOfKey(e.key);
+  if (!a) return;
+  axesKeys.delete(a.k);
+  const b = arld.hello.box, still = [...b.keys[a.d][0], ...b.keys[a.d][1]].some((k) => axesKeys.has(k));
+  if (!still && $("release-mode").value === "centre") setAxis(a.d, centre(a.d), "keys");
+}
+// Keys held push their dimension toward its bound, from the centre to the bound in KEY_RAMP_S.
+let axesLast = performance.now();
+function axesTick() {
+  const now = performance.now(), dt = Math.min(0.1, (now - axesLast) / 1000);
+  axesLast = now;
+  const h = arld.hello;
+  if (!h || !h.box || !axes || !axesKeys.size) return;
+  h.box.keys.forEach(([lo, hi], d) => {
+    const dir = (hi.some((k) => axesKeys.has(k)) ? 1 : 0) - (lo.some((k) => axesKeys.has(k)) ? 1 : 0);
+    if (!dir) return;
+    const half = (h.box.high[d] - h.box.low[d]) / 2;
+    setAxis(d, axes[d] + dir * Math.max(dt, 1 / 60) * half / KEY_RAMP_S, "keys");
+  });
+}
+setInterval(axesTick, 16);
+
+// A pad's sources for a dimension: a stick's axis (-1 to 1, around the centre) or a trigger (0 to 1, from the
+// lower bound to the upper).
+const PAD_SOURCES = [
+  { name: "left stick X", axis: 0 }, { name: "left stick Y", axis: 1 }, { name: "right stick X", axis: 2 },
+  { name: "right stick Y", axis: 3 }, { name: "LT / L2 trigger", button: 6 }, { name: "RT / R2 trigger", button: 7 },
+];
+// The default mapping: the lander's main engine on the right trigger, other dimensions on the sticks in order
+// (X, then Y pushed up toward the upper bound).
+function padAxesDefault(names) {
+  const free = [{ source: 0, invert: false }, { source: 3, invert: true }, { source: 2, invert: false }, { source: 1, invert: true }];
+  return names.map((n) => (/engine/.test(n) && n.startsWith("main") ? { source: 5, invert: false } : free.shift() || { source: null, invert: false }));
+}
+function padAxesSetup() {
+  let map = null;
+  try { map = JSON.parse(localStorage.getItem(padKey()) || "null"); } catch (e) { map = null; }
+  const n = arld.hello.box.names.length;
+  padState.map = Array.isArray(map) && map.length === n && map.every((m) => m && "source" in m) ? map : padAxesDefault(arld.hello.box.names);
+  padState.values = null;
+  showPad();
+}
+function showPadAxes() {
+  const box = $("pad"), b = arld.hello.box;
+  box.hidden = false;
+  $("pad-name").textContent = padState.id;
+  const t = $("pad-map");
+  t.textContent = "";
+  b.names.forEach((name, d) => {
+    const tr = t.insertRow(), th = document.createElement("th");
+    th.textContent = `${name} (${b.low[d]} to ${b.high[d]})`; tr.appendChild(th);
+    const sel = document.createElement("select");
+    sel.dataset.dim = d;
+    sel.add(new Option("none", ""));
+    PAD_SOURCES.forEach((s, i) => sel.add(new Option(s.name, String(i))));
+    const m = padState.map[d];
+    sel.value = m.source === null ? "" : String(m.source);
+    const inv = document.createElement("input");
+    inv.type = "checkbox"; inv.checked = m.invert; inv.dataset.dim = d; inv.title = "inverted";
+    const invLabel = document.createElement("label");
+    invLabel.append(inv, " inverted");
+    const change = () => {
+      padState.map = padState.map.map((x, j) => (j === d ? { source: sel.value === "" ? null : Number(sel.value), invert: inv.checked } : x));
+      try { localStorage.setItem(padKey(), JSON.stringify(padState.map)); } catch (e) { /* private mode */ }
+      padState.values = null;
+      showPad();
+    };
+    sel.addEventListener("change", change);
+    inv.addEventListener("change", change);
+    const td = tr.insertCell();
+    td.append(sel, invLabel);
+  });
+  $("pad-help").textContent = "A sends the values shown, Start pauses, Back/Select lets the agent decide. A stick moves around the centre of its dimension, a trigger from its lower bound to its upper. Change a source here; it is kept for this pad.";
+  arld.pad = { id: padState.id, map: padState.map.map((m) => ({ ...m })) };
+}
+// The pad's value for dimension `d` under mapping `m`, or null when it has none.
+function padValue(pad, d, m) {
+  if (m.source === null) return null;
+  const s = PAD_SOURCES[m.source], b = arld.hello.box;
+  if (s.button !== undefined) {
+    const btn = pad.buttons[s.button];
+    const t = btn ? Math.min(1, Math.max(0, btn.value)) : 0, f = m.invert ? 1 - t : t;
+    return b.low[d] + f * (b.high[d] - b.low[d]);
+  }
+  let x = pad.axes[s.axis] || 0;
+  if (Math.abs(x) < STICK_DEADZONE) x = 0;
+  if (m.invert) x = -x;
+  return centre(d) + x * (b.high[d] - b.low[d]) / 2;
+}
+function padAxesPoll(pad, fresh) {
+  const values = padState.map.map((m, d) => padValue(pad, d, m));
+  const before = padState.values;
+  padState.values = values;
+  // The pad sets a dimension when its value changed (so a slider or a key moved last still counts).
+  let moved = false;
+  // (A pad just seen sets nothing: its rest position is not a choice.)
+  values.forEach((v, d) => {
+    if (v === null || !before || before[d] === v) return;
+    setAxis(d, v, "pad");
+    moved = true;
+  });
+  const h = arld.hello, p = arld.prompt;
+  if (fresh(PAD_A) || (h.fps && moved && p && p.waits)) pressAxes();
+}
 window.addEventListener("gamepadconnected", padPoll);
 
 // ---- drawing the environment ------------------------------------------------------------------------------
