@@ -234,7 +234,7 @@ pub struct TrainConfig {
     #[serde(default, skip_serializing_if = "Algo::is_td3")]
     pub algo: Algo,
 
-    /// Proportional prioritized replay (false: uniform) \[P\].
+    /// Proportional prioritized replay (false: uniform) \[P; OURS: uniform for actions in a box, docs/algorithm.md §18\].
     pub prioritized: bool,
     /// Priority exponent α \[PER: 0.6\].
     pub alpha: f64,
