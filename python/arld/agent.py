@@ -817,9 +817,14 @@ class Agent:
             box = _box_of(policy)
             if env is not None:
                 _id, obs_dim, actions, _limit, _thr = _env_facts(env)
-                if isinstance(actions, BoxActions) != (box is not None) or (
-                        box is not None and (obs_dim, actions.low, actions.high) != (policy.obs_dim, box.low, box.high)
-                ) or (box is None and (obs_dim, actions) != (policy.obs_dim, policy.n_actions)):
+                if box is None and not isinstance(actions, BoxActions):
+                    if (obs_dim, actions) != (policy.obs_dim, policy.n_actions):
+                        raise ValueError(
+                            f"{path} has {policy.obs_dim} inputs and {policy.n_actions} actions, the environment "
+                            f"{obs_dim} and {actions}"
+                        )
+                elif box is None or not isinstance(actions, BoxActions) or (
+                        (obs_dim, actions.low, actions.high) != (policy.obs_dim, box.low, box.high)):
                     raise ValueError(f"{path} has {policy.obs_dim} inputs and acts in "
                                      f"{_actions_text(box or policy.n_actions)}; the environment has {obs_dim} "
                                      f"and {_actions_text(actions)}")
