@@ -586,6 +586,7 @@ impl ConfigInput {
     /// given values in order. A value the method does not use (other than the preset's own) is an error.
     pub fn resolve(&self) -> Result<TrainConfig> {
         let preset = TrainConfig::preset(&self.env, self.method, self.net, self.seed)?;
+        let boxed = preset.boxed();
         let preset_table = TrainConfig::preset_table(&preset);
         let mut cfg = preset;
         for (key, value, origin) in &self.given {
@@ -597,7 +598,7 @@ impl ConfigInput {
                 (_, v) => v.clone(),
             };
             if value != preset_table[key]
-                && let Some(why) = unused_by(key, self.method, self.net)
+                && let Some(why) = unused_by(key, self.method, self.net, boxed)
             {
                 bail!("{origin}: {why}, so `{key}` cannot be set");
             }
@@ -647,8 +648,22 @@ fn plain_terms(message: &str) -> String {
 
 /// Why a key means nothing for this method and network (`None`: it is used). The preset's value of such a key
 /// is inert; giving another value would change nothing, which is always a mistake.
-fn unused_by(key: &str, method: Method, net: NetKind) -> Option<String> {
+fn unused_by(key: &str, method: Method, net: NetKind, boxed: bool) -> Option<String> {
     match key {
+        "margin" | "double_q" | "loss" | "grad_clip" | "l2" | "target_period" | "target_period_in_steps"
+            if boxed =>
+        {
+            Some(
+                "a task with actions in a box learns with TD3 or SAC (docs/algorithm.md §15-§17), which have no \
+                 large-margin loss, double-Q switch, TD loss choice, gradient clipping or L2 term, and whose target \
+                 networks follow by Polyak averaging, not every target period"
+                    .to_string(),
+            )
+        }
+        "lambda" if boxed && !method.pretrains() => Some(format!(
+            "in a task with actions in a box `lambda` is the cloning weight of the methods that pre-train (dqfd, \
+             adqnp); {method} does not clone"
+        )),
         "budget"
         | "budget_unit"
         | "segment_len"
@@ -1182,14 +1197,66 @@ mod tests {
     /// The errors of CartPole-v0 with `method` and `net` and each override of `cases`, each checked to contain
     /// the words paired with its override.
     fn errors_saying(method: Method, net: NetKind, cases: &[(&str, &str)]) -> Vec<String> {
+        errors_in("CartPole-v0", method, net, cases)
+    }
+
+    /// [`errors_saying`] on the task `env`.
+    fn errors_in(env: &str, method: Method, net: NetKind, cases: &[(&str, &str)]) -> Vec<String> {
         cases
             .iter()
             .map(|&(set, words)| {
-                let err = error("CartPole-v0", method, net, &[set]);
+                let err = error(env, method, net, &[set]);
                 assert!(err.contains(words), "{set}: {err}");
                 err
             })
             .collect()
+    }
+
+    /// In a task with actions in a box the keys of the DQN family's learner are refused when set, with the reason
+    /// and the key named, and `lambda` is the cloning weight of the methods that pre-train only; set to their
+    /// preset values they pass, as a run's own config.toml gives them.
+    #[test]
+    fn keys_box_learners_do_not_read_are_refused_in_box_tasks() {
+        let box_keys = [
+            "margin=0.5",
+            "double_q=false",
+            "loss=\"huber\"",
+            "grad_clip=1.0",
+            "l2=0.001",
+            "target_period=100",
+            "target_period_in_steps=true",
+        ];
+        let cases: Vec<(&str, &str)> = box_keys.iter().map(|&set| (set, "TD3 or SAC")).collect();
+        for (err, (set, _)) in errors_in("Pendulum-v1", Method::Adqn, NetKind::Bootstrap, &cases)
+            .iter()
+            .zip(&cases)
+        {
+            let key = set.split('=').next().unwrap();
+            assert!(err.contains(&format!("`{key}` cannot be set")), "{err}");
+        }
+        errors_in(
+            "Pendulum-v1",
+            Method::Adqn,
+            NetKind::Bootstrap,
+            &[("lambda=5", "adqn does not clone")],
+        );
+        let cfg = resolve(
+            "Pendulum-v1",
+            Method::Dqfd,
+            NetKind::Bootstrap,
+            &["lambda=5"],
+        )
+        .unwrap();
+        assert_eq!(cfg.lambda, 5.0);
+        // The discrete tasks keep them.
+        for set in box_keys {
+            resolve("CartPole-v0", Method::Adqn, NetKind::Bootstrap, &[set]).unwrap();
+        }
+        // Preset values pass in a box task (a run's config.toml lists every key).
+        let preset =
+            TrainConfig::preset("Pendulum-v1", Method::Adqn, NetKind::Bootstrap, 0).unwrap();
+        let own = format!("margin={}", preset.margin);
+        resolve("Pendulum-v1", Method::Adqn, NetKind::Bootstrap, &[&own]).unwrap();
     }
 
     #[test]
