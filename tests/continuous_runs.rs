@@ -17,6 +17,20 @@ use arld::train::{self, ConfigInput, Method, NetKind, RunBuilder, RunLog, TrainC
 use common::arld;
 use serde_json::Value;
 
+/// Fails the test with the command's own error output unless it exited successfully.
+fn assert_ran(res: &std::process::Output) {
+    assert!(
+        res.status.success(),
+        "{}",
+        String::from_utf8_lossy(&res.stderr)
+    );
+}
+
+/// A run directory's summary.json.
+fn summary_of(run: &std::path::Path) -> Value {
+    serde_json::from_str(&std::fs::read_to_string(run.join("summary.json")).unwrap()).unwrap()
+}
+
 #[test]
 fn an_active_td3_run_asks_the_scripted_swing_up_and_logs_box_actions() {
     let dir = tempfile::tempdir().unwrap();
@@ -42,13 +56,8 @@ fn an_active_td3_run_asks_the_scripted_swing_up_and_logs_box_actions() {
         "-o",
         out.to_str().unwrap(),
     ]);
-    assert!(
-        res.status.success(),
-        "{}",
-        String::from_utf8_lossy(&res.stderr)
-    );
-    let summary: Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    assert_ran(&res);
+    let summary = summary_of(&out);
     assert_eq!(summary["train_steps"], 1500);
     assert_eq!(summary["env"], "Pendulum-v1");
 
@@ -417,13 +426,8 @@ fn a_report_reads_box_runs() {
         "-o",
         run.to_str().unwrap(),
     ]);
-    assert!(
-        res.status.success(),
-        "{}",
-        String::from_utf8_lossy(&res.stderr)
-    );
-    let summary: Value =
-        serde_json::from_str(&std::fs::read_to_string(run.join("summary.json")).unwrap()).unwrap();
+    assert_ran(&res);
+    let summary = summary_of(&run);
     let steps = summary["steps_to_solve"].as_u64().unwrap();
     assert!(
         steps < 10_000,
@@ -436,11 +440,7 @@ fn a_report_reads_box_runs() {
         "-o",
         report.to_str().unwrap(),
     ]);
-    assert!(
-        res.status.success(),
-        "{}",
-        String::from_utf8_lossy(&res.stderr)
-    );
+    assert_ran(&res);
     let table = std::fs::read_to_string(report.join("table.md")).unwrap();
     let row = table
         .lines()
