@@ -174,19 +174,6 @@ pub struct DemoColumns<A: Action = usize> {
     pub truncated: Vec<bool>,
 }
 
-impl<A: Action> Default for DemoColumns<A> {
-    fn default() -> Self {
-        Self {
-            obs: Vec::new(),
-            actions: Vec::new(),
-            rewards: Vec::new(),
-            next_obs: Vec::new(),
-            terminated: Vec::new(),
-            truncated: Vec::new(),
-        }
-    }
-}
-
 /// A set of demonstrations for one environment, of discrete actions (the default) or of actions in a box
 /// (`Demonstrations<Vec<f32>>`): collected, given as columns, saved and loaded the same way.
 #[derive(Clone, Debug, PartialEq)]
