@@ -183,11 +183,12 @@ impl Adam {
             inv_sqrt_bias_correction2,
             eps: self.eps,
         };
-        let (m, v) = (&mut self.first_moment, &mut self.second_moment);
-        simd_dispatch!(
-            adam_update_avx2(params, grads, m, v, &coefficients),
-            adam_update(params, grads, m, v, &coefficients)
-        )
+        coefficients.update(
+            params,
+            grads,
+            &mut self.first_moment,
+            &mut self.second_moment,
+        );
     }
 }
 
@@ -219,50 +220,48 @@ struct AdamCoefficients {
     eps: f32,
 }
 
-/// Moments below this are set to zero (see [`adam_update`]).
+/// Moments below this are set to zero (see [`AdamCoefficients::update_impl`]).
 const FLUSH_BELOW: f32 = 1e-30;
 
-/// The element-wise Adam update (PyTorch's formula, see [`Adam`]).
-#[inline(always)]
-fn adam_update(
-    params: &mut [f32],
-    grads: &[f32],
-    m: &mut [f32],
-    v: &mut [f32],
-    c: &AdamCoefficients,
-) {
-    for (((p, &g), m), v) in params
-        .iter_mut()
-        .zip(grads)
-        .zip(m.iter_mut())
-        .zip(v.iter_mut())
-    {
-        let m_new = *m + c.beta1_complement * (g - *m);
-        let v_new = c.beta2 * *v + c.beta2_complement * g * g;
-        // Moments of parameters whose gradient stays zero (dead ReLU units) decay geometrically into the
-        // subnormal range, where arithmetic is far slower; flushing them to zero removes that cost
-        // and changes each update by less than 1e-26.
-        *m = if m_new.abs() < FLUSH_BELOW {
-            0.0
-        } else {
-            m_new
-        };
-        *v = if v_new < FLUSH_BELOW { 0.0 } else { v_new };
-        let denom = v.sqrt() * c.inv_sqrt_bias_correction2 + c.eps;
-        *p -= c.step_size * *m / denom;
+impl AdamCoefficients {
+    /// The element-wise Adam update of `params` with their gradients `grads` and moments `m`, `v` (PyTorch's
+    /// formula, see [`Adam`]).
+    fn update(&self, params: &mut [f32], grads: &[f32], m: &mut [f32], v: &mut [f32]) {
+        simd_dispatch!(
+            self.update_avx2(params, grads, m, v),
+            self.update_impl(params, grads, m, v)
+        )
     }
-}
 
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-fn adam_update_avx2(
-    params: &mut [f32],
-    grads: &[f32],
-    m: &mut [f32],
-    v: &mut [f32],
-    c: &AdamCoefficients,
-) {
-    adam_update(params, grads, m, v, c)
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    fn update_avx2(&self, params: &mut [f32], grads: &[f32], m: &mut [f32], v: &mut [f32]) {
+        self.update_impl(params, grads, m, v)
+    }
+
+    #[inline(always)]
+    fn update_impl(&self, params: &mut [f32], grads: &[f32], m: &mut [f32], v: &mut [f32]) {
+        for (((p, &g), m), v) in params
+            .iter_mut()
+            .zip(grads)
+            .zip(m.iter_mut())
+            .zip(v.iter_mut())
+        {
+            let m_new = *m + self.beta1_complement * (g - *m);
+            let v_new = self.beta2 * *v + self.beta2_complement * g * g;
+            // Moments of parameters whose gradient stays zero (dead ReLU units) decay geometrically into the
+            // subnormal range, where arithmetic is far slower; flushing them to zero removes that cost
+            // and changes each update by less than 1e-26.
+            *m = if m_new.abs() < FLUSH_BELOW {
+                0.0
+            } else {
+                m_new
+            };
+            *v = if v_new < FLUSH_BELOW { 0.0 } else { v_new };
+            let denom = v.sqrt() * self.inv_sqrt_bias_correction2 + self.eps;
+            *p -= self.step_size * *m / denom;
+        }
+    }
 }
 
 #[cfg(test)]
