@@ -458,7 +458,7 @@ pub(super) const MISTAKE: RuleInfo = RuleInfo {
 
 #[cfg(test)]
 mod tests {
-    use super::super::tests_support::{Recorded, replay};
+    use super::super::tests_support::{EPISODE_LEN, Recorded, SEGMENT_LEN, replay};
     use rand::{Rng, SeedableRng};
     use rand_pcg::Pcg64;
 
@@ -472,15 +472,15 @@ mod tests {
         let mut spent = 0;
         (0..recorded.len())
             .map(|i| {
-                if i > 0 && i % recorded.episode_len == 0 {
+                if i > 0 && i % EPISODE_LEN == 0 {
                     end_episode(i);
                 }
-                if spent >= recorded.budget {
+                if spent >= recorded.budget() {
                     return false;
                 }
                 let q = rule(i, spent, &mut rng);
                 if q {
-                    spent = (spent + recorded.segment_len).min(recorded.budget);
+                    spent = (spent + SEGMENT_LEN).min(recorded.budget());
                 }
                 q
             })
@@ -513,7 +513,7 @@ mod tests {
                         t
                     };
                     let p =
-                        ((r.budget - spent) as f64 / (5.0 * (end - i as f64).max(1.0))).min(1.0);
+                        ((r.budget() - spent) as f64 / (5.0 * (end - i as f64).max(1.0))).min(1.0);
                     rng.random_bool(p)
                 },
                 |_| {},
@@ -527,16 +527,18 @@ mod tests {
     #[test]
     fn rcmp_asks_above_its_variance_threshold() {
         let r = Recorded::new(12, 500);
-        let expected = by_definition(&r, |i, _, _| r.head_variance[i] > 0.5, |_| {});
+        let variance = r.column(|s| s.head_variance);
+        let expected = by_definition(&r, |i, _, _| variance[i] > 0.5, |_| {});
         assert_eq!(replay("rcmp(threshold=0.5)", &r), expected);
     }
 
     #[test]
     fn qgap_asks_below_its_percentile_of_past_gaps() {
         let r = Recorded::new(13, 500);
+        let gap = r.column(|s| s.q_gap);
         let expected = by_definition(
             &r,
-            |i, _, _| nth_asc(&r.q_gap[..i], 0.2).is_some_and(|t| r.q_gap[i] < t),
+            |i, _, _| nth_asc(&gap[..i], 0.2).is_some_and(|t| gap[i] < t),
             |_| {},
         );
         let got = replay("qgap(percentile=0.2)", &r);
@@ -549,10 +551,11 @@ mod tests {
         let r = Recorded::new(14, 700);
         let alpha = 0.05;
         let threshold = std::cell::Cell::new(None);
+        let u = r.column(|s| s.uncertainty);
         let expected = by_definition(
             &r,
-            |i, _, _| threshold.get().is_some_and(|t: f32| r.uncertainty[i] > t),
-            |i| threshold.set(nth_desc(&r.uncertainty[..i], alpha)),
+            |i, _, _| threshold.get().is_some_and(|t: f32| u[i] > t),
+            |i| threshold.set(nth_desc(&u[..i], alpha)),
         );
         assert_eq!(replay("calibrated(alpha=0.05)", &r), expected);
     }
@@ -561,14 +564,14 @@ mod tests {
     fn budget_paced_is_the_windowed_test_under_the_pro_rata_share() {
         let r = Recorded::new(15, 800);
         let (n_r, t, horizon) = (40, 0.3, 0.5);
+        let u = r.column(|s| s.uncertainty);
         let expected = by_definition(
             &r,
             |i, spent, _| {
-                let window = &r.uncertainty[i.saturating_sub(n_r)..i];
+                let window = &u[i.saturating_sub(n_r)..i];
                 let pro_rata =
-                    r.budget as f64 * ((i + 1) as f64 / (horizon * r.len() as f64)).min(1.0);
-                nth_desc(window, t).is_some_and(|thr| r.uncertainty[i] > thr)
-                    && (spent as f64) < pro_rata
+                    r.budget() as f64 * ((i + 1) as f64 / (horizon * r.len() as f64)).min(1.0);
+                nth_desc(window, t).is_some_and(|thr| u[i] > thr) && (spent as f64) < pro_rata
             },
             |_| {},
         );
@@ -589,12 +592,12 @@ mod tests {
         let expected = by_definition(
             &r,
             |i, spent, _| {
-                let u = r.uncertainty[i];
+                let u = r.signals[i].uncertainty.unwrap();
                 let Some(th) = theta.get() else {
                     theta.set(Some(u));
                     return false;
                 };
-                if spent as f64 >= r.budget as f64 * ((i + 1) as f64 / r.len() as f64) {
+                if spent as f64 >= r.budget() as f64 * ((i + 1) as f64 / r.len() as f64) {
                     return false;
                 }
                 let q = u > th;
@@ -619,7 +622,7 @@ mod tests {
         assert_eq!(replay("importance(threshold=6)", &r), expected);
         let expected = by_definition(
             &r,
-            |i, _, _| importance(i) >= 6.0 && r.agent_action[i] != r.oracle[i].action,
+            |i, _, _| importance(i) >= 6.0 && r.signals[i].greedy != r.oracle[i].action,
             |_| {},
         );
         assert_eq!(replay("mistake(threshold=6)", &r), expected);

@@ -519,17 +519,19 @@ pub(crate) mod tests_support {
     use rand::{Rng, SeedableRng};
     use rand_pcg::Pcg64;
 
+    /// Decisions per episode: `replay` ends an episode every so many.
+    pub const EPISODE_LEN: usize = 37;
+    /// Transitions one question spends.
+    pub const SEGMENT_LEN: usize = 5;
+
     /// Signals of `len` decisions: uncertainties that shrink as training goes on, with noise; episodes of
-    /// `episode_len` decisions; an expert with 3 actions.
+    /// [`EPISODE_LEN`] decisions; an expert with 3 actions; a budget of a quarter of the decisions' transitions.
     pub struct Recorded {
-        pub uncertainty: Vec<f32>,
-        pub head_variance: Vec<f32>,
-        pub q_gap: Vec<f32>,
-        pub agent_action: Vec<usize>,
+        /// What the agent's network signals at each decision (its greedy action is the agent's action).
+        pub signals: Vec<Signals>,
+        /// What the expert would do at each decision.
         pub oracle: Vec<OracleView>,
-        pub episode_len: usize,
-        pub budget: usize,
-        pub segment_len: usize,
+        /// The seed of the query generator `replay` gives the rule.
         pub rng_seed: u64,
     }
 
@@ -538,22 +540,21 @@ pub(crate) mod tests_support {
             let mut rng = Pcg64::seed_from_u64(seed);
             let mut noise = move |scale: f32| rng.random::<f32>() * scale;
             let mut r = Recorded {
-                uncertainty: vec![],
-                head_variance: vec![],
-                q_gap: vec![],
-                agent_action: vec![],
-                oracle: vec![],
-                episode_len: 37,
-                budget: len / 4,
-                segment_len: 5,
+                signals: Vec::with_capacity(len),
+                oracle: Vec::with_capacity(len),
                 rng_seed: seed + 1000,
             };
             for i in 0..len {
                 let decay = 1.0 / (1.0 + i as f32 / 100.0);
-                r.uncertainty.push(decay * noise(1.0));
-                r.head_variance.push(decay * noise(4.0));
-                r.q_gap.push(noise(2.0) + i as f32 / 200.0);
-                r.agent_action.push((noise(3.0) as usize).min(2));
+                let uncertainty = Some(decay * noise(1.0));
+                let head_variance = Some(decay * noise(4.0));
+                let q_gap = Some(noise(2.0) + i as f32 / 200.0);
+                r.signals.push(Signals {
+                    uncertainty,
+                    head_variance,
+                    q_gap,
+                    greedy: (noise(3.0) as usize).min(2),
+                });
                 let q: Vec<f32> = (0..3).map(|_| noise(10.0)).collect();
                 let action = (0..3).max_by(|&a, &b| q[a].total_cmp(&q[b])).unwrap();
                 r.oracle.push(OracleView {
@@ -565,19 +566,32 @@ pub(crate) mod tests_support {
         }
 
         pub fn len(&self) -> usize {
-            self.uncertainty.len()
+            self.signals.len()
+        }
+
+        /// The budget, in transitions.
+        pub fn budget(&self) -> usize {
+            self.len() / 4
+        }
+
+        /// One signal at every decision, in order (`|s| s.uncertainty`, ...).
+        pub fn column(&self, signal: impl Fn(&Signals) -> Option<f32>) -> Vec<f32> {
+            self.signals
+                .iter()
+                .map(|s| signal(s).expect("every signal is recorded"))
+                .collect()
         }
     }
 
     /// Feeds `recorded` to the rule built from `spec`, as the controller would: one decision per step, every
     /// query spending a whole segment, no decision once the budget is spent, `end_episode` every
-    /// `episode_len` decisions. Returns the decisions.
+    /// [`EPISODE_LEN`] decisions. Returns the decisions.
     pub fn replay(spec: &str, recorded: &Recorded) -> Vec<bool> {
         let defaults = RuleDefaults {
             t_query: 0.1,
             n_r: 1000,
-            budget: recorded.budget,
-            segment_len: recorded.segment_len,
+            budget: recorded.budget(),
+            segment_len: SEGMENT_LEN,
             train_steps: recorded.len(),
             unit: BudgetUnit::Transitions,
         };
@@ -586,35 +600,29 @@ pub(crate) mod tests_support {
         let (mut spent, mut queries) = (0, 0);
         let mut out = Vec::with_capacity(recorded.len());
         for i in 0..recorded.len() {
-            if i > 0 && i % recorded.episode_len == 0 {
+            if i > 0 && i % EPISODE_LEN == 0 {
                 rule.end_episode();
             }
-            if spent >= recorded.budget {
+            if spent >= recorded.budget() {
                 out.push(false);
                 continue;
             }
-            let signals = Signals {
-                uncertainty: Some(recorded.uncertainty[i]),
-                head_variance: Some(recorded.head_variance[i]),
-                q_gap: Some(recorded.q_gap[i]),
-                greedy: recorded.agent_action[i],
-            };
             let ctx = QueryContext {
                 step: i,
                 train_steps: recorded.len(),
-                budget: recorded.budget,
+                budget: recorded.budget(),
                 budget_spent: spent,
                 unit: BudgetUnit::Transitions,
-                segment_len: recorded.segment_len,
+                segment_len: SEGMENT_LEN,
                 queries,
-                agent_action: Some(recorded.agent_action[i]),
-                signals: &signals,
+                agent_action: Some(recorded.signals[i].greedy),
+                signals: &recorded.signals[i],
                 oracle: Some(&recorded.oracle[i]),
             };
             let query = rule.decide(&ctx, &mut rng).query;
             if query {
                 queries += 1;
-                spent = (spent + recorded.segment_len).min(recorded.budget);
+                spent = (spent + SEGMENT_LEN).min(recorded.budget());
             }
             out.push(query);
         }

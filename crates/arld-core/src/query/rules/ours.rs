@@ -69,7 +69,7 @@ pub(super) const RANKED: RuleInfo = RuleInfo {
 
 #[cfg(test)]
 mod tests {
-    use super::super::tests_support::{Recorded, replay};
+    use super::super::tests_support::{Recorded, SEGMENT_LEN, replay};
     use rand::{Rng, SeedableRng};
     use rand_pcg::Pcg64;
 
@@ -79,14 +79,15 @@ mod tests {
         let (n_r, horizon, start) = (60, 0.5, 0.1);
         let t = r.len() as f64;
         let mut rng = Pcg64::seed_from_u64(r.rng_seed);
+        let (budget, uncertainty) = (r.budget(), r.column(|s| s.uncertainty));
         let mut spent = 0;
         let expected: Vec<bool> = (0..r.len())
             .map(|i| {
-                if spent >= r.budget {
+                if spent >= budget {
                     return false;
                 }
-                let u = r.uncertainty[i];
-                let window = &r.uncertainty[i.saturating_sub(n_r)..i];
+                let u = uncertainty[i];
+                let window = &uncertainty[i.saturating_sub(n_r)..i];
                 let rank = if window.is_empty() {
                     0.0
                 } else {
@@ -97,11 +98,12 @@ mod tests {
                 }
                 let until = (horizon * t).ceil();
                 let end = if (i as f64) < until { until } else { t };
-                let paced =
-                    ((r.budget - spent) as f64 / (5.0 * (end - i as f64).max(1.0))).min(1.0);
+                let paced = ((budget - spent) as f64
+                    / (SEGMENT_LEN as f64 * (end - i as f64).max(1.0)))
+                .min(1.0);
                 let q = rng.random_bool((2.0 * rank * paced).min(1.0));
                 if q {
-                    spent = (spent + 5).min(r.budget);
+                    spent = (spent + SEGMENT_LEN).min(budget);
                 }
                 q
             })

@@ -255,7 +255,7 @@ pub(super) const ADAPTIVE: RuleInfo = RuleInfo {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::query::rules::tests_support::{Recorded, replay};
+    use crate::query::rules::tests_support::{Recorded, SEGMENT_LEN, replay};
     use proptest::prelude::*;
     use rand::{Rng, SeedableRng};
     use rand_pcg::Pcg64;
@@ -332,7 +332,7 @@ mod tests {
     fn the_paper_rules_on_a_recorded_sequence() {
         let recorded = Recorded::new(7, 400);
         // Every question spends a whole segment: the rule is asked until this many questions.
-        let questions = recorded.budget / recorded.segment_len;
+        let questions = recorded.budget() / SEGMENT_LEN;
         // Never: no question; greedy: a question at every decision until the budget is spent.
         assert!(replay("never", &recorded).iter().all(|q| !q));
         let greedy = replay("greedy", &recorded);
@@ -350,16 +350,17 @@ mod tests {
         assert_eq!(replay("bernoulli(p=0.2)", &recorded), expected);
         // Adaptive: the uncertainty exceeds the floor(|D| t)-th largest of the last n_r values.
         let (n_r, t) = (50, 0.1);
+        let u = recorded.column(|s| s.uncertainty);
         let expected: Vec<bool> = (0..recorded.len())
             .map(|i| {
-                let window = &recorded.uncertainty[i.saturating_sub(n_r)..i];
+                let window = &u[i.saturating_sub(n_r)..i];
                 if window.is_empty() {
                     return false;
                 }
                 let mut sorted = window.to_vec();
                 sorted.sort_by(|a, b| b.total_cmp(a));
                 let k = ((sorted.len() as f64 * t).floor() as usize).min(sorted.len() - 1);
-                recorded.uncertainty[i] > sorted[k]
+                u[i] > sorted[k]
             })
             .scan(0, |asked, q| {
                 let q = q && *asked < questions;
