@@ -485,7 +485,7 @@ fn descending_quantile(values: &[f32], alpha: f64) -> Option<f32> {
 
 /// A thrifty run on MountainCarContinuous-v0 (risk critic trained on the flag as its goal), stopped right after
 /// its third episode: the snapshot's record of every risk and uncertainty the rule saw has one value per decision
-/// the agent made, and the rule's thresholds are the (1 - alpha) quantiles of those records, recomputed here;
+/// (every step the agent acted, and every question), and the rule's thresholds are the (1 - alpha) quantiles of those records, recomputed here;
 /// every question came after the first episode (before it there is no threshold) with the threshold of its time
 /// logged, and asked for a risk above it or for novelty. A run of another rule holds no risk critic.
 #[test]
@@ -500,8 +500,10 @@ fn the_thrifty_rule_asks_above_the_quantiles_of_the_risks_it_recorded() {
         );
         let sets: [(&str, toml::Value); 8] = [
             ("query_rule", rule.into()),
-            ("train_steps", 4_000.into()),
-            ("budget", 300.into()),
+            // The run stops after its third episode: a budget it cannot spend by then, and a run long enough for
+            // the default alpha, budget / (5 train_steps), to be 0.04.
+            ("train_steps", 15_000.into()),
+            ("budget", 3_000.into()),
             ("learning_starts", 500.into()),
             ("eval_period", 4_000.into()),
             ("eval_episodes", 1.into()),
@@ -541,8 +543,9 @@ fn the_thrifty_rule_asks_above_the_quantiles_of_the_risks_it_recorded() {
     );
     let risks = state.f32s("query.risk.history").unwrap().to_vec();
     let novelty = state.f32s("query.novelty.history").unwrap();
-    // One decision per step the agent acted (the expert's steps are no decisions).
-    assert_eq!((risks.len(), novelty.len()), (step - used, step - used));
+    // One decision per step the agent acted, and one at each question (its step is the expert's first).
+    let decisions = step - used + queries.len();
+    assert_eq!((risks.len(), novelty.len()), (decisions, decisions));
     assert!(
         risks.iter().all(|r| *r > 0.0 && *r < 1.0),
         "a risk outside (0, 1)"
@@ -595,15 +598,15 @@ fn a_thrifty_run_asks_within_its_budget_and_tasks_without_a_goal_refuse_it() {
         "--expert",
         "scripted",
         "--set",
-        "query_rule=thrifty",
+        "query_rule=thrifty(alpha=0.05)",
         "--set",
-        "train_steps=3000",
+        "train_steps=4000",
         "--set",
         "budget=100",
         "--set",
         "learning_starts=500",
         "--set",
-        "eval_period=3000",
+        "eval_period=4000",
         "--set",
         "eval_episodes=1",
         "--set",
