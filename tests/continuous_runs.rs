@@ -498,20 +498,16 @@ fn the_thrifty_rule_asks_above_the_quantiles_of_the_risks_it_recorded() {
             NetKind::Bootstrap,
             2,
         );
-        let sets: [(&str, toml::Value); 8] = [
-            ("query_rule", rule.into()),
-            // The run stops after its third episode: a budget it cannot spend by then, and a run long enough for
-            // the default alpha, budget / (5 train_steps), to be 0.04.
-            ("train_steps", 15_000.into()),
-            ("budget", 3_000.into()),
-            ("learning_starts", 500.into()),
-            ("eval_period", 4_000.into()),
-            ("eval_episodes", 1.into()),
-            ("hidden", toml::Value::Array(vec![32.into(), 32.into()])),
-            ("batch_size", 32.into()),
-        ];
+        // The run stops after its third episode: a budget it cannot spend by then, and a run long enough for the
+        // default alpha, budget / (5 train_steps), to be 0.04.
+        let sets: toml::Table =
+            "train_steps = 15000\nbudget = 3000\nlearning_starts = 500\neval_period = 4000\n\
+             eval_episodes = 1\nhidden = [32, 32]\nbatch_size = 32"
+                .parse()
+                .unwrap();
+        input.set("query_rule", rule).unwrap();
         for (key, value) in sets {
-            input.set(key, value).unwrap();
+            input.set(&key, value).unwrap();
         }
         input.resolve().unwrap()
     };
@@ -589,33 +585,13 @@ fn the_thrifty_rule_asks_above_the_quantiles_of_the_risks_it_recorded() {
 fn a_thrifty_run_asks_within_its_budget_and_tasks_without_a_goal_refuse_it() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("run");
-    let res = arld(&[
-        "train",
-        "--env",
-        "MountainCarContinuous-v0",
-        "--method",
-        "adqn",
-        "--expert",
-        "scripted",
-        "--set",
-        "query_rule=thrifty(alpha=0.05)",
-        "--set",
-        "train_steps=4000",
-        "--set",
-        "budget=100",
-        "--set",
-        "learning_starts=500",
-        "--set",
-        "eval_period=4000",
-        "--set",
-        "eval_episodes=1",
-        "--set",
-        "hidden=[32,32]",
-        "--set",
-        "batch_size=32",
-        "-o",
-        out.to_str().unwrap(),
-    ]);
+    let mut args: Vec<&str> = "train --env MountainCarContinuous-v0 --method adqn --expert scripted \
+         --set query_rule=thrifty(alpha=0.05) --set train_steps=4000 --set budget=100 --set learning_starts=500 \
+         --set eval_period=4000 --set eval_episodes=1 --set hidden=[32,32] --set batch_size=32 -o"
+        .split_whitespace()
+        .collect();
+    args.push(out.to_str().unwrap());
+    let res = arld(&args);
     assert_ran(&res);
     let summary = summary_of(&out);
     let queried = summary["demos_queried"].as_u64().unwrap();

@@ -332,42 +332,16 @@ fn a_lunarlander_adqn_bootstrap_run_killed_five_times_ends_byte_identical() {
 /// mid-episode and at random moments: the questions, answers and weights come out byte for byte.
 #[test]
 fn a_mountain_car_thrifty_td3_run_killed_five_times_ends_byte_identical() {
-    let mut moments = vec![
-        Moment::When("mid-query-segment", mid_segment),
-        Moment::When("mid-episode", mid_episode),
-    ];
+    let args: Vec<&str> = "--env MountainCarContinuous-v0 --method adqn --expert scripted --seed 6 \
+         --set query_rule=thrifty(alpha=0.05) --set train_steps=4000 --set learning_starts=300 --set budget=150 \
+         --set eval_period=1000 --set eval_episodes=1 --set hidden=[32,32] --set batch_size=32 \
+         --set snapshot_every=97"
+        .split_whitespace()
+        .collect();
+    let mut moments = vec![Moment::When("mid-query-segment", mid_segment)];
+    moments.push(Moment::When("mid-episode", mid_episode));
     moments.extend(delays(17, 3, 400));
-    let hits = survives(
-        &[
-            "--env",
-            "MountainCarContinuous-v0",
-            "--method",
-            "adqn",
-            "--expert",
-            "scripted",
-            "--seed",
-            "6",
-            "--set",
-            "query_rule=thrifty(alpha=0.05)",
-            "--set",
-            "train_steps=4000",
-            "--set",
-            "learning_starts=300",
-            "--set",
-            "budget=150",
-            "--set",
-            "eval_period=1000",
-            "--set",
-            "eval_episodes=1",
-            "--set",
-            "hidden=[32,32]",
-            "--set",
-            "batch_size=32",
-            "--set",
-            "snapshot_every=97",
-        ],
-        &moments,
-    );
+    let hits = survives(&args, &moments);
     eprintln!("MountainCarContinuous-v0 thrifty (TD3) kills: {hits:#?}");
 }
 

@@ -134,14 +134,14 @@ impl RiskCritic {
             (&batch.next_obs, &self.next_actions[..n * a], d),
             n,
         );
-        for r in 0..n {
+        for (r, &next) in y.iter().enumerate() {
             let (reward, terminal) = (batch.rewards[r], batch.terminal[r]);
             self.targets[r] = if self.config.goal.reached(reward, terminal) {
                 1.0
             } else if terminal {
                 0.0
             } else {
-                self.config.gamma * probability(y[r])
+                self.config.gamma * probability(next)
             };
         }
         &self.targets[..n]
@@ -159,8 +159,8 @@ impl RiskCritic {
             n,
         );
         let mut loss = 0.0f32;
-        for r in 0..n {
-            let error = probability(y[r]) - self.targets[r];
+        for (r, &out) in y.iter().enumerate() {
+            let error = probability(out) - self.targets[r];
             loss += batch.weights[r] * error * error;
             // dL/dQ = 2 w (Q - y) / n, and dQ/d(tanh) = 1/2.
             self.d_out[r] = batch.weights[r] * error / n as f32;
@@ -223,14 +223,16 @@ fn forward<'w>(
 impl Persist for RiskCritic {
     /// Writes the network, its target and its optimiser (buffers are left out).
     fn save_state<'a>(&'a self, prefix: &str, state: &mut StateDict<'a>) {
-        self.net.save_state(&format!("{prefix}.net"), state);
-        self.target.save_state(&format!("{prefix}.target"), state);
+        for (part, net) in [("net", &self.net), ("target", &self.target)] {
+            net.save_state(&format!("{prefix}.{part}"), state);
+        }
         self.opt.save_state(&format!("{prefix}.adam"), state);
     }
 
     fn load_state(&mut self, prefix: &str, state: &StateDict<'_>) -> Result<(), StateError> {
-        self.net.load_state(&format!("{prefix}.net"), state)?;
-        self.target.load_state(&format!("{prefix}.target"), state)?;
+        for (part, net) in [("net", &mut self.net), ("target", &mut self.target)] {
+            net.load_state(&format!("{prefix}.{part}"), state)?;
+        }
         self.opt.load_state(&format!("{prefix}.adam"), state)
     }
 }
@@ -297,7 +299,8 @@ mod tests {
         risk.update(&b, &mut policy);
         assert_ne!(risk.net.parameters(), risk.target.parameters());
         let targets = risk.targets(&b, &mut policy).to_vec();
-        for r in 0..b.len() {
+        assert_eq!(targets.len(), b.len());
+        for (r, target) in targets.iter().enumerate() {
             let next = &b.next_obs[2 * r..2 * r + 2];
             let mut action = [0.0];
             policy(next, &mut action);
@@ -307,9 +310,8 @@ mod tests {
                 _ => 0.9 * q_of(&risk.target, next, &action),
             };
             assert!(
-                (f64::from(targets[r]) - expected).abs() < 1e-6,
-                "sample {r}: {} vs {expected}",
-                targets[r]
+                (f64::from(*target) - expected).abs() < 1e-6,
+                "sample {r}: {target} vs {expected}"
             );
         }
     }
@@ -335,18 +337,22 @@ mod tests {
                 .sum::<f64>()
                 / n as f64
         };
+        // Central differences, one parameter at a time, of the loss computed by forward passes alone.
         let h = 1e-3f32;
-        let mut net = risk.net.clone();
-        for (i, analytic) in grads.iter().enumerate() {
-            let original = net.parameters()[i];
-            net.parameters_mut()[i] = original + h;
-            let up = loss(&net);
-            net.parameters_mut()[i] = original - h;
-            let down = loss(&net);
-            net.parameters_mut()[i] = original;
-            let numeric = (up - down) / (2.0 * f64::from(h));
+        let numeric: Vec<f64> = (0..grads.len())
+            .map(|i| {
+                let at = |delta: f32| {
+                    let mut net = risk.net.clone();
+                    net.parameters_mut()[i] += delta;
+                    loss(&net)
+                };
+                (at(h) - at(-h)) / (2.0 * f64::from(h))
+            })
+            .collect();
+        for (i, (analytic, numeric)) in grads.iter().zip(&numeric).enumerate() {
+            let error = (f64::from(*analytic) - numeric).abs();
             assert!(
-                (f64::from(*analytic) - numeric).abs() < 2e-3 * numeric.abs().max(0.1),
+                error < 2e-3 * numeric.abs().max(0.1),
                 "parameter {i}: {analytic} vs {numeric}"
             );
         }
@@ -374,11 +380,10 @@ mod tests {
         };
         let mut v = [0.0f64; 7];
         for _ in 0..500 {
-            let mut new = v;
-            for s in 1..=5 {
-                new[s] = 0.8 * outcome(&v, s + 1) + 0.2 * outcome(&v, s - 1);
+            let old = v;
+            for (s, value) in v.iter_mut().enumerate().take(6).skip(1) {
+                *value = 0.8 * outcome(&old, s + 1) + 0.2 * outcome(&old, s - 1);
             }
-            v = new;
         }
         let expected = |s: usize, a: f32| if a > 0.0 { v[s] } else { outcome(&v, s - 1) };
 

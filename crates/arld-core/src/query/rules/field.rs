@@ -678,7 +678,8 @@ mod tests {
         let risky = by_definition(&r, |i, _, _| above(&risk_t, r.risk[i]), recalibrate);
         let got = replay(&format!("risk(alpha={alpha})"), &r);
         assert_eq!(got, risky);
-        (risk_t.set(None), novelty_t.set(None));
+        risk_t.set(None);
+        novelty_t.set(None);
         let either = by_definition(
             &r,
             |i, _, _| above(&risk_t, r.risk[i]) || above(&novelty_t, r.uncertainty[i]),
