@@ -13,7 +13,10 @@ use arld::expert;
 use arld::expert::demos::Demonstrations;
 use arld::task::{ActionColumn, BoxColumn};
 use arld::train::run::box_agent;
-use arld::train::{self, ConfigInput, Method, NetKind, RunBuilder, RunLog, TrainConfig};
+use arld::train::{
+    self, ConfigInput, Control, Driver, Method, NetKind, PausedRun, RunBuilder, RunLog, StepView,
+    TrainConfig,
+};
 use common::arld;
 use serde_json::Value;
 
@@ -447,4 +450,176 @@ fn a_report_reads_box_runs() {
         .find(|l| l.starts_with("| ADQN-B |"))
         .unwrap_or_else(|| panic!("no ADQN-B row in\n{table}"));
     assert!(row.contains(&format!("{steps}** (-) 1/1")), "{row}");
+}
+
+/// Pauses a box run right after its `episodes`-th episode ends, writes a snapshot into `dir` and stops it there;
+/// keeps the step and the budget used at that moment.
+struct StopAfterEpisodes {
+    episodes: usize,
+    dir: std::path::PathBuf,
+    at: Option<(usize, usize)>,
+}
+
+impl Driver<BoxAgent> for StopAfterEpisodes {
+    fn after_step(&mut self, at: &StepView<'_, BoxAgent>) -> anyhow::Result<Control> {
+        if self.at.is_none() && at.episode == self.episodes {
+            self.at = Some((at.step, at.budget_used));
+            return Ok(Control::Pause);
+        }
+        Ok(Control::Continue)
+    }
+
+    fn paused(&mut self, run: &mut PausedRun<'_, BoxAgent>) -> anyhow::Result<Control> {
+        run.snapshot(&self.dir)?;
+        Ok(Control::Stop)
+    }
+}
+
+/// The value at descending position floor(len * alpha) of `values` (the calibrated rules' threshold), by sorting.
+fn descending_quantile(values: &[f32], alpha: f64) -> Option<f32> {
+    let mut sorted = values.to_vec();
+    sorted.sort_by(|a, b| b.total_cmp(a));
+    let k = ((values.len() as f64 * alpha).floor() as usize).min(values.len().checked_sub(1)?);
+    Some(sorted[k])
+}
+
+/// A thrifty run on MountainCarContinuous-v0 (risk critic trained on the flag as its goal), stopped right after
+/// its third episode: the snapshot's record of every risk and uncertainty the rule saw has one value per decision
+/// (every step the agent acted, and every question), and the rule's thresholds are the (1 - alpha) quantiles of those records, recomputed here;
+/// every question came after the first episode (before it there is no threshold) with the threshold of its time
+/// logged, and asked for a risk above it or for novelty. A run of another rule holds no risk critic.
+#[test]
+fn the_thrifty_rule_asks_above_the_quantiles_of_the_risks_it_recorded() {
+    let spec = box_spec("MountainCarContinuous-v0").unwrap();
+    let config = |rule: &str| {
+        let mut input = ConfigInput::new(
+            "MountainCarContinuous-v0",
+            Method::Adqn,
+            NetKind::Bootstrap,
+            2,
+        );
+        // The run stops after its third episode: a budget it cannot spend by then, and a run long enough for the
+        // default alpha, budget / (5 train_steps), to be 0.04.
+        let sets: toml::Table =
+            "train_steps = 15000\nbudget = 3000\nlearning_starts = 500\neval_period = 4000\n\
+             eval_episodes = 1\nhidden = [32, 32]\nbatch_size = 32"
+                .parse()
+                .unwrap();
+        input.set("query_rule", rule).unwrap();
+        for (key, value) in sets {
+            input.set(&key, value).unwrap();
+        }
+        input.resolve().unwrap()
+    };
+    let stopped = |cfg: &TrainConfig, dir: &std::path::Path| {
+        let mut expert = expert::boxed::from_spec("scripted", spec, 0, 30.0).unwrap();
+        let mut driver = StopAfterEpisodes {
+            episodes: 3,
+            dir: dir.to_path_buf(),
+            at: None,
+        };
+        let mut log = RunLog::in_memory();
+        RunBuilder::for_box(cfg)
+            .expert(Some(expert.as_mut()))
+            .driver(&mut driver)
+            .train(&mut log)
+            .unwrap();
+        let bytes = std::fs::read(dir.join("snapshot.safetensors")).unwrap();
+        let state = arld::train::snapshot::read_snapshot(&bytes, cfg).unwrap();
+        (state, driver.at.unwrap(), log.query_events().to_vec())
+    };
+    let work = tempfile::tempdir().unwrap();
+    let cfg = config("thrifty");
+    let (state, (step, used), queries) = stopped(&cfg, work.path());
+    let alpha = cfg.budget as f64 / (cfg.segment_len * cfg.train_steps) as f64;
+    assert!(
+        used > 0 && used < cfg.budget,
+        "asked {used} of {}",
+        cfg.budget
+    );
+    let risks = state.f32s("query.risk.history").unwrap().to_vec();
+    let novelty = state.f32s("query.novelty.history").unwrap();
+    // One decision per step the agent acted, and one at each question (its step is the expert's first).
+    let decisions = step - used + queries.len();
+    assert_eq!((risks.len(), novelty.len()), (decisions, decisions));
+    assert!(
+        risks.iter().all(|r| *r > 0.0 && *r < 1.0),
+        "a risk outside (0, 1)"
+    );
+    let threshold: Option<f32> = state.value("query.risk.threshold").unwrap();
+    assert_eq!(threshold, descending_quantile(&risks, alpha));
+    let threshold_n: Option<f32> = state.value("query.novelty.threshold").unwrap();
+    assert_eq!(threshold_n, descending_quantile(novelty, alpha));
+    assert!(!queries.is_empty(), "the rule never asked");
+    let (mut for_risk, mut for_novelty) = (0, 0);
+    for q in &queries {
+        assert!(q.episode >= 1, "a question in the first episode: {q:?}");
+        let (risk, t) = (q.uncertainty.unwrap(), q.threshold.unwrap());
+        assert!(
+            risks.contains(&risk),
+            "the question's risk {risk} was not recorded"
+        );
+        if risk > t {
+            for_risk += 1;
+        } else {
+            for_novelty += 1;
+        }
+    }
+    eprintln!(
+        "thrifty on MountainCarContinuous-v0: {} questions ({for_risk} for risk, {for_novelty} for novelty) in \
+         {step} steps, {used} transitions; risk threshold {threshold:?} over {} risks",
+        queries.len(),
+        risks.len()
+    );
+    assert!(for_risk > 0);
+    // The risk critic is in the snapshot of this run and in no other's.
+    assert!(state.f32s("agent.risk_critic.net.params").is_ok());
+    let other = tempfile::tempdir().unwrap();
+    let (state, _, _) = stopped(&config("calibrated"), other.path());
+    assert!(state.f32s("agent.risk_critic.net.params").is_err());
+}
+
+/// `arld train` with the thrifty rule on MountainCarContinuous-v0 asks within its budget; a task without a goal
+/// (Pendulum-v1) and one of discrete actions refuse the rules that read the risk, with the reason.
+#[test]
+fn a_thrifty_run_asks_within_its_budget_and_tasks_without_a_goal_refuse_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("run");
+    let mut args: Vec<&str> = "train --env MountainCarContinuous-v0 --method adqn --expert scripted \
+         --set query_rule=thrifty(alpha=0.05) --set train_steps=4000 --set budget=100 --set learning_starts=500 \
+         --set eval_period=4000 --set eval_episodes=1 --set hidden=[32,32] --set batch_size=32 -o"
+        .split_whitespace()
+        .collect();
+    args.push(out.to_str().unwrap());
+    let res = arld(&args);
+    assert_ran(&res);
+    let summary = summary_of(&out);
+    let queried = summary["demos_queried"].as_u64().unwrap();
+    assert!(queried > 0 && queried <= 100, "{summary}");
+    let answers = std::fs::read_to_string(out.join("answers.jsonl")).unwrap();
+    assert_eq!(answers.lines().count() as u64, queried);
+    for (env, rule, says) in [
+        ("Pendulum-v1", "thrifty", "Pendulum-v1 has no goal"),
+        ("Pendulum-v1", "risk(alpha=0.1)", "Pendulum-v1 has no goal"),
+        ("CartPole-v0", "risk", "CartPole-v0 has discrete actions"),
+    ] {
+        let out = dir.path().join(format!("refused_{env}"));
+        let set = format!("query_rule={rule}");
+        let res = arld(&[
+            "train",
+            "--env",
+            env,
+            "--method",
+            "adqn",
+            "--set",
+            &set,
+            "-o",
+            out.to_str().unwrap(),
+        ]);
+        assert!(!res.status.success(), "{env} {rule} ran");
+        let err = String::from_utf8_lossy(&res.stderr);
+        assert!(err.contains(says) && err.contains("risk"), "{err}");
+        assert!(!err.contains("panicked"), "{err}");
+        assert!(!out.join("summary.json").exists());
+    }
 }

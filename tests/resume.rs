@@ -327,6 +327,24 @@ fn a_lunarlander_adqn_bootstrap_run_killed_five_times_ends_byte_identical() {
     eprintln!("LunarLander-v2 ADQN-B kills: {hits:#?}");
 }
 
+/// A box run whose query rule reads the risk (thrifty on MountainCarContinuous-v0: a risk critic trained next to
+/// TD3's critics, and the rule's records of every risk and uncertainty) survives kills in a query segment,
+/// mid-episode and at random moments: the questions, answers and weights come out byte for byte.
+#[test]
+fn a_mountain_car_thrifty_td3_run_killed_five_times_ends_byte_identical() {
+    let args: Vec<&str> = "--env MountainCarContinuous-v0 --method adqn --expert scripted --seed 6 \
+         --set query_rule=thrifty(alpha=0.05) --set train_steps=4000 --set learning_starts=300 --set budget=150 \
+         --set eval_period=1000 --set eval_episodes=1 --set hidden=[32,32] --set batch_size=32 \
+         --set snapshot_every=97"
+        .split_whitespace()
+        .collect();
+    let mut moments = vec![Moment::When("mid-query-segment", mid_segment)];
+    moments.push(Moment::When("mid-episode", mid_episode));
+    moments.extend(delays(17, 3, 400));
+    let hits = survives(&args, &moments);
+    eprintln!("MountainCarContinuous-v0 thrifty (TD3) kills: {hits:#?}");
+}
+
 /// A box run that pre-trains (adqnp: TD3 cloning the swing-up's demonstrations, then asking it) survives kills
 /// in pre-training, mid-episode and in a query segment.
 #[test]

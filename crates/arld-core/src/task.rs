@@ -38,6 +38,37 @@ pub struct BoxSpec {
     /// The mean test return that counts as solving the task: Gymnasium's `reward_threshold`, or ours where it
     /// has none (Pendulum-v1: -200).
     pub solve_threshold: Option<f64>,
+    /// How a transition says the task reached its goal (the success a risk critic predicts).
+    pub goal: Goal,
+}
+
+/// How a task with actions in a box says that a transition reached its goal: the binary success that a risk
+/// critic learns to predict (ThriftyDAgger's `Q_R`, docs/algorithm.md §20).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Goal {
+    /// The task has no goal a transition can show; the reason says why (it ends a sentence naming the task).
+    Absent(&'static str),
+    /// Reached by a transition that ends the episode (a termination, not a time limit) with a reward of at least
+    /// `min_reward`: the goal's bonus, which no other transition of the task earns.
+    TerminalReward { min_reward: f32 },
+}
+
+impl Goal {
+    /// Whether a transition with `reward` that ends the episode when `terminal` reached the goal.
+    pub fn reached(self, reward: f32, terminal: bool) -> bool {
+        match self {
+            Goal::Absent(_) => false,
+            Goal::TerminalReward { min_reward } => terminal && reward >= min_reward,
+        }
+    }
+
+    /// Whether task `id` has a goal; the error says why not.
+    pub fn check(self, id: &str) -> Result<(), String> {
+        match self {
+            Goal::Absent(why) => Err(format!("{id} {why}")),
+            Goal::TerminalReward { .. } => Ok(()),
+        }
+    }
 }
 
 impl BoxSpec {

@@ -8,6 +8,9 @@
 //!   draw comes from the learner's generator, so the run's seed fixes the actions.
 //! - Uncertainty: the standard deviation of the critic heads at the action taken (`critic_spread`), computed
 //!   only when the query rule asks for it.
+//! - Risk (only with a risk critic, [`BoxAgent::with_risk_critic`], which a run adds when its query rule reads the
+//!   risk): `1 - Q_R` at the action taken ([`super::risk`]); the critic takes one TD step on every batch, before
+//!   the learner's update, with the policy's test actions at the next observations.
 //! - Learning: the learner reads the replay batch as it is: the n-step return, its observation and `gamma^n`
 //!   when the replay keeps them, otherwise the one-step reward, the next observation and `gamma` (0 at a
 //!   bootstrap cut; [`Batch::returns`]); demonstrated samples are flagged for the cloning loss. The priorities are the absolute TD
@@ -15,6 +18,7 @@
 
 use super::actor_critic::ActorCriticLearner;
 use super::actor_file::{self, ActorKind};
+use super::risk::{RiskConfig, RiskCritic};
 use super::sac::{Sac, SacConfig};
 use super::td3::{Td3, Td3Config};
 use super::{Learner, UpdateStats};
@@ -37,6 +41,8 @@ pub struct BoxAgent {
     gamma: f32,
     /// Whether the learner's cloning loss is configured with the Q-filter (off during pre-training).
     q_filter: bool,
+    /// ThriftyDAgger's risk critic, when the run's query rule reads the risk.
+    risk: Option<RiskCritic>,
 }
 
 /// Which actor-critic learner a [`BoxAgent`] holds, with its settings.
@@ -73,7 +79,16 @@ impl BoxAgent {
             high: high.to_vec(),
             gamma,
             q_filter,
+            risk: None,
         }
+    }
+
+    /// The agent with a risk critic of `config`, its weights drawn from a generator seeded with `seed` (a stream
+    /// of its own, so that the learner's draws stay what they are without one).
+    pub fn with_risk_critic(mut self, config: RiskConfig, seed: u64) -> Self {
+        let critic = RiskCritic::new(config, self.obs_dim, self.low.len(), seed);
+        self.risk = Some(critic);
+        self
     }
 
     /// The policy network of the learner inside (TD3: the tanh actor; SAC: the means and log standard
@@ -105,14 +120,23 @@ impl Learner for BoxAgent {
         let uncertainty = want
             .uncertainty
             .then(|| self.learner.critic_spread(obs, &action));
+        let risk = match (&mut self.risk, want.risk) {
+            (Some(critic), true) => Some(critic.risk(obs, &action)),
+            _ => None,
+        };
         let signals = Signals {
             uncertainty,
+            risk,
             ..Signals::default()
         };
         (action, signals)
     }
 
     fn learn(&mut self, batch: &Batch<Vec<f32>>) -> (UpdateStats, &[f32]) {
+        if let Some(critic) = &mut self.risk {
+            let learner = &mut self.learner;
+            critic.update(batch, &mut |obs, action| learner.test_action(obs, action));
+        }
         let (update, priorities) = self.learner.learn(batch, self.gamma);
         let stats = UpdateStats {
             td_loss: update.critic_loss,
@@ -159,11 +183,18 @@ impl Persist for BoxAgent {
     fn save_state<'a>(&'a self, prefix: &str, state: &mut StateDict<'a>) {
         let name = format!("{prefix}.{}", self.learner.name());
         self.learner.save_state(&name, state);
+        if let Some(critic) = &self.risk {
+            critic.save_state(&format!("{prefix}.risk_critic"), state);
+        }
     }
 
     fn load_state(&mut self, prefix: &str, state: &StateDict<'_>) -> Result<(), StateError> {
         let name = format!("{prefix}.{}", self.learner.name());
-        self.learner.load_state(&name, state)
+        self.learner.load_state(&name, state)?;
+        match &mut self.risk {
+            Some(critic) => critic.load_state(&format!("{prefix}.risk_critic"), state),
+            None => Ok(()),
+        }
     }
 }
 

@@ -11,6 +11,7 @@ pub mod actor_critic;
 pub mod actor_file;
 pub mod box_agent;
 mod learner;
+pub mod risk;
 pub mod sac;
 pub mod td3;
 
@@ -220,6 +221,7 @@ impl Agent {
             uncertainty,
             head_variance: (want.head_variance && heads > 1).then(|| head_variance(q, heads, a)),
             q_gap: want.q_gap.then(|| q_gap(active)),
+            risk: None,
             greedy,
         };
         let action = if epsilon > 0.0 && self.rng.random::<f64>() < epsilon {

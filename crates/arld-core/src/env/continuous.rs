@@ -11,7 +11,7 @@
 
 use super::{BoxSpec, EnvError, EnvRng, Physics, Simulated};
 use crate::rng::NumpyRng;
-use crate::task::Action;
+use crate::task::{Action, Goal};
 
 /// Every continuous-action task, in the order `known_continuous_ids` lists them.
 pub static CONTINUOUS_SPECS: [BoxSpec; 3] = [
@@ -24,6 +24,9 @@ pub static CONTINUOUS_SPECS: [BoxSpec; 3] = [
         // Gymnasium registers none; -200 is ours (a mean test return above -200 swings up and holds from
         // almost every start: the swing-up controller scores -184).
         solve_threshold: Some(-200.0),
+        goal: Goal::Absent(
+            "has no goal: it never ends before its time limit, so no transition says it succeeded",
+        ),
     },
     BoxSpec {
         id: "MountainCarContinuous-v0",
@@ -32,6 +35,9 @@ pub static CONTINUOUS_SPECS: [BoxSpec; 3] = [
         action_high: &[1.0],
         max_episode_steps: 999,
         solve_threshold: Some(90.0),
+        // Reaching the flag ends the episode with +100 less the action's cost (0.1 a^2, at most 0.1 in the box);
+        // every other step earns at most 0.
+        goal: Goal::TerminalReward { min_reward: 50.0 },
     },
     BoxSpec {
         id: "LunarLanderContinuous-v3",
@@ -40,6 +46,8 @@ pub static CONTINUOUS_SPECS: [BoxSpec; 3] = [
         action_high: &[1.0, 1.0],
         max_episode_steps: 1000,
         solve_threshold: Some(200.0),
+        // Landed and at rest ends the episode with exactly +100; a crash or flying out of view with -100.
+        goal: Goal::TerminalReward { min_reward: 100.0 },
     },
 ];
 

@@ -11,7 +11,7 @@
 //! [`register`] and [`register_box`].
 
 use crate::rng::NumpyRng;
-pub use crate::task::{Action, ActionColumn, BoxSpec, EnvSpec, TaskSpec};
+pub use crate::task::{Action, ActionColumn, BoxSpec, EnvSpec, Goal, TaskSpec};
 use thiserror::Error;
 
 pub mod acrobot;
@@ -553,6 +553,10 @@ pub fn register_box(
         action_high: Box::leak(high.to_vec().into_boxed_slice()),
         max_episode_steps,
         solve_threshold: reward_threshold,
+        goal: Goal::Absent(
+            "is a Python environment: its success (SB3's info[\"is_success\"]) does not reach arld's replay, so \
+             no transition says it succeeded",
+        ),
     })
 }
 

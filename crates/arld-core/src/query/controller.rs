@@ -401,15 +401,24 @@ mod tests {
         );
         let adaptive = rule("adaptive");
         assert_eq!(
-            check_signals(&*adaptive, false, false).unwrap_err(),
+            check_signals(&*adaptive, false, false, Ok(())).unwrap_err(),
             QueryError::NoUncertaintySource { rule: "adaptive" }
         );
-        assert!(check_signals(&*adaptive, true, false).is_ok());
-        assert!(check_signals(&*rule("greedy"), false, false).is_ok());
+        assert!(check_signals(&*adaptive, true, false, Ok(())).is_ok());
+        assert!(check_signals(&*rule("greedy"), false, false, Ok(())).is_ok());
         assert_eq!(
-            check_signals(&*rule("rcmp"), true, false).unwrap_err(),
+            check_signals(&*rule("rcmp"), true, false, Ok(())).unwrap_err(),
             QueryError::NoHeads { rule: "rcmp" }
         );
+        // A rule that reads the risk is refused, with the reason, where no risk critic can be trained; a rule
+        // that does not read it is not.
+        let no_goal = || Err("Pendulum-v1 has no goal".to_string());
+        for name in ["risk", "thrifty"] {
+            let err = check_signals(&*rule(name), true, true, no_goal()).unwrap_err();
+            assert!(err.to_string().contains("Pendulum-v1 has no goal"), "{err}");
+            assert!(check_signals(&*rule(name), true, true, Ok(())).is_ok());
+        }
+        assert!(check_signals(&*adaptive, true, true, no_goal()).is_ok());
         // Boundary values are valid.
         assert!(
             AdaptiveQuantileRule::new(1, 0.0).is_ok() && AdaptiveQuantileRule::new(1, 1.0).is_ok()

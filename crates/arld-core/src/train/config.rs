@@ -943,10 +943,19 @@ impl TrainConfig {
         let rule = self
             .query_rule()
             .context("config key `query_rule` (or the method's own rule)")?;
+        let risk = match crate::env::box_spec(&self.env) {
+            Ok(spec) => spec.goal.check(spec.id),
+            Err(_) => Err(format!(
+                "{} has discrete actions, and the risk critic is built for the learners of actions in a box \
+                 (TD3, SAC)",
+                self.env
+            )),
+        };
         check_signals(
             &*rule,
             self.net != NetKind::Plain,
             self.net == NetKind::Bootstrap,
+            risk,
         )
         .map_err(|e| match e {
             QueryError::NoUncertaintySource { .. } if self.query_rule.is_empty() => anyhow::anyhow!(

@@ -13,6 +13,7 @@ use super::{
     pretrain_update, push_demos, record_failure, run_dir, seed_for, steps_to_solve, update_checked,
 };
 use crate::agent::box_agent::{BoxAgent, BoxLearnerConfig};
+use crate::agent::risk::RiskConfig;
 use crate::agent::sac::SacConfig;
 use crate::agent::td3::Td3Config;
 use crate::agent::{Agent, Learner};
@@ -88,7 +89,9 @@ impl<'a> RunBuilder<'a, BoxAgent> {
 /// The configuration's actor-critic learner (`algo`: TD3 or SAC) for the task `spec`, with its networks (the
 /// hidden widths, at least two critic heads: more heads are a larger ensemble), learning rate and batch, seeded
 /// from the run's seed. A method that pre-trains (dqfd, adqnp) clones the demonstrated actions with the weight
-/// `lambda` and the Q-filter (off while pre-training; docs/algorithm.md §17); the others do not clone.
+/// `lambda` and the Q-filter (off while pre-training; docs/algorithm.md §17); the others do not clone. A run whose
+/// query rule reads the risk gets a risk critic (docs/algorithm.md §20) of the critics' widths, learning rate,
+/// batch and Polyak rate, discounting by the run's gamma, its weights from a stream of its own.
 pub fn box_agent(cfg: &TrainConfig, spec: &'static BoxSpec) -> BoxAgent {
     let (hidden, heads, lr) = (cfg.hidden.clone(), cfg.heads.max(2), cfg.lr as f32);
     let bc_weight = if cfg.method.pretrains() {
@@ -117,15 +120,33 @@ pub fn box_agent(cfg: &TrainConfig, spec: &'static BoxSpec) -> BoxAgent {
             ..SacConfig::default()
         }),
     };
+    let tau = match &config {
+        BoxLearnerConfig::Td3(c) => c.tau,
+        BoxLearnerConfig::Sac(c) => c.tau,
+    };
     let seed = seed_for(cfg.seed, SeedPurpose::Agent);
-    BoxAgent::new(
+    let agent = BoxAgent::new(
         config,
         spec.obs_dim,
         spec.action_low,
         spec.action_high,
         cfg.gamma as f32,
         seed,
-    )
+    );
+    // The configuration was validated: its rule builds, and reads the risk only in a task with a goal.
+    let reads_risk = cfg.query_rule().is_ok_and(|rule| rule.needs().risk);
+    if !reads_risk {
+        return agent;
+    }
+    let risk = RiskConfig {
+        hidden: cfg.hidden.clone(),
+        lr: cfg.lr as f32,
+        gamma: cfg.gamma as f32,
+        tau,
+        max_batch: cfg.batch_size,
+        goal: spec.goal,
+    };
+    agent.with_risk_critic(risk, seed_for(cfg.seed, SeedPurpose::RiskCritic))
 }
 
 /// The continuous-action task `id`, as a run makes it.

@@ -21,6 +21,8 @@ pub enum SeedPurpose {
     Expert,
     /// Demonstration collection: episode `i` resets with this seed plus `i`.
     Demonstrations,
+    /// The risk critic's initial weights (only in runs whose query rule reads the risk).
+    RiskCritic,
 }
 
 impl SeedPurpose {
@@ -34,6 +36,7 @@ impl SeedPurpose {
             SeedPurpose::EvalEnv => (5, 32),
             SeedPurpose::Expert => (6, 0),
             SeedPurpose::Demonstrations => (7, 33),
+            SeedPurpose::RiskCritic => (8, 0),
         }
     }
 }
@@ -65,6 +68,7 @@ mod tests {
             (EvalEnv, 456755562, 1943223142),
             (Expert, 6038094601263162090, 4601199455465548305),
             (Demonstrations, 373378399, 1004921424),
+            (RiskCritic, 14232521865600346940, 6051947643683389182),
         ];
         for (purpose, at_0, at_7) in expected {
             assert_eq!(seed_for(0, purpose), at_0, "seed 0, {purpose:?}");

@@ -16,7 +16,10 @@
 //!   and lowered after each decision that asks nothing;
 //! - [`ImportanceRule`] (`importance`, `mistake`; Torrey and Taylor 2013), oracle references: ask where the
 //!   expert's best and worst Q-values are far apart, and (mistake correcting) the agent is about to act otherwise
-//!   than the expert would.
+//!   than the expert would;
+//! - [`ThriftyRule`] (`risk`, `thrifty`; ThriftyDAgger, Hoque et al. 2021): ask when the risk of the agent's
+//!   action (`1 - Q_R`) is above the `(1 - alpha)` quantile of every risk so far, calibrated as `calibrated`
+//!   is; `thrifty` also asks when the uncertainty (ThriftyDAgger's novelty) is above its own such quantile.
 
 use rand::RngCore;
 
@@ -157,13 +160,7 @@ impl QueryRule for CalibratedRule {
         &CALIBRATED
     }
     fn decide(&mut self, ctx: &QueryContext<'_>, _rng: &mut dyn RngCore) -> Verdict {
-        let u = ctx.uncertainty(self.name());
-        self.history.push(u);
-        Verdict {
-            query: self.threshold.is_some_and(|t| u > t),
-            threshold: self.threshold,
-            score: Some(u),
-        }
+        self.observe(ctx.uncertainty(self.name()))
     }
     fn end_episode(&mut self) {
         self.threshold = self.history.descending_quantile(self.alpha);
@@ -179,6 +176,81 @@ impl QueryRule for CalibratedRule {
         self.history.load(prefix, state)?;
         self.threshold = state.value(&format!("{prefix}.threshold"))?;
         Ok(())
+    }
+}
+
+impl CalibratedRule {
+    /// A calibration at the `(1 - alpha)` quantile, with nothing seen yet.
+    fn new(alpha: f64) -> Self {
+        CalibratedRule {
+            alpha,
+            history: History::default(),
+            threshold: None,
+        }
+    }
+
+    /// Records `value` and compares it with the threshold of the last episode's end.
+    fn observe(&mut self, value: f32) -> Verdict {
+        self.history.push(value);
+        Verdict {
+            query: self.threshold.is_some_and(|t| value > t),
+            threshold: self.threshold,
+            score: Some(value),
+        }
+    }
+}
+
+/// ThriftyDAgger's gate: the risk of the agent's action above the `(1 - alpha)` quantile of every risk so far,
+/// or (with `novelty`) the uncertainty above the `(1 - alpha)` quantile of every uncertainty so far; both
+/// thresholds recomputed after each episode. Logged: the risk and its threshold (a question whose risk is at
+/// most its threshold was asked for novelty).
+#[derive(Clone, Debug)]
+pub struct ThriftyRule {
+    risk: CalibratedRule,
+    novelty: Option<CalibratedRule>,
+}
+
+impl QueryRule for ThriftyRule {
+    fn info(&self) -> &'static RuleInfo {
+        if self.novelty.is_some() {
+            &THRIFTY
+        } else {
+            &RISK
+        }
+    }
+    fn decide(&mut self, ctx: &QueryContext<'_>, _rng: &mut dyn RngCore) -> Verdict {
+        let name = self.name();
+        let risky = self.risk.observe(ctx.risk(name));
+        let novel = match &mut self.novelty {
+            Some(novelty) => novelty.observe(ctx.uncertainty(name)).query,
+            None => false,
+        };
+        Verdict {
+            query: risky.query || novel,
+            ..risky
+        }
+    }
+    fn end_episode(&mut self) {
+        self.risk.end_episode();
+        if let Some(novelty) = &mut self.novelty {
+            novelty.end_episode();
+        }
+    }
+    fn threshold(&self) -> Option<f32> {
+        self.risk.threshold
+    }
+    fn save_state<'a>(&'a self, prefix: &str, state: &mut StateDict<'a>) {
+        self.risk.save_state(&format!("{prefix}.risk"), state);
+        if let Some(novelty) = &self.novelty {
+            novelty.save_state(&format!("{prefix}.novelty"), state);
+        }
+    }
+    fn load_state(&mut self, prefix: &str, state: &StateDict<'_>) -> Result<(), StateError> {
+        self.risk.load_state(&format!("{prefix}.risk"), state)?;
+        match &mut self.novelty {
+            Some(novelty) => novelty.load_state(&format!("{prefix}.novelty"), state),
+            None => Ok(()),
+        }
     }
 }
 
@@ -378,12 +450,44 @@ pub(super) const CALIBRATED: RuleInfo = RuleInfo {
         "budget / (units per query x train_steps): the budget spread over the run",
     )],
     needs: Needs::UNCERTAINTY,
+    build: |params, d| Ok(Box::new(CalibratedRule::new(target_alpha(params, d)?))),
+};
+
+/// The `alpha` parameter of a calibrated rule: by default the rate that spreads the budget over the run.
+fn target_alpha(params: &mut super::Params, d: &super::RuleDefaults) -> Result<f64, QueryError> {
+    params.fraction("alpha", d.target_rate().max(f64::MIN_POSITIVE))
+}
+
+pub(super) const RISK: RuleInfo = RuleInfo {
+    name: "risk",
+    source: "ThriftyDAgger's risk gate, Hoque et al. (CoRL 2021)",
+    params: CALIBRATED.params,
+    needs: Needs {
+        risk: true,
+        ..Needs::NOTHING
+    },
     build: |params, d| {
-        let alpha = params.fraction("alpha", d.target_rate().max(f64::MIN_POSITIVE))?;
-        Ok(Box::new(CalibratedRule {
-            alpha,
-            history: History::default(),
-            threshold: None,
+        Ok(Box::new(ThriftyRule {
+            risk: CalibratedRule::new(target_alpha(params, d)?),
+            novelty: None,
+        }))
+    },
+};
+
+pub(super) const THRIFTY: RuleInfo = RuleInfo {
+    name: "thrifty",
+    source: "ThriftyDAgger's novelty-or-risk gate, Hoque et al. (CoRL 2021)",
+    params: CALIBRATED.params,
+    needs: Needs {
+        risk: true,
+        uncertainty: true,
+        ..Needs::NOTHING
+    },
+    build: |params, d| {
+        let alpha = target_alpha(params, d)?;
+        Ok(Box::new(ThriftyRule {
+            risk: CalibratedRule::new(alpha),
+            novelty: Some(CalibratedRule::new(alpha)),
         }))
     },
 };
@@ -558,6 +662,42 @@ mod tests {
             |i| threshold.set(nth_desc(&u[..i], alpha)),
         );
         assert_eq!(replay("calibrated(alpha=0.05)", &r), expected);
+    }
+
+    #[test]
+    fn risk_and_thrifty_recompute_their_quantiles_after_each_episode() {
+        // `risk`: the risk above the (1 - alpha) quantile of every risk before the last episode's end;
+        // `thrifty`: that, or the uncertainty above its own such quantile. Thresholds recomputed here by sorting.
+        let mut r = Recorded::new(18, 900);
+        // Uncertainties that grow as the run goes on, so that novelty asks too.
+        let mut u = r.column(|s| s.uncertainty);
+        u.reverse();
+        for (s, u) in r.signals.iter_mut().zip(&u) {
+            s.uncertainty = Some(*u);
+        }
+        let risk = r.column(|s| s.risk);
+        let alpha = 0.04;
+        let (risk_t, novelty_t) = (std::cell::Cell::new(None), std::cell::Cell::new(None));
+        let recalibrate = |i: usize| {
+            risk_t.set(nth_desc(&risk[..i], alpha));
+            novelty_t.set(nth_desc(&u[..i], alpha));
+        };
+        let above = |t: &std::cell::Cell<Option<f32>>, v: f32| t.get().is_some_and(|t| v > t);
+        let risky = by_definition(&r, |i, _, _| above(&risk_t, risk[i]), recalibrate);
+        let got = replay(&format!("risk(alpha={alpha})"), &r);
+        assert_eq!(got, risky);
+        risk_t.set(None);
+        novelty_t.set(None);
+        let either = by_definition(
+            &r,
+            |i, _, _| above(&risk_t, risk[i]) || above(&novelty_t, u[i]),
+            recalibrate,
+        );
+        let got_thrifty = replay(&format!("thrifty(alpha={alpha})"), &r);
+        assert_eq!(got_thrifty, either);
+        // Questions happen, and the novelty changes which.
+        assert!(got.iter().any(|q| *q));
+        assert_ne!(got, got_thrifty);
     }
 
     #[test]

@@ -5,8 +5,9 @@
 //!   adaptive windowed quantile of Algorithm 1 (ADQN, ADQNP);
 //! - [`field`]: rules from the literature on asking for help, on the same signals: paced random, RCMP's head
 //!   variance, the Q-gap percentile of student-initiated advising, ThriftyDAgger's target-rate calibration, the
-//!   budget managers of stream-based active learning, and the oracle references of teacher advising
-//!   (importance advising and mistake correcting), which read the expert's own Q-values;
+//!   budget managers of stream-based active learning, the oracle references of teacher advising
+//!   (importance advising and mistake correcting), which read the expert's own Q-values, and ThriftyDAgger's
+//!   risk, alone or with its novelty (box tasks with a goal: the risk critic of `agent::risk`);
 //! - [`ours`]: rules designed on the effort benchmark's design seeds.
 //!
 //! A rule is chosen by a spec, `name` or `name(key=value, ...)` (the `query_rule` key of a run's configuration,
@@ -27,7 +28,7 @@ use rand::{Rng, RngCore};
 use crate::state::{StateDict, StateError};
 
 pub use field::{
-    BudgetPacedRule, CalibratedRule, ImportanceRule, PacedRule, QGapRule, RcmpRule,
+    BudgetPacedRule, CalibratedRule, ImportanceRule, PacedRule, QGapRule, RcmpRule, ThriftyRule,
     VariableThresholdRule,
 };
 pub use ours::RankedPacedRule;
@@ -78,6 +79,11 @@ pub enum QueryError {
         "the {rule} query rule reads the variance of the bootstrapped heads' Q-values; use a bootstrapped network"
     )]
     NoHeads { rule: &'static str },
+    #[error(
+        "the {rule} query rule reads the risk of the agent's action, 1 - Q_R(s, a), with Q_R a critic of the chance \
+         of reaching the task's goal (docs/algorithm.md section 20), but {reason}"
+    )]
+    NoRisk { rule: &'static str, reason: String },
     #[error("unknown query rule '{0}'; the rules are: {list}", list = rule_names().join(", "))]
     UnknownRule(String),
     #[error(
@@ -111,6 +117,9 @@ pub struct Signals {
     pub head_variance: Option<f32>,
     /// The active head's best minus worst Q-value (student-initiated advising).
     pub q_gap: Option<f32>,
+    /// ThriftyDAgger's risk at the agent's action: `1 - Q_R(s, a)`, with `Q_R` the risk critic's estimate of the
+    /// (discounted) chance of reaching the task's goal (box tasks with a goal only).
+    pub risk: Option<f32>,
     /// The agent's greedy action (its active head's argmax).
     pub greedy: usize,
 }
@@ -128,6 +137,8 @@ pub struct Needs {
     pub uncertainty: bool,
     pub head_variance: bool,
     pub q_gap: bool,
+    /// The risk of the agent's action ([`Signals::risk`]): the agent then trains a risk critic.
+    pub risk: bool,
     /// The expert's action and Q-values at every decision ([`OracleView`]): an upper-bound reference, not a
     /// rule an agent could run against a real expert.
     pub oracle: bool,
@@ -139,6 +150,7 @@ impl Needs {
         uncertainty: false,
         head_variance: false,
         q_gap: false,
+        risk: false,
         oracle: false,
     };
     /// The paper's uncertainty only.
@@ -184,6 +196,13 @@ impl QueryContext<'_> {
         self.signals.uncertainty.unwrap_or_else(|| {
             panic!("the {rule} rule reads the uncertainty: its needs must declare it")
         })
+    }
+
+    /// The risk signal, for a rule whose `needs` asked for it (as [`Self::uncertainty`]).
+    pub fn risk(&self, rule: &str) -> f32 {
+        self.signals
+            .risk
+            .unwrap_or_else(|| panic!("the {rule} rule reads the risk: its needs must declare it"))
     }
 
     /// Budget left, in its unit.
@@ -390,6 +409,8 @@ pub const RULES: &[RuleInfo] = &[
     field::VARIABLE,
     field::IMPORTANCE,
     field::MISTAKE,
+    field::RISK,
+    field::THRIFTY,
     ours::RANKED,
 ];
 
@@ -496,13 +517,21 @@ impl RuleSpec {
     }
 }
 
-/// Rejects, up front, a rule whose signals the network cannot give.
+/// Rejects, up front, a rule whose signals the network cannot give. `risk` says whether the run can train a risk
+/// critic (a box task with a goal), or why not.
 pub fn check_signals(
     rule: &dyn QueryRule,
     has_uncertainty: bool,
     has_heads: bool,
+    risk: Result<(), String>,
 ) -> Result<(), QueryError> {
     let needs = rule.needs();
+    if let (true, Err(reason)) = (needs.risk, risk) {
+        return Err(QueryError::NoRisk {
+            rule: rule.name(),
+            reason,
+        });
+    }
     if needs.uncertainty && !has_uncertainty {
         return Err(QueryError::NoUncertaintySource { rule: rule.name() });
     }
@@ -539,6 +568,7 @@ pub(crate) mod tests_support {
         pub fn new(seed: u64, len: usize) -> Self {
             let mut rng = Pcg64::seed_from_u64(seed);
             let mut noise = move |scale: f32| rng.random::<f32>() * scale;
+            let mut risk_draws = Pcg64::seed_from_u64(seed ^ 0x5249_534b);
             let mut r = Recorded {
                 signals: Vec::with_capacity(len),
                 oracle: Vec::with_capacity(len),
@@ -553,6 +583,8 @@ pub(crate) mod tests_support {
                     uncertainty,
                     head_variance,
                     q_gap,
+                    // From a stream of its own, so that the other signals stay what they were.
+                    risk: Some(risk_draws.random::<f32>() * (1.0 - decay) + 0.5 * decay),
                     greedy: (noise(3.0) as usize).min(2),
                 });
                 let q: Vec<f32> = (0..3).map(|_| noise(10.0)).collect();
