@@ -106,7 +106,14 @@ pub fn load<A: DemoAction>(data: &Path, env_id: &str) -> Result<Demonstrations<A
     let spec = A::task(env_id)?;
     meta.check_spaces::<A>(spec, env_id)
         .map_err(|why| anyhow::anyhow!("Minari dataset {}: {why}", data.display()))?;
-    let mut columns = DemoColumns::<A>::default();
+    let mut columns = DemoColumns::<A> {
+        obs: Vec::new(),
+        actions: Vec::new(),
+        rewards: Vec::new(),
+        next_obs: Vec::new(),
+        terminated: Vec::new(),
+        truncated: Vec::new(),
+    };
     let mut budget = Budget::default();
     for episode in 0..meta.total_episodes {
         read_episode(&data.join(episode.to_string()), &mut columns, &mut budget)
