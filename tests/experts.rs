@@ -158,18 +158,12 @@ fn demonstrations_round_trip_and_are_checked() {
         Demonstrations::<usize>::load(&path, None).unwrap_err()
     );
     assert!(e.contains(":2:"), "{e}");
-    // A Minari dataset's directory: refused, saying how to use it.
-    let minari = dir.path().join("answers-v0");
-    std::fs::create_dir_all(minari.join("data")).unwrap();
-    std::fs::write(minari.join("data").join("metadata.json"), "{}").unwrap();
+    // A directory is not a demonstration file (Minari datasets: `expert::minari`, tests/minari_datasets.rs).
     let e = format!(
         "{:#}",
-        Demonstrations::<usize>::load(&minari, None).unwrap_err()
+        Demonstrations::<usize>::load(dir.path(), None).unwrap_err()
     );
-    assert!(
-        e.contains("Minari dataset") && e.contains("arld.answers to-demos"),
-        "{e}"
-    );
+    assert!(e.contains("not a regular file"), "{e}");
 }
 
 /// DQfD pre-training alone makes the network imitate the expert on the demonstration states.

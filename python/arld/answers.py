@@ -1,6 +1,7 @@
 """A run's answers kept as a dataset: the steps the expert took in a run (`answers.jsonl` in its run directory)
 written as a Minari dataset, and Minari datasets read back as demonstrations (`demos=`, or a demonstration file
-for the command line's `demo_file`).
+for the command line's `demo_file`; the command line also reads a dataset in the Arrow format itself, by id or
+directory, and `arld demo convert` writes one as a demonstration file for either kind of action).
 
     python -m arld.answers export RUN_DIR --dataset-id arld/cartpole-answers-v0
     python -m arld.answers to-demos arld/cartpole-answers-v0 answers.demos.jsonl [--env CartPole-v1]

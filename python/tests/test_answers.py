@@ -1,6 +1,8 @@
 """A run's answers kept as a Minari dataset, with the real `minari` package: a run's answers exported, read back
 with `minari.load_dataset` and compared with what the run's other logs say, and later runs seeded from the dataset
-(`demos=` by id and by directory, and the command line's `demo_file` through `arld.answers to-demos`)."""
+(`demos=` by id and by directory, and the command line's `demo_file` through `arld.answers to-demos`); the command
+line reads the dataset itself (`demo_file` = its id or directory, `arld demo convert`), a box dataset written by
+minari from Gymnasium's Pendulum-v1 too, and a dataset of other spaces is refused."""
 
 import csv
 import json
@@ -141,6 +143,102 @@ def test_a_run_seeded_from_an_earlier_runs_answers(answered_run, tmp_path):
                           "-o", str(tmp_path / "cli")], capture_output=True, text=True)
     assert out.returncode == 0, out.stderr
     assert json.loads((tmp_path / "cli" / "summary.json").read_text())["demos_pretrain"] == n
+    # The command line reads the dataset itself, by id (MINARI_DATASETS_PATH) and by directory: it pre-trains on
+    # the same transitions, so the run is the one above to the last byte of its evaluations.
+    for name, given in (("by_id", DATASET), ("by_dir", str(datasets / DATASET))):
+        out = subprocess.run([str(ARLD), "train", "--env", "CartPole-v0", "--method", "dqfd", "--quiet", "--set",
+                              f"demo_file={given}", "--set", "pretrain_steps=300", "--set", "train_steps=1000",
+                              "-o", str(tmp_path / name)], capture_output=True, text=True)
+        assert out.returncode == 0, out.stderr
+        assert json.loads((tmp_path / name / "summary.json").read_text())["demos_pretrain"] == n
+        assert (tmp_path / name / "eval.csv").read_bytes() == (tmp_path / "cli" / "eval.csv").read_bytes()
+    # What the command line reads is what minari reads.
+    assert_cli_reads_as_minari(DATASET, "CartPole-v0", tmp_path / "converted.jsonl")
+
+
+def assert_cli_reads_as_minari(dataset, env, out):
+    """`arld demo convert` (the command line's reader of `demo_file`) writes the dataset's transitions as
+    `minari.load_dataset` reads them: as many, in order, each episode's last step truncated unless it ended."""
+    res = subprocess.run([str(ARLD), "demo", "convert", str(dataset), "--env", env, "-o", str(out)],
+                         capture_output=True, text=True)
+    assert res.returncode == 0, res.stderr
+    header, *lines = [json.loads(line) for line in out.read_text().splitlines()]
+    ds = answers.load_dataset(dataset)
+    assert header["env"] == env and header["transitions"] == len(lines) == ds.total_steps
+    expected = []
+    for ep in ds.iterate_episodes():
+        n = len(ep.actions)
+        for i in range(n):
+            ended = bool(ep.terminations[i])
+            truncated = bool(ep.truncations[i]) or (i == n - 1 and not ended)
+            expected.append((ep.observations[i], ep.actions[i], ep.rewards[i], ep.observations[i + 1], ended,
+                             truncated))
+    assert len(expected) == len(lines)
+    for (obs, action, reward, next_obs, terminated, truncated), t in zip(expected, lines):
+        assert np.array_equal(np.asarray(t["obs"], dtype=np.float32), np.asarray(obs, dtype=np.float32))
+        assert np.array_equal(np.asarray(t["next_obs"], dtype=np.float32), np.asarray(next_obs, dtype=np.float32))
+        assert np.array_equal(np.asarray(t["action"], dtype=np.float32), np.asarray(action, dtype=np.float32))
+        assert np.float32(t["reward"]) == np.float32(reward)
+        assert (t["terminated"], t["truncated"]) == (terminated, truncated)
+    return len(lines)
+
+
+def pendulum_dataset(dataset_id, episodes=3, steps=40):
+    """A box dataset written by minari from Gymnasium's Pendulum-v1 under a scripted torque. (Minari's
+    DataCollector needs jax for its step buffers; the episodes go through `create_dataset_from_buffers`, the
+    writer DataCollector ends in.)"""
+    from minari.data_collector import EpisodeBuffer
+    env = gym.make("Pendulum-v1", max_episode_steps=steps)
+    buffers = []
+    for i in range(episodes):
+        obs, _ = env.reset(seed=10 + i)
+        observations, actions, rewards, terminations, truncations = [obs], [], [], [], []
+        done = False
+        while not done:
+            action = np.clip([-2.0 * obs[1] - 0.5 * obs[2]], -2.0, 2.0).astype(np.float32)
+            obs, reward, terminated, truncated, _ = env.step(action)
+            for col, value in zip((observations, actions, rewards, terminations, truncations),
+                                  (obs, action, reward, terminated, truncated)):
+                col.append(value)
+            done = terminated or truncated
+        buffers.append(EpisodeBuffer(id=i, observations=np.asarray(observations), actions=np.asarray(actions),
+                                     rewards=rewards, terminations=terminations, truncations=truncations))
+    return minari.create_dataset_from_buffers(dataset_id, buffers, env=env, algorithm_name="scripted torque",
+                                              data_format="arrow")
+
+
+def test_the_command_line_reads_a_box_dataset_and_refuses_other_spaces(tmp_path, monkeypatch):
+    monkeypatch.setenv("MINARI_DATASETS_PATH", str(tmp_path / "datasets"))
+    assert ARLD.is_file(), "the command line is not built (cargo build --release)"
+    ds = pendulum_dataset("arld-test/pendulum-torque-v0")
+    assert ds.total_steps == 120
+    assert assert_cli_reads_as_minari("arld-test/pendulum-torque-v0", "Pendulum-v1", tmp_path / "pendulum.jsonl") == 120
+    out = subprocess.run([str(ARLD), "train", "--env", "Pendulum-v1", "--method", "dqfd", "--quiet", "--set",
+                          "demo_file=arld-test/pendulum-torque-v0", "--set", "pretrain_steps=50", "--set",
+                          "train_steps=400", "--set", "learning_starts=200", "-o", str(tmp_path / "run")],
+                         capture_output=True, text=True)
+    assert out.returncode == 0, out.stderr
+    assert json.loads((tmp_path / "run" / "summary.json").read_text())["demos_pretrain"] == 120
+    # Of other spaces: refused before training, naming what differs.
+    for env, says in (("MountainCarContinuous-v0", "observes 2 numbers"),
+                      ("CartPole-v0", "CartPole-v0 observes 4 numbers")):
+        out = subprocess.run([str(ARLD), "train", "--env", env, "--method", "dqfd", "--quiet", "--set",
+                              "demo_file=arld-test/pendulum-torque-v0", "-o", str(tmp_path / env)],
+                             capture_output=True, text=True)
+        assert out.returncode != 0 and says in out.stderr, out.stderr
+        assert not (tmp_path / env / "summary.json").exists()
+    # The same torques in a narrower box than Pendulum's: refused, naming both boxes.
+    narrow = minari.load_dataset("arld-test/pendulum-torque-v0")
+    meta_path = Path(narrow.storage.data_path) / "metadata.json"
+    meta = json.loads(meta_path.read_text())
+    meta["action_space"] = json.dumps({"type": "Box", "dtype": "float32", "shape": [1], "low": [-1.0], "high": [1.0]})
+    meta_path.write_text(json.dumps(meta))
+    out = subprocess.run([str(ARLD), "demo", "convert", "arld-test/pendulum-torque-v0", "--env", "Pendulum-v1", "-o",
+                          str(tmp_path / "narrow.jsonl")], capture_output=True, text=True)
+    assert out.returncode != 0, out.stdout
+    for box in ("Box([-1.0] to [1.0], shape [1])", "Box([-2.0] to [2.0], shape [1])"):
+        assert box in out.stderr, out.stderr
+    assert not (tmp_path / "narrow.jsonl").exists()
 
 
 def test_bad_answers_and_datasets_are_clear_errors(tmp_path, monkeypatch):

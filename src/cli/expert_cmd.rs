@@ -1,4 +1,5 @@
-//! `arld expert ...` and `arld demo ...`: the expert pipeline, expert statistics, and demonstration collection.
+//! `arld expert ...` and `arld demo ...`: the expert pipeline, expert statistics, demonstration collection, and
+//! Minari datasets written as demonstration files.
 use anyhow::{Context, Result};
 use arld::experiment::run_or_reuse;
 use arld::expert::demos::{DemoAction, Demonstrations};
@@ -94,6 +95,19 @@ pub enum DemoCommand {
         /// Episode i resets with seed SEED + i.
         #[arg(long, default_value_t = 0)]
         seed: u64,
+        /// Output file.
+        #[arg(long, short)]
+        out: PathBuf,
+    },
+    /// Write a Minari dataset (Arrow format) as a .jsonl demonstration file, read and checked as `demo_file`
+    /// reads it: its spaces must be the environment's.
+    Convert {
+        /// The dataset: its directory, its data/ directory, or its id (namespace/name-vN, under
+        /// MINARI_DATASETS_PATH, else ~/.minari/datasets).
+        dataset: PathBuf,
+        /// The environment the demonstrations are for.
+        #[arg(long)]
+        env: String,
         /// Output file.
         #[arg(long, short)]
         out: PathBuf,
@@ -260,8 +274,35 @@ fn collect_into<A: DemoAction>(
     Ok(ExitCode::SUCCESS)
 }
 
+/// Writes the Minari dataset `dataset` as demonstrations for `env` into `out`, and says what they hold.
+fn convert_into<A: DemoAction>(dataset: &Path, env: &str, out: &Path) -> Result<ExitCode> {
+    let Some(data) = arld::expert::minari::dataset_dir(dataset)? else {
+        anyhow::bail!(
+            "{} is not a Minari dataset (no data/{} in it)",
+            dataset.display(),
+            arld::expert::minari::METADATA_FILE
+        );
+    };
+    let demos = arld::expert::minari::load::<A>(&data, env)?;
+    demos.save(out)?;
+    println!(
+        "{} transitions in {} episodes -> {}",
+        demos.transitions.len(),
+        demos.episodes(),
+        out.display()
+    );
+    Ok(ExitCode::SUCCESS)
+}
+
 pub fn run_demo(cmd: DemoCommand) -> Result<ExitCode> {
     match cmd {
+        DemoCommand::Convert { dataset, env, out } => {
+            if arld::env::box_spec(&env).is_ok() {
+                convert_into::<Vec<f32>>(&dataset, &env, &out)
+            } else {
+                convert_into::<usize>(&dataset, &env, &out)
+            }
+        }
         DemoCommand::Collect {
             expert,
             transitions,

@@ -8,9 +8,9 @@
 //! (`"action_dim": K, "low": [...], "high": [...]`, in that place) and each `action` is a list of K numbers
 //! within it ([`DemoAction`]: what each kind of action brings; one reader and writer for both). `terminated` is the true end of the task; time-limit truncation is kept apart so that
 //! training can bootstrap through it. Collection follows DQfD: whole episodes from the start state, in order,
-//! until `N` transitions are gathered (the last episode is cut at `N`). A Minari dataset (a person's answers
-//! exported from a run, or any other with discrete actions) becomes such a file with
-//! `python -m arld.answers to-demos`; [`Demonstrations::load`] given one says so.
+//! until `N` transitions are gathered (the last episode is cut at `N`). A run's `demo_file` may instead name a
+//! Minari dataset (a person's answers exported from a run, or any other of the run's spaces), which
+//! [`super::minari`] reads into the same [`Demonstrations`].
 
 use super::Expert;
 use super::process::WireAction;
@@ -351,21 +351,6 @@ impl<A: DemoAction> Demonstrations<A> {
     /// Reads and checks a demonstration file; `expect_env` rejects a file recorded on another environment. A
     /// file with no transitions is an error: the methods that load demonstrations pre-train on them.
     pub fn load(path: &Path, expect_env: Option<&str>) -> Result<Self> {
-        // A Minari dataset (a directory whose `data` holds `metadata.json`) is read by the Python package.
-        if [
-            path.join("data").join("metadata.json"),
-            path.join("metadata.json"),
-        ]
-        .iter()
-        .any(|m| m.is_file())
-        {
-            bail!(
-                "{} is a Minari dataset, not an arld demonstration file: give it as `demos=` from Python, or \
-                 convert it with `python -m arld.answers to-demos {} OUT.jsonl` and give OUT.jsonl",
-                path.display(),
-                path.display()
-            );
-        }
         let file = std::fs::File::open(path)
             .with_context(|| format!("cannot open demonstration file {}", path.display()))?;
         let meta = file

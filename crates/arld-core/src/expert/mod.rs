@@ -8,10 +8,12 @@
 //! network acting greedily), [`NoisyExpert`] (acts at random with probability p), [`scripted`] controllers,
 //! the web expert (a person in a browser: the `arld-web` crate, whose options [`web_options`] parses) and
 //! [`process::ProcessExpert`] (another program speaking JSON lines). [`from_spec`] builds one from a short spec
-//! ([`build_with`] also the web expert, given its start); [`demos`] collects demonstrations from an expert.
+//! ([`build_with`] also the web expert, given its start); [`demos`] collects demonstrations from an expert;
+//! [`minari`] reads a Minari dataset as demonstrations.
 
 pub mod boxed;
 pub mod demos;
+pub mod minari;
 pub mod pipeline;
 pub mod process;
 pub mod scripted;

@@ -108,7 +108,8 @@ pub fn pretrain<L: Learner>(
 }
 
 /// The demonstrations a run of `cfg` pre-trains on, whatever the kind of its actions: none for a method that
-/// does not pre-train; else those of `demo_file` (its first `n_demo` transitions when `n_demo` is positive),
+/// does not pre-train; else those of `demo_file`, a demonstration file or a Minari dataset
+/// ([`crate::expert::minari`]; its first `n_demo` transitions when `n_demo` is positive),
 /// else `n_demo` transitions collected from `expert` in the environment `make_env` makes (episode i reset with
 /// the run's demonstration seed plus i). The command line, sweeps and Python (unless given `demos=`) all take a
 /// run's demonstrations here.
@@ -126,9 +127,11 @@ pub fn run_demonstrations<A: DemoAction>(
         } else {
             usize::MAX
         };
-        return Ok(Some(
-            Demonstrations::load(path, Some(&cfg.env))?.truncated_to(keep),
-        ));
+        let demos = match crate::expert::minari::dataset_dir(path)? {
+            Some(dataset) => crate::expert::minari::load(&dataset, &cfg.env)?,
+            None => Demonstrations::load(path, Some(&cfg.env))?,
+        };
+        return Ok(Some(demos.truncated_to(keep)));
     }
     let expert = expert.ok_or_else(|| {
         anyhow::anyhow!(
