@@ -336,7 +336,7 @@ pub(crate) fn product<S: Lanes>(dst: &mut [f32], a: Strided, b: &[f32], init: Op
         (m - 1) * a.row_stride + k.saturating_sub(1) * a.col_stride < a.data.len() || k == 0,
         "product: left view exceeds its slice"
     );
-    let p = Operands {
+    let mut p = Operands {
         dst: dst.as_mut_ptr(),
         n,
         a: a.data.as_ptr(),
@@ -346,9 +346,27 @@ pub(crate) fn product<S: Lanes>(dst: &mut [f32], a: Strided, b: &[f32], init: Op
         init: init.map(|bias| bias.as_ptr()),
         k,
     };
+    let mut m = m;
     // SAFETY: every block below stays inside rows 0..m and columns 0..n, which the asserts above showed
     // to lie inside the slices; `dst` is borrowed mutably, so it aliases nothing.
     unsafe {
+        // Fewer columns than a vector, and a left operand whose rows are adjacent (`Xᵀ` of a layer's input
+        // for a gradient of a 1-7 column layer: a critic's value, the actions of a Q-network): the vectors run
+        // across rows instead, so no lane idles. The rows left over go through the column blocks below.
+        if S::WIDTH >= 8 && p.a_rs == 1 && n < S::WIDTH {
+            let done = if S::REGISTERS >= 32 {
+                row_vector_blocks::<S, 4>(&p, 0, m)
+            } else {
+                row_vector_blocks::<S, 2>(&p, 0, m)
+            };
+            let done = row_vector_blocks::<S, 1>(&p, done, m);
+            p.dst = p.dst.add(done * n);
+            p.a = p.a.add(done);
+            m -= done;
+            if m == 0 {
+                return;
+            }
+        }
         let full = n / S::WIDTH * S::WIDTH;
         // Block width in vectors: 4 rows x C vectors of accumulators, plus C loaded vectors and one
         // broadcast, must fit the register file: C = 4 (21 registers) only with 32 of them, else C = 2.
@@ -432,6 +450,78 @@ unsafe fn column_blocks<S: Lanes, const C: usize>(p: &Operands, m: usize, full: 
         col += C * S::WIDTH;
     }
     col
+}
+
+/// Rows `from..` of the product in blocks of `RV` vectors of rows (a left operand with `a_rs == 1`), every
+/// column, while whole blocks fit in `m` rows; returns the first row left.
+#[inline(always)]
+unsafe fn row_vector_blocks<S: Lanes, const RV: usize>(
+    p: &Operands,
+    from: usize,
+    m: usize,
+) -> usize {
+    let mut row = from;
+    while row + RV * S::WIDTH <= m {
+        let mut col = 0;
+        while col < p.n {
+            // SAFETY: forwarded from `product`.
+            unsafe {
+                match p.n - col {
+                    1 => row_vector_block::<S, RV, 1>(p, row, col),
+                    2 => row_vector_block::<S, RV, 2>(p, row, col),
+                    3 => row_vector_block::<S, RV, 3>(p, row, col),
+                    _ => row_vector_block::<S, RV, 4>(p, row, col),
+                }
+            }
+            col += 4;
+        }
+        row += RV * S::WIDTH;
+    }
+    row
+}
+
+/// Rows `row..row + RV * WIDTH`, columns `col..col + CG` with vectors across rows: `CG x RV` accumulators over
+/// the whole `k` loop, each lane the FMA chain of one output as in [`block`]; stored lane by lane.
+#[inline(always)]
+unsafe fn row_vector_block<S: Lanes, const RV: usize, const CG: usize>(
+    p: &Operands,
+    row: usize,
+    col: usize,
+) {
+    // SAFETY: forwarded from `product` (every pointer offset is inside the checked shapes; `a_rs == 1`, so
+    // rows `row..row + RV * WIDTH` of column `k` of the left operand are adjacent).
+    unsafe {
+        let mut acc = [[S::splat(0.0); RV]; CG];
+        if let Some(bias) = p.init {
+            for (c, acc) in acc.iter_mut().enumerate() {
+                *acc = [S::splat(*bias.add(col + c)); RV];
+            }
+        }
+        let mut a_ptr = p.a.add(row);
+        let mut b_ptr = p.b.add(col);
+        for _ in 0..p.k {
+            let av: [S::V; RV] = std::array::from_fn(|v| S::load(a_ptr.add(v * S::WIDTH)));
+            for (c, acc) in acc.iter_mut().enumerate() {
+                let bv = S::splat(*b_ptr.add(c));
+                for (acc, &av) in acc.iter_mut().zip(&av) {
+                    *acc = S::fma(av, bv, *acc);
+                }
+            }
+            a_ptr = a_ptr.add(p.a_cs);
+            b_ptr = b_ptr.add(p.n);
+        }
+        let mut lanes = [0.0f32; 16];
+        debug_assert!(S::WIDTH <= lanes.len());
+        for (c, acc) in acc.iter().enumerate() {
+            for (v, &acc) in acc.iter().enumerate() {
+                S::store(lanes.as_mut_ptr(), acc);
+                let out = p.dst.add((row + v * S::WIDTH) * p.n + col + c);
+                for (lane, &value) in lanes[..S::WIDTH].iter().enumerate() {
+                    *out.add(lane * p.n) = value;
+                }
+            }
+        }
+    }
 }
 
 /// Columns `col..` of all `m` rows in blocks of `C` vectors, `R` rows at a time, then 4, then 1. `MASKED`: the
@@ -638,6 +728,13 @@ mod tests {
             (7, 9, 22),
             (5, 64, 30),
             (3, 4, 15),
+            (64, 32, 2),
+            (64, 32, 4),
+            (80, 5, 3),
+            (100, 9, 7),
+            (256, 3, 1),
+            (71, 4, 15),
+            (48, 6, 5),
         ]) {
             let a_data: Vec<f32> = (0..m * k)
                 .map(|i| ((i * 37 % 101) as f32 - 50.0) * 0.013)
