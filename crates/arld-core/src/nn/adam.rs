@@ -8,7 +8,7 @@
 #[cfg(test)]
 use super::Segment;
 use super::simd::simd_dispatch;
-use super::{Layout, QNet};
+use super::{Layout, QNet, SimdLevel, simd_level};
 use crate::state::{Persist, StateDict, StateError};
 
 /// Gradients of every parameter of a [`QNet`], in the same flat layout.
@@ -184,6 +184,12 @@ impl Adam {
             eps: self.eps,
         };
         let (m, v) = (&mut self.first_moment, &mut self.second_moment);
+        #[cfg(target_arch = "x86_64")]
+        if simd_level() >= SimdLevel::Avx512 {
+            // SAFETY: the AVX-512 level is only selected when the CPU supports it (`SimdLevel::detected`).
+            unsafe { adam_update_avx512(params, grads, m, v, &coefficients) };
+            return;
+        }
         simd_dispatch!(
             adam_update_avx2(params, grads, m, v, &coefficients),
             adam_update(params, grads, m, v, &coefficients)
@@ -256,6 +262,20 @@ fn adam_update(
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
 fn adam_update_avx2(
+    params: &mut [f32],
+    grads: &[f32],
+    m: &mut [f32],
+    v: &mut [f32],
+    c: &AdamCoefficients,
+) {
+    adam_update(params, grads, m, v, c)
+}
+
+/// The AVX-512 twin: 16-lane square roots and divisions, which bound the update (each lane computes the
+/// same IEEE operations as the other twins, so the same bytes).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx2")]
+fn adam_update_avx512(
     params: &mut [f32],
     grads: &[f32],
     m: &mut [f32],
