@@ -8,7 +8,10 @@
 //! other rows of the batch (a single-state forward equals the same row of a batched one).
 //!
 //! `b` is always row-major with contiguous columns; `a` is any strided view (so `Xᵀ · dY` reads `X` in
-//! place). A product with `bᵀ` (the input gradient `dY · Wᵀ`) first writes `Wᵀ` with [`transpose`].
+//! place). A product with `bᵀ` (the input gradient `dY · Wᵀ`) first writes `Wᵀ` with [`transpose`] (8 x 8
+//! blocks in vector registers). A product with fewer columns than a vector whose `a` has adjacent rows (`Xᵀ`
+//! for the weight gradient of a layer with 1-7 outputs) runs its vectors across rows instead of columns:
+//! still one FMA chain per output, in the same order.
 //!
 //! Outputs are computed in register blocks of `R` rows by `C` vectors whose accumulators stay in
 //! registers over the whole `k` loop; on the vector levels the leftover columns (fewer than a vector) run in
