@@ -8,7 +8,7 @@
 #[cfg(test)]
 use super::Segment;
 use super::simd::simd_dispatch;
-use super::{Layout, QNet};
+use super::{Layout, QNet, SimdLevel, simd_level};
 use crate::state::{Persist, StateDict, StateError};
 
 /// Gradients of every parameter of a [`QNet`], in the same flat layout.
@@ -227,6 +227,12 @@ impl AdamCoefficients {
     /// The element-wise Adam update of `params` with their gradients `grads` and moments `m`, `v` (PyTorch's
     /// formula, see [`Adam`]).
     fn update(&self, params: &mut [f32], grads: &[f32], m: &mut [f32], v: &mut [f32]) {
+        #[cfg(target_arch = "x86_64")]
+        if simd_level() >= SimdLevel::Avx512 {
+            // SAFETY: the AVX-512 level is only selected when the CPU supports it (`SimdLevel::detected`).
+            unsafe { self.update_avx512(params, grads, m, v) };
+            return;
+        }
         simd_dispatch!(
             self.update_avx2(params, grads, m, v),
             self.update_impl(params, grads, m, v)
@@ -236,6 +242,14 @@ impl AdamCoefficients {
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
     fn update_avx2(&self, params: &mut [f32], grads: &[f32], m: &mut [f32], v: &mut [f32]) {
+        self.update_impl(params, grads, m, v)
+    }
+
+    /// The AVX-512 twin: 16-lane square roots and divisions, which bound the update (each lane computes the
+    /// same IEEE operations as the other twins, so the same bytes).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx512f,avx2")]
+    fn update_avx512(&self, params: &mut [f32], grads: &[f32], m: &mut [f32], v: &mut [f32]) {
         self.update_impl(params, grads, m, v)
     }
 

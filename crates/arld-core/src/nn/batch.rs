@@ -113,7 +113,7 @@ impl QNet {
                     &mut ws.w_eff,
                     &mut ws.b_eff,
                 );
-                transpose(&ws.w_eff, a, n_last, &mut ws.w_eff_t);
+                transpose::<S>(&ws.w_eff, a, n_last, &mut ws.w_eff_t);
                 product::<S>(q, h2, &ws.w_eff_t, Some(&ws.b_eff));
             }
         }
@@ -188,7 +188,7 @@ impl QNet {
             }
             OutputKind::Plain | OutputKind::Bootstrap { .. } => {
                 product::<S>(g.out_w, Strided::transposed(h2, batch, n2), d_out, None);
-                transpose(self.tensor(l.out_w), n2, width, w_t);
+                transpose::<S>(self.tensor(l.out_w), n2, width, w_t);
                 product::<S>(d_h2, Strided::row_major(d_out, batch, width), w_t, None);
                 // The 1/K trunk scaling of Bootstrapped DQN.
                 if l.heads() > 1 {
@@ -211,7 +211,7 @@ impl QNet {
             };
             product::<S>(fc[i].w, Strided::transposed(input, batch, n_in), d_h, None);
             if let Some(d_input) = d_before.last_mut() {
-                transpose(self.tensor(l.fc_w[i]), n_in, n, &mut ws.w_t);
+                transpose::<S>(self.tensor(l.fc_w[i]), n_in, n, &mut ws.w_t);
                 product::<S>(
                     &mut d_input[..batch * n_in],
                     Strided::row_major(d_h, batch, n),

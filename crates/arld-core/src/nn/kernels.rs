@@ -8,7 +8,10 @@
 //! other rows of the batch (a single-state forward equals the same row of a batched one).
 //!
 //! `b` is always row-major with contiguous columns; `a` is any strided view (so `Xᵀ · dY` reads `X` in
-//! place). A product with `bᵀ` (the input gradient `dY · Wᵀ`) first writes `Wᵀ` with [`transpose`].
+//! place). A product with `bᵀ` (the input gradient `dY · Wᵀ`) first writes `Wᵀ` with [`transpose`] (8 x 8
+//! blocks in vector registers). A product with fewer columns than a vector whose `a` has adjacent rows (`Xᵀ`
+//! for the weight gradient of a layer with 1-7 outputs) runs its vectors across rows instead of columns:
+//! still one FMA chain per output, in the same order.
 //!
 //! Outputs are computed in register blocks of `R` rows by `C` vectors whose accumulators stay in
 //! registers over the whole `k` loop; on the vector levels the leftover columns (fewer than a vector) run in
@@ -48,6 +51,20 @@ pub(crate) trait Lanes {
         debug_assert_eq!(lanes, Self::WIDTH);
         // SAFETY: forwarded; a level without masked stores is only asked for whole vectors.
         unsafe { Self::store(p, v) }
+    }
+    /// Whether [`Self::transpose8`] moves whole 8 x 8 blocks in vector registers (else [`transpose`] moves
+    /// every element on its own).
+    const TRANSPOSES_BLOCKS: bool = false;
+    /// Writes the transpose of the 8 x 8 block at `src` (rows `src_stride` floats apart) to `dst` (rows
+    /// `dst_stride` apart): `dst[c][r] = src[r][c]`.
+    #[inline(always)]
+    unsafe fn transpose8(src: *const f32, src_stride: usize, dst: *mut f32, dst_stride: usize) {
+        for r in 0..8 {
+            for c in 0..8 {
+                // SAFETY: the caller guarantees both 8 x 8 blocks lie inside their slices.
+                unsafe { *dst.add(c * dst_stride + r) = *src.add(r * src_stride + c) };
+            }
+        }
     }
 }
 
@@ -121,6 +138,52 @@ impl Lanes for Avx2 {
         // SAFETY: the caller guarantees `lanes` writable floats; the masked-out lanes are not accessed.
         unsafe { _mm256_maskstore_ps(p, avx2_mask(lanes), v) }
     }
+    const TRANSPOSES_BLOCKS: bool = true;
+    #[inline(always)]
+    unsafe fn transpose8(src: *const f32, src_stride: usize, dst: *mut f32, dst_stride: usize) {
+        // SAFETY: the caller guarantees both 8 x 8 blocks lie inside their slices.
+        unsafe { avx_transpose8(src, src_stride, dst, dst_stride) }
+    }
+}
+
+/// The 8 x 8 transpose of [`Lanes::transpose8`] in AVX registers: pairs of rows interleaved, then pairs of
+/// pairs, then the 128-bit halves exchanged (24 shuffles for 64 floats instead of 64 single stores).
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+unsafe fn avx_transpose8(src: *const f32, src_stride: usize, dst: *mut f32, dst_stride: usize) {
+    // SAFETY: the caller guarantees 8 rows of 8 readable floats at `src` and writable ones at `dst`.
+    unsafe {
+        let r: [__m256; 8] = std::array::from_fn(|i| _mm256_loadu_ps(src.add(i * src_stride)));
+        // t[2i] = (r[2i][0], r[2i+1][0], r[2i][1], r[2i+1][1] | the same for columns 4 and 5), t[2i+1]: 2, 3 | 6, 7.
+        let t: [__m256; 8] = std::array::from_fn(|i| {
+            let (a, b) = (r[i / 2 * 2], r[i / 2 * 2 + 1]);
+            if i % 2 == 0 {
+                _mm256_unpacklo_ps(a, b)
+            } else {
+                _mm256_unpackhi_ps(a, b)
+            }
+        });
+        // s[4h + c]: rows 4h..4h+4 of column c (low half) and of column c + 4 (high half).
+        let s: [__m256; 8] = std::array::from_fn(|i| {
+            let (h, c) = (i / 4, i % 4);
+            let (a, b) = (t[4 * h + c / 2], t[4 * h + c / 2 + 2]);
+            if c % 2 == 0 {
+                _mm256_shuffle_ps::<0x44>(a, b)
+            } else {
+                _mm256_shuffle_ps::<0xEE>(a, b)
+            }
+        });
+        for c in 0..4 {
+            _mm256_storeu_ps(
+                dst.add(c * dst_stride),
+                _mm256_permute2f128_ps::<0x20>(s[c], s[4 + c]),
+            );
+            _mm256_storeu_ps(
+                dst.add((c + 4) * dst_stride),
+                _mm256_permute2f128_ps::<0x31>(s[c], s[4 + c]),
+            );
+        }
+    }
 }
 
 /// The AVX2 mask of the first `lanes` (1 to 8) lanes.
@@ -161,6 +224,13 @@ impl Lanes for Avx512 {
     #[inline(always)]
     unsafe fn keep_where_positive(g: __m512, a: __m512) -> __m512 {
         unsafe { _mm512_maskz_mov_ps(_mm512_cmp_ps_mask::<_CMP_GT_OQ>(a, _mm512_setzero_ps()), g) }
+    }
+    const TRANSPOSES_BLOCKS: bool = true;
+    #[inline(always)]
+    unsafe fn transpose8(src: *const f32, src_stride: usize, dst: *mut f32, dst_stride: usize) {
+        // SAFETY: the caller guarantees both 8 x 8 blocks lie inside their slices; the AVX-512 level implies
+        // AVX (`SimdLevel::detected`).
+        unsafe { avx_transpose8(src, src_stride, dst, dst_stride) }
     }
 }
 
@@ -269,7 +339,7 @@ pub(crate) fn product<S: Lanes>(dst: &mut [f32], a: Strided, b: &[f32], init: Op
         (m - 1) * a.row_stride + k.saturating_sub(1) * a.col_stride < a.data.len() || k == 0,
         "product: left view exceeds its slice"
     );
-    let p = Operands {
+    let mut p = Operands {
         dst: dst.as_mut_ptr(),
         n,
         a: a.data.as_ptr(),
@@ -279,9 +349,27 @@ pub(crate) fn product<S: Lanes>(dst: &mut [f32], a: Strided, b: &[f32], init: Op
         init: init.map(|bias| bias.as_ptr()),
         k,
     };
+    let mut m = m;
     // SAFETY: every block below stays inside rows 0..m and columns 0..n, which the asserts above showed
     // to lie inside the slices; `dst` is borrowed mutably, so it aliases nothing.
     unsafe {
+        // Fewer columns than a vector, and a left operand whose rows are adjacent (`Xᵀ` of a layer's input
+        // for a gradient of a 1-7 column layer: a critic's value, the actions of a Q-network): the vectors run
+        // across rows instead, so no lane idles. The rows left over go through the column blocks below.
+        if S::WIDTH >= 8 && p.a_rs == 1 && n < S::WIDTH {
+            let done = if S::REGISTERS >= 32 {
+                row_vector_blocks::<S, 4>(&p, 0, m)
+            } else {
+                row_vector_blocks::<S, 2>(&p, 0, m)
+            };
+            let done = row_vector_blocks::<S, 1>(&p, done, m);
+            p.dst = p.dst.add(done * n);
+            p.a = p.a.add(done);
+            m -= done;
+            if m == 0 {
+                return;
+            }
+        }
         let full = n / S::WIDTH * S::WIDTH;
         // Block width in vectors: 4 rows x C vectors of accumulators, plus C loaded vectors and one
         // broadcast, must fit the register file: C = 4 (21 registers) only with 32 of them, else C = 2.
@@ -311,25 +399,27 @@ pub(crate) fn product<S: Lanes>(dst: &mut [f32], a: Strided, b: &[f32], init: Op
             rows_blocked::<S, 4, 1, false>(&p, m, col, S::WIDTH);
             col += S::WIDTH;
         }
-        // An 8-column rest of a 16-lane level in AVX2 vectors (the 10 heads' 40 columns), not lane by lane.
+        // An 8-column rest of a 16-lane level in AVX2 vectors (the 10 heads' 40 columns), not lane by lane,
+        // 8 rows at a time as the AVX2 level's rest.
         #[cfg(target_arch = "x86_64")]
         if S::WIDTH > Avx2::WIDTH && col + Avx2::WIDTH <= n {
             // The AVX-512 level is only chosen on CPUs that also have AVX2 and FMA (`SimdLevel::detected`).
-            rows_blocked::<Avx2, 4, 1, false>(&p, m, col, Avx2::WIDTH);
+            rows_blocked::<Avx2, 8, 1, false>(&p, m, col, Avx2::WIDTH);
             col += Avx2::WIDTH;
         }
         // A rest under 8 columns of the AVX-512 level (the tasks' 2-4 actions, the heads' 4- and 6-column
-        // rests) in 4-lane FMA vectors, masked for the last 1-3 columns.
+        // rests) in 4-lane FMA vectors, masked for the last 1-3 columns; 8 rows at a time, so that 8
+        // independent accumulators hide the FMA latency (4 rows left the output layer latency-bound).
         #[cfg(target_arch = "x86_64")]
         if S::WIDTH > Avx2::WIDTH {
             if col + 4 <= n {
-                rows_blocked::<Fma4<4>, 4, 1, false>(&p, m, col, 4);
+                rows_blocked::<Fma4<4>, 8, 1, false>(&p, m, col, 4);
                 col += 4;
             }
             match n - col {
-                1 => rows_blocked::<Fma4<1>, 4, 1, false>(&p, m, col, 1),
-                2 => rows_blocked::<Fma4<2>, 4, 1, false>(&p, m, col, 2),
-                3 => rows_blocked::<Fma4<3>, 4, 1, false>(&p, m, col, 3),
+                1 => rows_blocked::<Fma4<1>, 8, 1, false>(&p, m, col, 1),
+                2 => rows_blocked::<Fma4<2>, 8, 1, false>(&p, m, col, 2),
+                3 => rows_blocked::<Fma4<3>, 8, 1, false>(&p, m, col, 3),
                 _ => {}
             }
             col = n;
@@ -363,6 +453,78 @@ unsafe fn column_blocks<S: Lanes, const C: usize>(p: &Operands, m: usize, full: 
         col += C * S::WIDTH;
     }
     col
+}
+
+/// Rows `from..` of the product in blocks of `RV` vectors of rows (a left operand with `a_rs == 1`), every
+/// column, while whole blocks fit in `m` rows; returns the first row left.
+#[inline(always)]
+unsafe fn row_vector_blocks<S: Lanes, const RV: usize>(
+    p: &Operands,
+    from: usize,
+    m: usize,
+) -> usize {
+    let mut row = from;
+    while row + RV * S::WIDTH <= m {
+        let mut col = 0;
+        while col < p.n {
+            // SAFETY: forwarded from `product`.
+            unsafe {
+                match p.n - col {
+                    1 => row_vector_block::<S, RV, 1>(p, row, col),
+                    2 => row_vector_block::<S, RV, 2>(p, row, col),
+                    3 => row_vector_block::<S, RV, 3>(p, row, col),
+                    _ => row_vector_block::<S, RV, 4>(p, row, col),
+                }
+            }
+            col += 4;
+        }
+        row += RV * S::WIDTH;
+    }
+    row
+}
+
+/// Rows `row..row + RV * WIDTH`, columns `col..col + CG` with vectors across rows: `CG x RV` accumulators over
+/// the whole `k` loop, each lane the FMA chain of one output as in [`block`]; stored lane by lane.
+#[inline(always)]
+unsafe fn row_vector_block<S: Lanes, const RV: usize, const CG: usize>(
+    p: &Operands,
+    row: usize,
+    col: usize,
+) {
+    // SAFETY: forwarded from `product` (every pointer offset is inside the checked shapes; `a_rs == 1`, so
+    // rows `row..row + RV * WIDTH` of column `k` of the left operand are adjacent).
+    unsafe {
+        let mut acc = [[S::splat(0.0); RV]; CG];
+        if let Some(bias) = p.init {
+            for (c, acc) in acc.iter_mut().enumerate() {
+                *acc = [S::splat(*bias.add(col + c)); RV];
+            }
+        }
+        let mut a_ptr = p.a.add(row);
+        let mut b_ptr = p.b.add(col);
+        for _ in 0..p.k {
+            let av: [S::V; RV] = std::array::from_fn(|v| S::load(a_ptr.add(v * S::WIDTH)));
+            for (c, acc) in acc.iter_mut().enumerate() {
+                let bv = S::splat(*b_ptr.add(c));
+                for (acc, &av) in acc.iter_mut().zip(&av) {
+                    *acc = S::fma(av, bv, *acc);
+                }
+            }
+            a_ptr = a_ptr.add(p.a_cs);
+            b_ptr = b_ptr.add(p.n);
+        }
+        let mut lanes = [0.0f32; 16];
+        debug_assert!(S::WIDTH <= lanes.len());
+        for (c, acc) in acc.iter().enumerate() {
+            for (v, &acc) in acc.iter().enumerate() {
+                S::store(lanes.as_mut_ptr(), acc);
+                let out = p.dst.add((row + v * S::WIDTH) * p.n + col + c);
+                for (lane, &value) in lanes[..S::WIDTH].iter().enumerate() {
+                    *out.add(lane * p.n) = value;
+                }
+            }
+        }
+    }
 }
 
 /// Columns `col..` of all `m` rows in blocks of `C` vectors, `R` rows at a time, then 4, then 1. `MASKED`: the
@@ -481,13 +643,36 @@ pub(crate) fn relu_backward<S: Lanes>(grad: &mut [f32], activations: &[f32]) {
     }
 }
 
-/// Writes the transpose of the row-major `rows x cols` matrix `src` into `dst` (`cols x rows`).
+/// Writes the transpose of the row-major `rows x cols` matrix `src` into `dst` (`cols x rows`): in 8 x 8
+/// blocks in vector registers on the vector levels, the edges (and the scalar level) element by element.
+/// Moves only, no arithmetic: every level writes the same bytes.
 #[inline(always)]
-pub(crate) fn transpose(src: &[f32], rows: usize, cols: usize, dst: &mut [f32]) {
+pub(crate) fn transpose<S: Lanes>(src: &[f32], rows: usize, cols: usize, dst: &mut [f32]) {
     assert!(src.len() >= rows * cols && dst.len() >= rows * cols);
-    for (r, src_row) in src.chunks_exact(cols).take(rows).enumerate() {
-        for (c, &v) in src_row.iter().enumerate() {
-            dst[c * rows + r] = v;
+    let (block_rows, block_cols) = if S::TRANSPOSES_BLOCKS {
+        (rows / 8 * 8, cols / 8 * 8)
+    } else {
+        (0, 0)
+    };
+    for r in (0..block_rows).step_by(8) {
+        for c in (0..block_cols).step_by(8) {
+            // SAFETY: rows r..r+8 and columns c..c+8 lie inside `src` (rows x cols), and rows c..c+8, columns
+            // r..r+8 inside `dst` (cols x rows), by the assert above.
+            unsafe {
+                S::transpose8(
+                    src.as_ptr().add(r * cols + c),
+                    cols,
+                    dst.as_mut_ptr().add(c * rows + r),
+                    rows,
+                )
+            };
+        }
+    }
+    // The right edge of the blocked rows, then every column of the rows below them.
+    for r in 0..rows {
+        let first = if r < block_rows { block_cols } else { 0 };
+        for c in first..cols {
+            dst[c * rows + r] = src[r * cols + c];
         }
     }
 }
@@ -546,6 +731,13 @@ mod tests {
             (7, 9, 22),
             (5, 64, 30),
             (3, 4, 15),
+            (64, 32, 2),
+            (64, 32, 4),
+            (80, 5, 3),
+            (100, 9, 7),
+            (256, 3, 1),
+            (71, 4, 15),
+            (48, 6, 5),
         ]) {
             let a_data: Vec<f32> = (0..m * k)
                 .map(|i| ((i * 37 % 101) as f32 - 50.0) * 0.013)
@@ -599,11 +791,68 @@ mod tests {
         }
     }
 
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    fn transpose_avx2(src: &[f32], rows: usize, cols: usize, dst: &mut [f32]) {
+        transpose::<Avx2>(src, rows, cols, dst)
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx512f,avx2,fma")]
+    fn transpose_avx512(src: &[f32], rows: usize, cols: usize, dst: &mut [f32]) {
+        transpose::<Avx512>(src, rows, cols, dst)
+    }
+
+    /// Every level puts element `(r, c)` at `(c, r)`, for shapes with and without whole 8 x 8 blocks and with
+    /// edges on either side, and writes nothing past the transpose.
     #[test]
     fn transpose_moves_every_element() {
         let src: Vec<f32> = (0..6).map(|i| i as f32).collect();
         let mut dst = vec![0.0; 6];
-        transpose(&src, 2, 3, &mut dst);
+        transpose::<Scalar>(&src, 2, 3, &mut dst);
         assert_eq!(dst, [0.0, 3.0, 1.0, 4.0, 2.0, 5.0]);
+        let detected = SimdLevel::detected();
+        for (rows, cols) in [
+            (2, 3),
+            (8, 8),
+            (64, 64),
+            (64, 2),
+            (2, 64),
+            (17, 9),
+            (9, 24),
+            (16, 40),
+            (7, 7),
+        ] {
+            let src: Vec<f32> = (0..rows * cols).map(|i| i as f32 + 0.5).collect();
+            let expected: Vec<f32> = (0..cols * rows)
+                .map(|i| src[(i % rows) * cols + i / rows])
+                .collect();
+            let mut dst = vec![f32::NAN; rows * cols + 8];
+            transpose::<Scalar>(&src, rows, cols, &mut dst);
+            assert_eq!(dst[..rows * cols], expected, "scalar {rows}x{cols}");
+            #[cfg(target_arch = "x86_64")]
+            {
+                if detected >= SimdLevel::Avx2 {
+                    dst.fill(f32::NAN);
+                    // SAFETY: the CPU has AVX2 and FMA.
+                    unsafe { transpose_avx2(&src, rows, cols, &mut dst) };
+                    assert_eq!(dst[..rows * cols], expected, "avx2 {rows}x{cols}");
+                    assert!(
+                        dst[rows * cols..].iter().all(|v| v.is_nan()),
+                        "avx2 wrote past"
+                    );
+                }
+                if detected >= SimdLevel::Avx512 {
+                    dst.fill(f32::NAN);
+                    // SAFETY: the CPU has AVX-512F.
+                    unsafe { transpose_avx512(&src, rows, cols, &mut dst) };
+                    assert_eq!(dst[..rows * cols], expected, "avx512 {rows}x{cols}");
+                    assert!(
+                        dst[rows * cols..].iter().all(|v| v.is_nan()),
+                        "avx512 wrote past"
+                    );
+                }
+            }
+        }
     }
 }

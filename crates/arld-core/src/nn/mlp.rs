@@ -243,7 +243,7 @@ impl Mlp {
                 break;
             }
             let (w, _) = self.layer(layer);
-            transpose(w, n_in, n_out, w_t);
+            transpose::<S>(w, n_in, n_out, w_t);
             let da = &mut da_buf[..batch * n_in];
             product::<S>(
                 da,
