@@ -530,10 +530,10 @@ class Agent:
         # The run writes its directory until it ends, maybe after the working directory changed: fix it now.
         log_dir = None if log_dir is None else os.path.abspath(log_dir)
         self._run_dir = log_dir
-        return _arld.start_run(
-            json.dumps(self.config), env=env, test_envs=test_envs, expert=self._expert,
-            expert_name=self._expert_name, demos=self._demos, log_dir=log_dir, resume=resume, demo_env=demo_env,
-        )
+        return _arld.start_run(json.dumps(self.config), {
+            "env": env, "test_envs": test_envs, "expert": self._expert, "expert_name": self._expert_name,
+            "demos": self._demos, "log_dir": log_dir, "resume": resume, "demo_env": demo_env,
+        })
 
     def learn(
         self,
@@ -875,16 +875,15 @@ class Agent:
 
 
 def _load_policy(path: str) -> Tuple[Any, Dict[str, str]]:
-    """The policy of a weights file: a TD3/SAC actor (`BoxPolicy`) or a DQN-family network (`Policy`), with the
-    file's metadata."""
-    cls = _arld.BoxPolicy if _arld.holds_an_actor(path) else _arld.Policy
-    policy, meta = cls.load(path)
+    """The policy of a weights file (a TD3/SAC actor or a DQN-family network, whichever it holds), with the file's
+    metadata."""
+    policy, meta = _arld.Policy.load(path)
     return policy, dict(meta)
 
 
 def _box_of(policy: Any) -> Optional[BoxActions]:
     """The Box a TD3/SAC policy acts in (flat, float32), None for a DQN-family network."""
-    if not isinstance(policy, _arld.BoxPolicy):
+    if policy.bounds is None:
         return None
     low, high = policy.bounds
     return BoxActions((len(low),), tuple(low), tuple(high))

@@ -550,23 +550,41 @@ fn check_obs(obs: &[f32], inputs: usize) -> PyResult<()> {
     Ok(())
 }
 
-/// A trained network acting with the test policy (no exploration), or, when it comes from a run, also with
-/// the run's exploration policy at the step it stands at.
+/// A trained policy acting with its test policy (no exploration): a DQN-family network, or a TD3 or SAC actor
+/// as the run's test episodes act ([`TrainedActor`]: TD3's action or SAC's `tanh` of its means, mapped into the
+/// box). A DQN-family policy that comes from a run also explores as the run does at the step it stands at.
 #[pyclass(module = "arld._arld")]
 struct Policy {
-    net: QNet,
-    q: Vec<f32>,
-    /// The exploring agent (its own generator, so asking it never changes the run) and ε.
-    explorer: Option<(Box<arld::agent::Agent>, f64)>,
+    kind: PolicyKind,
+}
+
+/// The two families of policy, side by side.
+enum PolicyKind {
+    Q {
+        net: Box<QNet>,
+        q: Vec<f32>,
+        /// The exploring agent (its own generator, so asking it never changes the run) and ε.
+        explorer: Option<(Box<arld::agent::Agent>, f64)>,
+    },
+    Actor(TrainedActor),
+}
+
+/// An action as Python receives it: an int, or a list of floats for a box.
+#[derive(IntoPyObject)]
+enum PolicyAction {
+    Index(usize),
+    Vector(Vec<f32>),
 }
 
 impl Policy {
-    fn new(net: QNet) -> Self {
+    fn of_net(net: QNet) -> Self {
         let q = vec![0.0; net.heads() * net.n_actions()];
         Self {
-            net,
-            q,
-            explorer: None,
+            kind: PolicyKind::Q {
+                net: Box::new(net),
+                q,
+                explorer: None,
+            },
         }
     }
 
@@ -575,162 +593,144 @@ impl Policy {
         let rng = Pcg64::seed_from_u64(seed_for(cfg.seed, SeedPurpose::Agent) ^ step as u64);
         let agent = arld::agent::Agent::from_network(&cfg.agent_config(), net.clone(), rng);
         let eps = train::epsilon_at(cfg, step);
-        Self {
-            explorer: Some((Box::new(agent), eps)),
-            ..Self::new(net)
+        let mut policy = Self::of_net(net);
+        if let PolicyKind::Q { explorer, .. } = &mut policy.kind {
+            *explorer = Some((Box::new(agent), eps));
         }
+        policy
+    }
+
+    /// The policy of a run's network.
+    fn of_run(net: Net, cfg: &TrainConfig, step: usize) -> Self {
+        match net {
+            Net::Q(net) => Self::exploring(*net, cfg, step),
+            Net::Actor(actor) => Self {
+                kind: PolicyKind::Actor(*actor),
+            },
+        }
+    }
+
+    /// The observation's length the policy takes, after checking that `obs` has it.
+    fn check(&self, obs: &[f32]) -> PyResult<()> {
+        check_obs(obs, self.obs_dim())
     }
 }
 
 #[pymethods]
 impl Policy {
-    /// The test policy's action for one observation.
-    fn act(&mut self, obs: Vec<f32>) -> PyResult<usize> {
-        check_obs(&obs, self.net.obs_dim())?;
-        Ok(arld::agent::test_policy_action(
-            &self.net,
-            &mut self.q,
-            &obs,
-        ))
+    /// The test policy's action for one observation: an int, or a flat list of floats for a box.
+    fn act(&mut self, obs: Vec<f32>) -> PyResult<PolicyAction> {
+        self.check(&obs)?;
+        Ok(match &mut self.kind {
+            PolicyKind::Q { net, q, .. } => {
+                PolicyAction::Index(arld::agent::test_policy_action(net, q, &obs))
+            }
+            PolicyKind::Actor(actor) => PolicyAction::Vector(actor.act(&obs)),
+        })
     }
 
     /// The exploration policy's action (ε-greedy with the run's current ε, the episode's bootstrap head, the
-    /// noisy layer's sampled noise); `episode_start` begins a new episode (a new head, new noise).
-    fn explore(&mut self, obs: Vec<f32>, episode_start: bool) -> PyResult<usize> {
-        check_obs(&obs, self.net.obs_dim())?;
-        match &mut self.explorer {
-            None => Err(value_error(
+    /// noisy layer's sampled noise); `episode_start` begins a new episode (a new head, new noise). An actor acts
+    /// as in `act`: TD3's policy is deterministic (its exploration noise belongs to the run), as in
+    /// Stable-Baselines3's TD3, whose `predict(deterministic=False)` is the actor's action too.
+    fn explore(&mut self, obs: Vec<f32>, episode_start: bool) -> PyResult<PolicyAction> {
+        self.check(&obs)?;
+        match &mut self.kind {
+            PolicyKind::Q { explorer: None, .. } => Err(value_error(
                 "this policy has no exploration (loaded weights, not a run): use deterministic=True".into(),
             )),
-            Some((agent, eps)) => {
+            PolicyKind::Q {
+                explorer: Some((agent, eps)),
+                ..
+            } => {
                 if episode_start {
                     agent.begin_episode();
                 }
-                Ok(agent.act(&obs, *eps, arld::query::Needs::NOTHING).0)
+                Ok(PolicyAction::Index(
+                    agent.act(&obs, *eps, arld::query::Needs::NOTHING).0,
+                ))
+            }
+            PolicyKind::Actor(actor) => Ok(PolicyAction::Vector(actor.act(&obs))),
+        }
+    }
+
+    /// The network's kind: "plain", "bootstrap" or "noisy"; or the learner of an actor: "td3" or "sac".
+    #[getter]
+    fn net(&self) -> &'static str {
+        match &self.kind {
+            PolicyKind::Q { net, .. } => match net.kind() {
+                arld::nn::OutputKind::Plain => "plain",
+                arld::nn::OutputKind::Bootstrap { .. } => "bootstrap",
+                _ => "noisy",
+            },
+            PolicyKind::Actor(actor) => actor.kind().learner(),
+        }
+    }
+
+    /// Saves the weights (safetensors; the run's weights file format, which `checkpoint:PATH` experts read)
+    /// with `meta` as metadata.
+    fn save(&self, path: &str, meta: Metadata) -> PyResult<()> {
+        match &self.kind {
+            PolicyKind::Q { net, .. } => save_weights(net.as_ref(), path, &meta),
+            PolicyKind::Actor(actor) => save_weights(actor, path, &meta),
+        }
+    }
+
+    /// Loads weights saved by `save` (or by `arld train`): a DQN-family network or a TD3/SAC actor, whichever
+    /// the file holds; returns the policy and the file's metadata.
+    #[staticmethod]
+    fn load(path: &str) -> PyResult<(Policy, Metadata)> {
+        let actor = arld::agent::actor_file::holds_an_actor(Path::new(path))
+            .map_err(|e| value_error(format!("cannot read {path}: {e:#}")))?;
+        if actor {
+            let (actor, meta) = load_weights(path)?;
+            Ok((
+                Policy {
+                    kind: PolicyKind::Actor(actor),
+                },
+                meta,
+            ))
+        } else {
+            let (net, meta) = load_weights(path)?;
+            Ok((Policy::of_net(net), meta))
+        }
+    }
+
+    #[getter]
+    fn obs_dim(&self) -> usize {
+        match &self.kind {
+            PolicyKind::Q { net, .. } => net.obs_dim(),
+            PolicyKind::Actor(actor) => actor.obs_dim(),
+        }
+    }
+
+    /// The number of actions of a DQN-family network; `None` for an actor.
+    #[getter]
+    fn n_actions(&self) -> Option<usize> {
+        match &self.kind {
+            PolicyKind::Q { net, .. } => Some(net.n_actions()),
+            PolicyKind::Actor(_) => None,
+        }
+    }
+
+    /// An actor's box: `(low, high)`, flat; `None` for a DQN-family network.
+    #[getter]
+    fn bounds(&self) -> Option<(Vec<f32>, Vec<f32>)> {
+        match &self.kind {
+            PolicyKind::Q { .. } => None,
+            PolicyKind::Actor(actor) => {
+                let (low, high) = actor.bounds();
+                Some((low.to_vec(), high.to_vec()))
             }
         }
     }
-
-    /// The network's kind: "plain", "bootstrap" or "noisy".
-    #[getter]
-    fn net(&self) -> &'static str {
-        match self.net.kind() {
-            arld::nn::OutputKind::Plain => "plain",
-            arld::nn::OutputKind::Bootstrap { .. } => "bootstrap",
-            _ => "noisy",
-        }
-    }
-
-    /// Saves the weights (safetensors) with `meta` as metadata.
-    fn save(&self, path: &str, meta: Metadata) -> PyResult<()> {
-        save_weights(&self.net, path, &meta)
-    }
-
-    /// Loads weights saved by `save` (or by `arld train`); returns the policy and the file's metadata.
-    #[staticmethod]
-    fn load(path: &str) -> PyResult<(Policy, Metadata)> {
-        let (net, meta) = load_weights(path)?;
-        Ok((Policy::new(net), meta))
-    }
-
-    #[getter]
-    fn obs_dim(&self) -> usize {
-        self.net.obs_dim()
-    }
-
-    #[getter]
-    fn n_actions(&self) -> usize {
-        self.net.n_actions()
-    }
-}
-
-/// A TD3 or SAC actor acting with the test policy (no exploration noise), as the run's test episodes act
-/// ([`TrainedActor`]): TD3's action or SAC's `tanh` of its means, mapped into the box.
-#[pyclass(module = "arld._arld")]
-#[derive(Clone)]
-struct BoxPolicy {
-    actor: TrainedActor,
-}
-
-impl BoxPolicy {
-    fn of(agent: &BoxAgent, spec: &env::BoxSpec) -> Self {
-        let kind = ActorKind::of_learner(agent.learner_name())
-            .expect("a box agent's learner is TD3 or SAC");
-        BoxPolicy {
-            actor: TrainedActor::new(
-                kind,
-                agent.actor().clone(),
-                spec.action_low,
-                spec.action_high,
-            ),
-        }
-    }
-}
-
-#[pymethods]
-impl BoxPolicy {
-    /// The test policy's action for one observation (flat, as many numbers as the box has dimensions).
-    fn act(&mut self, obs: Vec<f32>) -> PyResult<Vec<f32>> {
-        check_obs(&obs, self.actor.obs_dim())?;
-        Ok(self.actor.act(&obs))
-    }
-
-    /// As `act`: TD3's policy is deterministic (its exploration noise belongs to the run), as in
-    /// Stable-Baselines3's TD3, whose `predict(deterministic=False)` is the actor's action too.
-    fn explore(&mut self, obs: Vec<f32>, _episode_start: bool) -> PyResult<Vec<f32>> {
-        self.act(obs)
-    }
-
-    /// The learner: "td3" or "sac".
-    #[getter]
-    fn net(&self) -> &'static str {
-        self.actor.kind().learner()
-    }
-
-    /// Saves the actor's weights (the run's weights file format, which `checkpoint:PATH` experts read) with
-    /// `meta` as metadata.
-    fn save(&self, path: &str, meta: Metadata) -> PyResult<()> {
-        save_weights(&self.actor, path, &meta)
-    }
-
-    /// Loads an actor saved by `save` (or by `arld train` on a box task); returns the policy and the file's
-    /// metadata.
-    #[staticmethod]
-    fn load(path: &str) -> PyResult<(BoxPolicy, Metadata)> {
-        let (actor, meta) = load_weights(path)?;
-        Ok((BoxPolicy { actor }, meta))
-    }
-
-    #[getter]
-    fn obs_dim(&self) -> usize {
-        self.actor.obs_dim()
-    }
-
-    #[getter]
-    fn action_dim(&self) -> usize {
-        self.actor.action_dim()
-    }
-
-    /// The box: `(low, high)`, flat.
-    #[getter]
-    fn bounds(&self) -> (Vec<f32>, Vec<f32>) {
-        let (low, high) = self.actor.bounds();
-        (low.to_vec(), high.to_vec())
-    }
-}
-
-/// Whether the weights file at `path` holds a TD3 or SAC actor (a box policy) rather than a DQN-family network.
-#[pyfunction]
-fn holds_an_actor(path: &str) -> PyResult<bool> {
-    arld::agent::actor_file::holds_an_actor(Path::new(path))
-        .map_err(|e| value_error(format!("cannot read {path}: {e:#}")))
 }
 
 /// A run's current network as Python acts with it: a DQN-family network or a TD3 actor.
 #[derive(Clone)]
 enum Net {
     Q(Box<QNet>),
-    Box(Box<BoxPolicy>),
+    Actor(Box<TrainedActor>),
 }
 
 /// A built-in environment (`arld.make`), stepped from Python (also from a run's thread, when wrapped).
@@ -930,7 +930,14 @@ impl PyLearner for BoxAgent {
     }
     fn net(&self, id: &str) -> Net {
         let spec = env::box_spec(id).expect("a box run's task is registered");
-        Net::Box(Box::new(BoxPolicy::of(self, spec)))
+        let kind = ActorKind::of_learner(self.learner_name())
+            .expect("a box agent's learner is TD3 or SAC");
+        Net::Actor(Box::new(TrainedActor::new(
+            kind,
+            self.actor().clone(),
+            spec.action_low,
+            spec.action_high,
+        )))
     }
     fn for_snapshot(cfg: &TrainConfig) -> anyhow::Result<Self> {
         Ok(train::run::box_agent(cfg, env::box_spec(&cfg.env)?))
@@ -1187,15 +1194,6 @@ impl Run {
     }
 }
 
-/// The policy Python acts with for `net`: a DQN-family network exploring as the run `cfg` does at `step`, or a
-/// TD3 actor.
-fn net_policy(py: Python<'_>, net: Net, cfg: &TrainConfig, step: usize) -> PyResult<Py<PyAny>> {
-    Ok(match net {
-        Net::Q(net) => Py::new(py, Policy::exploring(*net, cfg, step))?.into_any(),
-        Net::Box(policy) => Py::new(py, *policy)?.into_any(),
-    })
-}
-
 fn eval_dict<'py>(py: Python<'py>, p: &EvalPoint) -> PyResult<Bound<'py, PyDict>> {
     let d = PyDict::new(py);
     d.set_item("step", p.step)?;
@@ -1289,26 +1287,25 @@ impl Run {
     }
 
     /// The current policy (a copy of the network, with the exploration of training at its step): the live one
-    /// inside a callback, the last pause's otherwise. A `Policy`, or a `BoxPolicy` for actions in a box.
-    fn policy(&self, py: Python<'_>) -> PyResult<Py<PyAny>> {
-        if let Some(p) = self.live_policy(py)? {
+    /// inside a callback, the last pause's otherwise.
+    fn policy(&self) -> PyResult<Policy> {
+        if let Some(p) = self.live_policy() {
             return Ok(p);
         }
         let (net, step) = self.with_last(|p| (p.net.clone(), p.summary.train_steps))?;
-        net_policy(py, net, &self.cfg, step)
+        Ok(Policy::of_run(net, &self.cfg, step))
     }
 
     /// The live network as a policy, inside this run's callback; `None` elsewhere.
-    fn live_policy(&self, py: Python<'_>) -> PyResult<Option<Py<PyAny>>> {
+    fn live_policy(&self) -> Option<Policy> {
         let step = self.step.load(Ordering::Relaxed);
         with_lent(self.id, |lent| {
             let net = match lent {
                 LentRef::Discrete(agent, _) => Net::Q(Box::new(agent.network().clone())),
                 LentRef::Box(agent, _) => agent.net(&self.cfg.env),
             };
-            net_policy(py, net, &self.cfg, step)
+            Policy::of_run(net, &self.cfg, step)
         })
-        .transpose()
     }
 
     /// The live target network (as a policy), inside this run's callback of a DQN-family run; `None` elsewhere
@@ -1352,12 +1349,15 @@ impl Run {
                 Ok(actions.into_pyobject(py)?.into_any().unbind())
             }
             LentRef::Box(agent, _) => {
-                let Net::Box(mut policy) = agent.net(&self.cfg.env) else {
-                    unreachable!("a box agent's network is a box policy")
+                let Net::Actor(mut actor) = agent.net(&self.cfg.env) else {
+                    unreachable!("a box agent's network is an actor")
                 };
                 let actions = rows
-                    .into_iter()
-                    .map(|obs| policy.act(obs))
+                    .iter()
+                    .map(|obs| {
+                        check(obs, actor.obs_dim())?;
+                        Ok(actor.act(obs))
+                    })
                     .collect::<PyResult<Vec<Vec<f32>>>>()?;
                 Ok(actions.into_pyobject(py)?.into_any().unbind())
             }
@@ -1445,25 +1445,9 @@ fn lock_run_dir(dir: &Path) -> anyhow::Result<arld::dir_lock::DirLock> {
 }
 
 /// Starts a training run in its own thread (it waits for `Run.advance`): the configuration as JSON text (from
-/// `resolve_config`), the environments (Python objects, or `None` for the built-in one of the configuration's
-/// id; `test_envs` one per test episode, stepped in lockstep), the expert (a Python callable, or `None` to
-/// build the configuration's expert spec), demonstrations as arrays of rows (or `None` to collect them from the
-/// expert on `demo_env`, or on the built-in environment), a run directory, and a snapshot file to continue from.
+/// `resolve_config`) and what Python gives the run ([`RunRequest`]).
 #[pyfunction]
-#[pyo3(signature = (config, env=None, test_envs=None, expert=None, expert_name=String::new(), demos=None, log_dir=None, resume=None, demo_env=None))]
-#[allow(clippy::too_many_arguments)]
-fn start_run(
-    py: Python<'_>,
-    config: &str,
-    env: Option<Py<PyAny>>,
-    test_envs: Option<Vec<Py<PyAny>>>,
-    expert: Option<Py<PyAny>>,
-    expert_name: String,
-    demos: Option<DemoArrays>,
-    log_dir: Option<String>,
-    resume: Option<String>,
-    demo_env: Option<Py<PyAny>>,
-) -> PyResult<Run> {
+fn start_run(py: Python<'_>, config: &str, request: RunRequest) -> PyResult<Run> {
     let errors = ErrorSlot::default();
     let cfg: TrainConfig = serde_json::from_str(config).map_err(|e| value_error(e.to_string()))?;
     let (commands_tx, commands_rx) = channel();
@@ -1488,7 +1472,7 @@ fn start_run(
     // A person's page is built here, where Python can be asked about the environment (its frames, its keys),
     // and the run waits for the page to open before its thread starts.
     let boxed = env::box_spec(&cfg.env).is_ok();
-    let web_expert = match &expert {
+    let web_expert = match &request.expert {
         Some(call) if boxed => {
             if call.bind(py).cast::<web::PyWebExpert>().is_ok() {
                 return Err(value_error(format!(
@@ -1506,7 +1490,7 @@ fn start_run(
             };
             web::expert(
                 call.bind(py),
-                env.as_ref().map(|e| e.bind(py)),
+                request.env.as_ref().map(|e| e.bind(py)),
                 spec,
                 keep,
                 interrupt.clone(),
@@ -1517,7 +1501,7 @@ fn start_run(
     };
     // One process per run directory, as `arld train`: the lock is taken here (a second run is refused before
     // anything starts, naming the holder) and held by the run's thread until it ends.
-    let lock = match &log_dir {
+    let lock = match &request.log_dir {
         Some(dir) => {
             Some(lock_run_dir(Path::new(dir)).map_err(|e| errors.raise(py, e, runtime_error))?)
         }
@@ -1525,14 +1509,7 @@ fn start_run(
     };
     let inputs = RunInputs {
         cfg: cfg.clone(),
-        env,
-        test_envs,
-        expert,
-        expert_name,
-        demos,
-        log_dir,
-        resume,
-        demo_env,
+        request,
         errors: errors.clone(),
     };
     let body = move || -> anyhow::Result<()> {
@@ -1573,9 +1550,14 @@ fn start_run(
     })
 }
 
-/// What a run's thread is given to train with (see [`start_run`]).
-struct RunInputs {
-    cfg: TrainConfig,
+/// What Python gives a run to train with (`start_run`'s second argument, a dict with every key): the
+/// environments (Python objects, or `None` for the built-in one of the configuration's id; `test_envs` one per
+/// test episode, stepped in lockstep), the expert (a Python callable, or `None` to build the configuration's
+/// expert spec) and its name, demonstrations as arrays of rows (or `None` to collect them from the expert on
+/// `demo_env`, or on the built-in environment), a run directory, and a snapshot file to continue from.
+#[derive(FromPyObject)]
+#[pyo3(from_item_all)]
+struct RunRequest {
     env: Option<Py<PyAny>>,
     test_envs: Option<Vec<Py<PyAny>>>,
     expert: Option<Py<PyAny>>,
@@ -1584,6 +1566,12 @@ struct RunInputs {
     log_dir: Option<String>,
     resume: Option<String>,
     demo_env: Option<Py<PyAny>>,
+}
+
+/// What a run's thread is given to train with (see [`start_run`]).
+struct RunInputs {
+    cfg: TrainConfig,
+    request: RunRequest,
     errors: ErrorSlot,
 }
 
@@ -1596,6 +1584,10 @@ fn train_in_thread<L: PyLearner>(
 ) -> anyhow::Result<()> {
     let RunInputs {
         cfg,
+        request,
+        errors,
+    } = inputs;
+    let RunRequest {
         env,
         test_envs,
         expert,
@@ -1604,8 +1596,7 @@ fn train_in_thread<L: PyLearner>(
         log_dir,
         resume,
         demo_env,
-        errors,
-    } = inputs;
+    } = request;
     let spec = L::Action::spec_of(&cfg.env)?;
     let make = |obj: Option<Py<PyAny>>| -> anyhow::Result<Box<dyn Env<L::Action>>> {
         Ok(match obj {
@@ -1687,7 +1678,7 @@ fn train_in_thread<L: PyLearner>(
 
 /// What `snapshot_policy` returns: the policy, the configuration (JSON), the step, the evaluations (JSON), the
 /// queries.
-type SnapshotPolicy = (Py<PyAny>, String, usize, String, Py<PyList>);
+type SnapshotPolicy = (Policy, String, usize, String, Py<PyList>);
 
 /// The network of a run's snapshot file, acting (and exploring) as the run did at its step; returns the policy,
 /// the configuration as JSON text, the step and the run's evaluations so far (JSON text: step, mean, std, min,
@@ -1716,7 +1707,7 @@ fn snapshot_policy(py: Python<'_>, path: &str) -> PyResult<SnapshotPolicy> {
         read().map_err(|e| value_error(format!("cannot load {path}: {e:#}")))?;
     let list = PyList::empty(py);
     queries.fill(py, &list)?;
-    let policy = net_policy(py, net, &cfg, step)?;
+    let policy = Policy::of_run(net, &cfg, step);
     Ok((policy, cfg.to_json(), step, curve, list.unbind()))
 }
 
@@ -1801,8 +1792,6 @@ fn _arld(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(snapshot_policy, m)?)?;
     m.add_class::<Run>()?;
     m.add_class::<Policy>()?;
-    m.add_class::<BoxPolicy>()?;
-    m.add_function(wrap_pyfunction!(holds_an_actor, m)?)?;
     m.add_class::<BuiltinEnv>()?;
     m.add_class::<web::PyWebExpert>()?;
     Ok(())
