@@ -284,6 +284,10 @@ fn a_scripted_person_answers_in_headless_chromium() {
     );
     let rows = queries(&lander.run);
     assert!(!rows.is_empty() && rows.iter().all(|r| r.answered && r.expert == "web"));
+    // Real time without segment_len or --web-segment-s: a question hands the person the default 3 s of play,
+    // 120 steps at 40 per second (the budget of 40 cuts the first one short).
+    let config = std::fs::read_to_string(lander.run.join("config.toml")).unwrap();
+    assert!(config.contains("\nsegment_len = 120\n"), "{config}");
     // Each real-time segment began with a countdown after the person's key.
     assert!(lander.report["countdownsSeen"].as_u64().unwrap() > 0);
     assert_eq!(
@@ -445,11 +449,17 @@ fn run_takeover_person(url: &str, shots: &Path) -> serde_json::Value {
 /// Runs the scripted person tests/e2e/`script` on `url` until it leaves; its report (the last JSON line it
 /// printed).
 fn run_script(script: &str, url: &str, shots: &Path) -> serde_json::Value {
+    run_script_with(script, url, shots, &[])
+}
+
+/// [`run_script`] with the script's own arguments `extra`.
+fn run_script_with(script: &str, url: &str, shots: &Path, extra: &[&str]) -> serde_json::Value {
     let out = Command::new("node")
         .current_dir(e2e_dir())
         .arg(script)
         .args(["--url", url, "--shots"])
         .arg(shots)
+        .args(extra)
         .output()
         .expect("start node");
     assert!(
@@ -499,6 +509,8 @@ fn a_person_takes_over_unasked_in_real_time_and_hands_back() {
         "web",
         "--web-fps",
         "20",
+        "--web-segment-s",
+        "0.25",
         "--listen",
         "127.0.0.1:0",
         "--set",
@@ -608,7 +620,6 @@ fn a_person_answers_a_box_task_with_a_pad_keys_and_a_slider() {
     let sets = [
         format!("train_steps={TRAIN_STEPS}"),
         format!("budget={BUDGET}"),
-        "segment_len=20".to_string(),
         "eval_period=1500".to_string(),
     ];
     let run = tempfile::tempdir().unwrap().keep().join("run");
@@ -622,6 +633,8 @@ fn a_person_answers_a_box_task_with_a_pad_keys_and_a_slider() {
         "web",
         "--web-fps",
         "20",
+        "--web-segment-s",
+        "1",
         "--listen",
         "127.0.0.1:0",
     ]
@@ -670,6 +683,11 @@ fn a_person_answers_a_box_task_with_a_pad_keys_and_a_slider() {
     // The torque each control gives, from its position.
     let expected = [0.5 * half, -0.25 * half, low, 0.8];
     let lines = answer_lines(&run);
+    // A second of play per question at 20 steps a second: 20 steps (fewer only where the episode's time limit cut
+    // the segment), recorded in config.toml, each segment lasting about its steps' time on the page.
+    let config = std::fs::read_to_string(run.join("config.toml")).unwrap();
+    assert!(config.contains("\nsegment_len = 20\n"), "{config}");
+    let mut lengths = Vec::new();
     for (q, want) in questions.iter().zip(expected) {
         // The question's segment: the lines whose first one starts at the state the page asked in.
         let obs = floats(&q["obs"]);
@@ -683,6 +701,12 @@ fn a_person_answers_a_box_task_with_a_pad_keys_and_a_slider() {
             .filter(|l| &l["question_step"] == question_step)
             .collect();
         assert!(!segment.is_empty());
+        let (steps, played) = (segment.len() as f64, q["segmentS"].as_f64().unwrap());
+        assert!(
+            (0.8 * (steps - 1.0) / 20.0..=2.0 * steps / 20.0).contains(&played),
+            "{steps} steps at 20 per second played in {played} s: {q}"
+        );
+        lengths.push(segment.len());
         for l in segment {
             let action = floats(&l["action"]);
             assert_eq!(action.len(), 1, "{l}");
@@ -696,6 +720,10 @@ fn a_person_answers_a_box_task_with_a_pad_keys_and_a_slider() {
             assert_eq!(l["expert"], "web");
         }
     }
+    assert!(
+        lengths.iter().all(|&n| n <= 20) && lengths.contains(&20),
+        "{lengths:?}"
+    );
     // The keyboard's segment in progress showed the torque at its bound.
     let during = &questions[2]["inProgress"];
     assert_eq!(during["axes"]["source"], "keys", "{report}");
