@@ -13,7 +13,8 @@
 //! seconds spent, an estimate of the time still needed at their pace). When the agent asks, the run waits for
 //! the person, who answers with the keyboard or the buttons for the whole segment, either turn-based (one step
 //! per key) or in real time (`fps`: after a fresh key and a countdown, the environment advances at that rate
-//! with the held key, or the no-op action when none is held). Before a question the page replays the agent's
+//! with the held key, or the no-op action when none is held; a question's segment lasts `segment_s` seconds of play,
+//! 3 by default: [`WebOptions::segment_steps`]). Before a question the page replays the agent's
 //! own steps since the person's last one, and in turn-based mode the person can undo their last key: both
 //! rebuild the environment from the query's episode ([`arld_core::env::replay_episode`]) where the frame source
 //! can show such a copy. Undo works one key ahead: the page shows the state after a key on a copy, and the run
