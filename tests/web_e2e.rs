@@ -1,7 +1,8 @@
 //! End-to-end test of the web expert in a real headless Chromium: `arld train --expert web` runs short ADQN runs
 //! on CartPole-v0 (turn-based, with a question left unanswered until its timeout) and LunarLander-v2 (real time),
 //! and a scripted person (tests/e2e/person.mjs, Playwright) answers by pressing keys; in a real-time CartPole run
-//! another (tests/e2e/takeover.mjs) also takes over unasked and hands back. The runs must complete, and
+//! another (tests/e2e/takeover.mjs) also takes over unasked and hands back (and in another run is stopped while
+//! holding control, then resumed). The runs must complete, and
 //! queries.csv must show the person's answers. The script itself checks the drawing is not blank, that requests
 //! without the token get 403 and that a watching tab's messages are refused; screenshots go to
 //! target/e2e-screenshots/.
@@ -604,6 +605,156 @@ fn a_person_takes_over_unasked_in_real_time_and_hands_back() {
     assert!(lines.len() as u64 <= BUDGET);
     assert_eq!(s["train_steps"], TRAIN_STEPS);
     assert_eq!(report["endScreen"]["rows"]["Takeovers"], "1", "{report}");
+}
+
+/// A person takes over in real time (CartPole-v0 at 20 steps a second) and, while they hold control, the run is
+/// stopped (SIGTERM, sent by tests/e2e/takeover.mjs once they have had 6 steps). Nothing is lost and nothing is
+/// logged twice: queries.csv and answers.jsonl after the resume begin with their bytes at the stop, the takeover's
+/// steps are one consecutive stretch from the step it opened at (each logged once) that goes on after the resume,
+/// and the budget spent is the lines logged. Resumed, the page opens on the takeover, with the person in control
+/// and the status where the run stopped; they hand back, and the run ends with one takeover on its end screen.
+#[test]
+fn a_stop_while_a_person_holds_control_loses_nothing_and_resume_gives_it_back() {
+    check_prerequisites();
+    const TRAIN_STEPS: u64 = 4000;
+    const BUDGET: u64 = 60;
+    let train_steps = format!("train_steps={TRAIN_STEPS}");
+    let budget = format!("budget={BUDGET}");
+    let run = tempfile::tempdir().unwrap().keep().join("run");
+    let run_arg = run.clone().into_os_string();
+    let words = [
+        "train",
+        "--env",
+        "CartPole-v0",
+        "--method",
+        "adqn",
+        "--net",
+        "bootstrap",
+        "--expert",
+        "web",
+        "--web-fps",
+        "20",
+        "--web-segment-s",
+        "0.25",
+        "--listen",
+        "127.0.0.1:0",
+        "--set",
+        train_steps.as_str(),
+        "--set",
+        budget.as_str(),
+        "--set",
+        "eval_period=2000",
+        "-o",
+    ];
+    let mut args: Vec<&std::ffi::OsStr> = words.iter().map(std::ffi::OsStr::new).collect();
+    args.push(&run_arg);
+    let (mut arld, url) = start_arld(&args, Stdio::piped());
+    let pid = arld.id().to_string();
+    let shots = shots_dir("takeover-stop");
+    let before = run_script_with(
+        "takeover.mjs",
+        &url,
+        &shots,
+        &["--stop", "6", "--pid", &pid],
+    );
+    let status = wait(&mut arld, Duration::from_secs(20), "arld after SIGTERM");
+    let mut stderr = String::new();
+    std::io::Read::read_to_string(&mut arld.stderr.take().unwrap(), &mut stderr).unwrap();
+    assert_eq!(status.code(), Some(143), "stderr: {stderr}");
+    assert!(
+        stderr.contains(&format!("arld train --resume {}", run.display())),
+        "{stderr}"
+    );
+    assert!(run.join("snapshot.safetensors").is_file(), "no snapshot");
+    assert!(shots.join("takeover.png").is_file() && shots.join("takeover-stopped.png").is_file());
+    let stopped = &before["stopped"];
+    assert_eq!(stopped["prompt"]["takeover"], true, "{before}");
+    assert!(
+        stopped["after"]["ended"]
+            .as_str()
+            .unwrap()
+            .starts_with("The run was stopped"),
+        "{before}"
+    );
+    let csv_before = std::fs::read_to_string(run.join("queries.csv")).unwrap();
+    let answers_before = std::fs::read_to_string(run.join("answers.jsonl")).unwrap();
+    let lines_before = answer_lines(&run);
+    let person_before: Vec<_> = lines_before
+        .iter()
+        .filter(|l| l["started_by"] == "person")
+        .collect();
+    assert!(person_before.len() >= 6, "{before}");
+    let opened = person_before[0]["question_step"].as_u64().unwrap();
+    // The step the run stopped at: the one after the last logged.
+    let stop_step = person_before.last().unwrap()["step"].as_u64().unwrap() + 1;
+
+    let (mut arld, url) = start_arld(
+        &[
+            std::ffi::OsStr::new("train"),
+            std::ffi::OsStr::new("--resume"),
+            run.as_os_str(),
+        ],
+        Stdio::inherit(),
+    );
+    let after = run_script_with(
+        "takeover.mjs",
+        &url,
+        &shots_dir("takeover-resumed"),
+        &["--resumed", "--hold", "6"],
+    );
+    let status = wait(&mut arld, Duration::from_secs(180), "the resumed arld");
+    assert!(status.success(), "the resumed run failed: {after}");
+    // The page opened on the takeover, the person in control. It goes on as soon as the page is open, so the
+    // first status the page shows may be a few steps on from the stop: each of those steps is one unit more of
+    // the budget than at the stop. (The panel may still be finishing a replay of the agent's last steps.)
+    let resumed = &after["takeover"]["resumed"];
+    assert_eq!(resumed["prompt"]["takeover"], true, "{after}");
+    let shown = resumed["status"]["step"].as_u64().unwrap();
+    assert!(
+        (stop_step..stop_step + 40).contains(&shown),
+        "stopped at {stop_step}: {after}"
+    );
+    assert_eq!(
+        resumed["status"]["budget_used"].as_u64(),
+        Some(lines_before.len() as u64 + shown - stop_step),
+        "{after}"
+    );
+    assert_eq!(resumed["status"]["takeovers"], 1, "{after}");
+
+    // Nothing before the stop changed; the takeover's steps are one stretch, each step once, going on after it.
+    let csv_after = std::fs::read_to_string(run.join("queries.csv")).unwrap();
+    assert!(
+        csv_after.starts_with(&csv_before),
+        "{csv_before}\n---\n{csv_after}"
+    );
+    let answers_after = std::fs::read_to_string(run.join("answers.jsonl")).unwrap();
+    assert!(answers_after.starts_with(&answers_before));
+    let lines = answer_lines(&run);
+    let takeover: Vec<u64> = lines
+        .iter()
+        .filter(|l| l["started_by"] == "person")
+        .map(|l| {
+            assert_eq!(
+                l["question_step"].as_u64(),
+                Some(opened),
+                "a second takeover: {l}"
+            );
+            l["step"].as_u64().unwrap()
+        })
+        .collect();
+    assert_eq!(
+        takeover,
+        (opened..opened + takeover.len() as u64).collect::<Vec<_>>()
+    );
+    assert!(
+        takeover.len() > person_before.len(),
+        "the takeover did not go on after the resume: {takeover:?}"
+    );
+    let s = summary(&run);
+    assert_eq!(s["demos_queried"].as_u64(), Some(lines.len() as u64));
+    assert!(lines.len() as u64 <= BUDGET);
+    assert_eq!(s["train_steps"], TRAIN_STEPS);
+    assert_eq!(after["endScreen"]["rows"]["Takeovers"], "1", "{after}");
 }
 
 /// A person answers Pendulum-v1 (a torque in [-2, 2]) on the page in real time with each continuous control:
