@@ -487,18 +487,16 @@ fn answer_lines(run: &Path) -> Vec<serde_json::Value> {
         .collect()
 }
 
-#[test]
-fn a_person_takes_over_unasked_in_real_time_and_hands_back() {
-    check_prerequisites();
-    // CartPole-v0 in real time at 20 steps per second, a budget of 60 transitions: the agent asks (the rule's
-    // questions), and in between the person presses T, acts for a while and hands back with Esc.
-    const TRAIN_STEPS: u64 = 4000;
-    const BUDGET: u64 = 60;
-    let train_steps = format!("train_steps={TRAIN_STEPS}");
-    let budget = format!("budget={BUDGET}");
+/// Steps and budget (transitions) of [`start_realtime_cartpole`]'s run.
+const REALTIME_STEPS: u64 = 4000;
+const REALTIME_BUDGET: u64 = 60;
+
+/// Starts `arld train` of a real-time CartPole-v0 run in a new directory: a person answers at 20 steps a second, a
+/// quarter second (5 steps) of play per question, within a budget of [`REALTIME_BUDGET`] transitions over
+/// [`REALTIME_STEPS`] steps. Returns the run directory, the process and the URL it printed.
+fn start_realtime_cartpole(stderr: Stdio) -> (PathBuf, Child, String) {
     let run = tempfile::tempdir().unwrap().keep().join("run");
-    let run_arg = run.clone().into_os_string();
-    let words = [
+    let mut args: Vec<std::ffi::OsString> = [
         "train",
         "--env",
         "CartPole-v0",
@@ -514,17 +512,29 @@ fn a_person_takes_over_unasked_in_real_time_and_hands_back() {
         "0.25",
         "--listen",
         "127.0.0.1:0",
-        "--set",
-        train_steps.as_str(),
-        "--set",
-        budget.as_str(),
-        "--set",
-        "eval_period=2000",
-        "-o",
-    ];
-    let mut args: Vec<&std::ffi::OsStr> = words.iter().map(std::ffi::OsStr::new).collect();
-    args.push(&run_arg);
-    let (mut arld, url) = start_arld(&args, Stdio::inherit());
+    ]
+    .iter()
+    .map(Into::into)
+    .collect();
+    for set in [
+        format!("train_steps={REALTIME_STEPS}"),
+        format!("budget={REALTIME_BUDGET}"),
+        "eval_period=2000".to_string(),
+    ] {
+        args.extend(["--set".into(), set.into()]);
+    }
+    args.extend(["-o".into(), run.as_os_str().to_owned()]);
+    let args: Vec<&std::ffi::OsStr> = args.iter().map(|a| a.as_os_str()).collect();
+    let (arld, url) = start_arld(&args, stderr);
+    (run, arld, url)
+}
+
+#[test]
+fn a_person_takes_over_unasked_in_real_time_and_hands_back() {
+    check_prerequisites();
+    // CartPole-v0 in real time at 20 steps per second, a budget of 60 transitions: the agent asks (the rule's
+    // questions), and in between the person presses T, acts for a while and hands back with Esc.
+    let (run, mut arld, url) = start_realtime_cartpole(Stdio::inherit());
     let shots = shots_dir("takeover");
     let report = run_takeover_person(&url, &shots);
     let status = wait(&mut arld, Duration::from_secs(180), "arld");
@@ -602,8 +612,8 @@ fn a_person_takes_over_unasked_in_real_time_and_hands_back() {
     // The budget: every step the expert took (asked or taken over) is one unit, within the budget.
     let s = summary(&run);
     assert_eq!(s["demos_queried"].as_u64(), Some(lines.len() as u64));
-    assert!(lines.len() as u64 <= BUDGET);
-    assert_eq!(s["train_steps"], TRAIN_STEPS);
+    assert!(lines.len() as u64 <= REALTIME_BUDGET);
+    assert_eq!(s["train_steps"], REALTIME_STEPS);
     assert_eq!(report["endScreen"]["rows"]["Takeovers"], "1", "{report}");
 }
 
@@ -616,39 +626,7 @@ fn a_person_takes_over_unasked_in_real_time_and_hands_back() {
 #[test]
 fn a_stop_while_a_person_holds_control_loses_nothing_and_resume_gives_it_back() {
     check_prerequisites();
-    const TRAIN_STEPS: u64 = 4000;
-    const BUDGET: u64 = 60;
-    let train_steps = format!("train_steps={TRAIN_STEPS}");
-    let budget = format!("budget={BUDGET}");
-    let run = tempfile::tempdir().unwrap().keep().join("run");
-    let run_arg = run.clone().into_os_string();
-    let words = [
-        "train",
-        "--env",
-        "CartPole-v0",
-        "--method",
-        "adqn",
-        "--net",
-        "bootstrap",
-        "--expert",
-        "web",
-        "--web-fps",
-        "20",
-        "--web-segment-s",
-        "0.25",
-        "--listen",
-        "127.0.0.1:0",
-        "--set",
-        train_steps.as_str(),
-        "--set",
-        budget.as_str(),
-        "--set",
-        "eval_period=2000",
-        "-o",
-    ];
-    let mut args: Vec<&std::ffi::OsStr> = words.iter().map(std::ffi::OsStr::new).collect();
-    args.push(&run_arg);
-    let (mut arld, url) = start_arld(&args, Stdio::piped());
+    let (run, mut arld, url) = start_realtime_cartpole(Stdio::piped());
     let pid = arld.id().to_string();
     let shots = shots_dir("takeover-stop");
     let before = run_script_with(
@@ -752,8 +730,8 @@ fn a_stop_while_a_person_holds_control_loses_nothing_and_resume_gives_it_back() 
     );
     let s = summary(&run);
     assert_eq!(s["demos_queried"].as_u64(), Some(lines.len() as u64));
-    assert!(lines.len() as u64 <= BUDGET);
-    assert_eq!(s["train_steps"], TRAIN_STEPS);
+    assert!(lines.len() as u64 <= REALTIME_BUDGET);
+    assert_eq!(s["train_steps"], REALTIME_STEPS);
     assert_eq!(after["endScreen"]["rows"]["Takeovers"], "1", "{after}");
 }
 

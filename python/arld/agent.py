@@ -476,7 +476,8 @@ class Agent:
                                       and self._base_id in _arld.builtin_env_ids()) else None
         pairs = [(k, json.dumps(v, default=_json_default)) for k, v in hyper.items()]
         # A person in real time: a question's segment lasts their seconds of play unless segment_len is given.
-        person = self._expert.spec if isinstance(getattr(self, "_expert", None), WebExpert) else None
+        expert = getattr(self, "_expert", None)
+        person = expert.spec if isinstance(expert, WebExpert) else None
         cfg = dict(json.loads(_arld.resolve_config(self.env_id, self.method, self.net, self.seed, pairs,
                                                    preset_of, person)))
         if self._expert_name and getattr(self, "_expert", None) is not None:

@@ -139,14 +139,7 @@ pub fn expert<A: GymAction>(
         None => A::builtin_page(id)?,
         Some(bridge) => {
             let gym = bridge.getattr("env").map_err(|e| anyhow::anyhow!("{e}"))?;
-            A::gym_page(
-                &gym,
-                id,
-                web.keys.as_ref(),
-                web.labels.as_deref(),
-                keep.clone(),
-            )
-            .map_err(|e| cannot_show(&e))?
+            A::gym_page(&gym, id, &web, Box::new(keep.clone())).map_err(|e| cannot_show(&e))?
         }
     };
     let mut expert =
@@ -169,20 +162,19 @@ pub fn expert<A: GymAction>(
     Ok(Some(Box::new(expert)))
 }
 
+/// A Gymnasium environment, as Python holds it.
+type Gym<'py> = Bound<'py, PyAny>;
+/// Keeps a Python exception (to raise when the run returns) and gives its text for the Rust error.
+type Keep = Box<dyn Fn(PyErr) -> String + Send + Sync>;
+
 /// A kind of action a person gives on the page of a Python program's run: how the page of its environment is
 /// made.
 pub trait GymAction: PageAction {
     /// The page of the built-in task `id`.
     fn builtin_page(id: &str) -> anyhow::Result<Page<Self>>;
     /// The page of the Gymnasium environment `gym`, registered as `id`: its frames or its observation, and how
-    /// the person acts (`keys=` and `labels=` as given to `arld.WebExpert`).
-    fn gym_page(
-        gym: &Bound<'_, PyAny>,
-        id: &str,
-        keys: Option<&BTreeMap<String, usize>>,
-        labels: Option<&[String]>,
-        keep: impl Fn(PyErr) -> String + Send + Sync + 'static,
-    ) -> PyResult<Page<Self>>;
+    /// the person acts (`keys=` and `labels=` as given to `web`).
+    fn gym_page(gym: &Gym<'_>, id: &str, web: &PyWebExpert, keep: Keep) -> PyResult<Page<Self>>;
 }
 
 impl GymAction for usize {
@@ -190,14 +182,9 @@ impl GymAction for usize {
         Page::builtin(id)
     }
 
-    fn gym_page(
-        gym: &Bound<'_, PyAny>,
-        id: &str,
-        keys: Option<&BTreeMap<String, usize>>,
-        labels: Option<&[String]>,
-        keep: impl Fn(PyErr) -> String + Send + Sync + 'static,
-    ) -> PyResult<Page> {
+    fn gym_page(gym: &Gym<'_>, id: &str, web: &PyWebExpert, keep: Keep) -> PyResult<Page> {
         let spec = arld::env::spec(id).map_err(|e| PyValueError::new_err(e.to_string()))?;
+        let (keys, labels) = (web.keys.as_ref(), web.labels.as_deref());
         let (actions, noop) = gym_actions(gym, spec.n_actions, keys, labels)?;
         let frames: Box<dyn FrameSource> = match rendered(gym, keep)? {
             Some(frames) => Box::new(frames),
@@ -222,13 +209,12 @@ impl GymAction for Vec<f32> {
     }
 
     fn gym_page(
-        gym: &Bound<'_, PyAny>,
+        gym: &Gym<'_>,
         id: &str,
-        keys: Option<&BTreeMap<String, usize>>,
-        labels: Option<&[String]>,
-        keep: impl Fn(PyErr) -> String + Send + Sync + 'static,
+        web: &PyWebExpert,
+        keep: Keep,
     ) -> PyResult<Page<Vec<f32>>> {
-        if keys.is_some() {
+        if web.keys.is_some() {
             return Err(PyValueError::new_err(
                 "keys= maps keys to discrete actions, but its actions are in a box: the arrows and WASD push \
                  each dimension toward its bounds (name the dimensions with labels=)",
@@ -239,16 +225,13 @@ impl GymAction for Vec<f32> {
         if let Some(frames) = rendered(gym, keep)? {
             page.frames = Box::new(frames);
         }
-        page.dim_names = labels.map(<[String]>::to_vec);
+        page.dim_names = web.labels.clone();
         Ok(page)
     }
 }
 
 /// The environment's own frames when it was made with `render_mode="rgb_array"`, else `None`.
-fn rendered(
-    gym: &Bound<'_, PyAny>,
-    keep: impl Fn(PyErr) -> String + Send + Sync + 'static,
-) -> PyResult<Option<RenderedFrames>> {
+fn rendered(gym: &Gym<'_>, keep: Keep) -> PyResult<Option<RenderedFrames>> {
     let render_mode: Option<String> = gym.getattr("render_mode")?.extract().unwrap_or(None);
     if render_mode.as_deref() != Some("rgb_array") {
         return Ok(None);

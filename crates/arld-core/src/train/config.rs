@@ -1229,20 +1229,11 @@ mod tests {
         // Given at the preset's own value, it is given all the same.
         assert_eq!(len(&["segment_len=5", "expert=\"web:fps=20\""]), 5);
         // A method that never asks has no segment to set (and refuses `segment_len` given).
-        let dqfd = resolve(
-            "CartPole-v0",
-            Method::Dqfd,
-            NetKind::Plain,
-            &["expert=\"web:fps=20\"", "demo_file=\"d.csv\""],
-        );
-        assert_eq!(dqfd.unwrap().segment_len, 5);
-        let cfg = resolve(
-            "Pendulum-v1",
-            Method::Adqn,
-            NetKind::Bootstrap,
-            &["expert=\"web:fps=20,segment_s=2\""],
-        )
-        .unwrap();
+        let sets = ["expert=\"web:fps=20\"", "demo_file=\"d.csv\""];
+        let dqfd = resolve("CartPole-v0", Method::Dqfd, NetKind::Plain, &sets).unwrap();
+        assert_eq!(dqfd.segment_len, 5);
+        let sets = ["expert=\"web:fps=20,segment_s=2\""];
+        let cfg = resolve("Pendulum-v1", Method::Adqn, NetKind::Bootstrap, &sets).unwrap();
         assert_eq!(cfg.segment_len, 40);
         let mut again = ConfigInput::new("Pendulum-v1", Method::Adqn, NetKind::Bootstrap, 0);
         again
