@@ -1,7 +1,8 @@
 //! End-to-end test of the web expert in a real headless Chromium: `arld train --expert web` runs short ADQN runs
 //! on CartPole-v0 (turn-based, with a question left unanswered until its timeout) and LunarLander-v2 (real time),
 //! and a scripted person (tests/e2e/person.mjs, Playwright) answers by pressing keys; in a real-time CartPole run
-//! another (tests/e2e/takeover.mjs) also takes over unasked and hands back. The runs must complete, and
+//! another (tests/e2e/takeover.mjs) also takes over unasked and hands back (and in another run is stopped while
+//! holding control, then resumed). The runs must complete, and
 //! queries.csv must show the person's answers. The script itself checks the drawing is not blank, that requests
 //! without the token get 403 and that a watching tab's messages are refused; screenshots go to
 //! target/e2e-screenshots/.
@@ -284,6 +285,10 @@ fn a_scripted_person_answers_in_headless_chromium() {
     );
     let rows = queries(&lander.run);
     assert!(!rows.is_empty() && rows.iter().all(|r| r.answered && r.expert == "web"));
+    // Real time without segment_len or --web-segment-s: a question hands the person the default 3 s of play,
+    // 120 steps at 40 per second (the budget of 40 cuts the first one short).
+    let config = std::fs::read_to_string(lander.run.join("config.toml")).unwrap();
+    assert!(config.contains("\nsegment_len = 120\n"), "{config}");
     // Each real-time segment began with a countdown after the person's key.
     assert!(lander.report["countdownsSeen"].as_u64().unwrap() > 0);
     assert_eq!(
@@ -445,11 +450,17 @@ fn run_takeover_person(url: &str, shots: &Path) -> serde_json::Value {
 /// Runs the scripted person tests/e2e/`script` on `url` until it leaves; its report (the last JSON line it
 /// printed).
 fn run_script(script: &str, url: &str, shots: &Path) -> serde_json::Value {
+    run_script_with(script, url, shots, &[])
+}
+
+/// [`run_script`] with the script's own arguments `extra`.
+fn run_script_with(script: &str, url: &str, shots: &Path, extra: &[&str]) -> serde_json::Value {
     let out = Command::new("node")
         .current_dir(e2e_dir())
         .arg(script)
         .args(["--url", url, "--shots"])
         .arg(shots)
+        .args(extra)
         .output()
         .expect("start node");
     assert!(
@@ -476,18 +487,16 @@ fn answer_lines(run: &Path) -> Vec<serde_json::Value> {
         .collect()
 }
 
-#[test]
-fn a_person_takes_over_unasked_in_real_time_and_hands_back() {
-    check_prerequisites();
-    // CartPole-v0 in real time at 20 steps per second, a budget of 60 transitions: the agent asks (the rule's
-    // questions), and in between the person presses T, acts for a while and hands back with Esc.
-    const TRAIN_STEPS: u64 = 4000;
-    const BUDGET: u64 = 60;
-    let train_steps = format!("train_steps={TRAIN_STEPS}");
-    let budget = format!("budget={BUDGET}");
+/// Steps and budget (transitions) of [`start_realtime_cartpole`]'s run.
+const REALTIME_STEPS: u64 = 4000;
+const REALTIME_BUDGET: u64 = 60;
+
+/// Starts `arld train` of a real-time CartPole-v0 run in a new directory: a person answers at 20 steps a second, a
+/// quarter second (5 steps) of play per question, within a budget of [`REALTIME_BUDGET`] transitions over
+/// [`REALTIME_STEPS`] steps. Returns the run directory, the process and the URL it printed.
+fn start_realtime_cartpole(stderr: Stdio) -> (PathBuf, Child, String) {
     let run = tempfile::tempdir().unwrap().keep().join("run");
-    let run_arg = run.clone().into_os_string();
-    let words = [
+    let mut args: Vec<std::ffi::OsString> = [
         "train",
         "--env",
         "CartPole-v0",
@@ -499,19 +508,33 @@ fn a_person_takes_over_unasked_in_real_time_and_hands_back() {
         "web",
         "--web-fps",
         "20",
+        "--web-segment-s",
+        "0.25",
         "--listen",
         "127.0.0.1:0",
-        "--set",
-        train_steps.as_str(),
-        "--set",
-        budget.as_str(),
-        "--set",
-        "eval_period=2000",
-        "-o",
-    ];
-    let mut args: Vec<&std::ffi::OsStr> = words.iter().map(std::ffi::OsStr::new).collect();
-    args.push(&run_arg);
-    let (mut arld, url) = start_arld(&args, Stdio::inherit());
+    ]
+    .iter()
+    .map(Into::into)
+    .collect();
+    for set in [
+        format!("train_steps={REALTIME_STEPS}"),
+        format!("budget={REALTIME_BUDGET}"),
+        "eval_period=2000".to_string(),
+    ] {
+        args.extend(["--set".into(), set.into()]);
+    }
+    args.extend(["-o".into(), run.as_os_str().to_owned()]);
+    let args: Vec<&std::ffi::OsStr> = args.iter().map(|a| a.as_os_str()).collect();
+    let (arld, url) = start_arld(&args, stderr);
+    (run, arld, url)
+}
+
+#[test]
+fn a_person_takes_over_unasked_in_real_time_and_hands_back() {
+    check_prerequisites();
+    // CartPole-v0 in real time at 20 steps per second, a budget of 60 transitions: the agent asks (the rule's
+    // questions), and in between the person presses T, acts for a while and hands back with Esc.
+    let (run, mut arld, url) = start_realtime_cartpole(Stdio::inherit());
     let shots = shots_dir("takeover");
     let report = run_takeover_person(&url, &shots);
     let status = wait(&mut arld, Duration::from_secs(180), "arld");
@@ -589,9 +612,127 @@ fn a_person_takes_over_unasked_in_real_time_and_hands_back() {
     // The budget: every step the expert took (asked or taken over) is one unit, within the budget.
     let s = summary(&run);
     assert_eq!(s["demos_queried"].as_u64(), Some(lines.len() as u64));
-    assert!(lines.len() as u64 <= BUDGET);
-    assert_eq!(s["train_steps"], TRAIN_STEPS);
+    assert!(lines.len() as u64 <= REALTIME_BUDGET);
+    assert_eq!(s["train_steps"], REALTIME_STEPS);
     assert_eq!(report["endScreen"]["rows"]["Takeovers"], "1", "{report}");
+}
+
+/// A person takes over in real time (CartPole-v0 at 20 steps a second) and, while they hold control, the run is
+/// stopped (SIGTERM, sent by tests/e2e/takeover.mjs once they have had 6 steps). Nothing is lost and nothing is
+/// logged twice: queries.csv and answers.jsonl after the resume begin with their bytes at the stop, the takeover's
+/// steps are one consecutive stretch from the step it opened at (each logged once) that goes on after the resume,
+/// and the budget spent is the lines logged. Resumed, the page opens on the takeover, with the person in control
+/// and the status where the run stopped; they hand back, and the run ends with one takeover on its end screen.
+#[test]
+fn a_stop_while_a_person_holds_control_loses_nothing_and_resume_gives_it_back() {
+    check_prerequisites();
+    let (run, mut arld, url) = start_realtime_cartpole(Stdio::piped());
+    let pid = arld.id().to_string();
+    let shots = shots_dir("takeover-stop");
+    let before = run_script_with(
+        "takeover.mjs",
+        &url,
+        &shots,
+        &["--stop", "6", "--pid", &pid],
+    );
+    let status = wait(&mut arld, Duration::from_secs(20), "arld after SIGTERM");
+    let mut stderr = String::new();
+    std::io::Read::read_to_string(&mut arld.stderr.take().unwrap(), &mut stderr).unwrap();
+    assert_eq!(status.code(), Some(143), "stderr: {stderr}");
+    assert!(
+        stderr.contains(&format!("arld train --resume {}", run.display())),
+        "{stderr}"
+    );
+    assert!(run.join("snapshot.safetensors").is_file(), "no snapshot");
+    assert!(shots.join("takeover.png").is_file() && shots.join("takeover-stopped.png").is_file());
+    let stopped = &before["stopped"];
+    assert_eq!(stopped["prompt"]["takeover"], true, "{before}");
+    assert!(
+        stopped["after"]["ended"]
+            .as_str()
+            .unwrap()
+            .starts_with("The run was stopped"),
+        "{before}"
+    );
+    let csv_before = std::fs::read_to_string(run.join("queries.csv")).unwrap();
+    let answers_before = std::fs::read_to_string(run.join("answers.jsonl")).unwrap();
+    let lines_before = answer_lines(&run);
+    let person_before: Vec<_> = lines_before
+        .iter()
+        .filter(|l| l["started_by"] == "person")
+        .collect();
+    assert!(person_before.len() >= 6, "{before}");
+    let opened = person_before[0]["question_step"].as_u64().unwrap();
+    // The step the run stopped at: the one after the last logged.
+    let stop_step = person_before.last().unwrap()["step"].as_u64().unwrap() + 1;
+
+    let (mut arld, url) = start_arld(
+        &[
+            std::ffi::OsStr::new("train"),
+            std::ffi::OsStr::new("--resume"),
+            run.as_os_str(),
+        ],
+        Stdio::inherit(),
+    );
+    let after = run_script_with(
+        "takeover.mjs",
+        &url,
+        &shots_dir("takeover-resumed"),
+        &["--resumed", "--hold", "6"],
+    );
+    let status = wait(&mut arld, Duration::from_secs(180), "the resumed arld");
+    assert!(status.success(), "the resumed run failed: {after}");
+    // The page opened on the takeover, the person in control. It goes on as soon as the page is open, so the
+    // first status the page shows may be a few steps on from the stop: each of those steps is one unit more of
+    // the budget than at the stop. (The panel may still be finishing a replay of the agent's last steps.)
+    let resumed = &after["takeover"]["resumed"];
+    assert_eq!(resumed["prompt"]["takeover"], true, "{after}");
+    let shown = resumed["status"]["step"].as_u64().unwrap();
+    assert!(
+        (stop_step..stop_step + 40).contains(&shown),
+        "stopped at {stop_step}: {after}"
+    );
+    assert_eq!(
+        resumed["status"]["budget_used"].as_u64(),
+        Some(lines_before.len() as u64 + shown - stop_step),
+        "{after}"
+    );
+    assert_eq!(resumed["status"]["takeovers"], 1, "{after}");
+
+    // Nothing before the stop changed; the takeover's steps are one stretch, each step once, going on after it.
+    let csv_after = std::fs::read_to_string(run.join("queries.csv")).unwrap();
+    assert!(
+        csv_after.starts_with(&csv_before),
+        "{csv_before}\n---\n{csv_after}"
+    );
+    let answers_after = std::fs::read_to_string(run.join("answers.jsonl")).unwrap();
+    assert!(answers_after.starts_with(&answers_before));
+    let lines = answer_lines(&run);
+    let takeover: Vec<u64> = lines
+        .iter()
+        .filter(|l| l["started_by"] == "person")
+        .map(|l| {
+            assert_eq!(
+                l["question_step"].as_u64(),
+                Some(opened),
+                "a second takeover: {l}"
+            );
+            l["step"].as_u64().unwrap()
+        })
+        .collect();
+    assert_eq!(
+        takeover,
+        (opened..opened + takeover.len() as u64).collect::<Vec<_>>()
+    );
+    assert!(
+        takeover.len() > person_before.len(),
+        "the takeover did not go on after the resume: {takeover:?}"
+    );
+    let s = summary(&run);
+    assert_eq!(s["demos_queried"].as_u64(), Some(lines.len() as u64));
+    assert!(lines.len() as u64 <= REALTIME_BUDGET);
+    assert_eq!(s["train_steps"], REALTIME_STEPS);
+    assert_eq!(after["endScreen"]["rows"]["Takeovers"], "1", "{after}");
 }
 
 /// A person answers Pendulum-v1 (a torque in [-2, 2]) on the page in real time with each continuous control:
@@ -608,7 +749,6 @@ fn a_person_answers_a_box_task_with_a_pad_keys_and_a_slider() {
     let sets = [
         format!("train_steps={TRAIN_STEPS}"),
         format!("budget={BUDGET}"),
-        "segment_len=20".to_string(),
         "eval_period=1500".to_string(),
     ];
     let run = tempfile::tempdir().unwrap().keep().join("run");
@@ -622,6 +762,8 @@ fn a_person_answers_a_box_task_with_a_pad_keys_and_a_slider() {
         "web",
         "--web-fps",
         "20",
+        "--web-segment-s",
+        "1",
         "--listen",
         "127.0.0.1:0",
     ]
@@ -670,6 +812,11 @@ fn a_person_answers_a_box_task_with_a_pad_keys_and_a_slider() {
     // The torque each control gives, from its position.
     let expected = [0.5 * half, -0.25 * half, low, 0.8];
     let lines = answer_lines(&run);
+    // A second of play per question at 20 steps a second: 20 steps (fewer only where the episode's time limit cut
+    // the segment), recorded in config.toml, each segment lasting about its steps' time on the page.
+    let config = std::fs::read_to_string(run.join("config.toml")).unwrap();
+    assert!(config.contains("\nsegment_len = 20\n"), "{config}");
+    let mut lengths = Vec::new();
     for (q, want) in questions.iter().zip(expected) {
         // The question's segment: the lines whose first one starts at the state the page asked in.
         let obs = floats(&q["obs"]);
@@ -683,6 +830,12 @@ fn a_person_answers_a_box_task_with_a_pad_keys_and_a_slider() {
             .filter(|l| &l["question_step"] == question_step)
             .collect();
         assert!(!segment.is_empty());
+        let (steps, played) = (segment.len() as f64, q["segmentS"].as_f64().unwrap());
+        assert!(
+            (0.8 * (steps - 1.0) / 20.0..=2.0 * steps / 20.0).contains(&played),
+            "{steps} steps at 20 per second played in {played} s: {q}"
+        );
+        lengths.push(segment.len());
         for l in segment {
             let action = floats(&l["action"]);
             assert_eq!(action.len(), 1, "{l}");
@@ -696,6 +849,10 @@ fn a_person_answers_a_box_task_with_a_pad_keys_and_a_slider() {
             assert_eq!(l["expert"], "web");
         }
     }
+    assert!(
+        lengths.iter().all(|&n| n <= 20) && lengths.contains(&20),
+        "{lengths:?}"
+    );
     // The keyboard's segment in progress showed the torque at its bound.
     let during = &questions[2]["inProgress"];
     assert_eq!(during["axes"]["source"], "keys", "{report}");

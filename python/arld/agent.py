@@ -119,7 +119,8 @@ class Agent:
     ADQNP ask the expert during training). net: plain, bootstrap (10 heads), noisy. env: a Gymnasium environment
     with a Discrete action space, or a Box one (continuous actions: TD3 learns them, with the same methods'
     queries; `predict`, experts and demos= give actions in the space's shape; dqfd and adqnp pre-train the actor
-    by cloning the demonstrations; a WebExpert is not available there yet), exactly as given (wrappers, time limits), an id string (made with gym.make), or
+    by cloning the demonstrations; a WebExpert sets them with keys, sliders or a pad's sticks), exactly as given
+    (wrappers, time limits), an id string (made with gym.make), or
     `arld.make(id)` (the built-in one: trained entirely in Rust). Observations reach the network as SB3's policies
     see them (a vector Box as it is, Discrete one-hot, MultiDiscrete/MultiBinary/Dict/Tuple flattened; images are
     refused: see arld.envs); experts and `predict` take them as the environment gives them. The time limit is the
@@ -355,10 +356,6 @@ class Agent:
         self._set_env(env)
         self.eval_env = None if eval_env is None else _as_env(eval_env, max_episode_steps)
         self._check_eval_env()
-        if self._box is not None:
-            if isinstance(expert, WebExpert):
-                raise ValueError("a person in the browser (WebExpert) cannot answer actions in a Box yet: give a "
-                                 "callable or a model with predict (e.g. an SB3 TD3 or SAC model)")
         if expert is not None:
             self._expert, name = _expert_callable(expert, self._box)
             self._expert_name = name
@@ -478,8 +475,11 @@ class Agent:
         preset_of = self._base_id if (self.env_id != self._base_id
                                       and self._base_id in _arld.builtin_env_ids()) else None
         pairs = [(k, json.dumps(v, default=_json_default)) for k, v in hyper.items()]
+        # A person in real time: a question's segment lasts their seconds of play unless segment_len is given.
+        expert = getattr(self, "_expert", None)
+        person = expert.spec if isinstance(expert, WebExpert) else None
         cfg = dict(json.loads(_arld.resolve_config(self.env_id, self.method, self.net, self.seed, pairs,
-                                                   preset_of)))
+                                                   preset_of, person)))
         if self._expert_name and getattr(self, "_expert", None) is not None:
             cfg["expert"] = f"python:{self._expert_name}"  # what was asked, for config.toml
         return cfg

@@ -21,7 +21,7 @@ from . import _arld
 from .envs import BoxActions, ObsCodec, as_env as _as_env, box_actions as _box_actions, codec_of as _codec_of
 
 # A person answering in the browser: arld.WebExpert(listen="127.0.0.1:0", fps=None, timeout=None, keys=None,
-# wait=True, labels=None) serves the page (its URL is .url, printed when learn starts the run); pass it as expert=
+# wait=True, labels=None, segment_s=None) serves the page (its URL is .url, printed when learn starts the run); pass it as expert=
 # (one run per WebExpert).
 WebExpert = _arld.WebExpert
 

@@ -437,9 +437,11 @@ fn config_keys() -> Vec<String> {
 
 /// Resolves a configuration (the paper's preset, then `values` as JSON texts) and returns it as JSON text.
 /// `preset_of`: the built-in task whose preset a wrapped or re-limited copy of it (`env`) takes; the values are
-/// resolved as for that task, then the run is named `env`.
+/// resolved as for that task, then the run is named `env`. `person`: the options of an `arld.WebExpert` as its spec
+/// (`.spec`): in real time a question's segment lasts its seconds of play unless `segment_len` is given
+/// ([`ConfigInput::real_time_segment`]).
 #[pyfunction]
-#[pyo3(signature = (env, method, net, seed, values, preset_of=None))]
+#[pyo3(signature = (env, method, net, seed, values, preset_of=None, person=None))]
 fn resolve_config(
     env: &str,
     method: &str,
@@ -447,8 +449,9 @@ fn resolve_config(
     seed: u64,
     values: Vec<(String, String)>,
     preset_of: Option<&str>,
+    person: Option<&str>,
 ) -> PyResult<String> {
-    let cfg = resolve(env, method, net, seed, &values, preset_of)
+    let cfg = resolve(env, method, net, seed, &values, preset_of, person)
         .map_err(|e| value_error(format!("{e:#}")))?;
     Ok(cfg.to_json())
 }
@@ -460,6 +463,7 @@ fn resolve(
     seed: u64,
     values: &[(String, String)],
     preset_of: Option<&str>,
+    person: Option<&str>,
 ) -> anyhow::Result<TrainConfig> {
     let mut input = ConfigInput::new(
         preset_of.unwrap_or(env),
@@ -470,6 +474,9 @@ fn resolve(
     for (key, json) in values {
         let value: serde_json::Value = serde_json::from_str(json)?;
         input.set(key, toml_value(key, value)?)?;
+    }
+    if let Some(steps) = person.and_then(|spec| input.real_time_segment(spec)) {
+        input.set("segment_len", steps as i64)?;
     }
     let mut cfg = input.resolve()?;
     if preset_of.is_some() {
@@ -1472,32 +1479,22 @@ fn start_run(py: Python<'_>, config: &str, request: RunRequest) -> PyResult<Run>
     // A person's page is built here, where Python can be asked about the environment (its frames, its keys),
     // and the run waits for the page to open before its thread starts.
     let boxed = env::box_spec(&cfg.env).is_ok();
-    let web_expert = match &request.expert {
+    let keep = {
+        let errors = errors.clone();
+        move |e| errors.keep(e)
+    };
+    let gym = request.env.as_ref().map(|e| e.bind(py));
+    let (web_discrete, web_box) = match &request.expert {
         Some(call) if boxed => {
-            if call.bind(py).cast::<web::PyWebExpert>().is_ok() {
-                return Err(value_error(format!(
-                    "a person in the browser (WebExpert) cannot answer in {} yet: its actions are in a box",
-                    cfg.env
-                )));
-            }
-            None
+            let web =
+                web::expert::<Vec<f32>>(call.bind(py), gym, &cfg.env, keep, interrupt.clone());
+            (None, web.map_err(|e| errors.raise(py, e, runtime_error))?)
         }
         Some(call) => {
-            let spec = env::spec(&cfg.env).map_err(|e| value_error(e.to_string()))?;
-            let keep = {
-                let errors = errors.clone();
-                move |e| errors.keep(e)
-            };
-            web::expert(
-                call.bind(py),
-                request.env.as_ref().map(|e| e.bind(py)),
-                spec,
-                keep,
-                interrupt.clone(),
-            )
-            .map_err(|e| errors.raise(py, e, runtime_error))?
+            let web = web::expert::<usize>(call.bind(py), gym, &cfg.env, keep, interrupt.clone());
+            (web.map_err(|e| errors.raise(py, e, runtime_error))?, None)
         }
-        None => None,
+        None => (None, None),
     };
     // One process per run directory, as `arld train`: the lock is taken here (a second run is refused before
     // anything starts, naming the holder) and held by the run's thread until it ends.
@@ -1522,9 +1519,9 @@ fn start_run(py: Python<'_>, config: &str, request: RunRequest) -> PyResult<Run>
             _ => return Ok(()),
         }
         if boxed {
-            train_in_thread::<BoxAgent>(inputs, &mut remote, None)
+            train_in_thread::<BoxAgent>(inputs, &mut remote, web_box)
         } else {
-            train_in_thread::<Agent>(inputs, &mut remote, web_expert)
+            train_in_thread::<Agent>(inputs, &mut remote, web_discrete)
         }
     };
     let thread = std::thread::Builder::new()

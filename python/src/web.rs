@@ -7,12 +7,14 @@
 //! The keys: the `keys=` mapping where given, else the environment's `get_keys_to_action()` where it has one
 //! (Gymnasium's `play` convention), else a number key per action. The labels: `labels=`, else
 //! `get_action_meanings()`, else the names of an `actions` enum of the environment (MiniGrid's `Actions`).
+//! Actions in a box ([`GymAction`] for `Vec<f32>`) are set with keys toward each bound, a slider or a pad's stick
+//! per dimension; `labels=` names the dimensions (else arld's names for a task it knows, e.g. Pendulum's torque).
 //! The URL is printed once the run has accepted the environment (a refused environment prints none).
 
 use arld::expert::Expert;
 use arld_web::frames::{FrameSource, ObservationTable, RenderedFrames, RgbImage};
 use arld_web::protocol::ActionKeys;
-use arld_web::{Page, WebExpert, WebOptions, WebServer};
+use arld_web::{Page, PageAction, WebExpert, WebOptions, WebServer};
 use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyString, PyTuple};
@@ -22,16 +24,20 @@ use std::sync::Mutex;
 /// Keys the page keeps for itself: Escape hands a question back.
 const RESERVED_KEYS: &[&str] = &["Escape"];
 
-/// `arld.WebExpert(listen="127.0.0.1:0", fps=None, timeout=None, keys=None, wait=True, labels=None)`: starts the
+/// `arld.WebExpert(listen="127.0.0.1:0", fps=None, timeout=None, keys=None, wait=True, labels=None,
+/// segment_s=None)`: starts the
 /// page's server (its URL is `.url`, printed when a run takes it). Pass it as `expert=` to `arld.Agent`; it serves
 /// one run. `fps`: real time at that many steps a second (default: turn-based, one step per key); `timeout`:
 /// seconds a question waits before it goes back to the agent; `keys`: `{"ArrowLeft": 0, "d": 1, ...}`
-/// (`KeyboardEvent.key` names; before the environment's `get_keys_to_action()`); `wait`: whether training starts
-/// only once the page is open; `labels`: what each action does, one string per action.
+/// (`KeyboardEvent.key` names; before the environment's `get_keys_to_action()`; discrete actions only); `wait`:
+/// whether training starts only once the page is open; `labels`: what each action does, one string per action
+/// (actions in a box: a name per dimension); `segment_s`: real time, the seconds of play a question hands the
+/// person (3 by default; the run's `segment_len` unless that is given).
 #[pyclass(name = "WebExpert", module = "arld._arld")]
 pub struct PyWebExpert {
     server: Mutex<Option<WebServer>>,
     url: String,
+    spec: String,
     keys: Option<BTreeMap<String, usize>>,
     labels: Option<Vec<String>>,
 }
@@ -39,7 +45,8 @@ pub struct PyWebExpert {
 #[pymethods]
 impl PyWebExpert {
     #[new]
-    #[pyo3(signature = (listen="127.0.0.1:0", fps=None, timeout=None, keys=None, wait=true, labels=None))]
+    #[pyo3(signature = (listen="127.0.0.1:0", fps=None, timeout=None, keys=None, wait=true, labels=None, segment_s=None))]
+    #[allow(clippy::too_many_arguments)]
     fn new(
         listen: &str,
         fps: Option<f64>,
@@ -47,9 +54,11 @@ impl PyWebExpert {
         keys: Option<BTreeMap<String, usize>>,
         wait: bool,
         labels: Option<Vec<String>>,
+        segment_s: Option<f64>,
     ) -> PyResult<Self> {
         let mut spec = format!("listen={listen},wait={}", if wait { "yes" } else { "no" });
         spec.extend(fps.map(|v| format!(",fps={v}")));
+        spec.extend(segment_s.map(|v| format!(",segment_s={v}")));
         spec.extend(timeout.map(|v| format!(",timeout={v}")));
         let options: WebOptions = spec
             .parse()
@@ -73,6 +82,7 @@ impl PyWebExpert {
         let server =
             WebServer::bind(&options).map_err(|e| PyRuntimeError::new_err(format!("{e:#}")))?;
         Ok(Self {
+            spec: options.to_spec(),
             url: server.url().to_string(),
             server: Mutex::new(Some(server)),
             keys,
@@ -86,21 +96,29 @@ impl PyWebExpert {
         self.url.clone()
     }
 
+    /// The options as an expert spec (`web:listen=...,fps=...`): the run's configuration reads the real-time
+    /// segment's length from it.
+    #[getter]
+    fn spec(&self) -> String {
+        self.spec.clone()
+    }
+
     fn __repr__(&self) -> String {
         format!("arld.WebExpert(url={:?})", self.url)
     }
 }
 
-/// The library's web expert for a run, when `obj` is an `arld.WebExpert` (`None` otherwise). `env` is the run's
-/// environment bridge (its Gymnasium environment as `.env`), or `None` for a built-in task; `keep` keeps a
-/// Python exception (a Ctrl-C) to raise when the run returns; `stop` is set when the run is asked to stop.
-pub fn expert(
+/// The library's web expert for a run, when `obj` is an `arld.WebExpert` (`None` otherwise), for actions of kind
+/// `A` (discrete, or in a box). `env` is the run's environment bridge (its Gymnasium environment as `.env`), or
+/// `None` for the built-in task `id`; `keep` keeps a Python exception (a Ctrl-C) to raise when the run returns;
+/// `stop` is set when the run is asked to stop.
+pub fn expert<A: GymAction>(
     obj: &Bound<'_, PyAny>,
     env: Option<&Bound<'_, PyAny>>,
-    spec: &arld::env::EnvSpec,
+    id: &str,
     keep: impl Fn(PyErr) -> String + Send + Sync + Clone + 'static,
     stop: std::sync::Arc<std::sync::atomic::AtomicBool>,
-) -> anyhow::Result<Option<Box<dyn Expert>>> {
+) -> anyhow::Result<Option<Box<dyn Expert<A>>>> {
     let Ok(web) = obj.cast::<PyWebExpert>() else {
         return Ok(None);
     };
@@ -115,22 +133,18 @@ pub fn expert(
                 "this arld.WebExpert served a run already: create a new one for each run"
             )
         })?;
+    let cannot_show =
+        |e: &dyn std::fmt::Display| anyhow::anyhow!("arld.WebExpert cannot show {id}: {e}");
     let page = match env {
-        None => Page::builtin(spec.id)?,
+        None => A::builtin_page(id)?,
         Some(bridge) => {
             let gym = bridge.getattr("env").map_err(|e| anyhow::anyhow!("{e}"))?;
-            gym_page(
-                &gym,
-                spec,
-                web.keys.as_ref(),
-                web.labels.as_deref(),
-                keep.clone(),
-            )
-            .map_err(|e| anyhow::anyhow!("arld.WebExpert cannot show {}: {e}", spec.id))?
+            A::gym_page(&gym, id, &web, Box::new(keep.clone())).map_err(|e| cannot_show(&e))?
         }
     };
-    server.announce()?;
-    let mut expert = WebExpert::new(server, page);
+    let mut expert =
+        WebExpert::for_page(server, page).map_err(|e| cannot_show(&format!("{e:#}")))?;
+    expert.announce()?;
     // A stop in Python (Ctrl-C, or SIGTERM during `learn`): the main thread, which alone runs Python's signal
     // handlers, sets `stop` while the run trains in its own thread; the wait for the page, on the main thread,
     // asks Python itself. The KeyboardInterrupt is raised once the run has paused with the question open.
@@ -148,32 +162,85 @@ pub fn expert(
     Ok(Some(Box::new(expert)))
 }
 
-/// The page of a Gymnasium environment: its frames or its observation, and its keys.
-fn gym_page(
-    gym: &Bound<'_, PyAny>,
-    spec: &arld::env::EnvSpec,
-    keys: Option<&BTreeMap<String, usize>>,
-    labels: Option<&[String]>,
-    keep: impl Fn(PyErr) -> String + Send + Sync + 'static,
-) -> PyResult<Page> {
-    let (actions, noop) = gym_actions(gym, spec.n_actions, keys, labels)?;
+/// A Gymnasium environment, as Python holds it.
+type Gym<'py> = Bound<'py, PyAny>;
+/// Keeps a Python exception (to raise when the run returns) and gives its text for the Rust error.
+type Keep = Box<dyn Fn(PyErr) -> String + Send + Sync>;
+
+/// A kind of action a person gives on the page of a Python program's run: how the page of its environment is
+/// made.
+pub trait GymAction: PageAction {
+    /// The page of the built-in task `id`.
+    fn builtin_page(id: &str) -> anyhow::Result<Page<Self>>;
+    /// The page of the Gymnasium environment `gym`, registered as `id`: its frames or its observation, and how
+    /// the person acts (`keys=` and `labels=` as given to `web`).
+    fn gym_page(gym: &Gym<'_>, id: &str, web: &PyWebExpert, keep: Keep) -> PyResult<Page<Self>>;
+}
+
+impl GymAction for usize {
+    fn builtin_page(id: &str) -> anyhow::Result<Page> {
+        Page::builtin(id)
+    }
+
+    fn gym_page(gym: &Gym<'_>, id: &str, web: &PyWebExpert, keep: Keep) -> PyResult<Page> {
+        let spec = arld::env::spec(id).map_err(|e| PyValueError::new_err(e.to_string()))?;
+        let (keys, labels) = (web.keys.as_ref(), web.labels.as_deref());
+        let (actions, noop) = gym_actions(gym, spec.n_actions, keys, labels)?;
+        let frames: Box<dyn FrameSource> = match rendered(gym, keep)? {
+            Some(frames) => Box::new(frames),
+            None => Box::new(ObservationTable::new(spec.obs_dim, None)),
+        };
+        Ok(Page {
+            env: spec.id.to_string(),
+            actions,
+            noop,
+            solve_threshold: spec.solve_threshold,
+            frames,
+            dim_names: None,
+        })
+    }
+}
+
+/// Actions in a box: the task's bounds give the controls (keys toward each bound, a slider and a pad's stick per
+/// dimension); `labels=` names the dimensions. `keys=` maps keys to discrete actions and is refused here.
+impl GymAction for Vec<f32> {
+    fn builtin_page(id: &str) -> anyhow::Result<Page<Vec<f32>>> {
+        Page::builtin_box(id)
+    }
+
+    fn gym_page(
+        gym: &Gym<'_>,
+        id: &str,
+        web: &PyWebExpert,
+        keep: Keep,
+    ) -> PyResult<Page<Vec<f32>>> {
+        if web.keys.is_some() {
+            return Err(PyValueError::new_err(
+                "keys= maps keys to discrete actions, but its actions are in a box: the arrows and WASD push \
+                 each dimension toward its bounds (name the dimensions with labels=)",
+            ));
+        }
+        let mut page =
+            Page::builtin_box(id).map_err(|e| PyValueError::new_err(format!("{e:#}")))?;
+        if let Some(frames) = rendered(gym, keep)? {
+            page.frames = Box::new(frames);
+        }
+        page.dim_names = web.labels.clone();
+        Ok(page)
+    }
+}
+
+/// The environment's own frames when it was made with `render_mode="rgb_array"`, else `None`.
+fn rendered(gym: &Gym<'_>, keep: Keep) -> PyResult<Option<RenderedFrames>> {
     let render_mode: Option<String> = gym.getattr("render_mode")?.extract().unwrap_or(None);
-    let frames: Box<dyn FrameSource> = if render_mode.as_deref() == Some("rgb_array") {
-        let gym: Py<PyAny> = gym.clone().unbind();
-        Box::new(RenderedFrames::new(Box::new(move || {
-            Python::attach(|py| rgb_frame(gym.bind(py)))
-                .map_err(|e| anyhow::anyhow!("render() failed: {}", keep(e)))
-        })))
-    } else {
-        Box::new(ObservationTable::new(spec.obs_dim, None))
-    };
-    Ok(Page {
-        env: spec.id.to_string(),
-        actions,
-        noop,
-        solve_threshold: spec.solve_threshold,
-        frames,
-    })
+    if render_mode.as_deref() != Some("rgb_array") {
+        return Ok(None);
+    }
+    let gym: Py<PyAny> = gym.clone().unbind();
+    Ok(Some(RenderedFrames::new(Box::new(move || {
+        Python::attach(|py| rgb_frame(gym.bind(py)))
+            .map_err(|e| anyhow::anyhow!("render() failed: {}", keep(e)))
+    }))))
 }
 
 /// The environment's current frame from `render()`: a height x width x 3 (or 4: the alpha is dropped) array of

@@ -401,3 +401,87 @@ def start_run_with(script, *argv):
             return train, line[line.index("http://"):].strip()
     train.kill()
     raise AssertionError(f"the program printed no URL: {train.stderr.read()}")
+
+
+# Gymnasium's own Pendulum-v1 (actions in a box: one torque in [-2, 2]), rendered, in real time at 20 steps a
+# second with a second of play per question; labels= names the torque's dimension. After learn the program waits
+# for the file argv[2] (the page shows where the run stands meanwhile).
+PENDULUM = r"""
+import json, os, sys, time
+import gymnasium as gym
+import arld
+
+env = gym.make("Pendulum-v1", render_mode="rgb_array")
+web = arld.WebExpert(fps=20, segment_s=1.0, labels=["twist"])
+model = arld.Agent("adqn", env, expert=web, seed=0, budget=100, eval_period=1500, eval_episodes=2)
+model.learn(total_timesteps=3000, log_dir=sys.argv[1])
+print(json.dumps({"summary": model.summary, "learned": model.num_timesteps,
+                  "segment_len": model.config["segment_len"]}), flush=True)
+while not os.path.exists(sys.argv[2]):
+    time.sleep(0.05)
+"""
+
+
+def test_a_person_answers_a_gymnasium_box_task_with_a_pad_a_key_and_the_slider(tmp_path):
+    """tests/e2e/continuous.mjs answers the page of a Python program's Pendulum: a pad's stick (scripted through the
+    Gamepad API), the stick after the mapping is changed on the page, a held key and the slider, then it hands back.
+    Every logged step of each segment must be the torque the control set, computed here from the control's position
+    and the environment's own bounds; `learn` returns and the page shows the end screen."""
+    import numpy as np
+
+    missing = missing_prerequisites()
+    assert not missing, f"missing: {', '.join(missing)}; `scripts/test --setup` installs them"
+    # The screenshots (the end screen among them) where the Rust browser tests put theirs.
+    run, shots = tmp_path / "run", REPO / "target" / "e2e-screenshots" / "python-box"
+    go = tmp_path / "go"
+    train, url = start_run_with(PENDULUM, run, go)
+    try:
+        out = subprocess.run(["node", "continuous.mjs", "--url", url, "--shots", str(shots), "--env", "Pendulum-v1"],
+                             cwd=E2E, capture_output=True, text=True, timeout=300)
+        go.touch()
+        assert out.returncode == 0, f"the person failed: {out.stderr}{out.stdout}"
+        report = json.loads([l for l in out.stdout.splitlines() if l.startswith("{")][-1])
+        stdout, err = train.communicate(timeout=120)
+    finally:
+        if train.poll() is None:
+            train.kill()
+    assert train.returncode == 0, f"the program failed: {err}"
+    import gymnasium as gym
+
+    space = gym.make("Pendulum-v1").action_space
+    low, high = float(space.low[0]), float(space.high[0])
+    half, centre = (high - low) / 2, (high + low) / 2
+    hello = report["hello"]
+    assert hello["env"].startswith("Pendulum-v1") and hello["box"]["names"] == ["twist"], hello
+    assert (hello["box"]["low"], hello["box"]["high"]) == ([low], [high])
+    # The torque each control gave: the stick's x times the half-width, the held left arrow the lower bound, the
+    # slider its value.
+    expected = [centre + 0.5 * half, centre - 0.25 * half, low, 0.8]
+    lines = [json.loads(l) for l in (run / "answers.jsonl").read_text().splitlines()]
+    questions = report["questions"]
+    assert len(questions) >= 5, report
+    # A second of play at 20 steps a second: 20 steps a question (fewer only where the episode's time limit cut
+    # it), each lasting about its steps' time on the page.
+    result = json.loads(stdout.strip().splitlines()[-1])
+    assert result["segment_len"] == 20
+    lengths = []
+    for q, want in zip(questions, expected):
+        first = next(l for l in lines if np.array_equal(np.float32(l["obs"]), np.float32(q["obs"])))
+        segment = [l for l in lines if l["question_step"] == first["question_step"]]
+        lengths.append(len(segment))
+        assert 0.8 * (len(segment) - 1) / 20 <= q["segmentS"] <= 2 * len(segment) / 20, (q, len(segment))
+        assert segment and all(len(l["action"]) == 1 for l in segment), segment
+        assert all(abs(l["action"][0] - want) < 1e-6 for l in segment), (q["control"], want, segment)
+        assert all(l["expert"] == "web" and l["started_by"] == "rule" for l in segment)
+    # learn returned: the page shows the end screen of the run the program has back; the budget spent is the
+    # logged steps.
+    assert max(lengths) == 20 and all(n <= 20 for n in lengths), lengths
+    summary = json.loads((run / "summary.json").read_text())
+    assert result["learned"] == 3000 and summary["train_steps"] == 3000
+    assert summary["demos_queried"] == len(lines) <= 100
+    end = report["endScreen"]
+    solved = f"Solved at step {summary['steps_to_solve']} of 3000" if summary["solved"] else None
+    assert end["title"] == (solved or "Not solved in 3000 steps"), end
+    assert end["badge"] == "the program has the run" and end["handed"] is not None, end
+    assert end["outcome"]["answered"] == 4 and end["rows"]["Questions answered"].startswith("4"), end
+    assert (shots / "end-screen.png").is_file()

@@ -59,6 +59,10 @@ pub struct TrainArgs {
     /// no-op action when none is held) [default: turn-based, one step per key].
     #[arg(long, value_name = "N")]
     web_fps: Option<String>,
+    /// Web expert in real time: each question hands the person S seconds of play (ceil(S x N) steps at
+    /// --web-fps N), unless `segment_len` is set [default: 3].
+    #[arg(long, value_name = "S")]
+    web_segment_s: Option<String>,
     /// Web expert: a question nobody answers within S seconds goes back to the agent, logged as unanswered
     /// and not charged to the budget [default: the run waits].
     #[arg(long, value_name = "S")]
@@ -156,13 +160,16 @@ pub fn resolve(args: &TrainArgs) -> anyhow::Result<TrainConfig> {
     let web = [
         ("listen", &args.listen),
         ("fps", &args.web_fps),
+        ("segment_s", &args.web_segment_s),
         ("timeout", &args.web_timeout),
         ("wait", &no),
     ];
     if web.iter().any(|(_, v)| v.is_some()) {
         let expert = input.resolve()?.expert;
         let Some(rest) = expert.strip_prefix("web") else {
-            anyhow::bail!("--listen, --web-fps, --web-timeout and --web-no-wait need --expert web");
+            anyhow::bail!(
+                "--listen, --web-fps, --web-segment-s, --web-timeout and --web-no-wait need --expert web"
+            );
         };
         let mut options = rest.trim_start_matches(':').to_string();
         for (key, value) in web {

@@ -9,10 +9,14 @@
 //   outside the box; each must come back as an error frame), then Esc hands the question back.
 // Headless Chromium has no gamepad: an init script (page.addInitScript) replaces navigator.getGamepads with one
 // standard pad whose axes and buttons the script sets (window.__pad), as a real pad's state would read.
-// Usage: node continuous.mjs --url URL --shots DIR
+// Usage: node continuous.mjs --url URL --shots DIR [--env ID]
+// --env: the environment's id begins with ID (a Python program's Gymnasium Pendulum is registered as
+// `Pendulum-v1[...]`); without it the id is Pendulum-v1. The person stays until the run is over, or until a Python
+// program has the run back (`learn` returned: the page shows the same end screen).
 // Screenshots: gamepad-mapping.png (the pad's mapping table for the box), continuous-answer.png (the keyboard's
-// segment in progress). Prints one JSON line:
-//   {"questions": [{"id", "obs", "control", "expected", "pad"?}...], "errors": [...], "hello": {...}, "endScreen": {...}}.
+// segment in progress), end-screen.png (the end screen). Prints one JSON line:
+//   {"questions": [{"id", "obs", "control", "expected", "segmentS", "pad"?}...], "errors": [...], "hello": {...},
+//    "endScreen": {...}}; segmentS: seconds from the segment's first running step (after the countdown) to its end.
 import { chromium } from "playwright-core";
 import fs from "node:fs";
 import path from "node:path";
@@ -51,26 +55,29 @@ page.on("pageerror", (e) => pageErrors.push(String(e)));
 await page.goto(args.url);
 await page.waitForFunction(() => window.arld && arld.hello && arld.controller === arld.hello.client, null, { timeout: 30000 });
 const hello = await page.evaluate(() => arld.hello);
-if (!hello.box || hello.env !== "Pendulum-v1") fail(`not Pendulum-v1's box: ${JSON.stringify(hello)}`);
+const envOk = args.env ? hello.env.startsWith(args.env) : hello.env === "Pendulum-v1";
+if (!hello.box || !envOk) fail(`not Pendulum-v1's box: ${JSON.stringify(hello)}`);
 const setPad = (axes) => page.evaluate((a) => { window.__pad.axes = a; }, axes);
 
 const questions = [], errors = [];
 let lastId = 0, current = null;
 for (;;) {
   await page.waitForTimeout(5);
-  const s = await page.evaluate(() => ({ prompt: arld.prompt, ended: arld.ended, replaying: arld.replaying, status: arld.status }));
-  if (s.ended) break;
+  const s = await page.evaluate(() => ({ prompt: arld.prompt, ended: arld.ended, handed: arld.handed, replaying: arld.replaying, status: arld.status }));
+  if (s.ended || s.handed) break;
   if (s.replaying) { await page.keyboard.press("Shift"); continue; }
   const p = s.prompt;
   if (!p) {
-    // Between segments: the controls go back to rest.
+    // Between segments: the controls go back to rest; the segment's play lasted from its first running step.
     if (current) {
+      if (current.liveAt) current.segmentS = (Date.now() - current.liveAt) / 1000;
       if (current.control === "keys") await page.keyboard.up("ArrowLeft");
       if (current.control.startsWith("pad")) await setPad([0, 0, 0, 0]);
       current = null;
     }
     continue;
   }
+  if (current && !p.waits && !p.starts_in && !current.liveAt) current.liveAt = Date.now();
   if (current && current.control === "keys" && !p.waits && !p.starts_in && !current.shot) {
     // The keyboard's segment in progress: the torque ramps toward its bound.
     await page.waitForTimeout(150);
@@ -127,7 +134,15 @@ for (;;) {
   questions.push(q);
   current = q;
 }
-const endScreen = await page.evaluate(() => ({ title: document.getElementById("end-title").textContent }));
+await page.waitForFunction(() => !document.getElementById("end").hidden, null, { timeout: 5000 })
+  .catch(() => fail("no end screen"));
+const endScreen = await page.evaluate(() => ({
+  title: document.getElementById("end-title").textContent,
+  rows: Object.fromEntries([...document.querySelectorAll("#end-table tr")].map((r) => [r.cells[0].textContent, r.cells[1].textContent])),
+  badge: document.getElementById("role").textContent,
+  handed: arld.handed, outcome: arld.outcome,
+}));
+await page.screenshot({ path: path.join(shots, "end-screen.png"), fullPage: true });
 if (pageErrors.length) fail(`page errors: ${pageErrors.join("; ")}`);
 await browser.close();
 fs.rmSync(userDataDir, { recursive: true, force: true });

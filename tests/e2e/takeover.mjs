@@ -3,8 +3,14 @@
 // and once a question was answered and the agent acts again, presses T ("Take over"), answers the takeover's
 // opening prompt with a fresh key, holds the controller's keys for a while, saves a screenshot of the takeover in
 // progress (takeover.png) and hands back with Esc; then answers the agent's questions until the run ends. Usage:
-//   node takeover.mjs --url URL --shots DIR [--hold N]
+//   node takeover.mjs --url URL --shots DIR [--hold N] [--stop N --pid PID] [--resumed]
 // (--hold N: hand back after the person's N-th step of the takeover; 15 by default.)
+// --stop N --pid PID: instead of handing back, once the person has had N steps of the takeover, send SIGTERM to
+// PID (the run) while they hold control, and wait for the page to show the stop (takeover-stopped.png); the report
+// then has "stopped" (the page's status and panel just before) and no end screen.
+// --resumed: the run was resumed from such a stop: the takeover must go on as the page opens (before any question
+// of the agent): the report's takeover.resumed says what the page showed then (takeover-resumed.png), and the
+// person holds control for --hold steps more, hands back and answers the agent's questions to the end.
 // Prints one JSON line: {"takeover": {...what the page showed of it...}, "questions": N, "endScreen": {...}}.
 import { chromium } from "playwright-core";
 import fs from "node:fs";
@@ -60,7 +66,8 @@ const panel = () => page.evaluate(() => ({
   takeovers: document.getElementById("s-takeovers").textContent,
 }));
 
-let lastId = 0, questions = 0, takeover = null, phase = "before";
+let lastId = 0, questions = 0, takeover = null, phase = args.resumed ? "resumed" : "before";
+let stopped = null;
 let running = 0;
 for (;;) {
   await page.waitForTimeout(5);
@@ -78,6 +85,19 @@ for (;;) {
       phase = "asked";
     }
     continue;
+  }
+  if (phase === "resumed") {
+    if (!p.takeover) fail(`the resumed run asked a question before its takeover went on: ${JSON.stringify(p)}`);
+    // The takeover the stop interrupted goes on: where the run stands, and who has control.
+    takeover = { openedAtStep: s.status.step, resumed: { prompt: p, status: s.status, panel: await panel() } };
+    await page.screenshot({ path: path.join(shots, "takeover-resumed.png") });
+    phase = "running";
+    if (p.waits && p.agent_action !== null) {
+      lastId = p.id;
+      const first = cartpole(p.obs);
+      if (first === hello.noop) await page.keyboard.press(keyOf(first)); else await holdKey(first);
+      continue;
+    }
   }
   if (p.takeover) {
     if (p.waits && p.agent_action !== null && p.id > lastId) {
@@ -102,6 +122,20 @@ for (;;) {
       if (running >= 3 && !takeover.inProgress) {
         takeover.inProgress = await panel();
         await page.screenshot({ path: path.join(shots, "takeover.png") });
+      }
+      if (args.stop && running >= Number(args.stop)) {
+        // The person holds control; the run is stopped (SIGTERM) under them.
+        stopped = { status: s.status, panel: await panel(), prompt: p };
+        process.kill(Number(args.pid), "SIGTERM");
+        await page.waitForFunction(() => arld.ended, null, { timeout: 20000 })
+          .catch(() => fail("the page did not show the stop"));
+        await holdKey(null);
+        stopped.after = await page.evaluate(() => ({
+          ended: arld.ended, badge: document.getElementById("role").textContent,
+          text: document.getElementById("prompt-text").textContent,
+        }));
+        await page.screenshot({ path: path.join(shots, "takeover-stopped.png") });
+        break;
       }
       if (running >= holdSteps) {
         await holdKey(null);
@@ -140,6 +174,13 @@ for (;;) {
   await holdKey(a === hello.noop ? null : a);
 }
 await holdKey(null);
+if (stopped) {
+  await browser.close();
+  fs.rmSync(userDataDir, { recursive: true, force: true });
+  if (pageErrors.length) fail(`the page threw: ${pageErrors.join("; ")}`);
+  console.log(JSON.stringify({ takeover, questions, running, stopped }));
+  process.exit(0);
+}
 const endScreen = await page.evaluate(() => ({
   shown: !document.getElementById("end").hidden,
   rows: Object.fromEntries([...document.querySelectorAll("#end-table tr")].map((r) => [r.cells[0].textContent, r.cells[1].textContent])),
@@ -149,5 +190,6 @@ await page.screenshot({ path: path.join(shots, "takeover-end.png") });
 await browser.close();
 fs.rmSync(userDataDir, { recursive: true, force: true });
 if (pageErrors.length) fail(`the page threw: ${pageErrors.join("; ")}`);
-if (!takeover || !takeover.inProgress) fail(`the person never had control long enough: ${JSON.stringify({ takeover, questions })}`);
+// Resumed, the page opened on the takeover in progress (its episode may end before many more steps).
+if (!takeover || !(takeover.inProgress || takeover.resumed)) fail(`the person never had control long enough: ${JSON.stringify({ takeover, questions })}`);
 console.log(JSON.stringify({ takeover, questions, running, endScreen }));

@@ -13,7 +13,8 @@
 //! seconds spent, an estimate of the time still needed at their pace). When the agent asks, the run waits for
 //! the person, who answers with the keyboard or the buttons for the whole segment, either turn-based (one step
 //! per key) or in real time (`fps`: after a fresh key and a countdown, the environment advances at that rate
-//! with the held key, or the no-op action when none is held). Before a question the page replays the agent's
+//! with the held key, or the no-op action when none is held; a question's segment lasts `segment_s` seconds of play,
+//! 3 by default: [`WebOptions::segment_steps`]). Before a question the page replays the agent's
 //! own steps since the person's last one, and in turn-based mode the person can undo their last key: both
 //! rebuild the environment from the query's episode ([`arld_core::env::replay_episode`]) where the frame source
 //! can show such a copy. Undo works one key ahead: the page shows the state after a key on a copy, and the run
@@ -210,8 +211,9 @@ impl Drop for WebServer {
 /// a box (a list of numbers, from keys, sliders and a pad's sticks), side by side. How an action travels and is
 /// checked is the core's [`WireAction`], as for an expert process.
 pub trait PageAction: WireAction {
-    /// How the page controls the task `env` (`n_actions` discrete actions): its box, or `None` for buttons.
-    fn controls(env: &str) -> Result<Option<BoxControls>>;
+    /// How the page controls the task `env`: its box (its dimensions named `names` where given), or `None`
+    /// for buttons.
+    fn controls(env: &str, names: Option<&[String]>) -> Result<Option<BoxControls>>;
     /// The check of an action the page sends.
     fn checker(env: &str, n_actions: usize) -> Result<ActionCheck>;
     /// A fresh copy of the built-in environment `env` (to replay the agent's steps, or show a key's result),
@@ -220,7 +222,7 @@ pub trait PageAction: WireAction {
 }
 
 impl PageAction for usize {
-    fn controls(_: &str) -> Result<Option<BoxControls>> {
+    fn controls(_: &str, _: Option<&[String]>) -> Result<Option<BoxControls>> {
         Ok(None)
     }
     fn checker(_: &str, n_actions: usize) -> Result<ActionCheck> {
@@ -232,8 +234,12 @@ impl PageAction for usize {
 }
 
 impl PageAction for Vec<f32> {
-    fn controls(env: &str) -> Result<Option<BoxControls>> {
-        Ok(Some(BoxControls::of(arld_core::env::box_spec(env)?)))
+    fn controls(env: &str, names: Option<&[String]>) -> Result<Option<BoxControls>> {
+        let controls = BoxControls::of(arld_core::env::box_spec(env)?);
+        Ok(Some(match names {
+            Some(names) => controls.named(names)?,
+            None => controls,
+        }))
     }
     fn checker(env: &str, _: usize) -> Result<ActionCheck> {
         Ok(protocol::box_check(arld_core::env::box_spec(env)?))
@@ -252,6 +258,9 @@ pub struct Page<A: PageAction = usize> {
     pub noop: A,
     pub solve_threshold: f64,
     pub frames: Box<dyn FrameSource<A>>,
+    /// Actions in a box: a name for each dimension (`None`: arld's names where it knows the task, else
+    /// `action[d]`).
+    pub dim_names: Option<Vec<String>>,
 }
 
 impl Page<Vec<f32>> {
@@ -274,6 +283,7 @@ impl Page<Vec<f32>> {
                 spec.obs_dim,
                 protocol::box_obs_labels(env_id),
             )),
+            dim_names: None,
         })
     }
 }
@@ -290,6 +300,7 @@ impl Page {
             noop,
             solve_threshold: spec.solve_threshold,
             frames: Box::new(frames::GeometryFrames),
+            dim_names: None,
         })
     }
 }
@@ -393,7 +404,7 @@ impl<A: PageAction> WebExpert<A> {
         let check = A::checker(&page.env, page.actions.len())?;
         let hello = Hello {
             undo,
-            controls: A::controls(&page.env)?,
+            controls: A::controls(&page.env, page.dim_names.as_deref())?,
             noop: serde_json::to_value(&page.noop)?,
             env: page.env,
             actions: page.actions,
@@ -438,6 +449,12 @@ impl<A: PageAction> WebExpert<A> {
     /// The page's URL with its token.
     pub fn url(&self) -> &str {
         self.server.url()
+    }
+
+    /// Prints the URL to open on standard output ([`WebServer::announce`]): a Python program's run, once its
+    /// page is made.
+    pub fn announce(&self) -> Result<()> {
+        self.server.announce()
     }
 
     fn stopped(&mut self, what: &str) -> Result<()> {

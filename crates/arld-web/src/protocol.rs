@@ -92,9 +92,11 @@ pub struct BoxControls {
 }
 
 impl BoxControls {
-    /// The controls of the box task `spec`, its dimensions named where arld knows what they do.
+    /// The controls of the box task `spec`, its dimensions named where arld knows what they do (also under a
+    /// registered id that adds facts to the task's own: `Pendulum-v1[max_episode_steps=...]`).
     pub fn of(spec: &arld_core::env::BoxSpec) -> Self {
-        let known: &[&str] = match spec.id {
+        let task = base_id(spec.id);
+        let known: &[&str] = match task {
             "Pendulum-v1" => &["torque"],
             "MountainCarContinuous-v0" => &["force"],
             "LunarLanderContinuous-v3" => &["main engine", "lateral"],
@@ -109,7 +111,7 @@ impl BoxControls {
             })
             .collect();
         // The lander's main engine fires upward (up and down arrows), its lateral engines sideways.
-        let pairs: &[[&[&str]; 2]] = match spec.id {
+        let pairs: &[[&[&str]; 2]] = match task {
             "LunarLanderContinuous-v3" => &[UP_DOWN, LEFT_RIGHT],
             _ => &[LEFT_RIGHT, UP_DOWN, [&["j"], &["l"]], [&["k"], &["i"]]],
         };
@@ -127,6 +129,29 @@ impl BoxControls {
             keys,
         }
     }
+
+    /// The same controls with the dimensions named `names` (one non-empty name per dimension).
+    pub fn named(self, names: &[String]) -> anyhow::Result<Self> {
+        anyhow::ensure!(
+            names.len() == self.names.len(),
+            "labels= names {} dimensions, but the environment's actions have {}",
+            names.len(),
+            self.names.len()
+        );
+        if let Some(empty) = names.iter().find(|n| n.trim().is_empty()) {
+            anyhow::bail!("labels: {empty:?} is empty; give each dimension a word or two");
+        }
+        Ok(Self {
+            names: names.to_vec(),
+            ..self
+        })
+    }
+}
+
+/// The task's own id of a registered id that adds facts in brackets (`Pendulum-v1[max_episode_steps=200]`: a
+/// Python program's Gymnasium environment under arld's name for it).
+fn base_id(id: &str) -> &str {
+    id.split_once('[').map_or(id, |(base, _)| base)
 }
 
 const LEFT_RIGHT: [&[&str]; 2] = [&["ArrowLeft", "a"], &["ArrowRight", "d"]];
@@ -134,7 +159,7 @@ const UP_DOWN: [&[&str]; 2] = [&["ArrowDown", "s"], &["ArrowUp", "w"]];
 
 /// The observation's labels of a built-in box task (for its table), where arld knows them.
 pub fn box_obs_labels(env_id: &str) -> Option<Vec<String>> {
-    let labels: &[&str] = match env_id {
+    let labels: &[&str] = match base_id(env_id) {
         "Pendulum-v1" => &["cos θ", "sin θ", "angular velocity"],
         "MountainCarContinuous-v0" => &["position", "velocity"],
         "LunarLanderContinuous-v3" => &[
@@ -464,6 +489,35 @@ mod tests {
             (c.low.as_slice(), c.high.as_slice()),
             (spec.action_low, spec.action_high)
         );
+    }
+
+    /// A Python program's Gymnasium Pendulum is registered under an id that adds its own facts: its torque and
+    /// observation keep their names; `labels=` renames the dimensions, one name each.
+    #[test]
+    fn a_registered_copy_of_a_known_box_task_keeps_its_names_and_labels_rename_them() {
+        let id = "Pendulum-v1[max_episode_steps=200,reward_threshold=None,protocol-test]";
+        let spec = arld_core::env::register_box(id, 3, &[-2.0], &[2.0], 200, None).unwrap();
+        let c = BoxControls::of(spec);
+        assert_eq!(c.names, ["torque"]);
+        assert_eq!(c.keys[0][0], ["ArrowLeft", "a"]);
+        assert_eq!(box_obs_labels(id).unwrap()[2], "angular velocity");
+        let renamed = c.clone().named(&["twist".to_string()]).unwrap();
+        assert_eq!(
+            (renamed.names.as_slice(), &renamed.low),
+            (&["twist".to_string()][..], &c.low)
+        );
+        let two = ["a".to_string(), "b".to_string()];
+        let err = c.clone().named(&two).unwrap_err().to_string();
+        assert!(
+            err.contains("names 2 dimensions") && err.contains("have 1"),
+            "{err}"
+        );
+        let err = c.named(&[" ".to_string()]).unwrap_err().to_string();
+        assert!(err.contains("is empty"), "{err}");
+        // Another task's name with the same brackets is not taken for Pendulum's.
+        let other = "Swing-v0[max_episode_steps=200,protocol-test]";
+        let spec = arld_core::env::register_box(other, 3, &[-2.0], &[2.0], 200, None).unwrap();
+        assert_eq!(BoxControls::of(spec).names, ["action[0]"]);
     }
 
     #[test]

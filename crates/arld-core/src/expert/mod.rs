@@ -376,6 +376,17 @@ impl ExpertSpec {
             _ => true,
         }
     }
+
+    /// The steps of a question's segment this expert's person takes in real time ([`WebOptions::segment_steps`]:
+    /// seconds of play at the page's rate); `None` for every other expert (a segment is `segment_len` steps).
+    ///
+    /// [`WebOptions::segment_steps`]: web_options::WebOptions::segment_steps
+    pub fn segment_steps(&self) -> Option<usize> {
+        match self {
+            Self::Web(options) => options.segment_steps(),
+            _ => None,
+        }
+    }
 }
 
 /// Starts the web expert with its options for the environment `env_id` (`arld_web::start`): the crate above this

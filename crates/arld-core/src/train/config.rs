@@ -285,7 +285,8 @@ pub struct TrainConfig {
     /// adaptive for ADQN and ADQNP), whose parameters default to `t_query` and `n_r` \[OURS: empty\].
     #[serde(default)]
     pub query_rule: String,
-    /// Expert steps per query \[P-inf: 5\].
+    /// Expert steps per query \[P-inf: 5\]; when not given and the expert is a person in real time
+    /// (`web:fps=N`), the steps of its `segment_s` seconds of play (3 s by default).
     pub segment_len: usize,
     /// Use the exact factorised-noise variance instead of the paper's formula \[OURS: false\].
     pub exact_factorised_var: bool,
@@ -611,8 +612,28 @@ impl ConfigInput {
                 )
             })?;
         }
+        if let Some(steps) = self.real_time_segment(&cfg.expert) {
+            cfg.segment_len = steps;
+        }
         cfg.validate()?;
         Ok(cfg)
+    }
+
+    /// A person in real time answers for seconds of play: the steps of a question's segment when `expert` (a
+    /// spec) is the web expert in real time ([`ExpertSpec::segment_steps`]: its `segment_s` at its `fps`), the
+    /// method asks during training and `segment_len` is not given; `None` otherwise (an unreadable spec is
+    /// refused by `validate`). [`ConfigInput::resolve`] applies it to the configuration's own expert, a Python
+    /// program to its `arld.WebExpert`'s options.
+    ///
+    /// [`ExpertSpec::segment_steps`]: crate::expert::ExpertSpec::segment_steps
+    pub fn real_time_segment(&self, expert: &str) -> Option<usize> {
+        if !self.method.queries() || self.given.iter().any(|(key, ..)| key == "segment_len") {
+            return None;
+        }
+        expert
+            .parse::<crate::expert::ExpertSpec>()
+            .ok()?
+            .segment_steps()
     }
 }
 
@@ -1197,6 +1218,37 @@ mod tests {
             input.apply_override(s)?;
         }
         input.resolve()
+    }
+
+    /// A real-time person's question lasts seconds of play: `segment_len` follows the web expert's `segment_s`
+    /// (3 s by default) at its `fps` unless it is given; turn-based and other experts keep the preset's 5 steps;
+    /// the config.toml written and read back gives the same segment.
+    #[test]
+    fn a_real_time_web_expert_sets_the_segment_in_seconds_unless_segment_len_is_given() {
+        let len = |sets: &[&str]| {
+            resolve("CartPole-v0", Method::Adqn, NetKind::Bootstrap, sets)
+                .unwrap()
+                .segment_len
+        };
+        assert_eq!(len(&[]), 5);
+        assert_eq!(len(&["expert=\"web\""]), 5);
+        assert_eq!(len(&["expert=\"web:fps=20\""]), 60);
+        assert_eq!(len(&["expert=\"web:fps=40,segment_s=0.5\""]), 20);
+        assert_eq!(len(&["expert=\"web:fps=20\"", "segment_len=7"]), 7);
+        // Given at the preset's own value, it is given all the same.
+        assert_eq!(len(&["segment_len=5", "expert=\"web:fps=20\""]), 5);
+        // A method that never asks has no segment to set (and refuses `segment_len` given).
+        let sets = ["expert=\"web:fps=20\"", "demo_file=\"d.csv\""];
+        let dqfd = resolve("CartPole-v0", Method::Dqfd, NetKind::Plain, &sets).unwrap();
+        assert_eq!(dqfd.segment_len, 5);
+        let sets = ["expert=\"web:fps=20,segment_s=2\""];
+        let cfg = resolve("Pendulum-v1", Method::Adqn, NetKind::Bootstrap, &sets).unwrap();
+        assert_eq!(cfg.segment_len, 40);
+        let mut again = ConfigInput::new("Pendulum-v1", Method::Adqn, NetKind::Bootstrap, 0);
+        again
+            .apply_text(&cfg.to_toml(), Path::new("config.toml"))
+            .unwrap();
+        assert_eq!(again.resolve().unwrap(), cfg);
     }
 
     fn error(env: &str, method: Method, net: NetKind, sets: &[&str]) -> String {

@@ -1041,7 +1041,8 @@ impl<'a, L: Learner> Run<'a, L> {
             expert.finish(&RunEnd {
                 solved: summary.solved,
                 steps_to_solve: summary.steps_to_solve,
-                train_steps: self.cfg.train_steps,
+                // The steps trained: fewer than configured when a Python program closes its run early.
+                train_steps: summary.train_steps,
                 final_score: summary.final_score,
                 dir: self.log.dir().map(|d| d.to_path_buf()),
             });
