@@ -196,18 +196,14 @@ fn updates(c: &mut Criterion) {
     let data = batches(&mut Pcg64::seed_from_u64(7));
     let learners: [(&str, ConfigOfWidth); 2] = [
         ("td3_update", |width| {
-            BoxLearnerConfig::Td3(Td3Config {
-                hidden: vec![width, width],
-                max_batch: BATCH,
-                ..Td3Config::default()
-            })
+            let mut config = Td3Config::default();
+            (config.common.hidden, config.common.max_batch) = (vec![width, width], BATCH);
+            BoxLearnerConfig::Td3(config)
         }),
         ("sac_update", |width| {
-            BoxLearnerConfig::Sac(SacConfig {
-                hidden: vec![width, width],
-                max_batch: BATCH,
-                ..SacConfig::default()
-            })
+            let mut config = SacConfig::default();
+            (config.common.hidden, config.common.max_batch) = (vec![width, width], BATCH);
+            BoxLearnerConfig::Sac(config)
         }),
     ];
     for (name, config) in learners {

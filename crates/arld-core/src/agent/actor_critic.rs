@@ -1,12 +1,14 @@
 //! What the actor-critic learners for actions in a box (TD3 in `td3.rs`, SAC in `sac.rs`) share: the interface a
-//! run drives them through (`ActorCriticLearner`, whose shared methods read the core; they learn from the
-//! replay's batches, [`Batch`]) and what an update measures ([`BoxUpdate`]), what both hold ([`ActorCritic`]: the box, the actor, the critics, the generator and
-//! the per-sample buffers, with the critics' regression towards the clipped double-Q target), the sizes their
-//! networks are built to ([`Sizes`]), the actor with its optimiser and buffers ([`Actor`]), the box itself ([`ActionBox`]: the map between a tanh output in (-1, 1) and an
-//! action), the critic ensemble with its target and optimiser ([`Critics`]: K heads on a shared torso, the
-//! regression step that returns priorities, the gradient with respect to the action, and the two uncertainties
-//! read from its heads), and the behaviour cloning loss with the Q-filter on demonstrated samples
-//! ([`behaviour_cloning`]; Nair et al. 2018).
+//! run drives them through (`ActorCriticLearner`; they learn from the replay's batches, [`Batch`]) and what an
+//! update measures ([`BoxUpdate`]); the one learner behind it ([`BoxLearner`]: the shared core and an
+//! [`Algorithm`]'s own part, TD3's or SAC's); the settings both have ([`ActorCriticConfig`]); what both hold
+//! ([`ActorCritic`]: the settings, the box, the actor, the critics, the generator and the per-sample buffers,
+//! with the critics' regression towards the clipped double-Q target), the sizes their networks are built to
+//! ([`Sizes`]), the actor with its optimiser and buffers ([`Actor`]), the box itself ([`ActionBox`]: the map
+//! between a tanh output in (-1, 1) and an action), the critic ensemble with its target and optimiser
+//! ([`Critics`]: K heads on a shared torso, the regression step that returns priorities, the gradient with
+//! respect to the action, and the two uncertainties read from its heads), and the behaviour cloning loss with
+//! the Q-filter on demonstrated samples ([`behaviour_cloning`]; Nair et al. 2018).
 //!
 //! Every buffer is sized once for the largest batch, so an update allocates nothing.
 
@@ -18,15 +20,11 @@ use crate::replay::Batch;
 use crate::state::{Persist, StateDict, StateError};
 
 /// What a run needs of an actor-critic learner of box actions (TD3, SAC): acting, learning from a batch, the
-/// critics' disagreement, its generator, its policy network and its state. A learner gives its own acting,
-/// learning and state beyond the shared [`ActorCritic`]; the rest is read from that core.
+/// critics' disagreement, its generator, its policy network and its state. [`BoxLearner`] is the one
+/// implementation, for every [`Algorithm`].
 pub(crate) trait ActorCriticLearner: Send {
     /// The learner's name in a weights file and a snapshot.
     fn name(&self) -> &'static str;
-    /// The parts every actor-critic learner holds.
-    fn core(&self) -> &ActorCritic<Pcg64>;
-    /// The parts every actor-critic learner holds, to change.
-    fn core_mut(&mut self) -> &mut ActorCritic<Pcg64>;
     /// The behaviour action at `obs` (with the learner's own exploration), into `action`.
     fn act(&mut self, obs: &[f32], action: &mut [f32]);
     /// The test-time action at `obs` (no exploration), into `action`.
@@ -37,41 +35,166 @@ pub(crate) trait ActorCriticLearner: Send {
     /// # Panics
     /// If the batch is larger than the configured maximum or its vectors disagree in length.
     fn learn(&mut self, batch: &Batch<Vec<f32>>, gamma: f32) -> (BoxUpdate, &[f32]);
-    /// Writes what the learner holds beyond [`Self::core`] under `prefix`.
+    /// Turns the cloning loss's Q-filter on or off (pre-training on demonstrations alone clones without it).
+    fn set_q_filter(&mut self, on: bool);
+    /// The standard deviation of the critic heads at `(obs, action)` (the uncertainty a query rule can read).
+    /// Draws no random number.
+    fn critic_spread(&mut self, obs: &[f32], action: &[f32]) -> f32;
+    /// The learner's generator, for a caller's draws in sequence with the learner's own.
+    fn rng(&mut self) -> &mut Pcg64;
+    /// The policy network a run keeps (TD3: the tanh actor; SAC: the means and log standard deviations of its
+    /// Gaussian).
+    fn actor(&self) -> &Mlp;
+    /// Writes everything that changes while the learner learns and acts. Buffers are left out: every use
+    /// overwrites them.
+    fn save_state<'a>(&'a self, prefix: &str, state: &mut StateDict<'a>);
+    /// Reads what [`Self::save_state`] wrote into a learner of the same configuration.
+    fn load_state(&mut self, prefix: &str, state: &StateDict<'_>) -> Result<(), StateError>;
+}
+
+/// The shared core of every actor-critic learner the run drives.
+pub(crate) type Core = ActorCritic<Pcg64>;
+
+/// What an actor-critic algorithm (TD3, SAC) adds to the shared [`Core`]: its acting, its update and its state
+/// beyond the core. Every method is handed the core it works on.
+pub(crate) trait Algorithm: Send {
+    /// The learner's name in a weights file and a snapshot.
+    const NAME: &'static str;
+    /// The behaviour action at `obs` (with the algorithm's own exploration), into `action`.
+    fn act(&mut self, core: &mut Core, obs: &[f32], action: &mut [f32]);
+    /// The test-time action at `obs` (no exploration) as the tanh output the box scales, into `unit`.
+    fn test_unit(&self, core: &mut Core, obs: &[f32], unit: &mut [f32]);
+    /// One update from `batch`: what it measured; the new priorities are left in the core's `priorities`.
+    fn learn(&mut self, core: &mut Core, batch: &Batch<Vec<f32>>, gamma: f32) -> BoxUpdate;
+    /// Writes what the algorithm holds beyond the core under `prefix`.
     fn save_own<'a>(&'a self, prefix: &str, state: &mut StateDict<'a>);
     /// Reads what [`Self::save_own`] wrote.
     fn load_own(&mut self, prefix: &str, state: &StateDict<'_>) -> Result<(), StateError>;
-    /// Turns the cloning loss's Q-filter on or off (pre-training on demonstrations alone clones without it).
-    fn set_q_filter(&mut self, on: bool);
+}
 
-    /// The standard deviation of the critic heads at `(obs, action)` (the uncertainty a query rule can read).
-    /// Draws no random number.
+/// An actor-critic learner of actions in a box: the shared core (the box, the actor, the critics, the generator,
+/// the shared settings and buffers) and the algorithm's own part `A` (TD3: [`super::td3::Td3Part`]; SAC:
+/// [`super::sac::SacPart`]).
+pub struct BoxLearner<A> {
+    pub(crate) core: Core,
+    pub(crate) algo: A,
+    /// The test action's tanh output at one state, the centre of [`Self::disagreement`]'s probes.
+    centre: Vec<f32>,
+}
+
+impl<A> BoxLearner<A> {
+    /// The learner of `core` and `algo`.
+    pub(crate) fn from_parts(core: Core, algo: A) -> Self {
+        let centre = vec![0.0; core.action_dim()];
+        BoxLearner { core, algo, centre }
+    }
+
+    /// The critics' disagreement about the best action near the test action at `obs`, in half-widths of the box
+    /// (see `Critics::argmax_disagreement`; 0 when every head prefers the same probe). Draws no random number.
+    pub(crate) fn disagreement(&mut self, obs: &[f32]) -> f32
+    where
+        A: Algorithm,
+    {
+        self.algo.test_unit(&mut self.core, obs, &mut self.centre);
+        let core = &mut self.core;
+        core.critics
+            .argmax_disagreement(obs, &self.centre, &core.action_box)
+    }
+}
+
+impl<A: Algorithm> ActorCriticLearner for BoxLearner<A> {
+    fn name(&self) -> &'static str {
+        A::NAME
+    }
+
+    fn act(&mut self, obs: &[f32], action: &mut [f32]) {
+        self.algo.act(&mut self.core, obs, action);
+    }
+
+    fn test_action(&mut self, obs: &[f32], action: &mut [f32]) {
+        self.algo.test_unit(&mut self.core, obs, action);
+        self.core.action_box.to_box(action);
+    }
+
+    fn learn(&mut self, batch: &Batch<Vec<f32>>, gamma: f32) -> (BoxUpdate, &[f32]) {
+        let stats = self.algo.learn(&mut self.core, batch, gamma);
+        (stats, &self.core.priorities[..batch.len()])
+    }
+
+    fn set_q_filter(&mut self, on: bool) {
+        self.core.config.q_filter = on;
+    }
+
     fn critic_spread(&mut self, obs: &[f32], action: &[f32]) -> f32 {
-        self.core_mut().critics.spread(obs, action)
+        self.core.critics.spread(obs, action)
     }
 
-    /// The learner's generator, for a caller's draws in sequence with the learner's own.
     fn rng(&mut self) -> &mut Pcg64 {
-        &mut self.core_mut().rng
+        &mut self.core.rng
     }
 
-    /// The policy network a run keeps (TD3: the tanh actor; SAC: the means and log standard deviations of its
-    /// Gaussian).
     fn actor(&self) -> &Mlp {
-        &self.core().actor.net
+        &self.core.actor.net
     }
 
-    /// Writes everything that changes while the learner learns and acts: the core ([`ActorCritic`]'s state) and
-    /// the learner's own. Buffers are left out: every use overwrites them.
+    /// The core ([`ActorCritic`]'s state) and the algorithm's own.
     fn save_state<'a>(&'a self, prefix: &str, state: &mut StateDict<'a>) {
-        self.core().save_state(prefix, state);
-        self.save_own(prefix, state);
+        self.core.save_state(prefix, state);
+        self.algo.save_own(prefix, state);
     }
 
-    /// Reads what [`Self::save_state`] wrote into a learner of the same configuration.
     fn load_state(&mut self, prefix: &str, state: &StateDict<'_>) -> Result<(), StateError> {
-        self.core_mut().load_state(prefix, state)?;
-        self.load_own(prefix, state)
+        self.core.load_state(prefix, state)?;
+        self.algo.load_own(prefix, state)
+    }
+}
+
+/// What TD3's and SAC's settings share (each learner's configuration holds one as `common`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct ActorCriticConfig {
+    /// Hidden widths of the actor and of the critics' torso.
+    pub hidden: Vec<usize>,
+    /// Critic heads on the shared torso (at least 2: the clipped double-Q target takes the first two).
+    pub heads: usize,
+    /// Polyak averaging rate of the target networks.
+    pub tau: f32,
+    pub actor_lr: f32,
+    pub critic_lr: f32,
+    /// The largest batch an update (`learn`) accepts.
+    pub max_batch: usize,
+    /// Weight of the behaviour cloning loss on demonstrated samples (with the Q-filter; 0 turns it off).
+    pub bc_weight: f32,
+    /// Whether the cloning loss keeps only the demonstrated samples whose action the critics value above the
+    /// actor's (the Q-filter); without it every demonstrated sample counts (pre-training on demonstrations
+    /// alone needs that: there the critics overvalue the actor's unseen actions).
+    pub q_filter: bool,
+    /// Added to the priority of a demonstrated sample (DDPGfD's `eps_D`).
+    pub demo_priority_bonus: f32,
+}
+
+impl ActorCriticConfig {
+    /// The shared defaults with the learning rate `lr` for the actor and the critics: 256-256 networks, two
+    /// heads, Polyak rate 0.005, batches of up to 256, no cloning (with the Q-filter when it is turned on) and
+    /// no demonstration bonus.
+    pub fn with_learning_rate(lr: f32) -> Self {
+        ActorCriticConfig {
+            hidden: vec![256, 256],
+            heads: 2,
+            tau: 0.005,
+            actor_lr: lr,
+            critic_lr: lr,
+            max_batch: 256,
+            bc_weight: 0.0,
+            q_filter: true,
+            demo_priority_bonus: 0.0,
+        }
+    }
+
+    /// Whether an actor update on `batch` has a cloning term (the weight is positive and the batch holds
+    /// demonstrations), and whether that term filters by the critics' values.
+    pub(crate) fn cloning(&self, batch: &Batch<Vec<f32>>) -> (bool, bool) {
+        let cloning = self.bc_weight > 0.0 && batch.is_demo.contains(&true);
+        (cloning, cloning && self.q_filter)
     }
 }
 
@@ -401,9 +524,12 @@ impl Critics {
     }
 }
 
-/// What TD3 and SAC both hold: the observation length, the box, the actor, the critics, the generator, the update
-/// count, and the per-sample buffers of an update (TD targets, the Q-filter's values, the new priorities).
+/// What TD3 and SAC both hold: their shared settings, the observation length, the box, the actor, the critics,
+/// the generator, the update count, and the per-sample buffers of an update (TD targets, the Q-filter's values,
+/// the new priorities).
 pub(crate) struct ActorCritic<R> {
+    /// The settings TD3 and SAC share.
+    pub config: ActorCriticConfig,
     pub obs_dim: usize,
     pub action_box: ActionBox,
     pub actor: Actor,
@@ -447,21 +573,36 @@ impl<R: serde::Serialize + serde::de::DeserializeOwned> Persist for ActorCritic<
 }
 
 impl<R: Rng> ActorCritic<R> {
-    /// The parts of a learner of `sizes` in `action_box`, their weights drawn from `rng`, actor first: `actor` is
-    /// its outputs per action dimension, their activation and its learning rate; `critics` the heads and their
-    /// learning rate.
+    /// The parts of a learner of `config` for observations of `obs_dim` values and actions in the box `[low,
+    /// high]`, their weights drawn from `rng`, actor first: `actor` is its outputs per action dimension and their
+    /// activation.
+    ///
+    /// # Panics
+    /// If the box is empty or inverted, or the configuration has fewer than two heads or a zero batch (callers
+    /// validate configurations first).
     pub fn new(
-        sizes: &Sizes<'_>,
-        action_box: ActionBox,
-        (per_dim, activation, actor_lr): (usize, OutputActivation, f32),
-        (heads, critic_lr): (usize, f32),
+        config: ActorCriticConfig,
+        obs_dim: usize,
+        (low, high): (&[f32], &[f32]),
+        (per_dim, activation): (usize, OutputActivation),
         mut rng: R,
     ) -> Self {
-        let (a, n) = (action_box.dim(), sizes.max_batch);
-        let actor = Actor::new(sizes, per_dim * a, activation, actor_lr, &mut rng);
-        let critics = Critics::new(sizes, a, heads, critic_lr, &mut rng);
+        let action_box = ActionBox::new(low, high);
+        assert!(
+            config.heads >= 2 && config.max_batch > 0,
+            "an actor-critic learner needs two critic heads and a batch"
+        );
+        let (a, n) = (action_box.dim(), config.max_batch);
+        let sizes = Sizes {
+            obs_dim,
+            hidden: &config.hidden,
+            max_batch: n,
+        };
+        let actor = Actor::new(&sizes, per_dim * a, activation, config.actor_lr, &mut rng);
+        let critics = Critics::new(&sizes, a, config.heads, config.critic_lr, &mut rng);
         ActorCritic {
-            obs_dim: sizes.obs_dim,
+            config,
+            obs_dim,
             action_box,
             actor,
             critics,
@@ -511,7 +652,6 @@ impl<R: Rng> ActorCritic<R> {
         gamma: f32,
         next_actions: &[f32],
         entropy: Option<(f32, &[f32])>,
-        demo_bonus: f32,
     ) -> f32 {
         let (n, k) = (batch.len(), self.critics.heads);
         let q_next = self
@@ -530,7 +670,7 @@ impl<R: Rng> ActorCritic<R> {
             batch,
             &self.targets[..n],
             &mut self.priorities[..n],
-            demo_bonus,
+            self.config.demo_priority_bonus,
         )
     }
 
@@ -613,15 +753,100 @@ pub(crate) fn behaviour_cloning(
 /// demonstrations of the scripted swing-up.
 #[cfg(test)]
 pub(crate) mod testing {
-    use super::ActorCriticLearner;
+    use super::{ActorCriticConfig, ActorCriticLearner, BoxLearner, Core};
     use crate::env::pendulum::swing_up;
     use crate::env::{Env, Outcome, make_continuous};
+    use crate::nn::MlpWorkspace;
     use crate::replay::Batch;
     use crate::task::BoxColumn;
     use rand::{Rng, SeedableRng};
 
     /// The discount of the tests' transitions.
     pub(crate) const GAMMA: f32 = 0.99;
+
+    /// The box of the small learners of the gradient checks, `[-1, 3] x [0, 0.5]` (neither centred nor
+    /// symmetric), as `(low, high)`.
+    pub(crate) const SMALL_BOX: ([f32; 2], [f32; 2]) = ([-1.0, 0.0], [3.0, 0.5]);
+
+    /// `defaults` with the small networks of the gradient checks (8-8, three heads, batches of up to 8) and the
+    /// cloning weight `bc_weight`.
+    pub(crate) fn small_config(bc_weight: f32, defaults: ActorCriticConfig) -> ActorCriticConfig {
+        ActorCriticConfig {
+            hidden: vec![8, 8],
+            heads: 3,
+            max_batch: 8,
+            bc_weight,
+            ..defaults
+        }
+    }
+
+    /// The shared settings of the Pendulum-v1 tests: 64-64 networks, batches of 128, learning rates 1e-3.
+    pub(crate) fn pendulum_config() -> ActorCriticConfig {
+        ActorCriticConfig {
+            hidden: vec![64, 64],
+            max_batch: 128,
+            ..ActorCriticConfig::with_learning_rate(1e-3)
+        }
+    }
+
+    /// [`pendulum_config`] for pre-training on demonstrations: cloning with weight 100, without the Q-filter.
+    pub(crate) fn pretraining_config() -> ActorCriticConfig {
+        ActorCriticConfig {
+            bc_weight: 100.0,
+            q_filter: false,
+            ..pendulum_config()
+        }
+    }
+
+    /// `n` random one-step samples in [`SMALL_BOX`] with two observations each, flagged by `is_demo` (empty for
+    /// none), drawn from `seed` (the observations first, then the actions).
+    pub(crate) fn random_batch(n: usize, is_demo: &[bool], seed: u64) -> Batch<Vec<f32>> {
+        let mut draw = rand_pcg::Pcg64::seed_from_u64(seed);
+        let obs = (0..2 * n).map(|_| draw.random_range(-1.0..1.0)).collect();
+        let actions: Vec<f32> = (0..n)
+            .flat_map(|_| [draw.random_range(-1.0..3.0), draw.random_range(0.0..0.5)])
+            .collect();
+        Batch {
+            idx: (0..n).collect(),
+            obs,
+            actions: column(2, &actions),
+            rewards: (0..n).map(|_| draw.random_range(-1.0..1.0)).collect(),
+            next_obs: (0..2 * n).map(|_| draw.random_range(-1.0..1.0)).collect(),
+            terminal: vec![false; n],
+            weights: (0..n).map(|_| draw.random_range(0.5..1.0)).collect(),
+            is_demo: if is_demo.is_empty() {
+                vec![false; n]
+            } else {
+                is_demo.to_vec()
+            },
+            ..Batch::default()
+        }
+    }
+
+    /// The online critic heads' values at `(state, action)`, from a pass of their own.
+    pub(crate) fn heads_at(core: &Core, state: &[f32], action: &[f32]) -> Vec<f32> {
+        let mut ws = MlpWorkspace::new(&core.critics.net, 1);
+        let mut input = state.to_vec();
+        input.extend(action);
+        core.critics.net.forward(&input, 1, &mut ws).to_vec()
+    }
+
+    /// The central difference `(loss(theta_i + h) - loss(theta_i - h)) / 2h` in the actor's parameter `i`; the
+    /// parameter is restored.
+    pub(crate) fn central_difference<A>(
+        learner: &mut BoxLearner<A>,
+        i: usize,
+        h: f32,
+        loss: &mut impl FnMut(&mut BoxLearner<A>) -> f64,
+    ) -> f64 {
+        let original = learner.core.actor.net.parameters()[i];
+        learner.core.actor.net.parameters_mut()[i] = original + h;
+        let up = loss(learner);
+        learner.core.actor.net.parameters_mut()[i] = original - h;
+        let down = loss(learner);
+        learner.core.actor.net.parameters_mut()[i] = original;
+        (up - down) / (2.0 * f64::from(h))
+    }
 
     /// A column of actions of `width` numbers each, row-major in `values`.
     pub(crate) fn column(width: usize, values: &[f32]) -> BoxColumn {
@@ -722,6 +947,17 @@ pub(crate) mod testing {
             }
         }
         total / episodes as f64
+    }
+
+    /// Trains `agent` on Pendulum-v1 for `steps` steps ([`train_pendulum`], batches of 128) and checks that its
+    /// greedy policy then holds the task above -200 on ten evaluation seeds it never trained on (1000-1009).
+    pub(crate) fn learns_pendulum(agent: &mut impl ActorCriticLearner, steps: usize, name: &str) {
+        train_pendulum(agent, steps, 128);
+        let score = evaluate_pendulum(agent, 1000..1010);
+        eprintln!(
+            "{name} on Pendulum-v1 after {steps} steps: mean return {score:.1} on seeds 1000-1009"
+        );
+        assert!(score > -200.0, "{name} did not learn Pendulum-v1: {score}");
     }
 
     /// Trains on Pendulum-v1 (seed 0) for `steps` steps, the first 1,000 uniformly random, one update of a

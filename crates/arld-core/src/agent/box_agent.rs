@@ -65,8 +65,8 @@ impl BoxAgent {
     ) -> Self {
         let rng = Pcg64::seed_from_u64(seed);
         let q_filter = match &config {
-            BoxLearnerConfig::Td3(config) => config.q_filter,
-            BoxLearnerConfig::Sac(config) => config.q_filter,
+            BoxLearnerConfig::Td3(config) => config.common.q_filter,
+            BoxLearnerConfig::Sac(config) => config.common.q_filter,
         };
         let learner: Box<dyn ActorCriticLearner> = match config {
             BoxLearnerConfig::Td3(config) => Box::new(Td3::new(config, obs_dim, low, high, rng)),
@@ -209,17 +209,13 @@ mod tests {
     fn pendulum_agent(sac: bool, seed: u64) -> BoxAgent {
         let (hidden, max_batch) = (vec![64, 64], 128);
         let config = if sac {
-            BoxLearnerConfig::Sac(SacConfig {
-                hidden,
-                max_batch,
-                ..SacConfig::default()
-            })
+            let mut config = SacConfig::default();
+            (config.common.hidden, config.common.max_batch) = (hidden, max_batch);
+            BoxLearnerConfig::Sac(config)
         } else {
-            BoxLearnerConfig::Td3(Td3Config {
-                hidden,
-                max_batch,
-                ..Td3Config::default()
-            })
+            let mut config = Td3Config::default();
+            (config.common.hidden, config.common.max_batch) = (hidden, max_batch);
+            BoxLearnerConfig::Td3(config)
         };
         BoxAgent::new(config, 3, &[-2.0], &[2.0], 0.99, seed)
     }

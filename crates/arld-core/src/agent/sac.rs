@@ -25,73 +25,40 @@ use rand::Rng;
 use rand_distr::StandardNormal;
 
 pub use super::actor_critic::BcStats;
-use super::actor_critic::{ActionBox, ActorCritic, ActorCriticLearner, BoxUpdate, Net, Sizes};
+use super::actor_critic::{
+    ActionBox, ActorCritic, ActorCriticConfig, Algorithm, BoxLearner, BoxUpdate, Core, Net,
+};
 use crate::nn::{Adam, OutputActivation};
 use crate::replay::Batch;
 use crate::state::{Persist, StateDict, StateError};
 use rand_pcg::Pcg64;
 
-/// The clip of the actor's log standard deviation (the authors' code).
-pub const LOG_STD_MIN: f32 = -20.0;
-pub const LOG_STD_MAX: f32 = 2.0;
-
-/// `log(2 pi) / 2`.
-const HALF_LOG_TWO_PI: f32 = 0.918_938_5;
-
 /// SAC's settings (the paper's defaults where it has them).
 #[derive(Debug, Clone, PartialEq)]
 pub struct SacConfig {
-    /// Hidden widths of the actor and of the critics' torso.
-    pub hidden: Vec<usize>,
-    /// Critic heads on the shared torso (at least 2: the soft target and the actor take the first two's minimum).
-    pub heads: usize,
-    /// Polyak averaging rate of the critics' target.
-    pub tau: f32,
-    pub actor_lr: f32,
-    pub critic_lr: f32,
+    /// What SAC shares with TD3 (networks, heads, learning rates: 3e-4 by default, Polyak rate, batch, cloning).
+    pub common: ActorCriticConfig,
     /// Learning rate of `log alpha`.
     pub alpha_lr: f32,
     /// The temperature before the first update.
     pub initial_alpha: f32,
     /// The entropy the temperature steers towards; `None` for the paper's `-dim(A)`.
     pub target_entropy: Option<f32>,
-    /// The largest batch an update (`learn`) accepts.
-    pub max_batch: usize,
-    /// Weight of the behaviour cloning loss on demonstrated samples (with the Q-filter; 0 turns it off).
-    pub bc_weight: f32,
-    /// Whether the cloning loss keeps only the demonstrated samples whose action the critics value above the
-    /// actor's (the Q-filter); without it every demonstrated sample counts (pre-training on demonstrations
-    /// alone needs that: there the critics overvalue the actor's unseen actions).
-    pub q_filter: bool,
-    /// Added to the priority of a demonstrated sample (DDPGfD's `eps_D`).
-    pub demo_priority_bonus: f32,
 }
 
 impl Default for SacConfig {
     fn default() -> Self {
         SacConfig {
-            hidden: vec![256, 256],
-            heads: 2,
-            tau: 0.005,
-            actor_lr: 3e-4,
-            critic_lr: 3e-4,
+            common: ActorCriticConfig::with_learning_rate(3e-4),
             alpha_lr: 3e-4,
             initial_alpha: 1.0,
             target_entropy: None,
-            max_batch: 256,
-            bc_weight: 0.0,
-            q_filter: true,
-            demo_priority_bonus: 0.0,
         }
     }
 }
 
-/// The SAC learner: actor, critics, the critics' target, the temperature, their optimisers and the buffers of
-/// an update.
-pub struct Sac<R: Rng> {
-    config: SacConfig,
-    /// The box, the actor, the critics (with their target), the generator and the per-sample buffers.
-    ac: ActorCritic<R>,
+/// SAC's own part of the learner: the temperature, its optimiser and the buffers of an update.
+pub struct SacPart {
     target_entropy: f32,
     log_alpha: f32,
     alpha_opt: Adam,
@@ -110,6 +77,16 @@ pub struct Sac<R: Rng> {
     /// The head (0 or 1) with the smaller value at each sampled action.
     min_head: Vec<usize>,
 }
+
+/// The SAC learner: the shared core (actor, critics with their target, optimisers, generator) and SAC's part.
+pub type Sac = BoxLearner<SacPart>;
+
+/// The clip of the actor's log standard deviation (the authors' code).
+pub const LOG_STD_MIN: f32 = -20.0;
+pub const LOG_STD_MAX: f32 = 2.0;
+
+/// `log(2 pi) / 2`.
+const HALF_LOG_TWO_PI: f32 = 0.918_938_5;
 
 /// `log(1 - tanh(u)^2)`, as `2 (log 2 - u - softplus(-2u))` (finite for every finite `u`).
 fn log_one_minus_tanh_squared(u: f32) -> f32 {
@@ -146,29 +123,22 @@ fn squash(
     action_box.to_box(actions);
 }
 
-impl<R: Rng> Sac<R> {
+impl Sac {
     /// A learner for observations of `obs_dim` values and actions in the box `[low, high]`, with its weights
     /// drawn from `rng` (actor first, then critic; the target starts as a copy).
     ///
     /// # Panics
     /// If the box is empty or inverted, or the configuration has fewer than two heads, a zero batch or a
     /// non-positive initial temperature (callers validate configurations first).
-    pub fn new(config: SacConfig, obs_dim: usize, low: &[f32], high: &[f32], rng: R) -> Self {
-        let action_box = ActionBox::new(low, high);
+    pub fn new(config: SacConfig, obs_dim: usize, low: &[f32], high: &[f32], rng: Pcg64) -> Self {
         assert!(
-            config.heads >= 2 && config.max_batch > 0 && config.initial_alpha > 0.0,
-            "SAC needs two critic heads, a batch and a positive temperature"
+            config.initial_alpha > 0.0,
+            "SAC needs a positive temperature"
         );
-        let (a, n) = (low.len(), config.max_batch);
-        let sizes = Sizes {
-            obs_dim,
-            hidden: &config.hidden,
-            max_batch: n,
-        };
-        let actor = (2, OutputActivation::Linear, config.actor_lr);
-        let critics = (config.heads, config.critic_lr);
-        Sac {
-            ac: ActorCritic::new(&sizes, action_box, actor, critics, rng),
+        let actor = (2, OutputActivation::Linear);
+        let core = ActorCritic::new(config.common, obs_dim, (low, high), actor, rng);
+        let (a, n) = (core.action_dim(), core.config.max_batch);
+        let algo = SacPart {
             target_entropy: config.target_entropy.unwrap_or(-(a as f32)),
             log_alpha: config.initial_alpha.ln(),
             alpha_opt: Adam::for_parameters(1, config.alpha_lr),
@@ -181,50 +151,44 @@ impl<R: Rng> Sac<R> {
             d_y_mean: vec![0.0; n * a],
             log_probs: vec![0.0; n],
             min_head: vec![0; n],
-            config,
-        }
+        };
+        BoxLearner::from_parts(core, algo)
     }
 
+    /// The critics' disagreement about the best action near the test action at `obs` (`BoxLearner::disagreement`).
+    pub fn action_disagreement(&mut self, obs: &[f32]) -> f32 {
+        self.disagreement(obs)
+    }
+}
+
+impl SacPart {
     /// The entropy temperature `alpha`.
     pub fn alpha(&self) -> f32 {
         self.log_alpha.exp()
     }
 
-    /// The critics' disagreement about the best action near the test action at `obs`, in half-widths of the box
-    /// (see `Critics::argmax_disagreement`; 0 when every head prefers the same probe). Draws no random number.
-    pub fn action_disagreement(&mut self, obs: &[f32]) -> f32 {
-        let a = self.ac.action_dim();
-        let out = self.ac.actor.forward(obs, 1);
-        for (y, mu) in self.y_mean[..a].iter_mut().zip(&out[..a]) {
-            *y = mu.tanh();
-        }
-        self.ac
-            .critics
-            .argmax_disagreement(obs, &self.y_mean[..a], &self.ac.action_box)
-    }
-
     /// Fills the first `count` noise values from the generator.
-    fn draw_noise(&mut self, count: usize) {
+    fn draw_noise(&mut self, core: &mut Core, count: usize) {
         for eps in &mut self.noise[..count] {
-            *eps = self.ac.rng.sample(StandardNormal);
+            *eps = core.rng.sample(StandardNormal);
         }
     }
 
     /// The actor's outputs at `n` rows of `obs`, into `self.out` (the pass stays in the actor's workspace).
-    fn actor_outputs(&mut self, obs: &[f32], n: usize) {
-        let a = self.ac.action_dim();
-        let out = self.ac.actor.forward(obs, n);
+    fn actor_outputs(&mut self, core: &mut Core, obs: &[f32], n: usize) {
+        let a = core.action_dim();
+        let out = core.actor.forward(obs, n);
         self.out[..2 * n * a].copy_from_slice(out);
     }
 
     /// Samples the policy ([`squash`]) at the first `n` rows of `self.out` with the noise in `self.noise`, into
     /// `self.y`, `self.actions` and `self.log_probs`.
-    fn sample_policy(&mut self, n: usize) {
-        let a = self.ac.action_dim();
+    fn sample_policy(&mut self, core: &Core, n: usize) {
+        let a = core.action_dim();
         squash(
             &self.out[..2 * n * a],
             &self.noise[..n * a],
-            &self.ac.action_box,
+            &core.action_box,
             &mut self.y[..n * a],
             &mut self.actions[..n * a],
             &mut self.log_probs[..n],
@@ -241,18 +205,22 @@ impl<R: Rng> Sac<R> {
     /// The actor's loss at the batch's states with the noise in `self.noise` and temperature `alpha`:
     /// `mean_b [alpha log pi(a_b|s_b) - min(Q_1, Q_2)(s_b, a_b)]` plus the behaviour cloning term with the
     /// Q-filter (the demonstrated action against `tanh(mu)`, each valued by `min(Q_1, Q_2)`), and its gradient
-    /// with respect to the actor's parameters in `self.ac.actor.grads`. Returns the first part and the cloning
+    /// with respect to the actor's parameters in `core.actor.grads`. Returns the first part and the cloning
     /// term's measures; leaves the samples' log-probabilities in `self.log_probs`.
-    fn actor_gradient(&mut self, batch: &Batch<Vec<f32>>, alpha: f32) -> (f32, Option<BcStats>) {
+    fn actor_gradient(
+        &mut self,
+        core: &mut Core,
+        batch: &Batch<Vec<f32>>,
+        alpha: f32,
+    ) -> (f32, Option<BcStats>) {
         let n = batch.len();
-        let (d, a, k) = (self.ac.obs_dim, self.ac.action_dim(), self.config.heads);
+        let (d, a, k) = (core.obs_dim, core.action_dim(), core.config.heads);
         let pair_min = |q: &[f32], r: usize| q[r * k].min(q[r * k + 1]);
-        let cloning = self.config.bc_weight > 0.0 && batch.is_demo.contains(&true);
-        let filtering = cloning && self.config.q_filter;
+        let (cloning, filtering) = core.config.cloning(batch);
         if filtering {
-            self.ac.value_demonstrations(batch, |q| q[0].min(q[1]));
+            core.value_demonstrations(batch, |q| q[0].min(q[1]));
         }
-        self.actor_outputs(&batch.obs, n);
+        self.actor_outputs(core, &batch.obs, n);
         if cloning {
             for r in 0..n {
                 for dim in 0..a {
@@ -263,18 +231,14 @@ impl<R: Rng> Sac<R> {
         if filtering {
             let actions = &mut self.actions[..n * a];
             actions.copy_from_slice(&self.y_mean[..n * a]);
-            self.ac.action_box.to_box(actions);
-            let q = self
-                .ac
-                .critics
-                .evaluate(Net::Online, &batch.obs, actions, n);
+            core.action_box.to_box(actions);
+            let q = core.critics.evaluate(Net::Online, &batch.obs, actions, n);
             for r in 0..n {
-                self.ac.q_pi[r] = pair_min(q, r);
+                core.q_pi[r] = pair_min(q, r);
             }
         }
-        self.sample_policy(n);
-        let q = self
-            .ac
+        self.sample_policy(core, n);
+        let q = core
             .critics
             .evaluate(Net::Online, &batch.obs, &self.actions[..n * a], n);
         let mut loss = 0.0f32;
@@ -282,12 +246,12 @@ impl<R: Rng> Sac<R> {
             loss += alpha * self.log_probs[r] - pair_min(q, r);
             self.min_head[r] = usize::from(q[r * k + 1] < q[r * k]);
         }
-        let d_q = self.ac.critics.d_q(n);
+        let d_q = core.critics.d_q(n);
         d_q.fill(0.0);
         for r in 0..n {
             d_q[r * k + self.min_head[r]] = -1.0 / n as f32;
         }
-        let d_input = self.ac.critics.backward_to_actions(n);
+        let d_input = core.critics.backward_to_actions(n);
         let inv_n = 1.0 / n as f32;
         for r in 0..n {
             for dim in 0..a {
@@ -296,8 +260,8 @@ impl<R: Rng> Sac<R> {
                 let raw_log_std = self.out[r * 2 * a + a + dim];
                 let d_action = d_input[r * (d + a) + d + dim];
                 // dL/du: the entropy term's (d/du of -log(1 - tanh(u)^2) is 2 tanh(u)) and the critic's.
-                let d_u = alpha * 2.0 * y * inv_n
-                    + d_action * self.ac.action_box.half[dim] * (1.0 - y * y);
+                let d_u =
+                    alpha * 2.0 * y * inv_n + d_action * core.action_box.half[dim] * (1.0 - y * y);
                 self.d_out[r * 2 * a + dim] = d_u;
                 // u = mu + exp(log sigma) eps, and log N contributes -log sigma; the clip passes no gradient.
                 self.d_out[r * 2 * a + a + dim] =
@@ -312,9 +276,7 @@ impl<R: Rng> Sac<R> {
             let d_y = &mut self.d_y_mean[..n * a];
             d_y.fill(0.0);
             let y = &self.y_mean[..n * a];
-            let stats = self
-                .ac
-                .behaviour_cloning(self.config.bc_weight, batch, filtering, y, d_y);
+            let stats = core.behaviour_cloning(core.config.bc_weight, batch, filtering, y, d_y);
             for r in 0..n {
                 for dim in 0..a {
                     let y = self.y_mean[r * a + dim];
@@ -325,71 +287,62 @@ impl<R: Rng> Sac<R> {
         } else {
             None
         };
-        self.ac.actor.backward(&self.d_out[..2 * n * a]);
+        core.actor.backward(&self.d_out[..2 * n * a]);
         (loss * inv_n, bc)
     }
 }
 
-impl ActorCriticLearner for Sac<Pcg64> {
-    fn name(&self) -> &'static str {
-        "sac"
-    }
+impl Algorithm for SacPart {
+    const NAME: &'static str = "sac";
 
     /// The behaviour action at `obs`: a sample of the policy.
-    fn act(&mut self, obs: &[f32], action: &mut [f32]) {
-        let a = self.ac.action_dim();
-        self.actor_outputs(obs, 1);
-        self.draw_noise(a);
-        self.sample_policy(1);
+    fn act(&mut self, core: &mut Core, obs: &[f32], action: &mut [f32]) {
+        let a = core.action_dim();
+        self.actor_outputs(core, obs, 1);
+        self.draw_noise(core, a);
+        self.sample_policy(core, 1);
         action.copy_from_slice(&self.actions[..a]);
     }
 
-    /// The test-time action at `obs`: `tanh(mu)` scaled to the box.
-    fn test_action(&mut self, obs: &[f32], action: &mut [f32]) {
-        let a = self.ac.action_dim();
-        let out = self.ac.actor.forward(obs, 1);
-        for (v, mu) in action.iter_mut().zip(&out[..a]) {
+    /// The test-time action at `obs`: `tanh(mu)`.
+    fn test_unit(&self, core: &mut Core, obs: &[f32], unit: &mut [f32]) {
+        let a = core.action_dim();
+        let out = core.actor.forward(obs, 1);
+        for (v, mu) in unit.iter_mut().zip(&out[..a]) {
             *v = mu.tanh();
         }
-        self.ac.action_box.to_box(action);
     }
 
     /// One update from `batch`: critics, actor, temperature, target.
-    fn learn(&mut self, batch: &Batch<Vec<f32>>, gamma: f32) -> (BoxUpdate, &[f32]) {
-        let (n, a) = self.ac.check(batch);
+    fn learn(&mut self, core: &mut Core, batch: &Batch<Vec<f32>>, gamma: f32) -> BoxUpdate {
+        let (n, a) = core.check(batch);
         let alpha = self.alpha();
 
         // The soft target: r + gamma^n (min(Q'_1, Q'_2)(s', a') - alpha log pi(a'|s')), a' ~ pi(s').
-        self.actor_outputs(batch.bootstrap_obs(), n);
-        self.draw_noise(n * a);
-        self.sample_policy(n);
-        let critic_loss = self.ac.critic_step(
-            batch,
-            gamma,
-            &self.actions[..n * a],
-            Some((alpha, &self.log_probs[..n])),
-            self.config.demo_priority_bonus,
-        );
+        self.actor_outputs(core, batch.bootstrap_obs(), n);
+        self.draw_noise(core, n * a);
+        self.sample_policy(core, n);
+        let entropy = Some((alpha, &self.log_probs[..n]));
+        let critic_loss = core.critic_step(batch, gamma, &self.actions[..n * a], entropy);
 
         // The actor, on fresh samples at the batch's states.
-        self.draw_noise(n * a);
-        let (actor_loss, bc) = self.actor_gradient(batch, alpha);
-        self.ac.actor.step();
+        self.draw_noise(core, n * a);
+        let (actor_loss, bc) = self.actor_gradient(core, batch, alpha);
+        core.actor.step();
 
         // The temperature, from the same samples' log-probabilities.
         let (entropy, d_log_alpha) = self.temperature_gradient(n);
         self.alpha_opt
             .step_parameters(std::slice::from_mut(&mut self.log_alpha), &[d_log_alpha]);
 
-        self.ac.critics.soft_update(self.config.tau);
-        self.ac.updates += 1;
-        let stats = BoxUpdate {
+        core.critics.soft_update(core.config.tau);
+        core.updates += 1;
+        BoxUpdate {
             critic_loss,
             actor_loss: Some(actor_loss),
             entropy: Some(entropy),
             bc,
-        };
-        (stats, &self.ac.priorities[..n])
+        }
     }
 
     /// Writes the temperature and its optimiser (the core holds the rest).
@@ -404,89 +357,42 @@ impl ActorCriticLearner for Sac<Pcg64> {
         self.alpha_opt
             .load_state(&format!("{prefix}.alpha_adam"), state)
     }
-
-    fn core(&self) -> &ActorCritic<Pcg64> {
-        &self.ac
-    }
-
-    fn core_mut(&mut self) -> &mut ActorCritic<Pcg64> {
-        &mut self.ac
-    }
-
-    fn set_q_filter(&mut self, on: bool) {
-        self.config.q_filter = on;
-    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::agent::actor_critic::testing::{
-        GAMMA, check_filter_counts, column, evaluate_pendulum, pretraining_imitates, train_pendulum,
-    };
+    use crate::agent::actor_critic::ActorCriticLearner;
+    use crate::agent::actor_critic::testing::*;
     use crate::nn::MlpWorkspace;
     use rand::SeedableRng;
 
     type Pcg = rand_pcg::Pcg64;
 
-    fn small(bc_weight: f32, seed: u64) -> Sac<Pcg> {
+    /// A learner of the gradient checks in [`SMALL_BOX`] with two observations, temperature 0.3, from `seed`.
+    fn small(bc_weight: f32, seed: u64) -> Sac {
         let config = SacConfig {
-            hidden: vec![8, 8],
-            heads: 3,
-            max_batch: 8,
-            bc_weight,
+            common: small_config(bc_weight, SacConfig::default().common),
             initial_alpha: 0.3,
             ..SacConfig::default()
         };
-        Sac::new(
-            config,
-            2,
-            &[-1.0, 0.0],
-            &[3.0, 0.5],
-            Pcg::seed_from_u64(seed),
-        )
-    }
-
-    /// `n` random one-step samples in the box of [`small`], flagged by `is_demo` (empty for none).
-    fn random_batch(n: usize, is_demo: &[bool], seed: u64) -> Batch<Vec<f32>> {
-        let mut draw = Pcg::seed_from_u64(seed);
-        let obs = (0..2 * n).map(|_| draw.random_range(-1.0..1.0)).collect();
-        let actions: Vec<f32> = (0..n)
-            .flat_map(|_| [draw.random_range(-1.0..3.0), draw.random_range(0.0..0.5)])
-            .collect();
-        Batch {
-            idx: (0..n).collect(),
-            obs,
-            actions: column(2, &actions),
-            rewards: (0..n).map(|_| draw.random_range(-1.0..1.0)).collect(),
-            next_obs: (0..2 * n).map(|_| draw.random_range(-1.0..1.0)).collect(),
-            terminal: vec![false; n],
-            weights: (0..n).map(|_| draw.random_range(0.5..1.0)).collect(),
-            is_demo: if is_demo.is_empty() {
-                vec![false; n]
-            } else {
-                is_demo.to_vec()
-            },
-            ..Batch::default()
-        }
+        let (low, high) = SMALL_BOX;
+        Sac::new(config, 2, &low, &high, Pcg::seed_from_u64(seed))
     }
 
     /// The first two heads' minimum at `(state, action)`, in float64.
-    fn pair_min(agent: &Sac<Pcg>, state: &[f32], action: &[f32]) -> f64 {
-        let mut ws = MlpWorkspace::new(&agent.ac.critics.net, 1);
-        let mut input = state.to_vec();
-        input.extend(action);
-        let q = agent.ac.critics.net.forward(&input, 1, &mut ws);
+    fn pair_min(agent: &Sac, state: &[f32], action: &[f32]) -> f64 {
+        let q = heads_at(&agent.core, state, action);
         f64::from(q[0].min(q[1]))
     }
 
     /// One sample of the policy at `state` for the noise `eps`, in float64 with the textbook formulas: the
     /// action (in the box) and `log N(u; mu, sigma) - log(1 - tanh(u)^2)` summed over the dimensions.
-    fn sample(agent: &Sac<Pcg>, state: &[f32], eps: &[f32]) -> (Vec<f32>, f64, Vec<f64>) {
-        let mut ws = MlpWorkspace::new(&agent.ac.actor.net, 1);
-        let out = agent.ac.actor.net.forward(state, 1, &mut ws).to_vec();
+    fn sample(agent: &Sac, state: &[f32], eps: &[f32]) -> (Vec<f32>, f64, Vec<f64>) {
+        let mut ws = MlpWorkspace::new(&agent.core.actor.net, 1);
+        let out = agent.core.actor.net.forward(state, 1, &mut ws).to_vec();
         let a = eps.len();
-        let (low, high) = (&agent.ac.action_box.low, &agent.ac.action_box.high);
+        let (low, high) = (&agent.core.action_box.low, &agent.core.action_box.high);
         let mut action = vec![0.0; a];
         let mut means = vec![0.0; a];
         let mut log_prob = 0.0f64;
@@ -513,10 +419,10 @@ mod tests {
         let batch = random_batch(n, is_demo, 6);
         let mut draw = Pcg::seed_from_u64(7);
         let noise: Vec<f32> = (0..2 * n).map(|_| draw.sample(StandardNormal)).collect();
-        agent.noise[..2 * n].copy_from_slice(&noise);
+        agent.algo.noise[..2 * n].copy_from_slice(&noise);
         let alpha = 0.3f32;
-        let (_, bc) = agent.actor_gradient(&batch, alpha);
-        let grads = agent.ac.actor.grads.clone();
+        let (_, bc) = agent.algo.actor_gradient(&mut agent.core, &batch, alpha);
+        let grads = agent.core.actor.grads.clone();
         // The Q-filter's outcome at the unperturbed parameters (a selection, not differentiated).
         let filter: Vec<bool> = (0..n)
             .map(|r| {
@@ -531,7 +437,7 @@ mod tests {
         check_filter_counts(bc_weight, is_demo, &filter, bc);
         let half = [2.0f64, 0.25];
         let low = [-1.0f64, 0.0];
-        let loss = |agent: &Sac<Pcg>| -> f64 {
+        let mut loss = |agent: &mut Sac| -> f64 {
             let mut total = 0.0f64;
             for r in 0..n {
                 let state = &batch.obs[2 * r..2 * r + 2];
@@ -551,16 +457,8 @@ mod tests {
         // disagree and the point is skipped; with eight rows through 16 ReLUs there are a few, at most one in ten.
         let mut skipped = 0;
         for (i, analytic) in grads.iter().enumerate() {
-            let original = agent.ac.actor.net.parameters()[i];
-            let mut central = |h: f32| {
-                agent.ac.actor.net.parameters_mut()[i] = original + h;
-                let up = loss(&agent);
-                agent.ac.actor.net.parameters_mut()[i] = original - h;
-                let down = loss(&agent);
-                agent.ac.actor.net.parameters_mut()[i] = original;
-                (up - down) / (2.0 * f64::from(h))
-            };
-            let (coarse, numeric) = (central(1e-2), central(5e-3));
+            let coarse = central_difference(&mut agent, i, 1e-2, &mut loss);
+            let numeric = central_difference(&mut agent, i, 5e-3, &mut loss);
             let tolerance = 5e-3 * numeric.abs().max(0.1);
             if (coarse - numeric).abs() > tolerance {
                 skipped += 1;
@@ -592,6 +490,11 @@ mod tests {
     }
 
     #[test]
+    fn the_actor_gradient_on_eight_rows_matches_finite_differences() {
+        check_actor_gradient(0.0, &[false; 8]);
+    }
+
+    #[test]
     fn the_temperature_gradient_and_log_probabilities_match_an_independent_computation() {
         // The learner's log-probabilities (stable form of the tanh correction) against the float64 textbook
         // density, and d/d(log alpha) of -log alpha (mean log pi + target entropy) against central differences
@@ -601,8 +504,8 @@ mod tests {
         let batch = random_batch(n, &[], 12);
         let mut draw = Pcg::seed_from_u64(13);
         let noise: Vec<f32> = (0..2 * n).map(|_| draw.sample(StandardNormal)).collect();
-        agent.noise[..2 * n].copy_from_slice(&noise);
-        agent.actor_gradient(&batch, 0.5);
+        agent.algo.noise[..2 * n].copy_from_slice(&noise);
+        agent.algo.actor_gradient(&mut agent.core, &batch, 0.5);
         let mut mean = 0.0f64;
         for r in 0..n {
             let (_, log_prob, _) = sample(
@@ -610,18 +513,18 @@ mod tests {
                 &batch.obs[2 * r..2 * r + 2],
                 &noise[2 * r..2 * r + 2],
             );
-            let ours = f64::from(agent.log_probs[r]);
+            let ours = f64::from(agent.algo.log_probs[r]);
             assert!(
                 (ours - log_prob).abs() < 1e-4 * log_prob.abs().max(1.0),
                 "row {r}: {ours} vs {log_prob}"
             );
             mean += log_prob / n as f64;
         }
-        assert_eq!(agent.target_entropy, -2.0);
-        let loss = |log_alpha: f64| -log_alpha * (mean + f64::from(agent.target_entropy));
-        let log_alpha = f64::from(agent.log_alpha);
+        assert_eq!(agent.algo.target_entropy, -2.0);
+        let loss = |log_alpha: f64| -log_alpha * (mean + f64::from(agent.algo.target_entropy));
+        let log_alpha = f64::from(agent.algo.log_alpha);
         let numeric = (loss(log_alpha + 1e-3) - loss(log_alpha - 1e-3)) / 2e-3;
-        let (entropy, analytic) = agent.temperature_gradient(n);
+        let (entropy, analytic) = agent.algo.temperature_gradient(n);
         assert!(
             (f64::from(analytic) - numeric).abs() < 1e-4 * numeric.abs().max(1.0),
             "{analytic} vs {numeric}"
@@ -653,7 +556,7 @@ mod tests {
                     &[true, false, true, false, false, true, true, false],
                     step,
                 );
-                let alpha = agent.alpha();
+                let alpha = agent.algo.alpha();
                 let (stats, priorities) = agent.learn(&batch, GAMMA);
                 trace.extend(priorities.iter().map(|p| p.to_bits()));
                 trace.push(stats.critic_loss.to_bits());
@@ -663,10 +566,18 @@ mod tests {
                 trace.push(agent.critic_spread(&[0.1, -0.2], &action).to_bits());
                 trace.push(agent.action_disagreement(&[0.1, -0.2]).to_bits());
             }
-            trace.extend(agent.ac.actor.net.parameters().iter().map(|p| p.to_bits()));
             trace.extend(
                 agent
-                    .ac
+                    .core
+                    .actor
+                    .net
+                    .parameters()
+                    .iter()
+                    .map(|p| p.to_bits()),
+            );
+            trace.extend(
+                agent
+                    .core
                     .critics
                     .net
                     .parameters()
@@ -702,13 +613,13 @@ mod tests {
                     probes.push(p);
                 }
             }
-            let mut ws = MlpWorkspace::new(&agent.ac.critics.net, 1);
+            let mut ws = MlpWorkspace::new(&agent.core.critics.net, 1);
             let values: Vec<Vec<f32>> = probes
                 .iter()
                 .map(|p| {
                     let mut input = state.to_vec();
                     input.extend([-1.0 + (p[0] + 1.0) * 2.0, (p[1] + 1.0) * 0.25]);
-                    agent.ac.critics.net.forward(&input, 1, &mut ws).to_vec()
+                    agent.core.critics.net.forward(&input, 1, &mut ws).to_vec()
                 })
                 .collect();
             let picks: Vec<&Vec<f32>> = (0..3)
@@ -742,46 +653,30 @@ mod tests {
         eprintln!("the heads disagreed on {nonzero} of 8 states");
     }
 
-    /// The settings of the Pendulum-v1 tests: 64-64 networks, batch 128, learning rates 1e-3.
-    fn pendulum_config() -> SacConfig {
-        SacConfig {
-            hidden: vec![64, 64],
-            max_batch: 128,
-            actor_lr: 1e-3,
-            critic_lr: 1e-3,
+    /// SAC with the shared settings `common` and its learning rate of the temperature 1e-3.
+    fn pendulum_agent(common: ActorCriticConfig, seed: u64) -> Sac {
+        let config = SacConfig {
+            common,
             alpha_lr: 1e-3,
             ..SacConfig::default()
-        }
+        };
+        Sac::new(config, 3, &[-2.0], &[2.0], Pcg::seed_from_u64(seed))
     }
 
     #[test]
     fn sac_learns_pendulum() {
         // 64-64 networks, batch 128, 10,000 steps (the first 1,000 uniformly random), one update a step; the
         // policy's mean action must then hold Pendulum-v1 above -200 on ten evaluation seeds it never trained on.
-        let config = pendulum_config();
-        let mut agent = Sac::new(config, 3, &[-2.0], &[2.0], Pcg::seed_from_u64(0));
-        train_pendulum(&mut agent, 10_000, 128);
-        let score = evaluate_pendulum(&mut agent, 1000..1010);
+        let mut agent = pendulum_agent(pendulum_config(), 0);
+        learns_pendulum(&mut agent, 10_000, "SAC");
         eprintln!(
-            "SAC on Pendulum-v1 after 10,000 steps: mean return {score:.1} on seeds 1000-1009, alpha {:.4}",
-            agent.alpha()
+            "SAC's temperature after training: {:.4}",
+            agent.algo.alpha()
         );
-        assert!(score > -200.0, "SAC did not learn Pendulum-v1: {score}");
     }
 
     #[test]
     fn pretraining_on_demonstrations_imitates_the_swing_up() {
-        let config = SacConfig {
-            bc_weight: 100.0,
-            q_filter: false,
-            ..pendulum_config()
-        };
-        let mut agent = Sac::new(config, 3, &[-2.0], &[2.0], Pcg::seed_from_u64(3));
-        pretraining_imitates(&mut agent, 2_000, "SAC");
-    }
-
-    #[test]
-    fn the_actor_gradient_on_eight_rows_matches_finite_differences() {
-        check_actor_gradient(0.0, &[false; 8]);
+        pretraining_imitates(&mut pendulum_agent(pretraining_config(), 3), 2_000, "SAC");
     }
 }

@@ -205,16 +205,10 @@ mod tests {
         let spec = box_spec("LunarLanderContinuous-v3").unwrap();
         let (low, high) = (spec.action_low, spec.action_high);
         let hidden = vec![16, 8];
-        let configs = [
-            BoxLearnerConfig::Td3(Td3Config {
-                hidden: hidden.clone(),
-                ..Td3Config::default()
-            }),
-            BoxLearnerConfig::Sac(SacConfig {
-                hidden,
-                ..SacConfig::default()
-            }),
-        ];
+        let (mut td3, mut sac) = (Td3Config::default(), SacConfig::default());
+        td3.common.hidden = hidden.clone();
+        sac.common.hidden = hidden;
+        let configs = [BoxLearnerConfig::Td3(td3), BoxLearnerConfig::Sac(sac)];
         let dir = tempfile::tempdir().unwrap();
         for (i, config) in configs.into_iter().enumerate() {
             let mut agent = BoxAgent::new(config, 8, low, high, 0.99, 1 + i as u64);

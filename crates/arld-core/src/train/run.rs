@@ -12,6 +12,7 @@ use super::{
     Algo, Checkpointer, QueryEvent, RunLog, SeedPurpose, Summary, TrainConfig, epsilon_at,
     pretrain_update, push_demos, record_failure, run_dir, seed_for, steps_to_solve, update_checked,
 };
+use crate::agent::actor_critic::ActorCriticConfig;
 use crate::agent::box_agent::{BoxAgent, BoxLearnerConfig};
 use crate::agent::risk::RiskConfig;
 use crate::agent::sac::SacConfig;
@@ -99,24 +100,21 @@ pub fn box_agent(cfg: &TrainConfig, spec: &'static BoxSpec) -> BoxAgent {
     } else {
         0.0
     };
+    let common = ActorCriticConfig {
+        hidden,
+        heads,
+        max_batch: cfg.batch_size,
+        bc_weight,
+        ..ActorCriticConfig::with_learning_rate(lr)
+    };
     let config = match cfg.algo {
         Algo::Td3 => BoxLearnerConfig::Td3(Td3Config {
-            hidden,
-            heads,
-            actor_lr: lr,
-            critic_lr: lr,
-            max_batch: cfg.batch_size,
-            bc_weight,
+            common,
             ..Td3Config::default()
         }),
         Algo::Sac => BoxLearnerConfig::Sac(SacConfig {
-            hidden,
-            heads,
-            actor_lr: lr,
-            critic_lr: lr,
+            common,
             alpha_lr: lr,
-            max_batch: cfg.batch_size,
-            bc_weight,
             ..SacConfig::default()
         }),
     };
