@@ -107,6 +107,7 @@ pub fn box_agent(cfg: &TrainConfig, spec: &'static BoxSpec) -> BoxAgent {
         bc_weight,
         ..ActorCriticConfig::with_learning_rate(lr)
     };
+    let tau = common.tau;
     let config = match cfg.algo {
         Algo::Td3 => BoxLearnerConfig::Td3(Td3Config {
             common,
@@ -117,10 +118,6 @@ pub fn box_agent(cfg: &TrainConfig, spec: &'static BoxSpec) -> BoxAgent {
             alpha_lr: lr,
             ..SacConfig::default()
         }),
-    };
-    let tau = match &config {
-        BoxLearnerConfig::Td3(c) => c.tau,
-        BoxLearnerConfig::Sac(c) => c.tau,
     };
     let seed = seed_for(cfg.seed, SeedPurpose::Agent);
     let agent = BoxAgent::new(
