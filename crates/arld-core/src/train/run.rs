@@ -19,7 +19,7 @@ use crate::agent::td3::Td3Config;
 use crate::agent::{Agent, Learner};
 use crate::env::{self, Action, BoxSpec, Env, TaskSpec};
 use crate::expert::demos::Demonstrations;
-use crate::expert::{Answer, EpisodeTrace, Expert, Progress, Query, RunEnd};
+use crate::expert::{Answer, EpisodeTrace, Expert, Progress, Query, RunEnd, RunHistory};
 use crate::interrupt;
 use crate::query::{DecisionInput, Needs, OracleView, QueryController};
 use crate::replay::{Batch, Replay, ReplayConfig, Transition};
@@ -440,7 +440,7 @@ impl<'a, L: Learner> Run<'a, L> {
         self.pretrain()?;
         self.begin_training();
         if self.resume_from.is_some() {
-            self.show_where_resumed();
+            self.show_where_resumed()?;
         }
         while self.driver.is_some() || self.st.step < self.cfg.train_steps {
             let (took, uncertainty) = match self.st.env_pending.clone() {
@@ -908,8 +908,16 @@ impl<'a, L: Learner> Run<'a, L> {
 
     /// A resumed run shows its expert where it stands before anything else (a person's page fills its status
     /// before the question that was open is asked again).
-    fn show_where_resumed(&mut self) {
+    /// Its history first: the evaluations so far and the uncertainties logged with the questions (the only ones
+    /// a run keeps with their steps).
+    fn show_where_resumed(&mut self) -> Result<()> {
         if let Some(expert) = self.expert.as_deref_mut() {
+            let uncertainty = match self.log.dir() {
+                Some(dir) => super::run_dir::read_query_uncertainties(dir)?,
+                None => Vec::new(),
+            };
+            let curve = self.log.curve().iter().map(|p| (p.step, p.mean)).collect();
+            expert.resumed_history(&RunHistory { curve, uncertainty });
             expert.observe(&Progress {
                 step: self.st.step,
                 train_steps: self.cfg.train_steps,
@@ -920,6 +928,7 @@ impl<'a, L: Learner> Run<'a, L> {
                 last_eval: self.log.curve().last().map(|p| (p.step, p.mean)),
             });
         }
+        Ok(())
     }
 
     /// After a step: the evaluation without exploration every `eval_period` steps, the expert's view of the run,
