@@ -440,7 +440,7 @@ impl<'a, L: Learner> Run<'a, L> {
         self.pretrain()?;
         self.begin_training();
         if self.resume_from.is_some() {
-            self.show_where_resumed()?;
+            self.show_where_resumed();
         }
         while self.driver.is_some() || self.st.step < self.cfg.train_steps {
             let (took, uncertainty) = match self.st.env_pending.clone() {
@@ -908,14 +908,21 @@ impl<'a, L: Learner> Run<'a, L> {
 
     /// A resumed run shows its expert where it stands before anything else (a person's page fills its status
     /// before the question that was open is asked again).
-    /// Its history first: the evaluations so far and the uncertainties logged with the questions (the only ones
-    /// a run keeps with their steps).
-    fn show_where_resumed(&mut self) -> Result<()> {
+    /// Its history first: the evaluations so far and, for an expert that shows the uncertainty (a person's
+    /// page), the uncertainties logged with the questions (the only ones a run keeps with their steps). The
+    /// charts are no reason to refuse a resume: a query log that cannot be read leaves a warning and no points.
+    fn show_where_resumed(&mut self) {
         if let Some(expert) = self.expert.as_deref_mut() {
-            let uncertainty = match self.log.dir() {
-                Some(dir) => super::run_dir::read_query_uncertainties(dir)?,
-                None => Vec::new(),
+            let logged = match self.log.dir() {
+                Some(dir) if expert.shows_uncertainty() => {
+                    super::run_dir::read_query_uncertainties(dir)
+                }
+                _ => Ok(Vec::new()),
             };
+            let uncertainty = logged.unwrap_or_else(|err| {
+                eprintln!("warning: the uncertainty chart starts empty: {err:#}");
+                Vec::new()
+            });
             let curve = self.log.curve().iter().map(|p| (p.step, p.mean)).collect();
             expert.resumed_history(&RunHistory { curve, uncertainty });
             expert.observe(&Progress {
@@ -928,7 +935,6 @@ impl<'a, L: Learner> Run<'a, L> {
                 last_eval: self.log.curve().last().map(|p| (p.step, p.mean)),
             });
         }
-        Ok(())
     }
 
     /// After a step: the evaluation without exploration every `eval_period` steps, the expert's view of the run,
