@@ -312,6 +312,8 @@ fn floats(v: &serde_json::Value) -> Vec<f64> {
 #[test]
 fn a_stop_while_a_question_is_open_loses_nothing_and_resume_asks_it_again() {
     check_prerequisites();
+    // An evaluation every 20 steps (of 2 episodes): the run has a few when it stops, near step 50, for the charts
+    // of the resumed page to draw.
     // The budget runs out near step 60; the steps after it train without questions, long enough for the page
     // to show (and the person to screenshot) the training state even on a loaded machine (at 1500 steps, about
     // 0.2 s of training, a loaded CI machine once reached the end first).
@@ -336,7 +338,9 @@ fn a_stop_while_a_question_is_open_loses_nothing_and_resume_asks_it_again() {
         "--set",
         "budget=30",
         "--set",
-        "eval_period=500",
+        "eval_period=20",
+        "--set",
+        "eval_episodes=2",
         "-o",
     ];
     let mut args: Vec<&std::ffi::OsStr> = words.iter().map(std::ffi::OsStr::new).collect();
@@ -389,6 +393,29 @@ fn a_stop_while_a_question_is_open_loses_nothing_and_resume_asks_it_again() {
         "queries.csv after the stop does not hold the person's answers"
     );
     assert!(std::fs::metadata(run.join("episodes.csv")).unwrap().len() > 0);
+    // The run's course at the stop, read here from its files: its evaluations (eval.csv: step and mean) and the
+    // uncertainties logged with its questions (queries.csv: step, uncertainty, threshold or none).
+    let curve_before: Vec<(f64, f64)> = csv::Reader::from_path(run.join("eval.csv"))
+        .unwrap()
+        .records()
+        .map(|r| {
+            let r = r.unwrap();
+            (r[0].parse().unwrap(), r[1].parse().unwrap())
+        })
+        .collect();
+    let uncertainty_before: Vec<(f64, f64, Option<f64>)> =
+        csv::Reader::from_path(run.join("queries.csv"))
+            .unwrap()
+            .records()
+            .map(|r| r.unwrap())
+            .filter(|r| !r[2].is_empty())
+            .map(|r| {
+                let threshold = (!r[3].is_empty()).then(|| r[3].parse().unwrap());
+                (r[0].parse().unwrap(), r[2].parse().unwrap(), threshold)
+            })
+            .collect();
+    assert!(!curve_before.is_empty(), "no evaluation before the stop");
+    assert!(!uncertainty_before.is_empty(), "{csv_before}");
 
     // Resumed, the run asks the open question again; the person answers to the end.
     let (mut arld, url) = start_arld(
@@ -420,6 +447,29 @@ fn a_stop_while_a_question_is_open_loses_nothing_and_resume_asks_it_again() {
             && !first["panel"].as_str().unwrap().starts_with('–'),
         "the step in the status panel: {first}"
     );
+    // The charts draw the run's course before the stop as the question is asked again: each evaluation and
+    // each question's uncertainty, with the threshold then.
+    let charts = &first["charts"];
+    let curve_shown: Vec<(f64, f64)> = charts["curve"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|p| (p[0].as_f64().unwrap(), p[1].as_f64().unwrap()))
+        .collect();
+    assert_eq!(curve_shown, curve_before, "{charts}");
+    let uncertainty_shown: Vec<(f64, f64, Option<f64>)> = charts["uncertainty"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|p| {
+            (
+                p[0].as_f64().unwrap(),
+                p[1].as_f64().unwrap(),
+                p[2].as_f64(),
+            )
+        })
+        .collect();
+    assert_eq!(uncertainty_shown, uncertainty_before, "{charts}");
     let csv_after = std::fs::read_to_string(run.join("queries.csv")).unwrap();
     assert!(
         csv_after.starts_with(&csv_before),
@@ -682,22 +732,24 @@ fn a_stop_while_a_person_holds_control_loses_nothing_and_resume_gives_it_back() 
     );
     let status = wait(&mut arld, Duration::from_secs(180), "the resumed arld");
     assert!(status.success(), "the resumed run failed: {after}");
-    // The page opened on the takeover, the person in control. It goes on as soon as the page is open, so the
-    // first status the page shows may be a few steps on from the stop: each of those steps is one unit more of
-    // the budget than at the stop. (The panel may still be finishing a replay of the agent's last steps.)
+    // The page opened on the takeover, the person in control, and the run waits for their fresh key: the page
+    // shows the step the run stopped at and the budget spent then, also a second later, before the key.
     let resumed = &after["takeover"]["resumed"];
     assert_eq!(resumed["prompt"]["takeover"], true, "{after}");
-    let shown = resumed["status"]["step"].as_u64().unwrap();
-    assert!(
-        (stop_step..stop_step + 40).contains(&shown),
-        "stopped at {stop_step}: {after}"
-    );
+    assert_eq!(resumed["prompt"]["waits"], true, "{after}");
+    for shown in [&resumed["status"], &resumed["beforeKey"]["status"]] {
+        assert_eq!(shown["step"].as_u64(), Some(stop_step), "{after}");
+        assert_eq!(
+            shown["budget_used"].as_u64(),
+            Some(lines_before.len() as u64),
+            "{after}"
+        );
+        assert_eq!(shown["takeovers"], 1, "{after}");
+    }
     assert_eq!(
-        resumed["status"]["budget_used"].as_u64(),
-        Some(lines_before.len() as u64 + shown - stop_step),
+        resumed["beforeKey"]["prompt"]["id"], resumed["prompt"]["id"],
         "{after}"
     );
-    assert_eq!(resumed["status"]["takeovers"], 1, "{after}");
 
     // Nothing before the stop changed; the takeover's steps are one stretch, each step once, going on after it.
     let csv_after = std::fs::read_to_string(run.join("queries.csv")).unwrap();
@@ -728,6 +780,11 @@ fn a_stop_while_a_person_holds_control_loses_nothing_and_resume_gives_it_back() 
         takeover.len() > person_before.len(),
         "the takeover did not go on after the resume: {takeover:?}"
     );
+    // The first step after the resume is the stopped one, from the state the page showed, with the person's key.
+    let first = &lines[lines_before.len()];
+    assert_eq!(first["step"].as_u64(), Some(stop_step), "{first}");
+    assert_eq!(floats(&first["obs"]), floats(&resumed["obs"]), "{first}");
+    assert_eq!(first["action"], resumed["first"], "{first}");
     let s = summary(&run);
     assert_eq!(s["demos_queried"].as_u64(), Some(lines.len() as u64));
     assert!(lines.len() as u64 <= REALTIME_BUDGET);

@@ -256,7 +256,9 @@ for (;;) {
     lastId = p.id;
     // The status panel as the question opens (a resumed run fills it before asking again).
     const panel = await page.evaluate(() => document.getElementById("s-step").textContent);
-    const question = { obs: p.obs, agent_action: p.agent_action, steps_left: p.steps_left, statusStep: s.status ? s.status.step : null, panel };
+    // The charts' points as the question opens (a resumed run draws its course before the stop).
+    const charts = await page.evaluate(() => ({ curve: arld.curve, uncertainty: arld.uncertainty }));
+    const question = { obs: p.obs, agent_action: p.agent_action, steps_left: p.steps_left, statusStep: s.status ? s.status.step : null, panel, charts };
     if (first === null) first = question;
     if (answerLimit && answers.length >= answerLimit) { open = question; break; }
     if (skipped < skip) {

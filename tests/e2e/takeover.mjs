@@ -9,7 +9,8 @@
 // PID (the run) while they hold control, and wait for the page to show the stop (takeover-stopped.png); the report
 // then has "stopped" (the page's status and panel just before) and no end screen.
 // --resumed: the run was resumed from such a stop: the takeover must go on as the page opens (before any question
-// of the agent): the report's takeover.resumed says what the page showed then (takeover-resumed.png), and the
+// of the agent), once the person presses a fresh key: the report's takeover.resumed says what the page showed then
+// (takeover-resumed.png), a second later before any key (beforeKey), and the key pressed (first); then the
 // person holds control for --hold steps more, hands back and answers the agent's questions to the end.
 // Prints one JSON line: {"takeover": {...what the page showed of it...}, "questions": N, "endScreen": {...}}.
 import { chromium } from "playwright-core";
@@ -92,9 +93,15 @@ for (;;) {
     takeover = { openedAtStep: s.status.step, resumed: { prompt: p, status: s.status, panel: await panel() } };
     await page.screenshot({ path: path.join(shots, "takeover-resumed.png") });
     phase = "running";
-    if (p.waits && p.agent_action !== null) {
+    if (p.waits) {
+      // The run waits for the person's key: a second later it still stands where it stopped.
+      await page.waitForTimeout(1000);
+      const later = await state();
+      takeover.resumed.beforeKey = { status: later.status, prompt: later.prompt };
       lastId = p.id;
       const first = cartpole(p.obs);
+      takeover.resumed.first = first;
+      takeover.resumed.obs = p.obs;
       if (first === hello.noop) await page.keyboard.press(keyOf(first)); else await holdKey(first);
       continue;
     }

@@ -28,7 +28,13 @@
 //! leaves out pauses and time with no tab open. A Python program's run handed back to it between two steps
 //! ([`Expert::handed_over`]: `learn` returned, or a stop) shows where it stands until it goes on. A stop request
 //! (Ctrl-C, SIGTERM) ends any wait at once with [`arld_core::interrupt::Interrupted`], so that the run snapshots with
-//! the question open. The page ([`protocol`] describes its messages) is plain HTML, CSS and JavaScript embedded
+//! the question open. Resumed, the run asks it again; a real-time segment that was in progress goes on only after
+//! a fresh key and the countdown, as at its opening (the person had no control while the run was stopped), and
+//! the charts start from the run's course before the stop ([`Expert::resumed_history`]): the test-return curve
+//! from its evaluations (the snapshot's curve, which `eval.csv` holds too) and the uncertainty chart from the
+//! uncertainties logged with its questions in `queries.csv`, the only ones a run keeps with their steps (the
+//! rule's window in the snapshot has no steps), so before the resume the chart shows the steps where the agent
+//! asked. The page ([`protocol`] describes its messages) is plain HTML, CSS and JavaScript embedded
 //! in the binary; at the end it shows how the run ended and what the person gave ([`Expert::finish`]).
 //!
 //! Actions in a box (the continuous tasks: [`WebExpert::start_box`]) take the same path: [`PageAction`] says how
@@ -47,7 +53,7 @@ use anyhow::{Context, Result, bail};
 use arld_core::env::{Env, EpisodeStart};
 use arld_core::expert::process::WireAction;
 pub use arld_core::expert::web_options::{DEFAULT_LISTEN, WebOptions};
-use arld_core::expert::{Answer, Expert, Progress, Query, RunEnd};
+use arld_core::expert::{Answer, Expert, Progress, Query, RunEnd, RunHistory};
 use frames::FrameSource;
 use protocol::{ActionCheck, ActionKeys, BoxControls, EndScreen, Hello, Prompt, ServerMsg, Status};
 use server::{Input, KeyInput, Shared};
@@ -365,6 +371,9 @@ pub struct WebExpert<A: PageAction = usize> {
     declined: bool,
     /// The segment in progress is the person's takeover ([`Query::taken_over`]).
     taking_over: bool,
+    /// The run was resumed from a snapshot ([`Expert::restore`]) and has not asked yet: a real-time segment in
+    /// progress goes on only after a fresh key and the countdown, as a segment's opening does.
+    resumed: bool,
 }
 
 impl WebExpert {
@@ -438,6 +447,7 @@ impl<A: PageAction> WebExpert<A> {
             handing_back: false,
             declined: false,
             taking_over: false,
+            resumed: false,
         })
     }
 
@@ -704,10 +714,11 @@ impl<A: PageAction> WebExpert<A> {
     }
 
     /// Real time: only the segment's opening question waits for a fresh key, then a countdown; the later steps
-    /// take the held key (or the no-op action) at the set rate.
-    fn ask_realtime(&mut self, query: &Query<'_, A>, fps: f64) -> Result<Answer<A>> {
+    /// take the held key (or the no-op action) at the set rate. So does the first step after a resume (`resumed`)
+    /// of a segment in progress: the person had no control while the run was stopped.
+    fn ask_realtime(&mut self, query: &Query<'_, A>, fps: f64, resumed: bool) -> Result<Answer<A>> {
         let period = Duration::from_secs_f64(1.0 / fps);
-        if query.agent_action.is_some() {
+        if query.agent_action.is_some() || resumed {
             let id = self.show_query(query)?;
             let answer = loop {
                 if let Some(answer) = self.wait_for_key(id, false)? {
@@ -802,6 +813,12 @@ impl<A: PageAction> WebExpert<A> {
     /// steps and asked for it, so there is no replay, no breath and no quiet interval.
     fn ask(&mut self, query: &Query<'_, A>) -> Result<Answer<A>> {
         self.lift_hand_over();
+        let resumed = std::mem::take(&mut self.resumed);
+        if resumed && query.agent_action.is_none() {
+            // A segment in progress at the stop: the page shows where the run stands before the person goes on.
+            self.carried = None;
+            self.publish_unsent_status();
+        }
         self.taking_over = query.taken_over;
         if query.agent_action.is_some() && query.taken_over {
             self.carried = None;
@@ -836,7 +853,7 @@ impl<A: PageAction> WebExpert<A> {
         }
         let answer = match self.server.options.fps {
             None => self.ask_turn(query)?,
-            Some(fps) => self.ask_realtime(query, fps)?,
+            Some(fps) => self.ask_realtime(query, fps, resumed)?,
         };
         match answer {
             Answer::Action { .. } => {
@@ -964,11 +981,35 @@ impl<A: PageAction> Expert<A> for WebExpert<A> {
     fn restore(&mut self, state: &str) -> Result<()> {
         self.effort = serde_json::from_str(state)
             .map_err(|e| anyhow::anyhow!("the snapshot's web expert state is damaged: {e}"))?;
+        self.resumed = true;
         Ok(())
     }
 
     fn shows_uncertainty(&self) -> bool {
         true
+    }
+    /// The charts of a resumed run start from its course before the stop: the test-return curve from its
+    /// evaluations, the uncertainty chart from the uncertainties logged with its questions (the only ones a run
+    /// keeps with their steps), the latest [`server::UNCERTAINTY_HISTORY`] of them.
+    fn resumed_history(&mut self, history: &RunHistory) {
+        self.last_eval = history.curve.last().map(|&(step, _)| step);
+        let keep = history
+            .uncertainty
+            .len()
+            .saturating_sub(server::UNCERTAINTY_HISTORY);
+        let uncertainty: Vec<(usize, f32, Option<f32>)> = history.uncertainty[keep..]
+            .iter()
+            .map(|&(step, u, threshold)| (step as usize, u, threshold))
+            .collect();
+        let msg = ServerMsg::History {
+            uncertainty: &uncertainty,
+            curve: &history.curve,
+        }
+        .to_json();
+        self.server.shared.publish(msg, |b, _| {
+            b.uncertainty = uncertainty.clone();
+            b.curve = history.curve.clone();
+        });
     }
     /// Real time only: the page's "Take over (T)" asked since the last step (turn-based, every step waits for
     /// the agent's questions anyway).

@@ -69,6 +69,9 @@ pub trait Expert<A: Action = usize>: Send {
     fn wants_control(&mut self) -> bool {
         false
     }
+    /// Called once when a resumed run goes on, before anything else is shown: what the run kept of its course
+    /// before the stop (a person's page draws its charts from it).
+    fn resumed_history(&mut self, _history: &RunHistory) {}
     /// Whether the expert shows the agent's uncertainty at every step (a person's page): the agent then
     /// computes it even where no query rule reads it (a segment aside), so that it goes on after the budget is
     /// spent. Programs say no: the agent computes only what its rule needs.
@@ -131,6 +134,16 @@ impl<A: Action> Clone for EpisodeTrace<'_, A> {
 }
 
 impl<A: Action> Copy for EpisodeTrace<'_, A> {}
+
+/// What a resumed run kept of its course before the stop, for [`Expert::resumed_history`].
+#[derive(Clone, Debug, Default)]
+pub struct RunHistory {
+    /// The evaluations so far: step and mean test return, in step order.
+    pub curve: Vec<(u64, f64)>,
+    /// The uncertainty logged with each question so far (the query log's rows that have one): step,
+    /// uncertainty and the rule's threshold then, in step order.
+    pub uncertainty: Vec<(u64, f32, Option<f32>)>,
+}
 
 /// How a run ended, for [`Expert::finish`].
 #[derive(Clone, Debug)]

@@ -20,7 +20,7 @@ use crate::agent::td3::Td3Config;
 use crate::agent::{Agent, Learner};
 use crate::env::{self, Action, BoxSpec, Env, TaskSpec};
 use crate::expert::demos::Demonstrations;
-use crate::expert::{Answer, EpisodeTrace, Expert, Progress, Query, RunEnd};
+use crate::expert::{Answer, EpisodeTrace, Expert, Progress, Query, RunEnd, RunHistory};
 use crate::interrupt;
 use crate::query::{DecisionInput, Needs, OracleView, QueryController};
 use crate::replay::{Batch, Replay, ReplayConfig, Transition};
@@ -903,8 +903,23 @@ impl<'a, L: Learner> Run<'a, L> {
 
     /// A resumed run shows its expert where it stands before anything else (a person's page fills its status
     /// before the question that was open is asked again).
+    /// Its history first: the evaluations so far and, for an expert that shows the uncertainty (a person's
+    /// page), the uncertainties logged with the questions (the only ones a run keeps with their steps). The
+    /// charts are no reason to refuse a resume: a query log that cannot be read leaves a warning and no points.
     fn show_where_resumed(&mut self) {
         if let Some(expert) = self.expert.as_deref_mut() {
+            let logged = match self.log.dir() {
+                Some(dir) if expert.shows_uncertainty() => {
+                    super::run_dir::read_query_uncertainties(dir)
+                }
+                _ => Ok(Vec::new()),
+            };
+            let uncertainty = logged.unwrap_or_else(|err| {
+                eprintln!("warning: the uncertainty chart starts empty: {err:#}");
+                Vec::new()
+            });
+            let curve = self.log.curve().iter().map(|p| (p.step, p.mean)).collect();
+            expert.resumed_history(&RunHistory { curve, uncertainty });
             expert.observe(&Progress {
                 step: self.st.step,
                 train_steps: self.cfg.train_steps,

@@ -947,6 +947,65 @@ pub fn parse_query_steps(bytes: &[u8], path: &Path) -> Result<Vec<u64>> {
     Ok(steps)
 }
 
+/// The uncertainty logged with each question in `queries.csv` (step, uncertainty, threshold; rows without an
+/// uncertainty left out), in the log's order; empty when the run has no query log.
+pub fn read_query_uncertainties(dir: &Path) -> Result<Vec<(u64, f32, Option<f32>)>> {
+    let path = dir.join(QUERIES_FILE);
+    if !path.is_file() {
+        return Ok(Vec::new());
+    }
+    let bytes = crate::files::read_bounded(&path, MAX_LOG_BYTES)
+        .with_context(|| format!("cannot read {}", path.display()))?;
+    parse_query_uncertainties(&bytes, &path)
+}
+
+/// The step, uncertainty and threshold columns of the bytes of a `queries.csv` at `path` (named in errors).
+pub fn parse_query_uncertainties(
+    bytes: &[u8],
+    path: &Path,
+) -> Result<Vec<(u64, f32, Option<f32>)>> {
+    let mut reader = csv::Reader::from_reader(bytes);
+    let headers = reader
+        .headers()
+        .with_context(|| format!("{}: bad header", path.display()))?
+        .clone();
+    let column = |name: &str| {
+        headers
+            .iter()
+            .position(|h| h == name)
+            .with_context(|| format!("{} has no `{name}` column", path.display()))
+    };
+    let (step, uncertainty, threshold) = (
+        column("step")?,
+        column("uncertainty")?,
+        column("threshold")?,
+    );
+    let number = |value: &str, what: &str| -> Result<Option<f32>> {
+        let value = value.trim();
+        if value.is_empty() {
+            return Ok(None);
+        }
+        let parsed: f32 = value
+            .parse()
+            .with_context(|| format!("{}: bad {what} '{value}'", path.display()))?;
+        Ok(Some(parsed))
+    };
+    let mut rows = Vec::new();
+    for (line, record) in reader.records().enumerate() {
+        let record = record.with_context(|| format!("{}: bad row {}", path.display(), line + 1))?;
+        let field = |c: usize| record.get(c).unwrap_or("");
+        let Some(u) = number(field(uncertainty), "uncertainty")? else {
+            continue;
+        };
+        let at = field(step).trim();
+        let at = at
+            .parse()
+            .with_context(|| format!("{}: bad step '{at}'", path.display()))?;
+        rows.push((at, u, number(field(threshold), "threshold")?));
+    }
+    Ok(rows)
+}
+
 /// Where a run of a sweep lives below the sweep directory: `ENV/METHOD-NET[/VARIANT]/seedN`, e.g.
 /// `CartPole-v0/adqn-bootstrap/tq0.05/seed3`. [`variant_from_path`] reads the variant back.
 pub fn sweep_run_path(
@@ -1143,6 +1202,28 @@ mod tests {
 
     fn point(step: u64, mean: f64) -> EvalPoint {
         EvalPoint::constant(step, mean)
+    }
+
+    #[test]
+    fn the_uncertainties_of_a_query_log_skip_rows_without_one_and_name_a_bad_field() {
+        let path = Path::new("run/queries.csv");
+        // A question with a threshold, one of a rule without one, and the rest of a segment taken back (no
+        // uncertainty): written by hand in the log's columns.
+        let log = format!(
+            "{QUERIES_HEADER}12,0,0.5,0.25,1,0,web,1.000,true\n\
+             30,1,0.75,,0,0,web,0.500,true\n\
+             31,1,,,,1,web,2.000,false\n"
+        );
+        let rows = parse_query_uncertainties(log.as_bytes(), path).unwrap();
+        assert_eq!(rows, vec![(12, 0.5, Some(0.25)), (30, 0.75, None)]);
+        let bad = format!("{QUERIES_HEADER}12,0,high,0.25,1,0,web,1.000,true\n");
+        let err = parse_query_uncertainties(bad.as_bytes(), path).unwrap_err();
+        assert!(
+            format!("{err:#}").contains("run/queries.csv: bad uncertainty 'high'"),
+            "{err:#}"
+        );
+        let no_column = parse_query_uncertainties(b"step,episode\n1,0\n", path).unwrap_err();
+        assert!(format!("{no_column:#}").contains("no `uncertainty` column"));
     }
 
     #[test]

@@ -185,6 +185,13 @@ function showPrompt() {
     text = "Get ready: you take over in a moment. Hold the key you want; Esc hands back.";
     box.className = "takeover";
   }
+  else if (h.fps && p.waits && p.agent_action === null) {
+    // A real-time segment in progress when the run was stopped: it goes on after a fresh key and the countdown.
+    text = p.takeover
+      ? "The run goes on where it stopped, and you still have control: press the key of your next action. Esc hands back."
+      : `The run goes on where it stopped, in your segment (${p.steps_left} step${p.steps_left > 1 ? "s" : ""} left): press the key of your next action.`;
+    box.className = p.takeover ? "takeover" : "asking";
+  }
   else if (p.takeover && p.waits) {
     text = `You take over from here: press the key of your first action (the agent would "${actionName(p.agent_action)}"). ` +
       "Esc hands back.";
