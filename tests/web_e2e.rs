@@ -23,8 +23,14 @@ fn e2e_dir() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/e2e")
 }
 
-/// Fails with the reason when something the browser test needs is missing.
-fn check_prerequisites() {
+/// One browser test at a time: the real-time tests pace a person against the run's clock, and two headless
+/// Chromiums plus two runs on a small machine would test the machine's load rather than the page.
+static ONE_BROWSER: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
+/// Fails with the reason when something the browser test needs is missing; otherwise waits for the other browser
+/// tests to finish and returns the guard that keeps them waiting until this one ends (hold it for the test).
+#[must_use = "the guard keeps the other browser tests waiting: bind it for the whole test"]
+fn check_prerequisites() -> std::sync::MutexGuard<'static, ()> {
     let chromium = std::env::var("CHROMIUM").unwrap_or_else(|_| "/usr/bin/chromium".into());
     let mut missing = Vec::new();
     if !Path::new(&chromium).is_file() {
@@ -43,6 +49,9 @@ fn check_prerequisites() {
         "the web expert's browser test cannot run; missing: {}; `scripts/test --setup` installs them",
         missing.join(", ")
     );
+    ONE_BROWSER
+        .lock()
+        .unwrap_or_else(|poisoned| poisoned.into_inner())
 }
 
 /// Waits for `child`, killing it if it is still running after `limit` (a hang guard, not a timing check).
@@ -217,7 +226,7 @@ fn summary(run: &Path) -> serde_json::Value {
 
 #[test]
 fn a_scripted_person_answers_in_headless_chromium() {
-    check_prerequisites();
+    let _one_browser = check_prerequisites();
 
     // CartPole-v0, turn-based; the first question is left to time out; a second tab watches and the answering
     // tab reloads while the run goes on.
@@ -311,7 +320,7 @@ fn floats(v: &serde_json::Value) -> Vec<f64> {
 
 #[test]
 fn a_stop_while_a_question_is_open_loses_nothing_and_resume_asks_it_again() {
-    check_prerequisites();
+    let _one_browser = check_prerequisites();
     // An evaluation every 20 steps (of 2 episodes): the run has a few when it stops, near step 50, for the charts
     // of the resumed page to draw.
     // The budget runs out near step 60; the steps after it train without questions, long enough for the page
@@ -581,7 +590,7 @@ fn start_realtime_cartpole(stderr: Stdio) -> (PathBuf, Child, String) {
 
 #[test]
 fn a_person_takes_over_unasked_in_real_time_and_hands_back() {
-    check_prerequisites();
+    let _one_browser = check_prerequisites();
     // CartPole-v0 in real time at 20 steps per second, a budget of 60 transitions: the agent asks (the rule's
     // questions), and in between the person presses T, acts for a while and hands back with Esc.
     let (run, mut arld, url) = start_realtime_cartpole(Stdio::inherit());
@@ -675,7 +684,7 @@ fn a_person_takes_over_unasked_in_real_time_and_hands_back() {
 /// and the status where the run stopped; they hand back, and the run ends with one takeover on its end screen.
 #[test]
 fn a_stop_while_a_person_holds_control_loses_nothing_and_resume_gives_it_back() {
-    check_prerequisites();
+    let _one_browser = check_prerequisites();
     let (run, mut arld, url) = start_realtime_cartpole(Stdio::piped());
     let pid = arld.id().to_string();
     let shots = shots_dir("takeover-stop");
@@ -800,7 +809,7 @@ fn a_stop_while_a_person_holds_control_loses_nothing_and_resume_gives_it_back() 
 /// position and the box: a stick at x gives x times the half-width, a held key the bound, the slider its value.
 #[test]
 fn a_person_answers_a_box_task_with_a_pad_keys_and_a_slider() {
-    check_prerequisites();
+    let _one_browser = check_prerequisites();
     const TRAIN_STEPS: u64 = 3000;
     const BUDGET: u64 = 100;
     let sets = [
