@@ -303,8 +303,9 @@ for (;;) {
     else { await thinkPause(); await page.keyboard.press(keyOf(a)); }
     continue;
   }
-  // Later steps of a segment.
-  if (p.steps_left <= 3) await shot("mid-segment");
+  // Later steps of a segment. In real time a segment lasts seconds and its last steps pass in a blink that a
+  // loaded machine's polling can miss: the picture is taken at the first running step the page shows.
+  if (p.steps_left <= 3 || (realtime && !p.starts_in && !p.waits)) await shot("mid-segment");
   const a = policy(p.obs);
   if (realtime) await holdKey(a === hello.noop ? null : a);
   else if (p.waits && p.id > lastId) {
