@@ -103,7 +103,13 @@ fn unknown_env_in_trace_lists_known_ids() {
     let output = arld(&["env", "check", trace.to_str().unwrap()]);
     assert_clean_failure(
         &output,
-        &["unknown.jsonl:2:", "CartPole-v9", "known ids", "Acrobot-v1"],
+        &[
+            "unknown.jsonl:2:",
+            "CartPole-v9",
+            "arld's tasks",
+            "Acrobot-v1",
+            "Pendulum-v1",
+        ],
     );
 }
 
@@ -124,10 +130,16 @@ fn missing_trace_file_is_reported() {
 
 #[test]
 fn rollout_unknown_env_lists_known_ids() {
-    let output = arld(&["env", "rollout", "--env", "Pendulum-v1", "--episodes", "2"]);
+    let output = arld(&["env", "rollout", "--env", "Pendulum-v2", "--episodes", "2"]);
     assert_clean_failure(
         &output,
-        &["Pendulum-v1", "known ids", "CartPole-v0", "MountainCar-v0"],
+        &[
+            "Pendulum-v2",
+            "arld's tasks",
+            "CartPole-v0",
+            "MountainCar-v0",
+            "Pendulum-v1",
+        ],
     );
 }
 
@@ -173,4 +185,126 @@ fn rollout_json_is_reproducible_and_consistent() {
         "--json",
     ]);
     assert_ne!(first.stdout, other_seed.stdout);
+}
+
+/// Every task of the registry, discrete and with actions in a box, in `env list`; each box task's bounds as its
+/// spec gives them.
+#[test]
+fn list_shows_every_task_of_both_kinds() {
+    let output = arld(&["env", "list"]);
+    let table = stdout(&output);
+    assert!(output.status.success(), "{}", stderr(&output));
+    for task in &arld::env::registry::TASKS {
+        let row = table
+            .lines()
+            .find(|line| line.split_whitespace().next() == Some(task.id))
+            .unwrap_or_else(|| panic!("{} missing from:\n{table}", task.id));
+        let (obs_dim, max_steps, _) = task.facts();
+        let fields: Vec<&str> = row.split_whitespace().collect();
+        assert!(fields.contains(&obs_dim.to_string().as_str()), "{row}");
+        assert!(fields.contains(&max_steps.to_string().as_str()), "{row}");
+    }
+    let lander = table
+        .lines()
+        .find(|l| l.starts_with("LunarLanderContinuous-v3"))
+        .unwrap();
+    assert!(lander.contains("box [-1, 1] x [-1, 1]"), "{lander}");
+}
+
+/// A random rollout of a box task draws actions in the box from the seed: the same seed gives the same returns,
+/// and they are those of the library's environment stepped with the same draws (computed here independently).
+#[test]
+fn rollout_plays_box_tasks_reproducibly() {
+    use arld::rng::NumpyRng;
+    use rand::Rng;
+    let run = |seed: &str| {
+        let output = arld(&[
+            "env",
+            "rollout",
+            "--env",
+            "Pendulum-v1",
+            "--episodes",
+            "3",
+            "--seed",
+            seed,
+            "--json",
+        ]);
+        assert!(output.status.success(), "{}", stderr(&output));
+        serde_json::from_str::<serde_json::Value>(&stdout(&output)).unwrap()
+    };
+    let (a, b) = (run("7"), run("7"));
+    assert_eq!(a, b);
+    let mut env = arld::env::make_continuous("Pendulum-v1").unwrap();
+    let mut rng = NumpyRng::new(7);
+    let mut returns = Vec::new();
+    for i in 0..3u64 {
+        use arld::env::Env;
+        env.reset(Some(7 + i));
+        let mut total = 0.0;
+        loop {
+            let action = [rng.random_range(-2.0f32..2.0)];
+            let step = env.step(&action).unwrap();
+            total += step.reward;
+            if step.terminated || step.truncated {
+                break;
+            }
+        }
+        returns.push(total);
+    }
+    let mean = returns.iter().sum::<f64>() / 3.0;
+    let got = a["return_mean"].as_f64().unwrap();
+    assert!((got - mean).abs() <= 1e-9 * mean.abs(), "{got} vs {mean}");
+    assert_eq!(a["env"], "Pendulum-v1");
+    assert_ne!(run("8")["return_mean"], a["return_mean"]);
+}
+
+/// `env check` reads the continuous traces (float32 action vectors, the lander recorded under the name Gymnasium
+/// gives it) and passes them.
+#[test]
+fn check_reads_the_continuous_traces() {
+    let path =
+        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/continuous/conformance.jsonl");
+    let output = arld(&["env", "check", path.to_str().unwrap()]);
+    let table = stdout(&output);
+    assert!(output.status.success(), "{table}\n{}", stderr(&output));
+    for id in [
+        "Pendulum-v1",
+        "MountainCarContinuous-v0",
+        "LunarLanderContinuous",
+    ] {
+        let row = table.lines().find(|line| line.contains(id)).expect(id);
+        assert!(row.contains("PASS"), "{row}");
+    }
+}
+
+/// A trace whose step records the other kind of action is malformed, named with its line.
+#[test]
+fn check_refuses_an_action_of_the_other_kind() {
+    let dir = tempfile::tempdir().unwrap();
+    let step = STEP.replace(r#""action":1"#, r#""action":[0.5]"#);
+    let path = write_trace(dir.path(), "t.jsonl", &[META, START, &step]);
+    let output = arld(&["env", "check", path.to_str().unwrap()]);
+    assert_clean_failure(&output, &["t.jsonl:3", "discrete actions", "vector"]);
+}
+
+/// An unknown id is refused naming the tasks of both kinds; a continuous id that is not arld's never becomes
+/// another task.
+#[test]
+fn unknown_ids_are_refused_with_every_task() {
+    for args in [
+        vec!["env", "rollout", "--env", "Pendulum-v9"],
+        vec![
+            "train",
+            "--env",
+            "MountainCarContinuous-v9",
+            "--method",
+            "dqn",
+        ],
+    ] {
+        let output = arld(&args);
+        assert_clean_failure(
+            &output,
+            &["CartPole-v0", "Pendulum-v1", "LunarLanderContinuous-v3"],
+        );
+    }
 }

@@ -80,7 +80,7 @@ fn config_errors_are_reported_before_any_work() {
     );
     fails_with(
         &["train", "--env", "CartPole-v9", "-o", o],
-        &["CartPole-v9", "known ids", "Acrobot-v1"],
+        &["CartPole-v9", "arld's tasks", "Acrobot-v1"],
     );
     fails_with(
         &[

@@ -124,6 +124,7 @@ fn write_fake_run(spec: &RunSpec, dir: &Path, interrupt: bool) -> Result<()> {
             env: spec.id.env.clone(),
             method: spec.id.method,
             net: spec.id.net,
+            algo: None,
             seed: spec.id.seed,
             steps_to_solve: solve.unwrap_or(TRAIN_STEPS) as usize,
             solved: solve.is_some(),

@@ -5,8 +5,8 @@
 //! statistics; `list` prints the registered environments.
 
 use anyhow::bail;
+use arld::env;
 use arld::env::conformance::{EnvReport, check_file};
-use arld::env::{self, Env};
 use arld::rng::NumpyRng;
 use clap::{Subcommand, ValueEnum};
 use rand::Rng;
@@ -18,7 +18,8 @@ pub enum EnvCommand {
     /// Replay Gymnasium conformance traces and report how closely each environment follows them.
     ///
     /// Each FILE holds JSON lines as recorded from Gymnasium (a meta line, then per episode a start line
-    /// and its step lines). Every episode is reset with its seed (or set to its recorded state), the
+    /// and its step lines; a task with actions in a box records float32 action vectors, as
+    /// tests/data/continuous/conformance.jsonl does). Every episode is reset with its seed (or set to its recorded state), the
     /// recorded actions are replayed, and observations, rewards and episode ends are compared. Classic
     /// control must stay within 1e-6 on every observation and reward; LunarLander within 1e-4 on the
     /// seeded episodes, with at most 10% of the long heuristic episodes allowed to drift. Exits with a
@@ -34,10 +35,11 @@ pub enum EnvCommand {
     },
     /// Play a policy for several seeded episodes and print the mean and standard deviation of return and length.
     ///
-    /// Episode i is reset with seed SEED+i; the random policy draws its actions from a generator seeded
-    /// with SEED, so a run is reproducible. Standard deviations are population ones (NumPy's `np.std`).
+    /// Episode i is reset with seed SEED+i; the random policy draws its actions (an index, or a point of the
+    /// action box, uniformly) from a generator seeded with SEED, so a run is reproducible. Standard deviations are population ones (NumPy's `np.std`).
     Rollout {
-        /// Gymnasium environment id, e.g. CartPole-v1 (see `arld env list`).
+        /// Gymnasium id of a built-in task, discrete or with actions in a box, e.g. CartPole-v1 or Pendulum-v1
+        /// (`arld env list` shows them all).
         #[arg(long = "env", value_name = "ID")]
         env_id: String,
         /// Policy that chooses the actions.
@@ -53,7 +55,8 @@ pub enum EnvCommand {
         #[arg(long)]
         json: bool,
     },
-    /// List the registered environments with their sizes, time limits and solve thresholds.
+    /// List the built-in tasks, discrete and with actions in a box: actions, sizes, time limits, solve
+    /// thresholds and the preset's steps.
     List,
 }
 
@@ -75,23 +78,43 @@ pub fn run(cmd: EnvCommand) -> anyhow::Result<ExitCode> {
             json,
         } => rollout(&env_id, policy, episodes, seed, json),
         EnvCommand::List => {
-            println!(
-                "{:<16} {:>7} {:>7} {:>9} {:>15}",
-                "id", "obs dim", "actions", "max steps", "solve threshold"
-            );
-            for spec in env::SPECS.iter() {
-                println!(
-                    "{:<16} {:>7} {:>7} {:>9} {:>15}",
-                    spec.id,
-                    spec.obs_dim,
-                    spec.n_actions,
-                    spec.max_episode_steps,
-                    spec.solve_threshold
-                );
-            }
+            list();
             Ok(ExitCode::SUCCESS)
         }
     }
+}
+
+/// Every built-in task of the registry: id, actions, sizes, time limit, threshold, the preset's steps and what
+/// the task is.
+fn list() {
+    println!(
+        "{:<25} {:<22} {:>7} {:>9} {:>9}  {:>12}  about",
+        "id", "actions", "obs dim", "max steps", "threshold", "preset steps"
+    );
+    for task in &env::registry::TASKS {
+        let (obs_dim, max_steps, threshold) = task.facts();
+        let preset = arld::train::TrainConfig::preset(
+            task.id,
+            arld::train::Method::Dqn,
+            arld::train::NetKind::Bootstrap,
+            0,
+        )
+        .map_or_else(|_| "-".to_string(), |cfg| cfg.train_steps.to_string());
+        println!(
+            "{:<25} {:<22} {:>7} {:>9} {:>9}  {:>12}  {}",
+            task.id,
+            task.actions(),
+            obs_dim,
+            max_steps,
+            threshold.map_or_else(|| "none".to_string(), |t| t.to_string()),
+            preset,
+            task.about
+        );
+    }
+    println!(
+        "\nTasks with actions in a box learn with TD3 or SAC (`arld train --env Pendulum-v1 --algo td3|sac`); the \
+         others with the DQN family. Thresholds are Gymnasium's (Pendulum-v1's -200 is arld's: Gymnasium gives none)."
+    );
 }
 
 fn check(files: &[PathBuf]) -> anyhow::Result<ExitCode> {
@@ -105,7 +128,7 @@ fn check(files: &[PathBuf]) -> anyhow::Result<ExitCode> {
         rows.extend(reports.into_iter().map(|report| (name.clone(), report)));
     }
     println!(
-        "{:<24} {:<15} {:>8} {:>6} {:>8} {:>7} {:>11} {:>11}  {:<6} first divergence",
+        "{:<24} {:<25} {:>8} {:>6} {:>8} {:>7} {:>11} {:>11}  {:<6} first divergence",
         "file",
         "env",
         "episodes",
@@ -125,7 +148,7 @@ fn check(files: &[PathBuf]) -> anyhow::Result<ExitCode> {
             .as_ref()
             .map_or_else(|| "-".to_string(), ToString::to_string);
         println!(
-            "{:<24} {:<15} {:>8} {:>6} {:>8} {:>7} {:>11.3e} {:>11.3e}  {:<6} {}",
+            "{:<24} {:<25} {:>8} {:>6} {:>8} {:>7} {:>11.3e} {:>11.3e}  {:<6} {}",
             file,
             report.env,
             report.episodes,
@@ -156,19 +179,33 @@ fn rollout(
     json: bool,
 ) -> anyhow::Result<ExitCode> {
     let last_seed = super::last_seed(seed, episodes)?;
-    let mut env: Box<dyn Env> = env::make(env_id)?;
+    let task = env::registry::task(env_id)?;
     let mut action_rng = NumpyRng::new(seed);
-    let n_actions = env.n_actions();
-    let episodes_played = env::rollouts(
-        env.as_mut(),
-        episodes,
-        |i| Some(seed + i as u64),
-        |_| {
-            Ok::<_, anyhow::Error>(match policy {
-                RolloutPolicy::Random => action_rng.random_range(0..n_actions),
-            })
-        },
-    )?;
+    let seeds = |i: usize| Some(seed + i as u64);
+    // Uniformly random actions: an index, or a point of the box drawn dimension by dimension.
+    let episodes_played = match &task.body {
+        env::registry::Body::Discrete { spec, make, .. } => {
+            let n_actions = spec.n_actions;
+            env::rollouts(make(spec).as_mut(), episodes, seeds, |_| {
+                Ok::<_, anyhow::Error>(match policy {
+                    RolloutPolicy::Random => action_rng.random_range(0..n_actions),
+                })
+            })?
+        }
+        env::registry::Body::Box { spec, .. } => {
+            let mut box_env = env::make_box(task.id)?;
+            env::rollouts(box_env.as_mut(), episodes, seeds, |_| {
+                Ok::<_, anyhow::Error>(match policy {
+                    RolloutPolicy::Random => spec
+                        .action_low
+                        .iter()
+                        .zip(spec.action_high)
+                        .map(|(&low, &high)| action_rng.random_range(low..high))
+                        .collect::<Vec<f32>>(),
+                })
+            })?
+        }
+    };
     let (return_mean, return_std, _, _) = env::return_stats(&episodes_played);
     let lengths: Vec<f64> = episodes_played.iter().map(|e| e.length as f64).collect();
     let (length_mean, length_std, _, _) = env::mean_std_min_max(&lengths);
@@ -177,7 +214,7 @@ fn rollout(
     };
     if json {
         let summary = serde_json::json!({
-            "env": env.id(),
+            "env": task.id,
             "policy": policy_name,
             "episodes": episodes,
             "seeds": [seed, last_seed],
@@ -190,7 +227,7 @@ fn rollout(
     } else {
         println!(
             "{} policy={policy_name} episodes={episodes} seeds={seed}..={last_seed}",
-            env.id()
+            task.id
         );
         println!("return  {return_mean:.3} +- {return_std:.3}");
         println!("length  {length_mean:.3} +- {length_std:.3}");

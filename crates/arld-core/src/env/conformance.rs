@@ -2,7 +2,10 @@
 //!
 //! A trace file (format in `conformance/README.md`) is JSON lines: a `meta` line, then per episode a `start`
 //! line (environment id, case, seed, the first observation, for the `set` case the float64 state to set)
-//! followed by its `step` lines (action, observation, reward, terminated, truncated). [`check_reader`] streams
+//! followed by its `step` lines (action, observation, reward, terminated, truncated). A task with discrete actions
+//! states its number of actions at the start and an action index per step; a task with actions in a box states
+//! its `action_dim` and bounds and a float32 vector per step (`tests/data/continuous/conformance.jsonl`). The task
+//! is found in the registry by id or by a spelling a trace uses ([`super::registry::find`]). [`check_reader`] streams
 //! such a file line by line: it resets one environment per id the way the case prescribes, replays the
 //! recorded actions and compares what comes back. Per environment it fills an [`EnvReport`]: episodes,
 //! episodes reproduced bit for bit, largest observation and reward deviations, the first divergence and the
@@ -12,7 +15,8 @@
 //! a [`ConformanceError`] that names the file and line; a mismatch between our environment and the trace is
 //! not an error but a divergence in the report.
 
-use super::{Env, EnvError, make};
+use super::registry::{self, Body};
+use super::{Env, EnvError, Step};
 use serde::Deserialize;
 use std::collections::HashMap;
 use std::fmt;
@@ -176,7 +180,12 @@ enum TraceLine {
         env: String,
         case: String,
         seed: u64,
-        n_actions: usize,
+        /// Discrete actions: their number.
+        n_actions: Option<usize>,
+        /// Actions in a box: the dimension and bounds.
+        action_dim: Option<usize>,
+        action_low: Option<Vec<f32>>,
+        action_high: Option<Vec<f32>>,
         max_episode_steps: usize,
         obs: Vec<f64>,
         state: Option<Vec<f64>>,
@@ -184,12 +193,139 @@ enum TraceLine {
     Step {
         env: String,
         t: usize,
-        action: usize,
+        action: TraceAction,
         obs: Vec<f64>,
         reward: f64,
         terminated: bool,
         truncated: bool,
     },
+}
+
+/// A recorded action: an index (discrete actions) or a float32 vector (a box).
+#[derive(Debug, Deserialize)]
+#[serde(untagged)]
+enum TraceAction {
+    Index(usize),
+    Vector(Vec<f32>),
+}
+
+/// The environment a trace's episodes replay in, of either kind of action.
+enum Replayed {
+    Discrete(Box<dyn Env>),
+    Boxed(Box<dyn Env<Vec<f32>>>),
+}
+
+impl Replayed {
+    /// The built-in task a trace names (by id or by a spelling of the registry).
+    fn make(id: &str) -> Result<Self, EnvError> {
+        let task = registry::find(id)?;
+        Ok(match &task.body {
+            Body::Discrete { spec, make, .. } => Replayed::Discrete(make(spec)),
+            Body::Box { .. } => Replayed::Boxed(super::make_box(task.id)?),
+        })
+    }
+
+    /// Whether the trace's start line states this task's actions and time limit; else what differs.
+    fn check_start(
+        &self,
+        n_actions: Option<usize>,
+        bounds: (Option<usize>, Option<&[f32]>, Option<&[f32]>),
+        max_episode_steps: usize,
+    ) -> Result<(), String> {
+        let (id, limit, ours, theirs) = match self {
+            Replayed::Discrete(env) => (
+                env.id(),
+                env.max_episode_steps(),
+                format!("{} actions", env.n_actions()),
+                n_actions.map(|n| format!("{n} actions")),
+            ),
+            Replayed::Boxed(env) => {
+                let spec = env.spec();
+                let box_of = |dim: usize, low: &[f32], high: &[f32]| {
+                    format!("{dim}-dimensional actions in [{low:?}, {high:?}]")
+                };
+                let theirs = match bounds {
+                    (Some(dim), Some(low), Some(high)) => Some(box_of(dim, low, high)),
+                    _ => None,
+                };
+                (
+                    env.id(),
+                    env.max_episode_steps(),
+                    box_of(spec.action_low.len(), spec.action_low, spec.action_high),
+                    theirs,
+                )
+            }
+        };
+        let Some(theirs) = theirs else {
+            return Err(format!(
+                "{id} has {ours}: a start line of it needs them (`n_actions`, or `action_dim`, `action_low` and \
+                 `action_high`)"
+            ));
+        };
+        if ours != theirs || limit != max_episode_steps {
+            return Err(format!(
+                "{id} has {ours} and a {limit}-step limit, the trace says {theirs} and {max_episode_steps}"
+            ));
+        }
+        Ok(())
+    }
+
+    fn reset(&mut self, seed: u64) -> Vec<f32> {
+        match self {
+            Replayed::Discrete(env) => env.reset(Some(seed)),
+            Replayed::Boxed(env) => env.reset(Some(seed)),
+        }
+    }
+
+    fn set_state(&mut self, state: &[f64]) -> Result<Vec<f32>, EnvError> {
+        match self {
+            Replayed::Discrete(env) => env.set_state(state),
+            Replayed::Boxed(env) => env.set_state(state),
+        }
+    }
+
+    /// Whether a recorded action is of this task's kind and in its range: a wrong kind is a malformed line
+    /// (`Err(Ok(message))`), an index out of range the environment's error (`Err(Err(error))`).
+    fn check_action(&self, action: &TraceAction) -> Result<(), Result<String, EnvError>> {
+        match (self, action) {
+            (Replayed::Discrete(env), TraceAction::Index(a)) if *a >= env.n_actions() => {
+                Err(Err(EnvError::ActionOutOfRange {
+                    env: env.id(),
+                    action: *a,
+                    n_actions: env.n_actions(),
+                }))
+            }
+            (Replayed::Discrete(_), TraceAction::Index(_))
+            | (Replayed::Boxed(_), TraceAction::Vector(_)) => Ok(()),
+            (Replayed::Discrete(env), TraceAction::Vector(_)) => Err(Ok(format!(
+                "{} has discrete actions, the step records a vector",
+                env.id()
+            ))),
+            (Replayed::Boxed(env), TraceAction::Index(_)) => Err(Ok(format!(
+                "{} has actions in a box, the step records an index",
+                env.id()
+            ))),
+        }
+    }
+
+    /// One step with a recorded action [`Replayed::check_action`] accepted.
+    fn step(&mut self, action: &TraceAction) -> Result<Step, EnvError> {
+        match (self, action) {
+            (Replayed::Discrete(env), TraceAction::Index(a)) => env.step(*a),
+            (Replayed::Boxed(env), TraceAction::Vector(a)) => env.step(a),
+            (env, _) => Err(EnvError::BadState {
+                env: env.id(),
+                msg: "an action of the other kind (check_action refuses it)".into(),
+            }),
+        }
+    }
+
+    fn id(&self) -> &'static str {
+        match self {
+            Replayed::Discrete(env) => env.id(),
+            Replayed::Boxed(env) => env.id(),
+        }
+    }
 }
 
 /// The episode being replayed.
@@ -228,7 +364,7 @@ pub fn check_reader(
     reader: impl BufRead,
     file_name: &str,
 ) -> Result<Vec<EnvReport>, ConformanceError> {
-    let mut envs: HashMap<String, Box<dyn Env>> = HashMap::new();
+    let mut envs: HashMap<String, Replayed> = HashMap::new();
     let mut reports: Vec<EnvReport> = Vec::new();
     let mut episode: Option<Episode> = None;
     let malformed = |line: usize, msg: String| ConformanceError::Malformed {
@@ -268,6 +404,9 @@ pub fn check_reader(
                 case,
                 seed,
                 n_actions,
+                action_dim,
+                action_low,
+                action_high,
                 max_episode_steps,
                 obs,
                 state,
@@ -276,29 +415,22 @@ pub fn check_reader(
                     finish_episode(&mut reports, done);
                 }
                 if !envs.contains_key(&env_id) {
-                    let built = make(&env_id).map_err(|err| env_error(line, err))?;
+                    let built = Replayed::make(&env_id).map_err(|err| env_error(line, err))?;
                     envs.insert(env_id.clone(), built);
                     reports.push(EnvReport::new(&env_id));
                 }
                 let env = envs.get_mut(&env_id).expect("inserted above");
-                if env.n_actions() != n_actions || env.max_episode_steps() != max_episode_steps {
-                    return Err(malformed(
-                        line,
-                        format!(
-                            "{env_id} has {} actions and a {}-step limit, the trace says {n_actions} and {max_episode_steps}",
-                            env.n_actions(),
-                            env.max_episode_steps()
-                        ),
-                    ));
-                }
+                let bounds = (action_dim, action_low.as_deref(), action_high.as_deref());
+                env.check_start(n_actions, bounds, max_episode_steps)
+                    .map_err(|msg| malformed(line, msg))?;
                 let first_obs = match case.as_str() {
-                    "seed" | "heuristic" => env.reset(Some(seed)),
+                    "seed" | "heuristic" => env.reset(seed),
                     "set" => {
                         let state = state.ok_or_else(|| {
                             malformed(line, "a `set` start line needs a `state`".into())
                         })?;
                         // Gymnasium: reset(seed=0), then the state is overwritten.
-                        env.reset(Some(0));
+                        env.reset(0);
                         env.set_state(&state).map_err(|err| env_error(line, err))?
                     }
                     other => {
@@ -350,21 +482,15 @@ pub fn check_reader(
                 }
                 current.t = t;
                 let env = envs.get_mut(&env_id).expect("created at start");
-                if action >= env.n_actions() {
-                    return Err(env_error(
-                        line,
-                        EnvError::ActionOutOfRange {
-                            env: env.id(),
-                            action,
-                            n_actions: env.n_actions(),
-                        },
-                    ));
-                }
+                env.check_action(&action).map_err(|problem| match problem {
+                    Ok(msg) => malformed(line, msg),
+                    Err(err) => env_error(line, err),
+                })?;
                 let report = report_for(&mut reports, &env_id);
                 if current.ended {
                     continue;
                 }
-                let step = match env.step(action) {
+                let step = match env.step(&action) {
                     Ok(step) => step,
                     Err(err) => return Err(env_error(line, err)),
                 };

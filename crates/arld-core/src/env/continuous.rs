@@ -13,7 +13,8 @@ use super::{BoxSpec, EnvError, EnvRng, Physics, Simulated};
 use crate::rng::NumpyRng;
 use crate::task::{Action, Goal};
 
-/// Every continuous-action task, in the order `known_continuous_ids` lists them.
+/// The registered facts of every continuous-action task (each one's entry in [`super::registry::TASKS`] points
+/// here).
 pub static CONTINUOUS_SPECS: [BoxSpec; 3] = [
     BoxSpec {
         id: "Pendulum-v1",
@@ -51,9 +52,9 @@ pub static CONTINUOUS_SPECS: [BoxSpec; 3] = [
     },
 ];
 
-/// The ids of the continuous-action tasks.
+/// The ids of the built-in continuous-action tasks ([`super::registry::TASKS`]).
 pub fn known_continuous_ids() -> Vec<&'static str> {
-    CONTINUOUS_SPECS.iter().map(|s| s.id).collect()
+    super::registry::ids(true).collect()
 }
 
 /// The physics of one continuous-action task.

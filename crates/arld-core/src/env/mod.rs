@@ -23,6 +23,7 @@ pub mod lunar_lander;
 pub mod mountain_car;
 pub mod mountain_car_continuous;
 pub mod pendulum;
+pub mod registry;
 pub mod rollout;
 
 pub use acrobot::Acrobot;
@@ -61,7 +62,11 @@ pub struct Step {
 /// Errors from environments: bad ids, bad actions, bad states.
 #[derive(Debug, Error)]
 pub enum EnvError {
-    #[error("unknown environment id '{id}'; known ids: {}", known_ids().join(", "))]
+    #[error(
+        "unknown environment id '{id}'; arld's tasks are, with {} (`arld env list` describes them). A Gymnasium \
+         environment arld does not have can be trained from Python: pass the gymnasium.Env to arld.Agent",
+        registry::described()
+    )]
     UnknownId { id: String },
     #[error(
         "action {action} is out of range for {env}: it has {n_actions} actions (0 to {})",
@@ -84,6 +89,13 @@ pub enum EnvError {
     /// happened, and a driven run pauses there and takes it again when it goes on.
     #[error("{env} raised: {msg}")]
     Raised { env: String, msg: String },
+    /// A built-in task asked for with the other kind of action.
+    #[error("{id} has {has}, and this needs a task with {wanted}")]
+    KindMismatch {
+        id: String,
+        has: &'static str,
+        wanted: &'static str,
+    },
     #[error("cannot register environment '{id}': {msg}")]
     Register { id: String, msg: String },
     #[error("environment '{id}' is registered but not available in this build: {reason}")]
@@ -269,9 +281,9 @@ pub const SPECS: [EnvSpec; 6] = [
     },
 ];
 
-/// Every registered environment id.
+/// The ids of the built-in tasks with discrete actions ([`registry::TASKS`]).
 pub fn known_ids() -> Vec<&'static str> {
-    SPECS.iter().map(|spec| spec.id).collect()
+    registry::ids(false).collect()
 }
 
 /// The static facts of a built-in or [`register`]ed environment, or `UnknownId`.
@@ -437,24 +449,25 @@ pub fn register(
 /// `LunarLanderContinuous-v3` is Gymnasium's `gym.make("LunarLander-v3", continuous=True)`; see
 /// [`continuous_id`] for that spelling.
 pub fn make_continuous(id: &str) -> Result<continuous::ContinuousEnv, EnvError> {
-    let spec = box_spec(id)?;
-    let physics: Box<dyn continuous::ContinuousDynamics> = match spec.id {
-        "Pendulum-v1" => Box::new(pendulum::Pendulum::default()),
-        "LunarLanderContinuous-v3" => Box::new(lunar_lander::LunarLanderContinuous::default()),
-        _ => Box::new(mountain_car_continuous::MountainCarContinuous::default()),
-    };
-    Ok(continuous::ContinuousEnv::with_spec(spec, physics))
+    match &registry::task(id)?.body {
+        registry::Body::Box { spec, physics, .. } => {
+            Ok(continuous::ContinuousEnv::with_spec(spec, physics()))
+        }
+        registry::Body::Discrete { .. } => Err(EnvError::KindMismatch {
+            id: id.to_string(),
+            has: "discrete actions",
+            wanted: "actions in a box",
+        }),
+    }
 }
 
 /// The registered id of `gym.make(id, continuous=True)` where a task has both kinds of action
 /// (`LunarLander-v3` and `LunarLander-v2` give `LunarLanderContinuous-v3`); `None` for any other id.
 pub fn continuous_id(id: &str) -> Option<&'static str> {
-    match id {
-        "LunarLander-v3" | "LunarLander-v2" | "LunarLanderContinuous-v3" => {
-            Some("LunarLanderContinuous-v3")
-        }
-        _ => None,
-    }
+    registry::TASKS
+        .iter()
+        .find(|task| task.id == id && task.is_box() || task.continuous_of.contains(&id))
+        .map(|task| task.id)
 }
 
 /// The registered facts of a continuous-action task: a built-in one (its id as [`make_continuous`] takes it) or
@@ -573,15 +586,16 @@ pub fn make_box(id: &str) -> Result<Box<dyn Env<Vec<f32>>>, EnvError> {
     Ok(Box::new(make_continuous(id)?))
 }
 
-/// Builds an environment by Gymnasium id.
+/// Builds an environment with discrete actions by Gymnasium id (a built-in task: one registered from Python is
+/// made in Python).
 pub fn make(id: &str) -> Result<Box<dyn Env>, EnvError> {
-    let spec = spec(id)?;
-    match spec.id {
-        "CartPole-v0" | "CartPole-v1" => Ok(Box::new(CartPole::new(spec.id))),
-        "Acrobot-v1" => Ok(Box::new(Acrobot::new())),
-        "MountainCar-v0" => Ok(Box::new(MountainCar::new())),
-        "LunarLander-v2" | "LunarLander-v3" => Ok(Box::new(LunarLander::new(spec.id))),
-        _ => Err(EnvError::UnknownId { id: id.to_string() }),
+    match &registry::task(id)?.body {
+        registry::Body::Discrete { spec, make, .. } => Ok(make(spec)),
+        registry::Body::Box { .. } => Err(EnvError::KindMismatch {
+            id: id.to_string(),
+            has: "actions in a box",
+            wanted: "discrete actions",
+        }),
     }
 }
 

@@ -79,6 +79,11 @@ impl ClassicTask<2> for MountainCarPhysics {
     }
 }
 
+/// Accelerate in the direction of motion. Observation: [position, velocity]; actions: 0 left, 1 none, 2 right.
+pub fn push_with_motion(obs: &[f32]) -> usize {
+    if obs[1] >= 0.0 { 2 } else { 0 }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -11,9 +11,13 @@
 //!
 //! It never terminates; the limit is 200 steps, and the task has no reward threshold.
 //!
-//! Observations and states match Gymnasium's bit for bit. The reward does on all but about one step in 1,500:
-//! NumPy squares the float32 torque with the C library's `powf`, which is not correctly rounded, and ours is the
-//! correctly rounded square, so there the torque cost (at most 0.004) differs by one float32 ulp (at most 5e-10).
+//! Observations and states match Gymnasium's bit for bit. The reward does on all but about one step in 400:
+//! Gymnasium's three squares (`normalize(theta) ** 2`, `theta_dot ** 2`, `u ** 2`) go through the C library's
+//! `pow` and `powf`, which are not correctly rounded (with NumPy 2.4.6 on glibc 2.36, about one square in 1,200 is
+//! one ulp off, in float64 and in float32: `tests/data/continuous/measure_squares.py`), and may differ between
+//! C libraries and CPUs; ours are correctly rounded, the same bytes on every machine. On such a step the reward
+//! differs by that ulp (at most 5e-10, through the float32 torque cost), and `tests/continuous_conformance.rs`
+//! checks that every reward is exactly NumPy's formula with each square correctly rounded or one ulp off.
 
 use super::continuous::{ContinuousDynamics, state_of_len};
 use crate::rng::NumpyRng;

@@ -145,6 +145,153 @@ impl Algo {
     }
 }
 
+/// The settings of TD3 and SAC beyond the shared ones (network, learning rate, batch, discount), as config keys:
+/// each `None` stands for its default, which [`BoxSettings::value`] gives with its source.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct BoxSettings {
+    /// Polyak rate of the target networks \[TD3, SAC: 0.005\].
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tau: Option<f64>,
+    /// TD3: critic updates per actor and target update \[TD3: 2\].
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub policy_delay: Option<usize>,
+    /// TD3: standard deviation of the target policy's smoothing noise, in half-widths of the box \[TD3: 0.2\].
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub target_noise: Option<f64>,
+    /// TD3: the clip of that noise, in half-widths \[TD3: 0.5\].
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub noise_clip: Option<f64>,
+    /// TD3: standard deviation of the exploration noise, in half-widths \[TD3: 0.1\].
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub exploration_noise: Option<f64>,
+    /// SAC: the entropy the temperature steers towards \[SAC: -dim(A)\].
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub target_entropy: Option<f64>,
+    /// SAC: the temperature's learning rate \[OURS: `lr`\].
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub alpha_lr: Option<f64>,
+    /// SAC: the temperature before the first update \[SAC: 1\].
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub initial_alpha: Option<f64>,
+}
+
+/// Which box learner a setting of [`BoxSettings`] belongs to (`None`: both).
+fn box_setting_owner(key: &str) -> Option<Option<Algo>> {
+    match key {
+        "tau" => Some(None),
+        "policy_delay" | "target_noise" | "noise_clip" | "exploration_noise" => {
+            Some(Some(Algo::Td3))
+        }
+        "target_entropy" | "alpha_lr" | "initial_alpha" => Some(Some(Algo::Sac)),
+        _ => None,
+    }
+}
+
+impl BoxSettings {
+    /// Checks the given values.
+    fn validate(&self) -> Result<()> {
+        let check = |name: &str, v: Option<f64>, ok: fn(f64) -> bool, what: &str| -> Result<()> {
+            match v {
+                Some(v) if !ok(v) => bail!("{name} must be {what}, got {v}"),
+                _ => Ok(()),
+            }
+        };
+        check("tau", self.tau, |v| v > 0.0 && v <= 1.0, "in (0, 1]")?;
+        let non_negative = |v: f64| v >= 0.0 && v.is_finite();
+        let positive = |v: f64| v > 0.0 && v.is_finite();
+        check(
+            "target_noise",
+            self.target_noise,
+            non_negative,
+            "non-negative and finite",
+        )?;
+        check(
+            "noise_clip",
+            self.noise_clip,
+            non_negative,
+            "non-negative and finite",
+        )?;
+        check(
+            "exploration_noise",
+            self.exploration_noise,
+            non_negative,
+            "non-negative and finite",
+        )?;
+        check(
+            "target_entropy",
+            self.target_entropy,
+            f64::is_finite,
+            "finite",
+        )?;
+        check("alpha_lr", self.alpha_lr, positive, "positive and finite")?;
+        check(
+            "initial_alpha",
+            self.initial_alpha,
+            positive,
+            "positive and finite",
+        )?;
+        ensure!(
+            self.policy_delay
+                .is_none_or(|d| (1..=MAX_STEPS).contains(&d)),
+            "policy_delay must be between 1 and {MAX_STEPS}, got {:?}",
+            self.policy_delay
+        );
+        Ok(())
+    }
+
+    /// These settings with each one equal to its default ([`BoxSettings::values`] of unset settings) unset.
+    fn given_only(&self, lr: f64, action_dim: usize) -> BoxSettings {
+        let defaults = BoxSettings::default().values(lr, action_dim);
+        let given = self.values(lr, action_dim);
+        let keep = |i: usize| given[i].1 != defaults[i].1;
+        BoxSettings {
+            tau: self.tau.filter(|_| keep(0)),
+            policy_delay: self.policy_delay.filter(|_| keep(1)),
+            target_noise: self.target_noise.filter(|_| keep(2)),
+            noise_clip: self.noise_clip.filter(|_| keep(3)),
+            exploration_noise: self.exploration_noise.filter(|_| keep(4)),
+            target_entropy: self.target_entropy.filter(|_| keep(5)),
+            alpha_lr: self.alpha_lr.filter(|_| keep(6)),
+            initial_alpha: self.initial_alpha.filter(|_| keep(7)),
+        }
+    }
+
+    /// Each key's value in a run with learning rate `lr` and actions of `action_dim` dimensions: the given one or
+    /// its default.
+    pub fn values(&self, lr: f64, action_dim: usize) -> [(&'static str, toml::Value); 8] {
+        // The defaults are the learners' own (`Td3Config::default`, `SacConfig::default`).
+        let (td3, sac) = (
+            crate::agent::td3::Td3Config::default(),
+            crate::agent::sac::SacConfig::default(),
+        );
+        // A float32 default as the decimal it is written as (0.005, not 0.004999999888241291).
+        let decimal = |x: f32| x.to_string().parse::<f64>().unwrap_or(f64::from(x));
+        let f = |v: Option<f64>, default: f32| toml::Value::Float(v.unwrap_or(decimal(default)));
+        [
+            ("tau", f(self.tau, td3.common.tau)),
+            (
+                "policy_delay",
+                toml::Value::Integer(self.policy_delay.unwrap_or(td3.policy_delay as usize) as i64),
+            ),
+            ("target_noise", f(self.target_noise, td3.target_noise)),
+            ("noise_clip", f(self.noise_clip, td3.noise_clip)),
+            (
+                "exploration_noise",
+                f(self.exploration_noise, td3.exploration_noise),
+            ),
+            (
+                "target_entropy",
+                f(
+                    self.target_entropy,
+                    sac.target_entropy.unwrap_or(-(action_dim as f32)),
+                ),
+            ),
+            ("alpha_lr", toml::Value::Float(self.alpha_lr.unwrap_or(lr))),
+            ("initial_alpha", f(self.initial_alpha, sac.initial_alpha)),
+        ]
+    }
+}
+
 /// The output stage of the Q-network (docs/algorithm.md §2).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize, clap::ValueEnum)]
 #[serde(rename_all = "lowercase")]
@@ -233,6 +380,11 @@ pub struct TrainConfig {
     /// Written to a configuration only when it is not td3.
     #[serde(default, skip_serializing_if = "Algo::is_td3")]
     pub algo: Algo,
+    /// The settings of the box learners (TD3 and SAC), each `None` at its source's value ([`BoxSettings`],
+    /// docs/algorithm.md §15-§16) and then left out of a configuration file; refused for a discrete task, and the
+    /// one learner's settings for the other.
+    #[serde(flatten)]
+    pub box_settings: BoxSettings,
 
     /// Proportional prioritized replay (false: uniform) \[P; OURS: uniform for actions in a box, docs/algorithm.md §18\].
     pub prioritized: bool,
@@ -314,7 +466,7 @@ pub struct TrainConfig {
 }
 
 /// Our per-task choices beside the paper's parameters ([`crate::paper::TaskParameters`]): what the paper does not
-/// give.
+/// give (a built-in task's come from its entry in the registry, [`crate::env::registry::Schedule`]).
 #[derive(Clone, Copy, Debug)]
 struct TaskSchedule {
     eval_period: usize,
@@ -361,88 +513,46 @@ const BOX_TASK: (crate::paper::TaskParameters, TaskSchedule) = (
     },
 );
 
-/// [`BOX_TASK`] trained for `train_steps` environment steps and tested every `eval_period`.
-const fn box_task_for(
-    train_steps: usize,
-    eval_period: usize,
-) -> (crate::paper::TaskParameters, TaskSchedule) {
-    (
-        crate::paper::TaskParameters {
-            train_steps,
-            ..BOX_TASK.0
-        },
-        TaskSchedule {
-            eval_period,
-            ..BOX_TASK.1
-        },
-    )
-}
-
-/// MountainCarContinuous-v0: 100,000 steps, tested every 5,000 (an active TD3 asking the scripted controller
-/// solved both design seeds within them; TD3 alone solved neither) \[OURS\].
-const CAR_TASK: (crate::paper::TaskParameters, TaskSchedule) = box_task_for(100_000, 5_000);
-
-/// LunarLanderContinuous-v3: 300,000 steps, tested every 10,000 (the runs of docs/algorithm.md §18) \[OURS\].
-const LANDER_TASK: (crate::paper::TaskParameters, TaskSchedule) = box_task_for(300_000, 10_000);
+/// The horizon of the critics' n-step target in a task with actions in a box: with 3, the active TD3 with the
+/// shipped weak expert held the threshold at the end of every design run on MountainCarContinuous-v0 and
+/// LunarLanderContinuous-v3 (5 of 5 each), with 1 on 2 of 5 (docs/algorithm.md §21) \[OURS\].
+const BOX_N_STEP: usize = 3;
 
 /// The weight of the behaviour cloning loss (`lambda`) of dqfd and adqnp in a task with actions in a box: with
 /// 100 pre-training imitates the demonstrator, with 1 or 10 it does not (docs/algorithm.md §17) \[OURS\].
 const BOX_CLONING_WEIGHT: f64 = 100.0;
 
-/// The paper's parameters and our schedule for a Gymnasium id (CartPole-v1 reuses the CartPole-v0 row); an
-/// environment registered at run time gets [`EXTERNAL_TASK`] ([`BOX_TASK`] for actions in a box).
-fn task_preset(env: &str) -> Result<(&'static crate::paper::TaskParameters, TaskSchedule)> {
-    let row = if env == "CartPole-v1" {
-        "CartPole-v0"
-    } else {
-        env
-    };
-    let unknown = || {
-        anyhow::anyhow!(
-            "{}",
-            crate::env::EnvError::UnknownId {
-                id: env.to_string()
-            }
-        )
-    };
-    if let Ok(spec) = crate::env::box_spec(env) {
-        return Ok(match spec.id {
-            "MountainCarContinuous-v0" => (&CAR_TASK.0, CAR_TASK.1),
-            "LunarLanderContinuous-v3" => (&LANDER_TASK.0, LANDER_TASK.1),
-            _ => (&BOX_TASK.0, BOX_TASK.1),
-        });
-    }
-    let Some(paper) = crate::paper::task_parameters(row) else {
-        return match crate::env::spec(env) {
-            Ok(_) => Ok((&EXTERNAL_TASK.0, EXTERNAL_TASK.1)),
-            Err(_) => Err(unknown()),
+/// The paper's parameters and our schedule for a Gymnasium id: a built-in task's from its entry in the registry
+/// (its row of the paper's table, or [`BOX_TASK`] for actions in a box, with the entry's schedule); an
+/// environment registered at run time (from Python) gets [`EXTERNAL_TASK`] ([`BOX_TASK`] for actions in a box).
+/// An id that is neither is refused.
+fn task_preset(env: &str) -> Result<(crate::paper::TaskParameters, TaskSchedule)> {
+    let unknown = |e: crate::env::EnvError| anyhow::anyhow!("{e}");
+    let Ok(task) = crate::env::registry::task(env) else {
+        return match crate::env::box_spec(env) {
+            Ok(_) => Ok(BOX_TASK),
+            Err(_) => crate::env::spec(env)
+                .map(|_| EXTERNAL_TASK)
+                .map_err(unknown),
         };
     };
-    let schedule = match row {
-        "CartPole-v0" => TaskSchedule {
-            eval_period: 1_000,
-            learning_starts: 500,
-            // The notes suggest 500; with 500 bootstrapped DQN solved only 3 of 5 seeds within the paper's 20k
-            // steps (medians 16k), with 250 all 5 (median 7k, the paper's 8k).
-            target_period: 250,
-        },
-        "Acrobot-v1" => TaskSchedule {
-            eval_period: 2_000,
-            learning_starts: 1_000,
-            target_period: 1_000,
-        },
-        "MountainCar-v0" => TaskSchedule {
-            eval_period: 10_000,
-            learning_starts: 1_000,
-            target_period: 1_000,
-        },
-        _ => TaskSchedule {
-            eval_period: 5_000,
-            learning_starts: 1_000,
-            target_period: 1_000,
-        },
+    let s = task.schedule;
+    let base = match s.paper_row {
+        Some(row) => *crate::paper::task_parameters(row).ok_or_else(|| {
+            anyhow::anyhow!("the registry names the paper's row {row}, which it lacks")
+        })?,
+        None => BOX_TASK.0,
     };
-    Ok((paper, schedule))
+    let parameters = crate::paper::TaskParameters {
+        train_steps: s.train_steps.unwrap_or(base.train_steps),
+        ..base
+    };
+    let schedule = TaskSchedule {
+        eval_period: s.eval_period,
+        learning_starts: s.learning_starts,
+        target_period: s.target_period,
+    };
+    Ok((parameters, schedule))
 }
 
 /// Upper limits of the validated sizes: far beyond any experiment, low enough that a typo cannot ask for more
@@ -590,6 +700,15 @@ impl ConfigInput {
         let boxed = preset.boxed();
         let preset_table = TrainConfig::preset_table(&preset);
         let mut cfg = preset;
+        // The learner first: which box settings a run takes depends on it, wherever `algo` stands among the values.
+        if boxed
+            && let Some((_, toml::Value::String(name), origin)) =
+                self.given.iter().rev().find(|(key, ..)| key == "algo")
+        {
+            cfg.algo = name
+                .parse()
+                .with_context(|| format!("{origin}: config key `algo`"))?;
+        }
         for (key, value, origin) in &self.given {
             debug_assert!(!IDENTITY_KEYS.contains(&key.as_str()));
             let mut table = TrainConfig::preset_table(&cfg);
@@ -599,7 +718,7 @@ impl ConfigInput {
                 (_, v) => v.clone(),
             };
             if value != preset_table[key]
-                && let Some(why) = unused_by(key, self.method, self.net, boxed)
+                && let Some(why) = unused_by(key, self.method, self.net, boxed, cfg.algo)
             {
                 bail!("{origin}: {why}, so `{key}` cannot be set");
             }
@@ -611,6 +730,8 @@ impl ConfigInput {
                     plain_terms(e.message())
                 )
             })?;
+            // The table gave every box setting its default: those stay unset (and out of config.toml).
+            cfg.box_settings = cfg.box_settings.given_only(cfg.lr, cfg.action_dim());
         }
         if let Some(steps) = self.real_time_segment(&cfg.expert) {
             cfg.segment_len = steps;
@@ -669,8 +790,26 @@ fn plain_terms(message: &str) -> String {
 
 /// Why a key means nothing for this method and network (`None`: it is used). The preset's value of such a key
 /// is inert; giving another value would change nothing, which is always a mistake.
-fn unused_by(key: &str, method: Method, net: NetKind, boxed: bool) -> Option<String> {
+fn unused_by(key: &str, method: Method, net: NetKind, boxed: bool, algo: Algo) -> Option<String> {
+    if let Some(owner) = box_setting_owner(key) {
+        return match owner {
+            _ if !boxed => Some(format!(
+                "`{key}` is a setting of the learners of a task with actions in a box (TD3, SAC), and a task \
+                 with discrete actions learns with the DQN family"
+            )),
+            Some(owner) if owner != algo => Some(format!(
+                "`{key}` is a setting of {owner}, and this run learns with {algo} (choose the learner with --algo \
+                 or the key `algo`)"
+            )),
+            _ => None,
+        };
+    }
     match key {
+        "algo" if !boxed => Some(
+            "a task with discrete actions learns with the DQN family; `algo` chooses the learner (TD3 or SAC) \
+             of a task with actions in a box"
+                .to_string(),
+        ),
         "margin" | "double_q" | "loss" | "grad_clip" | "l2" | "target_period" | "target_period_in_steps"
             if boxed =>
         {
@@ -726,10 +865,16 @@ impl TrainConfig {
              file holds)"
         );
         let (p, schedule) = task_preset(env)?;
+        let boxed = crate::env::box_spec(env).is_ok();
+        ensure!(
+            !boxed || net == NetKind::Bootstrap,
+            "{env} has actions in a box: its learners (TD3, SAC) have an ensemble of critic heads (config key \
+             `heads`), neither a noisy layer nor a single plain output, so --net {net} would change nothing but \
+             the query threshold; leave --net at bootstrap (the critics' heads) and choose the learner with --algo"
+        );
         // A task with actions in a box is learned by TD3 (or SAC): one-step returns, two critic heads, batches
         // of 128 from a uniform replay (docs/algorithm.md §18), uniform actions before learning starts (as
         // Stable-Baselines3's TD3) \[OURS\].
-        let boxed = crate::env::box_spec(env).is_ok();
         let t_query = match net {
             NetKind::Noisy => p.t_query_noisy,
             _ => p.t_query_bootstrap,
@@ -777,7 +922,9 @@ impl TrainConfig {
                 p.lambda
             },
             lambda_n: 0.0,
-            n_step: if boxed { 1 } else { 10 },
+            // Box tasks: three-step returns as the critics' target, which keep what the active TD3 learns on the
+            // design seeds (docs/algorithm.md §21) \[OURS\].
+            n_step: if boxed { BOX_N_STEP } else { 10 },
             l2: 0.0,
             n_demo,
             pretrain_steps: if method.pretrains() {
@@ -790,6 +937,7 @@ impl TrainConfig {
             queries_from_learning_starts: false,
             random_before_learning: boxed,
             algo: Algo::Td3,
+            box_settings: BoxSettings::default(),
             target_period_in_steps: false,
             t_query,
             n_r: 1000,
@@ -819,12 +967,15 @@ impl TrainConfig {
 
     /// The keys a configuration file leaves out at their default (false), so that the files of runs that do
     /// not use them stay as they were before the keys existed.
-    fn omitted_at_default(&self) -> [(&'static str, toml::Value); 3] {
-        [
+    fn omitted_at_default(&self) -> Vec<(&'static str, toml::Value)> {
+        let action_dim = self.action_dim();
+        let mut keys = vec![
             ("random_before_learning", self.random_before_learning.into()),
             ("target_period_in_steps", self.target_period_in_steps.into()),
             ("algo", self.algo.name().into()),
-        ]
+        ];
+        keys.extend(self.box_settings.values(self.lr, action_dim));
+        keys
     }
 
     /// The configuration as JSON with every key, also those a configuration file leaves out at their default
@@ -849,9 +1000,18 @@ impl TrainConfig {
         table
     }
 
-    /// The configuration as TOML, for the run directory.
+    /// The configuration as TOML, for the run directory. A task with actions in a box records its learner
+    /// (`algo`) also when it is TD3, whose name serde leaves out (so that the files of discrete runs stay as they
+    /// were): it is written where serde writes it for SAC, before `prioritized`.
     pub fn to_toml(&self) -> String {
-        toml::to_string_pretty(self).expect("config serialises")
+        let text = toml::to_string_pretty(self).expect("config serialises");
+        if !self.boxed() || !self.algo.is_td3() {
+            return text;
+        }
+        match text.find("\nprioritized = ") {
+            Some(at) => format!("{}\nalgo = \"td3\"{}", &text[..at], &text[at..]),
+            None => text,
+        }
     }
 
     /// The keys whose values differ between `self` and `other`, each as `key = <self's> (<other's>)`, in key
@@ -921,6 +1081,7 @@ impl TrainConfig {
             self.hidden
         );
         positive("grad_clip", self.grad_clip)?;
+        self.box_settings.validate()?;
         // Exploration.
         unit("eps_start", self.eps_start)?;
         unit("eps_end", self.eps_end)?;
@@ -1122,6 +1283,11 @@ impl TrainConfig {
         crate::env::box_spec(&self.env).is_ok()
     }
 
+    /// The dimension of a box task's actions (1 for a discrete task, whose box settings are unused).
+    fn action_dim(&self) -> usize {
+        crate::env::box_spec(&self.env).map_or(1, |spec| spec.action_low.len())
+    }
+
     /// The agent's part of the configuration.
     pub fn agent_config(&self) -> AgentConfig {
         AgentConfig {
@@ -1175,12 +1341,15 @@ impl TrainConfig {
         asks.then_some(self.expert.as_str())
     }
 
-    /// A short name for the run directory: `CartPole-v0_adqn-bootstrap_seed3`.
+    /// A short name for the run directory: `CartPole-v0_adqn-bootstrap_seed3`; in a task with actions in a box
+    /// the learner stands where the network's output stage does (`Pendulum-v1_adqn-sac_seed3`).
     pub fn run_name(&self) -> String {
-        format!(
-            "{}_{}-{}_seed{}",
-            self.env, self.method, self.net, self.seed
-        )
+        let learner = if self.boxed() {
+            self.algo.name()
+        } else {
+            self.net.name()
+        };
+        format!("{}_{}-{learner}_seed{}", self.env, self.method, self.seed)
     }
 }
 
@@ -1249,6 +1418,108 @@ mod tests {
             .apply_text(&cfg.to_toml(), Path::new("config.toml"))
             .unwrap();
         assert_eq!(again.resolve().unwrap(), cfg);
+    }
+
+    /// The learner of a box task: recorded in config.toml (also TD3, which serde leaves out elsewhere) and read
+    /// back to the same configuration; TD3's and SAC's own settings are keys with their learners' defaults, set
+    /// for the one and refused for the other, and for discrete tasks; `algo` on a discrete task and a network
+    /// other than the critics' heads on a box task are refused with the reason.
+    #[test]
+    fn box_learners_and_their_settings_are_keys_of_their_own() {
+        let td3 = resolve("Pendulum-v1", Method::Adqn, NetKind::Bootstrap, &[]).unwrap();
+        let text = td3.to_toml();
+        assert!(text.contains("\nalgo = \"td3\"\nprioritized = "), "{text}");
+        let mut again = ConfigInput::new("Pendulum-v1", Method::Adqn, NetKind::Bootstrap, 0);
+        again.apply_text(&text, Path::new("config.toml")).unwrap();
+        assert_eq!(again.resolve().unwrap(), td3);
+        let discrete = resolve("CartPole-v0", Method::Adqn, NetKind::Bootstrap, &[]).unwrap();
+        assert!(!discrete.to_toml().contains("algo"));
+        assert_eq!(td3.run_name(), "Pendulum-v1_adqn-td3_seed0");
+        assert_eq!(discrete.run_name(), "CartPole-v0_adqn-bootstrap_seed0");
+
+        // TD3's defaults are the learner's own, SAC's target entropy is -dim(A) of the task.
+        let table = TrainConfig::preset_table(&td3);
+        assert_eq!(table["policy_delay"], toml::Value::Integer(2));
+        assert_eq!(table["tau"], toml::Value::Float(0.005));
+        let lander = resolve(
+            "LunarLanderContinuous-v3",
+            Method::Dqn,
+            NetKind::Bootstrap,
+            &[],
+        )
+        .unwrap();
+        assert_eq!(
+            TrainConfig::preset_table(&lander)["target_entropy"],
+            toml::Value::Float(-2.0)
+        );
+
+        let set = resolve(
+            "Pendulum-v1",
+            Method::Adqn,
+            NetKind::Bootstrap,
+            &["policy_delay=3", "exploration_noise=0.2", "tau=0.01"],
+        )
+        .unwrap();
+        assert_eq!(set.box_settings.policy_delay, Some(3));
+        assert_eq!(set.box_settings.tau, Some(0.01));
+        let text = set.to_toml();
+        assert!(text.contains("policy_delay = 3"), "{text}");
+        // `algo` wins wherever it stands: SAC's keys after or before it.
+        let sac = resolve(
+            "Pendulum-v1",
+            Method::Adqn,
+            NetKind::Bootstrap,
+            &["target_entropy=-0.5", "algo=\"sac\""],
+        )
+        .unwrap();
+        assert_eq!(
+            (sac.algo, sac.box_settings.target_entropy),
+            (Algo::Sac, Some(-0.5))
+        );
+        assert_eq!(sac.run_name(), "Pendulum-v1_adqn-sac_seed0");
+
+        let refused = |env: &str, net: NetKind, sets: &[&str], needle: &str| {
+            let e = error(env, Method::Adqn, net, sets);
+            assert!(e.contains(needle), "{sets:?}: {e}");
+        };
+        refused(
+            "Pendulum-v1",
+            NetKind::Bootstrap,
+            &["algo=\"sac\"", "policy_delay=3"],
+            "setting of td3",
+        );
+        refused(
+            "Pendulum-v1",
+            NetKind::Bootstrap,
+            &["target_entropy=-0.5"],
+            "setting of sac",
+        );
+        refused(
+            "CartPole-v0",
+            NetKind::Bootstrap,
+            &["tau=0.01"],
+            "DQN family",
+        );
+        refused(
+            "CartPole-v0",
+            NetKind::Bootstrap,
+            &["algo=\"sac\""],
+            "DQN family",
+        );
+        refused("Pendulum-v1", NetKind::Noisy, &[], "critics' heads");
+        refused("Pendulum-v1", NetKind::Plain, &[], "critics' heads");
+        refused(
+            "Pendulum-v1",
+            NetKind::Bootstrap,
+            &["tau=0"],
+            "tau must be in (0, 1]",
+        );
+        refused(
+            "Pendulum-v1",
+            NetKind::Bootstrap,
+            &["policy_delay=0"],
+            "policy_delay",
+        );
     }
 
     fn error(env: &str, method: Method, net: NetKind, sets: &[&str]) -> String {

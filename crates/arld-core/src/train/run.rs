@@ -100,6 +100,7 @@ pub fn box_agent(cfg: &TrainConfig, spec: &'static BoxSpec) -> BoxAgent {
     } else {
         0.0
     };
+    let settings = &cfg.box_settings;
     let common = ActorCriticConfig {
         hidden,
         heads,
@@ -107,17 +108,41 @@ pub fn box_agent(cfg: &TrainConfig, spec: &'static BoxSpec) -> BoxAgent {
         bc_weight,
         ..ActorCriticConfig::with_learning_rate(lr)
     };
+    let common = ActorCriticConfig {
+        tau: settings.tau.map_or(common.tau, |v| v as f32),
+        ..common
+    };
     let tau = common.tau;
     let config = match cfg.algo {
-        Algo::Td3 => BoxLearnerConfig::Td3(Td3Config {
-            common,
-            ..Td3Config::default()
-        }),
-        Algo::Sac => BoxLearnerConfig::Sac(SacConfig {
-            common,
-            alpha_lr: lr,
-            ..SacConfig::default()
-        }),
+        Algo::Td3 => {
+            let defaults = Td3Config::default();
+            BoxLearnerConfig::Td3(Td3Config {
+                common,
+                policy_delay: settings
+                    .policy_delay
+                    .map_or(defaults.policy_delay, |d| d as u64),
+                target_noise: settings
+                    .target_noise
+                    .map_or(defaults.target_noise, |v| v as f32),
+                noise_clip: settings
+                    .noise_clip
+                    .map_or(defaults.noise_clip, |v| v as f32),
+                exploration_noise: settings
+                    .exploration_noise
+                    .map_or(defaults.exploration_noise, |v| v as f32),
+            })
+        }
+        Algo::Sac => {
+            let defaults = SacConfig::default();
+            BoxLearnerConfig::Sac(SacConfig {
+                common,
+                alpha_lr: settings.alpha_lr.map_or(lr, |v| v as f32),
+                initial_alpha: settings
+                    .initial_alpha
+                    .map_or(defaults.initial_alpha, |v| v as f32),
+                target_entropy: settings.target_entropy.map(|v| v as f32),
+            })
+        }
     };
     let seed = seed_for(cfg.seed, SeedPurpose::Agent);
     let agent = BoxAgent::new(
@@ -1357,6 +1382,7 @@ fn summarize<A: Action>(
         env: cfg.env.clone(),
         method: cfg.method,
         net: cfg.net,
+        algo: cfg.boxed().then_some(cfg.algo),
         seed: cfg.seed,
         steps_to_solve: steps as usize,
         solved,

@@ -13,7 +13,7 @@
 //! Inside a sweep, runs live at `ENV/METHOD-NET[/VARIANT]/seedN` ([`sweep_run_path`]); [`load_runs`] finds the
 //! complete runs below a directory and reads each into a [`RunRecord`] for reports.
 
-use super::config::{ConfigInput, Method, NetKind, TrainConfig};
+use super::config::{Algo, ConfigInput, Method, NetKind, TrainConfig};
 use crate::expert::demos::DemoStep;
 pub use crate::files::write_atomic;
 use crate::query::RuleSpec;
@@ -470,6 +470,10 @@ pub struct Summary {
     pub env: String,
     pub method: Method,
     pub net: NetKind,
+    /// The learner of a task with actions in a box (TD3 or SAC); absent for the DQN family and from older
+    /// summaries (whose box runs were TD3's).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub algo: Option<Algo>,
     pub seed: u64,
     /// First evaluation step whose mean reaches the solve threshold; `train_steps` if none does.
     pub steps_to_solve: usize,
@@ -1254,6 +1258,7 @@ mod tests {
             env: "CartPole-v0".into(),
             method: Method::Bdqn,
             net: NetKind::Noisy,
+            algo: None,
             seed: 4,
             steps_to_solve: 2000,
             solved: true,
