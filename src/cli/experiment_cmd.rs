@@ -121,7 +121,8 @@ the methods comparison on CartPole-v0 with 3 seeds. Interrupt it any time: the s
 where it stopped."
 )]
 pub struct ReproduceArgs {
-    /// Only these environments (repeatable) [default: all four tasks].
+    /// Only these environments (repeatable): the paper's four tasks, or a task with actions in a box (part
+    /// continuous) [default: every task of the parts run].
     #[arg(long)]
     env: Vec<String>,
     /// Seeds per configuration (0..SEEDS).
@@ -130,7 +131,8 @@ pub struct ReproduceArgs {
     /// A few minutes on CartPole-v0: the methods comparison with 3 seeds.
     #[arg(long)]
     quick: bool,
-    /// Which parts: methods, t_query, experts, n_r, ablations, effort, held_out, held_out_2 (repeatable) [default: all].
+    /// Which parts: methods, t_query, experts, n_r, ablations, effort, held_out, held_out_2, continuous
+    /// (repeatable) [default: all].
     #[arg(long)]
     part: Vec<String>,
     /// Parallel runs (0: one per core).
@@ -345,7 +347,7 @@ pub fn run_reproduce(args: ReproduceArgs) -> Result<ExitCode> {
         }
     }
     for e in &envs {
-        arld::env::make(e)?;
+        arld::env::registry::task(e)?;
     }
     arld::interrupt::install()?;
     let mut ran_any = false;

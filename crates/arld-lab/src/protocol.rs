@@ -281,6 +281,7 @@ pub const PAPER_SEEDS: u64 = 20;
 /// - `effort`: the effort benchmark ([`effort_grids`]);
 /// - `held_out`: the effort benchmark's held-out test ([`held_out_grids`], on seeds of its own);
 /// - `held_out_2`: its second held-out test ([`second_held_out_grids`], on seeds of its own);
+/// - `continuous`: the six methods on the three tasks with actions in a box ([`continuous_grid`]);
 /// - `ablations`: [`ABLATIONS`] on Acrobot and [`CARTPOLE_TARGET_ABLATION`] on CartPole, for DQN, BDQN and ADQN
 ///   x both nets (the methods part's runs are the baseline), then [`HARDER_ABLATIONS`] on [`HARDER_TASKS`].
 ///
@@ -367,7 +368,26 @@ pub fn paper_grids(seeds: u64) -> Vec<(&'static str, SweepGrid)> {
     for grid in second_held_out_grids() {
         grids.push(("held_out_2", grid));
     }
+    grids.push(("continuous", continuous_grid(&seed_list)));
     grids
+}
+
+/// The `continuous` part: the paper's six methods on every built-in task with actions in a box, learned by TD3
+/// with the box preset (docs/algorithm.md §15-§21: three-step returns, the shipped weak expert), on `seeds`. The
+/// network's output stage of a box task is its critics' heads (`bootstrap`).
+pub fn continuous_grid(seeds: &[u64]) -> SweepGrid {
+    SweepGrid {
+        envs: arld_core::env::registry::ids(true)
+            .map(str::to_string)
+            .collect(),
+        methods: TABLE5_METHODS
+            .iter()
+            .map(|m| m.parse::<Method>().expect("a method name"))
+            .collect(),
+        nets: vec![NetKind::Bootstrap],
+        seeds: seeds.to_vec(),
+        ..SweepGrid::default()
+    }
 }
 
 /// The names of the parts of [`paper_grids`], in order.

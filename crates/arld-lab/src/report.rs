@@ -116,7 +116,18 @@ pub fn table5(cells: &[Cell]) -> Result<(String, String)> {
         ]);
     }
     csv_writer.write_record(&csv_header)?;
+    // Tasks with actions in a box learn with an actor-critic (TD3 or SAC) whose critics' heads are the run's
+    // "bootstrap" network: their rows are named for it, not for the DQN family's output stage.
+    let all_boxed = envs.iter().all(|env| arld_core::env::box_spec(env).is_ok());
     for (net, suffix) in TABLE5_NETS {
+        // A network group no run of the report has (the noisy one of box tasks) gets no rows.
+        let any_run = envs
+            .iter()
+            .any(|env| TABLE5_METHODS.iter().any(|m| find(env, m, net).is_some()));
+        if !any_run {
+            continue;
+        }
+        let suffix = if all_boxed { "actor-critic" } else { suffix };
         // Like the paper, bold the best (smallest) median of each task within a network group.
         let best: Vec<f64> = envs
             .iter()
@@ -128,7 +139,10 @@ pub fn table5(cells: &[Cell]) -> Result<(String, String)> {
             })
             .collect();
         for method in TABLE5_METHODS {
-            let name = format!("{}-{suffix}", method.parse::<Method>()?.paper_name());
+            let name = match all_boxed {
+                true => format!("{} ({suffix})", method.parse::<Method>()?.paper_name()),
+                false => format!("{}-{suffix}", method.parse::<Method>()?.paper_name()),
+            };
             let mut row = Vec::new();
             let mut csv_row = vec![method.to_string(), net.to_string()];
             for (env, best) in envs.iter().zip(&best) {
