@@ -25,6 +25,7 @@ use arld::agent::{Agent, Learner};
 use arld::env::{self, Action, Env, EnvError, Outcome, TaskSpec};
 use arld::expert::Expert;
 use arld::expert::demos::{DemoAction, DemoColumns, Demonstrations};
+use arld::expert::process::WireAction;
 use arld::interrupt::Interrupted;
 use arld::nn::QNet;
 use arld::rng::NumpyRng;
@@ -169,7 +170,9 @@ impl PyAction for Vec<f32> {
 
     fn answer(obj: &Bound<'_, PyAny>, spec: &env::BoxSpec) -> Result<Vec<f32>, String> {
         let answer = obj.extract::<Vec<f32>>().map_err(|e| e.to_string())?;
-        Vec::<f32>::check(&answer, spec).map_err(|m| format!("it answered {answer:?}: {m}"))?;
+        // The check a process expert's answer passes (in the box's bounds): one rule for every expert.
+        <Vec<f32> as WireAction>::check_answer(&answer, spec)
+            .map_err(|m| format!("it answered {answer:?}: {m}"))?;
         Ok(answer)
     }
 
@@ -423,10 +426,12 @@ fn is_box_env(id: &str) -> bool {
     env::box_spec(id).is_ok()
 }
 
-/// The ids of the built-in environments.
+/// The ids of the built-in environments: the tasks of discrete actions, then those with actions in a box.
 #[pyfunction]
 fn builtin_env_ids() -> Vec<&'static str> {
-    env::known_ids()
+    let mut ids = env::known_ids();
+    ids.extend(env::continuous::known_continuous_ids());
+    ids
 }
 
 /// Every configuration key (the CLI's `--set` keys), in order.
@@ -740,19 +745,30 @@ enum Net {
     Actor(Box<TrainedActor>),
 }
 
-/// A built-in environment (`arld.make`), stepped from Python (also from a run's thread, when wrapped).
+/// A built-in environment (`arld.make`), stepped from Python (also from a run's thread, when wrapped): a task of
+/// discrete actions or one with actions in a box.
 #[pyclass(module = "arld._arld")]
 struct BuiltinEnv {
     /// In a mutex only to be shared between threads (Python's and a run's); the methods take `&mut self`.
-    env: Mutex<Box<dyn Env>>,
+    env: Mutex<BuiltinKind>,
+}
+
+/// The two kinds of built-in task, side by side.
+enum BuiltinKind {
+    Discrete(Box<dyn Env>),
+    Box(Box<dyn Env<Vec<f32>>>),
+}
+
+/// A built-in task's actions as Python sees them: their number, or the box's bounds.
+#[derive(IntoPyObject)]
+enum BuiltinActions {
+    Count(usize),
+    Bounds(Vec<f32>, Vec<f32>),
 }
 
 impl BuiltinEnv {
-    fn env_mut(&mut self) -> &mut dyn Env {
-        self.env
-            .get_mut()
-            .unwrap_or_else(|e| e.into_inner())
-            .as_mut()
+    fn env_mut(&mut self) -> &mut BuiltinKind {
+        self.env.get_mut().unwrap_or_else(|e| e.into_inner())
     }
 }
 
@@ -760,33 +776,58 @@ impl BuiltinEnv {
 impl BuiltinEnv {
     #[new]
     fn new(id: &str) -> PyResult<Self> {
-        let env = env::make(id).map_err(|e| value_error(e.to_string()))?;
+        let kind = match env::make(id) {
+            Ok(env) => BuiltinKind::Discrete(env),
+            Err(discrete) => match env::make_box(id) {
+                Ok(env) => BuiltinKind::Box(env),
+                Err(_) => return Err(value_error(discrete.to_string())),
+            },
+        };
         Ok(Self {
-            env: Mutex::new(env),
+            env: Mutex::new(kind),
         })
     }
     #[pyo3(signature = (seed=None))]
     fn reset(&mut self, seed: Option<u64>) -> Vec<f32> {
-        self.env_mut().reset(seed)
+        match self.env_mut() {
+            BuiltinKind::Discrete(env) => env.reset(seed),
+            BuiltinKind::Box(env) => env.reset(seed),
+        }
     }
-    fn step(&mut self, action: usize) -> PyResult<(Vec<f32>, f64, bool, bool)> {
-        let s = self
-            .env_mut()
-            .step(action)
-            .map_err(|e| value_error(e.to_string()))?;
+    /// One step with `action`: an int, or a list of floats in the box (Gymnasium clips an action outside it).
+    fn step(&mut self, action: &Bound<'_, PyAny>) -> PyResult<(Vec<f32>, f64, bool, bool)> {
+        let s = match self.env_mut() {
+            BuiltinKind::Discrete(env) => env.step(action.extract::<usize>()?),
+            BuiltinKind::Box(env) => env.step(&action.extract::<Vec<f32>>()?),
+        }
+        .map_err(|e| value_error(e.to_string()))?;
         Ok((s.obs, s.reward, s.terminated, s.truncated))
     }
-    /// (id, obs_dim, n_actions, max_episode_steps, reward_threshold)
+    /// (id, obs_dim, actions: their number or the box's (low, high), max_episode_steps, reward_threshold)
     #[getter]
-    fn spec(&self) -> (&'static str, usize, usize, usize, f64) {
-        let s = self.env.lock().unwrap_or_else(|e| e.into_inner()).spec();
-        (
-            s.id,
-            s.obs_dim,
-            s.n_actions,
-            s.max_episode_steps,
-            s.solve_threshold,
-        )
+    fn spec(&self) -> (&'static str, usize, BuiltinActions, usize, Option<f64>) {
+        match &*self.env.lock().unwrap_or_else(|e| e.into_inner()) {
+            BuiltinKind::Discrete(env) => {
+                let s = env.spec();
+                (
+                    s.id,
+                    s.obs_dim,
+                    BuiltinActions::Count(s.n_actions),
+                    s.max_episode_steps,
+                    Some(s.solve_threshold),
+                )
+            }
+            BuiltinKind::Box(env) => {
+                let s = env.spec();
+                (
+                    s.id,
+                    s.obs_dim,
+                    BuiltinActions::Bounds(s.action_low.to_vec(), s.action_high.to_vec()),
+                    s.max_episode_steps,
+                    s.solve_threshold,
+                )
+            }
+        }
     }
 }
 
@@ -905,6 +946,8 @@ trait PyLearner: Learner<Action: PyAction> + Sized + 'static {
     fn net(&self, id: &str) -> Net;
     /// A learner of `cfg`'s shape, to load a snapshot's state into.
     fn for_snapshot(cfg: &TrainConfig) -> anyhow::Result<Self>;
+    /// A learner of `cfg` that begins with the weights file `path` (`set_parameters` before a new run).
+    fn from_weights(cfg: &TrainConfig, path: &Path) -> anyhow::Result<Self>;
 }
 
 impl PyLearner for Agent {
@@ -925,6 +968,11 @@ impl PyLearner for Agent {
             spec.n_actions,
             0,
         ))
+    }
+    fn from_weights(cfg: &TrainConfig, path: &Path) -> anyhow::Result<Self> {
+        let (net, _meta) = QNet::load_file(path)?;
+        let rng = Pcg64::seed_from_u64(seed_for(cfg.seed, SeedPurpose::Agent));
+        Ok(Agent::from_network(&cfg.agent_config(), net, rng))
     }
 }
 
@@ -948,6 +996,11 @@ impl PyLearner for BoxAgent {
     }
     fn for_snapshot(cfg: &TrainConfig) -> anyhow::Result<Self> {
         Ok(train::run::box_agent(cfg, env::box_spec(&cfg.env)?))
+    }
+    fn from_weights(_cfg: &TrainConfig, _path: &Path) -> anyhow::Result<Self> {
+        anyhow::bail!(
+            "a TD3 or SAC run cannot begin from an actor's weights alone (its critics are not in them)"
+        )
     }
 }
 
@@ -990,6 +1043,21 @@ impl Remote {
         let last_eval = at.log.curve().last().map(|p| (p.step, p.mean));
         let _lent = Lent::new(self.id, L::lend(at.agent, at.log));
         Python::attach(|py| {
+            let last = at.last;
+            // What the step did, as SB3's callbacks see it: the action, the reward, the episode's end (and its
+            // return and length), the next observation.
+            let action = last
+                .action
+                .as_ref()
+                .and_then(|a| L::Action::to_py(py, a.borrow()).ok());
+            let taken = (
+                action,
+                last.reward,
+                last.terminated,
+                last.truncated,
+                last.ended,
+                at.obs,
+            );
             let answer = cb.call1(
                 py,
                 (
@@ -998,6 +1066,7 @@ impl Remote {
                     at.budget_used,
                     at.log.query_events().len(),
                     last_eval,
+                    taken,
                 ),
             );
             match answer {
@@ -1551,7 +1620,8 @@ fn start_run(py: Python<'_>, config: &str, request: RunRequest) -> PyResult<Run>
 /// environments (Python objects, or `None` for the built-in one of the configuration's id; `test_envs` one per
 /// test episode, stepped in lockstep), the expert (a Python callable, or `None` to build the configuration's
 /// expert spec) and its name, demonstrations as arrays of rows (or `None` to collect them from the expert on
-/// `demo_env`, or on the built-in environment), a run directory, and a snapshot file to continue from.
+/// `demo_env`, or on the built-in environment), a run directory, a snapshot file to continue from, and a snapshot
+/// file whose learner (weights, target, optimiser) a new run begins with ([`RunBuilder::start_from`]).
 #[derive(FromPyObject)]
 #[pyo3(from_item_all)]
 struct RunRequest {
@@ -1562,6 +1632,7 @@ struct RunRequest {
     demos: Option<DemoArrays>,
     log_dir: Option<String>,
     resume: Option<String>,
+    start_from: Option<String>,
     demo_env: Option<Py<PyAny>>,
 }
 
@@ -1592,6 +1663,7 @@ fn train_in_thread<L: PyLearner>(
         demos,
         log_dir,
         resume,
+        start_from,
         demo_env,
     } = request;
     let spec = L::Action::spec_of(&cfg.env)?;
@@ -1637,6 +1709,20 @@ fn train_in_thread<L: PyLearner>(
             ck.load()?
         }
     };
+    // The learner a new run begins with: a saved run's (its snapshot), or weights given (set_parameters).
+    let given_learner: L;
+    let start_state = match &start_from {
+        None => None,
+        Some(path) if train::snapshot::recorded_config(Path::new(path)).is_ok() => {
+            Some(read_snapshot_file(path)?.1)
+        }
+        Some(path) => {
+            given_learner = L::from_weights(&cfg, Path::new(path))?;
+            let mut state = arld::state::StateDict::default();
+            given_learner.save_state(train::run::AGENT_STATE, &mut state);
+            Some(state)
+        }
+    };
     // Demonstrations given as rows, else the run's own (its demo_file, or collected from the expert on
     // `demo_env`): `train::run_demonstrations`, as for the command line.
     let demos = match demos {
@@ -1669,6 +1755,7 @@ fn train_in_thread<L: PyLearner>(
         .demos(demos.as_ref())
         .driver(remote)
         .resume_from(resume_state.as_ref())
+        .start_from(start_state.as_ref())
         .train(&mut log)?;
     Ok(())
 }
@@ -1684,13 +1771,7 @@ type SnapshotPolicy = (Policy, String, usize, String, Py<PyList>);
 #[pyfunction]
 fn snapshot_policy(py: Python<'_>, path: &str) -> PyResult<SnapshotPolicy> {
     let read = || -> anyhow::Result<(Net, TrainConfig, usize, String, Records)> {
-        let text = train::snapshot::recorded_config(Path::new(path))?;
-        let cfg: TrainConfig = toml::from_str(&text)?;
-        let dir = tempfile::tempdir()?;
-        std::fs::copy(path, dir.path().join(train::snapshot::SNAPSHOT_FILE))?;
-        let state = Checkpointer::new(dir.path(), &cfg)
-            .load()?
-            .ok_or_else(|| anyhow::anyhow!("no snapshot"))?;
+        let (cfg, state) = read_snapshot_file(path)?;
         let st: serde_json::Value = state.value("loop")?;
         let step = st["step"].as_u64().unwrap_or(0) as usize;
         let (net, curve, queries) = if env::box_spec(&cfg.env).is_ok() {
@@ -1708,19 +1789,48 @@ fn snapshot_policy(py: Python<'_>, path: &str) -> PyResult<SnapshotPolicy> {
     Ok((policy, cfg.to_json(), step, curve, list.unbind()))
 }
 
+/// The snapshot file `path` (a saved run) with the configuration it recorded.
+fn read_snapshot_file(
+    path: &str,
+) -> anyhow::Result<(TrainConfig, arld::state::StateDict<'static>)> {
+    let text = train::snapshot::recorded_config(Path::new(path))?;
+    let cfg: TrainConfig = toml::from_str(&text)?;
+    // The snapshot machinery reads `snapshot.safetensors` in a directory: a private copy there.
+    let dir = tempfile::tempdir()?;
+    std::fs::copy(path, dir.path().join(train::snapshot::SNAPSHOT_FILE))?;
+    let state = Checkpointer::new(dir.path(), &cfg)
+        .load()?
+        .ok_or_else(|| anyhow::anyhow!("no snapshot"))?;
+    Ok((cfg, state))
+}
+
 /// The network, the evaluations (JSON text) and the queries of a run's snapshot `state`, for the learner `L`.
 fn snapshot_parts<L: PyLearner>(
     cfg: &TrainConfig,
     state: &arld::state::StateDict<'_>,
 ) -> anyhow::Result<(Net, String, Records)> {
     let mut agent = L::for_snapshot(cfg)?;
-    agent.load_state("agent", state)?;
+    agent.load_state(train::run::AGENT_STATE, state)?;
     let position = train::resume_position::<L::Action>(state)?;
     Ok((
         agent.net(&cfg.env),
         serde_json::to_string(&position.curve)?,
         L::Action::records(&position.query_events),
     ))
+}
+
+/// A network of the shape a run of `config` (JSON text, from `resolve_config`) trains, for weights to be set into
+/// (`Agent.set_parameters` before any run).
+#[pyfunction]
+fn fresh_policy(config: &str) -> PyResult<Policy> {
+    let cfg: TrainConfig = serde_json::from_str(config).map_err(|e| value_error(e.to_string()))?;
+    let net = if env::box_spec(&cfg.env).is_ok() {
+        <BoxAgent as PyLearner>::for_snapshot(&cfg).map(|a| a.net(&cfg.env))
+    } else {
+        <Agent as PyLearner>::for_snapshot(&cfg).map(|a| a.net(&cfg.env))
+    }
+    .map_err(|e| value_error(format!("{e:#}")))?;
+    Ok(Policy::of_run(net, &cfg, 0))
 }
 
 /// The configuration a snapshot file recorded, as JSON text (`None` when the file is plain weights).
@@ -1782,6 +1892,7 @@ fn _arld(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(register_box_env, m)?)?;
     m.add_function(wrap_pyfunction!(is_box_env, m)?)?;
     m.add_function(wrap_pyfunction!(builtin_env_ids, m)?)?;
+    m.add_function(wrap_pyfunction!(fresh_policy, m)?)?;
     m.add_function(wrap_pyfunction!(config_keys, m)?)?;
     m.add_function(wrap_pyfunction!(resolve_config, m)?)?;
     m.add_function(wrap_pyfunction!(start_run, m)?)?;

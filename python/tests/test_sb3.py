@@ -72,7 +72,7 @@ def test_load_continues_the_saved_run(tmp_path):
     assert loaded.num_timesteps == 1000 and loaded.net == "bootstrap"
     # The evaluations travel in the file (the query events do not).
     assert len(model.evaluations) == 2 and loaded.evaluations == model.evaluations
-    loaded.learn(1000)
+    loaded.learn(1000, reset_num_timesteps=False)
     whole = cartpole_agent().learn(2000)
     assert len(whole.evaluations) == 4 and loaded.evaluations == whole.evaluations
     assert loaded.summary["demos_queried"] == whole.summary["demos_queried"]
