@@ -11,11 +11,10 @@ import os
 import shutil
 import sys
 import tempfile
-import time
 import weakref
 from pathlib import Path
-from typing import (TYPE_CHECKING, Any, Callable, Deque, Dict, List, Literal, Optional, Protocol, Sequence, Tuple,
-                    TypedDict, Union, cast)
+from typing import (TYPE_CHECKING, Any, Deque, Dict, List, Literal, Optional, Protocol, Sequence, Tuple, TypedDict,
+                    Union, cast)
 
 import numpy as np
 
@@ -24,9 +23,9 @@ if TYPE_CHECKING:
 
 from . import _arld
 from .callbacks import _Callbacks, _EpisodeLog, _Logger, _ProgressBar, _stop_on_sigterm
-from .experts import ExpertLike, WebExpert, _demos, _expert_callable, _shown_raw, gym_spaces
 from .envs import (BoxActions, BuiltinEnv, EnvBridge, ObsCodec, as_env as _as_env, codec_of as _codec_of,
                    copy_env as _copy_env, env_facts as _env_facts, make, register as _register)
+from .experts import ExpertLike, WebExpert, _demos, _expert_callable, _shown_raw, gym_spaces
 
 Method = Literal["dqn", "dqfd", "gdqn", "bdqn", "adqn", "adqnp"]
 Net = Literal["plain", "bootstrap", "noisy"]
@@ -228,7 +227,8 @@ class Agent:
     `exploration_initial_eps` to `exploration_final_eps` over `exploration_fraction × train_steps` steps; PER's
     β anneals to 1 over `train_steps`), fixed when the agent is made (the paper's preset for its tasks, 100k
     otherwise). `learn(n)` trains n environment steps of that run; past `train_steps` ε and β keep their final
-    values. So `learn(a)` then `learn(b, reset_num_timesteps=False)` is exactly `learn(a + b)`.
+    values. So `learn(a)` then `learn(b, reset_num_timesteps=False)` is exactly `learn(a + b)`; `learn(n)` with
+    the default reset_num_timesteps=True starts a new run from the network the last one left (SB3's second learn).
 
     Every hyperparameter is a keyword (None: the preset's value; `arld.preset(method, env_id)` shows them).
     SB3's names are accepted where the meaning is the same (learning_rate=lr, buffer_size=replay_size,
@@ -831,8 +831,9 @@ class Agent:
     def close(self) -> None:
         """Ends the run's thread: its files are finished, and its run directory's lock (.arld.lock) is released,
         so that another Agent or `arld train --resume` may continue there. The agent keeps everything: predict,
-        evaluations, queries and save work as before, and the next learn continues the run as for an agent from
-        Agent.load (in a run directory only when given again as log_dir). Nothing happens when no run is alive."""
+        evaluations, queries and save work as before, and the next learn(..., reset_num_timesteps=False) continues
+        the run as for an agent from Agent.load (in a run directory only when given again as log_dir). Nothing
+        happens when no run is alive."""
         run = self._run
         if run is None:
             return

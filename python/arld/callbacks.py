@@ -3,22 +3,11 @@ turned into a stop."""
 
 from __future__ import annotations
 
-import copy
-import difflib
-import json
-import os
-import shutil
 import sys
-import tempfile
 import time
-from pathlib import Path
-from typing import Any, Callable, Dict, List, Literal, Optional, Protocol, Sequence, Tuple, Union, cast
+from typing import Any, Dict, Optional
 
 import numpy as np
-from typing import TYPE_CHECKING
-
-if TYPE_CHECKING:
-    from .agent import Agent
 
 
 class _stop_on_sigterm:
@@ -76,7 +65,8 @@ class _Callbacks:
     With SB3's logger set (`set_logger`) and log_interval, every log_interval finished episodes the run's values
     are recorded and dumped, as SB3's DQN does (`_dump`)."""
 
-    def __init__(self, callback: Any, model: "Agent", total_timesteps: int,
+    # `model` is the arld.Agent that learns (typed Any: the agent module imports this one).
+    def __init__(self, callback: Any, model: Any, total_timesteps: int,
                  episode_log: Optional[_EpisodeLog] = None, log_interval: Optional[int] = None) -> None:
         self.items = [] if callback is None else list(callback) if isinstance(callback, (list, tuple)) else [
             callback]

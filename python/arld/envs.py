@@ -30,7 +30,6 @@ from gymnasium import spaces
 from . import _arld
 
 
-
 @dataclass(frozen=True)
 class BoxActions:
     """A `Box` action space as arld's loop sees it: flat vectors of float32 numbers in [low, high] (the bounds

@@ -428,7 +428,8 @@ def test_a_run_directory_holds_one_run_at_a_time(tmp_path):
     second.close()
     if ARLD.is_file():
         out = subprocess.run([str(ARLD), "train", "--env", "CartPole-v0", "--method", "dqn", "--quiet",
-                              "--set", "train_steps=200", "--overwrite", "-o", str(run)], capture_output=True, text=True)
+                              "--set", "train_steps=200", "--overwrite", "-o", str(run)],
+                             capture_output=True, text=True)
         assert out.returncode == 0, out.stderr
 
 

@@ -211,7 +211,7 @@ def test_sb3_attributes_policy_hyperparameters_device_replay_and_seed(tmp_path):
     assert same(model.policy.state_dict(), weights(model))
     assert evaluate(model.policy, 3) == evaluate(model, 3)
     with pytest.raises(AttributeError, match="save"):
-        model.replay_buffer
+        _ = model.replay_buffer
     # SB3's CheckpointCallback with save_replay_buffer=True writes the run (which holds the replay) and goes on.
     model.learn(200, callback=CheckpointCallback(100, str(tmp_path), save_replay_buffer=True))
     assert sorted(p.name for p in tmp_path.iterdir()) == ["rl_model_100_steps.zip", "rl_model_200_steps.zip"]
