@@ -1030,7 +1030,7 @@ class Agent:
     @classmethod
     def load(cls, path: Union[str, os.PathLike], env: Any = None,  # type: ignore[type-arg]
              device: str = "auto", custom_objects: Optional[Dict[str, Any]] = None, print_system_info: bool = False,
-             force_reset: bool = True, *, expert: Any = None, eval_env: Any = None,
+             force_reset: bool = True, *, expert: Any = None, eval_env: Any = None, demos: Any = None,
              policy_kwargs: Optional[Dict[str, Any]] = None, **kwargs: Unpack[Hyperparameters]) -> "Agent":
         """An agent from `save` (the run's full state; pass the environment, and the expert when it was a Python
         one) or from plain weights (`arld train`'s weights.safetensors: it acts only). A loaded run has its
@@ -1046,7 +1046,8 @@ class Agent:
         SB3's schedule and space objects in custom_objects (lr_schedule, exploration_schedule, clip_range,
         observation_space, action_space) have nothing to replace: arld's file holds no pickled objects.
         device: "auto" or "cpu" (arld trains on the CPU); print_system_info and force_reset are accepted as SB3's
-        (the environment is reset when a run begins either way)."""
+        (the environment is reset when a run begins either way). demos: the demonstrations a DQfD or ADQNP run
+        was given as demos= (they are not in the file), for its next new run to pre-train on."""
         _check_device(device)
         given: Dict[str, Any] = {k: v for k, v in dict(custom_objects or {}).items() if k not in _SB3_OBJECTS}
         given.update(kwargs)
@@ -1118,7 +1119,7 @@ class Agent:
             if spec.startswith("python:"):
                 raise ValueError(f"{path} was trained with the Python expert {spec[7:]}: pass it as expert=")
             expert = spec
-        agent = cls(cfg["method"], env, cfg["net"], expert, seed=cfg["seed"], eval_env=eval_env)
+        agent = cls(cfg["method"], env, cfg["net"], expert, seed=cfg["seed"], eval_env=eval_env, demos=demos)
         run_policy, _cfg, step, curve, queries = _arld.snapshot_policy(path)
         agent.config = cfg
         # The saved run's values are the agent's hyperparameters (what a new run resolves from).

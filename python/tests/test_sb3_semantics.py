@@ -125,6 +125,16 @@ def test_load_applies_keywords_and_custom_objects_as_sb3_does(tmp_path):
         arld.Agent.load(tmp_path / "run.zip", gym.make("CartPole-v1"), device="cuda")
 
 
+def test_a_loaded_dqfd_run_given_its_demos_again_starts_a_new_run(tmp_path):
+    demos = arld.collect_demos(gym.make("CartPole-v1"), expert, 200, seed=0)
+    arld.Agent("dqfd", gym.make("CartPole-v1"), demos=demos, seed=0, pretrain_steps=20, learning_starts=50,
+               eval_period=100_000, eval_episodes=1).learn(100).save(tmp_path / "dqfd.zip")
+    with pytest.raises(RuntimeError, match="same demos="):
+        arld.Agent.load(tmp_path / "dqfd.zip", gym.make("CartPole-v1")).learn(20)
+    loaded = arld.Agent.load(tmp_path / "dqfd.zip", gym.make("CartPole-v1"), demos=demos)
+    assert loaded.learn(20).num_timesteps == 20
+
+
 # --- 3. callbacks see the step
 
 
