@@ -3,6 +3,7 @@ SB3's DQN defaults), environments given as Gymnasium ones, saving and loading.""
 
 from __future__ import annotations
 
+import collections
 import copy
 import difflib
 import json
@@ -10,18 +11,21 @@ import os
 import shutil
 import sys
 import tempfile
-import time
 import weakref
 from pathlib import Path
-from typing import Any, Callable, Dict, List, Literal, Optional, Protocol, Sequence, Tuple, Union, cast
+from typing import (TYPE_CHECKING, Any, Deque, Dict, List, Literal, Optional, Protocol, Sequence, Tuple, TypedDict,
+                    Union, cast)
 
 import numpy as np
 
+if TYPE_CHECKING:
+    from typing_extensions import Unpack
+
 from . import _arld
 from .callbacks import _Callbacks, _EpisodeLog, _Logger, _ProgressBar, _stop_on_sigterm
-from .experts import ExpertLike, WebExpert, _demos, _expert_callable, _shown_raw, gym_spaces
 from .envs import (BoxActions, BuiltinEnv, EnvBridge, ObsCodec, as_env as _as_env, codec_of as _codec_of,
                    copy_env as _copy_env, env_facts as _env_facts, make, register as _register)
+from .experts import ExpertLike, WebExpert, _demos, _expert_callable, _shown_raw, gym_spaces
 
 Method = Literal["dqn", "dqfd", "gdqn", "bdqn", "adqn", "adqnp"]
 Net = Literal["plain", "bootstrap", "noisy"]
@@ -95,6 +99,20 @@ def _json_default(value: Any) -> Any:
     raise TypeError(f"{value!r} ({type(value).__name__}) is not a number, boolean, string or list")
 
 
+def _config_name(key: str, where: str) -> str:
+    """arld's configuration key for the keyword `key` (SB3's name or arld's), or TypeError naming the closest."""
+    name = SB3_NAMES.get(key, key)
+    valid = set(config_keys())
+    if name not in valid:
+        close = difflib.get_close_matches(key, sorted(valid | set(SB3_NAMES)), n=1)
+        hint = f"; did you mean {close[0]!r}?" if close else ""
+        if key == "net_arch":
+            hint = "; pass it as policy_kwargs=dict(net_arch=[...]), or as hidden=[...]"
+        raise TypeError(f"{where} got an unexpected keyword argument {key!r}{hint} (valid hyperparameters: "
+                        + ", ".join(sorted(valid | set(SB3_NAMES))) + ")")
+    return name
+
+
 def config_keys() -> List[str]:
     """Every hyperparameter keyword (the CLI's `--set` keys) that `Agent` accepts."""
     return [k for k in _arld.config_keys() if k not in _IDENTITY]
@@ -111,6 +129,71 @@ def preset(method: Method, env: str, net: Net = "bootstrap", seed: int = 0) -> D
 # The environments' part (observation spaces, time limits, registration, arld.make) is in envs.py.
 _BuiltinEnv = BuiltinEnv
 
+
+# Configuration keys that shape the network: they cannot change once the agent has one.
+_SHAPE_KEYS = ("hidden", "heads", "algo")
+
+
+# Every hyperparameter keyword of Agent (and of Agent.load, which applies them to the loaded agent): SB3's names
+# where the meaning is the same, arld's names otherwise, and arld's names of SB3's too (lr, replay_size, ...). None
+# is the preset's value. A TypedDict, so that a type checker catches a misspelt keyword.
+Hyperparameters = TypedDict("Hyperparameters", {
+    "learning_rate": Optional[float],
+    "buffer_size": Optional[int],
+    "batch_size": Optional[int],
+    "gamma": Optional[float],
+    "exploration_fraction": Optional[float],
+    "exploration_initial_eps": Optional[float],
+    "exploration_final_eps": Optional[float],
+    "target_update_interval": Optional[int],
+    "learning_starts": Optional[int],
+    "train_freq": Optional[int],
+    "max_grad_norm": Optional[float],
+    "train_steps": Optional[int],
+    "budget": Optional[int],
+    "budget_unit": Optional[str],
+    "segment_len": Optional[int],
+    "t_query": Optional[float],
+    "query_rule": Optional[str],
+    "n_r": Optional[int],
+    "heads": Optional[int],
+    "hidden": Optional[Sequence[int]],
+    "loss": Optional[str],
+    "double_q": Optional[bool],
+    "timeout_as_terminal": Optional[bool],
+    "eps_greedy_on_top": Optional[bool],
+    "prioritized": Optional[bool],
+    "alpha": Optional[float],
+    "beta0": Optional[float],
+    "eps_agent": Optional[float],
+    "eps_demo": Optional[float],
+    "margin": Optional[float],
+    "lambda_margin": Optional[float],
+    "lambda_n": Optional[float],
+    "n_step": Optional[int],
+    "l2": Optional[float],
+    "n_demo": Optional[int],
+    "pretrain_steps": Optional[int],
+    "queries_from_learning_starts": Optional[bool],
+    "random_before_learning": Optional[bool],
+    "algo": Optional[str],
+    "target_period_in_steps": Optional[bool],
+    "exact_factorised_var": Optional[bool],
+    "expert_timeout": Optional[float],
+    "demo_file": Optional[str],
+    "eval_period": Optional[int],
+    "eval_episodes": Optional[int],
+    "checkpoint_every": Optional[int],
+    "snapshot_every": Optional[int],
+    "lr": Optional[float],
+    "replay_size": Optional[int],
+    "eps_start": Optional[float],
+    "eps_end": Optional[float],
+    "eps_fraction": Optional[float],
+    "target_period": Optional[int],
+    "grad_clip": Optional[float],
+    "lambda": Optional[float],
+}, total=False)
 
 class Agent:
     """An arld agent with Stable-Baselines3's shape: `Agent(method, env, net=..., expert=..., **hyperparameters)`.
@@ -144,7 +227,8 @@ class Agent:
     `exploration_initial_eps` to `exploration_final_eps` over `exploration_fraction × train_steps` steps; PER's
     β anneals to 1 over `train_steps`), fixed when the agent is made (the paper's preset for its tasks, 100k
     otherwise). `learn(n)` trains n environment steps of that run; past `train_steps` ε and β keep their final
-    values. So `learn(a)` then `learn(b, reset_num_timesteps=False)` is exactly `learn(a + b)`.
+    values. So `learn(a)` then `learn(b, reset_num_timesteps=False)` is exactly `learn(a + b)`; `learn(n)` with
+    the default reset_num_timesteps=True starts a new run from the network the last one left (SB3's second learn).
 
     Every hyperparameter is a keyword (None: the preset's value; `arld.preset(method, env_id)` shows them).
     SB3's names are accepted where the meaning is the same (learning_rate=lr, buffer_size=replay_size,
@@ -239,73 +323,13 @@ class Agent:
         policy_kwargs: Optional[Dict[str, Any]] = None,
         tensorboard_log: Optional[Union[str, os.PathLike]] = None,  # type: ignore[type-arg]
         verbose: int = 0,
-        learning_rate: Optional[float] = None,
-        buffer_size: Optional[int] = None,
-        batch_size: Optional[int] = None,
-        gamma: Optional[float] = None,
-        exploration_fraction: Optional[float] = None,
-        exploration_initial_eps: Optional[float] = None,
-        exploration_final_eps: Optional[float] = None,
-        target_update_interval: Optional[int] = None,
-        learning_starts: Optional[int] = None,
-        train_freq: Optional[int] = None,
-        max_grad_norm: Optional[float] = None,
-        train_steps: Optional[int] = None,
-        budget: Optional[int] = None,
-        budget_unit: Optional[str] = None,
-        segment_len: Optional[int] = None,
-        t_query: Optional[float] = None,
-        query_rule: Optional[str] = None,
-        n_r: Optional[int] = None,
-        heads: Optional[int] = None,
-        hidden: Optional[Sequence[int]] = None,
-        loss: Optional[str] = None,
-        double_q: Optional[bool] = None,
-        timeout_as_terminal: Optional[bool] = None,
-        eps_greedy_on_top: Optional[bool] = None,
-        prioritized: Optional[bool] = None,
-        alpha: Optional[float] = None,
-        beta0: Optional[float] = None,
-        eps_agent: Optional[float] = None,
-        eps_demo: Optional[float] = None,
-        margin: Optional[float] = None,
-        lambda_margin: Optional[float] = None,
-        lambda_n: Optional[float] = None,
-        n_step: Optional[int] = None,
-        l2: Optional[float] = None,
-        n_demo: Optional[int] = None,
-        pretrain_steps: Optional[int] = None,
-        queries_from_learning_starts: Optional[bool] = None,
-        random_before_learning: Optional[bool] = None,
-        algo: Optional[str] = None,
-        target_period_in_steps: Optional[bool] = None,
-        exact_factorised_var: Optional[bool] = None,
-        expert_timeout: Optional[float] = None,
-        demo_file: Optional[str] = None,
-        eval_period: Optional[int] = None,
-        eval_episodes: Optional[int] = None,
-        checkpoint_every: Optional[int] = None,
-        snapshot_every: Optional[int] = None,
         max_episode_steps: Optional[int] = None,
-        **other: Any,
+        **hyperparameters: Unpack[Hyperparameters],
     ) -> None:
-        given = {k: v for k, v in locals().items() if k not in ("self", "method", "env", "net", "expert", "seed",
-                                                                  "eval_env", "demos", "policy_kwargs",
-                                                                  "defaults", "tensorboard_log", "verbose", "other",
-                                                                  "max_episode_steps", "__class__")}
+        given: Dict[str, Any] = dict(hyperparameters)
         hyper: Dict[str, Any] = {}
-        valid = set(config_keys())
-        for key, value in list(given.items()) + list(other.items()):
-            name = SB3_NAMES.get(key, key)
-            if name not in valid:
-                close = difflib.get_close_matches(key, sorted(valid | set(SB3_NAMES)), n=1)
-                hint = f"; did you mean {close[0]!r}?" if close else ""
-                if key == "net_arch":
-                    hint = "; pass it as policy_kwargs=dict(net_arch=[...]), or as hidden=[...]"
-                raise TypeError(
-                    f"Agent() got an unexpected keyword argument {key!r}{hint} (valid hyperparameters: "
-                    + ", ".join(sorted(valid | set(SB3_NAMES))) + ")"
-                )
+        for key, value in given.items():
+            name = _config_name(key, "Agent()")
             if value is None:
                 continue
             if name in hyper:
@@ -349,7 +373,11 @@ class Agent:
         self.verbose = int(verbose)
         self.tensorboard_log = None if tensorboard_log is None else str(tensorboard_log)
         self.policy_kwargs = dict(policy_kwargs or {})
-        self.logger = _Logger()
+        self._logger: Any = _Logger()
+        self._expert_obj = expert
+        # Hyperparameters changed (attributes set, Agent.load's keywords) since the last run began: they take effect
+        # at the next new run; a run continued exactly keeps its configuration.
+        self._changed: Dict[str, Any] = {}
         self._hyper = hyper
         self._max_episode_steps = max_episode_steps
         self._vec_env: Any = None
@@ -384,8 +412,8 @@ class Agent:
             if "net_arch" in self.policy_kwargs and "hidden" in str(e):
                 raise ValueError(f"policy_kwargs net_arch (arld's hidden): {e}") from None
             message = str(e)
-            for key in list(given) + list(other):  # the names the caller used, where arld's differ
-                if key in SB3_NAMES and given.get(key, other.get(key)) is not None:
+            for key in given:  # the names the caller used, where arld's differ
+                if key in SB3_NAMES and given[key] is not None:
                     message = message.replace(f"`{SB3_NAMES[key]}`", f"`{key}` (arld's `{SB3_NAMES[key]}`)")
             if message != str(e):
                 raise ValueError(message) from None
@@ -394,6 +422,12 @@ class Agent:
         self._run: Any = None
         self._resume: Optional[str] = None
         self._run_dir: Optional[str] = None
+        self._started_from: Optional[str] = None
+        self._learner_dir: Optional[str] = None
+        self._params_set = False
+        self._bridge: Optional[EnvBridge] = None
+        # The last 100 episodes' return, length and time (SB3's ep_info_buffer: Monitor's when it is there).
+        self._ep_infos: Deque[Dict[str, float]] = collections.deque(maxlen=100)
         self._live_step = 0
         self._evaluations: List[Dict[str, Any]] = []
         # A loaded run's evaluations before its snapshot (the continued run reports those after it).
@@ -468,6 +502,114 @@ class Agent:
         self._set_env(env)
         self.config = self._resolve(self._hyper)
 
+    # --- Stable-Baselines3's attributes
+
+    @property
+    def logger(self) -> Any:
+        """The logger (SB3's `Logger` after `set_logger`, e.g. `configure(folder, ["csv", "stdout"])`): callbacks'
+        `self.logger.record(...)` go to it, and arld records its own values (time/..., rollout/ep_rew_mean,
+        rollout/ep_len_mean, rollout/exploration_rate, train/learning_rate, arld/budget_used, arld/queries,
+        eval/mean_reward) and dumps them every `log_interval` episodes, as SB3's DQN does. Without set_logger it
+        keeps the latest values and writes nowhere (SB3 with verbose=0)."""
+        return self._logger
+
+    def set_logger(self, logger: Any) -> None:
+        """Uses `logger` (SB3's `stable_baselines3.common.logger.Logger`, or anything with record and dump)."""
+        self._logger = logger
+
+    def _set_hyper(self, key: str, value: Any) -> None:
+        """Sets the hyperparameter `key` (SB3's or arld's name) for the next new run, checked now; a run continued
+        exactly (learn(..., reset_num_timesteps=False)) refuses to start while it differs from the run's."""
+        name = SB3_NAMES.get(key, key)
+        if name in _SHAPE_KEYS and self._has_run() and self.config.get(name) != value:
+            raise ValueError(f"{key} cannot change once the agent has a network: it is "
+                             f"{self.config.get(name)!r} (start a new Agent for another network)")
+        hyper = {**self._hyper, name: value}
+        config = self._resolve(hyper)
+        self._hyper, self.config = hyper, config
+        if self._has_run():
+            self._changed[key] = value
+
+    def _has_run(self) -> bool:
+        """Whether the agent has a run to go on from (live, closed, loaded, or a copy's)."""
+        return self._run is not None or self._resume is not None
+
+    def _check_continuable(self) -> None:
+        if self._changed:
+            shown = ", ".join(f"{k}={v!r}" for k, v in self._changed.items())
+            raise ValueError(
+                f"{shown} changed since the run began: a run continued exactly (learn(..., "
+                "reset_num_timesteps=False)) keeps the configuration it began with; learn(n) starts a new run "
+                "from this agent's network with the new values")
+
+    @property
+    def learning_rate(self) -> float:
+        """Adam's step size (arld's `lr`); setting it applies from the next new run (learn with
+        reset_num_timesteps=True)."""
+        return float(self.config["lr"])
+
+    @learning_rate.setter
+    def learning_rate(self, value: float) -> None:
+        self._set_hyper("learning_rate", float(value))
+
+    @property
+    def gamma(self) -> float:
+        """The discount factor; setting it applies from the next new run."""
+        return float(self.config["gamma"])
+
+    @gamma.setter
+    def gamma(self, value: float) -> None:
+        self._set_hyper("gamma", float(value))
+
+    @property
+    def batch_size(self) -> int:
+        """The minibatch size; setting it applies from the next new run."""
+        return int(self.config["batch_size"])
+
+    @batch_size.setter
+    def batch_size(self, value: int) -> None:
+        self._set_hyper("batch_size", int(value))
+
+    @property
+    def buffer_size(self) -> int:
+        """The agent's part of the replay memory (arld's `replay_size`; demonstrations have room of their own);
+        setting it applies from the next new run."""
+        return int(self.config["replay_size"])
+
+    @buffer_size.setter
+    def buffer_size(self, value: int) -> None:
+        self._set_hyper("buffer_size", int(value))
+
+    @property
+    def replay_buffer(self) -> Any:
+        """Not available: arld's replay memory lives inside the run (in Rust, with the demonstrations and their
+        priorities). `save` writes it with the rest of the run and `Agent.load` brings it back, so SB3's
+        save_replay_buffer/load_replay_buffer have nothing to do (CheckpointCallback's save_replay_buffer=True
+        finds no replay_buffer and writes the run alone, which holds it)."""
+        raise AttributeError(
+            "arld's replay memory lives inside the run (Rust), not in Python: agent.save(path) writes it with the "
+            "whole run and Agent.load(path, env) brings it back")
+
+    @property
+    def device(self) -> str:
+        """"cpu": arld trains on the CPU (one thread per run)."""
+        return "cpu"
+
+    def set_random_seed(self, seed: Optional[int] = None) -> None:
+        """The seed of the next new run (every draw of a run comes from its seed); None does nothing, as SB3."""
+        if seed is None:
+            return
+        self.seed = int(seed)
+        self.config = self._resolve(self._hyper)
+        if self._has_run():
+            self._changed["seed"] = self.seed
+
+    @property
+    def policy(self) -> "AgentPolicy":
+        """The network the agent acts with, as SB3's `model.policy`: predict, state_dict, and set_training_mode
+        (which does nothing: arld's policy has no dropout or batch norm)."""
+        return AgentPolicy(self)
+
     # --- configuration
 
     def _resolve(self, hyper: Dict[str, Any]) -> Dict[str, Any]:
@@ -514,7 +656,34 @@ class Agent:
         n = max(numbers, default=0) + 1
         return str(root / f"{name}_{n}")
 
-    def _start_run(self, log_dir: Optional[str], resume: Optional[str]) -> Any:
+    def _learner_file(self) -> Optional[str]:
+        """A snapshot of the last run (live, or loaded or closed) whose learner a new run begins with; None for a
+        first run (or one that ended with an error: nothing to go on from); the weights given to set_parameters
+        when there are some (a file of weights)."""
+        if self._params_set:
+            path = os.path.join(self._private_dir(), "given.safetensors")
+            self._policy.save(path, {})
+            return path
+        if self._run is None:
+            return self._resume
+        if self._run.num_timesteps == 0:
+            return self._started_from  # the learner it began with, untouched
+        # One file per agent: the run it began the last run with has read it when its first step was taken.
+        path = os.path.join(self._private_dir(), "learner.arld")
+        try:
+            self._run.save(path)
+        except RuntimeError:
+            return None
+        return path
+
+    def _private_dir(self) -> str:
+        """A directory of this agent's own, removed with it."""
+        if self._learner_dir is None:
+            self._learner_dir = tempfile.mkdtemp(prefix="arld-agent-")
+            weakref.finalize(self, shutil.rmtree, self._learner_dir, True)
+        return self._learner_dir
+
+    def _start_run(self, log_dir: Optional[str], resume: Optional[str], start_from: Optional[str] = None) -> Any:
         if self._builtin:
             # Trained entirely in Rust; the test episodes too, unless eval_env is another environment.
             env = demo_env = None
@@ -530,9 +699,12 @@ class Agent:
         # The run writes its directory until it ends, maybe after the working directory changed: fix it now.
         log_dir = None if log_dir is None else os.path.abspath(log_dir)
         self._run_dir = log_dir
+        # The training environment's bridge: what its last step gave (callbacks' locals).
+        self._bridge = env
         return _arld.start_run(json.dumps(self.config), {
             "env": env, "test_envs": test_envs, "expert": self._expert, "expert_name": self._expert_name,
-            "demos": self._demos, "log_dir": log_dir, "resume": resume, "demo_env": demo_env,
+            "demos": self._demos, "log_dir": log_dir, "resume": resume, "start_from": start_from,
+            "demo_env": demo_env,
         })
 
     def learn(
@@ -547,10 +719,14 @@ class Agent:
     ) -> "Agent":
         """Trains `total_timesteps` environment steps with arld's loop and returns self.
 
-        reset_num_timesteps=True starts a new run (a fresh network, replay and budget); False continues the
-        current one (network, optimiser, replay, schedules, budget, generators), so learn(a) then
-        learn(b, reset_num_timesteps=False) equals learn(a + b) byte for byte. An agent from `Agent.load` of a
-        full save continues its run on the first learn either way. callback: SB3-style callback objects
+        reset_num_timesteps=True (as SB3) starts a new run that keeps the network: the weights, target network and
+        optimiser go on from where the last run (live, closed, loaded or copied) left them, and the counters
+        begin again (num_timesteps, episodes, the ε and β schedules, learning_starts), with a new replay memory,
+        budget and evaluations, and the hyperparameters as they are now (attributes set, Agent.load's
+        keywords). False continues the current run exactly (network, optimiser, replay, schedules, budget,
+        generators), so learn(a) then learn(b, reset_num_timesteps=False) equals learn(a + b) byte for byte, and
+        Agent.load(path, env).learn(n, reset_num_timesteps=False) goes on as if the run had not been saved.
+        callback: SB3-style callback objects
         (BaseCallback subclasses, CallbackList, EvalCallback, CheckpointCallback, StopTrainingOn...) or a callable
         (locals, globals) -> bool, called after every step with the live model (predict, get_parameters, save,
         evaluations and queries are those of that step; a save is written when the callback returns); returning
@@ -572,30 +748,40 @@ class Agent:
             raise ValueError(f"log_interval must be a whole number of episodes, 1 or more (or None); got "
                              f"{log_interval!r}")
         start = 0
+        if self._has_run() and not reset_num_timesteps:
+            self._check_continuable()
         if self._run is not None and not reset_num_timesteps:
             start = self._run.num_timesteps
-        elif self._run is None and self._resume is not None:
+        elif self._run is None and self._resume is not None and not reset_num_timesteps:
             start = self._live_step
             self._run = self._start_run(None if log_dir is None else str(log_dir), self._resume)
             self._resume = None
         else:
+            # A new run (SB3's reset_num_timesteps=True): steps, schedules, replay, budget and evaluations
+            # start afresh; the learner (weights, target, optimiser) goes on from where the last run left it.
+            start_from = self._learner_file()
             if self._run is not None:
                 self._run.close()
+                self._run = None
+            self._resume = None
+            self._changed = {}
             self._prior_evaluations = []
             directory = str(log_dir) if log_dir is not None else self._log_dir(tb_log_name, True)
             if self._horizon_from_learn:
                 # As SB3: the ε schedule runs over this learn's total_timesteps.
                 self.config = self._resolve({**self._hyper, "train_steps": int(total_timesteps)})
-            self._run = self._start_run(directory, None)
+            self._run = self._start_run(directory, None, start_from)
+            self._started_from, self._params_set = start_from, False
             self._live_step = 0
+            self._ep_infos.clear()
         until = start + int(total_timesteps)
         label = f"{self.method.upper()}-{self.net}"
         episode_log = _EpisodeLog(int(log_interval), label) if self.verbose >= 1 and log_interval else None
         callbacks = None
-        if callback is not None or episode_log is not None:
-            callbacks = _Callbacks(callback, self, int(total_timesteps), episode_log)
-            # Episodes finished before this learn (unknown for a loaded run until its first step).
-            callbacks.episode = 0 if start == 0 else None if self.summary is None else int(self.summary["episodes"])
+        logs = log_interval is not None and not isinstance(self._logger, _Logger)
+        if callback is not None or episode_log is not None or logs:
+            callbacks = _Callbacks(callback, self, int(total_timesteps), episode_log,
+                                   int(log_interval) if logs and log_interval else None)
         bar = _ProgressBar(start, int(total_timesteps), label) if progress_bar else None
         if callbacks is not None:
             callbacks.start()
@@ -645,8 +831,9 @@ class Agent:
     def close(self) -> None:
         """Ends the run's thread: its files are finished, and its run directory's lock (.arld.lock) is released,
         so that another Agent or `arld train --resume` may continue there. The agent keeps everything: predict,
-        evaluations, queries and save work as before, and the next learn continues the run as for an agent from
-        Agent.load (in a run directory only when given again as log_dir). Nothing happens when no run is alive."""
+        evaluations, queries and save work as before, and the next learn(..., reset_num_timesteps=False) continues
+        the run as for an agent from Agent.load (in a run directory only when given again as log_dir). Nothing
+        happens when no run is alive."""
         run = self._run
         if run is None:
             return
@@ -760,24 +947,68 @@ class Agent:
             policy.save(path, {})
             return {"policy": _read_safetensors(path)}
 
-    def set_parameters(self, load_path_or_dict: Any, exact_match: bool = True) -> None:
-        """Sets the weights `predict` (and a weights-only `save`) use, from `get_parameters()`'s dict or a weights
-        file (a DQN-family network, or a TD3/SAC actor for actions in a Box). A live run keeps training its own
-        network: this changes what the agent acts with, not the run."""
+    def set_parameters(self, load_path_or_dict: Any, exact_match: bool = True, device: str = "auto") -> None:
+        """Sets the network's weights from `get_parameters()`'s dict ({"policy": {name: array}} or the inner dict),
+        a weights file, or a saved agent (`save`'s file: its network). exact_match=False (as SB3's) takes the
+        weights the dict has and keeps the others, ignoring names the network does not have; True wants every
+        weight. Works before any learn (the network then has the configuration's shape).
+
+        The agent acts with them (predict, save of weights), and the next new run (learn with
+        reset_num_timesteps=True) trains from them (a DQN-family network; a TD3/SAC actor's weights are for acting
+        only, its critics are not in them). A run continued exactly cannot take them: after set_parameters,
+        learn(..., reset_num_timesteps=False) is refused until a new run begins."""
+        _check_device(device)
         if isinstance(load_path_or_dict, (str, os.PathLike)):
-            policy, _meta = _load_policy(str(load_path_or_dict))
-        else:
-            params = load_path_or_dict.get("policy", load_path_or_dict)
-            with tempfile.TemporaryDirectory() as tmp:
-                path = os.path.join(tmp, "w.safetensors")
-                # The network's description (kind, heads or layer widths, box) from the current weights' file.
-                self._require_policy().save(path, {})
-                metadata = _read_safetensors_metadata(path)
-                _write_safetensors(path, params, metadata)
+            path = str(load_path_or_dict)
+            if not os.path.exists(path) and os.path.exists(path + ".zip"):
+                path += ".zip"
+            if _arld.snapshot_config(path) is not None:
+                policy = _arld.snapshot_policy(path)[0]
+            else:
                 policy, _meta = _load_policy(path)
-        if self._policy is not None and _policy_shape(policy) != _policy_shape(self._policy):
+        else:
+            policy = self._policy_from_dict(load_path_or_dict, exact_match)
+        current = self._policy if self._policy is not None else self._fresh_policy()
+        if _policy_shape(policy) != _policy_shape(current):
             raise ValueError("the parameters are for another observation size, number of actions or action box")
         self._policy = policy
+        self._params_set = self._box is None
+        if self._has_run():
+            self._changed["parameters"] = "set_parameters(...)"
+
+    def _fresh_policy(self) -> Any:
+        """A network of this agent's configuration (its weights to be set)."""
+        if self._in_callback():
+            return self._run.live_policy()
+        return _arld.fresh_policy(json.dumps(self.config))
+
+    def _policy_from_dict(self, given: Any, exact_match: bool) -> Any:
+        params = dict(given.get("policy", given)) if isinstance(given, dict) else None
+        if params is None:
+            raise TypeError(f"set_parameters takes a dict of weights or a file's path, not {type(given).__name__}")
+        current_policy = self._policy if self._policy is not None and not self._in_callback() else \
+            self._fresh_policy()
+        with tempfile.TemporaryDirectory() as tmp:
+            path = os.path.join(tmp, "w.safetensors")
+            # The network's description (kind, heads or layer widths, box) from the current weights' file.
+            current_policy.save(path, {})
+            current = _read_safetensors(path)
+            metadata = _read_safetensors_metadata(path)
+            missing, unexpected = sorted(set(current) - set(params)), sorted(set(params) - set(current))
+            if exact_match and (missing or unexpected):
+                raise ValueError(
+                    "the parameters do not match the network"
+                    + (f"; missing: {', '.join(missing)}" if missing else "")
+                    + (f"; not in the network: {', '.join(unexpected)}" if unexpected else "")
+                    + " (exact_match=False sets those the network has and keeps the others)")
+            for name in sorted(set(params) & set(current)):
+                shape = np.shape(params[name])
+                if shape != current[name].shape:
+                    raise ValueError(f"the parameter {name} has shape {shape}, the network's has "
+                                     f"{current[name].shape}")
+            merged = {**current, **{k: v for k, v in params.items() if k in current}}
+            _write_safetensors(path, merged, metadata)
+            return _load_policy(path)[0]
 
     def save(self, path: Union[str, os.PathLike]) -> None:  # type: ignore[type-arg]
         """Writes the run's full state (network, optimiser, replay, query state, generators: arld's run snapshot
@@ -797,13 +1028,37 @@ class Agent:
         self._run.save(os.path.abspath(path))
 
     @classmethod
-    def load(cls, path: Union[str, os.PathLike], env: Any = None, expert: Any = None,  # type: ignore[type-arg]
-             eval_env: Any = None, **kwargs: Any) -> "Agent":
-        """An agent from `save` (the run's full state: `learn` continues it; pass the environment, and the expert
-        when it was a Python one) or from plain weights (`arld train`'s weights.safetensors: it acts only). A loaded
-        run has its `evaluations` and its `queries` as the agent that saved it had them (both are in the file;
-        a file written before the queries were kept there has none, and its run directory's queries.csv holds
-        them)."""
+    def load(cls, path: Union[str, os.PathLike], env: Any = None,  # type: ignore[type-arg]
+             device: str = "auto", custom_objects: Optional[Dict[str, Any]] = None, print_system_info: bool = False,
+             force_reset: bool = True, *, expert: Any = None, eval_env: Any = None, demos: Any = None,
+             policy_kwargs: Optional[Dict[str, Any]] = None, **kwargs: Unpack[Hyperparameters]) -> "Agent":
+        """An agent from `save` (the run's full state; pass the environment, and the expert when it was a Python
+        one) or from plain weights (`arld train`'s weights.safetensors: it acts only). A loaded run has its
+        `evaluations` and its `queries` as the agent that saved it had them (both are in the file; a file written
+        before the queries were kept there has none, and its run directory's queries.csv holds them).
+        learn(n, reset_num_timesteps=False) continues the saved run exactly; learn(n) starts a new run from its
+        network (as SB3's load then learn).
+
+        Hyperparameter keywords (and `custom_objects`, as SB3 applies them: the keywords win) set the loaded
+        agent's values, as SB3 sets them as attributes after loading: they apply to the next new run, and a run
+        continued exactly refuses them (it keeps the configuration it was saved with). Those that shape the
+        network (hidden, heads, algo, policy_kwargs' net_arch) cannot change and are refused when they differ.
+        SB3's schedule and space objects in custom_objects (lr_schedule, exploration_schedule, clip_range,
+        observation_space, action_space) have nothing to replace: arld's file holds no pickled objects.
+        device: "auto" or "cpu" (arld trains on the CPU); print_system_info and force_reset are accepted as SB3's
+        (the environment is reset when a run begins either way). demos: the demonstrations a DQfD or ADQNP run
+        was given as demos= (they are not in the file), for its next new run to pre-train on."""
+        _check_device(device)
+        given: Dict[str, Any] = {k: v for k, v in dict(custom_objects or {}).items() if k not in _SB3_OBJECTS}
+        given.update(kwargs)
+        arch = given.pop("policy_kwargs", None) or policy_kwargs
+        if arch:
+            if set(arch) - {"net_arch"}:
+                unknown = ", ".join(sorted(set(arch) - {"net_arch"}))
+                raise TypeError(f"policy_kwargs: only net_arch is understood, not {unknown}")
+            given["hidden"] = list(arch["net_arch"])
+        for key in given:
+            _config_name(key, "Agent.load()")
         path = str(path)
         if not os.path.exists(path) and os.path.exists(path + ".zip"):
             path += ".zip"
@@ -813,6 +1068,9 @@ class Agent:
             env_id = facts[0] if isinstance(env, _BuiltinEnv) else _register(facts)
         config = _arld.snapshot_config(path)
         if config is None:
+            if given:
+                raise ValueError(f"{path} holds weights only (it acts, it does not train): "
+                                 f"{', '.join(sorted(given))} have nothing to apply to")
             policy, meta = _load_policy(path)
             box = _box_of(policy)
             if env is not None:
@@ -844,7 +1102,9 @@ class Agent:
             agent.evaluations, agent.queries, agent.summary = [], [], None
             agent._prior_evaluations = []
             agent.verbose, agent.tensorboard_log, agent.policy_kwargs = 0, None, {}
-            agent.logger = _Logger()
+            agent._logger, agent._expert_obj, agent._changed = _Logger(), expert, {}
+            agent._started_from, agent._learner_dir, agent._params_set = None, None, False
+            agent._bridge, agent._ep_infos = None, collections.deque(maxlen=100)
             return agent
         cfg = json.loads(config)
         if env is None:
@@ -859,19 +1119,113 @@ class Agent:
             if spec.startswith("python:"):
                 raise ValueError(f"{path} was trained with the Python expert {spec[7:]}: pass it as expert=")
             expert = spec
-        agent = cls(cfg["method"], env, cfg["net"], expert, seed=cfg["seed"], eval_env=eval_env, **kwargs)
+        agent = cls(cfg["method"], env, cfg["net"], expert, seed=cfg["seed"], eval_env=eval_env, demos=demos)
         run_policy, _cfg, step, curve, queries = _arld.snapshot_policy(path)
         agent.config = cfg
+        # The saved run's values are the agent's hyperparameters (what a new run resolves from).
+        saved = {k: cfg[k] for k in config_keys() if k in cfg and k != "expert"}
+        agent._hyper = {**saved, **agent._hyper}
         # The evaluations and the queries travel in the snapshot.
         agent._evaluations = list(json.loads(curve))
         agent._queries = list(queries)
         agent._prior_evaluations = list(agent._evaluations)
         agent.policy_kwargs = {"net_arch": list(cfg["hidden"])}
         agent._policy, agent._resume, agent._live_step = run_policy, path, step
+        for key, value in given.items():
+            if value is not None:
+                agent._set_hyper(key, value)
         return agent
+
+    # --- copies
+
+    # What a copy does not take over as it is: the live run and its network (the copy gets them through a saved
+    # file), views and files of this agent's own, and the expert as the run calls it (bound again).
+    _NOT_COPIED = ("_run", "_policy", "_vec_env", "_expert", "_resume", "_started_from", "_learner_dir", "_logger",
+                   "_bridge")
+
+    def _copy_state(self) -> Dict[str, Any]:
+        """The agent as plain data: its attributes and its run as the bytes `save` writes (as Agent.load would
+        read them), its network's weights as a weights file's bytes."""
+        if self._in_callback():
+            raise RuntimeError("an agent cannot be copied or pickled inside its callback; save(path) there writes "
+                               "the run as it stands at that step")
+        if isinstance(self._expert_obj, WebExpert):
+            raise TypeError("an agent asking a person (WebExpert) cannot be copied or pickled: save it with "
+                            "agent.save(path) and go on with Agent.load(path, env, expert=arld.WebExpert(...))")
+        state = {k: v for k, v in self.__dict__.items() if k not in self._NOT_COPIED}
+        state["_logger"] = self._logger if isinstance(self._logger, _Logger) else _Logger()
+        state["_expert_bound"] = self._expert is not None
+        state["_run_bytes"] = state["_policy_bytes"] = None
+        with tempfile.TemporaryDirectory() as tmp:
+            if self._has_run():
+                path = os.path.join(tmp, "run.arld")
+                self.save(path)
+                state["_run_bytes"] = Path(path).read_bytes()
+            if self._policy is not None:
+                path = os.path.join(tmp, "weights.safetensors")
+                self._policy.save(path, {})
+                state["_policy_bytes"] = Path(path).read_bytes()
+        return state
+
+    def __getstate__(self) -> Dict[str, Any]:
+        """For pickle: the agent's data and its run's saved bytes (see __setstate__). The environments and the
+        expert must pickle too (a lambda does not: save and Agent.load then, or copy.deepcopy in this process)."""
+        state = self._copy_state()
+        import pickle
+
+        for what, obj in (("expert", self._expert_obj), ("environment", self.env), ("eval_env", self.eval_env)):
+            try:
+                pickle.dumps(obj)
+            except Exception as e:
+                raise TypeError(
+                    f"cannot pickle this agent: its {what} {obj!r} cannot be pickled ({e}); save it with "
+                    "agent.save(path) and load it with Agent.load(path, env, expert=...), or copy it in this process "
+                    "with copy.deepcopy(agent)") from e
+        return state
+
+    def __setstate__(self, state: Dict[str, Any]) -> None:
+        """An agent from `_copy_state`: it stands where the original stood, as an agent from Agent.load of its
+        save (learn(n, reset_num_timesteps=False) continues the run exactly; learn(n) starts a new run from its
+        network); its logger is SB3's default (none is copied)."""
+        run_bytes, policy_bytes = state.pop("_run_bytes"), state.pop("_policy_bytes")
+        bound = state.pop("_expert_bound")
+        self.__dict__.update(state)
+        self._run, self._vec_env, self._resume, self._policy = None, None, None, None
+        self._started_from, self._learner_dir = None, None
+        self._expert = None
+        if bound:
+            ask, _name = _expert_callable(self._expert_obj, self._box)
+            self._expert = None if ask is None else _shown_raw(ask, self._codec)
+        if run_bytes is not None:
+            path = os.path.join(self._private_dir(), "copied.arld")
+            Path(path).write_bytes(run_bytes)
+            self._resume = path
+            self._policy = _arld.snapshot_policy(path)[0]
+        if policy_bytes is not None and (self._params_set or self._policy is None):
+            path = os.path.join(self._private_dir(), "copied.safetensors")
+            Path(path).write_bytes(policy_bytes)
+            self._policy = _load_policy(path)[0]
+
+    def __deepcopy__(self, memo: Dict[int, Any]) -> "Agent":
+        """A copy standing where this agent stands (see __setstate__); the environments and the expert are deep
+        copies (a function is shared, as deepcopy does)."""
+        state = self._copy_state()
+        other = type(self).__new__(type(self))
+        memo[id(self)] = other
+        other.__setstate__(copy.deepcopy(state, memo))
+        return other
 
     def __repr__(self) -> str:
         return f"arld.Agent({self.method!r}, {self.env_id!r}, net={self.net!r}, seed={self.seed})"
+
+
+# Stable-Baselines3's pickled objects that its load's custom_objects replace; arld's file holds none of them.
+_SB3_OBJECTS = ("lr_schedule", "exploration_schedule", "clip_range", "observation_space", "action_space")
+
+
+def _check_device(device: Any) -> None:
+    if str(device) not in ("auto", "cpu"):
+        raise ValueError(f"arld trains on the CPU: device must be \"auto\" or \"cpu\", got {device!r}")
 
 
 def _load_policy(path: str) -> Tuple[Any, Dict[str, str]]:
@@ -933,3 +1287,35 @@ def _write_safetensors(path: str, params: Dict[str, Any], metadata: Optional[Dic
     text = json.dumps(header).encode()
     text += b" " * (-len(text) % 8)
     Path(path).write_bytes(len(text).to_bytes(8, "little") + text + b"".join(blobs))
+
+
+class AgentPolicy:
+    """An agent's network as Stable-Baselines3's `model.policy` is used: `predict` (the agent's), `state_dict` (its
+    weights, as get_parameters()["policy"]), `load_state_dict` (set_parameters), `set_training_mode`."""
+
+    def __init__(self, agent: Agent) -> None:
+        self.agent = agent
+
+    def predict(self, observation: Any, state: Any = None, episode_start: Any = None,
+                deterministic: bool = True) -> Tuple[np.ndarray, None]:
+        return self.agent.predict(observation, state, episode_start, deterministic)
+
+    def state_dict(self) -> Dict[str, np.ndarray]:
+        return self.agent.get_parameters()["policy"]
+
+    def load_state_dict(self, state_dict: Dict[str, Any], strict: bool = True) -> None:
+        self.agent.set_parameters({"policy": state_dict}, exact_match=strict)
+
+    def set_training_mode(self, mode: bool) -> None:
+        """Nothing to switch: arld's networks have no dropout or batch normalisation."""
+
+    @property
+    def observation_space(self) -> Any:
+        return self.agent.observation_space
+
+    @property
+    def action_space(self) -> Any:
+        return self.agent.action_space
+
+    def __repr__(self) -> str:
+        return f"policy of {self.agent!r}"

@@ -18,7 +18,8 @@ after the last step, one more) and the segment's question, the same in every row
 `question_step`, `agent_action` (what the agent proposed; -1 when not known), `uncertainty` and `threshold`
 (NaN when the rule computed none), `response_s` (seconds the answer took; NaN for a program), `expert` (who
 answered) and `started_by` (`rule`: the query rule asked; `person`: a person took over unasked on the web page).
-Observations are arld's flat float32 vectors (a Box), actions are discrete. The dataset's metadata also holds `arld_env` (the run's environment) and `arld_run`.
+Observations are arld's flat float32 vectors (a Box), actions are discrete. The dataset's metadata also holds
+`arld_env` (the run's environment) and `arld_run`.
 """
 
 from __future__ import annotations
@@ -154,8 +155,7 @@ def export_minari(run_dir: "str | os.PathLike[str]", dataset_id: str, *, n_actio
     environment's. A run with no answers is an error (a dataset needs an episode)."""
     import gymnasium as gym
     import minari  # type: ignore[import-untyped, import-not-found, unused-ignore]
-    from minari.dataset.minari_dataset import (  # type: ignore[import-untyped, import-not-found, unused-ignore]
-        parse_dataset_id)
+    from minari.dataset.minari_dataset import parse_dataset_id  # type: ignore[import-untyped, import-not-found, unused-ignore]
     from minari.storage import get_dataset_path  # type: ignore[import-untyped, import-not-found, unused-ignore]
 
     run_dir = Path(run_dir)

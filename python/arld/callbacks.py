@@ -3,22 +3,11 @@ turned into a stop."""
 
 from __future__ import annotations
 
-import copy
-import difflib
-import json
-import os
-import shutil
 import sys
-import tempfile
 import time
-from pathlib import Path
-from typing import Any, Callable, Dict, List, Literal, Optional, Protocol, Sequence, Tuple, Union, cast
+from typing import Any, Dict, Optional
 
 import numpy as np
-from typing import TYPE_CHECKING
-
-if TYPE_CHECKING:
-    from .agent import Agent
 
 
 class _stop_on_sigterm:
@@ -62,19 +51,33 @@ class _Callbacks:
     step, and `save` writes the run as it stands at that step (when the callback returns).
 
     Moments, as SB3's DQN has them: on_training_start, then on_rollout_start, when learn begins; on_step after
-    every environment step (`n_calls`, `num_timesteps`; the locals hold `dones`, `infos`, `rewards` is not
-    given, `step`, `episode`, `budget_used`, `queries`, `last_eval`, `total_timesteps`); one learn is one rollout:
-    on_rollout_end, then on_training_end, when learn returns (also after an exception or a stop)."""
+    every environment step (`n_calls`, `num_timesteps`); one learn is one rollout: on_rollout_end, then
+    on_training_end, when learn returns (also after an exception or a stop).
 
-    def __init__(self, callback: Any, model: "Agent", total_timesteps: int,
-                 episode_log: Optional[_EpisodeLog] = None) -> None:
+    The locals, as SB3's off-policy loop has them for its one environment: `actions` (the action taken, the
+    agent's or the expert's), `rewards`, `dones`, `new_obs` (batches of one, as a vector environment gives
+    them: after an episode's end the reset's observation), `infos` (the environment's info of the step: Monitor's
+    `episode` when it wraps the environment; with `terminal_observation` and `TimeLimit.truncated` at an
+    episode's end, as SB3's vector environments add them), and arld's own: `step`, `episode`, `budget_used`,
+    `queries`, `last_eval`, `total_timesteps`. An environment that arld.make gives, trained unwrapped, runs in Rust:
+    its infos hold only what SB3's vector environment adds.
+
+    With SB3's logger set (`set_logger`) and log_interval, every log_interval finished episodes the run's values
+    are recorded and dumped, as SB3's DQN does (`_dump`)."""
+
+    # `model` is the arld.Agent that learns (typed Any: the agent module imports this one).
+    def __init__(self, callback: Any, model: Any, total_timesteps: int,
+                 episode_log: Optional[_EpisodeLog] = None, log_interval: Optional[int] = None) -> None:
         self.items = [] if callback is None else list(callback) if isinstance(callback, (list, tuple)) else [
             callback]
         self.episode_log = episode_log
+        self.log_interval = log_interval
         self.model = model
         self.episode: Optional[int] = None
+        self.t0 = time.perf_counter()
+        self.start_step: Optional[int] = None
         self.locals: Dict[str, Any] = {
-            "self": model, "total_timesteps": total_timesteps, "callback": self, "log_interval": None,
+            "self": model, "total_timesteps": total_timesteps, "callback": self, "log_interval": log_interval,
             "dones": np.zeros(1, dtype=bool), "infos": [{}], "last_eval": None,
         }
         for cb in self.items:
@@ -89,16 +92,53 @@ class _Callbacks:
             if hasattr(cb, "on_rollout_start"):
                 cb.on_rollout_start()
 
-    def __call__(self, step: int, episode: int, budget_used: int, queries: int, last_eval: Any) -> bool:
+    def _step_locals(self, taken: Any) -> Dict[str, Any]:
+        """SB3's locals of the step the run took: (action, reward, terminated, truncated, ended, obs) from the run,
+        the environment's own observation and info from its bridge (a Python environment)."""
+        action, reward, terminated, truncated, ended, flat_obs = taken
+        model = self.model
+        box = model._box
+        bridge = model._bridge
+        done = bool(terminated or truncated)
+        if bridge is not None:
+            info = dict(bridge.info)
+            new_obs = _batch_of_one(bridge.obs)
+            if done:
+                info["terminal_observation"] = bridge.final_obs
+        else:
+            info = {}
+            new_obs = np.asarray(flat_obs, dtype=np.float32)[None]
+        if done:
+            info["TimeLimit.truncated"] = bool(truncated and not terminated)
+            episode = info.get("episode")
+            # SB3's ep_info_buffer: Monitor's episode info when it wraps the environment, else arld's own.
+            if isinstance(episode, dict) and "r" in episode:
+                model._ep_infos.append(dict(episode))
+            elif ended is not None:
+                model._ep_infos.append({"r": float(ended[0]), "l": int(ended[1]),
+                                        "t": round(time.perf_counter() - self.t0, 6)})
+        actions: np.ndarray
+        if box is None:
+            actions = np.array([-1 if action is None else action], dtype=np.int64)
+        else:
+            actions = np.asarray(action if action is not None else np.zeros(box.dim), dtype=np.float32).reshape(
+                (1,) + box.shape)
+        return {"actions": actions, "rewards": np.array([reward], dtype=np.float32),
+                "dones": np.array([done]), "new_obs": new_obs, "infos": [info]}
+
+    def __call__(self, step: int, episode: int, budget_used: int, queries: int, last_eval: Any,
+                 taken: Any = None) -> bool:
         model = self.model
         model._live_step = step
-        done = self.episode is not None and episode > self.episode
+        if self.start_step is None:
+            self.start_step = step - 1
         self.episode = episode
         self.locals.update(
             step=step, num_timesteps=step, episode=episode, budget_used=budget_used, queries=queries,
-            dones=np.array([done]), infos=[{}],
             last_eval=None if last_eval is None else {"step": last_eval[0], "mean": last_eval[1]},
         )
+        if taken is not None:
+            self.locals.update(self._step_locals(taken))
         if self.episode_log is not None:
             self.episode_log(step, episode, budget_used, self.locals["last_eval"])
         go_on = True
@@ -111,7 +151,32 @@ class _Callbacks:
                 answer = cb(self.locals, {})
             if answer is False:
                 go_on = False
+        # After the callbacks, as SB3's loop dumps after on_step.
+        if self.log_interval is not None and bool(self.locals["dones"][0]) and episode % self.log_interval == 0:
+            self._dump(step, episode, budget_used, queries)
         return go_on
+
+    def _dump(self, step: int, episode: int, budget_used: int, queries: int) -> None:
+        """SB3's DQN's dump_logs with arld's values besides: the run's step, episodes, the last 100 episodes'
+        mean return and length, ε, steps per second, and the learning rate, budget, queries and last evaluation."""
+        model, logger = self.model, self.model.logger
+        elapsed = max(time.perf_counter() - self.t0, 1e-9)
+        logger.record("time/episodes", episode, exclude="tensorboard")
+        infos = list(model._ep_infos)
+        if infos:
+            logger.record("rollout/ep_rew_mean", float(np.mean([e["r"] for e in infos])))
+            logger.record("rollout/ep_len_mean", float(np.mean([e["l"] for e in infos])))
+        logger.record("rollout/exploration_rate", model.exploration_rate)
+        logger.record("time/fps", int((step - (self.start_step or 0)) / elapsed))
+        logger.record("time/time_elapsed", int(elapsed), exclude="tensorboard")
+        logger.record("time/total_timesteps", step, exclude="tensorboard")
+        logger.record("train/learning_rate", model.learning_rate)
+        logger.record("arld/budget_used", budget_used)
+        logger.record("arld/queries", queries)
+        last = self.locals["last_eval"]
+        if last is not None:
+            logger.record("eval/mean_reward", float(last["mean"]))
+        logger.dump(step=step)
 
     def end(self) -> None:
         for cb in self.items:
@@ -120,6 +185,13 @@ class _Callbacks:
         for cb in self.items:
             if hasattr(cb, "on_training_end"):
                 cb.on_training_end()
+
+
+def _batch_of_one(obs: Any) -> Any:
+    """An observation as a vector environment of one gives it: a leading axis of 1 (per key of a dict)."""
+    if isinstance(obs, dict):
+        return {k: _batch_of_one(v) for k, v in obs.items()}
+    return np.asarray(obs)[None]
 
 
 class _EpisodeLog:

@@ -30,7 +30,6 @@ from gymnasium import spaces
 from . import _arld
 
 
-
 @dataclass(frozen=True)
 class BoxActions:
     """A `Box` action space as arld's loop sees it: flat vectors of float32 numbers in [low, high] (the bounds
@@ -186,16 +185,25 @@ class EnvBridge:
         self.flat = codec.flat
         space = getattr(env, "action_space", None)
         self.box = box_actions(space, env_name(env)) if isinstance(space, spaces.Box) else None
+        # What the last step gave, as the environment gave it (callbacks' new_obs and infos): the observation
+        # the agent acts on next (the reset's after an episode's end), the step's info, and the observation that
+        # ended the episode.
+        self.obs: Any = None
+        self.info: Dict[str, Any] = {}
+        self.final_obs: Any = None
 
     def reset(self, seed: Optional[int]) -> List[float]:
         obs, _info = self.env.reset() if seed is None else self.env.reset(seed=int(seed))
+        self.obs = obs
         return self.flat(obs)
 
     def step(self, action: Any) -> Tuple[List[float], float, bool, bool]:
         """One step with arld's action: an int, or a flat list of floats for a Box (shaped as the space)."""
         if self.box is not None:
             action = self.box.shaped(action)
-        obs, reward, terminated, truncated, _info = self.env.step(action)
+        obs, reward, terminated, truncated, info = self.env.step(action)
+        self.obs = self.final_obs = obs
+        self.info = info
         return self.flat(obs), float(reward), bool(terminated), bool(truncated)
 
     def _bit_generator(self) -> Any:
@@ -277,8 +285,7 @@ def env_facts(env: Any) -> Facts:
     """(id, obs_dim, actions, max_episode_steps, reward_threshold) of a Gymnasium environment, or ValueError;
     `actions` is the number of discrete actions, or the `BoxActions` of a Box."""
     if isinstance(env, BuiltinEnv):
-        spec: Facts = env._core.spec
-        return spec
+        return (env.id, env._core.spec[1], env.actions, env.max_episode_steps, env.reward_threshold)
     act_space: Any = getattr(env, "action_space", None)
     name = env_name(env)
     actions: Actions
@@ -342,18 +349,29 @@ def copy_env(env: Any) -> Any:
         ) from e
 
 
-class BuiltinEnv(gym.Env[np.ndarray, np.int64]):
+class BuiltinEnv(gym.Env[np.ndarray, Any]):
     """A built-in arld task as a Gymnasium environment (`arld.make`): stepped in Rust; when arld trains on it
-    unwrapped, the whole run stays in Rust. It pickles (and copies) by id: a copy is a new environment."""
+    unwrapped, the whole run stays in Rust. Its actions are Discrete, or a float32 Box for the continuous tasks
+    (Pendulum-v1, MountainCarContinuous-v0, LunarLanderContinuous-v3). It pickles (and copies) by id: a copy is a
+    new environment."""
 
     metadata: Dict[str, Any] = {"render_modes": []}
 
     def __init__(self, env_id: str) -> None:
         self._core = _arld.BuiltinEnv(env_id)
-        env_id, obs_dim, n_actions, limit, threshold = self._core.spec
+        env_id, obs_dim, actions, limit, threshold = self._core.spec
         self.id = env_id
         self.observation_space = spaces.Box(-np.inf, np.inf, (obs_dim,), np.float32)
-        self.action_space = spaces.Discrete(n_actions)
+        # What arld's loop sees of its actions: their number, or the box.
+        self.actions: Actions
+        if isinstance(actions, int):
+            self.actions = actions
+            self.action_space: Any = spaces.Discrete(actions)
+        else:
+            low, high = actions
+            self.actions = BoxActions((len(low),), tuple(low), tuple(high))
+            self.action_space = spaces.Box(np.asarray(low, np.float32), np.asarray(high, np.float32),
+                                           dtype=np.float32)
         self.spec = gym.envs.registration.EnvSpec(
             id=env_id, entry_point="arld:make", reward_threshold=threshold, max_episode_steps=limit,
             kwargs={"env_id": env_id})
@@ -367,7 +385,8 @@ class BuiltinEnv(gym.Env[np.ndarray, np.int64]):
         return np.asarray(self._core.reset(seed), dtype=np.float32), {}
 
     def step(self, action: Any) -> Tuple[Any, float, bool, bool, Dict[str, Any]]:
-        obs, reward, terminated, truncated = self._core.step(int(action))
+        taken = int(action) if isinstance(self.actions, int) else self.actions.flat(action, "the action")
+        obs, reward, terminated, truncated = self._core.step(taken)
         return np.asarray(obs, dtype=np.float32), reward, terminated, truncated, {}
 
     def render(self) -> None:
@@ -382,6 +401,7 @@ class BuiltinEnv(gym.Env[np.ndarray, np.int64]):
 
 
 def make(env_id: str) -> BuiltinEnv:
-    """A built-in environment (CartPole-v0/v1, Acrobot-v1, MountainCar-v0, LunarLander-v2/v3) as a
-    gymnasium.Env; training on it unwrapped runs entirely in Rust, without the GIL."""
+    """A built-in environment (CartPole-v0/v1, Acrobot-v1, MountainCar-v0, LunarLander-v2/v3; with actions in a
+    box: Pendulum-v1, MountainCarContinuous-v0, LunarLanderContinuous-v3) as a gymnasium.Env; training on it
+    unwrapped runs entirely in Rust, without the GIL."""
     return BuiltinEnv(env_id)

@@ -4,16 +4,7 @@ collect_demos)."""
 
 from __future__ import annotations
 
-import copy
-import difflib
-import json
-import os
-import shutil
-import sys
-import tempfile
-import time
-from pathlib import Path
-from typing import Any, Callable, Dict, List, Literal, Optional, Protocol, Sequence, Tuple, Union, cast
+from typing import Any, Callable, Dict, List, Optional, Protocol, Tuple, Union, cast
 
 import numpy as np
 
@@ -21,7 +12,8 @@ from . import _arld
 from .envs import BoxActions, ObsCodec, as_env as _as_env, box_actions as _box_actions, codec_of as _codec_of
 
 # A person answering in the browser: arld.WebExpert(listen="127.0.0.1:0", fps=None, timeout=None, keys=None,
-# wait=True, labels=None, segment_s=None) serves the page (its URL is .url, printed when learn starts the run); pass it as expert=
+# wait=True, labels=None, segment_s=None) serves the page (its URL is .url, printed when learn starts the run); pass
+# it as expert=
 # (one run per WebExpert).
 WebExpert = _arld.WebExpert
 
@@ -52,18 +44,9 @@ def _expert_callable(expert: Any, box: Optional[BoxActions] = None) -> Tuple[Opt
     if isinstance(expert, WebExpert):
         # Not called from Python: the compiled part recognises it and drives the person's page.
         return cast(Callable[[Any], int], expert), "web"
-    from .agent import Agent  # the agent module imports this one
-
     convert: Callable[[Any], Any] = _as_action if box is None else box.flat
-    if isinstance(expert, Agent):
-        agent = expert
-
-        def ask_agent(obs: Any) -> Any:
-            return convert(agent.predict(obs)[0])
-
-        return ask_agent, "arld.Agent"
     if hasattr(expert, "predict") and callable(expert.predict):
-        # Stable-Baselines3's predict(obs, deterministic=True) -> (action, state).
+        # Stable-Baselines3's predict(obs, deterministic=True) -> (action, state); an arld.Agent has it too.
         def ask(obs: Any) -> Any:
             action, _state = expert.predict(obs, deterministic=True)
             return convert(action)

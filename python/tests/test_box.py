@@ -132,7 +132,7 @@ def test_box_runs_learn_in_stretches_and_save_and_load_whole(tmp_path):
     two.save(tmp_path / "half.arld")
     loaded = arld.Agent.load(tmp_path / "half.arld", env=gym.make("Pendulum-v1"), expert=swing_up)
     two.learn(900, reset_num_timesteps=False)
-    loaded.learn(900)
+    loaded.learn(900, reset_num_timesteps=False)
     obs = np.random.default_rng(0).uniform(-1, 1, (20, 3)).astype(np.float32)
     for other in (two, loaded):
         assert other.evaluations == one.evaluations

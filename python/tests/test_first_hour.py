@@ -129,7 +129,7 @@ def test_a_checkpoint_written_in_a_callback_is_the_whole_run_at_that_step(tmp_pa
     model.learn(1000, callback=CheckpointCallback(save_freq=400, save_path=str(tmp_path), name_prefix="cp"))
     assert sorted(p.name for p in tmp_path.iterdir()) == ["cp_400_steps.zip", "cp_800_steps.zip"]
     resumed = arld.Agent.load(tmp_path / "cp_400_steps.zip", gym.make("CartPole-v1"), expert=expert)
-    resumed.learn(1100)
+    resumed.learn(1100, reset_num_timesteps=False)
     whole = agent().learn(1500)
     assert resumed.num_timesteps == 1500 and same_params(params(resumed), params(whole))
     assert resumed.evaluations == [e for e in whole.evaluations if e["step"] > 400]
@@ -361,7 +361,7 @@ def test_continuing_a_loaded_run_in_its_log_dir_keeps_its_records(tmp_path):
     first.save(tmp_path / "snap.arld")
     first.close()  # its run holds the directory until then
     loaded = arld.Agent.load(tmp_path / "snap.arld", gym.make("CartPole-v1"), expert=expert)
-    loaded.learn(700, log_dir=tmp_path / "run")
+    loaded.learn(700, log_dir=tmp_path / "run", reset_num_timesteps=False)
     agent().learn(1500, log_dir=tmp_path / "whole")
     for f in ("queries.csv", "eval.csv", "episodes.csv"):
         assert (tmp_path / "run" / f).read_bytes() == (tmp_path / "whole" / f).read_bytes(), f
@@ -392,7 +392,7 @@ def test_a_loaded_agent_has_the_queries_of_the_agent_that_saved_it(tmp_path):
     first.save(tmp_path / "snap.arld")
     loaded = arld.Agent.load(tmp_path / "snap.arld", gym.make("CartPole-v1"), expert=expert)
     assert loaded.queries == first.queries and loaded.evaluations == first.evaluations
-    loaded.learn(1300)
+    loaded.learn(1300, reset_num_timesteps=False)
     whole = agent().learn(1500)
     assert loaded.queries == whole.queries and len(whole.queries) > len(first.queries)
 
@@ -428,7 +428,8 @@ def test_a_run_directory_holds_one_run_at_a_time(tmp_path):
     second.close()
     if ARLD.is_file():
         out = subprocess.run([str(ARLD), "train", "--env", "CartPole-v0", "--method", "dqn", "--quiet",
-                              "--set", "train_steps=200", "--overwrite", "-o", str(run)], capture_output=True, text=True)
+                              "--set", "train_steps=200", "--overwrite", "-o", str(run)],
+                             capture_output=True, text=True)
         assert out.returncode == 0, out.stderr
 
 
@@ -479,5 +480,5 @@ def test_an_exception_from_the_environment_pauses_the_run_whole_and_it_goes_on_a
     loaded = arld.Agent.load(tmp_path / "at-exception.arld", gym.make("CartPole-v1"), expert=expert,
                              eval_env=gym.make("CartPole-v1"))
     assert loaded.queries == queries_then
-    loaded.learn(1500 - paused_at)
+    loaded.learn(1500 - paused_at, reset_num_timesteps=False)
     assert loaded.queries == whole.queries and same_params(params(loaded), params(whole))

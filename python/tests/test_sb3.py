@@ -72,7 +72,7 @@ def test_load_continues_the_saved_run(tmp_path):
     assert loaded.num_timesteps == 1000 and loaded.net == "bootstrap"
     # The evaluations travel in the file (the query events do not).
     assert len(model.evaluations) == 2 and loaded.evaluations == model.evaluations
-    loaded.learn(1000)
+    loaded.learn(1000, reset_num_timesteps=False)
     whole = cartpole_agent().learn(2000)
     assert len(whole.evaluations) == 4 and loaded.evaluations == whole.evaluations
     assert loaded.summary["demos_queried"] == whole.summary["demos_queried"]
@@ -279,7 +279,7 @@ def _numpy_greedy(weights, obs):
 
 
 def test_net_arch_sets_the_hidden_widths_and_the_saved_weights_have_them(tmp_path):
-    model = cartpole_agent("dqn", net="plain", policy_kwargs=dict(net_arch=[256, 256])).learn(
+    cartpole_agent("dqn", net="plain", policy_kwargs=dict(net_arch=[256, 256])).learn(
         600, log_dir=tmp_path / "wide")
     shapes = _safetensors_shapes(tmp_path / "wide" / "weights.safetensors")
     assert shapes["fc1.weight"] == [256, 4] and shapes["fc2.weight"] == [256, 256]
@@ -314,10 +314,10 @@ def test_log_interval_prints_a_line_every_n_episodes_when_verbose(capsys):
         return True
 
     model = cartpole_agent("dqn", verbose=1).learn(700, log_interval=3, callback=count)
-    lines = [l for l in capsys.readouterr().out.splitlines() if "| episodes " in l]
+    lines = [line for line in capsys.readouterr().out.splitlines() if "| episodes " in line]
     finished = model.summary["episodes"]
     assert finished == episodes[-1] > 6
-    assert [int(l.split("| episodes ")[1].split()[0]) for l in lines] == list(range(3, finished + 1, 3))
+    assert [int(line.split("| episodes ")[1].split()[0]) for line in lines] == list(range(3, finished + 1, 3))
     cartpole_agent("dqn").learn(700, log_interval=3)  # verbose=0: SB3 prints nothing either
     assert "| episodes " not in capsys.readouterr().out
     with pytest.raises(ValueError, match="log_interval"):

@@ -75,7 +75,7 @@ def scripted_person(url, tmp_path, *extra):
         cwd=E2E, capture_output=True, text=True, timeout=300,
     )
     assert out.returncode == 0, f"the scripted person failed: {out.stderr}{out.stdout}"
-    return json.loads([l for l in out.stdout.splitlines() if l.startswith("{")][-1])
+    return json.loads([row for row in out.stdout.splitlines() if row.startswith("{")][-1])
 
 
 def test_a_person_answers_a_gymnasium_environment_from_its_rendered_frames(tmp_path):
@@ -231,7 +231,7 @@ def page_person(url, tmp_path, *extra):
     out = subprocess.run(["node", "python_page.mjs", "--url", url, "--shots", str(tmp_path / "shots"), *extra],
                          cwd=E2E, capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, f"the person failed: {out.stderr}{out.stdout}"
-    return json.loads([l for l in out.stdout.splitlines() if l.startswith("{")][-1])
+    return json.loads([row for row in out.stdout.splitlines() if row.startswith("{")][-1])
 
 
 def test_the_page_shows_where_a_python_run_stands_when_learn_returns_and_when_it_is_stopped(tmp_path):
@@ -245,7 +245,7 @@ def test_the_page_shows_where_a_python_run_stands_when_learn_returns_and_when_it
         if train.poll() is None:
             train.kill()
     assert train.returncode == 0, f"the program failed: {err}"
-    lines = [json.loads(l) for l in out.splitlines() if l.startswith("{")]
+    lines = [json.loads(row) for row in out.splitlines() if row.startswith("{")]
     learned, stopped = lines[0], lines[1]
     hello = report["hello"]
     # labels= and keys= (Space named as such); rendered frames cannot be copied, so undo is neither offered nor
@@ -440,7 +440,7 @@ def test_a_person_answers_a_gymnasium_box_task_with_a_pad_a_key_and_the_slider(t
                              cwd=E2E, capture_output=True, text=True, timeout=300)
         go.touch()
         assert out.returncode == 0, f"the person failed: {out.stderr}{out.stdout}"
-        report = json.loads([l for l in out.stdout.splitlines() if l.startswith("{")][-1])
+        report = json.loads([row for row in out.stdout.splitlines() if row.startswith("{")][-1])
         stdout, err = train.communicate(timeout=120)
     finally:
         if train.poll() is None:
@@ -457,7 +457,7 @@ def test_a_person_answers_a_gymnasium_box_task_with_a_pad_a_key_and_the_slider(t
     # The torque each control gave: the stick's x times the half-width, the held left arrow the lower bound, the
     # slider its value.
     expected = [centre + 0.5 * half, centre - 0.25 * half, low, 0.8]
-    lines = [json.loads(l) for l in (run / "answers.jsonl").read_text().splitlines()]
+    lines = [json.loads(row) for row in (run / "answers.jsonl").read_text().splitlines()]
     questions = report["questions"]
     assert len(questions) >= 5, report
     # A second of play at 20 steps a second: 20 steps a question (fewer only where the episode's time limit cut
@@ -466,13 +466,13 @@ def test_a_person_answers_a_gymnasium_box_task_with_a_pad_a_key_and_the_slider(t
     assert result["segment_len"] == 20
     lengths = []
     for q, want in zip(questions, expected):
-        first = next(l for l in lines if np.array_equal(np.float32(l["obs"]), np.float32(q["obs"])))
-        segment = [l for l in lines if l["question_step"] == first["question_step"]]
+        first = next(row for row in lines if np.array_equal(np.float32(row["obs"]), np.float32(q["obs"])))
+        segment = [row for row in lines if row["question_step"] == first["question_step"]]
         lengths.append(len(segment))
         assert 0.8 * (len(segment) - 1) / 20 <= q["segmentS"] <= 2 * len(segment) / 20, (q, len(segment))
-        assert segment and all(len(l["action"]) == 1 for l in segment), segment
-        assert all(abs(l["action"][0] - want) < 1e-6 for l in segment), (q["control"], want, segment)
-        assert all(l["expert"] == "web" and l["started_by"] == "rule" for l in segment)
+        assert segment and all(len(row["action"]) == 1 for row in segment), segment
+        assert all(abs(row["action"][0] - want) < 1e-6 for row in segment), (q["control"], want, segment)
+        assert all(row["expert"] == "web" and row["started_by"] == "rule" for row in segment)
     # learn returned: the page shows the end screen of the run the program has back; the budget spent is the
     # logged steps.
     assert max(lengths) == 20 and all(n <= 20 for n in lengths), lengths

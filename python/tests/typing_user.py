@@ -34,8 +34,11 @@ def main() -> None:
     demos = arld.collect_demos(gym.make("CartPole-v1"), my_expert, 50, seed=0)
     print(len(demos["actions"]), arld.make("CartPole-v1"), arld.METHODS, arld.NETS)
     model.save("/tmp/arld_typing_user.arld")
-    again = arld.Agent.load("/tmp/arld_typing_user.arld", env, expert=my_expert)
-    print(again.num_timesteps)
+    again = arld.Agent.load("/tmp/arld_typing_user.arld", env, expert=my_expert, learning_rate=1e-3,
+                            custom_objects={"gamma": 0.98})
+    again.learning_rate = 5e-4
+    again.set_random_seed(3)
+    print(again.num_timesteps, again.policy.predict(np.zeros(4, dtype=np.float32))[0], again.device, again.gamma)
     sb3_like = arld.Agent("dqn", "CartPole-v1", defaults="sb3").learn(200)
     student = arld.Agent("gdqn", arld.make("CartPole-v1"), expert=sb3_like, eval_env=[env, env])
     print(student.method, student.net, arld.SB3_DEFAULTS["lr"])

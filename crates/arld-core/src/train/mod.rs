@@ -14,7 +14,7 @@ pub mod snapshot;
 pub use config::{Algo, ConfigInput, Method, NetKind, TdLoss, TrainConfig};
 pub use eval::Evaluator;
 pub use log::{LogPosition, RunLog};
-pub use run::{Control, Driver, PausedRun, RunBuilder, StepView};
+pub use run::{Control, Driver, LastStep, PausedRun, RunBuilder, StepView};
 pub use run_dir::{EvalPoint, QueryEvent, Summary, steps_to_solve};
 pub use seeds::{SeedPurpose, seed_for};
 pub use snapshot::Checkpointer;

@@ -32,6 +32,9 @@ use rand_pcg::Pcg64;
 use std::path::Path;
 use std::time::Instant;
 
+/// The name under which a snapshot holds the learner's state.
+pub const AGENT_STATE: &str = "agent";
+
 /// What a run is given, and the one way to start it: `RunBuilder::new(&cfg)`, the parts a run needs beyond its
 /// configuration, then [`RunBuilder::train`].
 ///
@@ -45,6 +48,9 @@ use std::time::Instant;
 ///   directory; then a stop request ends the run with an [`crate::interrupt::Interrupted`] error.
 /// - [`Self::resume_from`]: the run continues from a snapshot, to the same results as an uninterrupted run. The
 ///   log must then come from [`RunLog::resume`] at the snapshot's log position ([`super::resume_position`]).
+/// - [`Self::start_from`]: a new run whose learner begins as another run's ended (its weights, target and
+///   optimiser; everything else, the counters, replay, schedules and budget, begins afresh): Stable-Baselines3's
+///   second `learn`.
 /// - [`Self::driver`]: the run is driven from outside and has no fixed end. After every environment step the
 ///   driver says whether to go on, pause (it then holds the whole live run, [`PausedRun`], until it says to go
 ///   on or stop) or stop; the run ends (its summary, weights and `summary.json`) only when the driver stops it.
@@ -62,6 +68,7 @@ pub struct RunBuilder<'a, L: Learner = Agent> {
     demos: Option<&'a Demonstrations<L::Action>>,
     checkpointer: Option<&'a mut Checkpointer>,
     resume_from: Option<&'a StateDict<'a>>,
+    start_from: Option<&'a StateDict<'a>>,
     driver: Option<&'a mut dyn Driver<L>>,
 }
 
@@ -217,6 +224,7 @@ impl<'a, L: Learner> RunBuilder<'a, L> {
             demos: None,
             checkpointer: None,
             resume_from: None,
+            start_from: None,
             driver: None,
         }
     }
@@ -254,6 +262,14 @@ impl<'a, L: Learner> RunBuilder<'a, L> {
     /// The snapshot the run continues from, if any.
     pub fn resume_from(mut self, state: Option<&'a StateDict<'a>>) -> Self {
         self.resume_from = state;
+        self
+    }
+
+    /// The learner's state to begin with (a snapshot's, read with [`super::snapshot::read_snapshot`]): its
+    /// weights, target and optimiser, where a learner of this run's configuration could have left them; the run
+    /// itself (steps, replay, schedules, budget, evaluations) starts afresh.
+    pub fn start_from(mut self, state: Option<&'a StateDict<'a>>) -> Self {
+        self.start_from = state;
         self
     }
 
@@ -306,7 +322,12 @@ impl<'a, L: Learner> RunBuilder<'a, L> {
             cfg.eval_episodes
         );
         let obs_dim = env.obs_dim();
-        let agent = (self.make_agent)(cfg, env.spec());
+        let mut agent = (self.make_agent)(cfg, env.spec());
+        if let Some(state) = self.start_from {
+            agent.load_state(AGENT_STATE, state).context(
+                "the learner to start from does not fit this run's network (its widths, heads or kind)",
+            )?;
+        }
         let evaluator =
             Evaluator::new(test_envs, seed_for(cfg.seed, SeedPurpose::EvalEnv), obs_dim)?;
         let pretrain_demos = self.demos.map(|d| d.transitions.len()).unwrap_or(0);
@@ -368,6 +389,8 @@ struct Run<'a, L: Learner> {
     /// The last step a run can take: `train_steps`, or none for a driven run (whose `train_steps` is its
     /// schedules' horizon, not its end).
     last_step: usize,
+    /// The environment step taken last, for the driver.
+    last: LastStep<L::Action>,
 }
 
 /// The ε the agent acts with at `step`: the schedule's ([`epsilon_at`]), or 1 (a uniformly random action)
@@ -440,6 +463,7 @@ impl<'a, L: Learner> Run<'a, L> {
             batch: Batch::default(),
             next_obs: Vec::new(),
             env_seed: seed_for(cfg.seed, SeedPurpose::TrainEnv),
+            last: LastStep::default(),
         }
     }
 
@@ -507,7 +531,7 @@ impl<'a, L: Learner> Run<'a, L> {
             return Ok(());
         };
         let parts = &mut self.parts;
-        parts.agent.load_state("agent", state)?;
+        parts.agent.load_state(AGENT_STATE, state)?;
         parts.replay.load_state("replay", state)?;
         parts.queries.load_state("query", state)?;
         parts.replay_rng = state.text("rng.replay")?;
@@ -839,9 +863,16 @@ impl<'a, L: Learner> Run<'a, L> {
             self.log.answered((st.step, st.episode), &taken, ended)?;
         }
         parts.replay.push(taken)?;
-        st.ep_actions.push(action);
         st.ep_return += s.reward;
         st.ep_len += 1;
+        self.last = LastStep {
+            action: Some(action.clone()),
+            reward: s.reward,
+            terminated: s.terminated,
+            truncated: s.truncated,
+            ended: (s.terminated || s.truncated).then_some((st.ep_return, st.ep_len)),
+        };
+        st.ep_actions.push(action);
         std::mem::swap(&mut parts.obs, &mut self.next_obs);
         if s.terminated || s.truncated {
             let step = st.step;
@@ -1023,6 +1054,8 @@ impl<'a, L: Learner> Run<'a, L> {
             budget_used: self.parts.queries.budget_used(),
             log: self.log,
             agent: &self.parts.agent,
+            last: &self.last,
+            obs: &self.parts.obs,
         };
         let mut control = driver.after_step(&view)?;
         if control == Control::Pause {
@@ -1145,6 +1178,35 @@ pub struct StepView<'a, L: Learner = Agent> {
     pub budget_used: usize,
     pub log: &'a RunLog<L::Action>,
     pub agent: &'a L,
+    /// The environment step just taken (what Stable-Baselines3's callbacks see of it).
+    pub last: &'a LastStep<L::Action>,
+    /// The observation the agent acts on next: the step's next observation, or the reset's after an episode's
+    /// end.
+    pub obs: &'a [f32],
+}
+
+/// The environment step a run took last, as its driver sees it.
+#[derive(Clone, Debug)]
+pub struct LastStep<A> {
+    /// The action taken (the agent's or the expert's); `None` before the first step.
+    pub action: Option<A>,
+    pub reward: f64,
+    pub terminated: bool,
+    pub truncated: bool,
+    /// The return and length of the episode this step ended, when it ended one.
+    pub ended: Option<(f64, usize)>,
+}
+
+impl<A> Default for LastStep<A> {
+    fn default() -> Self {
+        Self {
+            action: None,
+            reward: 0.0,
+            terminated: false,
+            truncated: false,
+            ended: None,
+        }
+    }
 }
 
 /// Steers a run from outside ([`RunBuilder::driver`]) (e.g. a Python `learn` call that trains for a while, returns,
@@ -1339,7 +1401,7 @@ fn snapshot<L: Learner>(
     stopping: bool,
 ) -> Result<()> {
     let mut state = StateDict::default();
-    parts.agent.save_state("agent", &mut state);
+    parts.agent.save_state(AGENT_STATE, &mut state);
     parts.replay.save_state("replay", &mut state);
     parts.queries.save_state("query", &mut state);
     state.put_text("rng.replay", &parts.replay_rng);
