@@ -448,6 +448,8 @@ mod tests {
                 20,
                 3 * 20,
                 20,
+                // The continuous part: three box tasks x six methods.
+                3 * 6 * 20,
             ]
         );
         assert_eq!(
@@ -460,7 +462,8 @@ mod tests {
                 "ablations",
                 "effort",
                 "held_out",
-                "held_out_2"
+                "held_out_2",
+                "continuous"
             ]
         );
         assert_eq!(paper_budget("CartPole-v0"), 200);
