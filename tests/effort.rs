@@ -921,7 +921,7 @@ fn every_effort_multiple_is_read_on_the_curve_of_asking_at_random() {
         )
     };
     let mut checked = 0;
-    for row in rows.iter().filter(|r| r["effort_multiple"] != "") {
+    for row in rows.iter().filter(|r| !r["effort_multiple"].is_empty()) {
         let env = row["env"].as_str();
         let (random, expert): (f64, f64) = (
             row["random_return"].parse().unwrap(),
@@ -978,8 +978,10 @@ fn every_effort_multiple_is_read_on_the_curve_of_asking_at_random() {
             expert,
         );
         let budget: f64 = row["budget"].parse().unwrap();
-        let expected = if y <= fitted[0] {
+        let expected = if y < fitted[0] {
             format!("<{}", budgets[0] as f64 / budget)
+        } else if y == fitted[0] {
+            format!("{}", budgets[0] as f64 / budget)
         } else if y > fitted[fitted.len() - 1] {
             format!(">{}", budgets[budgets.len() - 1] as f64 / budget)
         } else {

@@ -1213,8 +1213,8 @@ fn headline(measured: &Measured) -> String {
          95% interval over seeds ({MULTIPLE_RESAMPLES} resamples; seeds the rule and the curve share are resampled \
          together). \"2x\": asking at random needs twice the rule's budget for the same AUC; \"0.5x\": half of it. \
          Outside the curve the multiple is censored: \"> 4x\" when the rule's AUC lies above the curve's largest \
-         budget (4 times the paper's budget, for a rule at the paper's), \"< 0.25x\" when asking at random's \
-         smallest budget already reaches it. {net} network, seeds outside the held-out ones; the held-out cells have \
+         budget (4 times the paper's budget, for a rule at the paper's), \"< 0.25x\" when it lies below the \
+         curve's smallest budget. {net} network, seeds outside the held-out ones; the held-out cells have \
          theirs in their tables (the column \"effort multiple\") and in effort.csv.\n",
         net = EFFORT_NET.name()
     );
@@ -1757,12 +1757,12 @@ fn budget_multiple(env: &str, budget: usize) -> String {
 /// the smallest (Mann–Whitney).
 fn effort_buys(measured: &Measured) -> String {
     let (cells, comparisons, envs) = measured.parts();
-    let mut out = format!(
+    let mut out = String::from(
         "## What the expert's effort buys\n\nFor each rule run at two budgets or more, on every seed outside the \
          held-out ones: the median AUC and, in parentheses, the median first hit at each budget, as a multiple of \
          the paper's; then the largest budget against the smallest, on the seeds both have: the Hodges-Lehmann \
          shift of the AUC with its 95% interval, the Mann-Whitney p and the Holm-adjusted p over the task's \
-         budget comparisons.\n"
+         budget comparisons.\n",
     );
     for env in envs {
         let mut per_rule: BTreeMap<(usize, String, String), BTreeMap<usize, Vec<RunMetrics>>> =

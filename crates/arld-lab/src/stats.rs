@@ -522,15 +522,18 @@ pub fn seeds_needed(sd: f64, shift: f64, alpha: f64, power: f64) -> Option<u64> 
 
 /// Where a rule's value `y` falls on a reference's budget curve `points` ((budget, value), budgets increasing):
 /// the smallest budget at which the curve, made non-decreasing by isotonic regression (pool adjacent violators)
-/// and interpolated linearly in log budget, reaches `y`. `Below` when the first point already reaches it, `Above`
-/// when the last does not; `None` for fewer than two points or a NaN.
+/// and interpolated linearly in log budget, reaches `y`. `Below` when `y` lies below the first point, `Above` when
+/// it lies above the last; `None` for fewer than two points or a NaN.
 pub fn budget_equivalent(points: &[(f64, f64)], y: f64) -> Option<OnCurve> {
     if points.len() < 2 || y.is_nan() || points.iter().any(|p| p.1.is_nan() || p.0 <= 0.0) {
         return None;
     }
     let fitted = isotonic(&points.iter().map(|p| p.1).collect::<Vec<_>>());
-    if y <= fitted[0] {
+    if y < fitted[0] {
         return Some(OnCurve::Below);
+    }
+    if y == fitted[0] {
+        return Some(OnCurve::At(points[0].0));
     }
     for i in 1..points.len() {
         if fitted[i] >= y {
@@ -545,7 +548,7 @@ pub fn budget_equivalent(points: &[(f64, f64)], y: f64) -> Option<OnCurve> {
 /// A value's place on a budget curve ([`budget_equivalent`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum OnCurve {
-    /// At or below the curve's first point: worth at most its smallest budget.
+    /// Below the curve's first point: worth less than its smallest budget.
     Below,
     /// Reached at this budget.
     At(f64),
@@ -867,7 +870,9 @@ mod tests {
     fn the_budget_equivalent_reads_the_isotonic_curve_in_log_budget() {
         assert_eq!(isotonic(&[0.1, 0.3, 0.2, 0.5]), vec![0.1, 0.25, 0.25, 0.5]);
         let curve = [(1.0, 0.1), (2.0, 0.3), (4.0, 0.2), (8.0, 0.5)];
-        assert_eq!(budget_equivalent(&curve, 0.1), Some(OnCurve::Below));
+        assert_eq!(budget_equivalent(&curve, 0.05), Some(OnCurve::Below));
+        assert_eq!(budget_equivalent(&curve, 0.1), Some(OnCurve::At(1.0)));
+
         assert_eq!(budget_equivalent(&curve, 0.6), Some(OnCurve::Above));
         // 0.25 is first reached at 2 (the pooled 2-4 block); 0.375 half-way from 4 to 8 in log budget.
         let at = |y| match budget_equivalent(&curve, y) {
@@ -875,6 +880,7 @@ mod tests {
             other => panic!("{other:?}"),
         };
         assert!((at(0.25) - 2.0).abs() < 1e-12);
+        assert!((at(0.5) - 8.0).abs() < 1e-12);
         assert!((at(0.375) - 32f64.sqrt()).abs() < 1e-12);
         assert!((at(0.175) - 2f64.powf(0.5)).abs() < 1e-12);
         assert_eq!(budget_equivalent(&curve[..1], 0.2), None);
