@@ -127,6 +127,16 @@ fn design_median_in(dir: &Path, random: f64, expert: f64) -> Option<f64> {
     (!aucs.is_empty()).then(|| median(aucs))
 }
 
+/// The median AUC over the seeds outside the held-out ones (0-99) of the runs in `dir`, recomputed.
+fn screen_median_in(dir: &Path, random: f64, expert: f64) -> Option<f64> {
+    let aucs: Vec<f64> = (0..100)
+        .map(|s| dir.join(format!("seed{s}")))
+        .filter(|d| d.join("summary.json").is_file())
+        .map(|d| run_auc(&d, random, expert))
+        .collect();
+    (!aucs.is_empty()).then(|| median(aucs))
+}
+
 fn paper_budget_rows(rows: &[BTreeMap<String, String>]) -> Vec<&BTreeMap<String, String>> {
     rows.iter()
         .filter(|r| r["net"] == "bootstrap" && r["held_out"] == "false" && r["budget_scale"] == "1")
@@ -221,7 +231,7 @@ fn the_design_choice_is_the_candidate_with_the_highest_mean_median_auc() {
 }
 
 /// Every entry of effort.md's "What the expert's effort buys" tables is the median AUC of that rule's runs at
-/// that budget on the design seeds, recomputed from their eval.csv.
+/// that budget on every seed outside the held-out ones, recomputed from their eval.csv.
 #[test]
 fn what_the_effort_buys_is_the_median_auc_of_the_runs_at_each_budget() {
     let rows = effort_rows();
@@ -268,7 +278,7 @@ fn what_the_effort_buys_is_the_median_auc_of_the_runs_at_each_budget() {
                 } else {
                     budget_dir(env, rule, budget)
                 };
-                let ours = design_median_in(&dir, *random, *expert).unwrap_or_else(|| {
+                let ours = screen_median_in(&dir, *random, *expert).unwrap_or_else(|| {
                     panic!("{env} {rule} at {budget}: no run in {}", dir.display())
                 });
                 let theirs = field.split_whitespace().next().unwrap();
@@ -307,6 +317,7 @@ fn the_screen_lists_the_rules_that_differ_from_the_paper_rules() {
     for env in envs {
         let of_env: Vec<_> = cells.iter().filter(|r| r["env"] == env).collect();
         let (mut all, mut some, mut lower) = (Vec::new(), Vec::new(), Vec::new());
+        let (mut claims, mut aboves) = (Vec::new(), Vec::new());
         let mut rules: Vec<&str> = of_env
             .iter()
             .map(|r| r["rule"].as_str())
@@ -316,6 +327,7 @@ fn the_screen_lists_the_rules_that_differ_from_the_paper_rules() {
         for rule in rules {
             let row = of_env.iter().find(|r| r["rule"] == rule).unwrap();
             let (mut above, mut below) = (Vec::new(), Vec::new());
+            let mut one_sided: Vec<Option<f64>> = Vec::new();
             for (label, name, _) in baselines {
                 // The Holm-adjusted p of the task's screen family (recomputed from the runs by
                 // `every_comparison_is_recomputed_from_the_runs`) and the sign of the shift.
@@ -328,8 +340,10 @@ fn the_screen_lists_the_rules_that_differ_from_the_paper_rules() {
                         && c["budget"] == row["budget"]
                         && c["against_budget"] == row["budget"]
                 }) else {
+                    one_sided.push(None);
                     continue;
                 };
+                one_sided.push(c["p_greater"].parse().ok());
                 let p: f64 = match c["p_holm"].as_str() {
                     "" => continue,
                     text => text.parse().unwrap(),
@@ -343,13 +357,45 @@ fn the_screen_lists_the_rules_that_differ_from_the_paper_rules() {
                 }
             }
             let named = |v: &[&str]| format!("{rule} ({})", v.join(", "));
-            if above.len() == 3 {
-                all.push(rule.to_string());
-            } else if !above.is_empty() {
-                some.push(named(&above));
-            }
+            // "Above all three": the largest of the three one-sided p-values (the intersection-union test).
+            let iut: Option<f64> = one_sided
+                .iter()
+                .try_fold(0.0_f64, |worst, p| p.map(|p| worst.max(p)));
+            claims.push((rule.to_string(), iut));
+            aboves.push((rule.to_string(), named(&above), above.is_empty()));
             if !below.is_empty() {
                 lower.push(named(&below));
+            }
+        }
+        // Holm over the task's claims, then the rules whose adjusted p is below the level.
+        let mut order: Vec<usize> = (0..claims.len())
+            .filter(|&i| claims[i].1.is_some())
+            .collect();
+        order.sort_by(|&i, &j| {
+            claims[i]
+                .1
+                .unwrap()
+                .partial_cmp(&claims[j].1.unwrap())
+                .unwrap()
+        });
+        let mut adjusted = vec![None; claims.len()];
+        let mut running: f64 = 0.0;
+        for (rank, &i) in order.iter().enumerate() {
+            running = running.max(((order.len() - rank) as f64 * claims[i].1.unwrap()).min(1.0));
+            adjusted[i] = Some(running);
+        }
+        for (i, (rule, text, none_above)) in aboves.iter().enumerate() {
+            match adjusted[i] {
+                Some(p) if p < 0.05 => {
+                    let shown = if p < 0.001 {
+                        "<0.001".to_string()
+                    } else {
+                        format!("{p:.3}")
+                    };
+                    all.push(format!("{rule} (Holm {shown})"));
+                }
+                _ if !none_above => some.push(text.clone()),
+                _ => {}
             }
         }
         let list = |v: &[String]| {
@@ -487,17 +533,140 @@ fn mw_p(a: &[f64], b: &[f64]) -> Option<f64> {
     Some((2.0 * upper_tail(z)).min(1.0))
 }
 
-/// The Hodges-Lehmann shift of a over b and its 95% interval from the normal approximation of U's critical value.
+/// The Hodges-Lehmann shift of a over b and its 95% interval: the k-th smallest and largest differences, k the
+/// largest count with P(U <= k - 1) <= 0.025 under the null, from the exact null distribution of U counted as the
+/// rank sums of every subset of the pooled ranks.
 fn hl(a: &[f64], b: &[f64]) -> (f64, f64, f64) {
     let mut d: Vec<f64> = a
         .iter()
         .flat_map(|x| b.iter().map(move |y| x - y))
         .collect();
     d.sort_by(|x, y| x.partial_cmp(y).unwrap());
+    let (m, n) = (a.len(), b.len());
+    // ways[j][w]: subsets of j of the ranks 1..=i seen so far with rank sum w.
+    let total_rank = (m + n) * (m + n + 1) / 2;
+    let mut ways = vec![vec![0u128; total_rank + 1]; m + 1];
+    ways[0][0] = 1;
+    for rank in 1..=m + n {
+        for j in (1..=m.min(rank)).rev() {
+            for w in (rank..=total_rank).rev() {
+                ways[j][w] += ways[j - 1][w - rank];
+            }
+        }
+    }
+    // U = W - m(m+1)/2.
+    let offset = m * (m + 1) / 2;
+    let all: u128 = ways[m].iter().sum();
+    let mut cumulative = 0u128;
+    let mut k = 0;
+    for u in 0..=m * n {
+        cumulative += ways[m][u + offset];
+        if cumulative as f64 / all as f64 > 0.025 * (1.0 + 1e-12) {
+            break;
+        }
+        k += 1;
+    }
+    let k = k.max(1);
+    (median(d.clone()), d[k - 1], d[d.len() - k])
+}
+
+/// A decimal text such as "-123.45" as an integer at `scale` decimals.
+fn scaled(text: &str, scale: usize) -> i128 {
+    let (negative, digits) = match text.strip_prefix('-') {
+        Some(rest) => (true, rest),
+        None => (false, text),
+    };
+    let (whole, fraction) = digits.split_once('.').unwrap_or((digits, ""));
+    assert!(
+        !digits.contains('e') && fraction.len() <= scale,
+        "{text} at {scale} decimals"
+    );
+    let value: i128 = format!("{whole}{fraction:0<scale$}").parse().unwrap();
+    if negative { -value } else { value }
+}
+
+/// A run's evaluation means as written in its eval.csv.
+fn mean_texts(dir: &Path) -> Vec<String> {
+    std::fs::read_to_string(dir.join("eval.csv"))
+        .unwrap()
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').nth(1).unwrap().to_string())
+        .collect()
+}
+
+/// The two-sided Wilcoxon signed-rank p of paired runs (normal approximation with tie and continuity corrections,
+/// zero differences dropped), their differences taken exactly from the decimal texts of the means: a difference
+/// of sums at a common scale (every run of a comparison has the same number of evaluations).
+fn paired_p(a: &[PathBuf], b: &[PathBuf]) -> Option<f64> {
+    let texts: Vec<(Vec<String>, Vec<String>)> = a
+        .iter()
+        .zip(b)
+        .map(|(x, y)| (mean_texts(x), mean_texts(y)))
+        .collect();
+    let scale = texts
+        .iter()
+        .flat_map(|(x, y)| x.iter().chain(y))
+        .map(|t| t.split_once('.').map_or(0, |(_, f)| f.len()))
+        .max()
+        .unwrap_or(0);
+    let mut d: Vec<i128> = texts
+        .iter()
+        .map(|(x, y)| {
+            assert_eq!(
+                x.len(),
+                y.len(),
+                "runs of one comparison evaluate equally often"
+            );
+            x.iter().map(|t| scaled(t, scale)).sum::<i128>()
+                - y.iter().map(|t| scaled(t, scale)).sum::<i128>()
+        })
+        .filter(|&v| v != 0)
+        .collect();
+    if d.is_empty() {
+        return None;
+    }
+    d.sort_by_key(|v| v.abs());
+    let n = d.len() as f64;
+    let (mut plus, mut ties) = (0.0, 0.0);
+    let mut start = 0;
+    for group in d.chunk_by(|x, y| x.abs() == y.abs()) {
+        let t = group.len() as f64;
+        let rank = start as f64 + (t + 1.0) / 2.0;
+        plus += rank * group.iter().filter(|&&v| v > 0).count() as f64;
+        ties += t * t * t - t;
+        start += group.len();
+    }
+    let sigma = (n * (n + 1.0) * (2.0 * n + 1.0) / 24.0 - ties / 48.0).sqrt();
+    let z = ((plus - n * (n + 1.0) / 4.0).abs() - 0.5).max(0.0) / sigma;
+    Some((2.0 * upper_tail(z)).min(1.0))
+}
+
+/// The one-sided Mann-Whitney p that a lies above b (normal approximation with tie and continuity corrections).
+fn mw_greater(a: &[f64], b: &[f64]) -> Option<f64> {
     let (n1, n2) = (a.len() as f64, b.len() as f64);
-    let k = (n1 * n2 / 2.0 - 1.959963984540054 * (n1 * n2 * (n1 + n2 + 1.0) / 12.0).sqrt()).floor();
-    let k = k.max(0.0) as usize;
-    (median(d.clone()), d[k], d[d.len() - 1 - k])
+    let u: f64 = a
+        .iter()
+        .flat_map(|x| b.iter().map(move |y| (x, y)))
+        .map(|(x, y)| {
+            if x > y {
+                1.0
+            } else if x == y {
+                0.5
+            } else {
+                0.0
+            }
+        })
+        .sum();
+    let mut all: Vec<f64> = a.iter().chain(b).copied().collect();
+    all.sort_by(|x, y| x.partial_cmp(y).unwrap());
+    let ties: f64 = all
+        .chunk_by(|x, y| x == y)
+        .map(|g| (g.len() as f64).powi(3) - g.len() as f64)
+        .sum();
+    let n = n1 + n2;
+    let var = n1 * n2 / 12.0 * ((n + 1.0) - ties / (n * (n - 1.0)));
+    (var > 0.0).then(|| upper_tail((u - n1 * n2 / 2.0 - 0.5) / var.sqrt()).min(1.0))
 }
 
 /// The runs of a cell: the directories that may hold a rule's runs at a budget (the default variant at the
@@ -575,10 +744,8 @@ fn every_comparison_is_recomputed_from_the_runs() {
     let mut auc_cache: BTreeMap<PathBuf, f64> = BTreeMap::new();
     let mut families: BTreeMap<String, Vec<(f64, f64)>> = BTreeMap::new();
     let mut checked = 0;
+    let mut paired_checked = 0;
     for row in &rows {
-        if row["budget"] != row["against_budget"] {
-            continue; // the budget comparisons read the design seeds only; the screen's test covers them
-        }
         let (env, group) = (row["env"].as_str(), row["held_out"].as_str());
         let (random, expert) = refs[env];
         let mut auc = |dir: &PathBuf| {
@@ -587,7 +754,13 @@ fn every_comparison_is_recomputed_from_the_runs() {
                 .or_insert_with(|| exact_run_auc(dir, random, expert))
         };
         let a = cell_dirs(env, &row["rule"], &row["net"], &row["budget"], group);
-        let b = cell_dirs(env, &row["against"], &row["net"], &row["budget"], group);
+        let b = cell_dirs(
+            env,
+            &row["against"],
+            &row["net"],
+            &row["against_budget"],
+            group,
+        );
         let shared: Vec<u64> = a.keys().filter(|s| b.contains_key(s)).copied().collect();
         assert_eq!(shared.len().to_string(), row["seeds"], "{row:?}");
         let xs: Vec<f64> = shared.iter().map(|s| auc(&a[s])).collect();
@@ -614,8 +787,25 @@ fn every_comparison_is_recomputed_from_the_runs() {
         } else {
             assert_eq!(row["p"], "", "{row:?}");
         }
+        match mw_greater(&xs, &ys) {
+            Some(p) => close(p, "p_greater"),
+            None => assert_eq!(row["p_greater"], "", "{row:?}"),
+        }
+        let runs_a: Vec<PathBuf> = shared.iter().map(|s| a[s].clone()).collect();
+        let runs_b: Vec<PathBuf> = shared.iter().map(|s| b[s].clone()).collect();
+        match paired_p(&runs_a, &runs_b) {
+            Some(p) => {
+                close(p, "paired_p");
+                paired_checked += 1;
+            }
+            None => assert_eq!(row["paired_p"], "", "{row:?}"),
+        }
         checked += 1;
     }
+    assert!(
+        paired_checked >= 300,
+        "{paired_checked} paired tests checked"
+    );
     // Holm within each family: the i-th smallest of m p-values times (m - i + 1), made monotone, capped at 1.
     for (family, mut tests) in families {
         tests.sort_by(|x, y| x.0.partial_cmp(&y.0).unwrap());
@@ -695,4 +885,120 @@ fn comparison_rows() -> Vec<BTreeMap<String, String>> {
     lines
         .map(|l| header.iter().cloned().zip(csv_fields(l)).collect())
         .collect()
+}
+
+/// The paired p the audit of issue 51 computed with the tie between two paired differences kept (CartPole-v0,
+/// ranked(horizon=0.1) against GDQN at the paper's budget: 0.3506, where float subtraction had given 0.3411).
+#[test]
+fn the_paired_test_keeps_the_audits_tie() {
+    let row = comparison_rows()
+        .into_iter()
+        .find(|r| {
+            r["env"] == "CartPole-v0"
+                && r["rule"] == "ranked(horizon=0.1)"
+                && r["against"] == "greedy (GDQN)"
+                && r["net"] == "bootstrap"
+                && r["held_out"] == "false"
+        })
+        .expect("the comparison");
+    let p: f64 = row["paired_p"].parse().unwrap();
+    assert!((p - 0.3506).abs() < 5e-5, "paired p {p}");
+}
+
+/// Every effort multiple of effort.csv, recomputed from the runs with this file's own code: the rule's median AUC
+/// read on asking at random's curve of median AUCs (BDQN, bootstrapped heads, seeds outside the held-out ones) over
+/// its budgets, made non-decreasing by pooling adjacent violators and interpolated linearly in log budget, as a
+/// multiple of the rule's budget; censored (">" or "<" the curve's range) outside it.
+#[test]
+fn every_effort_multiple_is_read_on_the_curve_of_asking_at_random() {
+    let rows = effort_rows();
+    let medians = |env: &str, rule: &str, budget: &str, group: &str, random: f64, expert: f64| {
+        let dirs = cell_dirs(env, rule, "bootstrap", budget, group);
+        median(
+            dirs.values()
+                .map(|d| exact_run_auc(d, random, expert))
+                .collect(),
+        )
+    };
+    let mut checked = 0;
+    for row in rows.iter().filter(|r| !r["effort_multiple"].is_empty()) {
+        let env = row["env"].as_str();
+        let (random, expert): (f64, f64) = (
+            row["random_return"].parse().unwrap(),
+            row["expert_return"].parse().unwrap(),
+        );
+        let mut budgets: Vec<u64> = rows
+            .iter()
+            .filter(|r| {
+                r["env"] == env
+                    && r["rule"] == "bernoulli (BDQN)"
+                    && r["net"] == "bootstrap"
+                    && r["held_out"] == "false"
+            })
+            .map(|r| r["budget"].parse().unwrap())
+            .collect();
+        budgets.sort();
+        let curve: Vec<f64> = budgets
+            .iter()
+            .map(|b| {
+                medians(
+                    env,
+                    "bernoulli (BDQN)",
+                    &b.to_string(),
+                    "false",
+                    random,
+                    expert,
+                )
+            })
+            .collect();
+        // Pool adjacent violators: each point the mean of its block.
+        let mut blocks: Vec<(f64, usize)> = Vec::new();
+        for &v in &curve {
+            blocks.push((v, 1));
+            while blocks.len() > 1 {
+                let (s1, c1) = blocks[blocks.len() - 1];
+                let (s0, c0) = blocks[blocks.len() - 2];
+                if s0 / c0 as f64 <= s1 / c1 as f64 {
+                    break;
+                }
+                blocks.pop();
+                *blocks.last_mut().unwrap() = (s0 + s1, c0 + c1);
+            }
+        }
+        let fitted: Vec<f64> = blocks
+            .iter()
+            .flat_map(|&(s, c)| std::iter::repeat_n(s / c as f64, c))
+            .collect();
+        let y = medians(
+            env,
+            &row["rule"],
+            &row["budget"],
+            &row["held_out"],
+            random,
+            expert,
+        );
+        let budget: f64 = row["budget"].parse().unwrap();
+        let expected = if y < fitted[0] {
+            format!("<{}", budgets[0] as f64 / budget)
+        } else if y == fitted[0] {
+            format!("{}", budgets[0] as f64 / budget)
+        } else if y > fitted[fitted.len() - 1] {
+            format!(">{}", budgets[budgets.len() - 1] as f64 / budget)
+        } else {
+            let i = (1..fitted.len()).find(|&i| fitted[i] >= y).unwrap();
+            let (x0, x1) = ((budgets[i - 1] as f64).ln(), (budgets[i] as f64).ln());
+            let t = (y - fitted[i - 1]) / (fitted[i] - fitted[i - 1]);
+            format!("{}", (x0 + t * (x1 - x0)).exp() / budget)
+        };
+        let theirs = &row["effort_multiple"];
+        match (expected.parse::<f64>(), theirs.parse::<f64>()) {
+            (Ok(ours), Ok(them)) => assert!(
+                (ours - them).abs() < 1e-6 * ours.abs().max(1.0),
+                "{row:?}: {ours} recomputed"
+            ),
+            _ => assert_eq!(&expected, theirs, "{row:?}"),
+        }
+        checked += 1;
+    }
+    assert!(checked >= 100, "{checked} effort multiples checked");
 }
