@@ -105,7 +105,7 @@ fn bad_expert_specs_and_checkpoints_give_clear_errors() {
             .contains("/no/such/file.safetensors")
     );
     // A CartPole network asked to act on Acrobot: the shapes do not fit.
-    let cartpole = expert::shipped_path("CartPole-v0", "weak");
+    let cartpole = expert::shipped::source_dir().join("CartPole-v0/weak.safetensors");
     let e = err(&format!("checkpoint:{}", cartpole.display()), "Acrobot-v1");
     assert!(e.contains("4 inputs") && e.contains("Acrobot-v1"), "{e}");
     // A truncated checkpoint.

@@ -63,7 +63,8 @@ class _Callbacks:
 
     Moments, as SB3's DQN has them: on_training_start, then on_rollout_start, when learn begins; on_step after
     every environment step (`n_calls`, `num_timesteps`; the locals hold `dones`, `infos`, `rewards` is not
-    given, `step`, `episode`, `budget_used`, `queries`, `last_eval`, `total_timesteps`); one learn is one rollout:
+    given, `step`, `episode`, `budget_used` (the demonstrated transitions so far, whatever unit the budget counts
+    in), `queries` (the questions asked so far), `last_eval`, `total_timesteps`); one learn is one rollout:
     on_rollout_end, then on_training_end, when learn returns (also after an exception or a stop)."""
 
     def __init__(self, callback: Any, model: "Agent", total_timesteps: int,

@@ -389,6 +389,19 @@ const LANDER_TASK: (crate::paper::TaskParameters, TaskSchedule) = box_task_for(3
 /// 100 pre-training imitates the demonstrator, with 1 or 10 it does not (docs/algorithm.md §17) \[OURS\].
 const BOX_CLONING_WEIGHT: f64 = 100.0;
 
+/// Why `env` is no task of arld's, and what to do: name a built-in task, or train on that environment from
+/// Python, which takes any Gymnasium environment.
+fn unknown_task(env: &str) -> anyhow::Error {
+    anyhow::anyhow!(
+        "{}; with actions in a box: Pendulum-v1, MountainCarContinuous-v0, LunarLanderContinuous-v3 (`arld env \
+         list` lists every task). Any other Gymnasium environment trains from Python: \
+         arld.Agent(\"adqn\", gymnasium.make(\"{env}\"), expert=...) (pip install ./python)",
+        crate::env::EnvError::UnknownId {
+            id: env.to_string()
+        }
+    )
+}
+
 /// The paper's parameters and our schedule for a Gymnasium id (CartPole-v1 reuses the CartPole-v0 row); an
 /// environment registered at run time gets [`EXTERNAL_TASK`] ([`BOX_TASK`] for actions in a box).
 fn task_preset(env: &str) -> Result<(&'static crate::paper::TaskParameters, TaskSchedule)> {
@@ -397,14 +410,7 @@ fn task_preset(env: &str) -> Result<(&'static crate::paper::TaskParameters, Task
     } else {
         env
     };
-    let unknown = || {
-        anyhow::anyhow!(
-            "{}",
-            crate::env::EnvError::UnknownId {
-                id: env.to_string()
-            }
-        )
-    };
+    let unknown = || unknown_task(env);
     if let Ok(spec) = crate::env::box_spec(env) {
         return Ok(match spec.id {
             "MountainCarContinuous-v0" => (&CAR_TASK.0, CAR_TASK.1),
@@ -871,7 +877,7 @@ impl TrainConfig {
     /// Checks every value: the one place a run's configuration is validated (called by
     /// [`ConfigInput::resolve`]). Limits on sizes keep a typo from asking for more memory than a machine has.
     pub fn validate(&self) -> Result<()> {
-        let env = crate::env::task_spec(&self.env).map_err(|e| anyhow::anyhow!("{e}"))?;
+        let env = crate::env::task_spec(&self.env).map_err(|_| unknown_task(&self.env))?;
         let unit = |name: &str, v: f64| -> Result<()> {
             ensure!(
                 (0.0..=1.0).contains(&v),
@@ -990,7 +996,8 @@ impl TrainConfig {
         if self.method.needs_expert() {
             ensure!(
                 !self.expert.trim().is_empty(),
-                "{} needs an expert: `expert` must not be empty",
+                "{} needs an expert: `expert` must not be empty; give one with --expert (shipped:weak, the \
+                 preset's, or scripted, checkpoint:PATH, cmd:COMMAND, web: `arld expert eval --help` lists them)",
                 self.method
             );
             let spec: crate::expert::ExpertSpec = self
