@@ -866,3 +866,35 @@ fn a_config_file_names_the_run_and_flags_win_over_it() {
         &["no environment", "--env"],
     );
 }
+
+/// Demonstrations collected from a shipped expert, from any working directory, name it `shipped:weak` (the
+/// expert inside the binary), never a path of the checkout that built it.
+#[test]
+fn demonstrations_of_a_shipped_expert_name_it_not_a_path() {
+    let work = tempfile::tempdir().unwrap();
+    let out = Command::new(ARLD)
+        .current_dir(work.path())
+        .args([
+            "demo",
+            "collect",
+            "--env",
+            "CartPole-v0",
+            "--expert",
+            "shipped:weak",
+        ])
+        .args(["--transitions", "50", "-o", "demos.jsonl"])
+        .output()
+        .expect("runs");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let text = std::fs::read_to_string(work.path().join("demos.jsonl")).unwrap();
+    let header = text.lines().next().unwrap();
+    assert!(header.contains("\"shipped:weak\""), "{header}");
+    assert!(
+        !text.contains(env!("CARGO_MANIFEST_DIR")) && !text.contains("safetensors"),
+        "{header}"
+    );
+}

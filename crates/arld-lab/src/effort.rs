@@ -1346,10 +1346,9 @@ fn rule_family(label: &str) -> usize {
     }
 }
 
-/// AUC against effort (a line per rule over budgets, on the design seeds as the table "What the expert's effort
-/// buys") and cumulative questions against training step at the paper's budget (a line per rule), both with the
-/// benchmark's network ([`EFFORT_NET`]): a row of panels per task, a panel per family of rules; a rule keeps its
-/// line style in both.
+/// AUC against effort (a panel per task, a line per rule over budgets, on the design seeds as the table "What the
+/// expert's effort buys") and cumulative questions against training step at the paper's budget (a row of panels
+/// per task, a panel per family of rules, a line per rule), both with the benchmark's network ([`EFFORT_NET`]).
 fn figures(
     cells: &BTreeMap<CellKey, Vec<RunMetrics>>,
     envs: &[String],
@@ -1387,6 +1386,19 @@ fn figures(
         super::plot::family_style(family, member)
     };
     let rule_order: Vec<&String> = lines.iter().map(|(_, rule, _)| rule).collect();
+    // The rules run at a budget other than the paper's, in the same order.
+    let budget_rules: Vec<&String> = rule_order
+        .iter()
+        .copied()
+        .filter(|rule| {
+            cells.keys().any(|k| {
+                &k.1 == *rule
+                    && k.4 == Group::Screen
+                    && k.2 == EFFORT_NET.name()
+                    && k.3 != paper_budget(&k.0)
+            })
+        })
+        .collect();
     let mut auc_panels = Vec::new();
     let mut question_panels = Vec::new();
     for env in envs {
@@ -1408,6 +1420,8 @@ fn figures(
             if key.3 == paper_budget(env) {
                 let per_step = questions.entry((key.1.clone(), key.2.clone())).or_default();
                 for m in cell {
+                    // Every run starts at no question (step 0), so a rule that asks at once rises from 0.
+                    per_step.entry(0).or_default().push(0.0);
                     for &(step, asked) in &m.questions_at {
                         per_step.entry(step).or_default().push(asked as f64);
                     }
@@ -1434,21 +1448,23 @@ fn figures(
         for point in auc.iter_mut().flat_map(|c| c.points.iter_mut()) {
             point.x = (point.x / paper).log2();
         }
+        // The few rules run at several budgets share one panel, each in its own colour.
+        for curve in &mut auc {
+            let member = budget_rules.iter().position(|r| **r == curve.label);
+            curve.color = super::plot::family_style(0, member.unwrap_or(budget_rules.len()));
+        }
+        if !auc.is_empty() {
+            auc_panels.push(Panel::new(env.clone(), None, auc));
+        }
         let asked = curves(&questions, 1);
         for (family, name) in RULE_FAMILIES.iter().enumerate() {
-            let of_family = |curves: &[Curve]| -> Vec<Curve> {
-                curves
-                    .iter()
-                    .filter(|c| rule_family(&c.label) == family)
-                    .cloned()
-                    .collect()
-            };
-            let (auc, asked) = (of_family(&auc), of_family(&asked));
-            if !auc.is_empty() {
-                auc_panels.push(Panel::new(format!("{env}: {name}"), None, auc));
-            }
-            if !asked.is_empty() {
-                question_panels.push(Panel::new(format!("{env}: {name}"), None, asked));
+            let of_family: Vec<Curve> = asked
+                .iter()
+                .filter(|c| rule_family(&c.label) == family)
+                .cloned()
+                .collect();
+            if !of_family.is_empty() {
+                question_panels.push(Panel::new(format!("{env}: {name}"), None, of_family));
             }
         }
     }
