@@ -4,9 +4,21 @@ mod cli;
 
 use clap::{Parser, Subcommand};
 
-/// Active Reinforcement Learning with Demonstration: DQN agents that ask an expert only where they are unsure.
+/// Active Reinforcement Learning with Demonstration: agents that ask an expert only where they are unsure (DQN
+/// family on discrete actions; TD3 or SAC on actions in a box).
 #[derive(Parser)]
-#[command(name = "arld", version = arld::build_info::VERSION_LINE, about, long_about = None)]
+#[command(
+    name = "arld",
+    version = arld::build_info::VERSION_LINE,
+    about,
+    long_about = None,
+    after_help = "Start here (every command's --help says more):\n  \
+arld reproduce --quick                                    # the paper's comparison, CartPole-v0, 3 seeds\n  \
+arld train --env CartPole-v0 --method adqn                # active DQN asking the shipped expert\n  \
+arld train --env Pendulum-v1 --method adqn --algo sac     # active SAC, actions in a box\n  \
+arld train --env CartPole-v0 --method adqn --expert web   # you answer the agent in a browser\n\n\
+Methods: dqn, dqfd, gdqn, bdqn, adqn, adqnp. Tasks: `arld env list`."
+)]
 struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -19,9 +31,11 @@ enum Command {
         #[command(subcommand)]
         cmd: cli::env_cmd::EnvCommand,
     },
-    /// Train one agent (DQN, DQfD, GDQN, BDQN, ADQN, ADQNP) and write a run directory.
+    /// Train one agent and write a run directory: a method (DQN, DQfD, GDQN, BDQN, ADQN, ADQNP) with a DQN
+    /// learner, or TD3 or SAC (--algo) on a task with actions in a box.
     Train(cli::train_cmd::TrainArgs),
-    /// Experts: train and select them as the paper did, and measure their statistics.
+    /// Experts: measure one's statistics (shipped, scripted, checkpoint, cmd:), or train and select your own as
+    /// the paper did.
     Expert {
         #[command(subcommand)]
         cmd: cli::expert_cmd::ExpertCommand,
@@ -37,7 +51,8 @@ enum Command {
         #[command(subcommand)]
         cmd: cli::experiment_cmd::RunsCommand,
     },
-    /// Demonstrations: collect expert episodes into a file that DQfD pre-training reads.
+    /// Demonstrations: collect expert episodes into a file that DQfD pre-training reads, or convert a Minari
+    /// dataset into one.
     Demo {
         #[command(subcommand)]
         cmd: cli::expert_cmd::DemoCommand,

@@ -82,6 +82,48 @@ fn config_errors_are_reported_before_any_work() {
         &["train", "--env", "CartPole-v9", "-o", o],
         &["CartPole-v9", "arld's tasks", "Acrobot-v1"],
     );
+    // Each error says what to do: a task arld lacks points to the box tasks and to Python, an empty expert to
+    // the specs, a negative seed says what a seed is.
+    fails_with(
+        &["train", "--env", "Hopper-v4", "-o", o],
+        &["Hopper-v4", "Pendulum-v1", "arld env list", "arld.Agent"],
+    );
+    fails_with(
+        &[
+            "train",
+            "--env",
+            "CartPole-v0",
+            "--method",
+            "adqn",
+            "--expert",
+            "",
+            "-o",
+            o,
+        ],
+        &["must not be empty", "--expert", "scripted"],
+    );
+    for command in [
+        &["train", "--env", "CartPole-v0", "--seed", "-1"][..],
+        &[
+            "expert",
+            "eval",
+            "--env",
+            "CartPole-v0",
+            "--expert",
+            "scripted",
+            "--seed",
+            "-1",
+        ],
+        &["env", "rollout", "--env", "CartPole-v0", "--seed", "-5"],
+    ] {
+        fails_with(command, &["seeds are non-negative integers"]);
+    }
+    let empty = dir.path().join("empty");
+    std::fs::create_dir(&empty).unwrap();
+    fails_with(
+        &["report", empty.to_str().unwrap()],
+        &["no complete run", "arld reproduce", "--from-evaluations"],
+    );
     fails_with(
         &[
             "train",
@@ -484,10 +526,32 @@ fn an_expert_process_answers_box_actions() {
     );
 }
 
+/// Run from a copy of the checkout's root (its `experts/` as git has them), `expert train` writes its experts
+/// into `experts-trained/<env>` and leaves the shipped ones as they are; told to write into the shipped experts'
+/// folder, it refuses before any work.
 #[test]
-fn expert_train_reuses_only_a_run_of_the_same_configuration_and_writes_into_the_working_directory()
-{
+fn expert_train_reuses_only_a_run_of_the_same_configuration_and_never_replaces_shipped_experts() {
     let work = tempfile::tempdir().unwrap();
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+    let shipped = |dir: &std::path::Path| -> Vec<(String, Vec<u8>)> {
+        let mut files: Vec<(String, Vec<u8>)> = std::fs::read_dir(dir.join("experts/CartPole-v0"))
+            .unwrap()
+            .map(|e| {
+                let e = e.unwrap();
+                (
+                    e.file_name().to_string_lossy().into_owned(),
+                    std::fs::read(e.path()).unwrap(),
+                )
+            })
+            .collect();
+        files.sort();
+        files
+    };
+    let copy = work.path().join("experts/CartPole-v0");
+    std::fs::create_dir_all(&copy).unwrap();
+    for (name, bytes) in shipped(root) {
+        std::fs::write(copy.join(name), bytes).unwrap();
+    }
     let expert_train = |extra: &[&str]| {
         Command::new(ARLD)
             .current_dir(work.path())
@@ -501,9 +565,18 @@ fn expert_train_reuses_only_a_run_of_the_same_configuration_and_writes_into_the_
     let err = String::from_utf8_lossy(&first.stderr);
     assert!(first.status.success(), "{err}");
     assert!(err.contains("trained"), "{err}");
-    // The default output is ./experts/<env> of the working directory; the run, ./runs/expert_<env>_seed0.
-    let selection = work.path().join("experts/CartPole-v0/selection.json");
+    // The default output is ./experts-trained/<env> of the working directory; the run,
+    // ./runs/expert_<env>_seed0; the copy of the shipped experts is untouched.
+    let selection = work
+        .path()
+        .join("experts-trained/CartPole-v0/selection.json");
     assert!(selection.is_file());
+    assert!(
+        work.path()
+            .join("experts-trained/CartPole-v0/weak.safetensors")
+            .is_file()
+    );
+    assert_eq!(shipped(work.path()), shipped(root));
     assert!(
         work.path()
             .join("runs/expert_CartPole-v0_seed0/summary.json")
@@ -527,6 +600,17 @@ fn expert_train_reuses_only_a_run_of_the_same_configuration_and_writes_into_the_
     );
     assert!(!err.contains("train_steps"), "{err}");
     assert!(!selection.exists());
+    // Into the shipped experts (the copy, or the checkout's own folder): refused, naming what to do.
+    for out in [copy.clone(), root.join("experts/CartPole-v0")] {
+        let refused = expert_train(&["-o", out.to_str().unwrap()]);
+        let err = String::from_utf8_lossy(&refused.stderr);
+        assert_eq!(refused.status.code(), Some(1), "{err}");
+        assert!(
+            err.contains("holds shipped experts") && err.contains("--out DIR"),
+            "{err}"
+        );
+    }
+    assert_eq!(shipped(work.path()), shipped(root));
 }
 
 /// Values too large for their field, counts of zero, sizes no machine has: each named in a clear error before
@@ -780,5 +864,37 @@ fn a_config_file_names_the_run_and_flags_win_over_it() {
     fails_with(
         &["train", "--config", no_env.to_str().unwrap()],
         &["no environment", "--env"],
+    );
+}
+
+/// Demonstrations collected from a shipped expert, from any working directory, name it `shipped:weak` (the
+/// expert inside the binary), never a path of the checkout that built it.
+#[test]
+fn demonstrations_of_a_shipped_expert_name_it_not_a_path() {
+    let work = tempfile::tempdir().unwrap();
+    let out = Command::new(ARLD)
+        .current_dir(work.path())
+        .args([
+            "demo",
+            "collect",
+            "--env",
+            "CartPole-v0",
+            "--expert",
+            "shipped:weak",
+        ])
+        .args(["--transitions", "50", "-o", "demos.jsonl"])
+        .output()
+        .expect("runs");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let text = std::fs::read_to_string(work.path().join("demos.jsonl")).unwrap();
+    let header = text.lines().next().unwrap();
+    assert!(header.contains("\"shipped:weak\""), "{header}");
+    assert!(
+        !text.contains(env!("CARGO_MANIFEST_DIR")) && !text.contains("safetensors"),
+        "{header}"
     );
 }

@@ -25,13 +25,13 @@ fn scripted_experts_solve_their_tasks() {
     }
 }
 
-/// The README's table of the shipped experts states what they do: each row's expert, played again over the
+/// The reference's table of the shipped experts (docs/reference.md) states what they do: each row's expert, played again over the
 /// same 100 episodes as the selection (seeds 10000 to 10099), has the row's mean, standard deviation, minimum and
 /// average length (to the digits printed), and every shipped expert has its rows.
 #[test]
-fn the_readme_table_of_shipped_experts_matches_the_experts() {
+fn the_reference_table_of_shipped_experts_matches_the_experts() {
     let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
-    let readme = std::fs::read_to_string(root.join("README.md")).unwrap();
+    let readme = std::fs::read_to_string(root.join("docs/reference.md")).unwrap();
     let mut checked = Vec::new();
     for row in readme.lines().filter(|l| l.contains("| shipped:")) {
         let cells: Vec<String> = row.split('|').map(|c| c.trim().replace('−', "-")).collect();
@@ -52,7 +52,7 @@ fn the_readme_table_of_shipped_experts_matches_the_experts() {
         ] {
             assert!(
                 close(stated, value),
-                "README: {env} {spec} {what} {stated}, played again {value}"
+                "docs/reference.md: {env} {spec} {what} {stated}, played again {value}"
             );
         }
         checked.push(format!("{env}/{}", spec.trim_start_matches("shipped:")));
@@ -67,7 +67,7 @@ fn the_readme_table_of_shipped_experts_matches_the_experts() {
     }
     checked.sort();
     shipped.sort();
-    assert_eq!(checked, shipped, "README rows against experts/");
+    assert_eq!(checked, shipped, "docs/reference.md rows against experts/");
 }
 
 fn cartpole() -> Box<dyn arld::env::Env> {
@@ -105,7 +105,7 @@ fn bad_expert_specs_and_checkpoints_give_clear_errors() {
             .contains("/no/such/file.safetensors")
     );
     // A CartPole network asked to act on Acrobot: the shapes do not fit.
-    let cartpole = expert::shipped_path("CartPole-v0", "weak");
+    let cartpole = expert::shipped::source_dir().join("CartPole-v0/weak.safetensors");
     let e = err(&format!("checkpoint:{}", cartpole.display()), "Acrobot-v1");
     assert!(e.contains("4 inputs") && e.contains("Acrobot-v1"), "{e}");
     // A truncated checkpoint.

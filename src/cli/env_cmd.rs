@@ -48,8 +48,9 @@ pub enum EnvCommand {
         /// Number of episodes.
         #[arg(long, default_value_t = 100, value_name = "N", value_parser = super::count(super::MAX_EPISODES))]
         episodes: usize,
-        /// Base seed: episode i resets with SEED+i, and the policy's generator is seeded with SEED.
-        #[arg(long, default_value_t = 0, value_name = "S")]
+        /// Base seed (a non-negative integer): episode i resets with SEED+i, and the policy's generator is
+        /// seeded with SEED.
+        #[arg(long, default_value_t = 0, value_name = "S", allow_negative_numbers = true, value_parser = super::seed)]
         seed: u64,
         /// Print one JSON object instead of text.
         #[arg(long)]

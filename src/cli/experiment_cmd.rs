@@ -26,10 +26,12 @@ pub struct SweepArgs {
     /// TOML file with a [sweep] table (envs, methods, nets, seeds, t_query, experts, set, vary).
     #[arg(long, conflicts_with_all = ["env", "method", "net"])]
     grid: Option<PathBuf>,
-    /// Environments (comma-separated or repeated).
+    /// Tasks, as Gymnasium ids (comma-separated or repeated): CartPole-v0, Acrobot-v1, MountainCar-v0,
+    /// LunarLander-v2, ..., and the box tasks Pendulum-v1, MountainCarContinuous-v0, LunarLanderContinuous-v3
+    /// (`arld env list` lists them all).
     #[arg(long)]
     env: Vec<String>,
-    /// Methods: dqn, dqfd, gdqn, bdqn, adqn, adqnp.
+    /// Methods: dqn, dqfd, gdqn, bdqn, adqn, adqnp (for a box task, TD3 or SAC learns: --set algo=sac).
     #[arg(long)]
     method: Vec<String>,
     /// Networks: plain, bootstrap, noisy.
@@ -41,7 +43,8 @@ pub struct SweepArgs {
     /// t_query values to sweep (a variant per value).
     #[arg(long)]
     t_query: Vec<String>,
-    /// Expert specs to sweep (a variant per spec).
+    /// Experts to sweep (a variant per spec): shipped:weak, shipped:perfect, scripted, checkpoint:PATH,
+    /// noisy:P:SPEC, cmd:COMMAND (`arld expert eval --help` explains each).
     #[arg(long)]
     expert: Vec<String>,
     /// Config override applied to every run (repeatable).
@@ -94,7 +97,7 @@ pub struct SweepArgs {
 out as NAME.md with every {{FILE|SECTION|ROW|COLUMN}} replaced by that cell of a table the report wrote, e.g. \
 {{readings.md|Acrobot-v1|ADQN-B|first hit|value}}. A quote may check what its sentence relies on \
 ({{readings.md|Acrobot-v1|GDQN-B|first hit/p|<0.05|as-p}} writes \"p = 0.031\"); when the runs move a checked \
-value across, the report fails and names the line to read again. The syntax: src/experiment/quote.rs; an example: \
+value across, the report fails and names the line to read again. The syntax: crates/arld-lab/src/quote.rs; an example: \
 results/VERDICT.in.md. Not with --from-evaluations."
 )]
 pub struct ReportArgs {

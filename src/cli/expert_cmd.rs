@@ -13,9 +13,10 @@ use std::process::ExitCode;
 /// The environment and the expert of `expert eval` and `demo collect`.
 #[derive(Args)]
 pub struct ExpertArgs {
-    #[arg(long)]
+    #[arg(long, help = super::ENV_HELP)]
     env: String,
-    /// Expert spec.
+    /// The expert: shipped:weak, shipped:perfect, scripted, checkpoint:PATH, noisy:P:SPEC, cmd:COMMAND (each is
+    /// explained below).
     #[arg(long)]
     expert: String,
     /// Seconds an expert process (`cmd:...`) may take to answer.
@@ -35,9 +36,10 @@ pub enum ExpertCommand {
     /// Train prioritized double DQN (TD3 for a task with actions in a box), checkpoint it, evaluate every
     /// checkpoint over 100 episodes, and select a weak (paper-like) and a perfect expert.
     Train {
-        #[arg(long)]
+        #[arg(long, help = super::ENV_HELP)]
         env: String,
-        #[arg(long, default_value_t = 0)]
+        /// Seed of the candidates' training run (a non-negative integer).
+        #[arg(long, default_value_t = 0, allow_negative_numbers = true, value_parser = super::seed)]
         seed: u64,
         /// Output stage of the network (the paper's experts are plain prioritized double DQN; bootstrapped
         /// heads explore deeper, which MountainCar needs).
@@ -48,9 +50,11 @@ pub enum ExpertCommand {
         /// are TD3 runs that asked the scripted controller, `adqn`).
         #[arg(long, value_enum, default_value_t = Method::Dqn)]
         method: Method,
-        /// Where the selected experts go [default: experts/<env> in the working directory; the shipped experts
-        /// are never replaced].
-        #[arg(long)]
+        /// Where the selected experts (weak.safetensors, perfect.safetensors, selection.json) go [default:
+        /// experts-trained/<env> in the working directory]. The shipped experts are inside the binary and never
+        /// replaced; a folder that holds them (the repository's experts/<env>) is refused. Use the result as
+        /// `--expert checkpoint:DIR/weak.safetensors`.
+        #[arg(long, short)]
         out: Option<PathBuf>,
         /// Training run directory [default: runs/expert_<env>_seed<seed>].
         #[arg(long)]
@@ -73,8 +77,8 @@ pub enum ExpertCommand {
         /// Episodes to play (each from its own seed).
         #[arg(long, default_value_t = 100, value_parser = super::count(super::MAX_EPISODES))]
         episodes: usize,
-        /// Episode i resets with seed SEED + i.
-        #[arg(long, default_value_t = 10_000)]
+        /// Episode i resets with seed SEED + i (a non-negative integer).
+        #[arg(long, default_value_t = 10_000, allow_negative_numbers = true, value_parser = super::seed)]
         seed: u64,
         /// Print JSON instead of a table row.
         #[arg(long)]
@@ -92,8 +96,8 @@ pub enum DemoCommand {
         /// Number of transitions.
         #[arg(long, value_parser = super::count(arld::expert::demos::MAX_TRANSITIONS as u64))]
         transitions: usize,
-        /// Episode i resets with seed SEED + i.
-        #[arg(long, default_value_t = 0)]
+        /// Episode i resets with seed SEED + i (a non-negative integer).
+        #[arg(long, default_value_t = 0, allow_negative_numbers = true, value_parser = super::seed)]
         seed: u64,
         /// Output file.
         #[arg(long, short)]
@@ -105,7 +109,7 @@ pub enum DemoCommand {
         /// The dataset: its directory, its data/ directory, or its id (namespace/name-vN, under
         /// MINARI_DATASETS_PATH, else ~/.minari/datasets).
         dataset: PathBuf,
-        /// The environment the demonstrations are for.
+        /// The task the demonstrations are for (its Gymnasium id; `arld env list` lists them).
         #[arg(long)]
         env: String,
         /// Output file.
@@ -162,6 +166,13 @@ pub fn run_expert(cmd: ExpertCommand) -> Result<ExitCode> {
             episodes,
             overrides,
         } => {
+            let out = out.unwrap_or_else(|| PathBuf::from("experts-trained").join(&env));
+            anyhow::ensure!(
+                !expert::shipped::holds_shipped(&out),
+                "{} holds shipped experts, which `expert train` never replaces: give another folder with \
+                 --out DIR (the default is experts-trained/{env})",
+                out.display()
+            );
             let mut input = ConfigInput::new(&env, method, net, seed);
             for o in &overrides {
                 input.apply_override(o)?;
@@ -187,8 +198,8 @@ pub fn run_expert(cmd: ExpertCommand) -> Result<ExitCode> {
                 episodes,
             )?;
             let (weak, perfect) = select_experts(&candidates, &env)?;
-            let out = out.unwrap_or_else(|| PathBuf::from("experts").join(&env));
-            std::fs::create_dir_all(&out)?;
+            std::fs::create_dir_all(&out)
+                .with_context(|| format!("cannot create the output folder {}", out.display()))?;
             let command = std::env::args().collect::<Vec<_>>().join(" ");
             let mut selection =
                 serde_json::json!({ "env": env, "command": command, "candidates": candidates });

@@ -21,9 +21,7 @@ a snapshot that cannot be read (damaged, or a link, folder or device in its plac
 A run that ends with an error writes failed.json in its directory: the error, the step, the time, the arld version and commit."
 )]
 pub struct TrainArgs {
-    /// Gymnasium id: CartPole-v0, CartPole-v1, Acrobot-v1, MountainCar-v0, LunarLander-v2, LunarLander-v3
-    /// (or the config file's `env`).
-    #[arg(long, required_unless_present_any = ["resume", "config"])]
+    #[arg(long, required_unless_present_any = ["resume", "config"], help = super::ENV_HELP)]
     env: Option<String>,
     /// Learning method [default: the config file's `method`, else dqn].
     #[arg(long, value_enum)]
@@ -37,8 +35,9 @@ pub struct TrainArgs {
     /// meaning: adqn is an active TD3 (or SAC) asking the expert where its critics disagree.
     #[arg(long, value_enum)]
     algo: Option<Algo>,
-    /// Seed of every random draw of the run [default: the config file's `seed`, else 0].
-    #[arg(long)]
+    /// Seed of every random draw of the run (a non-negative integer; the same seed gives the same bytes)
+    /// [default: the config file's `seed`, else 0].
+    #[arg(long, allow_negative_numbers = true, value_parser = super::seed)]
     seed: Option<u64>,
     /// TOML file of config keys over the preset (a run's config.toml is one); --env, --method, --net, --seed
     /// and --set win over it.
@@ -47,8 +46,10 @@ pub struct TrainArgs {
     /// Override one config key (repeatable), e.g. --set lr=0.001.
     #[arg(long = "set", value_name = "KEY=VALUE")]
     overrides: Vec<String>,
-    /// Expert spec (overrides the config's `expert`): shipped:weak, shipped:perfect, checkpoint:PATH, scripted,
-    /// noisy:P:SPEC, web (a person answers the queries in a browser: the run prints the URL to open).
+    /// Who answers the agent's questions (overrides the config's `expert`): shipped:weak, shipped:perfect
+    /// (arld's own experts, inside the binary), scripted, checkpoint:PATH, noisy:P:SPEC, cmd:COMMAND (a program in
+    /// any language speaking JSON lines, e.g. cmd:"python3 examples/expert.py"), web (a person answers in a
+    /// browser: the run prints the URL to open) [default: the preset's, shipped:weak].
     #[arg(long)]
     expert: Option<String>,
     /// Web expert: the address to listen on [default: 127.0.0.1:8765; port 0 picks a free one]. Another
@@ -70,8 +71,10 @@ pub struct TrainArgs {
     /// Web expert: start training at once instead of waiting for the page to be opened.
     #[arg(long)]
     web_no_wait: bool,
-    /// Demonstration file for pre-training (DQfD, ADQNP); by default demonstrations are collected from the expert.
-    #[arg(long)]
+    /// Demonstrations for pre-training (DQfD, ADQNP): a file of `arld demo collect`, or a Minari dataset in
+    /// the Arrow format (its directory, or its id such as person/answers-v0, looked up under
+    /// MINARI_DATASETS_PATH, else ~/.minari/datasets) [default: collected from the expert].
+    #[arg(long, value_name = "FILE|DATASET")]
     demos: Option<PathBuf>,
     /// Run directory [default: runs/<env>_<method>-<net>_seed<seed>].
     #[arg(long, short)]
@@ -280,10 +283,20 @@ pub fn run(args: TrainArgs) -> anyhow::Result<ExitCode> {
         s.steps_to_solve,
         if s.solved { "" } else { " (not solved)" },
         s.final_score,
-        s.demos_queried,
+        demonstrated(s.demos_pretrain, s.demos_queried),
         s.steps_per_s,
         s.wall_time_s,
         dir.display()
     );
     Ok(ExitCode::SUCCESS)
+}
+
+/// The demonstrated transitions of a finished run, as its closing line says them: those it pre-trained on and
+/// those it asked for during training (`150 pre-training + 0 asked`), or the one count that is not zero.
+fn demonstrated(pretrain: usize, queried: usize) -> String {
+    match (pretrain, queried) {
+        (0, queried) => format!("{queried} asked"),
+        (pretrain, 0) => format!("{pretrain} in pre-training"),
+        (pretrain, queried) => format!("{pretrain} in pre-training + {queried} asked"),
+    }
 }

@@ -10,8 +10,8 @@
 //!   dense networks of any shape for the actor-critic learners.
 //! - [`replay`]: sum-tree prioritized replay with a permanent demonstration part.
 //! - [`agent`]: the [`agent::Learner`] interface a run trains through, and the DQN family implementing it: acting
-//!   (exploration, head sampling, noise), the learner (losses, target network), the test-time policy; and TD3's
-//!   core for actions in a box ([`agent::td3`], not yet behind the run loop).
+//!   (exploration, head sampling, noise), the learner (losses, target network), the test-time policy; and the
+//!   actor-critic family for actions in a box ([`agent::box_agent`]: TD3 and SAC, through the same run loop).
 //! - [`query`]: uncertainty measures, query rules and budget accounting.
 //! - [`expert`]: the [`expert::Expert`] trait and its kinds (the web expert's server and page are `arld-web`).
 //! - [`train`]: one run: [`train::RunBuilder`], its one entry point, the loop as named steps, the run

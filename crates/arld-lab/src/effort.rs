@@ -1284,7 +1284,7 @@ fn second_test(measured: &Measured) -> String {
     let (cells, comparisons, _) = measured.parts();
     let mut out = format!(
         "## The second held-out test\n\n`{SECOND_HELD_OUT_RULE}` against GDQN, BDQN and ADQN at a fraction of \
-         the paper's budget, {} network, seeds {} (fixed in src/experiment/protocol.rs before any of these runs). \
+         the paper's budget, {} network, seeds {} (fixed in crates/arld-lab/src/protocol.rs before any of these runs). \
          Its claim is directional: the rule wins a cell if its AUC is above all three paper rules there. Primary \
          analysis: the intersection-union test of that claim (three one-sided Mann-Whitney tests, each at \
          {TEST_LEVEL}: its p is the largest one-sided p), Holm-adjusted over the test's {} cells. The analysis fixed \
@@ -1902,7 +1902,7 @@ fn goal_verdict(measured: &Measured) -> String {
     if candidates.is_empty() {
         let _ = writeln!(
             out,
-            "Not run yet: the held-out seeds {} are fixed in src/experiment/protocol.rs and no \
+            "Not run yet: the held-out seeds {} are fixed in crates/arld-lab/src/protocol.rs and no \
              run of them exists. A rule is chosen on the design seeds first.",
             seed_span(&HELD_OUT_SEEDS)
         );
@@ -1988,9 +1988,29 @@ fn goal_verdict(measured: &Measured) -> String {
     out
 }
 
-/// AUC against effort (one panel per task, a line per rule over budgets, on the design seeds as the table
-/// "What the expert's effort buys") and cumulative questions against training step at the paper's budget (a line
-/// per rule), both with the benchmark's network ([`EFFORT_NET`]); a rule keeps its line style in both.
+/// The families of rules the figures show apart, one panel each ([`rule_family`]).
+const RULE_FAMILIES: [&str; 4] = [
+    "the paper's rules",
+    "rules that pace the budget",
+    "rules from the literature",
+    "ranked (ours)",
+];
+
+/// The family of a rule's label ([`RULE_FAMILIES`]): the paper's three, the rules that spread the budget over the
+/// run, our `ranked` variants, and the other rules from the literature.
+fn rule_family(label: &str) -> usize {
+    let name = label.split('(').next().unwrap_or(label).trim();
+    match name {
+        _ if rank_rule(label) < BASELINES.len() => 0,
+        "paced" | "budget_paced" | "variable" | "calibrated" => 1,
+        "ranked" => 3,
+        _ => 2,
+    }
+}
+
+/// AUC against effort (a panel per task, a line per rule over budgets, on the design seeds as the table "What the
+/// expert's effort buys") and cumulative questions against training step at the paper's budget (a row of panels
+/// per task, a panel per family of rules, a line per rule), both with the benchmark's network ([`EFFORT_NET`]).
 fn figures(
     cells: &BTreeMap<CellKey, Vec<RunMetrics>>,
     envs: &[String],
@@ -2016,12 +2036,31 @@ fn figures(
         .collect();
     lines.sort();
     lines.dedup();
+    // A panel shows one family of rules (a column of the figure); within it each rule has its own colour, and
+    // each family its own line pattern, so no two rules of the figure look alike.
     let style_of = |rule: &str, net: &str| {
-        lines
+        let family = rule_family(rule);
+        let member = lines
             .iter()
+            .filter(|(_, r, _)| rule_family(r) == family)
             .position(|(_, r, n)| r == rule && n == net)
-            .unwrap_or(lines.len())
+            .unwrap_or(0);
+        super::plot::family_style(family, member)
     };
+    let rule_order: Vec<&String> = lines.iter().map(|(_, rule, _)| rule).collect();
+    // The rules run at a budget other than the paper's, in the same order.
+    let budget_rules: Vec<&String> = rule_order
+        .iter()
+        .copied()
+        .filter(|rule| {
+            cells.keys().any(|k| {
+                &k.1 == *rule
+                    && k.4 == Group::Screen
+                    && k.2 == EFFORT_NET.name()
+                    && k.3 != paper_budget(&k.0)
+            })
+        })
+        .collect();
     let mut auc_panels = Vec::new();
     let mut question_panels = Vec::new();
     for env in envs {
@@ -2043,6 +2082,8 @@ fn figures(
             if key.3 == paper_budget(env) {
                 let per_step = questions.entry((key.1.clone(), key.2.clone())).or_default();
                 for m in cell {
+                    // Every run starts at no question (step 0), so a rule that asks at once rises from 0.
+                    per_step.entry(0).or_default().push(0.0);
                     for &(step, asked) in &m.questions_at {
                         per_step.entry(step).or_default().push(asked as f64);
                     }
@@ -2059,8 +2100,8 @@ fn figures(
                     points: band_of(per),
                 })
                 .collect::<Vec<_>>();
-            // The legend lists rules in the order of their styles.
-            curves.sort_by_key(|c| c.color);
+            // The legend lists rules in the order of their styles' ranking: the paper's first.
+            curves.sort_by_key(|c| rule_order.iter().position(|r| **r == c.label));
             curves
         };
         // Budgets as log2 of the multiple of the paper's: 1/4 .. 4 evenly spaced.
@@ -2069,12 +2110,24 @@ fn figures(
         for point in auc.iter_mut().flat_map(|c| c.points.iter_mut()) {
             point.x = (point.x / paper).log2();
         }
+        // The few rules run at several budgets share one panel, each in its own colour.
+        for curve in &mut auc {
+            let member = budget_rules.iter().position(|r| **r == curve.label);
+            curve.color = super::plot::family_style(0, member.unwrap_or(budget_rules.len()));
+        }
         if !auc.is_empty() {
             auc_panels.push(Panel::new(env.clone(), None, auc));
         }
         let asked = curves(&questions, 1);
-        if !asked.is_empty() {
-            question_panels.push(Panel::new(env.clone(), None, asked));
+        for (family, name) in RULE_FAMILIES.iter().enumerate() {
+            let of_family: Vec<Curve> = asked
+                .iter()
+                .filter(|c| rule_family(&c.label) == family)
+                .cloned()
+                .collect();
+            if !of_family.is_empty() {
+                question_panels.push(Panel::new(format!("{env}: {name}"), None, of_family));
+            }
         }
     }
     let mut out = Vec::new();

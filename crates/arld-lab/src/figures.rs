@@ -1,6 +1,6 @@
 //! The paper's figures: which figures a report draws and what goes into them, built from run records.
 //!
-//! - [`median_curve`] and [`query_timeline`] reduce the runs of one configuration to a [`Band`] per step: the
+//! - [`median_curve`] and [`questions_so_far`] reduce the runs of one configuration to a [`Band`] per step: the
 //!   median over seeds (the paper plots medians, docs/algorithm.md section 11) and the interquartile range.
 //! - [`paper_figures`] selects runs for each figure of the paper's Section 4 and builds a [`FigureContent`]
 //!   (one panel per environment, one line per method or setting), or says why a figure is skipped;
@@ -56,33 +56,45 @@ pub fn median_curve(runs: &[&RunRecord]) -> Vec<Band> {
     bands(per_step)
 }
 
-/// Queries per evaluation period over training, median over the runs that logged queries: bin k counts the
-/// queries at steps in [k P, (k + 1) P) and is plotted at x = (k + 1) P, where P is the runs' evaluation period.
-pub fn query_timeline(runs: &[&RunRecord]) -> Vec<Band> {
-    let logged: Vec<(&RunRecord, &Vec<u64>)> = runs
+/// Points per tenfold of steps in [`questions_so_far`].
+const POINTS_PER_DECADE: u32 = 20;
+
+/// Questions asked so far against training step, median and quartiles over the runs that logged queries: at
+/// steps 10^(1 + k/20) (and the last step of training) each run counts its questions at steps up to there. The x
+/// of a point is log10 of its step ([`XScale::Log10Steps`]): the questions of every method fall in the first few
+/// percent of a run, which a linear axis shows as one vertical line.
+pub fn questions_so_far(runs: &[&RunRecord]) -> Vec<Band> {
+    let logged: Vec<&Vec<u64>> = runs.iter().filter_map(|r| r.query_steps.as_ref()).collect();
+    let Some(last) = runs
         .iter()
-        .filter_map(|r| r.query_steps.as_ref().map(|q| (*r, q)))
-        .collect();
-    let Some(period) = logged.iter().map(|(r, _)| r.eval_period).max() else {
+        .filter(|r| r.query_steps.is_some())
+        .map(|r| r.train_steps)
+        .max()
+    else {
         return Vec::new();
     };
-    let steps = logged.iter().map(|(r, _)| r.train_steps).max().unwrap_or(0);
-    let bins = steps.div_ceil(period).max(1) as usize;
-    let mut per_bin: BTreeMap<u64, Vec<f64>> = BTreeMap::new();
-    for (_, queries) in &logged {
-        let mut counts = vec![0.0; bins];
-        for &step in queries.iter() {
-            let bin = ((step / period) as usize).min(bins - 1);
-            counts[bin] += 1.0;
-        }
-        for (k, count) in counts.into_iter().enumerate() {
-            per_bin
-                .entry((k as u64 + 1) * period)
-                .or_default()
-                .push(count);
+    let mut at: Vec<u64> = (0..)
+        .map(|k| {
+            10f64
+                .powf(1.0 + f64::from(k) / f64::from(POINTS_PER_DECADE))
+                .round() as u64
+        })
+        .take_while(|&step| step < last)
+        .collect();
+    at.dedup();
+    at.push(last);
+    let mut per_step: BTreeMap<u64, Vec<f64>> = BTreeMap::new();
+    for queries in logged {
+        for &step in &at {
+            let asked = queries.iter().filter(|&&q| q <= step).count();
+            per_step.entry(step).or_default().push(asked as f64);
         }
     }
-    bands(per_bin)
+    let mut points = bands(per_step);
+    for point in &mut points {
+        point.x = point.x.log10();
+    }
+    points
 }
 
 /// The curve of the runs of `pool` that `member` selects, summarised by `reduce`; `None` when it selects none.
@@ -301,7 +313,8 @@ fn expert_figure(runs: &[&RunRecord], suffix: &str, title: String) -> Option<Fig
     steps_figure(title, RETURN_LABEL, panels)
 }
 
-/// Queries per evaluation period for the querying methods (default variant), one panel per environment.
+/// Questions asked so far for the querying methods (default variant) on a logarithmic step axis, one panel per
+/// environment.
 fn query_figure(runs: &[&RunRecord], title: String) -> Option<FigureContent> {
     let methods = [Method::Gdqn, Method::Bdqn, Method::Adqn, Method::Adqnp];
     let selected: Vec<&RunRecord> = runs
@@ -311,9 +324,16 @@ fn query_figure(runs: &[&RunRecord], title: String) -> Option<FigureContent> {
         .filter(|r| r.query_steps.is_some())
         .collect();
     let panels = env_panels(&selected, false, |in_env| {
-        method_curves(in_env, &methods, query_timeline)
+        method_curves(in_env, &methods, questions_so_far)
     });
-    steps_figure(title, "queries per evaluation period", panels)
+    let mut figure = steps_figure(
+        title,
+        "questions asked so far (median, IQR over seeds)",
+        panels,
+    )?;
+    figure.x_scale = XScale::Log10Steps;
+    figure.x_label = "environment steps (log scale)".into();
+    Some(figure)
 }
 
 /// The paper's figures built from `runs`, in the paper's order, each for bootstrapped and noisy nets:
@@ -379,7 +399,7 @@ pub fn paper_figures(runs: &[RunRecord]) -> Vec<PaperFigure> {
             format!("fig5_queries_{net}"),
             query_figure(
                 &runs,
-                format!("When the agent asks: queries over training (-{suffix}, {words} DQN)"),
+                format!("When the agent asks: questions asked so far (-{suffix}, {words} DQN)"),
             ),
             format!(
                 "no complete default-variant run of a querying method with a queries.csv and net = {net}"
@@ -434,17 +454,29 @@ mod tests {
     }
 
     #[test]
-    fn query_timeline_counts_queries_per_evaluation_period() {
+    fn questions_so_far_counts_the_questions_up_to_each_step_on_a_log_axis() {
         let runs = [
             run(0, &[], Some(vec![0, 5, 999, 1000, 2999])),
             run(1, &[], Some(vec![10, 20, 30])),
             run(2, &[], None),
         ];
         let refs: Vec<&RunRecord> = runs.iter().collect();
-        let timeline = query_timeline(&refs);
-        let medians: Vec<(f64, f64)> = timeline.iter().map(|b| (b.x, b.median)).collect();
-        // Seed 0 bins: [3, 1, 1]; seed 1: [3, 0, 0]; seed 2 logged nothing and is left out.
-        assert_eq!(medians, vec![(1000.0, 3.0), (2000.0, 0.5), (3000.0, 0.5)]);
+        let points = questions_so_far(&refs);
+        let at = |step: f64| {
+            let p = points
+                .iter()
+                .find(|p| (p.x - step.log10()).abs() < 1e-9)
+                .unwrap_or_else(|| panic!("no point at step {step}: {points:?}"));
+            (p.lower_quartile, p.median, p.upper_quartile)
+        };
+        // Seed 2 logged nothing and is left out. At step 10: seed 0 asked 2 (steps 0, 5), seed 1 asked 1.
+        assert_eq!(at(10.0).1, 1.5);
+        // At step 1000 (10^3): 4 and 3; at the last step, 3000: 5 and 3.
+        assert_eq!(at(1000.0).1, 3.5);
+        assert_eq!(at(3000.0).1, 4.0);
+        assert_eq!(points.last().map(|p| p.x), Some(3000f64.log10()));
+        // 20 points per tenfold from 10 to 10^3.45 (the last below 3000), then 3000.
+        assert_eq!(points.len(), 51);
     }
 
     #[test]

@@ -73,6 +73,8 @@ pub enum XScale {
     Steps,
     /// The base-2 logarithm of a multiple (of a budget, say): ticks at whole powers of two read 1/4, 1/2, 1, 2, 4.
     Log2Multiple,
+    /// The base-10 logarithm of environment steps: ticks at whole powers of ten read 10, 100, 1k, 10k.
+    Log10Steps,
 }
 
 impl XScale {
@@ -82,6 +84,8 @@ impl XScale {
             XScale::Steps => (0.0, if x_max > 0.0 { x_max } else { 1.0 }),
             XScale::Log2Multiple if x_min <= x_max => (x_min - 0.25, x_max + 0.25),
             XScale::Log2Multiple => (-1.0, 1.0),
+            XScale::Log10Steps if x_min <= x_max => (x_min.floor(), x_max),
+            XScale::Log10Steps => (1.0, 2.0),
         }
     }
 
@@ -92,6 +96,8 @@ impl XScale {
             XScale::Log2Multiple if (x - x.round()).abs() > 1e-9 => String::new(),
             XScale::Log2Multiple if x < 0.0 => format!("1/{}", 2f64.powf(-x.round())),
             XScale::Log2Multiple => format!("{}", 2f64.powf(x.round())),
+            XScale::Log10Steps if (x - x.round()).abs() > 1e-9 => String::new(),
+            XScale::Log10Steps => format_steps(10f64.powf(x.round())),
         }
     }
 
@@ -99,7 +105,7 @@ impl XScale {
     fn ticks(self, span: f64) -> usize {
         match self {
             XScale::Steps => 6,
-            XScale::Log2Multiple => (span.floor() as usize + 1).max(2),
+            XScale::Log2Multiple | XScale::Log10Steps => (span.floor() as usize + 1).max(2),
         }
     }
 }
@@ -126,10 +132,23 @@ pub const PALETTE: [RGBColor; 8] = [
     RGBColor(0, 0, 0),       // black
 ];
 
+/// Line patterns (dash, gap in pixels; `None`: solid), in the order [`line_style`] takes them.
+const PATTERNS: [Option<(u32, u32)>; 4] = [None, Some((10, 6)), Some((2, 4)), Some((18, 5))];
+
+/// The palette's colours in the order that keeps the first few of a panel far apart (black, orange, sky blue,
+/// green, reddish purple, blue, vermillion, grey).
+const DISTINCT_ORDER: [usize; 8] = [7, 1, 2, 5, 6, 4, 3, 0];
+
+/// The style of member `member` of family `family` of a figure whose panels each show one family: the family's
+/// own pattern, and the colours of [`DISTINCT_ORDER`] in turn, so the curves of a panel differ in colour and no
+/// two curves of the figure look alike (for up to 8 members of up to 4 families).
+pub fn family_style(family: usize, member: usize) -> usize {
+    (family % PATTERNS.len()) * PALETTE.len() + DISTINCT_ORDER[member % DISTINCT_ORDER.len()]
+}
+
 /// The colour of style `index` and its dash pattern (dash, gap in pixels; `None`: solid): the palette's colours
-/// solid, then dashed, then dotted, then solid again.
+/// solid, then dashed, then dotted, then long-dashed, then solid again.
 fn line_style(index: usize) -> (RGBColor, Option<(u32, u32)>) {
-    const PATTERNS: [Option<(u32, u32)>; 3] = [None, Some((10, 6)), Some((2, 4))];
     (
         PALETTE[index % PALETTE.len()],
         PATTERNS[(index / PALETTE.len()) % PATTERNS.len()],

@@ -277,7 +277,9 @@ pub fn report(dir: &Path, out_dir: &Path, sustain: usize) -> Result<ReportSummar
             None => String::new(),
         };
         bail!(
-            "no complete run (a directory with {SUMMARY_FILE}) under {}{failed_note}",
+            "no complete run (a directory with {SUMMARY_FILE}) under {}{failed_note}: give the directory a sweep, \
+             `arld reproduce` or `arld train -o DIR/NAME` wrote its runs into (e.g. runs/reproduce), or \
+             `--from-evaluations results/evaluations.csv.gz` for the committed results",
             dir.display()
         );
     }

@@ -149,8 +149,14 @@ impl TrainedActor {
     pub fn load(path: &Path) -> Result<(Self, BTreeMap<String, String>)> {
         let bytes = crate::files::read_bounded(path, MAX_ACTOR_FILE_BYTES)
             .with_context(|| format!("cannot read the actor {}", path.display()))?;
-        let what = || format!("the actor {}", path.display());
-        let (_, header) = safetensors::SafeTensors::read_metadata(&bytes)
+        Self::from_bytes(&bytes, &path.display().to_string())
+    }
+
+    /// Reads an actor from the bytes of its file, checked as [`TrainedActor::load`] checks a file (`name` names
+    /// it in errors).
+    pub fn from_bytes(bytes: &[u8], name: &str) -> Result<(Self, BTreeMap<String, String>)> {
+        let what = || format!("the actor {name}");
+        let (_, header) = safetensors::SafeTensors::read_metadata(bytes)
             .with_context(|| format!("{} is not a safetensors file", what()))?;
         let meta = header.metadata().clone().unwrap_or_default();
         let field = |key: &str| {
@@ -207,7 +213,7 @@ impl TrainedActor {
             kind.learner(),
             low.len()
         );
-        let tensors = safetensors::SafeTensors::deserialize(&bytes)
+        let tensors = safetensors::SafeTensors::deserialize(bytes)
             .with_context(|| format!("{} is not a whole safetensors file", what()))?;
         let params = tensors
             .tensor("actor.params")

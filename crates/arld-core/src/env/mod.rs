@@ -63,8 +63,9 @@ pub struct Step {
 #[derive(Debug, Error)]
 pub enum EnvError {
     #[error(
-        "unknown environment id '{id}'; arld's tasks are, with {} (`arld env list` describes them). A Gymnasium \
-         environment arld does not have can be trained from Python: pass the gymnasium.Env to arld.Agent",
+        "unknown environment id '{id}'; arld's tasks are, with {} (`arld env list` describes them). Any other \
+         Gymnasium environment trains from Python: arld.Agent(\"adqn\", gymnasium.make(\"{id}\"), expert=...) \
+         (pip install ./python)",
         registry::described()
     )]
     UnknownId { id: String },

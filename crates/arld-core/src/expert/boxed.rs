@@ -3,7 +3,7 @@
 //!
 //! - `scripted`: the task's controller ([`super::scripted::ScriptedBoxExpert`]).
 //! - `shipped:weak`, `shipped:perfect`: the actors the expert pipeline selected for the task (`arld expert train`,
-//!   in `experts/<env>/`).
+//!   in `experts/<env>/`, compiled into the library: [`super::shipped`]).
 //! - `checkpoint:PATH`: a trained actor, as a run saves it (`weights.safetensors` or a checkpoint of a TD3 or SAC
 //!   run: [`crate::agent::box_agent::BoxAgent`]'s weights file), acting without exploration.
 //! - `noisy:S:SPEC`: the expert `SPEC` with Gaussian noise of standard deviation `S` half-widths of the box on
@@ -24,7 +24,7 @@ use anyhow::{Context, Result, bail, ensure};
 use rand::SeedableRng;
 use rand_distr::{Distribution, Normal};
 use rand_pcg::Pcg64;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 /// The expert `spec` for the box task `spec`, its random draws (noise) from `seed`; an expert process may take
 /// `timeout_s` seconds per answer.
@@ -67,16 +67,7 @@ fn build(
         ExpertSpec::Web(options) => web(options, spec.id)?,
         ExpertSpec::Scripted => Box::new(ScriptedBoxExpert::new(spec.id)?),
         ExpertSpec::Checkpoint(path) => Box::new(ActorExpert::load(path, spec)?),
-        ExpertSpec::Shipped(quality) => {
-            let path = super::shipped_path(spec.id, quality);
-            ensure!(
-                path.exists(),
-                "no shipped {quality} expert for {} (looked for {})",
-                spec.id,
-                path.display()
-            );
-            Box::new(ActorExpert::load(&path, spec)?)
-        }
+        ExpertSpec::Shipped(quality) => Box::new(ActorExpert::shipped(quality, spec)?),
         ExpertSpec::Command(command) => Box::new(super::process::ProcessExpert::<Vec<f32>>::spawn(
             command, spec, timeout_s,
         )?),
@@ -90,7 +81,8 @@ fn build(
 
 /// A trained actor acting without exploration ([`TrainedActor`]).
 pub struct ActorExpert {
-    path: PathBuf,
+    /// What the expert is called in records: `checkpoint:PATH`, or `shipped:QUALITY`.
+    name: String,
     actor: TrainedActor,
 }
 
@@ -99,27 +91,37 @@ impl ActorExpert {
     /// ([`crate::agent::actor_file`]) of a run of the same task (observation size, box).
     pub fn load(path: &Path, spec: &BoxSpec) -> Result<Self> {
         let (actor, _) = TrainedActor::load(path).context("cannot load the expert")?;
+        Self::new(actor, format!("checkpoint:{}", path.display()), spec)
+    }
+
+    /// The shipped actor `quality` of the task `spec` ([`super::shipped::model`]), named `shipped:QUALITY`.
+    pub fn shipped(quality: &str, spec: &BoxSpec) -> Result<Self> {
+        let bytes = super::shipped::model(spec.id, quality)
+            .with_context(|| super::no_shipped(quality, spec.id))?;
+        let name = format!("shipped:{quality}");
+        let (actor, _) =
+            TrainedActor::from_bytes(bytes, &name).context("cannot load the expert")?;
+        Self::new(actor, name, spec)
+    }
+
+    fn new(actor: TrainedActor, name: String, spec: &BoxSpec) -> Result<Self> {
         let (low, high) = actor.bounds();
+        let file = name.trim_start_matches("checkpoint:");
         ensure!(
             low == spec.action_low && high == spec.action_high,
-            "the expert's actor {} acts in the box {low:?} to {high:?}, but {} has {:?} to {:?}",
-            path.display(),
+            "the expert's actor {file} acts in the box {low:?} to {high:?}, but {} has {:?} to {:?}",
             spec.id,
             spec.action_low,
             spec.action_high
         );
         ensure!(
             actor.obs_dim() == spec.obs_dim,
-            "the expert's actor {} takes {} inputs, but {} has {} observation values",
-            path.display(),
+            "the expert's actor {file} takes {} inputs, but {} has {} observation values",
             actor.obs_dim(),
             spec.id,
             spec.obs_dim
         );
-        Ok(ActorExpert {
-            path: path.to_path_buf(),
-            actor,
-        })
+        Ok(ActorExpert { name, actor })
     }
 }
 
@@ -129,7 +131,7 @@ impl Expert<Vec<f32>> for ActorExpert {
     }
 
     fn describe(&self) -> String {
-        format!("checkpoint:{}", self.path.display())
+        self.name.clone()
     }
 }
 

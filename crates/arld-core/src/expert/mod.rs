@@ -17,6 +17,7 @@ pub mod minari;
 pub mod pipeline;
 pub mod process;
 pub mod scripted;
+pub mod shipped;
 pub mod web_options;
 
 use crate::agent::test_policy_action;
@@ -188,7 +189,8 @@ pub struct Progress<'a, A: Action = usize> {
 pub struct CheckpointExpert {
     net: QNet,
     q: Vec<f32>,
-    path: PathBuf,
+    /// What the expert is called in records: `checkpoint:PATH`, or `shipped:QUALITY`.
+    name: String,
 }
 
 impl CheckpointExpert {
@@ -196,10 +198,28 @@ impl CheckpointExpert {
     pub fn load(path: &Path, spec: &EnvSpec) -> Result<Self> {
         let (net, meta) = QNet::load(path)
             .with_context(|| format!("cannot load expert checkpoint {}", path.display()))?;
+        Self::new(net, &meta, format!("checkpoint:{}", path.display()), spec)
+    }
+
+    /// The shipped expert `quality` of the task `spec` ([`shipped::model`]), named `shipped:QUALITY`.
+    pub fn shipped(quality: &str, spec: &EnvSpec) -> Result<Self> {
+        let bytes =
+            shipped::model(spec.id, quality).with_context(|| no_shipped(quality, spec.id))?;
+        let name = format!("shipped:{quality}");
+        let (net, meta) = crate::nn::parse_model(Path::new(&name), bytes)?;
+        Self::new(net, &meta, name, spec)
+    }
+
+    fn new(
+        net: QNet,
+        meta: &std::collections::BTreeMap<String, String>,
+        name: String,
+        spec: &EnvSpec,
+    ) -> Result<Self> {
         ensure!(
             net.obs_dim() == spec.obs_dim && net.n_actions() == spec.n_actions,
             "expert checkpoint {} has {} inputs and {} actions, but {} has {} and {}{}",
-            path.display(),
+            name.trim_start_matches("checkpoint:"),
             net.obs_dim(),
             net.n_actions(),
             spec.id,
@@ -210,12 +230,19 @@ impl CheckpointExpert {
                 .unwrap_or_default()
         );
         let q = vec![0.0; net.heads() * net.n_actions()];
-        Ok(Self {
-            net,
-            q,
-            path: path.to_path_buf(),
-        })
+        Ok(Self { net, q, name })
     }
+}
+
+/// Why there is no shipped expert `quality` for `env_id`, and what to use instead.
+pub(crate) fn no_shipped(quality: &str, env_id: &str) -> String {
+    let tasks: Vec<&str> = shipped::tasks().collect();
+    format!(
+        "no shipped {quality} expert for {env_id}: arld ships experts for {} (and CartPole-v1, LunarLander-v3); \
+         train one with `arld expert train --env {env_id}` and give it as `checkpoint:PATH`, or use `scripted` or \
+         `cmd:COMMAND`",
+        tasks.join(", ")
+    )
 }
 
 impl Expert for CheckpointExpert {
@@ -231,7 +258,7 @@ impl Expert for CheckpointExpert {
         Some(OracleView { action, q_values })
     }
     fn describe(&self) -> String {
-        format!("checkpoint:{}", self.path.display())
+        self.name.clone()
     }
 }
 
@@ -287,41 +314,19 @@ impl Expert for NoisyExpert {
     }
 }
 
-/// Directory of the experts shipped with the repository.
-pub fn shipped_dir() -> PathBuf {
-    std::env::var_os("ARLD_EXPERTS_DIR")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| {
-            // The repository's `experts/`, two folders above this crate (`crates/arld-core`).
-            let crate_dir = Path::new(env!("CARGO_MANIFEST_DIR"));
-            crate_dir
-                .ancestors()
-                .nth(2)
-                .unwrap_or(crate_dir)
-                .join("experts")
-        })
-}
-
-/// Path of a shipped expert: `experts/<env>/<quality>.safetensors` (v1/v3 ids share their v0/v2 experts).
-pub fn shipped_path(env_id: &str, quality: &str) -> PathBuf {
-    let env = match env_id {
-        "CartPole-v1" => "CartPole-v0",
-        "LunarLander-v3" => "LunarLander-v2",
-        e => e,
-    };
-    shipped_dir()
-        .join(env)
-        .join(format!("{quality}.safetensors"))
-}
-
 /// Help text for expert specs.
-pub const SPEC_HELP: &str = "Expert specs: `shipped:weak` or `shipped:perfect` (the experts in experts/), \
-`checkpoint:PATH` (a safetensors checkpoint acting greedily), `scripted` (a hand-written controller: Gymnasium's \
-heuristic lander, simple controllers for CartPole, MountainCar and Acrobot), `noisy:P:SPEC` (SPEC acting at random \
-with probability P), `web[:OPTIONS]` (a person answering in a browser; see `arld train --help`), `cmd:COMMAND` (a \
-program in any language speaking JSON lines on stdin/stdout, e.g. cmd:\"python examples/expert.py\"; the protocol \
-is in crates/arld-core/src/expert/process.rs and the README), `python:NAME` (an expert given to arld.Agent in \
-Python; it names that expert in the run's records).";
+pub const SPEC_HELP: &str = "Expert specs:
+  shipped:weak, shipped:perfect  arld's own experts for every built-in task (inside the binary; the paper's kind \
+of expert, and the best one)
+  scripted                       a hand-written controller (Gymnasium's heuristic lander; simple controllers for \
+the other tasks, discrete and continuous)
+  checkpoint:PATH                a trained network acting greedily (a run's weights.safetensors or a checkpoint)
+  noisy:P:SPEC                   SPEC acting at random with probability P (a box task: Gaussian noise of P \
+half-widths)
+  cmd:COMMAND                    a program in any language speaking JSON lines on stdin/stdout, e.g. \
+cmd:\"python3 examples/expert.py\" (the protocol: docs/reference.md, \"An expert in any language\")
+  web[:OPTIONS]                  a person answering in a browser (see `arld train --help`)
+  python:NAME                    an expert given to arld.Agent in Python (names it in a run's records)";
 
 /// An expert spec, parsed: which expert [`from_spec`] builds. Parsing checks the form of every part, so that a
 /// configuration can be refused before any work (a run validates its spec first); building then loads
@@ -440,15 +445,7 @@ pub fn build_with(
     let env_spec = *crate::env::spec(env_id)?;
     Ok(match spec {
         ExpertSpec::Checkpoint(path) => Box::new(CheckpointExpert::load(path, &env_spec)?),
-        ExpertSpec::Shipped(quality) => {
-            let path = shipped_path(env_id, quality);
-            ensure!(
-                path.exists(),
-                "no shipped {quality} expert for {env_id} (looked for {})",
-                path.display()
-            );
-            Box::new(CheckpointExpert::load(&path, &env_spec)?)
-        }
+        ExpertSpec::Shipped(quality) => Box::new(CheckpointExpert::shipped(quality, &env_spec)?),
         ExpertSpec::Command(command) => Box::new(process::ProcessExpert::<usize>::spawn(
             command,
             crate::env::spec(env_id)?,

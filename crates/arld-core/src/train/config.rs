@@ -1151,7 +1151,8 @@ impl TrainConfig {
         if self.method.needs_expert() {
             ensure!(
                 !self.expert.trim().is_empty(),
-                "{} needs an expert: `expert` must not be empty",
+                "{} needs an expert: `expert` must not be empty; give one with --expert (shipped:weak, the \
+                 preset's, or scripted, checkpoint:PATH, cmd:COMMAND, web: `arld expert eval --help` lists them)",
                 self.method
             );
             let spec: crate::expert::ExpertSpec = self
