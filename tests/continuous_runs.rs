@@ -447,8 +447,8 @@ fn a_report_reads_box_runs() {
     let table = std::fs::read_to_string(report.join("table.md")).unwrap();
     let row = table
         .lines()
-        .find(|l| l.starts_with("| ADQN-B |"))
-        .unwrap_or_else(|| panic!("no ADQN-B row in\n{table}"));
+        .find(|l| l.starts_with("| ADQN (actor-critic) |"))
+        .unwrap_or_else(|| panic!("no ADQN (actor-critic) row in\n{table}"));
     assert!(row.contains(&format!("{steps}** (-) 1/1")), "{row}");
 }
 

@@ -13,8 +13,7 @@ use super::{BoxSpec, EnvError, EnvRng, Physics, Simulated};
 use crate::rng::NumpyRng;
 use crate::task::{Action, Goal};
 
-/// The registered facts of every continuous-action task (each one's entry in [`super::registry::TASKS`] points
-/// here).
+/// The registered facts of every continuous-action task (each one's entry in the task registry points here).
 pub static CONTINUOUS_SPECS: [BoxSpec; 3] = [
     BoxSpec {
         id: "Pendulum-v1",
@@ -52,9 +51,9 @@ pub static CONTINUOUS_SPECS: [BoxSpec; 3] = [
     },
 ];
 
-/// The ids of the built-in continuous-action tasks ([`super::registry::TASKS`]).
+/// The ids of the built-in continuous-action tasks, in the registry's order.
 pub fn known_continuous_ids() -> Vec<&'static str> {
-    super::registry::ids(true).collect()
+    CONTINUOUS_SPECS.iter().map(|spec| spec.id).collect()
 }
 
 /// The physics of one continuous-action task.
