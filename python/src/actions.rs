@@ -1,7 +1,6 @@
 //! The two kinds of action as they cross to Python and back ([`PyAction`]): a discrete index, or a list of floats
 //! in a box; what a run of each kind needs besides (its built-in tasks, its experts from a spec, its demonstrations).
 
-use crate::demos::DemoActions;
 use crate::records::Records;
 use arld::env::{self, Env, EnvError};
 use arld::expert::Expert;
@@ -9,6 +8,13 @@ use arld::expert::demos::DemoAction;
 use arld::expert::process::WireAction;
 use arld::train::{QueryEvent, SeedPurpose, TrainConfig, seed_for};
 use pyo3::prelude::*;
+
+/// The actions of demonstrations given in Python: one integer per transition, or one row of numbers (a box).
+#[derive(FromPyObject)]
+pub(crate) enum DemoActions {
+    Indices(Vec<usize>),
+    Vectors(Vec<Vec<f32>>),
+}
 
 /// A kind of action as it crosses to Python and back, and what a run of that kind needs besides (its built-in
 /// environments, its experts from a spec, its demonstrations).

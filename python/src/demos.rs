@@ -1,6 +1,6 @@
 //! Demonstrations given in Python as rows, turned into the library's.
 
-use crate::actions::PyAction;
+use crate::actions::{DemoActions, PyAction};
 use arld::expert::demos::{DemoColumns, Demonstrations};
 use arld::train::TrainConfig;
 use pyo3::prelude::*;
@@ -14,13 +14,6 @@ pub(crate) struct DemoArrays {
     pub(crate) next_obs: Vec<Vec<f32>>,
     pub(crate) terminated: Vec<bool>,
     pub(crate) truncated: Vec<bool>,
-}
-
-/// The actions of demonstrations given in Python: one integer per transition, or one row of numbers (a box).
-#[derive(FromPyObject)]
-pub(crate) enum DemoActions {
-    Indices(Vec<usize>),
-    Vectors(Vec<Vec<f32>>),
 }
 
 impl DemoArrays {
