@@ -199,17 +199,29 @@ pub enum Geometry {
         theta2: f64,
         link_lengths: [f64; 2],
     },
-    /// The car's position on the hill `hill` (a polyline of `[x, height]`), with the flag at `goal`.
+    /// The car's position on the hill `hill` (a polyline of `[x, height]`), with the flag at `goal`; with
+    /// continuous actions, the force the last step pushed with (its box is [-1, 1]).
     MountainCar {
         position: f64,
         height: f64,
         angle: f64,
         goal: f64,
         hill: Vec<[f64; 2]>,
+        #[serde(skip_serializing_if = "Option::is_none")]
+        force: Option<f64>,
+    },
+    /// A pendulum at angle `theta` (radians from upright, counter-clockwise) and the torque the last step
+    /// applied (positive counter-clockwise), at most `max_torque` either way.
+    Pendulum {
+        theta: f64,
+        torque: f64,
+        max_torque: f64,
     },
     /// The world of LunarLander in metres: viewport size, the moon's surface (left to right), the helipad
     /// between `helipad_x` at `helipad_y`, the hull and leg polygons in world coordinates, which legs touch,
-    /// and which engine fired on the last step (0 none, 1 left, 2 main, 3 right).
+    /// and which engine fired on the last step (0 none, 1 left, 2 main, 3 right); with continuous actions, the
+    /// engines' throttles on the last step (`[main, side]`: the main engine's from 0.5 to 1 when it fires, the
+    /// side engines' signed, negative for the left engine, from 0.5 to 1 in size when they fire; 0 when off).
     LunarLander {
         width: f64,
         height: f64,
@@ -220,6 +232,8 @@ pub enum Geometry {
         legs: [Vec<[f64; 2]>; 2],
         leg_contact: [bool; 2],
         engine: usize,
+        #[serde(skip_serializing_if = "Option::is_none")]
+        throttle: Option<[f64; 2]>,
     },
 }
 
