@@ -423,6 +423,15 @@ fn is_box_env(id: &str) -> bool {
     env::box_spec(id).is_ok()
 }
 
+/// The bounds `(low, high)` of the actions of a task with actions in a box (built in or registered); `None` for
+/// a task arld does not know with actions in a box.
+#[pyfunction]
+fn box_bounds(id: &str) -> Option<(Vec<f32>, Vec<f32>)> {
+    env::box_spec(id)
+        .ok()
+        .map(|spec| (spec.action_low.to_vec(), spec.action_high.to_vec()))
+}
+
 /// The ids of the built-in environments.
 #[pyfunction]
 fn builtin_env_ids() -> Vec<&'static str> {
@@ -1781,6 +1790,7 @@ fn _arld(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(register_env, m)?)?;
     m.add_function(wrap_pyfunction!(register_box_env, m)?)?;
     m.add_function(wrap_pyfunction!(is_box_env, m)?)?;
+    m.add_function(wrap_pyfunction!(box_bounds, m)?)?;
     m.add_function(wrap_pyfunction!(builtin_env_ids, m)?)?;
     m.add_function(wrap_pyfunction!(config_keys, m)?)?;
     m.add_function(wrap_pyfunction!(resolve_config, m)?)?;
