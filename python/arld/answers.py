@@ -34,7 +34,7 @@ import re
 import shutil
 import sys
 from pathlib import Path
-from typing import Any, Dict, List, Optional
+from typing import Any, Dict, List, Optional, Tuple
 
 import numpy as np
 
@@ -138,7 +138,7 @@ def _agent_action(proposal: Any, box: bool) -> Any:
     return -1 if proposal is None else int(proposal)
 
 
-def _box_bounds(env_id: str) -> Optional[Any]:
+def _box_bounds(env_id: str) -> Optional[Tuple[List[float], List[float]]]:
     """The bounds `(low, high)` of the actions of `env_id` when they are in a box, else None: a built-in task's
     own (and a registered one's, in this process), the bounds a Python environment's id states among its facts
     (`Id[...,action_low=[...],action_high=[...]]`), else Gymnasium's."""
@@ -148,7 +148,8 @@ def _box_bounds(env_id: str) -> Optional[Any]:
         return bounds
     facts = re.search(r"action_low=\[([^\]]*)\],action_high=\[([^\]]*)\]", env_id)
     if facts:
-        return tuple([float(x) for x in part.split(",")] for part in facts.groups())
+        low, high = ([float(x) for x in part.split(",")] for part in facts.groups())
+        return (low, high)
     if re.search(r"n_actions=\d+", env_id):
         return None
     base = env_id.split("[", 1)[0]
@@ -158,7 +159,7 @@ def _box_bounds(env_id: str) -> Optional[Any]:
     import gymnasium as gym
     space = gym.make(base).action_space
     if isinstance(space, gym.spaces.Box):
-        return (space.low.reshape(-1).tolist(), space.high.reshape(-1).tolist())
+        return ([float(x) for x in space.low.reshape(-1)], [float(x) for x in space.high.reshape(-1)])
     return None
 
 
@@ -203,7 +204,7 @@ def export_minari(run_dir: "str | os.PathLike[str]", dataset_id: str, *, n_actio
     box = bounds is not None
     if box != isinstance(steps[0]["action"], list):
         raise ValueError(f"{run_dir / ANSWERS_FILE}: its actions ({steps[0]['action']!r}) are not {env_id}'s kind")
-    if box:
+    if bounds is not None:
         if n_actions is not None:
             raise ValueError(f"n_actions is for discrete actions; {env_id}'s actions are in a box")
         low, high = (np.asarray(b, dtype=np.float32) for b in bounds)
