@@ -682,6 +682,24 @@ fn a_person_takes_over_unasked_in_real_time_and_hands_back() {
         "{steps} steps in {seconds} s: {watch}"
     );
     assert_eq!(watch["personS"].as_f64(), Some(0.0), "{watch}");
+    // A request made while paused was pending (the button offered to cancel it) and T again cancelled it: no
+    // takeover followed it (the script fails on one nobody asked for), only the one asked for next.
+    let cancel = &watch["cancel"];
+    assert_eq!(
+        cancel["pending"]["takeoverButton"]["text"], "Cancel take over [T]",
+        "{cancel}"
+    );
+    assert!(
+        cancel["pending"]["text"]
+            .as_str()
+            .unwrap()
+            .starts_with("You take over at the agent's next step, when the run goes on"),
+        "{cancel}"
+    );
+    assert_eq!(
+        cancel["cancelled"]["takeoverButton"]["text"], "Take over [T]",
+        "{cancel}"
+    );
 }
 
 /// A takeover starts only from a request made while the agent acts: a person who presses T the moment each of

@@ -72,7 +72,8 @@ const panel = () => page.evaluate(() => ({
   text: document.getElementById("prompt-text").textContent,
   className: document.getElementById("prompt").className,
   pass: { text: document.getElementById("pass").textContent, disabled: document.getElementById("pass").disabled },
-  takeoverButton: { hidden: document.getElementById("takeover").hidden, disabled: document.getElementById("takeover").disabled },
+  takeoverButton: { hidden: document.getElementById("takeover").hidden, disabled: document.getElementById("takeover").disabled,
+    text: document.getElementById("takeover").textContent },
   budget: document.getElementById("s-budget").textContent,
   takeovers: document.getElementById("s-takeovers").textContent,
 }));
@@ -152,6 +153,27 @@ for (;;) {
     if (phase === "before" && questions >= 1 && (!watch || watch.measured) && s.status && s.status.budget - s.status.budget_used > holdSteps + 10) {
       // The agent acts: the button is offered, and T takes over from here.
       if (s.button.hidden || s.button.disabled) continue;
+      if (watch && !watch.cancel) {
+        // First a request made while the run is paused (it waits for the run to go on), cancelled with T again:
+        // no takeover may follow it.
+        await page.click("#pause");
+        await page.waitForFunction(() => arld.paused, null, { timeout: 5000 }).catch(() => fail("the run did not pause"));
+        // (The agent may have asked meanwhile: then try again later.)
+        if (!(await page.evaluate(() => arld.takeover.offered && !arld.prompt))) {
+          await page.click("#pause");
+          await page.waitForFunction(() => !arld.paused, null, { timeout: 5000 });
+          continue;
+        }
+        await page.keyboard.press("t");
+        await page.waitForFunction(() => arld.takeover.pending, null, { timeout: 5000 }).catch(() => fail("the request is not pending"));
+        watch.cancel = { pending: await panel() };
+        await page.keyboard.press("t");
+        await page.waitForFunction(() => !arld.takeover.pending, null, { timeout: 5000 }).catch(() => fail("T again did not cancel"));
+        watch.cancel.cancelled = await panel();
+        await page.click("#pause");
+        await page.waitForFunction(() => !arld.paused, null, { timeout: 5000 });
+        continue;
+      }
       takeover = { ...(takeover || {}), pressedAtStep: s.status.step, offered: await panel() };
       await page.keyboard.press("t");
       phase = "asked";

@@ -8,14 +8,16 @@
 //! geometry, rendered frames of any other environment, or its observation as a table). The run starts once a
 //! page is open ([`WebExpert::wait_for_page`], unless `wait=no`).
 //!
-//! Training runs at full speed while the page shows it: the environment, step, episode, budget, the uncertainty
+//! Training runs at full speed while the page shows it (in real time the person may choose watch mode: the agent's
+//! own steps at the real-time rate, outside any question, so not the person's time): the environment, step, episode, budget, the uncertainty
 //! against the adaptive threshold, the test-return curve, and the person's own time (questions left at most,
 //! seconds spent, an estimate of the time still needed at their pace). When the agent asks, the run waits for
 //! the person, who answers with the keyboard or the buttons for the whole segment, either turn-based (one step
-//! per key) or in real time (`fps`: after a fresh key and a countdown, the environment advances at that rate
+//! per key) or in real time (`fps`: after a deliberate gesture, and a countdown unless the gesture was the action
+//! itself (an action's key, a stick leaving its dead zone), the environment advances at that rate
 //! with the held key, or the no-op action when none is held; a question's segment lasts `segment_s` seconds of play,
 //! 3 by default: [`WebOptions::segment_steps`]). Before a question the page replays the agent's
-//! own steps since the person's last one, and in turn-based mode the person can undo their last key: both
+//! own steps since the person's last one (during the breath after their last segment), and in turn-based mode the person can undo their last key: both
 //! rebuild the environment from the query's episode ([`arld_core::env::replay_episode`]) where the frame source
 //! can show such a copy. Undo works one key ahead: the page shows the state after a key on a copy, and the run
 //! takes that key only when the next one comes, so an undone key never reaches the training loop. A question goes back to the agent ([`Answer::Unanswered`]) when the person hands

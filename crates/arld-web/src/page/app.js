@@ -308,7 +308,7 @@ function showPersonTime() {
   const s = arld.status;
   if (!s) return;
   const extra = arld.prompt && waiting.id === arld.prompt.id ? waiting.s : 0;
-  $("s-person").textContent = `${duration(s.person_s + extra)} (${s.answered} answered, ${s.keys} keys)`;
+  $("s-person").textContent = `${duration(s.person_s + extra)} (${s.answered} answered, ${s.keys} ${padState.id === null ? "keys" : "inputs"})`;
 }
 setInterval(() => {
   const p = arld.prompt, now = performance.now();
@@ -383,7 +383,8 @@ function showEnd() {
   const rows = [
     ["Final score", fmt(o.final_score, 1)],
     ["Questions answered", `${o.answered}` + (o.unanswered ? ` (${o.unanswered} left to the agent)` : "")],
-    ["Keys pressed", `${o.keys}` + (o.undone ? ` (and ${o.undone} undone)` : "")],
+    // (With a gamepad the answers came from its buttons and sticks too.)
+    [padState.id === null ? "Keys pressed" : "Keys, buttons and sticks", `${o.keys}` + (o.undone ? ` (and ${o.undone} undone)` : "")],
     ["Takeovers", `${o.takeovers}`],
     ["Your time", `${duration(o.person_s)} (${o.person_s.toFixed(1)} s)`],
     ["Run directory", o.run_dir || "– (not saved)"],
