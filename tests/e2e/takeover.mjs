@@ -17,11 +17,12 @@
 // Esc) or about to ask again (its breath before the next question: "refused" when the agent's question comes first).
 // After a refused T the person presses nothing until that question's segment has ended, and a takeover opening
 // then is one nobody asked for: the script fails. The report has "breath": {granted, refused, banners}.
-// --watch: after the first question the person turns on watch mode (V: the agent's own steps at the real-time rate)
-// and samples the run's status while the agent acts: the report's "watch" has the steps and seconds of those
-// stretches and the person's seconds that grew meanwhile (none should: watching is not answering); after two seconds
-// of it T (the agent acting at the real-time rate, the button is offered for long stretches, where at full speed the
-// agent may ask again within milliseconds), and once the takeover ended, V again: full speed.
+// --watch: after the first question the person turns on watch mode (V: the agent's own steps at the real-time rate,
+// so that the button is offered for long stretches, where at full speed the agent may ask again within
+// milliseconds) and takes over in it; once the takeover is handed back (the agent's questions in the next 100 steps
+// go back to it unasked, so it acts) they sample the run's status for two seconds: the report's "watch" has the steps
+// and seconds of those samples and the person's seconds that grew meanwhile (none should: watching is not
+// answering); then V again: full speed (also once no budget is left).
 // Prints one JSON line: {"takeover": {...what the page showed of it...}, "questions": N, "endScreen": {...}}.
 import { chromium } from "playwright-core";
 import fs from "node:fs";
@@ -85,7 +86,7 @@ const breath = args.breath ? { granted: 0, refused: 0, banners: [], t: null, seg
 let stopped = null;
 let running = 0;
 // --watch: the stretches sampled while the agent acted (no prompt), and the last sample.
-const watch = args.watch ? { on: false, measured: false, steps: 0, seconds: 0, personS: 0, samples: 0, last: null } : null;
+const watch = args.watch ? { on: false, measured: false, steps: 0, seconds: 0, personS: 0, samples: 0, last: null, afterAt: null } : null;
 for (;;) {
   await page.waitForTimeout(5);
   const s = await state();
@@ -128,17 +129,20 @@ for (;;) {
   }
   if (watch) {
     if (watch.on && watch.seconds >= 2) watch.measured = true;
-    if (watch.on && phase === "after") {
+    if (watch.on && (watch.measured || (s.status && s.status.questions_left_max === 0))) {
       await page.keyboard.press("v");
       await page.waitForFunction(() => !arld.watch, null, { timeout: 5000 }).catch(() => fail("watch mode did not go off"));
       watch.on = false;
+      watch.measured = true;
     }
     if (!watch.on && !watch.measured && questions >= 1 && !p) {
       await page.keyboard.press("v");
       await page.waitForFunction(() => arld.watch, null, { timeout: 5000 }).catch(() => fail("watch mode did not come on"));
       watch.on = true;
     }
-    const sample = !p && watch.on && !watch.measured && s.status ? { at: Date.now(), step: s.status.step, personS: s.status.person_s } : null;
+    // Samples after the takeover (from 300 ms on: the status that counts the hand-back's own step comes a step later).
+    const sample = !p && watch.on && phase === "after" && s.status && Date.now() - (watch.afterAt ??= Date.now()) > 300
+      ? { at: Date.now(), step: s.status.step, personS: s.status.person_s } : null;
     if (sample && watch.last) {
       watch.steps += sample.step - watch.last.step;
       watch.seconds += (sample.at - watch.last.at) / 1000;
@@ -149,8 +153,7 @@ for (;;) {
   }
   if (!p) {
     await holdKey(null);
-    // (Watching, the takeover waits until the watch was measured.)
-    if (phase === "before" && questions >= 1 && (!watch || watch.measured) && s.status && s.status.budget - s.status.budget_used > holdSteps + 10) {
+    if (phase === "before" && questions >= 1 && s.status && s.status.budget - s.status.budget_used > holdSteps + 10) {
       // The agent acts: the button is offered, and T takes over from here.
       if (s.button.hidden || s.button.disabled) continue;
       if (watch && !watch.cancel) {
