@@ -670,7 +670,8 @@ fn a_person_takes_over_unasked_in_real_time_and_hands_back() {
     assert_eq!(s["train_steps"], REALTIME_STEPS);
     assert_eq!(report["endScreen"]["rows"]["Takeovers"], "1", "{report}");
     // Watch mode (on after the first question): while the agent acted, its steps went at most at the real-time
-    // rate of 20 a second (a quarter more for the page's sampling), and none of that time was the person's.
+    // rate of 20 a second (a quarter more for the page's sampling), and none of that time was the person's (but
+    // for the bookkeeping of the agent's questions that went back to it unasked meanwhile: microseconds each).
     let watch = &report["watch"];
     let (steps, seconds) = (
         watch["steps"].as_f64().unwrap(),
@@ -681,7 +682,7 @@ fn a_person_takes_over_unasked_in_real_time_and_hands_back() {
         steps > 0.0 && steps <= 25.0 * seconds + 2.0,
         "{steps} steps in {seconds} s: {watch}"
     );
-    assert_eq!(watch["personS"].as_f64(), Some(0.0), "{watch}");
+    assert!(watch["personS"].as_f64() < Some(0.05), "{watch}");
     // A request made while paused was pending (the button offered to cancel it) and T again cancelled it: no
     // takeover followed it (the script fails on one nobody asked for), only the one asked for next.
     let cancel = &watch["cancel"];

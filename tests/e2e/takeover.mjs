@@ -135,10 +135,10 @@ for (;;) {
       watch.on = false;
       watch.measured = true;
     }
-    if (!watch.on && !watch.measured && questions >= 1 && !p) {
+    // (Not during a replay, which a key only skips; tried again until watch mode is on.)
+    if (!watch.on && !watch.measured && questions >= 1 && !p && !s.replaying) {
       await page.keyboard.press("v");
-      await page.waitForFunction(() => arld.watch, null, { timeout: 5000 }).catch(() => fail("watch mode did not come on"));
-      watch.on = true;
+      watch.on = await page.waitForFunction(() => arld.watch, null, { timeout: 2000 }).then(() => true, () => false);
     }
     // Samples after the takeover (from 300 ms on: the status that counts the hand-back's own step comes a step later).
     const sample = !p && watch.on && phase === "after" && s.status && Date.now() - (watch.afterAt ??= Date.now()) > 300
