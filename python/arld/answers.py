@@ -15,11 +15,13 @@ last step; `actions`, `rewards`, `terminations` and `truncations` are the steps'
 the environment's episode does (the expert handed back) ends with `truncations` true, so that learning
 bootstraps there. `infos` has one row per observation: `step` (the run's step that acts from that observation;
 after the last step, one more) and the segment's question, the same in every row: `episode` (the run's episode),
-`question_step`, `agent_action` (what the agent proposed; -1 when not known), `uncertainty` and `threshold`
+`question_step`, `agent_action` (what the agent proposed: its index, -1 when not known; for actions in a box its
+numbers as a JSON list in a string, empty when not known), `uncertainty` and `threshold`
 (NaN when the rule computed none), `response_s` (seconds the answer took; NaN for a program), `expert` (who
 answered) and `started_by` (`rule`: the query rule asked; `person`: a person took over unasked on the web page).
-Observations are arld's flat float32 vectors (a Box), actions are discrete. The dataset's metadata also holds
-`arld_env` (the run's environment) and `arld_run`.
+Observations are arld's flat float32 vectors (a Box); actions are the task's: discrete (a `Discrete` space) or, for a
+task with actions in a box, float32 vectors (a `Box` with the task's bounds), exactly as the run took them. The
+dataset's metadata also holds `arld_env` (the run's environment) and `arld_run`.
 """
 
 from __future__ import annotations
@@ -32,7 +34,7 @@ import re
 import shutil
 import sys
 from pathlib import Path
-from typing import Any, Dict, List, Optional
+from typing import Any, Dict, List, Optional, Tuple
 
 import numpy as np
 
@@ -94,7 +96,7 @@ def _number(x: Optional[float]) -> float:
     return math.nan if x is None else float(x)
 
 
-def _buffer(index: int, seg: List[Dict[str, Any]]) -> Any:
+def _buffer(index: int, seg: List[Dict[str, Any]], box: bool) -> Any:
     from minari.data_collector import EpisodeBuffer  # type: ignore[import-untyped, import-not-found, unused-ignore]
     first = seg[0]
     n = len(seg)
@@ -105,7 +107,7 @@ def _buffer(index: int, seg: List[Dict[str, Any]]) -> Any:
     question = {
         "episode": int(first["episode"]),
         "question_step": -1 if first.get("question_step") is None else int(first["question_step"]),
-        "agent_action": -1 if first.get("agent_action") is None else int(first["agent_action"]),
+        "agent_action": _agent_action(first.get("agent_action"), box),
         "uncertainty": _number(first.get("uncertainty")),
         "threshold": _number(first.get("threshold")),
         "response_s": _number(first.get("response_s")),
@@ -120,12 +122,45 @@ def _buffer(index: int, seg: List[Dict[str, Any]]) -> Any:
     return EpisodeBuffer(
         id=index,
         observations=np.asarray(observations, dtype=np.float32),
-        actions=np.asarray([s["action"] for s in seg], dtype=np.int64),
+        actions=np.asarray([s["action"] for s in seg], dtype=np.float32 if box else np.int64),
         rewards=np.asarray([s["reward"] for s in seg], dtype=np.float32),
         terminations=np.asarray([bool(s["terminated"]) for s in seg]),
         truncations=np.asarray(truncations),
         infos=infos,
     )
+
+
+def _agent_action(proposal: Any, box: bool) -> Any:
+    """The agent's proposal as the dataset's `infos` keep it: an index (-1 unknown), or for actions in a box its
+    numbers as a JSON list in a string (empty unknown; Minari stores strings and scalars per row)."""
+    if box:
+        return "" if proposal is None else json.dumps([float(x) for x in proposal])
+    return -1 if proposal is None else int(proposal)
+
+
+def _box_bounds(env_id: str) -> Optional[Tuple[List[float], List[float]]]:
+    """The bounds `(low, high)` of the actions of `env_id` when they are in a box, else None: a built-in task's
+    own (and a registered one's, in this process), the bounds a Python environment's id states among its facts
+    (`Id[...,action_low=[...],action_high=[...]]`), else Gymnasium's."""
+    from . import _arld
+    bounds = _arld.box_bounds(env_id)
+    if bounds is not None:
+        return bounds
+    facts = re.search(r"action_low=\[([^\]]*)\],action_high=\[([^\]]*)\]", env_id)
+    if facts:
+        low, high = ([float(x) for x in part.split(",")] for part in facts.groups())
+        return (low, high)
+    if re.search(r"n_actions=\d+", env_id):
+        return None
+    base = env_id.split("[", 1)[0]
+    bounds = _arld.box_bounds(base)
+    if bounds is not None or base in _arld.builtin_env_ids():
+        return bounds
+    import gymnasium as gym
+    space = gym.make(base).action_space
+    if isinstance(space, gym.spaces.Box):
+        return ([float(x) for x in space.low.reshape(-1)], [float(x) for x in space.high.reshape(-1)])
+    return None
 
 
 def _n_actions(env_id: str) -> int:
@@ -164,8 +199,18 @@ def export_minari(run_dir: "str | os.PathLike[str]", dataset_id: str, *, n_actio
         raise ValueError(f"{run_dir / ANSWERS_FILE}: the run has no answers to export (the expert took no step)")
     env_id = _run_env(run_dir)
     obs_dim = len(steps[0]["obs"])
-    n = _n_actions(env_id) if n_actions is None else int(n_actions)
-    buffers = [_buffer(i, seg) for i, seg in enumerate(segments(steps))]
+    bounds = _box_bounds(env_id)
+    box = bounds is not None
+    if box != isinstance(steps[0]["action"], list):
+        raise ValueError(f"{run_dir / ANSWERS_FILE}: its actions ({steps[0]['action']!r}) are not {env_id}'s kind")
+    if bounds is not None:
+        if n_actions is not None:
+            raise ValueError(f"n_actions is for discrete actions; {env_id}'s actions are in a box")
+        low, high = (np.asarray(b, dtype=np.float32) for b in bounds)
+        action_space: Any = gym.spaces.Box(low, high, low.shape, np.float32)
+    else:
+        action_space = gym.spaces.Discrete(_n_actions(env_id) if n_actions is None else int(n_actions))
+    buffers = [_buffer(i, seg, box) for i, seg in enumerate(segments(steps))]
     parse_dataset_id(dataset_id)  # a malformed id is refused before anything is written
     path = get_dataset_path(dataset_id)
     if path.exists():
@@ -175,7 +220,7 @@ def export_minari(run_dir: "str | os.PathLike[str]", dataset_id: str, *, n_actio
             dataset_id=dataset_id,
             buffer=buffers,
             observation_space=gym.spaces.Box(-np.inf, np.inf, (obs_dim,), np.float32),
-            action_space=gym.spaces.Discrete(n),
+            action_space=action_space,
             algorithm_name="arld answers",
             author=author,
             description=description or f"The expert's answers in the arld run {run_dir.resolve()} on {env_id}: one "
@@ -214,8 +259,11 @@ def is_dataset(demos: Any) -> bool:
 def minari_columns(dataset: Any) -> Dict[str, np.ndarray]:
     """The transitions of a Minari dataset (see `load_dataset`) as demonstration columns (`demos=`): each episode's
     steps in order, its last step marked truncated when it neither terminated nor was truncated, so that the
-    episodes stay apart. Observations are flattened to float32 vectors; actions must be discrete."""
+    episodes stay apart. Observations are flattened to float32 vectors; actions are discrete (an index each), or in a
+    box (a `Box` action space: float32 vectors)."""
+    import gymnasium as gym
     ds = load_dataset(dataset)
+    box = isinstance(ds.action_space, gym.spaces.Box)
     cols: Dict[str, List[Any]] = {k: [] for k in ("obs", "actions", "rewards", "next_obs", "terminated", "truncated")}
     for ep in ds.iterate_episodes():
         n = len(ep.actions)
@@ -223,16 +271,20 @@ def minari_columns(dataset: Any) -> Dict[str, np.ndarray]:
             continue
         obs = np.asarray(ep.observations, dtype=np.float32).reshape(n + 1, -1)
         actions = np.asarray(ep.actions)
-        if not np.issubdtype(actions.dtype, np.integer) or actions.reshape(n, -1).shape[1] != 1:
+        if box:
+            actions = actions.astype(np.float32).reshape(n, -1)
+        elif not np.issubdtype(actions.dtype, np.integer) or actions.reshape(n, -1).shape[1] != 1:
             raise ValueError(f"episode {ep.id} of {ds.spec.dataset_id} has actions of type {actions.dtype} and shape "
-                             f"{actions.shape}: arld's demonstrations are discrete actions")
+                             f"{actions.shape}: arld's demonstrations are discrete actions or vectors in a Box")
+        else:
+            actions = actions.reshape(n).astype(np.int64)
         terminated = np.asarray(ep.terminations, dtype=bool).reshape(n)
         truncated = np.asarray(ep.truncations, dtype=bool).reshape(n).copy()
         if not (terminated[-1] or truncated[-1]):
             truncated[-1] = True
         cols["obs"].append(obs[:-1])
         cols["next_obs"].append(obs[1:])
-        cols["actions"].append(actions.reshape(n).astype(np.int64))
+        cols["actions"].append(actions)
         cols["rewards"].append(np.asarray(ep.rewards, dtype=np.float32).reshape(n))
         cols["terminated"].append(terminated)
         cols["truncated"].append(truncated)
@@ -252,16 +304,22 @@ def write_demo_file(dataset: Any, path: "str | os.PathLike[str]", env_id: Option
     n = len(cols["actions"])
     ends = cols["terminated"] | cols["truncated"]
     episode = np.concatenate([[0], np.cumsum(ends)[:-1]]).astype(int)
-    header = {"format": "arld-demos", "version": 1, "env": env_id, "expert": f"minari:{ds.spec.dataset_id}",
-              "seed": 0, "obs_dim": int(cols["obs"].shape[1]), "n_actions": _n_actions(env_id), "transitions": n,
-              "episodes": int(episode[-1]) + 1}
+    header: Dict[str, Any] = {"format": "arld-demos", "version": 1, "env": env_id,
+                              "expert": f"minari:{ds.spec.dataset_id}", "seed": 0, "obs_dim": int(cols["obs"].shape[1])}
+    box = cols["actions"].ndim == 2
+    if box:
+        low, high = (np.asarray(b, dtype=np.float32).reshape(-1) for b in (ds.action_space.low, ds.action_space.high))
+        header.update({"action_dim": int(low.size), "low": [float(x) for x in low], "high": [float(x) for x in high]})
+    else:
+        header["n_actions"] = _n_actions(env_id)
+    header.update({"transitions": n, "episodes": int(episode[-1]) + 1})
     tmp = Path(f"{path}.tmp")
     with open(tmp, "w", encoding="utf-8") as f:
         f.write(json.dumps(header) + "\n")
         for i in range(n):
             f.write(json.dumps({
                 "episode": int(episode[i]), "obs": [float(x) for x in cols["obs"][i]],
-                "action": int(cols["actions"][i]),
+                "action": [float(x) for x in cols["actions"][i]] if box else int(cols["actions"][i]),
                 "reward": float(cols["rewards"][i]), "next_obs": [float(x) for x in cols["next_obs"][i]],
                 "terminated": bool(cols["terminated"][i]), "truncated": bool(cols["truncated"][i])}) + "\n")
     os.replace(tmp, path)

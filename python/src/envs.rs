@@ -172,6 +172,15 @@ pub(crate) fn is_box_env(id: &str) -> bool {
     env::box_spec(id).is_ok()
 }
 
+/// The bounds `(low, high)` of the actions of a task with actions in a box (built in or registered); `None` for
+/// a task arld does not know with actions in a box.
+#[pyfunction]
+pub(crate) fn box_bounds(id: &str) -> Option<(Vec<f32>, Vec<f32>)> {
+    env::box_spec(id)
+        .ok()
+        .map(|spec| (spec.action_low.to_vec(), spec.action_high.to_vec()))
+}
+
 /// The ids of the built-in environments: the tasks of discrete actions, then those with actions in a box.
 #[pyfunction]
 pub(crate) fn builtin_env_ids() -> Vec<&'static str> {

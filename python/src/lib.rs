@@ -41,7 +41,9 @@ mod snapshots;
 mod web;
 
 use crate::config::{config_keys, resolve_config};
-use crate::envs::{BuiltinEnv, builtin_env_ids, is_box_env, register_box_env, register_env};
+use crate::envs::{
+    BuiltinEnv, box_bounds, builtin_env_ids, is_box_env, register_box_env, register_env,
+};
 use crate::policy::Policy;
 use crate::run::{Run, start_run};
 use crate::snapshots::{fresh_policy, snapshot_config, snapshot_policy};
@@ -55,6 +57,7 @@ pub(crate) fn _arld(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(register_env, m)?)?;
     m.add_function(wrap_pyfunction!(register_box_env, m)?)?;
     m.add_function(wrap_pyfunction!(is_box_env, m)?)?;
+    m.add_function(wrap_pyfunction!(box_bounds, m)?)?;
     m.add_function(wrap_pyfunction!(builtin_env_ids, m)?)?;
     m.add_function(wrap_pyfunction!(fresh_policy, m)?)?;
     m.add_function(wrap_pyfunction!(config_keys, m)?)?;

@@ -250,3 +250,60 @@ def test_bad_answers_and_datasets_are_clear_errors(tmp_path, monkeypatch):
     assert out.returncode == 1 and "no answer log" in out.stderr
     with pytest.raises(FileNotFoundError, match="not found locally"):
         arld.Agent("dqfd", gym.make("CartPole-v0"), demos="arld-test/nothing-v0")
+
+
+def test_a_box_runs_answers_are_a_minari_dataset_that_runs_train_on(tmp_path, monkeypatch):
+    """Answers in a box, from the command line's run and from Python's: exported (`python -m arld.answers export`),
+    loaded by minari with the very actions answers.jsonl holds and the task's box, and pre-trained on by the
+    command line (`demo_file` = the dataset) and by Python (`demos=` the dataset)."""
+    monkeypatch.setenv("MINARI_DATASETS_PATH", str(tmp_path / "datasets"))
+    assert ARLD.is_file(), "the command line is not built (cargo build --release)"
+    cli_run = tmp_path / "cli-run"
+    out = subprocess.run([str(ARLD), "train", "--env", "Pendulum-v1", "--method", "adqn", "--expert", "scripted",
+                          "--quiet", "--set", "train_steps=600", "--set", "budget=80", "-o", str(cli_run)],
+                         capture_output=True, text=True)
+    assert out.returncode == 0, out.stderr
+    py_run = tmp_path / "py-run"
+
+    def torque(obs):
+        return [float(np.clip(-2.0 * obs[1] - 0.5 * obs[2], -2.0, 2.0))]
+
+    model = arld.Agent("adqn", gym.make("Pendulum-v1"), expert=torque, seed=3)
+    model.learn(total_timesteps=600, log_dir=py_run)
+    for run, dataset in ((cli_run, "arld-test/pendulum-cli-answers-v0"), (py_run, "arld-test/pendulum-py-answers-v0")):
+        logged = [json.loads(line) for line in (run / "answers.jsonl").read_text().splitlines()]
+        assert logged and all(isinstance(s["action"], list) for s in logged)
+        out = subprocess.run([sys.executable, "-m", "arld.answers", "export", str(run), "--dataset-id", dataset],
+                             capture_output=True, text=True)
+        assert out.returncode == 0, out.stderr
+        ds = minari.load_dataset(dataset)
+        assert isinstance(ds.action_space, gym.spaces.Box)
+        assert ds.action_space.low.tolist() == [-2.0] and ds.action_space.high.tolist() == [2.0]
+        actions = np.concatenate([np.asarray(ep.actions, dtype=np.float32).reshape(-1, 1)
+                                  for ep in ds.iterate_episodes()])
+        assert np.array_equal(actions, np.asarray([s["action"] for s in logged], dtype=np.float32))
+        assert ds.total_steps == len(logged)
+        # The agent's proposal is kept in the infos, as a JSON list.
+        first = next(iter(ds.iterate_episodes()))
+        assert json.loads(first.infos["agent_action"][0]) == pytest.approx(logged[0]["agent_action"])
+        # The command line pre-trains on the dataset, every transition.
+        out = subprocess.run([str(ARLD), "train", "--env", "Pendulum-v1", "--method", "dqfd", "--quiet", "--set",
+                              f"demo_file={dataset}", "--set", "pretrain_steps=50", "--set", "train_steps=400",
+                              "--set", "learning_starts=200", "-o", str(tmp_path / f"{run.name}-dqfd")],
+                             capture_output=True, text=True)
+        assert out.returncode == 0, out.stderr
+        summary = json.loads((tmp_path / f"{run.name}-dqfd" / "summary.json").read_text())
+        assert summary["demos_pretrain"] == len(logged)
+        # What the command line reads is what minari reads; the demonstration file of it says the box.
+        assert assert_cli_reads_as_minari(dataset, "Pendulum-v1", tmp_path / f"{run.name}.jsonl") == len(logged)
+        demo_file = tmp_path / f"{run.name}.demos.jsonl"
+        out = subprocess.run([sys.executable, "-m", "arld.answers", "to-demos", dataset, str(demo_file), "--env",
+                              "Pendulum-v1"], capture_output=True, text=True)
+        assert out.returncode == 0, out.stderr
+        header = json.loads(demo_file.read_text().splitlines()[0])
+        assert (header["action_dim"], header["low"], header["high"]) == (1, [-2.0], [2.0]) and "n_actions" not in header
+    # Python pre-trains on the dataset too.
+    seeded = arld.Agent("dqfd", gym.make("Pendulum-v1"), demos="arld-test/pendulum-py-answers-v0", pretrain_steps=50,
+                        seed=5)
+    seeded.learn(400)
+    assert seeded.summary["demos_pretrain"] == len((py_run / "answers.jsonl").read_text().splitlines())

@@ -454,8 +454,8 @@ def test_a_person_answers_a_gymnasium_box_task_with_a_pad_a_key_and_the_slider(t
     hello = report["hello"]
     assert hello["env"].startswith("Pendulum-v1") and hello["box"]["names"] == ["twist"], hello
     assert (hello["box"]["low"], hello["box"]["high"]) == ([low], [high])
-    # The torque each control gave: the stick's x times the half-width, the held left arrow the lower bound, the
-    # slider its value.
+    # The torque each control gave: the stick's x times the half-width, the held left arrow the lower bound (its
+    # segment starts at once, the torque ramping down from the centre to it in 0.4 s), the slider its value.
     expected = [centre + 0.5 * half, centre - 0.25 * half, low, 0.8]
     lines = [json.loads(row) for row in (run / "answers.jsonl").read_text().splitlines()]
     questions = report["questions"]
@@ -469,9 +469,15 @@ def test_a_person_answers_a_gymnasium_box_task_with_a_pad_a_key_and_the_slider(t
         first = next(row for row in lines if np.array_equal(np.float32(row["obs"]), np.float32(q["obs"])))
         segment = [row for row in lines if row["question_step"] == first["question_step"]]
         lengths.append(len(segment))
-        assert 0.8 * (len(segment) - 1) / 20 <= q["segmentS"] <= 2 * len(segment) / 20, (q, len(segment))
+        # Paced at the real-time rate, never faster (a loaded machine may make it slower).
+        assert 0.8 * (len(segment) - 1) / 20 <= q["segmentS"], (q, len(segment))
         assert segment and all(len(row["action"]) == 1 for row in segment), segment
-        assert all(abs(row["action"][0] - want) < 1e-6 for row in segment), (q["control"], want, segment)
+        torques = [row["action"][0] for row in segment]
+        if q["control"] == "keys":
+            assert all(b <= a for a, b in zip(torques, torques[1:])) and all(want <= t < centre for t in torques), torques
+            assert len(torques) < 20 or torques[-1] == want, torques
+        else:
+            assert all(abs(t - want) < 1e-6 for t in torques), (q["control"], want, segment)
         assert all(row["expert"] == "web" and row["started_by"] == "rule" for row in segment)
     # learn returned: the page shows the end screen of the run the program has back; the budget spent is the
     # logged steps.
@@ -483,5 +489,9 @@ def test_a_person_answers_a_gymnasium_box_task_with_a_pad_a_key_and_the_slider(t
     solved = f"Solved at step {summary['steps_to_solve']} of 3000" if summary["solved"] else None
     assert end["title"] == (solved or "Not solved in 3000 steps"), end
     assert end["badge"] == "the program has the run" and end["handed"] is not None, end
-    assert end["outcome"]["answered"] == 4 and end["rows"]["Questions answered"].startswith("4"), end
+    # (The questions the person did not hand back; the budget of 100 lets the person answer more than the four
+    # above, with continuous.mjs' later gestures.)
+    given = sum(1 for q in questions if not q["control"].startswith("handed back"))
+    assert given >= 4 and end["outcome"]["answered"] == given, end
+    assert end["rows"]["Questions answered"].startswith(str(given)), end
     assert (shots / "end-screen.png").is_file()

@@ -33,8 +33,12 @@ const reload = !!args.reload;
 const answerLimit = Number(args.answer || 0);
 const expectImage = !!args["expect-image"];
 const undoTest = !!args.undo;
-// (--think MS: wait MS milliseconds before each key, as a person reading the state would; --watch: watch every
-//  replay to its end instead of skipping all but the first.)
+// (--think MS: wait MS milliseconds before each key, as a person reading the state would (in real time, before
+//  the key that answers a question, once the question can be answered); --watch: watch every replay to its end
+//  instead of skipping all but the first.)
+// Real time: the report's "overhead" times each question on the page's clock: from its first sign (its replay, or
+// its prompt) to the person's segment's first running step ("waitS": the replay, their reaction and any countdown;
+// not the breath before, which the page cannot see), and the segment's play from then to its end ("playS").
 const think = Number(args.think || 0);
 const watchAll = !!args.watch;
 const thinkPause = () => (think ? page.waitForTimeout(think) : null);
@@ -198,6 +202,9 @@ const timeoutNotices = [];
 // The first opening question this person saw, and the one left open (with --answer).
 let first = null, open = null, budgetSpentSeen = false;
 const latencies = [];
+// Real time: the page's times of each question (see "overhead" above).
+const timings = [];
+let timing = { from: null, live: null };
 const state = () => page.evaluate(() => ({ prompt: arld.prompt, status: arld.status, ended: arld.ended, replaying: arld.replaying }));
 let undoReport = null, replaysWatched = 0, replaysSkipped = 0, countdownsSeen = 0;
 const sameObs = (a, b) => a.length === b.length && a.every((x, i) => x === b[i]);
@@ -234,6 +241,14 @@ for (;;) {
   }
   let s = await state();
   if (s.ended) break;
+  if (realtime) {
+    // The page's clock for the overhead: a question's first sign (its replay, or its prompt), its first running
+    // step, its end.
+    const now = Date.now(), q = s.prompt;
+    if (!q && timing.live !== null) { timings.push({ waitS: (timing.live - timing.from) / 1000, playS: (now - timing.live) / 1000 }); timing = { from: null, live: null }; }
+    if (timing.from === null && (s.replaying || (q && q.waits && q.agent_action !== null))) timing.from = now;
+    if (q && !q.waits && !q.starts_in && timing.live === null && timing.from !== null) timing.live = now;
+  }
   if (s.replaying) { await handleReplay(); s = await state(); if (s.ended) break; }
   const p = s.prompt;
   if (p && p.starts_in) { countdownsSeen++; await shot("countdown"); }
@@ -297,6 +312,7 @@ for (;;) {
     if (realtime) {
       // A fresh key press opens the segment; then the key stays held (none for the no-op action).
       await holdKey(null);
+      await thinkPause();
       if (a === hello.noop) await page.keyboard.press(keyOf(a));
       else await holdKey(a);
     }
@@ -346,5 +362,5 @@ if (!answerLimit) for (const name of ["training", "asking", "mid-segment"]) if (
   fail(`no "${name}" screenshot: the run never showed that state (${answers.length} answers, ${steps} steps answered, budget spent seen: ${budgetSpentSeen})`);
 if (undoTest && !undoReport) fail("no question with steps to come was asked: undo was not tried");
 console.log(JSON.stringify({ env: hello.env, answers, skipped, timeoutNotices, steps, reloaded, refused, watcherErrors: watcher, drawn: taken, first, open, budgetSpentSeen, endScreen,
-  undo: undoReport, replaysWatched, replaysSkipped, countdownsSeen,
+  undo: undoReport, replaysWatched, replaysSkipped, countdownsSeen, overhead: timings,
   keyLatencyMs: latencies.length ? { n: latencies.length, median: latencies.sort((x, y) => x - y)[latencies.length >> 1], max: latencies[latencies.length - 1] } : null }));

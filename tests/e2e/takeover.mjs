@@ -12,6 +12,17 @@
 // of the agent), once the person presses a fresh key: the report's takeover.resumed says what the page showed then
 // (takeover-resumed.png), a second later before any key (beforeKey), and the key pressed (first); then the
 // person holds control for --hold steps more, hands back and answers the agent's questions to the end.
+// --breath: instead of the above, a person who presses T the moment each of their segments ends, whatever the page
+// shows: the run is then either acting (a takeover opens before any question: "granted", handed back at once with
+// Esc) or about to ask again (its breath before the next question: "refused" when the agent's question comes first).
+// After a refused T the person presses nothing until that question's segment has ended, and a takeover opening
+// then is one nobody asked for: the script fails. The report has "breath": {granted, refused, banners}.
+// --watch: after the first question the person turns on watch mode (V: the agent's own steps at the real-time rate,
+// so that the button is offered for long stretches, where at full speed the agent may ask again within
+// milliseconds) and takes over in it; once the takeover is handed back (the agent's questions in the next 100 steps
+// go back to it unasked, so it acts) they sample the run's status for two seconds: the report's "watch" has the steps
+// and seconds of those samples and the person's seconds that grew meanwhile (none should: watching is not
+// answering); then V again: full speed (also once no budget is left).
 // Prints one JSON line: {"takeover": {...what the page showed of it...}, "questions": N, "endScreen": {...}}.
 import { chromium } from "playwright-core";
 import fs from "node:fs";
@@ -62,25 +73,110 @@ const panel = () => page.evaluate(() => ({
   text: document.getElementById("prompt-text").textContent,
   className: document.getElementById("prompt").className,
   pass: { text: document.getElementById("pass").textContent, disabled: document.getElementById("pass").disabled },
-  takeoverButton: { hidden: document.getElementById("takeover").hidden, disabled: document.getElementById("takeover").disabled },
+  takeoverButton: { hidden: document.getElementById("takeover").hidden, disabled: document.getElementById("takeover").disabled,
+    text: document.getElementById("takeover").textContent },
   budget: document.getElementById("s-budget").textContent,
   takeovers: document.getElementById("s-takeovers").textContent,
 }));
 
 let lastId = 0, questions = 0, takeover = null, phase = args.resumed ? "resumed" : "before";
+// --breath: the person's T is "asked" (pressed, nothing came of it yet), or "quiet" (refused: no T until the question
+// that came first has had its segment).
+const breath = args.breath ? { granted: 0, refused: 0, banners: [], t: null, segment: null } : null;
 let stopped = null;
 let running = 0;
+// --watch: the stretches sampled while the agent acted (no prompt), and the last sample.
+const watch = args.watch ? { on: false, measured: false, steps: 0, seconds: 0, personS: 0, samples: 0, last: null, afterAt: null } : null;
 for (;;) {
   await page.waitForTimeout(5);
   const s = await state();
   if (s.ended) break;
   if (s.replaying) { await page.keyboard.press("Shift"); continue; }
   const p = s.prompt;
+  if (breath) {
+    if (!p) {
+      await holdKey(null);
+      // A segment of the person's just ended: T at once (unless the last T was refused and this is that question's).
+      if (breath.segment === "running") {
+        breath.segment = null;
+        if (breath.t === "quiet") { breath.t = null; continue; }
+        await page.keyboard.press("t");
+        breath.t = "asked";
+        breath.banners.push(await page.evaluate(() => (document.getElementById("banner").hidden ? null : document.getElementById("banner").textContent)));
+      }
+      continue;
+    }
+    if (p.waits && p.agent_action !== null && p.id > lastId) {
+      lastId = p.id;
+      if (p.takeover) {
+        if (breath.t !== "asked") fail(`a takeover nobody asked for: ${JSON.stringify({ prompt: p, breath })}`);
+        breath.granted++;
+        breath.t = null;
+        await page.keyboard.press("Escape");
+        continue;
+      }
+      questions++;
+      if (breath.t === "asked") { breath.refused++; breath.t = "quiet"; }
+      const a = cartpole(p.obs);
+      await holdKey(null);
+      if (a === hello.noop) await page.keyboard.press(keyOf(a)); else await holdKey(a);
+      continue;
+    }
+    if (!p.waits && !p.starts_in && !p.takeover) breath.segment = "running";
+    const a = cartpole(p.obs);
+    await holdKey(a === hello.noop ? null : a);
+    continue;
+  }
+  if (watch) {
+    if (watch.on && watch.seconds >= 2) watch.measured = true;
+    if (watch.on && (watch.measured || (s.status && s.status.questions_left_max === 0))) {
+      await page.keyboard.press("v");
+      await page.waitForFunction(() => !arld.watch, null, { timeout: 5000 }).catch(() => fail("watch mode did not go off"));
+      watch.on = false;
+      watch.measured = true;
+    }
+    // (Not during a replay, which a key only skips; tried again until watch mode is on.)
+    if (!watch.on && !watch.measured && questions >= 1 && !p && !s.replaying) {
+      await page.keyboard.press("v");
+      watch.on = await page.waitForFunction(() => arld.watch, null, { timeout: 2000 }).then(() => true, () => false);
+    }
+    // Samples after the takeover (from 300 ms on: the status that counts the hand-back's own step comes a step later).
+    const sample = !p && watch.on && phase === "after" && s.status && Date.now() - (watch.afterAt ??= Date.now()) > 300
+      ? { at: Date.now(), step: s.status.step, personS: s.status.person_s } : null;
+    if (sample && watch.last) {
+      watch.steps += sample.step - watch.last.step;
+      watch.seconds += (sample.at - watch.last.at) / 1000;
+      watch.personS += sample.personS - watch.last.personS;
+      watch.samples++;
+    }
+    watch.last = sample;
+  }
   if (!p) {
     await holdKey(null);
     if (phase === "before" && questions >= 1 && s.status && s.status.budget - s.status.budget_used > holdSteps + 10) {
       // The agent acts: the button is offered, and T takes over from here.
       if (s.button.hidden || s.button.disabled) continue;
+      if (watch && !watch.cancel) {
+        // First a request made while the run is paused (it waits for the run to go on), cancelled with T again:
+        // no takeover may follow it.
+        await page.click("#pause");
+        await page.waitForFunction(() => arld.paused, null, { timeout: 5000 }).catch(() => fail("the run did not pause"));
+        // (The agent may have asked meanwhile: then try again later.)
+        if (!(await page.evaluate(() => arld.takeover.offered && !arld.prompt))) {
+          await page.click("#pause");
+          await page.waitForFunction(() => !arld.paused, null, { timeout: 5000 });
+          continue;
+        }
+        await page.keyboard.press("t");
+        await page.waitForFunction(() => arld.takeover.pending, null, { timeout: 5000 }).catch(() => fail("the request is not pending"));
+        watch.cancel = { pending: await panel() };
+        await page.keyboard.press("t");
+        await page.waitForFunction(() => !arld.takeover.pending, null, { timeout: 5000 }).catch(() => fail("T again did not cancel"));
+        watch.cancel.cancelled = await panel();
+        await page.click("#pause");
+        await page.waitForFunction(() => !arld.paused, null, { timeout: 5000 });
+        continue;
+      }
       takeover = { ...(takeover || {}), pressedAtStep: s.status.step, offered: await panel() };
       await page.keyboard.press("t");
       phase = "asked";
@@ -197,6 +293,10 @@ await page.screenshot({ path: path.join(shots, "takeover-end.png") });
 await browser.close();
 fs.rmSync(userDataDir, { recursive: true, force: true });
 if (pageErrors.length) fail(`the page threw: ${pageErrors.join("; ")}`);
+if (breath) {
+  console.log(JSON.stringify({ breath, questions, endScreen }));
+  process.exit(0);
+}
 // Resumed, the page opened on the takeover in progress (its episode may end before many more steps).
 if (!takeover || !(takeover.inProgress || takeover.resumed)) fail(`the person never had control long enough: ${JSON.stringify({ takeover, questions })}`);
-console.log(JSON.stringify({ takeover, questions, running, endScreen }));
+console.log(JSON.stringify({ takeover, questions, running, endScreen, watch }));

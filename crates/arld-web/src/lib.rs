@@ -8,20 +8,23 @@
 //! geometry, rendered frames of any other environment, or its observation as a table). The run starts once a
 //! page is open ([`WebExpert::wait_for_page`], unless `wait=no`).
 //!
-//! Training runs at full speed while the page shows it: the environment, step, episode, budget, the uncertainty
+//! Training runs at full speed while the page shows it (in real time the person may choose watch mode: the agent's
+//! own steps at the real-time rate, outside any question, so not the person's time): the environment, step, episode, budget, the uncertainty
 //! against the adaptive threshold, the test-return curve, and the person's own time (questions left at most,
 //! seconds spent, an estimate of the time still needed at their pace). When the agent asks, the run waits for
 //! the person, who answers with the keyboard or the buttons for the whole segment, either turn-based (one step
-//! per key) or in real time (`fps`: after a fresh key and a countdown, the environment advances at that rate
+//! per key) or in real time (`fps`: after a deliberate gesture, and a countdown unless the gesture was the action
+//! itself (an action's key, a stick leaving its dead zone), the environment advances at that rate
 //! with the held key, or the no-op action when none is held; a question's segment lasts `segment_s` seconds of play,
 //! 3 by default: [`WebOptions::segment_steps`]). Before a question the page replays the agent's
-//! own steps since the person's last one, and in turn-based mode the person can undo their last key: both
+//! own steps since the person's last one (during the breath after their last segment), and in turn-based mode the person can undo their last key: both
 //! rebuild the environment from the query's episode ([`arld_core::env::replay_episode`]) where the frame source
 //! can show such a copy. Undo works one key ahead: the page shows the state after a key on a copy, and the run
 //! takes that key only when the next one comes, so an undone key never reaches the training loop. A question goes back to the agent ([`Answer::Unanswered`]) when the person hands
 //! it back or, with a `timeout`, when nobody answers in time (after a hand-back the agent's questions in the next
 //! [`HANDBACK_QUIET_STEPS`] steps of the episode go back to it unasked). In real time the person may also take
-//! over unasked ("Take over", key T, while the agent acts: [`Expert::wants_control`]): from the state the agent is
+//! over unasked ("Take over", key T, while the agent acts: [`Expert::wants_control`]; offered only then, not while
+//! a question opens, and a request not yet taken can be cancelled: [`server::Takeover`]): from the state the agent is
 //! in, a segment opens as a question's does (a fresh key, the countdown, then the held key), charged to the budget
 //! the same way and logged with `started_by: "person"`, until they hand back (Esc), the episode ends or the budget
 //! is spent. The person may pause the run; their time
@@ -66,7 +69,8 @@ use std::time::{Duration, Instant};
 const UPDATES_PER_S: f64 = 15.0;
 /// How often a wait for the person looks for a stop request.
 const STOP_POLL: Duration = Duration::from_millis(50);
-/// The agent's steps replayed to the person before a question, at most (the page plays them within 2 s).
+/// The agent's steps replayed to the person before a question, at most (the page plays them within 1 s, during the
+/// breath after the person's last segment).
 pub const REPLAY_MAX_STEPS: usize = 200;
 /// Real time: the countdown between the person's key and the start of their segment.
 pub const REALTIME_COUNTDOWN: Duration = Duration::from_millis(750);
@@ -270,8 +274,9 @@ pub struct Page<A: PageAction = usize> {
 }
 
 impl Page<Vec<f32>> {
-    /// A built-in task with actions in a box: its observation as a labelled table; nothing held is the box's
-    /// centre.
+    /// A task with actions in a box: a built-in one drawn from its geometry, another (a Python program's,
+    /// registered under arld's name for it with facts added) its observation as a labelled table; nothing held is
+    /// the box's centre.
     pub fn builtin_box(env_id: &str) -> Result<Self> {
         let spec = arld_core::env::box_spec(env_id)?;
         let noop = spec
@@ -285,10 +290,14 @@ impl Page<Vec<f32>> {
             actions: Vec::new(),
             noop,
             solve_threshold: spec.solve_threshold.unwrap_or(f64::INFINITY),
-            frames: Box::new(frames::ObservationTable::new(
-                spec.obs_dim,
-                protocol::box_obs_labels(env_id),
-            )),
+            frames: if arld_core::env::continuous::known_continuous_ids().contains(&env_id) {
+                Box::new(frames::GeometryFrames)
+            } else {
+                Box::new(frames::ObservationTable::new(
+                    spec.obs_dim,
+                    protocol::box_obs_labels(env_id),
+                ))
+            },
             dim_names: None,
         })
     }
@@ -374,6 +383,8 @@ pub struct WebExpert<A: PageAction = usize> {
     /// The run was resumed from a snapshot ([`Expert::restore`]) and has not asked yet: a real-time segment in
     /// progress goes on only after a fresh key and the countdown, as a segment's opening does.
     resumed: bool,
+    /// The last answer's gesture was the action itself (a real-time segment then starts without the countdown).
+    answered_acting: bool,
 }
 
 impl WebExpert {
@@ -448,6 +459,7 @@ impl<A: PageAction> WebExpert<A> {
             declined: false,
             taking_over: false,
             resumed: false,
+            answered_acting: false,
         })
     }
 
@@ -591,8 +603,9 @@ impl<A: PageAction> WebExpert<A> {
                 }
                 Input::Undo if undo => return Ok(None),
                 Input::Undo => {}
-                Input::Action(action) => {
+                Input::Action { action, acting } => {
                     let action = self.action_of(&action)?;
+                    self.answered_acting = acting;
                     self.last_tick = Instant::now();
                     self.effort.keys += 1;
                     return Ok(Some(Answer::Action {
@@ -713,11 +726,12 @@ impl<A: PageAction> WebExpert<A> {
         }
     }
 
-    /// Real time: only the segment's opening question waits for a fresh key, then a countdown; the later steps
-    /// take the held key (or the no-op action) at the set rate. So does the first step after a resume (`resumed`)
-    /// of a segment in progress: the person had no control while the run was stopped.
+    /// Real time: only the segment's opening question waits for a fresh key, then a countdown where needed; the
+    /// later steps take the held key (or the no-op action) at the set rate. So does the first step after a resume
+    /// (`resumed`) of a segment in progress: the person had no control while the run was stopped. The countdown is
+    /// needed unless the answer's gesture was the action itself (a fresh action key, a stick or trigger leaving
+    /// rest: the person acts already), and always after a resume.
     fn ask_realtime(&mut self, query: &Query<'_, A>, fps: f64, resumed: bool) -> Result<Answer<A>> {
-        let period = Duration::from_secs_f64(1.0 / fps);
         if query.agent_action.is_some() || resumed {
             let id = self.show_query(query)?;
             let answer = loop {
@@ -728,22 +742,24 @@ impl<A: PageAction> WebExpert<A> {
             let Answer::Action { response_s, .. } = answer else {
                 return Ok(answer);
             };
-            self.publish_prompt(Some(&Prompt {
-                id,
-                agent_action: agent_action(query),
-                steps_left: query.steps_left,
-                waits: false,
-                undo: false,
-                starts_in: Some(REALTIME_COUNTDOWN.as_secs_f64()),
-                obs: query.obs.to_vec(),
-                takeover: self.taking_over,
-            }));
-            let started = Instant::now();
-            let mut paused = Duration::ZERO;
-            while started.elapsed().saturating_sub(paused) < REALTIME_COUNTDOWN {
-                self.stopped("during the countdown to a real-time segment")?;
-                paused += self.wait_while_paused()?;
-                std::thread::sleep(STOP_POLL.min(REALTIME_COUNTDOWN / 10));
+            if !self.answered_acting || resumed {
+                self.publish_prompt(Some(&Prompt {
+                    id,
+                    agent_action: agent_action(query),
+                    steps_left: query.steps_left,
+                    waits: false,
+                    undo: false,
+                    starts_in: Some(REALTIME_COUNTDOWN.as_secs_f64()),
+                    obs: query.obs.to_vec(),
+                    takeover: self.taking_over,
+                }));
+                let started = Instant::now();
+                let mut paused = Duration::ZERO;
+                while started.elapsed().saturating_sub(paused) < REALTIME_COUNTDOWN {
+                    self.stopped("during the countdown to a real-time segment")?;
+                    paused += self.wait_while_paused()?;
+                    std::thread::sleep(STOP_POLL.min(REALTIME_COUNTDOWN / 10));
+                }
             }
             self.last_tick = Instant::now();
             return Ok(Answer::Action {
@@ -766,21 +782,27 @@ impl<A: PageAction> WebExpert<A> {
         }));
         self.stopped("during a real-time segment")?;
         self.wait_while_paused()?;
-        let next = self.last_tick + period;
-        std::thread::sleep(next.saturating_duration_since(Instant::now()));
+        self.pace(fps);
         // A takeover goes on until the person hands back (from any of its prompts).
         if self.taking_over && self.handed_back_now() {
             self.handing_back = true;
             return Ok(Answer::Unanswered { waited_s: 0.0 });
         }
-        // Keep the rate, but do not race to catch up after a slow step (or a pause).
-        self.last_tick = Instant::now()
-            .checked_sub(period)
-            .map_or(next, |late| next.max(late));
         Ok(Answer::Action {
             action: self.held(),
             response_s: None,
         })
+    }
+
+    /// Real time: waits for the next step's time at `fps` steps a second after the last one; keeps the rate, but
+    /// does not race to catch up after a slow step (or a pause).
+    fn pace(&mut self, fps: f64) {
+        let period = Duration::from_secs_f64(1.0 / fps);
+        let next = self.last_tick + period;
+        std::thread::sleep(next.saturating_duration_since(Instant::now()));
+        self.last_tick = Instant::now()
+            .checked_sub(period)
+            .map_or(next, |late| next.max(late));
     }
 
     /// Shows `status` on the page (and keeps it for a page that connects later).
@@ -825,8 +847,9 @@ impl<A: PageAction> WebExpert<A> {
             // What the person saw the agent do is the latest status.
             self.publish_unsent_status();
         } else if query.agent_action.is_some() {
-            // A request to take over made while the agent asks is answered by the question itself.
-            self.server.shared.take_takeover();
+            // No takeover while a question opens (its breath, replay and segment): one asked for while the agent
+            // acted is answered by the question itself, and none can be asked for until the agent acts again.
+            self.server.shared.offer_takeover(false);
             // Shortly after a hand-back in the same episode the question is not asked again.
             if let Some((episode, at)) = self.handed_back {
                 if episode == self.episode
@@ -837,7 +860,12 @@ impl<A: PageAction> WebExpert<A> {
                 }
                 self.handed_back = None;
             }
-            // Real time: a breath after the person's last segment before the next question.
+            // A segment opens: nothing can be carried over from the last one (it ended with its last step).
+            self.carried = None;
+            self.publish_unsent_status();
+            self.replay_agent_steps(query)?;
+            // Real time: a breath after the person's last segment before the next question (the replay plays
+            // meanwhile: the person's wait is the longer of the two, not their sum).
             if let Some(ended) = self.segment_ended.take() {
                 while ended.elapsed() < REALTIME_BREATH {
                     self.stopped("before a question")?;
@@ -846,10 +874,6 @@ impl<A: PageAction> WebExpert<A> {
                     );
                 }
             }
-            // A segment opens: nothing can be carried over from the last one (it ended with its last step).
-            self.carried = None;
-            self.publish_unsent_status();
-            self.replay_agent_steps(query)?;
         }
         let answer = match self.server.options.fps {
             None => self.ask_turn(query)?,
@@ -1019,6 +1043,19 @@ impl<A: PageAction> Expert<A> for WebExpert<A> {
     fn observe(&mut self, p: &Progress<'_, A>) {
         self.lift_hand_over();
         self.episode = p.episode;
+        // Real time: the person may take over while the agent acts and budget is left; in watch mode the agent's
+        // steps go at the real-time rate (outside any question: not the person's answering time).
+        let mut watching = false;
+        if let Some(fps) = self.server.options.fps {
+            let acts = !p.queries.expert_in_control() && p.step < p.train_steps;
+            self.server
+                .shared
+                .offer_takeover(acts && p.queries.budget_left() > 0);
+            watching = acts && self.server.shared.watching();
+            if watching {
+                self.pace(fps);
+            }
+        }
         if self.prompt_open && !p.queries.expert_in_control() && self.carried.is_none() {
             self.publish_prompt(None);
         }
@@ -1063,7 +1100,7 @@ impl<A: PageAction> Expert<A> for WebExpert<A> {
             .is_none_or(|t| now.duration_since(t).as_secs_f64() >= 1.0 / UPDATES_PER_S);
         // While a segment runs the steps are slow (the person's pace): show each one. Otherwise the latest
         // status waits for the next update, or for a question (which shows where the run stands).
-        if !due && !p.queries.expert_in_control() && p.step < p.train_steps {
+        if !due && !p.queries.expert_in_control() && !watching && p.step < p.train_steps {
             self.unsent = Some(status);
             return;
         }
@@ -1085,6 +1122,7 @@ impl<A: PageAction> Expert<A> for WebExpert<A> {
     }
 
     fn handed_over(&mut self, end: &RunEnd, note: &str) {
+        self.server.shared.offer_takeover(false);
         // The page's status shows where the run stands (the latest one may wait, throttled).
         self.publish_unsent_status();
         let stopped = (self.stop_requested)();
@@ -1108,6 +1146,7 @@ impl<A: PageAction> Expert<A> for WebExpert<A> {
 
     fn finish(&mut self, end: &RunEnd) {
         self.lift_hand_over();
+        self.server.shared.offer_takeover(false);
         let outcome = self.end_screen(end);
         let msg = ServerMsg::End {
             message: "The run is over.".into(),

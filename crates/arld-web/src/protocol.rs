@@ -6,12 +6,15 @@
 //! observation, labelled, of an environment without a picture), `eval` (a point of the test-return curve), `history` (the
 //! recent uncertainty samples and the curve, for a tab that joins late), `prompt` (the agent asks; `null` when no
 //! question is open), `error` (a message was rejected), `handed` (a Python program has the run back: `learn`
-//! returned, or it was stopped; it may go on, then `resumed`) and `end` (the run is over).
+//! returned, or it was stopped; it may go on, then `resumed`), `takeover` (real time: whether a takeover is
+//! offered, the agent acting, and whether the person asked for one), `watch` (whether the agent's steps go at the
+//! real-time rate) and `end` (the run is over).
 //!
 //! Page to server: `key` (answer prompt `id` with `action`), `pass` (hand prompt `id` back to the agent),
 //! `hold` (real time: the action held down, or `null`), `pause` (the run waits, or goes on), `control` (this
-//! tab takes control). An action is an index for discrete actions, and for actions in a box a list of numbers,
-//! one per dimension, within the box the hello describes ([`BoxControls`]; checked by the core's
+//! tab takes control), `takeover` (take over while the agent acts; with `cancel`, withdraw the request), `watch`
+//! (real time: the agent's own steps at the real-time rate, or at full speed). An
+//! action is an index for discrete actions, and for actions in a box a list of numbers, one per dimension, within the box the hello describes ([`BoxControls`]; checked by the core's
 //! [`WireAction::check_answer`], as an expert process's answer is). Anything else, or an action out of range (a
 //! number outside the box, or `null`: what `JSON.stringify` makes of NaN), gets an `error` frame and changes
 //! nothing.
@@ -339,6 +342,10 @@ pub enum ServerMsg<'a> {
     Paused {
         paused: bool,
     },
+    /// Real time: whether the agent's own steps go at the real-time rate (watch mode).
+    Watch {
+        on: bool,
+    },
     Error {
         message: String,
     },
@@ -356,6 +363,11 @@ pub enum ServerMsg<'a> {
     },
     /// The run goes on after `handed`.
     Resumed,
+    /// Real time: whether the person can take over now (the agent acts) and whether they asked to.
+    Takeover {
+        offered: bool,
+        pending: bool,
+    },
 }
 
 impl ServerMsg<'_> {
@@ -368,9 +380,13 @@ impl ServerMsg<'_> {
 #[derive(Clone, Debug, PartialEq, Deserialize)]
 #[serde(tag = "type", rename_all = "lowercase", deny_unknown_fields)]
 pub enum ClientMsg {
+    /// `acting`: the gesture that answered was itself the action (a fresh action key, a stick or trigger leaving
+    /// rest), so a real-time segment starts at once, without the countdown that Enter or a pad's A gets.
     Key {
         id: u64,
         action: serde_json::Value,
+        #[serde(default)]
+        acting: bool,
     },
     /// Hand question `id` back to the agent (logged unanswered, nothing charged); during a takeover, any
     /// prompt of it: the person hands back.
@@ -385,13 +401,22 @@ pub enum ClientMsg {
     Pause {
         paused: bool,
     },
+    /// Real time: the agent's own steps at the real-time rate (`on`), so that the person can watch and take over
+    /// in time, or at full speed.
+    Watch {
+        on: bool,
+    },
     Hold {
         action: Option<serde_json::Value>,
     },
     Control,
     /// Take over unasked from the state the agent is in (real time): a segment opens at the next step, charged
-    /// like a question's, until the person hands back.
-    Takeover,
+    /// like a question's, until the person hands back. Only while the agent acts (see `takeover` from the
+    /// server); `cancel: true` withdraws a request the run has not taken yet.
+    Takeover {
+        #[serde(default)]
+        cancel: bool,
+    },
 }
 
 impl ClientMsg {
@@ -403,10 +428,11 @@ impl ClientMsg {
             ClientMsg::Key { action, .. } => Some(action),
             ClientMsg::Hold { action } => action.as_ref(),
             ClientMsg::Control
-            | ClientMsg::Takeover
+            | ClientMsg::Takeover { .. }
             | ClientMsg::Pass { .. }
             | ClientMsg::Undo { .. }
-            | ClientMsg::Pause { .. } => None,
+            | ClientMsg::Pause { .. }
+            | ClientMsg::Watch { .. } => None,
         };
         if let Some(a) = action {
             check(a)?;
@@ -426,7 +452,16 @@ mod tests {
             ClientMsg::parse(r#"{"type":"key","id":3,"action":1}"#, &two),
             Ok(ClientMsg::Key {
                 id: 3,
-                action: 1.into()
+                action: 1.into(),
+                acting: false
+            })
+        );
+        assert_eq!(
+            ClientMsg::parse(r#"{"type":"key","id":3,"action":1,"acting":true}"#, &two),
+            Ok(ClientMsg::Key {
+                id: 3,
+                action: 1.into(),
+                acting: true
             })
         );
         assert_eq!(
@@ -463,7 +498,8 @@ mod tests {
             ClientMsg::parse(&key("[0.25,-1]"), &check),
             Ok(ClientMsg::Key {
                 id: 1,
-                action: serde_json::json!([0.25, -1])
+                action: serde_json::json!([0.25, -1]),
+                acting: false
             })
         );
         let hi = spec.action_high[1];

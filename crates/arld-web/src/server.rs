@@ -16,7 +16,7 @@ use axum::http::{StatusCode, header};
 use axum::middleware::{self, Next};
 use axum::response::{IntoResponse, Response};
 use axum::routing::get;
-use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, mpsc};
 use tokio::sync::{broadcast, oneshot};
 
@@ -44,8 +44,12 @@ pub struct KeyInput {
 /// An answer of the person.
 #[derive(Clone, Debug, PartialEq)]
 pub enum Input {
-    /// An action as the page sent it (checked: an index, or a box's numbers).
-    Action(serde_json::Value),
+    /// An action as the page sent it (checked: an index, or a box's numbers), and whether the gesture that gave
+    /// it was the action itself ([`ClientMsg::Key`]'s `acting`).
+    Action {
+        action: serde_json::Value,
+        acting: bool,
+    },
     /// The question goes back to the agent.
     HandBack,
     /// Take back the last key.
@@ -73,6 +77,10 @@ pub struct Board {
     pub held: Option<serde_json::Value>,
     /// Whether the controlling tab paused the run.
     pub paused: bool,
+    /// Real time: whether a takeover can be asked for now, and whether one is asked for ([`Takeover`]).
+    pub takeover: Takeover,
+    /// Real time: whether the controlling tab watches the agent's own steps at the real-time rate.
+    pub watch: bool,
     /// The person's absence (the run paused, or no tab open): the time absent before `absent_since`, and since
     /// when they are absent now. Such time is not charged to the person.
     absent_before: std::time::Duration,
@@ -116,6 +124,8 @@ impl Board {
             }
             .to_json(),
         );
+        msgs.push(self.takeover.to_json());
+        msgs.push(ServerMsg::Watch { on: self.watch }.to_json());
         msgs
     }
 
@@ -154,6 +164,29 @@ impl Board {
     }
 }
 
+/// Real time: the person's request to take over, and whether the run can take one now. The training thread
+/// offers a takeover only while the agent acts (not while a question is open or coming: the breath before a
+/// question, its replay, its segment); the page asks for it, or cancels its request, and the run takes a request
+/// at its next step. A request can only be made while a takeover is offered, and ends when the offer does (a
+/// question then opens instead), so that a takeover never starts from a key pressed before the agent acted.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Takeover {
+    /// The agent acts: a request now is taken at its next step.
+    pub offered: bool,
+    /// The controlling tab asked to take over, and the run has not taken it yet.
+    pub pending: bool,
+}
+
+impl Takeover {
+    fn to_json(self) -> String {
+        ServerMsg::Takeover {
+            offered: self.offered,
+            pending: self.pending,
+        }
+        .to_json()
+    }
+}
+
 /// State shared by the training thread and the server.
 pub struct Shared {
     token: String,
@@ -163,9 +196,6 @@ pub struct Shared {
     updates: broadcast::Sender<Arc<str>>,
     keys: Mutex<mpsc::Sender<KeyInput>>,
     next_client: AtomicU64,
-    /// The controlling tab asked to take over (real time): read and cleared by the training thread once per
-    /// step ([`Shared::take_takeover`]).
-    takeover: AtomicBool,
 }
 
 impl Shared {
@@ -181,7 +211,6 @@ impl Shared {
             updates: broadcast::channel(256).0,
             keys: Mutex::new(keys),
             next_client: AtomicU64::new(1),
-            takeover: AtomicBool::new(false),
         }
     }
 
@@ -206,9 +235,55 @@ impl Shared {
         board.uncertainty.push(sample);
     }
 
-    /// Whether the controlling tab asked to take over since the last call (the request is used up).
+    /// Changes the takeover's state under the board's lock, telling the tabs when it changed; returns the
+    /// state before.
+    fn update_takeover(&self, change: impl FnOnce(&mut Takeover)) -> Takeover {
+        let mut board = self.board();
+        let before = board.takeover;
+        change(&mut board.takeover);
+        if board.takeover != before {
+            let _ = self.updates.send(Arc::from(board.takeover.to_json()));
+        }
+        before
+    }
+
+    /// Whether the controlling tab asked to take over and the run has not taken it yet: the request is taken
+    /// (the takeover's segment opens, so nothing more is offered until the agent acts again).
     pub fn take_takeover(&self) -> bool {
-        self.takeover.swap(false, Ordering::Relaxed)
+        let before = self.update_takeover(|t| {
+            if t.pending {
+                *t = Takeover::default();
+            }
+        });
+        before.pending
+    }
+
+    /// Offers a takeover (the agent acts) or withdraws the offer (a question opens, or is about to); a request
+    /// still pending when the offer ends is dropped. Returns whether one was pending.
+    pub fn offer_takeover(&self, offered: bool) -> bool {
+        let before = self.update_takeover(|t| {
+            t.offered = offered;
+            t.pending &= offered;
+        });
+        before.pending && !offered
+    }
+
+    /// The page asks to take over (`cancel`: withdraws its request); refused when no takeover is offered.
+    fn request_takeover(&self, board: &mut Board, cancel: bool) -> Result<(), String> {
+        let before = board.takeover;
+        if cancel {
+            board.takeover.pending = false;
+        } else if board.takeover.offered {
+            board.takeover.pending = true;
+        } else {
+            return Err(
+                "no takeover now: take over while the agent acts (its question comes first)".into(),
+            );
+        }
+        if board.takeover != before {
+            let _ = self.updates.send(Arc::from(board.takeover.to_json()));
+        }
+        Ok(())
     }
 
     pub fn held(&self) -> Option<serde_json::Value> {
@@ -217,6 +292,11 @@ impl Shared {
 
     pub fn paused(&self) -> bool {
         self.board().paused
+    }
+
+    /// Whether the agent's own steps go at the real-time rate (watch mode).
+    pub fn watching(&self) -> bool {
+        self.board().watch
     }
 
     /// The time the person was absent until `now` (paused, or no tab open): subtracted from the person's time.
@@ -598,12 +678,18 @@ fn handle(shared: &Shared, id: u64, text: &str) -> Result<(), String> {
                 .send(Arc::from(ServerMsg::Paused { paused }.to_json()));
             Ok(())
         }
-        ClientMsg::Key { id, action } => send_key(shared, board, id, Input::Action(action)),
-        ClientMsg::Pass { id } => send_key(shared, board, id, Input::HandBack),
-        ClientMsg::Takeover => {
-            shared.takeover.store(true, Ordering::Relaxed);
+        ClientMsg::Watch { on } => {
+            board.watch = on;
+            let _ = shared
+                .updates
+                .send(Arc::from(ServerMsg::Watch { on }.to_json()));
             Ok(())
         }
+        ClientMsg::Key { id, action, acting } => {
+            send_key(shared, board, id, Input::Action { action, acting })
+        }
+        ClientMsg::Pass { id } => send_key(shared, board, id, Input::HandBack),
+        ClientMsg::Takeover { cancel } => shared.request_takeover(&mut board, cancel),
         ClientMsg::Undo { id } => send_key(shared, board, id, Input::Undo),
     }
 }
@@ -621,4 +707,57 @@ fn send_key(
         .unwrap_or_else(|e| e.into_inner())
         .send(KeyInput { id, input })
         .map_err(|_| "the run is over".to_string())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A takeover is asked for only while one is offered (the agent acts); a request can be cancelled; the run
+    /// takes it once; an offer withdrawn (a question opens) drops the request; every change reaches the tabs.
+    #[test]
+    fn a_takeover_is_asked_for_while_offered_cancelled_or_taken_once() {
+        let (keys, _rx) = mpsc::channel();
+        let shared = Shared::new("t".into(), "127.0.0.1:1".parse().unwrap(), keys);
+        let mut tab = shared.updates.subscribe();
+        let ask = |cancel: bool| shared.request_takeover(&mut shared.board(), cancel);
+        let err = ask(false).unwrap_err();
+        assert!(err.contains("while the agent acts"), "{err}");
+        assert!(!shared.take_takeover());
+        assert!(!shared.offer_takeover(true));
+        ask(false).unwrap();
+        ask(true).unwrap();
+        assert!(!shared.take_takeover(), "a cancelled request was taken");
+        ask(false).unwrap();
+        assert!(shared.take_takeover());
+        assert!(!shared.take_takeover(), "a request was taken twice");
+        // Taken, the offer ends with it (the takeover's segment opens).
+        assert!(ask(false).is_err());
+        shared.offer_takeover(true);
+        ask(false).unwrap();
+        // A question opens: the request is dropped, not kept for after it.
+        assert!(shared.offer_takeover(false));
+        assert!(!shared.take_takeover());
+        let mut seen = Vec::new();
+        while let Ok(msg) = tab.try_recv() {
+            let m: serde_json::Value = serde_json::from_str(&msg).unwrap();
+            seen.push((
+                m["offered"].as_bool().unwrap(),
+                m["pending"].as_bool().unwrap(),
+            ));
+        }
+        assert_eq!(
+            seen,
+            [
+                (true, false),
+                (true, true),
+                (true, false),
+                (true, true),
+                (false, false),
+                (true, false),
+                (true, true),
+                (false, false),
+            ]
+        );
+    }
 }

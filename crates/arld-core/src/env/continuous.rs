@@ -9,7 +9,7 @@
 //! follows NumPy's types step for step, float32 where NumPy computes in float32 (see each task's docs), so the
 //! conformance traces recorded from Gymnasium 1.4.0 are reproduced bit for bit (`tests/continuous_conformance.rs`).
 
-use super::{BoxSpec, EnvError, EnvRng, Physics, Simulated};
+use super::{BoxSpec, EnvError, EnvRng, Geometry, Physics, Simulated};
 use crate::rng::NumpyRng;
 use crate::task::{Action, Goal};
 
@@ -68,6 +68,10 @@ pub trait ContinuousDynamics: Send {
     fn observe(&self, obs: &mut [f32]);
     /// Overwrites the internal float64 state as Gymnasium's `env.unwrapped.state = ...` does.
     fn set_state(&mut self, state: &[f64]) -> Result<(), String>;
+    /// See [`super::Env::geometry`].
+    fn geometry(&self) -> Option<Geometry> {
+        None
+    }
 }
 
 /// An episodic task with a box of float32 actions: a task's physics, its reset generator and its time limit
@@ -104,6 +108,10 @@ impl Physics for Box<dyn ContinuousDynamics> {
         self.as_mut()
             .set_state(state)
             .map_err(|msg| EnvError::BadState { env, msg })
+    }
+
+    fn geometry(&self) -> Option<Geometry> {
+        self.as_ref().geometry()
     }
 }
 

@@ -371,8 +371,9 @@ impl Scene {
         ]
     }
 
-    /// The drawable state: hull and legs in world coordinates, terrain, helipad, contacts.
-    fn geometry(&self, engine: usize) -> super::Geometry {
+    /// The drawable state: hull and legs in world coordinates, terrain, helipad, contacts, and the engines of the
+    /// last step (`throttle` for continuous actions).
+    fn geometry(&self, engines: Engines, throttle: bool) -> super::Geometry {
         let place = |body: b2::BodyHandle, local: &[(f64, f64)]| -> Vec<[f64; 2]> {
             let b = self.world.body(body);
             let (p, a) = (*b.position(), b.angle() as f64);
@@ -405,7 +406,8 @@ impl Scene {
             hull: place(self.lander, &hull),
             legs: [place(self.legs[0], &leg), place(self.legs[1], &leg)],
             leg_contact: [0, 1].map(|i| self.flags.leg_contact[i].load(Ordering::Relaxed)),
-            engine,
+            engine: engines.drawn(),
+            throttle: throttle.then_some([engines.main, engines.side * engines.direction]),
         }
     }
 
@@ -598,7 +600,7 @@ impl Dynamics for LunarLanderPhysics {
     fn geometry(&self) -> Option<super::Geometry> {
         self.scene
             .as_ref()
-            .map(|scene| scene.geometry(self.last_engines.drawn()))
+            .map(|scene| scene.geometry(self.last_engines, false))
     }
 }
 
@@ -646,6 +648,14 @@ impl super::continuous::ContinuousDynamics for LunarLanderContinuous {
 
     fn set_state(&mut self, _state: &[f64]) -> Result<(), String> {
         Err("the lander's state is a Box2D world: it cannot be set from numbers".into())
+    }
+
+    fn geometry(&self) -> Option<super::Geometry> {
+        let physics = &self.0;
+        physics
+            .scene
+            .as_ref()
+            .map(|scene| scene.geometry(physics.last_engines, true))
     }
 }
 

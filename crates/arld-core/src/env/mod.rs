@@ -212,17 +212,29 @@ pub enum Geometry {
         theta2: f64,
         link_lengths: [f64; 2],
     },
-    /// The car's position on the hill `hill` (a polyline of `[x, height]`), with the flag at `goal`.
+    /// The car's position on the hill `hill` (a polyline of `[x, height]`), with the flag at `goal`; with
+    /// continuous actions, the force the last step pushed with (its box is [-1, 1]).
     MountainCar {
         position: f64,
         height: f64,
         angle: f64,
         goal: f64,
         hill: Vec<[f64; 2]>,
+        #[serde(skip_serializing_if = "Option::is_none")]
+        force: Option<f64>,
+    },
+    /// A pendulum at angle `theta` (radians from upright, counter-clockwise) and the torque the last step
+    /// applied (positive counter-clockwise), at most `max_torque` either way.
+    Pendulum {
+        theta: f64,
+        torque: f64,
+        max_torque: f64,
     },
     /// The world of LunarLander in metres: viewport size, the moon's surface (left to right), the helipad
     /// between `helipad_x` at `helipad_y`, the hull and leg polygons in world coordinates, which legs touch,
-    /// and which engine fired on the last step (0 none, 1 left, 2 main, 3 right).
+    /// and which engine fired on the last step (0 none, 1 left, 2 main, 3 right); with continuous actions, the
+    /// engines' throttles on the last step (`[main, side]`: the main engine's from 0.5 to 1 when it fires, the
+    /// side engines' signed, negative for the left engine, from 0.5 to 1 in size when they fire; 0 when off).
     LunarLander {
         width: f64,
         height: f64,
@@ -233,6 +245,8 @@ pub enum Geometry {
         legs: [Vec<[f64; 2]>; 2],
         leg_contact: [bool; 2],
         engine: usize,
+        #[serde(skip_serializing_if = "Option::is_none")]
+        throttle: Option<[f64; 2]>,
     },
 }
 
@@ -921,6 +935,72 @@ pub(crate) fn check_state(env: &'static str, state: &[f64], len: usize) -> Resul
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The continuous tasks draw their state and the action of their last step, as the task took it (clipped to
+    /// its box; the lander's throttles as Gymnasium reads an action: the main engine at 50-100% above 0, a side
+    /// engine beyond 0.5 in size, signed); the discrete tasks' drawings have no such fields.
+    #[test]
+    fn the_continuous_tasks_draw_their_state_and_the_action_of_their_last_step() {
+        let mut pendulum = make_continuous("Pendulum-v1").unwrap();
+        let mut obs = vec![0.0; 3];
+        pendulum.reset_into(Some(3), &mut obs);
+        let drawn = |env: &continuous::ContinuousEnv| env.geometry().expect("a drawing");
+        let Geometry::Pendulum { torque, .. } = drawn(&pendulum) else {
+            panic!("not a pendulum")
+        };
+        assert_eq!(torque, 0.0);
+        pendulum.step_into(&[5.0], &mut obs).unwrap();
+        let Geometry::Pendulum {
+            theta,
+            torque,
+            max_torque,
+        } = drawn(&pendulum)
+        else {
+            panic!("not a pendulum")
+        };
+        assert_eq!((torque, max_torque), (2.0, 2.0));
+        assert_eq!([theta.cos() as f32, theta.sin() as f32], obs[..2]);
+
+        let mut car = make_continuous("MountainCarContinuous-v0").unwrap();
+        let mut obs = vec![0.0; 2];
+        car.reset_into(Some(3), &mut obs);
+        car.step_into(&[-0.4], &mut obs).unwrap();
+        let Geometry::MountainCar {
+            position, force, ..
+        } = drawn(&car)
+        else {
+            panic!("not a car")
+        };
+        assert_eq!(
+            (position as f32, force),
+            (obs[0], Some(f64::from(-0.4_f32)))
+        );
+
+        let mut lander = make_continuous("LunarLanderContinuous-v3").unwrap();
+        let mut obs = vec![0.0; 8];
+        lander.reset_into(Some(3), &mut obs);
+        for (action, throttle) in [
+            ([0.5, -0.8], [0.75, f64::from(-0.8_f32)]),
+            ([-0.5, 0.3], [0.0, 0.0]),
+            ([2.0, 0.6], [1.0, f64::from(0.6_f32)]),
+        ] {
+            lander.step_into(&action, &mut obs).unwrap();
+            let Geometry::LunarLander { throttle: t, .. } = drawn(&lander) else {
+                panic!("not a lander")
+            };
+            assert_eq!(t, Some(throttle), "{action:?}");
+        }
+
+        for id in ["MountainCar-v0", "LunarLander-v2"] {
+            let mut env = make(id).unwrap();
+            env.reset(Some(3));
+            let json = serde_json::to_string(&env.geometry().unwrap()).unwrap();
+            assert!(
+                !json.contains("force") && !json.contains("throttle"),
+                "{json}"
+            );
+        }
+    }
 
     /// Stepping into one reused buffer (first filled with NaN) follows the same trajectory as fresh vectors
     /// from zeros, so every environment writes the whole observation on every reset and step; a failed step

@@ -61,21 +61,27 @@ impl ClassicTask<2> for MountainCarPhysics {
     }
 
     fn geometry(state: &[f64; 2]) -> super::Geometry {
-        let position = state[0];
-        let hill = (0..=60)
-            .map(|i| {
-                let x = MIN_POSITION + (MAX_POSITION - MIN_POSITION) * f64::from(i) / 60.0;
-                [x, hill_height(x)]
-            })
-            .collect();
-        super::Geometry::MountainCar {
-            position,
-            height: hill_height(position),
-            // The slope of the hill under the car: d/dx of 0.45 sin(3x).
-            angle: (1.35 * (3.0 * position).cos()).atan(),
-            goal: GOAL_POSITION,
-            hill,
-        }
+        geometry(state[0], GOAL_POSITION, None)
+    }
+}
+
+/// The drawing of a car at `position` on the valley's hill with the flag at `goal`, and the force of its last
+/// step where the task has one (continuous actions).
+pub(super) fn geometry(position: f64, goal: f64, force: Option<f64>) -> super::Geometry {
+    let hill = (0..=60)
+        .map(|i| {
+            let x = MIN_POSITION + (MAX_POSITION - MIN_POSITION) * f64::from(i) / 60.0;
+            [x, hill_height(x)]
+        })
+        .collect();
+    super::Geometry::MountainCar {
+        position,
+        height: hill_height(position),
+        // The slope of the hill under the car: d/dx of 0.45 sin(3x).
+        angle: (1.35 * (3.0 * position).cos()).atan(),
+        goal,
+        hill,
+        force,
     }
 }
 

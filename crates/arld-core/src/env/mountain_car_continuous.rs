@@ -103,11 +103,13 @@ impl Scalar {
     }
 }
 
-/// The car's state `[position, velocity]`, float64 after reset and float32 after a step (as Gymnasium keeps it).
+/// The car's state `[position, velocity]`, float64 after reset and float32 after a step (as Gymnasium keeps it),
+/// and the force of the last step, clipped to the box (drawing only).
 #[derive(Debug, Clone)]
 pub struct MountainCarContinuous {
     position: Scalar,
     velocity: Scalar,
+    force: f64,
 }
 
 impl Default for MountainCarContinuous {
@@ -115,6 +117,7 @@ impl Default for MountainCarContinuous {
         MountainCarContinuous {
             position: F64(0.0),
             velocity: F64(0.0),
+            force: 0.0,
         }
     }
 }
@@ -123,6 +126,7 @@ impl ContinuousDynamics for MountainCarContinuous {
     fn reset(&mut self, rng: &mut NumpyRng) {
         self.position = F64(rng.uniform(-0.6, -0.4));
         self.velocity = F64(0.0);
+        self.force = 0.0;
     }
 
     fn step(&mut self, action: &[f32], _rng: &mut NumpyRng) -> (f64, bool) {
@@ -165,6 +169,7 @@ impl ContinuousDynamics for MountainCarContinuous {
         // np.array([position, velocity], dtype=np.float32)
         self.position = F32(position.value() as f32);
         self.velocity = F32(velocity.value() as f32);
+        self.force = force.value();
         (reward, terminated)
     }
 
@@ -177,6 +182,14 @@ impl ContinuousDynamics for MountainCarContinuous {
         self.position = F64(position);
         self.velocity = F64(velocity);
         Ok(())
+    }
+
+    fn geometry(&self) -> Option<super::Geometry> {
+        Some(super::mountain_car::geometry(
+            self.position.value(),
+            GOAL_POSITION,
+            Some(self.force),
+        ))
     }
 }
 

@@ -53,10 +53,11 @@ const MAX_TORQUE: f32 = 2.0;
 const DT: f64 = 0.05;
 const G: f64 = 10.0;
 
-/// The pendulum's float64 state `[theta, theta_dot]`.
+/// The pendulum's float64 state `[theta, theta_dot]`, and the torque of the last step (drawing only).
 #[derive(Debug, Clone, Default)]
 pub struct Pendulum {
     state: [f64; 2],
+    torque: f32,
 }
 
 /// `((x + pi) mod 2 pi) - pi` with the modulo's result taking the divisor's sign, as NumPy's `%` on floats.
@@ -71,6 +72,7 @@ impl ContinuousDynamics for Pendulum {
         let theta = rng.uniform(-PI, PI);
         let theta_dot = rng.uniform(-1.0, 1.0);
         self.state = [theta, theta_dot];
+        self.torque = 0.0;
     }
 
     fn step(&mut self, action: &[f32], _rng: &mut NumpyRng) -> (f64, bool) {
@@ -85,6 +87,7 @@ impl ContinuousDynamics for Pendulum {
         let theta_dot = (theta_dot + acceleration * DT).clamp(-MAX_SPEED, MAX_SPEED);
         let theta = theta + theta_dot * DT;
         self.state = [theta, theta_dot];
+        self.torque = u;
         (-cost, false)
     }
 
@@ -96,6 +99,14 @@ impl ContinuousDynamics for Pendulum {
     fn set_state(&mut self, state: &[f64]) -> Result<(), String> {
         self.state = state_of_len::<2>(state)?;
         Ok(())
+    }
+
+    fn geometry(&self) -> Option<super::Geometry> {
+        Some(super::Geometry::Pendulum {
+            theta: self.state[0],
+            torque: f64::from(self.torque),
+            max_torque: f64::from(MAX_TORQUE),
+        })
     }
 }
 

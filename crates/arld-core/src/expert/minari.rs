@@ -300,7 +300,8 @@ fn describe(space: &serde_json::Value) -> String {
         Some("Discrete") => format!("Discrete({}, start={})", get("n"), get("start")),
         Some("Box") => format!(
             "Box({} to {}, shape {})",
-            get("low").replace("null", "inf"),
+            // (An infinite bound is read as null: below, the lower bounds' -inf, the upper bounds' inf.)
+            get("low").replace("null", "-inf"),
             get("high").replace("null", "inf"),
             get("shape")
         ),

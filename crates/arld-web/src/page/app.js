@@ -10,6 +10,7 @@ const arld = (window.arld = {
   client: null, hello: null, controller: null, status: null, frame: null, prompt: null, paused: false,
   uncertainty: [], curve: [], ended: null, outcome: null, errors: [], connected: false, obsHistory: [],
   replaying: false, replays: [], countdowns: 0, undos: 0, handed: null, takeovers: 0,
+  takeover: { offered: false, pending: false }, watch: false,
 });
 let socket = null;
 let replay = null; // the replay being played: {frames, at, timer, live}
@@ -79,6 +80,8 @@ function receive(m) {
       arld.handed = { message: m.message, stopped: m.stopped }; arld.outcome = m.outcome; arld.prompt = null;
       showPrompt(); showRole(); showEnd(); banner(null);
       break;
+    case "watch": arld.watch = m.on; showWatch(); break;
+    case "takeover": arld.takeover = { offered: m.offered, pending: m.pending }; showPrompt(); break;
     case "resumed": arld.handed = null; arld.outcome = null; $("end").hidden = true; banner(null); showRole(); showPrompt(); break;
   }
 }
@@ -105,18 +108,19 @@ function setup() {
     b.textContent = `${a.label} [${a.keys.map(keyName).join(" / ")}]`;
     b.dataset.action = i;
     b.addEventListener("click", () => { if (replay) stopReplay(); else if (!h.fps) press(i); });
-    b.addEventListener("pointerdown", () => { if (h.fps && !replay) { hold(i); press(i); } });
+    b.addEventListener("pointerdown", () => { if (h.fps && !replay) { hold(i); press(i, true); } });
     b.addEventListener("pointerup", () => { if (h.fps) release(i); });
     b.addEventListener("pointerleave", () => { if (h.fps) release(i); });
     box.appendChild(b);
   });
   $("keys-help").textContent = h.box ? axesHelp() : h.fps
-    ? `A fresh key press starts your segment after a short countdown; then hold a key to act (with no key held the environment takes "${h.actions[h.noop].label}"). T takes over from the agent at any time (Esc hands back). P pauses.`
+    ? `A fresh press of an action's key starts your segment at once; then hold a key to act (with no key held the environment takes "${h.actions[h.noop].label}"). T takes over while the agent acts (T again cancels a request; Esc hands back); V shows its steps at the real-time rate. P pauses.`
     : h.undo
       ? "Each key (or button) takes one step; Backspace undoes your last key of the segment. P pauses, Esc lets the agent decide."
       : "Each key (or button) takes one step. P pauses, Esc lets the agent decide.";
   showRole();
   showPrompt();
+  showWatch();
   padSetup();
 }
 
@@ -136,7 +140,9 @@ function showRole() {
   r.textContent = over ? "run over" : handed ? "the program has the run" : controls() ? "you answer" : "watching (another tab answers)";
   r.className = "badge " + (over || handed ? "idle" : controls() ? "control" : "watch");
   $("take-control").hidden = controls() || over;
-  $("pause").disabled = over;
+  // (A program that has the run back runs nothing to pause.)
+  $("pause").disabled = over || handed;
+  showWatch();
   // The panel follows the role at once (an open question is answerable as soon as control is taken).
   showPrompt();
 }
@@ -180,6 +186,10 @@ function showPrompt() {
   if (arld.ended) { text = arld.ended; box.className = "idle"; }
   else if (arld.handed) { text = arld.handed.message; box.className = arld.handed.stopped ? "stopped" : "idle"; }
   else if (!p && noneLeft()) { text = "No questions left: the agent trains on its own."; box.className = "idle"; }
+  else if (!p && arld.takeover.pending) {
+    text = `You take over at the agent's next step${arld.paused ? ", when the run goes on" : ""}. T again (or Esc) cancels.`;
+    box.className = "takeover";
+  }
   else if (!p) { text = "Training runs. When the agent is unsure it asks you here."; box.className = "idle"; }
   else if (p.takeover && p.starts_in) {
     text = "Get ready: you take over in a moment. Hold the key you want; Esc hands back.";
@@ -229,7 +239,9 @@ function showPrompt() {
   $("pass").textContent = p && p.takeover ? "Hand back [Esc]" : "Let the agent decide [Esc]";
   const t = $("takeover");
   t.hidden = !h.fps || !controls() || arld.ended !== null || arld.handed !== null || !!(p && p.takeover);
-  t.disabled = !!p || noneLeft() || arld.paused || !!replay;
+  // Offered only while the agent acts (not in the breath before its question); a request can be cancelled.
+  t.disabled = !!p || noneLeft() || !!replay || !(arld.takeover.offered || arld.takeover.pending);
+  t.textContent = arld.takeover.pending ? "Cancel take over [T]" : "Take over [T]";
   $("undo").disabled = !p || !p.undo || !controls() || arld.ended !== null || !!replay;
   $("undo").hidden = !!h.fps || !h.undo;
   if (p && p.starts_in && startsAt.id !== p.id) startsAt = { id: p.id, at: performance.now() + p.starts_in * 1000 };
@@ -249,13 +261,14 @@ setInterval(() => {
   if (left > 0) { el.textContent = `${Math.ceil(left * 2) / 2 >= 1 ? Math.ceil(left) : "Go"}`; arld.countdowns = Math.max(arld.countdowns, p.id); }
 }, 50);
 
-// The agent's own steps since the person's last one, played fast (within 2 s) before the question; a key skips.
+// The agent's own steps since the person's last one, played fast (within 1 s, while the run takes its breath before
+// the question) before the question; a key skips.
 function startReplay(frames) {
   if (!frames.length) return;
   if (replay) stopReplay();
   arld.replaying = true;
   arld.replays.push({ steps: frames.length - 1, last: frames[frames.length - 1] });
-  const interval = Math.max(4, Math.min(1000 / 60, 2000 / frames.length));
+  const interval = Math.max(4, Math.min(1000 / 60, 1000 / frames.length));
   replay = { frames, at: 0, live: null, timer: null };
   const tick = () => {
     if (!replay) return;
@@ -295,7 +308,7 @@ function showPersonTime() {
   const s = arld.status;
   if (!s) return;
   const extra = arld.prompt && waiting.id === arld.prompt.id ? waiting.s : 0;
-  $("s-person").textContent = `${duration(s.person_s + extra)} (${s.answered} answered, ${s.keys} keys)`;
+  $("s-person").textContent = `${duration(s.person_s + extra)} (${s.answered} answered, ${s.keys} ${padState.id === null ? "keys" : "inputs"})`;
 }
 setInterval(() => {
   const p = arld.prompt, now = performance.now();
@@ -317,10 +330,13 @@ setInterval(() => {
   el.textContent = ` ${Math.max(0, Math.ceil(asked.left))} s left to answer`;
 }, 200);
 
-// Real time: takes over from the state the agent is in (the run opens the segment at its next step).
+// Real time: takes over from the state the agent is in (the run opens the segment at its next step), only while the
+// agent acts; pressed again before the run took it (it waits for a paused run to go on), it cancels the request.
 function takeOver() {
   const h = arld.hello;
-  if (!h || !h.fps || arld.prompt || !controls() || arld.ended || arld.handed || arld.paused || noneLeft()) return;
+  if (!h || !h.fps || arld.prompt || !controls() || arld.ended || arld.handed || noneLeft()) return;
+  if (arld.takeover.pending) { send({ type: "takeover", cancel: true }); return; }
+  if (!arld.takeover.offered) { banner("The agent is about to ask you: its question comes first.", 2500); return; }
   arld.takeovers++;
   send({ type: "takeover" });
 }
@@ -329,6 +345,7 @@ $("takeover").addEventListener("click", () => takeOver());
 // Hands the open question (or the person's takeover) back to the agent.
 function pass() {
   const p = arld.prompt;
+  if (!p && arld.takeover.pending && controls()) { send({ type: "takeover", cancel: true }); return; }
   if (!p || !(p.waits || p.takeover) || !controls() || answered === p.id) return;
   answered = p.id;
   send({ type: "pass", id: p.id });
@@ -339,6 +356,16 @@ function showPaused() {
   if (arld.paused) banner("Paused: the run and your clock wait."); else banner(null);
 }
 $("pause").addEventListener("click", () => { if (controls()) send({ type: "pause", paused: !arld.paused }); });
+// Real time: watch mode, the agent's own steps at the real-time rate (or back to full speed).
+function showWatch() {
+  const h = arld.hello, w = $("watch");
+  if (!h) return;
+  w.hidden = !h.fps;
+  w.textContent = arld.watch ? `Full speed [V]` : `Watch at ${h.fps} steps/s [V]`;
+  w.classList.toggle("on", arld.watch);
+  w.disabled = arld.ended !== null || arld.handed !== null || !controls();
+}
+$("watch").addEventListener("click", () => { if (controls() && arld.hello && arld.hello.fps) send({ type: "watch", on: !arld.watch }); });
 
 // The end screen: how the run ended (or where it stands when its program has it back) and what the person gave.
 // An environment without a solve threshold is neither solved nor not solved.
@@ -356,7 +383,8 @@ function showEnd() {
   const rows = [
     ["Final score", fmt(o.final_score, 1)],
     ["Questions answered", `${o.answered}` + (o.unanswered ? ` (${o.unanswered} left to the agent)` : "")],
-    ["Keys pressed", `${o.keys}` + (o.undone ? ` (and ${o.undone} undone)` : "")],
+    // (With a gamepad the answers came from its buttons and sticks too.)
+    [padState.id === null ? "Keys pressed" : "Keys, buttons and sticks", `${o.keys}` + (o.undone ? ` (and ${o.undone} undone)` : "")],
     ["Takeovers", `${o.takeovers}`],
     ["Your time", `${duration(o.person_s)} (${o.person_s.toFixed(1)} s)`],
     ["Run directory", o.run_dir || "– (not saved)"],
@@ -369,12 +397,14 @@ function showEnd() {
   }
 }
 
-// Answers the open prompt with `action` (once per prompt).
-function press(action) {
+// Answers the open prompt with `action` (once per prompt); never during a replay or a pause (input then is not an
+// answer to a question the person is looking at). `acting`: the gesture is the action itself (an action's key, a
+// stick or trigger leaving rest), so a real-time segment starts at once, without a countdown.
+function press(action, acting = false) {
   const p = arld.prompt;
-  if (!p || !p.waits || !controls() || answered === p.id || replay) return;
+  if (!p || !p.waits || !controls() || answered === p.id || replay || arld.paused) return;
   answered = p.id;
-  send({ type: "key", id: p.id, action });
+  send({ type: "key", id: p.id, action, acting });
 }
 function hold(action) { held = action; send({ type: "hold", action }); showPrompt(); }
 function release(action) { if (held === action) { held = null; send({ type: "hold", action: null }); showPrompt(); } }
@@ -392,12 +422,13 @@ document.addEventListener("keydown", (e) => {
   if (arld.hello && arld.hello.box) { if (boxKeyDown(e)) return; }
   if (e.key === "Backspace" || ((e.ctrlKey || e.metaKey) && (e.key === "z" || e.key === "Z"))) { e.preventDefault(); undo(); return; }
   if ((e.key === "p" || e.key === "P") && actionOfKey(e.key) === null) { $("pause").click(); return; }
+  if ((e.key === "v" || e.key === "V") && actionOfKey(e.key) === null) { if (!e.repeat) $("watch").click(); return; }
   if ((e.key === "t" || e.key === "T") && actionOfKey(e.key) === null) { if (!e.repeat) takeOver(); return; }
   const a = actionOfKey(e.key);
   if (a === null) return;
   e.preventDefault();
   // Only a fresh press answers: a key held from before the question (or its auto-repeat) never does.
-  if (arld.hello.fps) { if (held !== a) hold(a); if (!e.repeat) press(a); } else if (!e.repeat) press(a);
+  if (arld.hello.fps) { if (held !== a) hold(a); if (!e.repeat) press(a, true); } else if (!e.repeat) press(a);
 });
 document.addEventListener("keyup", (e) => {
   if (arld.hello && arld.hello.box) { boxKeyUp(e); return; }
@@ -414,7 +445,7 @@ window.addEventListener("blur", () => { if (held !== null) release(held); axesKe
 const PAD_BUTTONS = ["A / Cross", "B / Circle", "X / Square", "Y / Triangle", "LB / L1", "RB / R1", "LT / L2", "RT / R2",
   "Back / Select", "Start", "L3", "R3", "D-pad up", "D-pad down", "D-pad left", "D-pad right", "Home"];
 const PAD_BACK = 8, PAD_START = 9;
-const padState = { index: null, id: null, map: [], before: [] };
+const padState = { index: null, id: null, map: [], before: [], values: null, rest: null };
 arld.pad = null;
 
 function padDefault(actions) {
@@ -477,12 +508,17 @@ function padPoll() {
   if (!arld.hello) return;
   const h = arld.hello;
   if (fresh(PAD_START)) { $("pause").click(); return; }
-  if (replay) { if (now.some((p, b) => fresh(b))) stopReplay(); return; }
+  if (replay) {
+    if (now.some((p, b) => fresh(b))) stopReplay();
+    // The sticks are followed during a replay too, so that one moved then is not a gesture when it ends.
+    else if (h.box) padAxesPoll(pad, () => false);
+    return;
+  }
   if (fresh(PAD_BACK)) { pass(); return; }
   if (h.box) { padAxesPoll(pad, fresh); return; }
   padState.map.forEach((b, a) => {
     if (b === null || b === undefined) return;
-    if (fresh(b)) { if (h.fps) { if (held !== a) hold(a); press(a); } else press(a); }
+    if (fresh(b)) { if (h.fps) { if (held !== a) hold(a); press(a, true); } else press(a); }
     else if (gone(b) && h.fps) release(a);
   });
 }
@@ -496,7 +532,7 @@ setInterval(padPoll, 16);
 // the pad in the browser). Enter (or "Send", or the pad's A button) answers with the vector shown; in real time a
 // fresh key (or a stick leaving the centre) answers the opening question too, then the vector held is the action
 // of each step (sent to the run whenever it changes).
-const KEY_RAMP_S = 0.4, STICK_DEADZONE = 0.1, PAD_A = 0;
+const KEY_RAMP_S = 0.4, STICK_DEADZONE = 0.1, TRIGGER_REST = 0.1, PAD_A = 0;
 const axesKeys = new Set(); // keys held down (their `key` values)
 let axes = null; // the vector set now
 let axesSent = null; // the vector last sent as held (real time)
@@ -539,7 +575,7 @@ function axesHelp() {
   const centreText = h.box.names.map((n, d) => `${n} ${centre(d)}`).join(", ");
   const keys = "Hold a dimension's keys to push it toward its bound; released, it goes back to the centre (or holds, as chosen below). The sliders set a value directly.";
   return h.fps
-    ? `${keys} Enter (or a fresh key, or a pad's stick) starts your segment after a short countdown; then the values shown are the action of each step (nothing touched: ${centreText}). T takes over from the agent at any time (Esc hands back). P pauses.`
+    ? `${keys} A fresh key, a pad's stick leaving its dead zone or its trigger pressed starts your segment at once (Enter or the pad's A after a short countdown); then the values shown are the action of each step (nothing touched: ${centreText}). T takes over while the agent acts (T again cancels a request; Esc hands back); V shows its steps at the real-time rate. P pauses.`
     : `${keys} Enter (or Send) takes one step with the values shown. P pauses, Esc lets the agent decide${h.undo ? ", Backspace undoes your last step" : ""}.`;
 }
 function setAxis(d, v, source) {
@@ -570,12 +606,12 @@ function showAxes() {
   });
   $("send-axes").disabled = off || !p.waits;
 }
-// Answers the open question with the vector shown (once per prompt).
-function pressAxes() {
+// Answers the open question with the vector shown (once per prompt); `acting` as for press().
+function pressAxes(acting = false) {
   if (!axes) return;
   const h = arld.hello;
   if (h.fps) { axesSent = null; sendHeld(); }
-  press(axes.slice());
+  press(axes.slice(), acting);
 }
 // The dimension and direction (-1 toward the lower bound, +1 the upper) of a key, or null.
 function axisOfKey(key) {
@@ -593,7 +629,7 @@ function boxKeyDown(e) {
   e.preventDefault();
   axesKeys.add(a.k);
   // Real time: a fresh key answers the opening question too (the value it pushes toward is held from then on).
-  if (arld.hello.fps && !e.repeat) { axesTick(); pressAxes(); }
+  if (arld.hello.fps && !e.repeat) { axesTick(); pressAxes(true); }
   return true;
 }
 function boxKeyUp(e) {
@@ -637,6 +673,7 @@ function padAxesSetup() {
   const n = arld.hello.box.names.length;
   padState.map = Array.isArray(map) && map.length === n && map.every((m) => m && "source" in m) ? map : padAxesDefault(arld.hello.box.names);
   padState.values = null;
+  padState.rest = null;
   showPad();
 }
 function showPadAxes() {
@@ -686,20 +723,32 @@ function padValue(pad, d, m) {
   if (m.invert) x = -x;
   return centre(d) + x * (b.high[d] - b.low[d]) / 2;
 }
+// Whether the source of mapping `m` is at rest: a stick within its dead zone, a trigger released.
+function padAtRest(pad, m) {
+  if (m.source === null) return true;
+  const s = PAD_SOURCES[m.source];
+  if (s.button !== undefined) { const b = pad.buttons[s.button]; return !b || b.value < TRIGGER_REST; }
+  return Math.abs(pad.axes[s.axis] || 0) < STICK_DEADZONE;
+}
 function padAxesPoll(pad, fresh) {
   const values = padState.map.map((m, d) => padValue(pad, d, m));
-  const before = padState.values;
+  const rest = padState.map.map((m) => padAtRest(pad, m));
+  const before = padState.values, restBefore = padState.rest;
   padState.values = values;
-  // The pad sets a dimension when its value changed (so a slider or a key moved last still counts).
-  let moved = false;
-  // (A pad just seen sets nothing: its rest position is not a choice.)
+  padState.rest = rest;
+  // The pad sets a dimension when its value changed (so a slider or a key moved last still counts). A pad just
+  // seen sets only its triggers: a trigger's rest is its lower bound (a stick's is the centre, as nothing touched).
   values.forEach((v, d) => {
-    if (v === null || !before || before[d] === v) return;
-    setAxis(d, v, "pad");
-    moved = true;
+    if (v === null) return;
+    if (before ? before[d] !== v : PAD_SOURCES[padState.map[d].source].button !== undefined) setAxis(d, v, "pad");
   });
+  // A deliberate gesture answers: A, or a source leaving its rest (a stick its dead zone, a trigger its release),
+  // never a release, nor a position held since before the question could be answered (press() ignores input
+  // during a replay or a pause, and the positions are followed meanwhile).
+  const left = !!restBefore && rest.some((r, d) => restBefore[d] && !r);
   const h = arld.hello, p = arld.prompt;
-  if (fresh(PAD_A) || (h.fps && moved && p && p.waits)) pressAxes();
+  if (fresh(PAD_A)) pressAxes();
+  else if (h.fps && left && p && p.waits) pressAxes(true);
 }
 window.addEventListener("gamepadconnected", padPoll);
 
@@ -763,7 +812,7 @@ function draw() {
   ctx.fillStyle = "#ffffff";
   ctx.fillRect(0, 0, cv.width, cv.height);
   if (!g) return;
-  ({ CartPole: drawCartPole, Acrobot: drawAcrobot, MountainCar: drawMountainCar, LunarLander: drawLander })[g.kind](g);
+  ({ CartPole: drawCartPole, Acrobot: drawAcrobot, MountainCar: drawMountainCar, LunarLander: drawLander, Pendulum: drawPendulum })[g.kind](g);
 }
 
 // A world-to-canvas map: `scale` pixels per unit, world point (ox, oy) at canvas (px, py), y up.
@@ -822,7 +871,52 @@ function drawMountainCar(g) {
   ctx.fillStyle = "#1f2937"; ctx.fillRect(-20, -22, 40, 16);
   ctx.fillStyle = "#6b7280";
   for (const wx of [-12, 12]) { ctx.beginPath(); ctx.arc(wx, -5, 5, 0, 2 * Math.PI); ctx.fill(); }
+  // Continuous actions: the force of the last step, an arrow along the slope (60 px at full force).
+  if (g.force !== undefined && g.force !== 0) {
+    const dir = Math.sign(g.force), from = dir * 22, to = from + g.force * 60;
+    arrow(from, -14, to, -14, "#f97316");
+  }
   ctx.restore();
+  if (g.force !== undefined) gauge([`force ${g.force.toFixed(2)}`]);
+}
+
+// An arrow from (x0, y0) to (x1, y1) in canvas units.
+function arrow(x0, y0, x1, y1, colour) {
+  const a = Math.atan2(y1 - y0, x1 - x0), head = 9;
+  ctx.strokeStyle = colour; ctx.fillStyle = colour; ctx.lineWidth = 4; ctx.lineCap = "round";
+  ctx.beginPath(); ctx.moveTo(x0, y0); ctx.lineTo(x1, y1); ctx.stroke();
+  ctx.beginPath(); ctx.moveTo(x1 + Math.cos(a) * head, y1 + Math.sin(a) * head);
+  ctx.lineTo(x1 + Math.cos(a + 2.4) * head, y1 + Math.sin(a + 2.4) * head);
+  ctx.lineTo(x1 + Math.cos(a - 2.4) * head, y1 + Math.sin(a - 2.4) * head); ctx.closePath(); ctx.fill();
+  ctx.lineCap = "butt";
+}
+// Lines of text in the canvas' top left corner (what the last step applied).
+function gauge(lines, colour = "#111827") {
+  ctx.setTransform(1, 0, 0, 1, 0, 0);
+  ctx.font = "14px system-ui"; ctx.fillStyle = colour; ctx.textAlign = "left";
+  lines.forEach((l, i) => ctx.fillText(l, 10, 20 + 18 * i));
+}
+
+function drawPendulum(g) {
+  // The pivot at the centre; theta from upright, counter-clockwise (as Gymnasium draws it).
+  const cx = cv.width / 2, cy = cv.height / 2, L = Math.min(cv.width, cv.height) * 0.38;
+  const tip = [cx - L * Math.sin(g.theta), cy - L * Math.cos(g.theta)];
+  ctx.strokeStyle = "#e5e7eb"; ctx.lineWidth = 1; ctx.setLineDash([4, 4]);
+  ctx.beginPath(); ctx.moveTo(cx, cy); ctx.lineTo(cx, cy - L - 20); ctx.stroke(); ctx.setLineDash([]);
+  ctx.strokeStyle = "#cc4d4d"; ctx.lineWidth = 0.14 * L; ctx.lineCap = "round";
+  ctx.beginPath(); ctx.moveTo(cx, cy); ctx.lineTo(tip[0], tip[1]); ctx.stroke(); ctx.lineCap = "butt";
+  ctx.fillStyle = "#111827"; ctx.beginPath(); ctx.arc(cx, cy, 0.05 * L, 0, 2 * Math.PI); ctx.fill();
+  // The torque of the last step: an arc around the pivot, counter-clockwise for a positive torque, its sweep
+  // growing with the torque's size (three quarters of a turn at the bound).
+  if (g.torque !== 0) {
+    const r = 0.3 * L, sweep = (Math.abs(g.torque) / g.max_torque) * 1.5 * Math.PI, start = -Math.PI / 2;
+    const ccw = g.torque > 0, end = ccw ? start - sweep : start + sweep;
+    ctx.strokeStyle = "#f97316"; ctx.lineWidth = 5;
+    ctx.beginPath(); ctx.arc(cx, cy, r, start, end, ccw); ctx.stroke();
+    const ex = cx + r * Math.cos(end), ey = cy + r * Math.sin(end), t = ccw ? end - Math.PI / 2 : end + Math.PI / 2;
+    arrow(ex - Math.cos(t) * 2, ey - Math.sin(t) * 2, ex + Math.cos(t) * 6, ey + Math.sin(t) * 6, "#f97316");
+  }
+  gauge([`torque ${g.torque.toFixed(2)} (of ±${g.max_torque})`]);
 }
 
 function drawLander(g) {
@@ -846,11 +940,18 @@ function drawLander(g) {
     poly(v, [[at[0] + side[0], at[1] + side[1]], [at[0] - side[0], at[1] - side[1]], [at[0] + dir[0] * len, at[1] + dir[1] * len]], "#f97316", "#fde047");
   };
   const local = (x, y) => [cx + right[0] * x + up[0] * y, cy + right[1] * x + up[1] * y];
-  if (g.engine === 2) flame(local(0, -0.45), [-up[0], -up[1]], 0.9);
-  if (g.engine === 1) flame(local(0.6, 0.25), right, 0.5);
-  if (g.engine === 3) flame(local(-0.6, 0.25), [-right[0], -right[1]], 0.5);
+  // Continuous actions: each flame as long as its engine's throttle (the main engine 50-100%, a side engine's
+  // signed: negative is the left engine's); discrete: the engine that fired, at full length.
+  const [main, side] = g.throttle || [g.engine === 2 ? 1 : 0, g.engine === 1 ? -1 : g.engine === 3 ? 1 : 0];
+  if (main > 0) flame(local(0, -0.45), [-up[0], -up[1]], 0.9 * main);
+  if (side < 0) flame(local(0.6, 0.25), right, 0.5 * -side);
+  if (side > 0) flame(local(-0.6, 0.25), [-right[0], -right[1]], 0.5 * side);
   g.legs.forEach((leg, i) => poly(v, leg, g.leg_contact[i] ? "#22c55e" : "#7c3aed", "#4c1d95"));
   poly(v, hull, "#8b5cf6", "#4c1d95");
+  if (g.throttle) {
+    const pct = (x) => `${Math.round(Math.abs(x) * 100)}%`;
+    gauge([`main engine ${main > 0 ? pct(main) : "off"}`, `side engine ${side < 0 ? "left " + pct(side) : side > 0 ? "right " + pct(side) : "off"}`], "#f9fafb");
+  }
 }
 function norm([x, y]) { const n = Math.hypot(x, y) || 1; return [x / n, y / n]; }
 
