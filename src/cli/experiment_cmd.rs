@@ -307,7 +307,7 @@ fn print_report(dir: &std::path::Path, out: &std::path::Path, sustain: usize) ->
         println!("  {}", f.display());
     }
     let table = out.join("table.md");
-    if let Ok(text) = std::fs::read_to_string(&table) {
+    if let Ok(text) = arld::files::read_text_bounded(&table, 16 << 20) {
         println!("\n{text}");
     }
     Ok(ExitCode::SUCCESS)

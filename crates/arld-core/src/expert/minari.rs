@@ -335,28 +335,7 @@ struct Budget {
 #[cfg(feature = "minari")]
 fn read_bounded(path: &Path, max: u64) -> Result<Vec<u8>> {
     use anyhow::Context;
-    use std::io::Read;
-    let file =
-        std::fs::File::open(path).with_context(|| format!("cannot open {}", path.display()))?;
-    let len = file
-        .metadata()
-        .with_context(|| format!("cannot read {}", path.display()))?
-        .len();
-    anyhow::ensure!(
-        len <= max,
-        "{} has {len} bytes; more than {max} are refused",
-        path.display()
-    );
-    let mut bytes = Vec::with_capacity(len as usize);
-    file.take(max + 1)
-        .read_to_end(&mut bytes)
-        .with_context(|| format!("cannot read {}", path.display()))?;
-    anyhow::ensure!(
-        bytes.len() as u64 <= max,
-        "{} grew past {max} bytes while read",
-        path.display()
-    );
-    Ok(bytes)
+    crate::files::read_bounded(path, max).with_context(|| format!("cannot read {}", path.display()))
 }
 
 /// The Arrow files of an episode's directory, in the order `pyarrow` reads them (by name; names starting with

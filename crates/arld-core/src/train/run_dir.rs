@@ -21,6 +21,7 @@ use crate::replay::Transition;
 use crate::task::Action;
 use anyhow::{Context, Result, bail};
 use serde::{Deserialize, Serialize};
+use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
 
 /// The resolved configuration (TOML).
@@ -123,27 +124,71 @@ pub fn check_own_entries(dir: &Path) -> Result<()> {
     Ok(())
 }
 
-/// Whether `name` is an entry a run writes into its directory (its files, checkpoints, TensorBoard events,
-/// snapshot, and the temporary files of its atomic writes).
+/// Whether `name` is an entry a run writes into its directory, by its exact name: its files, checkpoints,
+/// TensorBoard events, snapshot, and the temporary files of its atomic writes (exactly of their form, see
+/// [`crate::files::is_temporary_of`]: a user's `.notes.tmp.bak` is none).
 fn is_run_entry(name: &str) -> bool {
     own_files().contains(&name)
         || name == CHECKPOINTS_DIR
         || is_events_file(name)
-        || name.starts_with('.') && name.contains(".tmp")
+        || own_files()
+            .iter()
+            .any(|file| crate::files::is_temporary_of(name, file))
 }
 
-/// Whether `name` is an entry a run writes into its `checkpoints` folder (a checkpoint, or the temporary
-/// file of its atomic write).
+/// Whether `name` is the name a run gives a checkpoint (`step_NNNNNNNN.safetensors`, [`checkpoint_path`]),
+/// exactly: `step_5.safetensors` is none.
+fn is_checkpoint_name(name: &str) -> bool {
+    name.strip_prefix("step_")
+        .and_then(|n| n.strip_suffix(".safetensors"))
+        .filter(|digits| digits.bytes().all(|b| b.is_ascii_digit()))
+        .and_then(|digits| digits.parse::<usize>().ok())
+        .is_some_and(|step| {
+            checkpoint_path(Path::new(""), step).file_name() == Some(std::ffi::OsStr::new(name))
+        })
+}
+
+/// Whether `name` is an entry a run writes into its `checkpoints` folder: a checkpoint, or the temporary file
+/// of its atomic write, each by its exact name.
 fn is_checkpoint_entry(name: &str) -> bool {
-    let is_step = |n: &str| {
-        n.strip_prefix("step_")
-            .and_then(|n| n.strip_suffix(".safetensors"))
-            .is_some_and(|digits| !digits.is_empty() && digits.bytes().all(|b| b.is_ascii_digit()))
-    };
-    is_step(name)
+    is_checkpoint_name(name)
         || name
             .strip_prefix('.')
-            .is_some_and(|n| n.split(".tmp").next().is_some_and(is_step))
+            .and_then(|n| n.split(".tmp").next())
+            .is_some_and(|target| {
+                is_checkpoint_name(target) && crate::files::is_temporary_of(name, target)
+            })
+}
+
+/// Removes what writers of the run's files killed before their commit left in `dir` and its checkpoints
+/// folder (their temporary files, exactly by name; a writer of this process is left alone): done when a run
+/// starts, resumes and finishes.
+pub fn remove_leftovers(dir: &Path) -> Result<()> {
+    let tidy = |path: &Path| {
+        crate::files::remove_leftovers(path)
+            .with_context(|| format!("cannot tidy {}", dir.display()))
+    };
+    for name in own_files() {
+        tidy(&dir.join(name))?;
+    }
+    let checkpoints = dir.join(CHECKPOINTS_DIR);
+    let entries = match std::fs::read_dir(&checkpoints) {
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(()),
+        entries => entries.with_context(|| format!("cannot read {}", checkpoints.display()))?,
+    };
+    let mut targets = BTreeSet::new();
+    for entry in entries {
+        let name = entry?.file_name().to_string_lossy().into_owned();
+        if let Some(target) = name.strip_prefix('.').and_then(|n| n.split(".tmp").next())
+            && is_checkpoint_name(target)
+        {
+            targets.insert(target.to_string());
+        }
+    }
+    for target in targets {
+        tidy(&checkpoints.join(target))?;
+    }
+    Ok(())
 }
 
 /// Makes `dir` ready for a new run, so that nothing of an earlier run is mixed into it: a missing or empty
@@ -261,7 +306,10 @@ pub fn prepare_new_run(dir: &Path, overwrite: bool) -> Result<()> {
 pub fn prepare_restart(dir: &Path) -> Result<()> {
     let failed = dir.join(FAILED_FILE);
     let kept = if crate::files::own_file_exists(&failed)? {
-        Some(std::fs::read(&failed).with_context(|| format!("cannot read {}", failed.display()))?)
+        Some(
+            crate::files::read_bounded(&failed, MAX_KEY_FILE_BYTES)
+                .with_context(|| format!("cannot read {}", failed.display()))?,
+        )
     } else {
         None
     };
@@ -728,9 +776,42 @@ pub fn read_written_config(dir: &Path) -> Result<TrainConfig> {
     let path = dir.join(CONFIG_FILE);
     let bytes = crate::files::read_bounded(&path, MAX_KEY_FILE_BYTES)
         .with_context(|| format!("cannot read {}", path.display()))?;
-    let text = std::str::from_utf8(&bytes)
-        .with_context(|| format!("{} is not UTF-8 text", path.display()))?;
+    parse_written_config(&bytes, &path)
+}
+
+/// A run's configuration from the bytes of its `config.toml` (`path` names it in the error), as
+/// [`read_written_config`] reads it.
+fn parse_written_config(bytes: &[u8], path: &Path) -> Result<TrainConfig> {
+    let text =
+        std::str::from_utf8(bytes).with_context(|| format!("{} is not UTF-8 text", path.display()))?;
     toml::from_str(text).with_context(|| format!("{} is not a run configuration", path.display()))
+}
+
+/// Checks the text of a run's `config.toml` (`path` names it in the error): TOML whose every key that this arld
+/// knows holds a string exactly where this arld writes one (`seed = "1"` is refused). Keys it does not know (an
+/// older or newer run's) are not checked, nor missing keys.
+pub fn check_config_types(text: &str, path: &Path) -> Result<()> {
+    static REFERENCE: std::sync::OnceLock<toml::Table> = std::sync::OnceLock::new();
+    let reference = REFERENCE.get_or_init(|| {
+        let preset = ConfigInput::new("CartPole-v0", Method::Adqn, NetKind::Bootstrap, 0)
+            .resolve()
+            .expect("the preset resolves");
+        toml::from_str(&preset.to_toml()).expect("a configuration reads back")
+    });
+    let table: toml::Table = toml::from_str(text)
+        .with_context(|| format!("{} is not a TOML table", path.display()))?;
+    for (key, value) in &table {
+        if let Some(known) = reference.get(key)
+            && known.is_str() != value.is_str()
+        {
+            bail!(
+                "{}: `{key}` holds {value}, where a run writes {}",
+                path.display(),
+                if known.is_str() { "a string" } else { "a value that is no string" }
+            );
+        }
+    }
+    Ok(())
 }
 
 /// Gives `to` the files of the finished run `from` as the run `config` configures (a run of the same
@@ -751,12 +832,12 @@ pub fn copy_finished_run(from: &Path, to: &Path, config: &TrainConfig) -> Result
         if !entry.file_type()?.is_file() || name == SUMMARY_FILE || name == CONFIG_FILE {
             continue;
         }
-        let bytes = std::fs::read(entry.path())
+        let bytes = crate::files::read_bounded(&entry.path(), MAX_LOG_BYTES)
             .with_context(|| format!("cannot read {}", entry.path().display()))?;
         write_atomic(&to.join(&name), &bytes)?;
     }
     write_atomic(&to.join(CONFIG_FILE), config.to_toml().as_bytes())?;
-    let summary = std::fs::read(from.join(SUMMARY_FILE))
+    let summary = crate::files::read_bounded(&from.join(SUMMARY_FILE), MAX_KEY_FILE_BYTES)
         .with_context(|| format!("cannot read {}", from.join(SUMMARY_FILE).display()))?;
     write_atomic(&to.join(SUMMARY_FILE), &summary)?;
     check_complete(to).context("the copy is not whole")
@@ -786,6 +867,7 @@ pub fn parse_summary(bytes: &[u8], path: &Path) -> Result<Summary> {
 pub fn write_summary(dir: &Path, summary: &Summary) -> Result<()> {
     let json = serde_json::to_string_pretty(summary)?;
     write_atomic(&dir.join(SUMMARY_FILE), json.as_bytes())?;
+    remove_leftovers(dir)?;
     match std::fs::remove_file(dir.join(FAILED_FILE)) {
         Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
             Err(e).with_context(|| format!("cannot remove {}", dir.join(FAILED_FILE).display()))
@@ -855,7 +937,7 @@ pub fn write_failure(dir: &Path, failure: &Failure) -> Result<()> {
 /// The `failed.json` of the run directory `dir`, if it has one.
 pub fn read_failure(dir: &Path) -> Result<Option<Failure>> {
     let path = dir.join(FAILED_FILE);
-    let text = match std::fs::read_to_string(&path) {
+    let text = match crate::files::read_text_bounded(&path, MAX_KEY_FILE_BYTES) {
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
         text => text.with_context(|| format!("cannot read {}", path.display()))?,
     };
