@@ -415,7 +415,10 @@ pub fn run_runs(cmd: RunsCommand) -> Result<ExitCode> {
         RunsCommand::Pack { dir } => {
             let s = pack::pack(&dir)?;
             for path in &s.left_out {
-                eprintln!("not packed (not a text file of a run): {}", path.display());
+                eprintln!(
+                    "not packed (not a text file of a run, or too long for a dataset): {}",
+                    path.display()
+                );
             }
             println!(
                 "{} runs packed in {} ({} new; {} tables written, {} files kept verbatim)",

@@ -621,7 +621,7 @@ fn decode_task(tables: &BTreeMap<&'static str, Vec<u8>>) -> Result<TaskRuns> {
 
 /// A table's header and rows, checked: a `run` column first and as many fields in every row as in the header.
 fn run_table(gz: &[u8], name: &str) -> Result<(Vec<String>, Vec<csv::StringRecord>)> {
-    let mut reader = csv_reader(std::io::Cursor::new(gunzip(gz)?));
+    let mut reader = csv_reader(std::io::Cursor::new(gunzip(gz).context(name.to_string())?));
     let header: Vec<String> = reader
         .headers()
         .context(name.to_string())?
