@@ -918,7 +918,11 @@ fn unpacking_never_writes_through_a_link_planted_in_out() {
     let o = out_dir.display().to_string();
     let out = arld(&["runs", "unpack", &r, "-o", &o]);
     assert!(out.status.success(), "{}", stderr(&out));
-    assert!(out_dir.join("CartPole-v0/dqn-single/seed1/summary.json").is_file());
+    assert!(
+        out_dir
+            .join("CartPole-v0/dqn-single/seed1/summary.json")
+            .is_file()
+    );
 }
 
 #[test]
@@ -959,7 +963,11 @@ fn a_packed_dataset_with_two_copies_of_a_run_or_a_lying_layout_is_refused() {
         .push("seed".into());
     std::fs::write(&layout_path, layout.to_string()).unwrap();
     assert_refused(&unpack(), &["`seed`", "layout.json"]);
-    assert!(!out_dir.exists(), "a refused unpack wrote {:?}", listing(&out_dir));
+    assert!(
+        !out_dir.exists(),
+        "a refused unpack wrote {:?}",
+        listing(&out_dir)
+    );
     // layout.json an endless device, or a named pipe: refused at once, naming it.
     std::fs::remove_file(&layout_path).unwrap();
     std::os::unix::fs::symlink("/dev/zero", &layout_path).unwrap();
@@ -1010,7 +1018,10 @@ fn packing_a_huge_file_of_a_run_is_bounded() {
     std::fs::remove_dir_all(root.join("CartPole-v0")).unwrap();
     finished_run(&run);
     sparse(&run.join("queries.csv"), 1_500_000_000);
-    assert_refused(&run_small(&["runs", "pack", &r]), &["queries.csv", "longer than"]);
+    assert_refused(
+        &run_small(&["runs", "pack", &r]),
+        &["queries.csv", "longer than"],
+    );
 }
 
 #[test]
@@ -1043,13 +1054,23 @@ fn a_demonstration_or_dataset_file_that_is_a_pipe_or_huge_is_refused_at_once() {
     let demo = format!("demo_file={}", pipe.display());
     assert_refused(
         &run_small(&[
-            "train", "--quiet", "--env", "CartPole-v0", "--method", "dqfd", "--set", &demo, "-o", &o,
+            "train",
+            "--quiet",
+            "--env",
+            "CartPole-v0",
+            "--method",
+            "dqfd",
+            "--set",
+            &demo,
+            "-o",
+            &o,
         ]),
         &["demos.jsonl", "a named pipe"],
     );
     // A Minari dataset whose data file is a named pipe, or 3 GB long.
     let dataset = work.path().join("dataset");
-    let from = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/minari/arld-test/cartpole-v0");
+    let from =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/minari/arld-test/cartpole-v0");
     let copied = Command::new("cp")
         .arg("-r")
         .arg(&from)
@@ -1060,7 +1081,15 @@ fn a_demonstration_or_dataset_file_that_is_a_pipe_or_huge_is_refused_at_once() {
     let part = dataset.join("data/1/part-0.arrow");
     let d = dataset.display().to_string();
     let converted = work.path().join("demos-out.jsonl").display().to_string();
-    let convert = ["demo", "convert", "--env", "CartPole-v1", "-o", &converted, &d];
+    let convert = [
+        "demo",
+        "convert",
+        "--env",
+        "CartPole-v1",
+        "-o",
+        &converted,
+        &d,
+    ];
     std::fs::remove_file(&part).unwrap();
     mkfifo(&part);
     assert_refused(&run_small(&convert), &["part-0.arrow", "a named pipe"]);
@@ -1165,7 +1194,10 @@ fn the_person_is_served_past_a_crowd_of_idle_and_slow_connections() {
     let _ = child.wait();
     drop(held);
     assert!(page.starts_with("HTTP/1.1 200"), "the page: {page:?}");
-    assert!(socket.starts_with("HTTP/1.1 101"), "the WebSocket: {socket:?}");
+    assert!(
+        socket.starts_with("HTTP/1.1 101"),
+        "the WebSocket: {socket:?}"
+    );
     assert!(waited < Duration::from_secs(5), "served after {waited:?}");
 }
 
@@ -1193,7 +1225,11 @@ fn overwrite_leaves_files_that_only_look_like_a_runs() {
         arld(&a)
     };
     assert!(train(false).status.success());
-    for mine in [".important.tmp.bak", "checkpoints/step_5.safetensors", ".eval.csv.tmp"] {
+    for mine in [
+        ".important.tmp.bak",
+        "checkpoints/step_5.safetensors",
+        ".eval.csv.tmp",
+    ] {
         let path = dir.join(mine);
         std::fs::write(&path, "the user's").unwrap();
         let before = contents(&dir);
@@ -1243,6 +1279,9 @@ fn a_killed_writers_temporary_file_is_removed_when_the_run_goes_on() {
     std::fs::write(&mine, "the user's").unwrap();
     let out = resume(&dir, &[]);
     assert!(out.status.success(), "{}", stderr(&out));
-    assert!(!leftover.exists(), "the leftover stayed in the finished run");
+    assert!(
+        !leftover.exists(),
+        "the leftover stayed in the finished run"
+    );
     assert_eq!(std::fs::read_to_string(&mine).unwrap(), "the user's");
 }

@@ -419,7 +419,13 @@ mod tests {
         left.sort();
         assert_eq!(
             left,
-            [".s.bin.other", ".s.bin.tmp.bak", ".s.bin.tmp12-3.bak", "other.bin", "s.bin"]
+            [
+                ".s.bin.other",
+                ".s.bin.tmp.bak",
+                ".s.bin.tmp12-3.bak",
+                "other.bin",
+                "s.bin"
+            ]
         );
         assert!(is_temporary_of(".s.bin.tmp12-3", "s.bin"));
         assert!(!is_temporary_of(".s.bin.tmp12-", "s.bin"));

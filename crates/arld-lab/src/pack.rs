@@ -227,7 +227,8 @@ pub fn unpack(root: &Path, out: &Path) -> Result<UnpackSummary> {
                         missing.push((run_dir.clone(), name, bytes))
                     }
                     Err(e) => {
-                        return Err(e).with_context(|| format!("cannot inspect {}", path.display()));
+                        return Err(e)
+                            .with_context(|| format!("cannot inspect {}", path.display()));
                     }
                 }
             }
@@ -336,9 +337,13 @@ fn read_run_files(dir: &Path, left_out: &mut Vec<PathBuf>) -> Result<RunFiles> {
             left_out.push(path);
             continue;
         }
-        let bytes = arld_core::files::read_bounded(&path, MAX_RUN_FILE_BYTES).with_context(|| {
-            format!("cannot pack {}: a dataset keeps a run's logs whole", path.display())
-        })?;
+        let bytes =
+            arld_core::files::read_bounded(&path, MAX_RUN_FILE_BYTES).with_context(|| {
+                format!(
+                    "cannot pack {}: a dataset keeps a run's logs whole",
+                    path.display()
+                )
+            })?;
         if name.ends_with(".tmp") || std::str::from_utf8(&bytes).is_err() {
             left_out.push(path);
             continue;

@@ -396,7 +396,10 @@ impl Gate {
         let mut open = self.open.lock().unwrap_or_else(|e| e.into_inner());
         open.retain(|c| !c.closed.load(Ordering::Relaxed));
         for (limit, same) in [
-            (MAX_PER_ADDRESS, &(|c: &Conn| c.ip == ip) as &dyn Fn(&Conn) -> bool),
+            (
+                MAX_PER_ADDRESS,
+                &(|c: &Conn| c.ip == ip) as &dyn Fn(&Conn) -> bool,
+            ),
             (MAX_CONNECTIONS, &|_: &Conn| true),
         ] {
             if open.iter().filter(|c| same(c)).count() >= limit {

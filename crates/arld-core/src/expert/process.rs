@@ -381,8 +381,14 @@ impl Replies {
         if self.pending.is_empty() {
             return Ok(None);
         }
-        let first = self.pending.split(|&b| b == b'\n').next().unwrap_or_default();
-        Ok(Some(String::from_utf8_lossy(first).chars().take(200).collect()))
+        let first = self
+            .pending
+            .split(|&b| b == b'\n')
+            .next()
+            .unwrap_or_default();
+        Ok(Some(
+            String::from_utf8_lossy(first).chars().take(200).collect(),
+        ))
     }
 
     /// The answer line (without its line break), waiting at most until `deadline` and ending the wait at once

@@ -1248,7 +1248,11 @@ impl<A: Action> LoopState<A> {
                 && (!self.training || self.pretrain_done == pretrain_steps),
             "{} pre-training updates done, of the {pretrain_steps} the run makes{}",
             self.pretrain_done,
-            if self.training { " before training" } else { "" }
+            if self.training {
+                " before training"
+            } else {
+                ""
+            }
         );
         ensure!(
             self.training || (self.step, self.episode, self.ep_len, self.updates) == (0, 0, 0, 0),

@@ -782,8 +782,8 @@ pub fn read_written_config(dir: &Path) -> Result<TrainConfig> {
 /// A run's configuration from the bytes of its `config.toml` (`path` names it in the error), as
 /// [`read_written_config`] reads it.
 fn parse_written_config(bytes: &[u8], path: &Path) -> Result<TrainConfig> {
-    let text =
-        std::str::from_utf8(bytes).with_context(|| format!("{} is not UTF-8 text", path.display()))?;
+    let text = std::str::from_utf8(bytes)
+        .with_context(|| format!("{} is not UTF-8 text", path.display()))?;
     toml::from_str(text).with_context(|| format!("{} is not a run configuration", path.display()))
 }
 
@@ -798,8 +798,8 @@ pub fn check_config_types(text: &str, path: &Path) -> Result<()> {
             .expect("the preset resolves");
         toml::from_str(&preset.to_toml()).expect("a configuration reads back")
     });
-    let table: toml::Table = toml::from_str(text)
-        .with_context(|| format!("{} is not a TOML table", path.display()))?;
+    let table: toml::Table =
+        toml::from_str(text).with_context(|| format!("{} is not a TOML table", path.display()))?;
     for (key, value) in &table {
         if let Some(known) = reference.get(key)
             && known.is_str() != value.is_str()
@@ -807,7 +807,11 @@ pub fn check_config_types(text: &str, path: &Path) -> Result<()> {
             bail!(
                 "{}: `{key}` holds {value}, where a run writes {}",
                 path.display(),
-                if known.is_str() { "a string" } else { "a value that is no string" }
+                if known.is_str() {
+                    "a string"
+                } else {
+                    "a value that is no string"
+                }
             );
         }
     }
