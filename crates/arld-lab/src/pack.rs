@@ -580,7 +580,7 @@ fn decode_task(tables: &BTreeMap<&'static str, Vec<u8>>) -> Result<TaskRuns> {
             let named = PathBuf::from(format!("{run}/{file}"));
             match syntax {
                 Syntax::Toml => run_dir::check_config_types(&text, &named),
-                Syntax::Json => run_dir::parse_summary(text.as_bytes(), &named).map(drop),
+                Syntax::Json => run_dir::check_summary_types(&text, &named),
             }
             .with_context(|| {
                 format!("{table_name} and {LAYOUT_FILE} do not give back a run's {file}")

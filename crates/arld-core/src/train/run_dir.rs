@@ -21,7 +21,7 @@ use crate::replay::Transition;
 use crate::task::Action;
 use anyhow::{Context, Result, bail};
 use serde::{Deserialize, Serialize};
-use std::collections::BTreeSet;
+use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
 /// The resolved configuration (TOML).
@@ -791,27 +791,77 @@ fn parse_written_config(bytes: &[u8], path: &Path) -> Result<TrainConfig> {
 /// knows holds a string exactly where this arld writes one (`seed = "1"` is refused). Keys it does not know (an
 /// older or newer run's) are not checked, nor missing keys.
 pub fn check_config_types(text: &str, path: &Path) -> Result<()> {
-    static REFERENCE: std::sync::OnceLock<toml::Table> = std::sync::OnceLock::new();
-    let reference = REFERENCE.get_or_init(|| {
+    static STRINGS: std::sync::OnceLock<BTreeMap<String, bool>> = std::sync::OnceLock::new();
+    let strings = STRINGS.get_or_init(|| {
         let preset = ConfigInput::new("CartPole-v0", Method::Adqn, NetKind::Bootstrap, 0)
             .resolve()
             .expect("the preset resolves");
-        toml::from_str(&preset.to_toml()).expect("a configuration reads back")
+        let table: toml::Table = toml::from_str(&preset.to_toml()).expect("a configuration reads back");
+        table.into_iter().map(|(k, v)| (k, v.is_str())).collect()
     });
-    let table: toml::Table =
-        toml::from_str(text).with_context(|| format!("{} is not a TOML table", path.display()))?;
-    for (key, value) in &table {
-        if let Some(known) = reference.get(key)
-            && known.is_str() != value.is_str()
+    let table: toml::Table = toml::from_str(text)
+        .with_context(|| format!("{} is not a TOML table", path.display()))?;
+    check_strings(table.iter().map(|(k, v)| (k, Some(v.is_str()))), strings, path)
+}
+
+/// Checks the text of a run's `summary.json` as [`check_config_types`] checks a configuration (a `null` stands
+/// for a value a run did not have, of any type).
+pub fn check_summary_types(text: &str, path: &Path) -> Result<()> {
+    static STRINGS: std::sync::OnceLock<BTreeMap<String, bool>> = std::sync::OnceLock::new();
+    let strings = STRINGS.get_or_init(|| {
+        // A summary with every value present, for the kind of each.
+        let some = Summary {
+            env: String::new(),
+            method: Method::Adqn,
+            net: NetKind::Bootstrap,
+            seed: 0,
+            steps_to_solve: 0,
+            solved: false,
+            solve_threshold: 0.0,
+            train_steps: 0,
+            final_score: 0.0,
+            demos_pretrain: 0,
+            demos_queried: 0,
+            episodes: 0,
+            wall_time_s: 0.0,
+            cpu_time_s: Some(0.0),
+            steps_per_s: 0.0,
+            numerics: Some(String::new()),
+            arld_version: Some(String::new()),
+            git_commit: Some(String::new()),
+            expert: Some(String::new()),
+            person_s: Some(0.0),
+        };
+        let serde_json::Value::Object(object) = serde_json::to_value(some).expect("a summary serialises")
+        else {
+            unreachable!("a summary is an object")
+        };
+        object.into_iter().map(|(k, v)| (k, v.is_string())).collect()
+    });
+    let object: serde_json::Map<String, serde_json::Value> = serde_json::from_str(text)
+        .with_context(|| format!("{} is not a JSON object", path.display()))?;
+    let kinds = object
+        .iter()
+        .map(|(k, v)| (k, (!v.is_null()).then(|| v.is_string())));
+    check_strings(kinds, strings, path)
+}
+
+/// Refuses a key whose value is a string (`Some(true)`) where `strings` says its values are none, or the other
+/// way round (`None`: a value of any kind).
+fn check_strings<'a>(
+    kinds: impl Iterator<Item = (&'a String, Option<bool>)>,
+    strings: &BTreeMap<String, bool>,
+    path: &Path,
+) -> Result<()> {
+    for (key, is_string) in kinds {
+        if let (Some(&expected), Some(found)) = (strings.get(key), is_string)
+            && expected != found
         {
             bail!(
-                "{}: `{key}` holds {value}, where a run writes {}",
+                "{}: `{key}` holds {}, where a run writes {}",
                 path.display(),
-                if known.is_str() {
-                    "a string"
-                } else {
-                    "a value that is no string"
-                }
+                if found { "a string" } else { "a value that is no string" },
+                if expected { "a string" } else { "a value that is no string" }
             );
         }
     }
