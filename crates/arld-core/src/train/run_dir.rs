@@ -796,12 +796,17 @@ pub fn check_config_types(text: &str, path: &Path) -> Result<()> {
         let preset = ConfigInput::new("CartPole-v0", Method::Adqn, NetKind::Bootstrap, 0)
             .resolve()
             .expect("the preset resolves");
-        let table: toml::Table = toml::from_str(&preset.to_toml()).expect("a configuration reads back");
+        let table: toml::Table =
+            toml::from_str(&preset.to_toml()).expect("a configuration reads back");
         table.into_iter().map(|(k, v)| (k, v.is_str())).collect()
     });
-    let table: toml::Table = toml::from_str(text)
-        .with_context(|| format!("{} is not a TOML table", path.display()))?;
-    check_strings(table.iter().map(|(k, v)| (k, Some(v.is_str()))), strings, path)
+    let table: toml::Table =
+        toml::from_str(text).with_context(|| format!("{} is not a TOML table", path.display()))?;
+    check_strings(
+        table.iter().map(|(k, v)| (k, Some(v.is_str()))),
+        strings,
+        path,
+    )
 }
 
 /// Checks the text of a run's `summary.json` as [`check_config_types`] checks a configuration (a `null` stands
@@ -832,11 +837,15 @@ pub fn check_summary_types(text: &str, path: &Path) -> Result<()> {
             expert: Some(String::new()),
             person_s: Some(0.0),
         };
-        let serde_json::Value::Object(object) = serde_json::to_value(some).expect("a summary serialises")
+        let serde_json::Value::Object(object) =
+            serde_json::to_value(some).expect("a summary serialises")
         else {
             unreachable!("a summary is an object")
         };
-        object.into_iter().map(|(k, v)| (k, v.is_string())).collect()
+        object
+            .into_iter()
+            .map(|(k, v)| (k, v.is_string()))
+            .collect()
     });
     let object: serde_json::Map<String, serde_json::Value> = serde_json::from_str(text)
         .with_context(|| format!("{} is not a JSON object", path.display()))?;
@@ -860,8 +869,16 @@ fn check_strings<'a>(
             bail!(
                 "{}: `{key}` holds {}, where a run writes {}",
                 path.display(),
-                if found { "a string" } else { "a value that is no string" },
-                if expected { "a string" } else { "a value that is no string" }
+                if found {
+                    "a string"
+                } else {
+                    "a value that is no string"
+                },
+                if expected {
+                    "a string"
+                } else {
+                    "a value that is no string"
+                }
             );
         }
     }
