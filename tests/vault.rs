@@ -35,6 +35,8 @@ fn bounded(command: &str, limit_kib: u64, deadline: Duration) -> Option<Output> 
 }
 
 /// [`bounded`], with the most memory the command held at once (its peak resident set, KiB).
+// The child is reaped by wait4 (which reports its resources), not by `Child::wait`.
+#[allow(clippy::zombie_processes)]
 fn bounded_peak(command: &str, limit_kib: u64, deadline: Duration) -> Option<(Output, u64)> {
     use std::io::Read;
     // `exec`: the shell becomes the command, whose resources wait4 reports.
