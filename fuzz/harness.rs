@@ -178,3 +178,45 @@ pub fn packed(data: &[u8]) -> bool {
     let files: [&[u8]; 8] = std::array::from_fn(|i| files[i].as_slice());
     arld::experiment::pack::decode_tables(files).is_ok()
 }
+
+/// A message a page sends the web expert's server (JSON text), parsed and checked as the server parses each
+/// message, for a task of discrete actions (LunarLander-v2's four) and for one of actions in a box
+/// (LunarLanderContinuous-v3's): a message accepted with an action holds an action the task takes (checked here
+/// from the task's spec, not by the server's check).
+pub fn web(data: &[u8]) -> bool {
+    use arld::expert::web::protocol::{ClientMsg, box_check, discrete_check};
+    let Ok(text) = std::str::from_utf8(data) else {
+        return false;
+    };
+    let action = |msg: &ClientMsg| match msg {
+        ClientMsg::Key { action, .. } => Some(action.clone()),
+        ClientMsg::Hold { action } => action.clone(),
+        _ => None,
+    };
+    let discrete = ClientMsg::parse(text, &discrete_check(4));
+    if let Some(a) = discrete.as_ref().ok().and_then(action) {
+        assert!(a.as_u64().is_some_and(|a| a < 4), "accepted the action {a}");
+    }
+    let spec = arld::env::box_spec("LunarLanderContinuous-v3").expect("a task of the registry");
+    let boxed = ClientMsg::parse(text, &box_check(spec));
+    if let Some(a) = boxed.as_ref().ok().and_then(action) {
+        let values: Vec<f64> = a
+            .as_array()
+            .expect("a box's action is a list")
+            .iter()
+            .map(|v| v.as_f64().expect("of numbers"))
+            .collect();
+        assert_eq!(values.len(), spec.action_low.len(), "accepted {a}");
+        for (i, v) in values.iter().enumerate() {
+            let (lo, hi) = (
+                f64::from(spec.action_low[i]),
+                f64::from(spec.action_high[i]),
+            );
+            assert!(
+                (lo..=hi).contains(v),
+                "accepted {a}: dimension {i} out of [{lo}, {hi}]"
+            );
+        }
+    }
+    discrete.is_ok() || boxed.is_ok()
+}

@@ -11,7 +11,7 @@ set -euo pipefail
 cd "$(dirname "$0")"
 seconds="${SECONDS_PER_TARGET:-60}"
 targets=("$@")
-[ "${#targets[@]}" -gt 0 ] || targets=(config demos checkpoint trace run_dir packed snapshot)
+[ "${#targets[@]}" -gt 0 ] || targets=(config demos checkpoint trace run_dir packed snapshot web)
 export RUSTC_BOOTSTRAP=1
 cargo fuzz build -O
 # The snapshot target's seed is a snapshot of this arld (a snapshot records the version that wrote it, so none

@@ -415,12 +415,12 @@ fn expert_process_runs_and_its_failures_are_clear() {
             &["did not answer within 0.5 s"],
         ),
         (
-            "cmd:sh -c 'while read l; do echo hello there; done'",
+            "cmd:sh -c 'read h; while read l; do echo hello there; done'",
             &[],
             &["\"hello there\"", "{\"action\": 1}"],
         ),
         (
-            "cmd:sh -c 'while read l; do echo {\\\"action\\\":7}; done'",
+            "cmd:sh -c 'read h; while read l; do echo {\\\"action\\\":7}; done'",
             &[],
             &["answered action 7", "2 actions"],
         ),

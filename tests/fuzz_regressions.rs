@@ -10,13 +10,14 @@ use std::path::Path;
 
 type Target = fn(&[u8]) -> bool;
 
-const TARGETS: [(&str, Target); 6] = [
+const TARGETS: [(&str, Target); 7] = [
     ("config", harness::config),
     ("demos", harness::demos),
     ("checkpoint", harness::checkpoint),
     ("trace", harness::trace),
     ("run_dir", harness::run_dir),
     ("packed", harness::packed),
+    ("web", harness::web),
 ];
 
 /// The files of `fuzz/<kind>/<target>/` (none when the folder does not exist).

@@ -31,6 +31,15 @@ fn spawn(args: &[&str]) -> Child {
 
 /// Runs `command` in `sh` with at most `limit` of memory and `deadline` of time; `None` if it had to be killed.
 fn bounded(command: &str, limit_kib: u64, deadline: Duration) -> Option<Output> {
+    bounded_peak(command, limit_kib, deadline).map(|(out, _)| out)
+}
+
+/// [`bounded`], with the most memory the command held at once (its peak resident set, KiB).
+// The child is reaped by wait4 (which reports its resources), not by `Child::wait`.
+#[allow(clippy::zombie_processes)]
+fn bounded_peak(command: &str, limit_kib: u64, deadline: Duration) -> Option<(Output, u64)> {
+    use std::io::Read;
+    // `exec`: the shell becomes the command, whose resources wait4 reports.
     let mut child = Command::new("sh")
         .arg("-c")
         .arg(format!("ulimit -v {limit_kib}; exec {command}"))
@@ -38,8 +47,24 @@ fn bounded(command: &str, limit_kib: u64, deadline: Duration) -> Option<Output> 
         .stderr(Stdio::piped())
         .spawn()
         .expect("start sh");
+    let drain = |mut pipe: Box<dyn Read + Send>| {
+        std::thread::spawn(move || {
+            let mut bytes = Vec::new();
+            let _ = pipe.read_to_end(&mut bytes);
+            bytes
+        })
+    };
+    let out = drain(Box::new(child.stdout.take().unwrap()));
+    let err = drain(Box::new(child.stderr.take().unwrap()));
+    let pid = child.id() as i32;
     let started = Instant::now();
-    while child.try_wait().unwrap().is_none() {
+    let (mut status, mut usage) = (0, unsafe { std::mem::zeroed::<libc::rusage>() });
+    loop {
+        // SAFETY: wait4 writes only the status and the usage given.
+        let done = unsafe { libc::wait4(pid, &mut status, libc::WNOHANG, &mut usage) };
+        if done == pid {
+            break;
+        }
         if started.elapsed() > deadline {
             let _ = child.kill();
             let _ = child.wait();
@@ -47,7 +72,13 @@ fn bounded(command: &str, limit_kib: u64, deadline: Duration) -> Option<Output> 
         }
         std::thread::sleep(Duration::from_millis(20));
     }
-    Some(child.wait_with_output().unwrap())
+    use std::os::unix::process::ExitStatusExt;
+    let output = Output {
+        status: std::process::ExitStatus::from_raw(status),
+        stdout: out.join().unwrap(),
+        stderr: err.join().unwrap(),
+    };
+    Some((output, usage.ru_maxrss as u64))
 }
 
 fn stderr(out: &Output) -> String {
@@ -753,4 +784,506 @@ fn idle_connections_to_the_web_page_cannot_use_up_the_runs_files() {
     drop(held);
     assert!(out.status.success(), "{}", stderr(&out));
     assert!(dir.join("summary.json").is_file());
+}
+
+/// The most memory (KiB) a process may hold on an endless or flooding input.
+const PEAK_KIB: u64 = 200 << 10;
+
+/// `args` quoted for `sh`.
+fn shell(args: &[&str]) -> String {
+    let quoted: Vec<String> = args
+        .iter()
+        .map(|a| format!("'{}'", a.replace('\'', "'\\''")))
+        .collect();
+    format!("'{ARLD}' {}", quoted.join(" "))
+}
+
+/// Runs arld with `args` under a memory cap of 1 GiB and a minute: it must end, and hold less than [`PEAK_KIB`].
+fn run_small(args: &[&str]) -> Output {
+    let (out, peak) = bounded_peak(&shell(args), 1 << 20, Duration::from_secs(60))
+        .unwrap_or_else(|| panic!("arld {args:?} did not end"));
+    assert!(
+        peak < PEAK_KIB,
+        "arld {args:?} held {peak} KiB: {}",
+        stderr(&out)
+    );
+    eprintln!("arld {args:?}: peak {peak} KiB");
+    out
+}
+
+fn mkfifo(path: &Path) {
+    let made = Command::new("mkfifo").arg(path).status().expect("mkfifo");
+    assert!(made.success());
+}
+
+/// A sparse file of `len` bytes (no disk used).
+fn sparse(path: &Path, len: u64) {
+    std::fs::File::create(path).unwrap().set_len(len).unwrap();
+}
+
+/// A short finished run at `dir`.
+fn finished_run(dir: &Path) {
+    let d = dir.display().to_string();
+    let out = arld(&[
+        "train",
+        "--quiet",
+        "--env",
+        "CartPole-v0",
+        "--method",
+        "dqn",
+        "--set",
+        "train_steps=600",
+        "--set",
+        "eval_period=300",
+        "-o",
+        &d,
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+}
+
+/// A packed dataset of two short runs: `ROOT/CartPole-v0/dqn-single/seed{0,1}`, packed into `ROOT/CartPole-v0/`
+/// (the run directories removed).
+fn packed_dataset(root: &Path) -> PathBuf {
+    for seed in 0..2 {
+        finished_run(&root.join(format!("CartPole-v0/dqn-single/seed{seed}")));
+    }
+    let out = arld(&["runs", "pack", root.to_str().unwrap()]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    std::fs::remove_dir_all(root.join("CartPole-v0/dqn-single")).unwrap();
+    root.join("CartPole-v0")
+}
+
+fn gunzip(path: &Path) -> String {
+    use std::io::Read;
+    let mut text = String::new();
+    flate2::read::GzDecoder::new(std::fs::File::open(path).unwrap())
+        .read_to_string(&mut text)
+        .unwrap();
+    text
+}
+
+fn gzip_to(path: &Path, text: &str) {
+    use std::io::Write;
+    let mut out = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::default());
+    out.write_all(text.as_bytes()).unwrap();
+    std::fs::write(path, out.finish().unwrap()).unwrap();
+}
+
+/// Every path below `dir` (links not followed), to show that nothing was written there.
+fn listing(dir: &Path) -> Vec<PathBuf> {
+    let mut all = Vec::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for entry in std::fs::read_dir(&d).unwrap() {
+            let path = entry.unwrap().path();
+            if std::fs::symlink_metadata(&path).unwrap().is_dir() {
+                stack.push(path.clone());
+            }
+            all.push(path);
+        }
+    }
+    all.sort();
+    all
+}
+
+#[test]
+fn unpacking_never_writes_through_a_link_planted_in_out() {
+    let work = tempfile::tempdir().unwrap();
+    let root = work.path().join("data");
+    packed_dataset(&root);
+    let elsewhere = work.path().join("elsewhere");
+    std::fs::create_dir(&elsewhere).unwrap();
+    let r = root.display().to_string();
+    for planted in [
+        "CartPole-v0",
+        "CartPole-v0/dqn-single",
+        "CartPole-v0/dqn-single/seed1",
+    ] {
+        let out_dir = work.path().join("out");
+        clear(&out_dir);
+        let link = out_dir.join(planted);
+        std::fs::create_dir_all(link.parent().unwrap()).unwrap();
+        std::os::unix::fs::symlink(&elsewhere, &link).unwrap();
+        let o = out_dir.display().to_string();
+        assert_refused(
+            &arld(&["runs", "unpack", &r, "-o", &o]),
+            &[planted, "symbolic link"],
+        );
+        assert!(
+            listing(&elsewhere).is_empty(),
+            "a link at {planted}: unpacking wrote {:?}",
+            listing(&elsewhere)
+        );
+    }
+    // Without the link, the runs come back.
+    let out_dir = work.path().join("clean");
+    let o = out_dir.display().to_string();
+    let out = arld(&["runs", "unpack", &r, "-o", &o]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(
+        out_dir
+            .join("CartPole-v0/dqn-single/seed1/summary.json")
+            .is_file()
+    );
+}
+
+#[test]
+fn a_packed_dataset_with_two_copies_of_a_run_or_a_lying_layout_is_refused() {
+    let work = tempfile::tempdir().unwrap();
+    let root = work.path().join("data");
+    let task = packed_dataset(&root);
+    let r = root.display().to_string();
+    let out_dir = work.path().join("out");
+    let o = out_dir.display().to_string();
+    let unpack = || arld(&["runs", "unpack", &r, "-o", &o]);
+    // The run listed twice in the index.
+    let runs = task.join("runs.csv.gz");
+    let index = gunzip(&runs);
+    let mut lines: Vec<&str> = index.lines().collect();
+    lines.push(lines[1]);
+    gzip_to(&runs, &(lines.join("\n") + "\n"));
+    assert_refused(&unpack(), &["dqn-single/seed0", "twice"]);
+    gzip_to(&runs, &index);
+    // The run's configuration twice, the second copy with another seed.
+    let configs = task.join("configs.csv.gz");
+    let table = gunzip(&configs);
+    let row = table.lines().nth(1).unwrap().to_string();
+    let header: Vec<&str> = table.lines().next().unwrap().split(',').collect();
+    let seed_column = header.iter().position(|c| *c == "seed").unwrap();
+    let mut other: Vec<String> = row.split(',').map(str::to_string).collect();
+    other[seed_column] = "7".into();
+    gzip_to(&configs, &format!("{table}{}\n", other.join(",")));
+    assert_refused(&unpack(), &["config.toml", "twice"]);
+    gzip_to(&configs, &table);
+    // layout.json saying the seed is a string: `seed = "0"` would be written.
+    let layout_path = task.join("layout.json");
+    let layout_text = std::fs::read_to_string(&layout_path).unwrap();
+    let mut layout: serde_json::Value = serde_json::from_str(&layout_text).unwrap();
+    layout["config_string_columns"]
+        .as_array_mut()
+        .unwrap()
+        .push("seed".into());
+    std::fs::write(&layout_path, layout.to_string()).unwrap();
+    assert_refused(&unpack(), &["`seed`", "layout.json"]);
+    assert!(
+        !out_dir.exists(),
+        "a refused unpack wrote {:?}",
+        listing(&out_dir)
+    );
+    // layout.json an endless device, or a named pipe: refused at once, naming it.
+    std::fs::remove_file(&layout_path).unwrap();
+    std::os::unix::fs::symlink("/dev/zero", &layout_path).unwrap();
+    assert_refused(
+        &run_small(&["runs", "unpack", &r, "-o", &o]),
+        &["layout.json", "a device"],
+    );
+    std::fs::remove_file(&layout_path).unwrap();
+    mkfifo(&layout_path);
+    assert_refused(
+        &run_small(&["runs", "unpack", &r, "-o", &o]),
+        &["layout.json", "a named pipe"],
+    );
+    std::fs::remove_file(&layout_path).unwrap();
+    std::fs::write(&layout_path, &layout_text).unwrap();
+    // A table that decompresses to 2 GiB of zeros from 2 MB.
+    {
+        use std::io::Write;
+        let bomb = std::fs::File::create(task.join("eval.csv.gz")).unwrap();
+        let mut out = flate2::write::GzEncoder::new(bomb, flate2::Compression::best());
+        let zeros = vec![0u8; 1 << 20];
+        for _ in 0..2048 {
+            out.write_all(&zeros).unwrap();
+        }
+        out.finish().unwrap();
+    }
+    assert_refused(
+        &run_small(&["runs", "unpack", &r, "-o", &o]),
+        &["eval.csv.gz", "decompresses to more than"],
+    );
+}
+
+#[test]
+fn packing_a_huge_file_of_a_run_is_bounded() {
+    let work = tempfile::tempdir().unwrap();
+    let root = work.path().join("runs");
+    let run = root.join("CartPole-v0/dqn-single/seed0");
+    finished_run(&run);
+    let r = root.display().to_string();
+    // A 1.5 GB file of the user's: left out (as binary files are), not read whole.
+    let notes = run.join("notes.txt");
+    sparse(&notes, 1_500_000_000);
+    let out = run_small(&["runs", "pack", &r]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(stderr(&out).contains("notes.txt"), "{}", stderr(&out));
+    std::fs::remove_file(&notes).unwrap();
+    // A run's own log of 1.5 GB: refused, naming it.
+    std::fs::remove_dir_all(root.join("CartPole-v0")).unwrap();
+    finished_run(&run);
+    sparse(&run.join("queries.csv"), 1_500_000_000);
+    assert_refused(
+        &run_small(&["runs", "pack", &r]),
+        &["queries.csv", "longer than"],
+    );
+}
+
+#[test]
+fn endless_evaluations_and_grids_are_refused_within_bounds() {
+    let work = tempfile::tempdir().unwrap();
+    let o = work.path().join("out").display().to_string();
+    assert_refused(
+        &run_small(&["report", "--from-evaluations", "/dev/zero", "-o", &o]),
+        &["/dev/zero", "a device"],
+    );
+    assert_refused(
+        &run_small(&["sweep", "--grid", "/dev/zero", "-o", &o]),
+        &["/dev/zero", "a device"],
+    );
+    let pipe = work.path().join("grid.toml");
+    mkfifo(&pipe);
+    let p = pipe.display().to_string();
+    assert_refused(
+        &run_small(&["sweep", "--grid", &p, "-o", &o]),
+        &["grid.toml", "a named pipe"],
+    );
+}
+
+#[test]
+fn a_demonstration_or_dataset_file_that_is_a_pipe_or_huge_is_refused_at_once() {
+    let work = tempfile::tempdir().unwrap();
+    let pipe = work.path().join("demos.jsonl");
+    mkfifo(&pipe);
+    let o = work.path().join("run").display().to_string();
+    let demo = format!("demo_file={}", pipe.display());
+    assert_refused(
+        &run_small(&[
+            "train",
+            "--quiet",
+            "--env",
+            "CartPole-v0",
+            "--method",
+            "dqfd",
+            "--set",
+            &demo,
+            "-o",
+            &o,
+        ]),
+        &["demos.jsonl", "a named pipe"],
+    );
+    // A Minari dataset whose data file is a named pipe, or 3 GB long.
+    let dataset = work.path().join("dataset");
+    let from =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/minari/arld-test/cartpole-v0");
+    let copied = Command::new("cp")
+        .arg("-r")
+        .arg(&from)
+        .arg(&dataset)
+        .status()
+        .unwrap();
+    assert!(copied.success());
+    let part = dataset.join("data/1/part-0.arrow");
+    let d = dataset.display().to_string();
+    let converted = work.path().join("demos-out.jsonl").display().to_string();
+    let convert = [
+        "demo",
+        "convert",
+        "--env",
+        "CartPole-v1",
+        "-o",
+        &converted,
+        &d,
+    ];
+    std::fs::remove_file(&part).unwrap();
+    mkfifo(&part);
+    assert_refused(&run_small(&convert), &["part-0.arrow", "a named pipe"]);
+    std::fs::remove_file(&part).unwrap();
+    sparse(&part, 3_000_000_000);
+    assert_refused(&run_small(&convert), &["part-0.arrow", "longer than"]);
+}
+
+#[test]
+fn a_process_expert_flooding_answers_ends_the_run_within_bounds() {
+    let work = tempfile::tempdir().unwrap();
+    let dir = work.path().join("run");
+    let mut args = expert_run(&dir, "cmd:yes '{\"action\": 0}'", "60");
+    args.extend(["--set".to_string(), "budget=100000".to_string()]);
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    assert_refused(&run_small(&args), &["without being asked"]);
+    // An expert that answers each query with two lines: the second is never taken as the next answer.
+    let twice = "cmd:sh -c 'read h; while read q; do echo \"{\\\"action\\\": 1}\"; echo \"{\\\"action\\\": 0}\"; done'";
+    let dir = work.path().join("twice");
+    let args = expert_run(&dir, twice, "60");
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    assert_refused(&run_small(&args), &["without being asked"]);
+}
+
+/// An HTTP request to `addr` after `path` (with the run's token), on a new connection: the status line of the
+/// answer.
+fn http_status(addr: std::net::SocketAddr, request: &str) -> String {
+    use std::io::{BufRead, Write};
+    let mut stream = std::net::TcpStream::connect_timeout(&addr, Duration::from_secs(5)).unwrap();
+    stream
+        .set_read_timeout(Some(Duration::from_secs(10)))
+        .unwrap();
+    stream.write_all(request.as_bytes()).unwrap();
+    let mut line = String::new();
+    let _ = std::io::BufReader::new(stream).read_line(&mut line);
+    line
+}
+
+#[test]
+fn the_person_is_served_past_a_crowd_of_idle_and_slow_connections() {
+    use std::io::{BufRead, Write};
+    let work = tempfile::tempdir().unwrap();
+    let dir = work.path().join("run");
+    let mut child = Command::new(ARLD)
+        .args([
+            "train",
+            "--quiet",
+            "--env",
+            "CartPole-v0",
+            "--method",
+            "adqn",
+            "--expert",
+            "web",
+            "--listen",
+            "127.0.0.1:0",
+            "--web-no-wait",
+            "--web-timeout",
+            "0.01",
+            "--set",
+            "train_steps=1000000",
+            "-o",
+        ])
+        .arg(&dir)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let mut lines = std::io::BufReader::new(child.stdout.take().unwrap()).lines();
+    let url = lines
+        .by_ref()
+        .map_while(Result::ok)
+        .find_map(|l| l.find("http://").map(|i| l[i..].trim().to_string()))
+        .expect("the run printed its URL");
+    let rest = &url["http://".len()..];
+    let (authority, path) = rest.split_at(rest.find('/').unwrap());
+    let addr: std::net::SocketAddr = authority.parse().unwrap();
+    let query = &path[path.find('?').unwrap()..];
+    // 48 idle connections, and 8 slow ones that send a request a byte at a time.
+    let mut held: Vec<std::net::TcpStream> = (0..48)
+        .map(|_| std::net::TcpStream::connect_timeout(&addr, Duration::from_secs(5)).unwrap())
+        .collect();
+    for _ in 0..8 {
+        let mut slow = std::net::TcpStream::connect_timeout(&addr, Duration::from_secs(5)).unwrap();
+        slow.write_all(b"GET / HT").unwrap();
+        held.push(slow);
+    }
+    std::thread::sleep(Duration::from_millis(300));
+    let started = Instant::now();
+    let page = http_status(
+        addr,
+        &format!("GET /{query} HTTP/1.1\r\nHost: {authority}\r\nConnection: close\r\n\r\n"),
+    );
+    let socket = http_status(
+        addr,
+        &format!(
+            "GET /ws{query} HTTP/1.1\r\nHost: {authority}\r\nConnection: Upgrade\r\nUpgrade: websocket\r\n\
+             Sec-WebSocket-Version: 13\r\nSec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\n\r\n"
+        ),
+    );
+    let waited = started.elapsed();
+    let _ = child.kill();
+    let _ = child.wait();
+    drop(held);
+    assert!(page.starts_with("HTTP/1.1 200"), "the page: {page:?}");
+    assert!(
+        socket.starts_with("HTTP/1.1 101"),
+        "the WebSocket: {socket:?}"
+    );
+    assert!(waited < Duration::from_secs(5), "served after {waited:?}");
+}
+
+#[test]
+fn overwrite_leaves_files_that_only_look_like_a_runs() {
+    let work = tempfile::tempdir().unwrap();
+    let dir = work.path().join("run");
+    let d = dir.display().to_string();
+    let train = |overwrite: bool| {
+        let mut a = vec![
+            "train",
+            "--quiet",
+            "--env",
+            "CartPole-v0",
+            "--set",
+            "train_steps=1000",
+            "--set",
+            "checkpoint_every=500",
+            "-o",
+            &d,
+        ];
+        if overwrite {
+            a.push("--overwrite");
+        }
+        arld(&a)
+    };
+    assert!(train(false).status.success());
+    for mine in [
+        ".important.tmp.bak",
+        "checkpoints/step_5.safetensors",
+        ".eval.csv.tmp",
+    ] {
+        let path = dir.join(mine);
+        std::fs::write(&path, "the user's").unwrap();
+        let before = contents(&dir);
+        assert_refused(&train(true), &[mine.rsplit('/').next().unwrap()]);
+        assert_eq!(contents(&dir), before, "--overwrite changed the directory");
+        assert_eq!(std::fs::read_to_string(&path).unwrap(), "the user's");
+        std::fs::remove_file(&path).unwrap();
+    }
+    // What a killed writer of the run left is the run's: removed with it.
+    std::fs::write(dir.join(".eval.csv.tmp4194305-0"), "half").unwrap();
+    let out = train(true);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(!dir.join(".eval.csv.tmp4194305-0").exists());
+}
+
+#[test]
+fn a_consistently_forged_snapshot_is_refused() {
+    let work = tempfile::tempdir().unwrap();
+    let dir = work.path().join("run");
+    interrupted_run(&dir);
+    let path = dir.join("snapshot.safetensors");
+    let real = std::fs::read(&path).unwrap();
+    let mut snapshot = Snapshot::read(&path);
+    snapshot.change_values(|v| v["loop"]["step"] = 1_000_000_000_000u64.into());
+    snapshot.write(&path);
+    assert_refused(&resume(&dir, &[]), &["step 1000000000000", "loop"]);
+    std::fs::write(&path, &real).unwrap();
+    let mut snapshot = Snapshot::read(&path);
+    snapshot.array("replay.terminal")[0] = 7;
+    snapshot.write(&path);
+    assert_refused(&resume(&dir, &[]), &["replay.terminal", "holds 7"]);
+    // The real snapshot still resumes, and the run finishes.
+    std::fs::write(&path, &real).unwrap();
+    let out = resume(&dir, &[]);
+    assert!(out.status.success(), "{}", stderr(&out));
+}
+
+#[test]
+fn a_killed_writers_temporary_file_is_removed_when_the_run_goes_on() {
+    let work = tempfile::tempdir().unwrap();
+    let dir = work.path().join("run");
+    interrupted_run(&dir);
+    // As a writer killed before its rename leaves it (another process's id).
+    let leftover = dir.join(".eval.csv.tmp4194305-3");
+    std::fs::write(&leftover, "step,mean\n").unwrap();
+    let mine = dir.join(".eval.csv.tmp.bak");
+    std::fs::write(&mine, "the user's").unwrap();
+    let out = resume(&dir, &[]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(
+        !leftover.exists(),
+        "the leftover stayed in the finished run"
+    );
+    assert_eq!(std::fs::read_to_string(&mine).unwrap(), "the user's");
 }

@@ -312,7 +312,7 @@ fn print_report(dir: &std::path::Path, out: &std::path::Path, sustain: usize) ->
         println!("  {}", f.display());
     }
     let table = out.join("table.md");
-    if let Ok(text) = std::fs::read_to_string(&table) {
+    if let Ok(text) = arld::files::read_text_bounded(&table, 16 << 20) {
         println!("\n{text}");
     }
     Ok(ExitCode::SUCCESS)
@@ -420,7 +420,10 @@ pub fn run_runs(cmd: RunsCommand) -> Result<ExitCode> {
         RunsCommand::Pack { dir } => {
             let s = pack::pack(&dir)?;
             for path in &s.left_out {
-                eprintln!("not packed (not a text file of a run): {}", path.display());
+                eprintln!(
+                    "not packed (not a text file of a run, or too long for a dataset): {}",
+                    path.display()
+                );
             }
             println!(
                 "{} runs packed in {} ({} new; {} tables written, {} files kept verbatim)",

@@ -207,7 +207,8 @@ pub fn run_expert(cmd: ExpertCommand) -> Result<ExitCode> {
                 match idx {
                     Some(i) => {
                         let c = &candidates[i];
-                        let bytes = std::fs::read(&c.path)?;
+                        let bytes =
+                            arld::files::read_bounded(&c.path, arld::nn::MAX_MODEL_FILE_BYTES)?;
                         arld::files::write_atomic(
                             &out.join(format!("{name}.safetensors")),
                             &bytes,

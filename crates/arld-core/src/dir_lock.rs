@@ -77,7 +77,7 @@ impl DirLock {
                     });
                 }
             }
-            let text = std::fs::read_to_string(path).unwrap_or_default();
+            let text = crate::files::read_text_bounded(path, 1 << 20).unwrap_or_default();
             let holder: Option<Holder> = serde_json::from_str(&text).ok();
             match holder {
                 Some(holder) if holder.is_gone() => {

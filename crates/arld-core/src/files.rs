@@ -205,19 +205,15 @@ pub fn open_own_file(path: &Path, create: bool) -> std::io::Result<File> {
     Ok(file)
 }
 
-/// Reads a whole file of at most `max_bytes` (a file, or what a link names, that is no regular file, or is
-/// longer, is an error naming it): every whole-file read of input has a bound, so that `/dev/zero` or a pipe
-/// that never ends cannot exhaust the memory.
+/// Reads a whole input file of at most `max_bytes` (opened by [`open_bounded`]: a file, or what a link names,
+/// that is no regular file, or is longer, is an error naming it): every whole-file read of input has a bound, so
+/// that `/dev/zero` or a pipe that never ends cannot exhaust the memory, nor a pipe without a writer hang.
 pub fn read_bounded(path: &Path, max_bytes: u64) -> std::io::Result<Vec<u8>> {
     use std::io::Read;
     let named =
         |e: std::io::Error| std::io::Error::new(e.kind(), format!("{}: {e}", path.display()));
-    let file = open_regular(path)?;
-    let meta = file.metadata().map_err(named)?;
-    if meta.len() > max_bytes {
-        return Err(too_long(path, max_bytes));
-    }
-    let mut bytes = Vec::with_capacity(meta.len() as usize);
+    let (file, len) = open_bounded(path, max_bytes)?;
+    let mut bytes = Vec::with_capacity(len as usize);
     file.take(max_bytes + 1)
         .read_to_end(&mut bytes)
         .map_err(named)?;
@@ -225,6 +221,32 @@ pub fn read_bounded(path: &Path, max_bytes: u64) -> std::io::Result<Vec<u8>> {
         return Err(too_long(path, max_bytes));
     }
     Ok(bytes)
+}
+
+/// Reads a whole input text file of at most `max_bytes` ([`read_bounded`]); bytes that are not UTF-8 are an
+/// error ([`std::io::ErrorKind::InvalidData`]) naming it.
+pub fn read_text_bounded(path: &Path, max_bytes: u64) -> std::io::Result<String> {
+    String::from_utf8(read_bounded(path, max_bytes)?).map_err(|_| {
+        std::io::Error::new(
+            std::io::ErrorKind::InvalidData,
+            format!("{} is not UTF-8 text", path.display()),
+        )
+    })
+}
+
+/// Opens an input file to be read in pieces ([`open_regular`]), with its length, which is at most `max_bytes`
+/// (a longer file is an error naming it); the reader reads at most that many bytes (a file that grows while
+/// it is read is cut there). Every input arld reads (configurations, tables, demonstrations, datasets, weights,
+/// grids) is opened here or by [`read_bounded`], which builds on it.
+pub fn open_bounded(path: &Path, max_bytes: u64) -> std::io::Result<(File, u64)> {
+    let named =
+        |e: std::io::Error| std::io::Error::new(e.kind(), format!("{}: {e}", path.display()));
+    let file = open_regular(path)?;
+    let len = file.metadata().map_err(named)?.len();
+    if len > max_bytes {
+        return Err(too_long(path, max_bytes));
+    }
+    Ok((file, len))
 }
 
 /// Opens an input file for reading: a regular file, or what a link names if that is one. Anything else (a named
@@ -296,8 +318,27 @@ pub fn read_line_bounded(
 /// behind can be recognised ([`remove_leftovers`]).
 const TEMP_PREFIX: &str = ".";
 
+/// Whether `name` is the name of a temporary file that a writer of the file named `target` makes
+/// ([`AtomicFile::create`]: `.TARGET.tmpPID-N`), exactly: a user's `.TARGET.tmp.bak` is not one. With the
+/// writer's process id.
+fn temporary_of(name: &str, target: &str) -> Option<u32> {
+    let digits = |s: &str| !s.is_empty() && s.bytes().all(|b| b.is_ascii_digit());
+    let rest = name
+        .strip_prefix(TEMP_PREFIX)?
+        .strip_prefix(target)?
+        .strip_prefix(".tmp")?;
+    let (pid, counter) = rest.split_once('-')?;
+    (digits(pid) && digits(counter)).then(|| pid.parse().ok())?
+}
+
+/// Whether `name` is a temporary file of a writer of `target` (see [`AtomicFile`]), exactly by its form.
+pub fn is_temporary_of(name: &str, target: &str) -> bool {
+    temporary_of(name, target).is_some()
+}
+
 /// Removes the temporary files that writers of `path` killed before their commit left beside it (nothing if
-/// its directory does not exist).
+/// its directory does not exist): the files of exactly their form ([`is_temporary_of`]) made by another process
+/// than this one (whose writers may be at work).
 pub fn remove_leftovers(path: &Path) -> std::io::Result<()> {
     let (Some(dir), Some(name)) = (path.parent(), path.file_name()) else {
         return Ok(());
@@ -307,14 +348,15 @@ pub fn remove_leftovers(path: &Path) -> std::io::Result<()> {
     } else {
         dir
     };
-    let prefix = format!("{TEMP_PREFIX}{}.tmp", name.to_string_lossy());
+    let name = name.to_string_lossy();
     let entries = match std::fs::read_dir(dir) {
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(()),
         entries => entries?,
     };
     for entry in entries {
         let entry = entry?;
-        if entry.file_name().to_string_lossy().starts_with(&prefix) {
+        let pid = temporary_of(&entry.file_name().to_string_lossy(), &name);
+        if pid.is_some_and(|pid| pid != std::process::id()) {
             match std::fs::remove_file(entry.path()) {
                 Err(e) if e.kind() != std::io::ErrorKind::NotFound => return Err(e),
                 _ => {}
@@ -354,21 +396,39 @@ mod tests {
         assert_eq!(std::fs::read(&path).unwrap(), b"old");
         drop(file);
         assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1);
-        // What a killed writer leaves: its temporary file (forgotten here, as a killed process would).
+        // What a killed writer leaves: its temporary file (forgotten here, as a killed process would); a
+        // process's own writers' files are left to them, another (killed) process's are removed.
         let mut killed = AtomicFile::create(&path).unwrap();
         killed.write_all(b"half").unwrap();
         killed.flush_buffer().unwrap();
         std::mem::forget(killed);
+        let ours = format!(".s.bin.tmp{}-", std::process::id());
+        std::fs::write(dir.path().join(".s.bin.tmp4194305-7"), b"x").unwrap();
         std::fs::write(dir.path().join("other.bin"), b"x").unwrap();
         std::fs::write(dir.path().join(".s.bin.other"), b"x").unwrap();
-        assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 4);
+        // A user's files whose names only look like temporary ones.
+        std::fs::write(dir.path().join(".s.bin.tmp.bak"), b"x").unwrap();
+        std::fs::write(dir.path().join(".s.bin.tmp12-3.bak"), b"x").unwrap();
+        assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 7);
         remove_leftovers(&path).unwrap();
         let mut left: Vec<String> = std::fs::read_dir(dir.path())
             .unwrap()
             .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .filter(|name| !name.starts_with(&ours))
             .collect();
         left.sort();
-        assert_eq!(left, [".s.bin.other", "other.bin", "s.bin"]);
+        assert_eq!(
+            left,
+            [
+                ".s.bin.other",
+                ".s.bin.tmp.bak",
+                ".s.bin.tmp12-3.bak",
+                "other.bin",
+                "s.bin"
+            ]
+        );
+        assert!(is_temporary_of(".s.bin.tmp12-3", "s.bin"));
+        assert!(!is_temporary_of(".s.bin.tmp12-", "s.bin"));
         assert_eq!(std::fs::read(&path).unwrap(), b"old");
         remove_leftovers(&dir.path().join("missing/s.bin")).unwrap();
     }

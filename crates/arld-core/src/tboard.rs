@@ -136,11 +136,14 @@ fn put_bytes_field(buf: &mut Vec<u8>, field: u32, bytes: &[u8]) {
     buf.extend_from_slice(bytes);
 }
 
+/// The longest event file read back (a run's is a few megabytes).
+const MAX_EVENTS_FILE_BYTES: u64 = 1 << 30;
+
 /// Reads back the scalars of an event file: (tag, step, value) in file order, checking every checksum.
 /// Used by tests and by `arld report` to cross-check runs.
 pub fn read_scalars(path: &Path) -> anyhow::Result<Vec<(String, u64, f32)>> {
     use anyhow::{bail, ensure};
-    let data = std::fs::read(path)?;
+    let data = crate::files::read_bounded(path, MAX_EVENTS_FILE_BYTES)?;
     let mut out = Vec::new();
     let mut pos = 0usize;
     while pos < data.len() {

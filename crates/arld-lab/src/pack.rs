@@ -41,8 +41,17 @@ const SUMMARIES_TABLE: &str = "summaries.csv.gz";
 const VERBATIM_TABLE: &str = "verbatim.csv.gz";
 /// The format of `layout.json`.
 const FORMAT: u32 = 1;
-/// The largest table a reader decompresses (far above the committed dataset's largest, about 60 MB).
-const MAX_TABLE_BYTES: u64 = 4 << 30;
+/// The largest table file a reader reads (far above the committed dataset's largest, about 11 MB).
+pub(crate) const MAX_TABLE_BYTES: u64 = 1 << 30;
+/// The most bytes a table decompresses to (the committed dataset's largest: about 100 MB)...
+const MAX_TABLE_TEXT_BYTES: u64 = 1 << 30;
+/// ... and at most this many times its compressed bytes (with [`SMALL_TABLE_TEXT_BYTES`] more): the committed
+/// tables shrink about ten times, where a crafted stream (a "gzip bomb") shrinks a thousand times.
+const MAX_TABLE_RATIO: u64 = 64;
+const SMALL_TABLE_TEXT_BYTES: u64 = 1 << 20;
+/// The largest file of a run directory a dataset keeps (a run's logs are a few megabytes); a longer one is left
+/// out, as binary files are, or, if it is one of the run's tables, refused.
+const MAX_RUN_FILE_BYTES: u64 = 256 << 20;
 
 /// The files of one run, by name.
 type RunFiles = BTreeMap<String, Vec<u8>>;
@@ -149,7 +158,8 @@ pub fn pack(root: &Path) -> Result<PackSummary> {
             .with_context(|| format!("cannot create {}", dir.display()))?;
         for (name, bytes) in &tables {
             let path = dir.join(name);
-            if std::fs::read(&path).ok().as_deref() != Some(bytes.as_slice()) {
+            let there = arld_core::files::read_bounded(&path, MAX_TABLE_BYTES).ok();
+            if there.as_deref() != Some(bytes.as_slice()) {
                 write_atomic(&path, bytes)?;
                 summary.tables_written += 1;
             }
@@ -180,17 +190,31 @@ pub fn unpack(root: &Path, out: &Path) -> Result<UnpackSummary> {
     let mut summary = UnpackSummary::default();
     let mut missing = Vec::new();
     for (task, dir) in tasks {
+        ensure!(
+            plain_name(&task),
+            "{} names a task {task:?}, which is not a plain directory name",
+            root.display()
+        );
         for (run, files) in read_task(&dir)? {
             summary.runs += 1;
-            let run_dir = out.join(&task).join(&run);
+            let run_dir = format!("{task}/{run}");
+            // Every directory on the way is a real one inside OUT (or not there yet): never a link out of it.
+            if !inside(out, &run_dir, false)? {
+                for name in files.keys() {
+                    missing.push((run_dir.clone(), name.clone(), files[name].clone()));
+                }
+                continue;
+            }
             for (name, bytes) in files {
-                let path = run_dir.join(&name);
+                let path = out.join(&run_dir).join(&name);
                 match std::fs::symlink_metadata(&path) {
-                    Ok(meta) if !meta.is_file() => {
-                        bail!("{} is in the way: it is not a regular file", path.display())
-                    }
+                    Ok(meta) if !meta.is_file() => bail!(
+                        "{} is in the way: it is {}, not a regular file",
+                        path.display(),
+                        arld_core::files::kind_name(meta.file_type())
+                    ),
                     Ok(_) => {
-                        let there = std::fs::read(&path)
+                        let there = arld_core::files::read_bounded(&path, MAX_RUN_FILE_BYTES)
                             .with_context(|| format!("cannot read {}", path.display()))?;
                         ensure!(
                             there == bytes,
@@ -199,27 +223,56 @@ pub fn unpack(root: &Path, out: &Path) -> Result<UnpackSummary> {
                         );
                         summary.present += 1;
                     }
-                    Err(_) => missing.push((path, bytes)),
+                    Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+                        missing.push((run_dir.clone(), name, bytes))
+                    }
+                    Err(e) => {
+                        return Err(e)
+                            .with_context(|| format!("cannot inspect {}", path.display()));
+                    }
                 }
             }
         }
     }
     // Whole files, summary.json last in each run (a run is complete when its summary exists).
-    missing.sort_by_key(|(path, _)| {
-        (
-            path.parent().map(Path::to_path_buf),
-            path.ends_with(SUMMARY_FILE),
-        )
+    missing.sort_by(|(a, name_a, _), (b, name_b, _)| {
+        (a, name_a == SUMMARY_FILE).cmp(&(b, name_b == SUMMARY_FILE))
     });
-    for (path, bytes) in missing {
-        if let Some(parent) = path.parent() {
-            std::fs::create_dir_all(parent)
-                .with_context(|| format!("cannot create {}", parent.display()))?;
-        }
+    if !missing.is_empty() {
+        std::fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
+    }
+    for (run_dir, name, bytes) in missing {
+        inside(out, &run_dir, true)?;
+        let path = out.join(&run_dir).join(&name);
         write_unsynced(&path, &bytes)?;
         summary.written += 1;
     }
     Ok(summary)
+}
+
+/// Whether every directory of `relative` (`/`-separated, checked by [`check_run_path`]) below `out` is a real
+/// directory, not a link (`false`: one is not there yet; with `create`, the missing ones are made). Anything else
+/// on the way (a symbolic link, planted to lead the files out of `out`, or a file) is an error naming it.
+fn inside(out: &Path, relative: &str, create: bool) -> Result<bool> {
+    let mut dir = out.to_path_buf();
+    for part in relative.split('/') {
+        dir.push(part);
+        match std::fs::symlink_metadata(&dir) {
+            Ok(meta) if meta.is_dir() => {}
+            Ok(meta) => bail!(
+                "{} is {}, where unpacking makes a directory: nothing is written through it (move it away)",
+                dir.display(),
+                arld_core::files::kind_name(meta.file_type())
+            ),
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound && create => {
+                std::fs::create_dir(&dir)
+                    .with_context(|| format!("cannot create {}", dir.display()))?;
+            }
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(false),
+            Err(e) => return Err(e).with_context(|| format!("cannot inspect {}", dir.display())),
+        }
+    }
+    Ok(true)
 }
 
 /// Writes a whole file through a temporary one renamed over it, without syncing each to the disk (an unpack writes
@@ -233,7 +286,17 @@ fn write_unsynced(path: &Path, bytes: &[u8]) -> Result<()> {
         name.to_string_lossy(),
         std::process::id()
     ));
-    std::fs::write(&tmp, bytes).with_context(|| format!("cannot write {}", tmp.display()))?;
+    // A new file only (never through a link or into a file planted under the temporary name).
+    let _ = std::fs::remove_file(&tmp);
+    let written = std::fs::OpenOptions::new()
+        .write(true)
+        .create_new(true)
+        .open(&tmp)
+        .and_then(|mut file| file.write_all(bytes));
+    if let Err(e) = written {
+        let _ = std::fs::remove_file(&tmp);
+        return Err(e).with_context(|| format!("cannot write {}", tmp.display()));
+    }
     std::fs::rename(&tmp, path).with_context(|| format!("cannot write {}", path.display()))?;
     Ok(())
 }
@@ -267,8 +330,20 @@ fn read_run_files(dir: &Path, left_out: &mut Vec<PathBuf>) -> Result<RunFiles> {
             left_out.push(path);
             continue;
         }
+        let tabled = name == CONFIG_FILE
+            || name == SUMMARY_FILE
+            || LOG_TABLES.iter().any(|(file, _)| *file == name);
+        if meta.len() > MAX_RUN_FILE_BYTES && !tabled {
+            left_out.push(path);
+            continue;
+        }
         let bytes =
-            std::fs::read(&path).with_context(|| format!("cannot read {}", path.display()))?;
+            arld_core::files::read_bounded(&path, MAX_RUN_FILE_BYTES).with_context(|| {
+                format!(
+                    "cannot pack {}: a dataset keeps a run's logs whole",
+                    path.display()
+                )
+            })?;
         if name.ends_with(".tmp") || std::str::from_utf8(&bytes).is_err() {
             left_out.push(path);
             continue;
@@ -351,20 +426,12 @@ fn read_task(dir: &Path) -> Result<TaskRuns> {
     let mut tables = BTreeMap::new();
     for name in TASK_FILES {
         let path = dir.join(name);
-        let meta = std::fs::metadata(&path).with_context(|| {
+        let bytes = arld_core::files::read_bounded(&path, MAX_TABLE_BYTES).with_context(|| {
             format!(
                 "cannot read {} (a packed task directory holds it)",
                 path.display()
             )
         })?;
-        ensure!(
-            meta.len() <= MAX_TABLE_BYTES,
-            "{} is {} bytes, larger than a table may be",
-            path.display(),
-            meta.len()
-        );
-        let bytes =
-            std::fs::read(&path).with_context(|| format!("cannot read {}", path.display()))?;
         tables.insert(name, bytes);
     }
     decode_task(&tables)
@@ -442,7 +509,10 @@ fn decode_task(tables: &BTreeMap<&'static str, Vec<u8>>) -> Result<TaskRuns> {
             bail!("{RUNS_TABLE} names a file {bad:?} of {run}, which is not a plain file name");
         }
         absent.insert(run.clone(), [words(2).collect(), words(3).collect()]);
-        runs.insert(run, files);
+        ensure!(
+            runs.insert(run.clone(), files).is_none(),
+            "{RUNS_TABLE} lists the run {run} twice (two copies of one run cannot both be unpacked)"
+        );
     }
     let mut filled: BTreeSet<(String, String)> = BTreeSet::new();
     let mut put = |runs: &mut TaskRuns, run: &str, name: &str, bytes: Vec<u8>| -> Result<()> {
@@ -452,8 +522,11 @@ fn decode_task(tables: &BTreeMap<&'static str, Vec<u8>>) -> Result<TaskRuns> {
         let slot = files.get_mut(name).with_context(|| {
             format!("a table holds {run}/{name}, which {RUNS_TABLE} does not list")
         })?;
+        ensure!(
+            filled.insert((run.to_string(), name.to_string())),
+            "the tables hold {run}/{name} twice (two copies of one file cannot both be unpacked)"
+        );
         *slot = bytes;
-        filled.insert((run.to_string(), name.to_string()));
         Ok(())
     };
     let (header, verbatim) = run_table(table(VERBATIM_TABLE)?, VERBATIM_TABLE)?;
@@ -502,7 +575,17 @@ fn decode_task(tables: &BTreeMap<&'static str, Vec<u8>>) -> Result<TaskRuns> {
                     ));
                 }
             }
-            put(&mut runs, run, file, syntax.render(&pairs).into_bytes())?;
+            let text = syntax.render(&pairs);
+            // The types layout.json gives the columns must be the types the run's files have.
+            let named = PathBuf::from(format!("{run}/{file}"));
+            match syntax {
+                Syntax::Toml => run_dir::check_config_types(&text, &named),
+                Syntax::Json => run_dir::check_summary_types(&text, &named),
+            }
+            .with_context(|| {
+                format!("{table_name} and {LAYOUT_FILE} do not give back a run's {file}")
+            })?;
+            put(&mut runs, run, file, text.into_bytes())?;
         }
     }
     for (file, table_name) in LOG_TABLES {
@@ -543,7 +626,7 @@ fn decode_task(tables: &BTreeMap<&'static str, Vec<u8>>) -> Result<TaskRuns> {
 
 /// A table's header and rows, checked: a `run` column first and as many fields in every row as in the header.
 fn run_table(gz: &[u8], name: &str) -> Result<(Vec<String>, Vec<csv::StringRecord>)> {
-    let mut reader = csv_reader(std::io::Cursor::new(gunzip(gz)?));
+    let mut reader = csv_reader(std::io::Cursor::new(gunzip(gz).context(name.to_string())?));
     let header: Vec<String> = reader
         .headers()
         .context(name.to_string())?
@@ -954,16 +1037,23 @@ pub(crate) fn gzip(bytes: &[u8]) -> Result<Vec<u8>> {
     Ok(enc.finish()?)
 }
 
+/// Decompresses a table, bounded: at most [`MAX_TABLE_TEXT_BYTES`], and at most [`MAX_TABLE_RATIO`] times the
+/// compressed bytes (an error names the bound), so that a crafted stream cannot fill the memory.
 pub(crate) fn gunzip(bytes: &[u8]) -> Result<Vec<u8>> {
+    let bound = (bytes.len() as u64)
+        .saturating_mul(MAX_TABLE_RATIO)
+        .saturating_add(SMALL_TABLE_TEXT_BYTES)
+        .min(MAX_TABLE_TEXT_BYTES);
     let mut out = Vec::new();
     GzDecoder::new(bytes)
-        .take(MAX_TABLE_BYTES * 8)
+        .take(bound + 1)
         .read_to_end(&mut out)
         .context("not a whole gzip stream")?;
     ensure!(
-        (out.len() as u64) < MAX_TABLE_BYTES * 8,
-        "a table decompresses to more than {} bytes",
-        MAX_TABLE_BYTES * 8
+        (out.len() as u64) <= bound,
+        "a table of {} compressed bytes decompresses to more than {bound} bytes, more than a table of runs \
+         does (a crafted stream?)",
+        bytes.len()
     );
     Ok(out)
 }

@@ -32,6 +32,8 @@ use std::path::{Path, PathBuf};
 
 /// The suffix of a document to render; `NAME.in.md` becomes `NAME.md`.
 pub const TEMPLATE_SUFFIX: &str = ".in.md";
+/// The longest template or quoted file read (the report's are a few hundred kilobytes).
+const MAX_QUOTED_BYTES: u64 = 64 << 20;
 
 /// A table of a markdown file: the heading it stands under, its header and its rows of cells.
 #[derive(Debug, Clone, PartialEq)]
@@ -424,7 +426,7 @@ fn render(text: &str, dir: &Path) -> Result<(String, Vec<String>)> {
         let outcome = Quote::parse(inner).and_then(|quote| {
             if !files.contains_key(&quote.file) {
                 let path = dir.join(&quote.file);
-                let content = std::fs::read_to_string(&path)
+                let content = arld_core::files::read_text_bounded(&path, MAX_QUOTED_BYTES)
                     .with_context(|| format!("cannot read {}", path.display()))?;
                 files.insert(quote.file.clone(), tables(&content));
             }
@@ -482,7 +484,7 @@ pub fn render_documents(dir: &Path) -> Result<Vec<PathBuf>> {
             "{}.md",
             &name[..name.len() - TEMPLATE_SUFFIX.len()]
         ));
-        let text = std::fs::read_to_string(&template)
+        let text = arld_core::files::read_text_bounded(&template, MAX_QUOTED_BYTES)
             .with_context(|| format!("cannot read {}", template.display()))?;
         let (rendered, failures) =
             render(&text, dir).with_context(|| format!("{}", template.display()))?;

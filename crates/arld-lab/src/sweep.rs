@@ -95,6 +95,8 @@ struct SweepFile {
 
 /// The most seeds a sweep runs per configuration (the paper used 20).
 pub const MAX_SEEDS: u64 = 10_000;
+/// The longest sweep file read (a grid is a few hundred bytes).
+const MAX_GRID_BYTES: u64 = 4 << 20;
 
 /// Parses seeds given on a command line: `20` (seeds 0..19), `3..8` (seeds 3..7) or `0,4,9`; at most
 /// [`MAX_SEEDS`] of them (their values are checked with the rest of the grid, [`SweepGrid::validate`]).
@@ -230,7 +232,7 @@ impl SweepGrid {
 
     /// Reads and validates a sweep file.
     pub fn from_toml_file(path: &Path) -> Result<Self> {
-        let text = std::fs::read_to_string(path)
+        let text = arld_core::files::read_text_bounded(path, MAX_GRID_BYTES)
             .with_context(|| format!("cannot read {}", path.display()))?;
         Self::from_toml_str(&text).with_context(|| format!("in sweep file {}", path.display()))
     }
@@ -876,7 +878,7 @@ fn run_one_spec(spec: &RunSpec, path: &Path, status: &Path, run_fn: &RunFn) -> R
     }
     // The failed.json of an earlier attempt stays until an attempt finishes the run.
     let failed = path.join(run_dir::FAILED_FILE);
-    let earlier_failure = std::fs::read(&failed).ok();
+    let earlier_failure = arld_core::files::read_bounded(&failed, MAX_GRID_BYTES).ok();
     if path.exists() && (!has_snapshot || stale) {
         std::fs::remove_dir_all(path)
             .with_context(|| format!("cannot clear incomplete run directory {}", path.display()))?;
@@ -993,7 +995,7 @@ impl RunStatus {
 
     /// Reads a status file, if there is a readable one.
     pub fn read(path: &Path) -> Option<Self> {
-        let text = std::fs::read_to_string(path).ok()?;
+        let text = arld_core::files::read_text_bounded(path, MAX_GRID_BYTES).ok()?;
         serde_json::from_str(&text).ok()
     }
 }

@@ -804,7 +804,8 @@ pub fn write_verdict(cells: &[Cell], out_dir: &Path, k: usize) -> Result<(Vec<Pa
 /// The target comes from the environment's registration and the training length from the method's preset, so
 /// the committed file alone regenerates every table.
 pub fn runs_from_evaluations_csv(path: &Path) -> Result<Vec<RunRecord>> {
-    let bytes = std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
+    let bytes = arld_core::files::read_bounded(path, super::pack::MAX_TABLE_BYTES)
+        .with_context(|| format!("cannot read {}", path.display()))?;
     // As `arld report` writes it (gzip), or decompressed.
     let text = if bytes.starts_with(&[0x1f, 0x8b]) {
         super::pack::gunzip(&bytes).with_context(|| format!("cannot read {}", path.display()))?

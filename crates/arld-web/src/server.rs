@@ -5,13 +5,17 @@
 //! address (so that the page of another site cannot reach the server by DNS rebinding). The training thread and the server share a [`Board`]: the latest
 //! status, frame and prompt and the history, so that a tab that connects (or reloads) late sees everything at
 //! once; every change is also broadcast to the open tabs. One tab controls (the first one, or the one that took
-//! control); its keys go to the training thread over a channel, the others watch. At most [`MAX_CONNECTIONS`]
-//! connections are open at once.
+//! control); its keys go to the training thread over a channel, the others watch.
+//!
+//! A crowd of idle or slow connections cannot lock the person out ([`Gate`]): at most [`MAX_CONNECTIONS`] are
+//! open at once, at most [`MAX_PER_ADDRESS`] from one address; a connection that is not an open tab must finish
+//! each request within [`REQUEST_DEADLINE`] of its opening or of the server's last response, and when the server
+//! is full, a new connection takes the place of the oldest one that is not an open tab.
 
 use super::protocol::{ActionCheck, ClientMsg, ServerMsg};
 use axum::Router;
 use axum::extract::ws::{Message, WebSocket, WebSocketUpgrade};
-use axum::extract::{Request, State};
+use axum::extract::{ConnectInfo, Request, State};
 use axum::http::{StatusCode, header};
 use axum::middleware::{self, Next};
 use axum::response::{IntoResponse, Response};
@@ -409,16 +413,11 @@ pub fn spawn(
                         return;
                     }
                 };
-                // Small messages leave at once: Nagle's algorithm with delayed acknowledgements would hold each
-                // step's update for tens of milliseconds.
-                let listener = axum::serve::ListenerExt::tap_io(listener, |tcp| {
-                    let _ = tcp.set_nodelay(true);
-                });
                 let listener = Bounded {
                     inner: listener,
-                    permits: Arc::new(tokio::sync::Semaphore::new(MAX_CONNECTIONS)),
+                    gate: Arc::new(Gate::default()),
                 };
-                let app = router(shared);
+                let app = router(shared).into_make_service_with_connect_info::<Connection>();
                 tokio::select! {
                     result = axum::serve(listener, app) => {
                         if let Err(err) = result {
@@ -433,40 +432,127 @@ pub fn spawn(
     Ok(handle)
 }
 
-/// The most connections the server holds open at once. Further ones wait in the system's queue until one
-/// closes: idle connections cannot use up the process's open files (which the run needs too).
+/// The most connections the server holds open at once (idle connections cannot use up the process's open
+/// files, which the run needs too).
 pub const MAX_CONNECTIONS: usize = 32;
+/// The most connections open at once from one address.
+pub const MAX_PER_ADDRESS: usize = 16;
+/// How long a connection that is not an open tab may take to send a whole request, from its opening or from the
+/// server's last response on it (a page loads its three files at once).
+pub const REQUEST_DEADLINE: std::time::Duration = std::time::Duration::from_secs(10);
 
-/// A listener that accepts a connection only while fewer than its permits' number are open.
-struct Bounded<L> {
-    inner: L,
-    permits: Arc<tokio::sync::Semaphore>,
+/// The connections open: which may stay and which must make room ([`Gate::admit`]).
+#[derive(Default)]
+struct Gate {
+    /// Oldest first.
+    open: Mutex<Vec<Arc<Conn>>>,
 }
 
-/// A connection holding its permit until it closes.
-struct Counted<T> {
-    io: T,
-    _permit: tokio::sync::OwnedSemaphorePermit,
+/// One open connection, as the gate sees it.
+struct Conn {
+    ip: std::net::IpAddr,
+    /// Whether it became an open tab (a WebSocket that passed the token): it stays as long as the tab does.
+    tab: AtomicBool,
+    /// Whether the gate closed it (to make room); its next read ends it.
+    closed: AtomicBool,
+    /// The task reading from it, woken when the gate closes it.
+    reader: Mutex<Option<std::task::Waker>>,
 }
 
-impl<L: axum::serve::Listener> axum::serve::Listener for Bounded<L> {
-    type Io = Counted<L::Io>;
-    type Addr = L::Addr;
+impl Conn {
+    fn close(&self) {
+        self.closed.store(true, Ordering::Relaxed);
+        if let Some(waker) = self.reader.lock().unwrap_or_else(|e| e.into_inner()).take() {
+            waker.wake();
+        }
+    }
+}
+
+impl Gate {
+    /// Admits a connection from `ip`, closing the oldest connection that is not a tab (from `ip` when that
+    /// address has its most) if the server is full; `None` (the connection is refused) when every connection in
+    /// the way is an open tab.
+    fn admit(&self, ip: std::net::IpAddr) -> Option<Arc<Conn>> {
+        let mut open = self.open.lock().unwrap_or_else(|e| e.into_inner());
+        open.retain(|c| !c.closed.load(Ordering::Relaxed));
+        for (limit, same) in [
+            (
+                MAX_PER_ADDRESS,
+                &(|c: &Conn| c.ip == ip) as &dyn Fn(&Conn) -> bool,
+            ),
+            (MAX_CONNECTIONS, &|_: &Conn| true),
+        ] {
+            if open.iter().filter(|c| same(c)).count() >= limit {
+                let oldest = open
+                    .iter()
+                    .position(|c| same(c) && !c.tab.load(Ordering::Relaxed))?;
+                open.remove(oldest).close();
+            }
+        }
+        let conn = Arc::new(Conn {
+            ip,
+            tab: AtomicBool::new(false),
+            closed: AtomicBool::new(false),
+            reader: Mutex::new(None),
+        });
+        open.push(Arc::clone(&conn));
+        Some(conn)
+    }
+
+    fn leave(&self, conn: &Arc<Conn>) {
+        let mut open = self.open.lock().unwrap_or_else(|e| e.into_inner());
+        open.retain(|c| !Arc::ptr_eq(c, conn));
+    }
+}
+
+/// The listener: every connection accepted goes through the [`Gate`].
+struct Bounded {
+    inner: tokio::net::TcpListener,
+    gate: Arc<Gate>,
+}
+
+/// A connection with its place at the gate and its request deadline.
+struct Counted {
+    io: tokio::net::TcpStream,
+    conn: Arc<Conn>,
+    gate: Arc<Gate>,
+    deadline: std::pin::Pin<Box<tokio::time::Sleep>>,
+}
+
+impl Drop for Counted {
+    fn drop(&mut self) {
+        self.gate.leave(&self.conn);
+    }
+}
+
+impl axum::serve::Listener for Bounded {
+    type Io = Counted;
+    type Addr = std::net::SocketAddr;
 
     async fn accept(&mut self) -> (Self::Io, Self::Addr) {
-        // The semaphore is never closed, so acquiring only waits.
-        let permit = Arc::clone(&self.permits)
-            .acquire_owned()
-            .await
-            .expect("the connection semaphore is never closed");
-        let (io, addr) = self.inner.accept().await;
-        (
-            Counted {
-                io,
-                _permit: permit,
-            },
-            addr,
-        )
+        loop {
+            let (tcp, addr) = match self.inner.accept().await {
+                Ok(accepted) => accepted,
+                // Out of open files, or a connection reset before it was accepted: try again shortly.
+                Err(_) => {
+                    tokio::time::sleep(std::time::Duration::from_millis(50)).await;
+                    continue;
+                }
+            };
+            let Some(conn) = self.gate.admit(addr.ip()) else {
+                continue;
+            };
+            // Small messages leave at once: Nagle's algorithm with delayed acknowledgements would hold each
+            // step's update for tens of milliseconds.
+            let _ = tcp.set_nodelay(true);
+            let counted = Counted {
+                io: tcp,
+                conn,
+                gate: Arc::clone(&self.gate),
+                deadline: Box::pin(tokio::time::sleep(REQUEST_DEADLINE)),
+            };
+            return (counted, addr);
+        }
     }
 
     fn local_addr(&self) -> std::io::Result<Self::Addr> {
@@ -474,23 +560,56 @@ impl<L: axum::serve::Listener> axum::serve::Listener for Bounded<L> {
     }
 }
 
-impl<T: tokio::io::AsyncRead + Unpin> tokio::io::AsyncRead for Counted<T> {
+/// What a handler knows of its connection: the tab handler marks it as a tab.
+#[derive(Clone)]
+struct Connection(Arc<Conn>);
+
+impl axum::extract::connect_info::Connected<axum::serve::IncomingStream<'_, Bounded>>
+    for Connection
+{
+    fn connect_info(stream: axum::serve::IncomingStream<'_, Bounded>) -> Self {
+        Connection(Arc::clone(&stream.io().conn))
+    }
+}
+
+impl tokio::io::AsyncRead for Counted {
     fn poll_read(
         mut self: std::pin::Pin<&mut Self>,
         cx: &mut std::task::Context<'_>,
         buf: &mut tokio::io::ReadBuf<'_>,
     ) -> std::task::Poll<std::io::Result<()>> {
+        use std::task::Poll;
+        let ended = |why: &str| {
+            Poll::Ready(Err(std::io::Error::new(
+                std::io::ErrorKind::TimedOut,
+                why.to_string(),
+            )))
+        };
+        *self.conn.reader.lock().unwrap_or_else(|e| e.into_inner()) = Some(cx.waker().clone());
+        if self.conn.closed.load(Ordering::Relaxed) {
+            return ended("closed to make room for another connection");
+        }
+        if !self.conn.tab.load(Ordering::Relaxed) && self.deadline.as_mut().poll(cx).is_ready() {
+            self.conn.close();
+            return ended("no whole request within the deadline");
+        }
         std::pin::Pin::new(&mut self.io).poll_read(cx, buf)
     }
 }
 
-impl<T: tokio::io::AsyncWrite + Unpin> tokio::io::AsyncWrite for Counted<T> {
+impl tokio::io::AsyncWrite for Counted {
     fn poll_write(
         mut self: std::pin::Pin<&mut Self>,
         cx: &mut std::task::Context<'_>,
         buf: &[u8],
     ) -> std::task::Poll<std::io::Result<usize>> {
-        std::pin::Pin::new(&mut self.io).poll_write(cx, buf)
+        let written = std::pin::Pin::new(&mut self.io).poll_write(cx, buf);
+        if matches!(written, std::task::Poll::Ready(Ok(n)) if n > 0) {
+            // A response went out: the client has the deadline again for its next request.
+            let next = tokio::time::Instant::now() + REQUEST_DEADLINE;
+            self.deadline.as_mut().reset(next);
+        }
+        written
     }
 
     fn poll_flush(
@@ -570,7 +689,13 @@ async fn index(State(shared): State<Arc<Shared>>) -> Response {
         .into_response()
 }
 
-async fn websocket(State(shared): State<Arc<Shared>>, ws: WebSocketUpgrade) -> Response {
+async fn websocket(
+    State(shared): State<Arc<Shared>>,
+    ConnectInfo(connection): ConnectInfo<Connection>,
+    ws: WebSocketUpgrade,
+) -> Response {
+    // Past the token: an open tab, which no deadline or newcomer closes.
+    connection.0.tab.store(true, Ordering::Relaxed);
     ws.max_message_size(MAX_CLIENT_MESSAGE)
         .on_upgrade(move |socket| tab(socket, shared))
 }

@@ -101,7 +101,7 @@ pub fn write(
 /// `sac-actor`), read without its tensors; an error when it is not a safetensors file.
 pub fn holds_an_actor(path: &Path) -> Result<bool> {
     use std::io::Read;
-    let mut file = std::fs::File::open(path)?;
+    let (mut file, _) = crate::files::open_bounded(path, MAX_ACTOR_FILE_BYTES)?;
     let mut length = [0u8; 8];
     file.read_exact(&mut length)
         .context("it is too short for a safetensors file")?;

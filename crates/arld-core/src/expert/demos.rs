@@ -351,24 +351,10 @@ impl<A: DemoAction> Demonstrations<A> {
     /// Reads and checks a demonstration file; `expect_env` rejects a file recorded on another environment. A
     /// file with no transitions is an error: the methods that load demonstrations pre-train on them.
     pub fn load(path: &Path, expect_env: Option<&str>) -> Result<Self> {
-        let file = std::fs::File::open(path)
-            .with_context(|| format!("cannot open demonstration file {}", path.display()))?;
-        let meta = file
-            .metadata()
+        use std::io::Read;
+        let (file, len) = crate::files::open_bounded(path, MAX_DEMO_FILE_BYTES)
             .with_context(|| format!("cannot read demonstration file {}", path.display()))?;
-        ensure!(
-            meta.is_file(),
-            "demonstration file {} is not a regular file",
-            path.display()
-        );
-        ensure!(
-            meta.len() <= MAX_DEMO_FILE_BYTES,
-            "demonstration file {} has {} bytes; files over {} GiB are refused",
-            path.display(),
-            meta.len(),
-            MAX_DEMO_FILE_BYTES >> 30
-        );
-        Self::read(BufReader::new(file), meta.len(), path, expect_env)
+        Self::read(BufReader::new(file.take(len)), len, path, expect_env)
     }
 
     /// Parses the `len` bytes of a demonstration file from `reader` (`path` only names it in errors). The

@@ -15,7 +15,7 @@
 //! (`Discrete(n)` starting at 0 with the run's n, or a box of the run's dimension and bounds); the error names
 //! what differs. Each action is read as an answer of an expert process is ([`WireAction::from_wire`]) and the
 //! transitions are checked by [`Demonstrations::from_columns`], like demonstrations given from Python. The files
-//! are bounded before they are read (sizes, episodes and steps, see [`MAX_DEMO_FILE_BYTES`] and
+//! are bounded before they are read (sizes, episodes and steps, see [`MAX_DATASET_BYTES`] and
 //! [`MAX_TRANSITIONS`]), and a damaged file is an error naming it.
 //!
 //! An episode's transitions keep its ends; its last transition is marked truncated when it neither terminated nor
@@ -24,7 +24,7 @@
 
 use super::demos::{DemoAction, Demonstrations};
 #[cfg(feature = "minari")]
-use super::demos::{DemoColumns, MAX_DEMO_FILE_BYTES, MAX_TRANSITIONS};
+use super::demos::{DemoColumns, MAX_TRANSITIONS};
 use anyhow::Result;
 use std::path::{Path, PathBuf};
 
@@ -136,6 +136,9 @@ pub fn load<A: DemoAction>(data: &Path, env_id: &str) -> Result<Demonstrations<A
 /// The largest `metadata.json` read.
 #[cfg(feature = "minari")]
 const MAX_METADATA_BYTES: u64 = 16 << 20;
+/// The most bytes of a dataset's data files read (each is read whole into memory): above what
+/// [`MAX_TRANSITIONS`] transitions of the largest task take.
+pub const MAX_DATASET_BYTES: u64 = 2 << 30;
 
 /// What a dataset's `metadata.json` says that the reader needs.
 #[cfg(feature = "minari")]
@@ -325,7 +328,7 @@ fn describe_ours(space: &serde_json::Value) -> String {
     }
 }
 
-/// The bytes of a dataset's files read so far (at most [`MAX_DEMO_FILE_BYTES`] in all).
+/// The bytes of a dataset's files read so far (at most [`MAX_DATASET_BYTES`] in all).
 #[cfg(feature = "minari")]
 #[derive(Default)]
 struct Budget {
@@ -336,28 +339,7 @@ struct Budget {
 #[cfg(feature = "minari")]
 fn read_bounded(path: &Path, max: u64) -> Result<Vec<u8>> {
     use anyhow::Context;
-    use std::io::Read;
-    let file =
-        std::fs::File::open(path).with_context(|| format!("cannot open {}", path.display()))?;
-    let len = file
-        .metadata()
-        .with_context(|| format!("cannot read {}", path.display()))?
-        .len();
-    anyhow::ensure!(
-        len <= max,
-        "{} has {len} bytes; more than {max} are refused",
-        path.display()
-    );
-    let mut bytes = Vec::with_capacity(len as usize);
-    file.take(max + 1)
-        .read_to_end(&mut bytes)
-        .with_context(|| format!("cannot read {}", path.display()))?;
-    anyhow::ensure!(
-        bytes.len() as u64 <= max,
-        "{} grew past {max} bytes while read",
-        path.display()
-    );
-    Ok(bytes)
+    crate::files::read_bounded(path, max).with_context(|| format!("cannot read {}", path.display()))
 }
 
 /// The Arrow files of an episode's directory, in the order `pyarrow` reads them (by name; names starting with
@@ -402,7 +384,7 @@ fn read_episode<A: DemoAction>(
     use anyhow::{Context, ensure};
     let mut rows = EpisodeRows::default();
     for file in episode_files(dir)? {
-        let bytes = read_bounded(&file, MAX_DEMO_FILE_BYTES - budget.bytes)
+        let bytes = read_bounded(&file, MAX_DATASET_BYTES - budget.bytes)
             .context("the dataset is larger than arld reads")?;
         budget.bytes += bytes.len() as u64;
         let projection = check_layout(&bytes).map_err(|why| {

@@ -12,6 +12,12 @@
 //! `{"type": "box", "shape": [1], "low": [-2.0], "high": [2.0]}` and an answer is `{"action": [0.5]}`: one finite
 //! number per dimension, within the bounds ([`WireAction`] is how each kind of action travels).
 //!
+//! The expert speaks only when asked: arld reads its output only while a query waits for its answer, and an
+//! expert that wrote anything else (a line before the first query, a second line to one query, a flood of
+//! answers) has broken the protocol: the next query finds it, and the run ends with an error naming the expert
+//! and what it wrote. No answer nobody asked for is ever taken as the answer to a later query, and what arld holds
+//! of the expert's output is bounded (the pipe, and one line of at most [`MAX_ANSWER_BYTES`]).
+//!
 //! At the end arld closes the expert's standard input (end of file); an expert should then exit. Anything the
 //! expert writes to standard error is kept (the last lines) and shown if it fails. A crash, an answer slower than
 //! the timeout, a line that is not such an object (or longer than [`MAX_ANSWER_BYTES`]), or an action the task
@@ -28,12 +34,12 @@ use crate::env::{BoxSpec, EnvSpec};
 use crate::task::{Action, TaskSpec};
 use anyhow::{Context, Result, anyhow, bail};
 use std::collections::VecDeque;
-use std::io::{BufRead, BufReader, Write};
-use std::process::{Child, ChildStdin, Command, Stdio};
-use std::sync::mpsc::{Receiver, RecvTimeoutError, channel};
+use std::io::{BufRead, BufReader, Read, Write};
+use std::os::fd::AsRawFd;
+use std::process::{Child, ChildStdin, ChildStdout, Command, Stdio};
 use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 /// How long an expert process may take to answer one query unless configured otherwise.
 pub const DEFAULT_TIMEOUT_S: f64 = 30.0;
@@ -127,7 +133,7 @@ pub struct ProcessExpert<A: WireAction = usize> {
     command: String,
     child: Child,
     stdin: Option<ChildStdin>,
-    lines: Receiver<std::io::Result<String>>,
+    replies: Replies,
     stderr: Arc<Mutex<VecDeque<String>>>,
     stderr_thread: Option<JoinHandle<()>>,
     timeout: Duration,
@@ -160,27 +166,13 @@ impl<A: WireAction> ProcessExpert<A> {
             .stderr(Stdio::piped())
             .spawn()
             .with_context(|| format!("cannot start expert process `{command}`"))?;
-        let stdout = child.stdout.take().expect("stdout is piped");
+        let replies = Replies {
+            stdout: child.stdout.take().expect("stdout is piped"),
+            pending: Vec::new(),
+            closed: false,
+        };
         let stderr_pipe = child.stderr.take().expect("stderr is piped");
-        // Reader threads: the answer is awaited with a timeout, and a chatty stderr never blocks the expert.
-        let (tx, lines) = channel();
-        std::thread::spawn(move || {
-            let mut reader = BufReader::new(stdout);
-            let mut line = Vec::new();
-            loop {
-                let read =
-                    crate::files::read_line_bounded(&mut reader, &mut line, MAX_ANSWER_BYTES)
-                        .map(|more| more.then(|| String::from_utf8_lossy(&line).into_owned()));
-                let (line, stop) = match read {
-                    Ok(Some(line)) => (Ok(line), false),
-                    Ok(None) => break,
-                    Err(e) => (Err(e), true),
-                };
-                if tx.send(line).is_err() || stop {
-                    break;
-                }
-            }
-        });
+        // A reader thread for stderr: a chatty stderr never blocks the expert.
         let stderr = Arc::new(Mutex::new(VecDeque::new()));
         let kept = Arc::clone(&stderr);
         let stderr_thread = std::thread::spawn(move || {
@@ -207,7 +199,7 @@ impl<A: WireAction> ProcessExpert<A> {
             command: command.to_string(),
             stdin: child.stdin.take(),
             child,
-            lines,
+            replies,
             stderr,
             stderr_thread: Some(stderr_thread),
             timeout: Duration::from_secs_f64(timeout_s),
@@ -264,26 +256,6 @@ impl<A: WireAction> ProcessExpert<A> {
         anyhow!("expert process `{}` {what}{status}{tail}", self.command)
     }
 
-    /// The next line of the expert's output, waiting at most the timeout, and ending the wait at once when a
-    /// stop is requested.
-    fn next_line(&mut self) -> Result<std::io::Result<String>, RecvTimeoutError> {
-        let deadline = std::time::Instant::now() + self.timeout;
-        loop {
-            let left = deadline.saturating_duration_since(std::time::Instant::now());
-            if left.is_zero() {
-                return Err(RecvTimeoutError::Timeout);
-            }
-            match self.lines.recv_timeout(left.min(STOP_POLL)) {
-                // Whatever arrives later belongs to the question a resumed run asks again.
-                Err(RecvTimeoutError::Timeout) if crate::interrupt::requested() => {
-                    return Err(RecvTimeoutError::Disconnected);
-                }
-                Err(RecvTimeoutError::Timeout) => {}
-                other => return other,
-            }
-        }
-    }
-
     /// Stops the expert and every process it started (its process group).
     fn kill_group(&mut self) {
         if let Ok(pid) = i32::try_from(self.child.id()) {
@@ -295,23 +267,37 @@ impl<A: WireAction> ProcessExpert<A> {
         let _ = self.child.kill();
     }
 
+    /// Refuses to ask an expert that has written something nobody asked for (see the module's documentation).
+    fn check_unsolicited(&mut self) -> Result<()> {
+        match self.replies.unsolicited() {
+            Ok(None) => Ok(()),
+            Ok(Some(shown)) => Err(self.failure(&format!(
+                "wrote {shown:?} without being asked: an expert writes one line to each query, after it (a \
+                 flood of answers, or a second line to one query, breaks the protocol)"
+            ))),
+            Err(e) => Err(self.failure(&format!("could not be read from ({e})"))),
+        }
+    }
+
     fn read_answer(&mut self) -> Result<A> {
-        let line = match self.next_line() {
-            Err(RecvTimeoutError::Disconnected) if crate::interrupt::requested() => {
+        let line = match self.replies.answer(Instant::now() + self.timeout) {
+            Reply::Stopped => {
                 return Err(crate::interrupt::Interrupted(format!(
                     "stopped while expert process `{}` was asked",
                     self.command
                 ))
                 .into());
             }
-            Ok(Ok(line)) => line,
-            Ok(Err(e)) => return Err(self.failure(&format!("could not be read from ({e})"))),
-            Err(RecvTimeoutError::Disconnected) => {
+            Reply::Line(line) => line,
+            Reply::Failed(e) => {
+                return Err(self.failure(&format!("could not be read from ({e})")));
+            }
+            Reply::Closed => {
                 // Give a crashing process a moment to be reaped so its exit status can be shown.
                 let _ = self.child.wait_timeout_ms(500);
                 return Err(self.failure("closed its output without answering the query"));
             }
-            Err(RecvTimeoutError::Timeout) => {
+            Reply::Timeout => {
                 self.kill_group();
                 return Err(self.failure(&format!(
                     "did not answer within {} s (the expert timeout); it was stopped",
@@ -337,6 +323,129 @@ impl<A: WireAction> ProcessExpert<A> {
     }
 }
 
+/// The expert's standard output, read only while a query waits for its answer ([`Replies::answer`]).
+struct Replies {
+    stdout: ChildStdout,
+    /// Bytes read and not yet taken as an answer: a line in pieces, or what the expert wrote beyond its answer.
+    pending: Vec<u8>,
+    /// Whether the expert closed its output.
+    closed: bool,
+}
+
+/// What waiting for an answer gave.
+enum Reply {
+    Line(String),
+    Closed,
+    Timeout,
+    /// A stop was requested while waiting.
+    Stopped,
+    Failed(std::io::Error),
+}
+
+impl Replies {
+    /// Whether the output has something to read (bytes, or its end) within `ms` milliseconds (`false` also when
+    /// a signal ended the wait early: the caller looks at the stop request, then waits again).
+    fn ready(&self, ms: i32) -> std::io::Result<bool> {
+        let mut fd = libc::pollfd {
+            fd: self.stdout.as_raw_fd(),
+            events: libc::POLLIN,
+            revents: 0,
+        };
+        // SAFETY: `fd` is one valid pollfd that outlives the call.
+        let n = unsafe { libc::poll(&mut fd, 1, ms) };
+        if n < 0 {
+            let e = std::io::Error::last_os_error();
+            return if e.kind() == std::io::ErrorKind::Interrupted {
+                Ok(false)
+            } else {
+                Err(e)
+            };
+        }
+        Ok(n > 0)
+    }
+
+    /// Reads what the output holds now (one read, which does not wait: [`Replies::ready`] said it would not).
+    fn fill(&mut self) -> std::io::Result<()> {
+        let mut chunk = [0u8; 4096];
+        let n = self.stdout.read(&mut chunk)?;
+        self.closed |= n == 0;
+        self.pending.extend_from_slice(&chunk[..n]);
+        Ok(())
+    }
+
+    /// The beginning of what the expert wrote without being asked (before a query is sent), if it wrote anything.
+    fn unsolicited(&mut self) -> std::io::Result<Option<String>> {
+        if self.pending.is_empty() && !self.closed && self.ready(0)? {
+            self.fill()?;
+        }
+        if self.pending.is_empty() {
+            return Ok(None);
+        }
+        let first = self
+            .pending
+            .split(|&b| b == b'\n')
+            .next()
+            .unwrap_or_default();
+        Ok(Some(
+            String::from_utf8_lossy(first).chars().take(200).collect(),
+        ))
+    }
+
+    /// The answer line (without its line break), waiting at most until `deadline` and ending the wait at once
+    /// when a stop is requested. A line longer than [`MAX_ANSWER_BYTES`] is an error, so that an output without
+    /// line breaks cannot grow the memory.
+    fn answer(&mut self, deadline: Instant) -> Reply {
+        loop {
+            if let Some(end) = self.pending.iter().position(|&b| b == b'\n') {
+                let mut line: Vec<u8> = self.pending.drain(..=end).collect();
+                line.pop();
+                if line.last() == Some(&b'\r') {
+                    line.pop();
+                }
+                if line.len() <= MAX_ANSWER_BYTES {
+                    return Reply::Line(String::from_utf8_lossy(&line).into_owned());
+                }
+                return Reply::Failed(too_long());
+            }
+            if self.pending.len() > MAX_ANSWER_BYTES {
+                return Reply::Failed(too_long());
+            }
+            if self.closed {
+                // A last line without its line break is still an answer.
+                return match std::mem::take(&mut self.pending) {
+                    line if line.is_empty() => Reply::Closed,
+                    line => Reply::Line(String::from_utf8_lossy(&line).into_owned()),
+                };
+            }
+            if crate::interrupt::requested() {
+                // Whatever arrives later belongs to the question a resumed run asks again.
+                return Reply::Stopped;
+            }
+            let left = deadline.saturating_duration_since(Instant::now());
+            if left.is_zero() {
+                return Reply::Timeout;
+            }
+            let wait = left.min(STOP_POLL).as_millis().max(1) as i32;
+            match self.ready(wait) {
+                Ok(true) => {
+                    if let Err(e) = self.fill() {
+                        return Reply::Failed(e);
+                    }
+                }
+                Ok(false) => {}
+                Err(e) => return Reply::Failed(e),
+            }
+        }
+    }
+}
+
+fn too_long() -> std::io::Error {
+    std::io::Error::new(
+        std::io::ErrorKind::InvalidData,
+        format!("a line is longer than {MAX_ANSWER_BYTES} bytes"),
+    )
+}
+
 /// Waiting for a child with a bound (std has no timed wait).
 trait WaitTimeout {
     fn wait_timeout_ms(&mut self, ms: u64) -> std::io::Result<()>;
@@ -356,6 +465,7 @@ impl WaitTimeout for Child {
 
 impl<A: WireAction> Expert<A> for ProcessExpert<A> {
     fn act(&mut self, obs: &[f32]) -> Result<A> {
+        self.check_unsolicited()?;
         self.send(&serde_json::json!({"type": "query", "obs": obs}))?;
         self.read_answer()
     }

@@ -14,7 +14,6 @@
 //! the same directory, then rename), and loading validates everything before building a network.
 
 use std::collections::{BTreeMap, HashMap};
-use std::fs;
 use std::path::{Path, PathBuf};
 
 use safetensors::tensor::TensorView;
@@ -307,18 +306,7 @@ fn load_file(path: &Path) -> Result<(QNet, BTreeMap<String, String>), ModelFileE
         path: path.to_path_buf(),
         source,
     };
-    let meta = fs::metadata(path).map_err(read_error)?;
-    if !meta.is_file() {
-        return Err(read_error(std::io::Error::other("not a regular file")));
-    }
-    if meta.len() > MAX_MODEL_FILE_BYTES {
-        return Err(read_error(std::io::Error::other(format!(
-            "{} bytes is larger than any model file ({} MiB at most)",
-            meta.len(),
-            MAX_MODEL_FILE_BYTES >> 20
-        ))));
-    }
-    let bytes = fs::read(path).map_err(read_error)?;
+    let bytes = crate::files::read_bounded(path, MAX_MODEL_FILE_BYTES).map_err(read_error)?;
     parse_model(path, &bytes)
 }
 
@@ -489,6 +477,7 @@ pub fn parse_model(
 mod tests {
     use super::*;
     use rand::SeedableRng;
+    use std::fs;
 
     #[test]
     fn same_network_same_bytes_with_metadata_in_sorted_order() {

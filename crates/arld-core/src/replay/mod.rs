@@ -791,6 +791,15 @@ impl<A: Action> Persist for Replay<A> {
         state.f32s_into(&name("rewards"), &mut self.rewards)?;
         let mut terminal = vec![0u8; self.terminal.len()];
         state.u8s_into(&name("terminal"), &mut terminal)?;
+        if let Some(slot) = terminal.iter().position(|&t| t > 1) {
+            return Err(StateError::Value {
+                name: name("terminal"),
+                msg: format!(
+                    "slot {slot} holds {}, where a flag is 0 or 1",
+                    terminal[slot]
+                ),
+            });
+        }
         self.terminal = terminal.iter().map(|&t| t != 0).collect();
         state.f32s_into(&name("nstep_next_obs"), &mut self.nstep_next_obs)?;
         state.f32s_into(&name("nstep_rewards"), &mut self.nstep_rewards)?;

@@ -619,22 +619,14 @@ impl ConfigInput {
 
     /// Takes every key of a TOML file (a run's `config.toml` is one).
     pub fn apply_file(&mut self, path: &Path) -> Result<()> {
-        let meta = std::fs::metadata(path)
-            .with_context(|| format!("cannot read config file {}", path.display()))?;
-        ensure!(
-            meta.is_file(),
-            "config file {} is not a regular file",
-            path.display()
-        );
-        ensure!(
-            meta.len() <= MAX_CONFIG_BYTES,
-            "config file {} has {} bytes; a configuration is a few hundred bytes, and files over {} MiB are refused",
-            path.display(),
-            meta.len(),
-            MAX_CONFIG_BYTES >> 20
-        );
-        let text = std::fs::read_to_string(path)
-            .with_context(|| format!("cannot read config file {}", path.display()))?;
+        let bytes = crate::files::read_bounded(path, MAX_CONFIG_BYTES).with_context(|| {
+            format!(
+                "cannot read config file {} (a configuration is a few hundred bytes)",
+                path.display()
+            )
+        })?;
+        let text = String::from_utf8(bytes)
+            .with_context(|| format!("config file {} is not UTF-8", path.display()))?;
         self.apply_text(&text, path)
     }
 

@@ -86,6 +86,7 @@ impl<A: Action> RunLog<A> {
     ) -> Result<Self> {
         let bar = progress_bar(total_steps, progress);
         run_dir::check_own_entries(dir)?;
+        run_dir::remove_leftovers(dir)?;
         let Some(config_toml) = config_toml else {
             let _ = std::fs::remove_file(dir.join(SUMMARY_FILE));
             return Ok(Self {

@@ -543,6 +543,9 @@ impl<'a, L: Learner> Run<'a, L> {
             e.restore(&saved)?;
         }
         self.st = state.value("loop")?;
+        self.st
+            .check(self.cfg, self.last_step, parts.replay.n_agent())
+            .context("the snapshot's loop state `loop` is not one a run reaches")?;
         self.clock.carry(&self.st);
         if let (true, Some(EnvRetry::Reset { .. })) = (self.st.training, &self.st.env_pending) {
             // An episode had ended and the environment raised on its reset: the reset is taken again, from the
@@ -1312,6 +1315,69 @@ impl<A: Action> Default for LoopState<A> {
 }
 
 impl<A: Action> LoopState<A> {
+    /// Checks that the values hold together, with each other, with the configuration `cfg` (a run ends at
+    /// `last_step`) and with the replay memory (`n_agent` transitions of the agent stored), as every state the
+    /// loop reaches does: a snapshot edited with its checksum made again must not make a run count steps it never
+    /// took.
+    fn check(&self, cfg: &TrainConfig, last_step: usize, n_agent: usize) -> Result<()> {
+        let pretrain_steps = if cfg.method.pretrains() {
+            cfg.pretrain_steps
+        } else {
+            0
+        };
+        ensure!(
+            self.step <= last_step,
+            "it is at step {}, past the run's last step {last_step}",
+            self.step
+        );
+        ensure!(
+            self.pretrain_done <= pretrain_steps
+                && (!self.training || self.pretrain_done == pretrain_steps),
+            "{} pre-training updates done, of the {pretrain_steps} the run makes{}",
+            self.pretrain_done,
+            if self.training {
+                " before training"
+            } else {
+                ""
+            }
+        );
+        ensure!(
+            self.training || (self.step, self.episode, self.ep_len, self.updates) == (0, 0, 0, 0),
+            "it has not begun training, yet counts steps, episodes or updates"
+        );
+        ensure!(
+            self.episode <= self.step && self.ep_len <= self.step && self.updates <= self.step,
+            "{} episodes, {} steps in the episode in progress and {} updates do not fit in {} steps",
+            self.episode,
+            self.ep_len,
+            self.updates,
+            self.step
+        );
+        ensure!(
+            self.ep_actions.len() == self.ep_len && self.ep_demo <= self.ep_len,
+            "the episode in progress has {} steps, {} actions and {} steps by the expert",
+            self.ep_len,
+            self.ep_actions.len(),
+            self.ep_demo
+        );
+        ensure!(
+            n_agent <= self.step,
+            "the replay memory holds {n_agent} of the agent's transitions, more than the {} steps taken",
+            self.step
+        );
+        ensure!(
+            self.ep_return.is_finite()
+                && [self.elapsed_s, self.cpu_s]
+                    .iter()
+                    .all(|t| t.is_finite() && *t >= 0.0),
+            "a return or time that is not a finite number (return {}, {} s, {} s of CPU)",
+            self.ep_return,
+            self.elapsed_s,
+            self.cpu_s
+        );
+        Ok(())
+    }
+
     /// How the episode in progress began (the first with the run's environment seed).
     fn episode_start(&self, env_seed: u64) -> env::EpisodeStart {
         self.ep_generator.map_or(

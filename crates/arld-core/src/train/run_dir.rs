@@ -21,6 +21,7 @@ use crate::replay::Transition;
 use crate::task::Action;
 use anyhow::{Context, Result, bail};
 use serde::{Deserialize, Serialize};
+use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
 /// The resolved configuration (TOML).
@@ -123,27 +124,71 @@ pub fn check_own_entries(dir: &Path) -> Result<()> {
     Ok(())
 }
 
-/// Whether `name` is an entry a run writes into its directory (its files, checkpoints, TensorBoard events,
-/// snapshot, and the temporary files of its atomic writes).
+/// Whether `name` is an entry a run writes into its directory, by its exact name: its files, checkpoints,
+/// TensorBoard events, snapshot, and the temporary files of its atomic writes (exactly of their form, see
+/// [`crate::files::is_temporary_of`]: a user's `.notes.tmp.bak` is none).
 fn is_run_entry(name: &str) -> bool {
     own_files().contains(&name)
         || name == CHECKPOINTS_DIR
         || is_events_file(name)
-        || name.starts_with('.') && name.contains(".tmp")
+        || own_files()
+            .iter()
+            .any(|file| crate::files::is_temporary_of(name, file))
 }
 
-/// Whether `name` is an entry a run writes into its `checkpoints` folder (a checkpoint, or the temporary
-/// file of its atomic write).
+/// Whether `name` is the name a run gives a checkpoint (`step_NNNNNNNN.safetensors`, [`checkpoint_path`]),
+/// exactly: `step_5.safetensors` is none.
+fn is_checkpoint_name(name: &str) -> bool {
+    name.strip_prefix("step_")
+        .and_then(|n| n.strip_suffix(".safetensors"))
+        .filter(|digits| digits.bytes().all(|b| b.is_ascii_digit()))
+        .and_then(|digits| digits.parse::<usize>().ok())
+        .is_some_and(|step| {
+            checkpoint_path(Path::new(""), step).file_name() == Some(std::ffi::OsStr::new(name))
+        })
+}
+
+/// Whether `name` is an entry a run writes into its `checkpoints` folder: a checkpoint, or the temporary file
+/// of its atomic write, each by its exact name.
 fn is_checkpoint_entry(name: &str) -> bool {
-    let is_step = |n: &str| {
-        n.strip_prefix("step_")
-            .and_then(|n| n.strip_suffix(".safetensors"))
-            .is_some_and(|digits| !digits.is_empty() && digits.bytes().all(|b| b.is_ascii_digit()))
-    };
-    is_step(name)
+    is_checkpoint_name(name)
         || name
             .strip_prefix('.')
-            .is_some_and(|n| n.split(".tmp").next().is_some_and(is_step))
+            .and_then(|n| n.split(".tmp").next())
+            .is_some_and(|target| {
+                is_checkpoint_name(target) && crate::files::is_temporary_of(name, target)
+            })
+}
+
+/// Removes what writers of the run's files killed before their commit left in `dir` and its checkpoints
+/// folder (their temporary files, exactly by name; a writer of this process is left alone): done when a run
+/// starts, resumes and finishes.
+pub fn remove_leftovers(dir: &Path) -> Result<()> {
+    let tidy = |path: &Path| {
+        crate::files::remove_leftovers(path)
+            .with_context(|| format!("cannot tidy {}", dir.display()))
+    };
+    for name in own_files() {
+        tidy(&dir.join(name))?;
+    }
+    let checkpoints = dir.join(CHECKPOINTS_DIR);
+    let entries = match std::fs::read_dir(&checkpoints) {
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(()),
+        entries => entries.with_context(|| format!("cannot read {}", checkpoints.display()))?,
+    };
+    let mut targets = BTreeSet::new();
+    for entry in entries {
+        let name = entry?.file_name().to_string_lossy().into_owned();
+        if let Some(target) = name.strip_prefix('.').and_then(|n| n.split(".tmp").next())
+            && is_checkpoint_name(target)
+        {
+            targets.insert(target.to_string());
+        }
+    }
+    for target in targets {
+        tidy(&checkpoints.join(target))?;
+    }
+    Ok(())
 }
 
 /// Makes `dir` ready for a new run, so that nothing of an earlier run is mixed into it: a missing or empty
@@ -261,7 +306,10 @@ pub fn prepare_new_run(dir: &Path, overwrite: bool) -> Result<()> {
 pub fn prepare_restart(dir: &Path) -> Result<()> {
     let failed = dir.join(FAILED_FILE);
     let kept = if crate::files::own_file_exists(&failed)? {
-        Some(std::fs::read(&failed).with_context(|| format!("cannot read {}", failed.display()))?)
+        Some(
+            crate::files::read_bounded(&failed, MAX_KEY_FILE_BYTES)
+                .with_context(|| format!("cannot read {}", failed.display()))?,
+        )
     } else {
         None
     };
@@ -732,9 +780,113 @@ pub fn read_written_config(dir: &Path) -> Result<TrainConfig> {
     let path = dir.join(CONFIG_FILE);
     let bytes = crate::files::read_bounded(&path, MAX_KEY_FILE_BYTES)
         .with_context(|| format!("cannot read {}", path.display()))?;
-    let text = std::str::from_utf8(&bytes)
+    parse_written_config(&bytes, &path)
+}
+
+/// A run's configuration from the bytes of its `config.toml` (`path` names it in the error), as
+/// [`read_written_config`] reads it.
+fn parse_written_config(bytes: &[u8], path: &Path) -> Result<TrainConfig> {
+    let text = std::str::from_utf8(bytes)
         .with_context(|| format!("{} is not UTF-8 text", path.display()))?;
     toml::from_str(text).with_context(|| format!("{} is not a run configuration", path.display()))
+}
+
+/// Checks the text of a run's `config.toml` (`path` names it in the error): TOML whose every key that this arld
+/// knows holds a string exactly where this arld writes one (`seed = "1"` is refused). Keys it does not know (an
+/// older or newer run's) are not checked, nor missing keys.
+pub fn check_config_types(text: &str, path: &Path) -> Result<()> {
+    static STRINGS: std::sync::OnceLock<BTreeMap<String, bool>> = std::sync::OnceLock::new();
+    let strings = STRINGS.get_or_init(|| {
+        let preset = ConfigInput::new("CartPole-v0", Method::Adqn, NetKind::Bootstrap, 0)
+            .resolve()
+            .expect("the preset resolves");
+        let table: toml::Table =
+            toml::from_str(&preset.to_toml()).expect("a configuration reads back");
+        table.into_iter().map(|(k, v)| (k, v.is_str())).collect()
+    });
+    let table: toml::Table =
+        toml::from_str(text).with_context(|| format!("{} is not a TOML table", path.display()))?;
+    check_strings(
+        table.iter().map(|(k, v)| (k, Some(v.is_str()))),
+        strings,
+        path,
+    )
+}
+
+/// Checks the text of a run's `summary.json` as [`check_config_types`] checks a configuration (a `null` stands
+/// for a value a run did not have, of any type).
+pub fn check_summary_types(text: &str, path: &Path) -> Result<()> {
+    static STRINGS: std::sync::OnceLock<BTreeMap<String, bool>> = std::sync::OnceLock::new();
+    let strings = STRINGS.get_or_init(|| {
+        // A summary with every value present, for the kind of each.
+        let some = Summary {
+            env: String::new(),
+            method: Method::Adqn,
+            net: NetKind::Bootstrap,
+            seed: 0,
+            steps_to_solve: 0,
+            solved: false,
+            solve_threshold: 0.0,
+            train_steps: 0,
+            final_score: 0.0,
+            demos_pretrain: 0,
+            demos_queried: 0,
+            episodes: 0,
+            wall_time_s: 0.0,
+            cpu_time_s: Some(0.0),
+            steps_per_s: 0.0,
+            numerics: Some(String::new()),
+            arld_version: Some(String::new()),
+            git_commit: Some(String::new()),
+            expert: Some(String::new()),
+            person_s: Some(0.0),
+        };
+        let serde_json::Value::Object(object) =
+            serde_json::to_value(some).expect("a summary serialises")
+        else {
+            unreachable!("a summary is an object")
+        };
+        object
+            .into_iter()
+            .map(|(k, v)| (k, v.is_string()))
+            .collect()
+    });
+    let object: serde_json::Map<String, serde_json::Value> = serde_json::from_str(text)
+        .with_context(|| format!("{} is not a JSON object", path.display()))?;
+    let kinds = object
+        .iter()
+        .map(|(k, v)| (k, (!v.is_null()).then(|| v.is_string())));
+    check_strings(kinds, strings, path)
+}
+
+/// Refuses a key whose value is a string (`Some(true)`) where `strings` says its values are none, or the other
+/// way round (`None`: a value of any kind).
+fn check_strings<'a>(
+    kinds: impl Iterator<Item = (&'a String, Option<bool>)>,
+    strings: &BTreeMap<String, bool>,
+    path: &Path,
+) -> Result<()> {
+    for (key, is_string) in kinds {
+        if let (Some(&expected), Some(found)) = (strings.get(key), is_string)
+            && expected != found
+        {
+            bail!(
+                "{}: `{key}` holds {}, where a run writes {}",
+                path.display(),
+                if found {
+                    "a string"
+                } else {
+                    "a value that is no string"
+                },
+                if expected {
+                    "a string"
+                } else {
+                    "a value that is no string"
+                }
+            );
+        }
+    }
+    Ok(())
 }
 
 /// Gives `to` the files of the finished run `from` as the run `config` configures (a run of the same
@@ -755,12 +907,12 @@ pub fn copy_finished_run(from: &Path, to: &Path, config: &TrainConfig) -> Result
         if !entry.file_type()?.is_file() || name == SUMMARY_FILE || name == CONFIG_FILE {
             continue;
         }
-        let bytes = std::fs::read(entry.path())
+        let bytes = crate::files::read_bounded(&entry.path(), MAX_LOG_BYTES)
             .with_context(|| format!("cannot read {}", entry.path().display()))?;
         write_atomic(&to.join(&name), &bytes)?;
     }
     write_atomic(&to.join(CONFIG_FILE), config.to_toml().as_bytes())?;
-    let summary = std::fs::read(from.join(SUMMARY_FILE))
+    let summary = crate::files::read_bounded(&from.join(SUMMARY_FILE), MAX_KEY_FILE_BYTES)
         .with_context(|| format!("cannot read {}", from.join(SUMMARY_FILE).display()))?;
     write_atomic(&to.join(SUMMARY_FILE), &summary)?;
     check_complete(to).context("the copy is not whole")
@@ -790,6 +942,7 @@ pub fn parse_summary(bytes: &[u8], path: &Path) -> Result<Summary> {
 pub fn write_summary(dir: &Path, summary: &Summary) -> Result<()> {
     let json = serde_json::to_string_pretty(summary)?;
     write_atomic(&dir.join(SUMMARY_FILE), json.as_bytes())?;
+    remove_leftovers(dir)?;
     match std::fs::remove_file(dir.join(FAILED_FILE)) {
         Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
             Err(e).with_context(|| format!("cannot remove {}", dir.join(FAILED_FILE).display()))
@@ -859,7 +1012,7 @@ pub fn write_failure(dir: &Path, failure: &Failure) -> Result<()> {
 /// The `failed.json` of the run directory `dir`, if it has one.
 pub fn read_failure(dir: &Path) -> Result<Option<Failure>> {
     let path = dir.join(FAILED_FILE);
-    let text = match std::fs::read_to_string(&path) {
+    let text = match crate::files::read_text_bounded(&path, MAX_KEY_FILE_BYTES) {
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
         text => text.with_context(|| format!("cannot read {}", path.display()))?,
     };

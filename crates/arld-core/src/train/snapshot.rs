@@ -31,6 +31,9 @@ pub const SNAPSHOT_INFO_FILE: &str = "snapshot.json";
 /// is still read).
 pub const FORMAT_VERSION: u32 = 2;
 
+/// The largest snapshot read (the replay memory a configuration may ask for is at most 16 GiB).
+const MAX_SNAPSHOT_BYTES: u64 = 64 << 30;
+
 /// The metadata key of the checksum (format 2).
 const CHECKSUM_KEY: &str = "crc32c";
 /// The checksum's value while it is computed.
@@ -151,7 +154,7 @@ impl Checkpointer {
         if !crate::files::own_file_exists(&path).context("cannot resume the run")? {
             return Ok(None);
         }
-        let bytes = std::fs::read(&path)
+        let bytes = crate::files::read_bounded(&path, MAX_SNAPSHOT_BYTES)
             .with_context(|| format!("cannot read {} to resume the run", path.display()))?;
         let state = decode(&bytes, &self.config)
             .with_context(|| format!("cannot resume from {}", path.display()))?;
@@ -183,7 +186,7 @@ impl Drop for Checkpointer {
 /// Whether the run directory `dir` holds a snapshot computed with other elementary functions than this arld's
 /// (an older arld's): it cannot be resumed, and a sweep starts its run again.
 pub fn is_stale(dir: &Path) -> bool {
-    let Ok(bytes) = std::fs::read(dir.join(SNAPSHOT_FILE)) else {
+    let Ok(bytes) = crate::files::read_bounded(&dir.join(SNAPSHOT_FILE), MAX_SNAPSHOT_BYTES) else {
         return false;
     };
     SafeTensors::read_metadata(&bytes).is_ok_and(|(_, header)| {
@@ -198,7 +201,8 @@ pub fn is_stale(dir: &Path) -> bool {
 
 /// The configuration (TOML text) the snapshot file `path` recorded, or an error saying the file is no snapshot.
 pub fn recorded_config(path: &Path) -> Result<String> {
-    let bytes = std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
+    let bytes = crate::files::read_bounded(path, MAX_SNAPSHOT_BYTES)
+        .with_context(|| format!("cannot read {}", path.display()))?;
     let (_, header) = SafeTensors::read_metadata(&bytes)
         .with_context(|| format!("{} is not a readable safetensors file", path.display()))?;
     header
