@@ -823,6 +823,7 @@ pub fn check_summary_types(text: &str, path: &Path) -> Result<()> {
             env: String::new(),
             method: Method::Adqn,
             net: NetKind::Bootstrap,
+            algo: Some(Algo::Td3),
             seed: 0,
             steps_to_solve: 0,
             solved: false,
