@@ -1233,16 +1233,8 @@ fn headline(measured: &Measured) -> String {
         if measured.multiples.keys().all(|k| &k.0 != env) {
             continue;
         }
-        let header: Vec<String> = budgets
-            .iter()
-            .map(|&b| format!("{} ({b})", budget_multiple(env, b)))
-            .collect();
-        let _ = writeln!(
-            out,
-            "\n### {env}\n\n| rule | {} |\n|---|{}",
-            header.join(" | "),
-            "---|".repeat(budgets.len())
-        );
+        let (header, rule) = budget_columns(env, &budgets);
+        let _ = writeln!(out, "\n### {env}\n\n| rule | {header} |\n|---|{rule}");
         for (_, rule) in rules {
             let row: Vec<String> = budgets
                 .iter()
@@ -1741,6 +1733,17 @@ fn seed_span(seeds: &std::ops::Range<u64>) -> String {
     format!("{}-{}", seeds.start, seeds.end.saturating_sub(1))
 }
 
+/// The budget columns of a table of `env`: each budget as its multiple of the paper's with its transitions, joined
+/// for a Markdown header row, and the matching separator cells.
+fn budget_columns<'a>(env: &str, budgets: impl IntoIterator<Item = &'a usize>) -> (String, String) {
+    let names: Vec<String> = budgets
+        .into_iter()
+        .map(|&b| format!("{} ({b})", budget_multiple(env, b)))
+        .collect();
+    let rule = "---|".repeat(names.len());
+    (names.join(" | "), rule)
+}
+
 /// A budget as a multiple of the paper's for `env`: "1/4", "1/2", "1", "2", "4" (or a decimal).
 fn budget_multiple(env: &str, budget: usize) -> String {
     let scale = budget as f64 / paper_budget(env).max(1) as f64;
@@ -1784,15 +1787,10 @@ fn effort_buys(measured: &Measured) -> String {
             .values()
             .flat_map(|by_budget| by_budget.keys().copied())
             .collect();
-        let header: Vec<String> = budgets
-            .iter()
-            .map(|&b| format!("{} ({b})", budget_multiple(env, b)))
-            .collect();
+        let (header, rule) = budget_columns(env, &budgets);
         let _ = writeln!(
             out,
-            "\n### {env}\n\n| rule | net | {} | largest vs smallest |\n|---|---|{}---|",
-            header.join(" | "),
-            "---|".repeat(budgets.len())
+            "\n### {env}\n\n| rule | net | {header} | largest vs smallest |\n|---|---|{rule}---|"
         );
         for ((_, rule, net), by_budget) in &per_rule {
             let row: Vec<String> = budgets

@@ -157,142 +157,39 @@ const CARTPOLE: Schedule = Schedule {
     ..paper("CartPole-v0")
 };
 
-/// Every built-in task, discrete ones first, in Gymnasium's registration order.
+/// Every built-in task, discrete ones first, in Gymnasium's registration order (laid out as a table, three lines a
+/// task: its id and words, its actions, its preset and names).
+#[rustfmt::skip]
 pub static TASKS: [Task; 9] = [
-    Task {
-        id: "CartPole-v0",
-        about: "balance a pole on a cart (200 steps)",
-        body: Body::Discrete {
-            spec: &SPECS[0],
-            make: make_cartpole,
-            scripted: cartpole::balance,
-        },
-        schedule: CARTPOLE,
-        experts: "CartPole-v0",
-        continuous_of: &[],
-        spellings: &[],
-        // Its physics are CartPole-v1's, whose traces test them.
-        traces: &[],
-    },
-    Task {
-        id: "CartPole-v1",
-        about: "balance a pole on a cart (500 steps)",
-        body: Body::Discrete {
-            spec: &SPECS[1],
-            make: make_cartpole,
-            scripted: cartpole::balance,
-        },
-        schedule: CARTPOLE,
-        experts: "CartPole-v0",
-        continuous_of: &[],
-        spellings: &[],
-        traces: CLASSIC_TRACES,
-    },
-    Task {
-        id: "Acrobot-v1",
-        about: "swing a two-link arm's tip above a bar",
-        body: Body::Discrete {
-            spec: &SPECS[2],
-            make: make_acrobot,
-            scripted: acrobot::pump,
-        },
-        schedule: Schedule {
-            eval_period: 2_000,
-            ..paper("Acrobot-v1")
-        },
-        experts: "Acrobot-v1",
-        continuous_of: &[],
-        spellings: &[],
-        traces: CLASSIC_TRACES,
-    },
-    Task {
-        id: "MountainCar-v0",
-        about: "drive an underpowered car up a hill (sparse reward)",
-        body: Body::Discrete {
-            spec: &SPECS[3],
-            make: make_mountain_car,
-            scripted: mountain_car::push_with_motion,
-        },
-        schedule: Schedule {
-            eval_period: 10_000,
-            ..paper("MountainCar-v0")
-        },
-        experts: "MountainCar-v0",
-        continuous_of: &[],
-        spellings: &[],
-        traces: CLASSIC_TRACES,
-    },
-    Task {
-        id: "LunarLander-v2",
-        about: "land a craft on a pad with four engine choices (Box2D)",
-        body: Body::Discrete {
-            spec: &SPECS[4],
-            make: make_lander,
-            scripted: lunar_lander::heuristic_action,
-        },
-        schedule: paper("LunarLander-v2"),
-        experts: "LunarLander-v2",
-        continuous_of: &[],
-        spellings: &[],
-        // Its world is LunarLander-v3's less the v3 fixes; the traces are v3's.
-        traces: &[],
-    },
-    Task {
-        id: "LunarLander-v3",
-        about: "land a craft on a pad with four engine choices (Box2D, v3 fixes)",
-        body: Body::Discrete {
-            spec: &SPECS[5],
-            make: make_lander,
-            scripted: lunar_lander::heuristic_action,
-        },
-        schedule: paper("LunarLander-v2"),
-        experts: "LunarLander-v2",
-        continuous_of: &[],
-        spellings: &[],
-        traces: LANDER_TRACES,
-    },
-    Task {
-        id: "Pendulum-v1",
-        about: "swing a pendulum up and hold it upright with a torque",
-        body: Body::Box {
-            spec: &CONTINUOUS_SPECS[0],
-            physics: || Box::new(pendulum::Pendulum::default()),
-            scripted: |obs| pendulum::swing_up(obs).to_vec(),
-        },
-        schedule: boxed(20_000, 1_000),
-        experts: "Pendulum-v1",
-        continuous_of: &[],
-        spellings: &[],
-        traces: CONTINUOUS_TRACES,
-    },
-    Task {
-        id: "MountainCarContinuous-v0",
-        about: "drive an underpowered car up a hill with a throttle (sparse reward)",
-        body: Body::Box {
-            spec: &CONTINUOUS_SPECS[1],
-            physics: || Box::new(mountain_car_continuous::MountainCarContinuous::default()),
-            scripted: |obs| mountain_car_continuous::momentum(obs, 0.6).to_vec(),
-        },
-        schedule: boxed(100_000, 5_000),
-        experts: "MountainCarContinuous-v0",
-        continuous_of: &[],
-        spellings: &[],
-        traces: CONTINUOUS_TRACES,
-    },
-    Task {
-        id: "LunarLanderContinuous-v3",
-        about: "land a craft on a pad with throttled main and side engines (Box2D)",
-        body: Body::Box {
-            spec: &CONTINUOUS_SPECS[2],
-            physics: || Box::new(lunar_lander::LunarLanderContinuous::default()),
-            scripted: |obs| lunar_lander::heuristic_throttle(obs).to_vec(),
-        },
-        schedule: boxed(300_000, 10_000),
-        experts: "LunarLanderContinuous-v3",
-        continuous_of: &["LunarLander-v3", "LunarLander-v2"],
-        spellings: &["LunarLanderContinuous"],
-        traces: CONTINUOUS_TRACES,
-    },
+    // CartPole-v0's physics are CartPole-v1's, whose traces test them.
+    Task { id: "CartPole-v0", about: "balance a pole on a cart (200 steps)",
+        body: Body::Discrete { spec: &SPECS[0], make: make_cartpole, scripted: cartpole::balance },
+        schedule: CARTPOLE, experts: "CartPole-v0", continuous_of: &[], spellings: &[], traces: &[] },
+    Task { id: "CartPole-v1", about: "balance a pole on a cart (500 steps)",
+        body: Body::Discrete { spec: &SPECS[1], make: make_cartpole, scripted: cartpole::balance },
+        schedule: CARTPOLE, experts: "CartPole-v0", continuous_of: &[], spellings: &[], traces: CLASSIC_TRACES },
+    Task { id: "Acrobot-v1", about: "swing a two-link arm's tip above a bar",
+        body: Body::Discrete { spec: &SPECS[2], make: make_acrobot, scripted: acrobot::pump },
+        schedule: Schedule { eval_period: 2_000, ..paper("Acrobot-v1") }, experts: "Acrobot-v1", continuous_of: &[], spellings: &[], traces: CLASSIC_TRACES },
+    Task { id: "MountainCar-v0", about: "drive an underpowered car up a hill (sparse reward)",
+        body: Body::Discrete { spec: &SPECS[3], make: make_mountain_car, scripted: mountain_car::push_with_motion },
+        schedule: Schedule { eval_period: 10_000, ..paper("MountainCar-v0") }, experts: "MountainCar-v0", continuous_of: &[], spellings: &[], traces: CLASSIC_TRACES },
+    // LunarLander-v2's world is LunarLander-v3's less the v3 fixes; the traces are v3's.
+    Task { id: "LunarLander-v2", about: "land a craft on a pad with four engine choices (Box2D)",
+        body: Body::Discrete { spec: &SPECS[4], make: make_lander, scripted: lunar_lander::heuristic_action },
+        schedule: paper("LunarLander-v2"), experts: "LunarLander-v2", continuous_of: &[], spellings: &[], traces: &[] },
+    Task { id: "LunarLander-v3", about: "land a craft on a pad with four engine choices (Box2D, v3 fixes)",
+        body: Body::Discrete { spec: &SPECS[5], make: make_lander, scripted: lunar_lander::heuristic_action },
+        schedule: paper("LunarLander-v2"), experts: "LunarLander-v2", continuous_of: &[], spellings: &[], traces: LANDER_TRACES },
+    Task { id: "Pendulum-v1", about: "swing a pendulum up and hold it upright with a torque",
+        body: Body::Box { spec: &CONTINUOUS_SPECS[0], physics: || Box::new(pendulum::Pendulum::default()), scripted: |obs| pendulum::swing_up(obs).to_vec() },
+        schedule: boxed(20_000, 1_000), experts: "Pendulum-v1", continuous_of: &[], spellings: &[], traces: CONTINUOUS_TRACES },
+    Task { id: "MountainCarContinuous-v0", about: "drive an underpowered car up a hill with a throttle (sparse reward)",
+        body: Body::Box { spec: &CONTINUOUS_SPECS[1], physics: || Box::new(mountain_car_continuous::MountainCarContinuous::default()), scripted: |obs| mountain_car_continuous::momentum(obs, 0.6).to_vec() },
+        schedule: boxed(100_000, 5_000), experts: "MountainCarContinuous-v0", continuous_of: &[], spellings: &[], traces: CONTINUOUS_TRACES },
+    Task { id: "LunarLanderContinuous-v3", about: "land a craft on a pad with throttled main and side engines (Box2D)",
+        body: Body::Box { spec: &CONTINUOUS_SPECS[2], physics: || Box::new(lunar_lander::LunarLanderContinuous::default()), scripted: |obs| lunar_lander::heuristic_throttle(obs).to_vec() },
+        schedule: boxed(300_000, 10_000), experts: "LunarLanderContinuous-v3", continuous_of: &["LunarLander-v3", "LunarLander-v2"], spellings: &["LunarLanderContinuous"], traces: CONTINUOUS_TRACES },
 ];
 
 /// The built-in task `id`, or `UnknownId` (whose message lists every task).

@@ -10,59 +10,63 @@ use super::Expert;
 use crate::env::registry::{self, Body};
 use anyhow::{Result, bail};
 
-/// A hand-written controller for one environment.
-pub struct ScriptedExpert {
+/// A hand-written controller for one task, of its kind of action (`usize`, or `Vec<f32>` for a box).
+pub struct Scripted<A> {
     env: &'static str,
-    policy: fn(&[f32]) -> usize,
+    policy: fn(&[f32]) -> A,
 }
 
-impl ScriptedExpert {
-    /// The scripted controller of `env_id`.
-    pub fn new(env_id: &str) -> Result<Self> {
-        match registry::task(env_id).map(|task| (task.id, &task.body)) {
-            Ok((env, Body::Discrete { scripted, .. })) => Ok(Self {
-                env,
-                policy: *scripted,
-            }),
-            _ => bail!("no scripted expert for '{env_id}' (a task with discrete actions)"),
+/// The scripted controller of a task with discrete actions.
+pub type ScriptedExpert = Scripted<usize>;
+
+/// The scripted controller of a task with actions in a box: Gymnasium's heuristic for the continuous lander, an
+/// energy-based swing-up for Pendulum, a momentum controller for MountainCarContinuous.
+pub type ScriptedBoxExpert = Scripted<Vec<f32>>;
+
+/// A kind of action a scripted controller acts in, and where the registry keeps a task's controller of it.
+pub trait ScriptedKind: crate::task::Action {
+    /// The kind in words, for the error of a task of the other kind.
+    const KIND: &'static str;
+    /// The task's controller, if its actions are of this kind.
+    fn controller(body: &Body) -> Option<fn(&[f32]) -> Self>;
+}
+
+impl ScriptedKind for usize {
+    const KIND: &'static str = "discrete actions";
+    fn controller(body: &Body) -> Option<fn(&[f32]) -> usize> {
+        match body {
+            Body::Discrete { scripted, .. } => Some(*scripted),
+            Body::Box { .. } => None,
         }
     }
 }
 
-impl Expert for ScriptedExpert {
-    fn act(&mut self, obs: &[f32]) -> Result<usize> {
-        Ok((self.policy)(obs))
-    }
-    fn describe(&self) -> String {
-        format!("scripted({})", self.env)
+impl ScriptedKind for Vec<f32> {
+    const KIND: &'static str = "actions in a box";
+    fn controller(body: &Body) -> Option<fn(&[f32]) -> Vec<f32>> {
+        if let Body::Box { scripted, .. } = body {
+            return Some(*scripted);
+        }
+        None
     }
 }
 
-/// A controller of box actions: the action for an observation.
-type BoxPolicy = fn(&[f32]) -> Vec<f32>;
-
-/// A hand-written controller for a task with actions in a box: Gymnasium's heuristic for the continuous
-/// lander, an energy-based swing-up for Pendulum, a momentum controller for MountainCarContinuous.
-pub struct ScriptedBoxExpert {
-    env: &'static str,
-    policy: BoxPolicy,
-}
-
-impl ScriptedBoxExpert {
-    /// The scripted controller of the continuous task `env_id`.
+impl<A: ScriptedKind> Scripted<A> {
+    /// The scripted controller of the task `env_id`, whose actions are of the kind `A`.
     pub fn new(env_id: &str) -> Result<Self> {
-        match registry::task(env_id).map(|task| (task.id, &task.body)) {
-            Ok((env, Body::Box { scripted, .. })) => Ok(Self {
-                env,
-                policy: *scripted,
-            }),
-            _ => bail!("no scripted expert for '{env_id}' (a task with actions in a box)"),
+        let found = registry::task(env_id).ok();
+        match found.and_then(|task| A::controller(&task.body).map(|policy| (task.id, policy))) {
+            Some((env, policy)) => Ok(Scripted { env, policy }),
+            None => bail!(
+                "no scripted expert for '{env_id}' (a task with {})",
+                A::KIND
+            ),
         }
     }
 }
 
-impl Expert<Vec<f32>> for ScriptedBoxExpert {
-    fn act(&mut self, obs: &[f32]) -> Result<Vec<f32>> {
+impl<A: ScriptedKind> Expert<A> for Scripted<A> {
+    fn act(&mut self, obs: &[f32]) -> Result<A> {
         Ok((self.policy)(obs))
     }
     fn describe(&self) -> String {

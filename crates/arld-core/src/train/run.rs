@@ -122,33 +122,28 @@ pub fn box_agent(cfg: &TrainConfig, spec: &'static BoxSpec) -> BoxAgent {
     let tau = common.tau;
     let config = match cfg.algo {
         Algo::Td3 => {
-            let defaults = Td3Config::default();
+            let d = Td3Config::default();
+            // A setting given (float64 in the configuration) or the learner's default.
+            let or = |given: Option<f64>, default: f32| given.map_or(default, |v| v as f32);
             BoxLearnerConfig::Td3(Td3Config {
                 common,
-                policy_delay: settings
-                    .policy_delay
-                    .map_or(defaults.policy_delay, |d| d as u64),
-                target_noise: settings
-                    .target_noise
-                    .map_or(defaults.target_noise, |v| v as f32),
-                noise_clip: settings
-                    .noise_clip
-                    .map_or(defaults.noise_clip, |v| v as f32),
-                exploration_noise: settings
-                    .exploration_noise
-                    .map_or(defaults.exploration_noise, |v| v as f32),
+                policy_delay: settings.policy_delay.map_or(d.policy_delay, |p| p as u64),
+                target_noise: or(settings.target_noise, d.target_noise),
+                noise_clip: or(settings.noise_clip, d.noise_clip),
+                exploration_noise: or(settings.exploration_noise, d.exploration_noise),
             })
         }
         Algo::Sac => {
-            let defaults = SacConfig::default();
-            BoxLearnerConfig::Sac(SacConfig {
+            let mut sac = SacConfig {
                 common,
                 alpha_lr: settings.alpha_lr.map_or(lr, |v| v as f32),
-                initial_alpha: settings
-                    .initial_alpha
-                    .map_or(defaults.initial_alpha, |v| v as f32),
                 target_entropy: settings.target_entropy.map(|v| v as f32),
-            })
+                ..SacConfig::default()
+            };
+            if let Some(alpha) = settings.initial_alpha {
+                sac.initial_alpha = alpha as f32;
+            }
+            BoxLearnerConfig::Sac(sac)
         }
     };
     let seed = seed_for(cfg.seed, SeedPurpose::Agent);
