@@ -1359,7 +1359,8 @@ mod tests {
             |sets: &[&str]| resolve("Pendulum-v1", Method::Adqn, NetKind::Bootstrap, sets);
         assert_eq!(box_run(&["n_step=3"]).unwrap().replay_config().n_step, 3);
         assert_eq!(box_run(&["n_step=1"]).unwrap().replay_config().n_step, 0);
-        assert_eq!(box_run(&[]).unwrap().replay_config().n_step, 0);
+        // The box preset: three-step returns (docs/algorithm.md §21).
+        assert_eq!(box_run(&[]).unwrap().replay_config().n_step, BOX_N_STEP);
         let err = format!("{:#}", box_run(&["lambda_n=0.5"]).unwrap_err());
         assert!(err.contains("lambda_n") && err.contains("n-step"), "{err}");
         let discrete =
