@@ -177,6 +177,14 @@ Hyperparameters = TypedDict("Hyperparameters", {
     "queries_from_learning_starts": Optional[bool],
     "random_before_learning": Optional[bool],
     "algo": Optional[str],
+    "tau": Optional[float],
+    "policy_delay": Optional[int],
+    "target_noise": Optional[float],
+    "noise_clip": Optional[float],
+    "exploration_noise": Optional[float],
+    "target_entropy": Optional[float],
+    "alpha_lr": Optional[float],
+    "initial_alpha": Optional[float],
     "target_period_in_steps": Optional[bool],
     "exact_factorised_var": Optional[bool],
     "expert_timeout": Optional[float],
@@ -268,6 +276,14 @@ class Agent:
     - target_period_in_steps: target_update_interval counts environment steps from the first, as SB3 [False]
     - random_before_learning: uniformly random actions before learning_starts, as SB3 [False]
     - algo: the learner of an environment with a Box action space, "td3" or "sac" ["td3"]
+    - tau: Polyak rate of a Box learner's target networks [0.005]
+    - policy_delay: TD3's critic updates per actor update [2]
+    - target_noise: TD3's target smoothing noise, in half-widths of the box [0.2]
+    - noise_clip: the clip of TD3's target smoothing noise, in half-widths of the box [0.5]
+    - exploration_noise: TD3's exploration noise, in half-widths of the box [0.1]
+    - target_entropy: SAC's entropy target [-dim(A)]
+    - alpha_lr: SAC's temperature learning rate [learning_rate]
+    - initial_alpha: SAC's temperature before the first update [1]
     - learning_starts: environment steps before the first update [500/1000]
     - train_freq: environment steps per update [1]
     - max_grad_norm: global gradient-norm clip (grad_clip) [10]
@@ -292,7 +308,7 @@ class Agent:
     - margin: large-margin loss margin [0.8]
     - lambda_margin: weight of the margin loss (config key `lambda`) [preset]
     - lambda_n: weight of DQfD's n-step loss [0]
-    - n_step: horizon of the n-step loss [10]
+    - n_step: horizon of the n-step loss [10]; in a Box task the critics' n-step target [3]
     - l2: L2 weight [0]
     - n_demo: demonstrations collected before training (dqfd, adqnp) [preset]
     - pretrain_steps: pre-training updates (dqfd, adqnp) [preset]

@@ -474,7 +474,8 @@ def test_a_person_answers_a_gymnasium_box_task_with_a_pad_a_key_and_the_slider(t
         assert segment and all(len(row["action"]) == 1 for row in segment), segment
         torques = [row["action"][0] for row in segment]
         if q["control"] == "keys":
-            assert all(b <= a for a, b in zip(torques, torques[1:])) and all(want <= t < centre for t in torques), torques
+            assert all(b <= a for a, b in zip(torques, torques[1:])), torques
+            assert all(want <= t < centre for t in torques), torques
             assert len(torques) < 20 or torques[-1] == want, torques
         else:
             assert all(abs(t - want) < 1e-6 for t in torques), (q["control"], want, segment)
