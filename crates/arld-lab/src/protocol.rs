@@ -281,6 +281,7 @@ pub const PAPER_SEEDS: u64 = 20;
 /// - `held_out`: the effort benchmark's held-out test ([`held_out_grids`], on seeds of its own);
 /// - `held_out_2`: its second held-out test ([`second_held_out_grids`], on seeds of its own);
 /// - `continuous`: the six methods on the three tasks with actions in a box ([`continuous_grid`]);
+/// - `effort_continuous`: the effort benchmark on those tasks ([`box_effort_grids`]);
 /// - `ablations`: [`ABLATIONS`] on Acrobot and [`CARTPOLE_TARGET_ABLATION`] on CartPole, for DQN, BDQN and ADQN
 ///   x both nets (the methods part's runs are the baseline), then [`HARDER_ABLATIONS`] on [`HARDER_TASKS`].
 ///
@@ -368,6 +369,9 @@ pub fn paper_grids(seeds: u64) -> Vec<(&'static str, SweepGrid)> {
         grids.push(("held_out_2", grid));
     }
     grids.push(("continuous", continuous_grid(&seed_list)));
+    for grid in box_effort_grids(&seed_list) {
+        grids.push(("effort_continuous", grid));
+    }
     grids
 }
 
@@ -387,6 +391,70 @@ pub fn continuous_grid(seeds: &[u64]) -> SweepGrid {
         seeds: seeds.to_vec(),
         ..SweepGrid::default()
     }
+}
+
+/// The continuous effort benchmark's rules at the preset's budget, each run as ADQN with `query_rule` set, beside the
+/// paper's three rules (the `continuous` part's GDQN, BDQN and ADQN): chance paced over the run and over its first
+/// tenth (front-loaded); the critics' variance above its running quantile (RCMP's signal with a scale-free
+/// threshold: RCMP's fixed one has no meaning across tasks whose returns differ by orders of magnitude); ThriftyDAgger's
+/// risk and its novelty OR risk (on the tasks with a goal, docs/algorithm.md section 20); and ADQN asking only from
+/// `learning_starts` on.
+pub const BOX_EFFORT_RULES: [&str; 6] = [
+    "query_rule=paced",
+    "query_rule=paced(horizon=0.1)",
+    "query_rule=calibrated",
+    "query_rule=risk",
+    "query_rule=thrifty",
+    "query_rule=adaptive;queries_from_learning_starts=true",
+];
+
+/// The rules of [`BOX_EFFORT_RULES`] that read ThriftyDAgger's risk, which only a task with a goal has.
+const BOX_RISK_RULES: [&str; 2] = ["query_rule=risk", "query_rule=thrifty"];
+
+/// The rules run at every budget of [`EFFORT_BUDGET_SCALES`] on the box tasks, beside BDQN (the reference of the
+/// effort multiple) and ADQN: chance paced over the run.
+pub const BOX_EFFORT_SCALED_RULES: [&str; 1] = ["paced"];
+
+/// The continuous effort benchmark (`effort_continuous`) over `seeds`, on every built-in task with actions in a box
+/// with its box preset (TD3, the shipped weak expert, a budget of 1,000 transitions): every rule of
+/// [`BOX_EFFORT_RULES`] the task can run at the preset's budget, then BDQN, ADQN and [`BOX_EFFORT_SCALED_RULES`]
+/// at the budgets of [`EFFORT_BUDGET_SCALES`]. The paper's rules at the preset's budget are the `continuous`
+/// part's runs.
+pub fn box_effort_grids(seeds: &[u64]) -> Vec<SweepGrid> {
+    let grid = |env: &str, methods: Vec<Method>, vary: Vec<String>| SweepGrid {
+        envs: vec![env.to_string()],
+        methods,
+        nets: vec![NetKind::Bootstrap],
+        seeds: seeds.to_vec(),
+        vary,
+        ..SweepGrid::default()
+    };
+    let mut grids = Vec::new();
+    for env in arld_core::env::registry::ids(true) {
+        let has_goal = arld_core::env::box_spec(env)
+            .map(|spec| !matches!(spec.goal, arld_core::task::Goal::Absent(_)))
+            .unwrap_or(false);
+        let rules = BOX_EFFORT_RULES
+            .iter()
+            .filter(|r| has_goal || !BOX_RISK_RULES.contains(r))
+            .map(|r| r.to_string());
+        grids.push(grid(env, vec![Method::Adqn], rules.collect()));
+        let budgets: Vec<String> = EFFORT_BUDGET_SCALES
+            .iter()
+            .map(|&s| format!("budget={}", scaled_budget(env, s)))
+            .collect();
+        let scaled_rules: Vec<String> = budgets
+            .iter()
+            .flat_map(|b| {
+                BOX_EFFORT_SCALED_RULES
+                    .iter()
+                    .map(move |r| format!("{b};query_rule={r}"))
+            })
+            .collect();
+        grids.push(grid(env, vec![Method::Bdqn, Method::Adqn], budgets));
+        grids.push(grid(env, vec![Method::Adqn], scaled_rules));
+    }
+    grids
 }
 
 /// The names of the parts of [`paper_grids`], in order.
@@ -449,6 +517,17 @@ mod tests {
                 20,
                 // The continuous part: three box tasks x six methods.
                 3 * 6 * 20,
+                // The continuous effort benchmark, per task: its rules (no risk on Pendulum-v1), the budget
+                // grid of BDQN and ADQN, and paced random at every budget.
+                4 * 20,
+                2 * 4 * 20,
+                4 * 20,
+                6 * 20,
+                2 * 4 * 20,
+                4 * 20,
+                6 * 20,
+                2 * 4 * 20,
+                4 * 20,
             ]
         );
         assert_eq!(
@@ -462,7 +541,8 @@ mod tests {
                 "effort",
                 "held_out",
                 "held_out_2",
-                "continuous"
+                "continuous",
+                "effort_continuous"
             ]
         );
         assert_eq!(paper_budget("CartPole-v0"), 200);
