@@ -76,6 +76,10 @@ struct RunMetrics {
     transitions: f64,
     questions: f64,
     last_question: Option<f64>,
+    /// The share of the questions asked before learning starts (`None` without questions or a recorded start).
+    before_learning: Option<f64>,
+    /// The step of the question that takes the count to half of all questions asked (`None` without questions).
+    half_asked_by: Option<f64>,
     /// Questions asked before each evaluation: (evaluation step, count), for the figure.
     questions_at: Vec<(u64, u64)>,
 }
@@ -136,7 +140,7 @@ fn rule_and_budget(run: &RunRecord) -> Option<(String, usize)> {
     }
     // A run whose configuration records no budget (made by hand, or outside the benchmark) is left out.
     let budget = run.config.budget?;
-    let label = match &run.config.query_rule {
+    let mut label = match &run.config.query_rule {
         Some(rule) => rule.clone(),
         None => BASELINES
             .iter()
@@ -144,6 +148,9 @@ fn rule_and_budget(run: &RunRecord) -> Option<(String, usize)> {
             .map(|(l, _)| l.to_string())
             .expect("a querying method"),
     };
+    if run.config.queries_from_learning_starts == Some(true) {
+        label.push_str(" from learning_starts");
+    }
     Some((label, budget))
 }
 
@@ -223,8 +230,22 @@ fn metrics(run: &RunRecord, reference: (f64, f64), k: usize) -> RunMetrics {
             .as_ref()
             .and_then(|q| q.last())
             .map(|&s| s as f64),
+        before_learning: spent_before(run),
+        half_asked_by: run
+            .query_steps
+            .as_ref()
+            .filter(|q| !q.is_empty())
+            .map(|q| q[(q.len() - 1) / 2] as f64),
         questions_at,
     }
+}
+
+/// The share of `run`'s questions asked before the step at which learning starts.
+fn spent_before(run: &RunRecord) -> Option<f64> {
+    let steps = run.query_steps.as_ref().filter(|q| !q.is_empty())?;
+    let start = run.config.learning_starts?;
+    let before = steps.iter().filter(|&&s| s < start).count();
+    Some(before as f64 / steps.len() as f64)
 }
 
 /// Median and bootstrap 95% interval, formatted `m [lo, hi]`.
@@ -1438,7 +1459,7 @@ pub fn effort(runs: &[RunRecord], k: usize) -> Result<Option<EffortReport>> {
         "env,rule,net,budget,budget_scale,seeds,held_out,auc_median,auc_lo,auc_hi,first_hit_median,first_hit_lo,\
          first_hit_hi,sustained_median,sustained_lo,sustained_hi,final_median,final_lo,final_hi,p_vs_gdqn,\
          p_vs_bdqn,p_vs_adqn,transitions_median,questions_median,last_question_median,random_return,expert_return,\
-         effort_multiple,effort_multiple_lo,effort_multiple_hi\n",
+         effort_multiple,effort_multiple_lo,effort_multiple_hi,before_learning_median,half_asked_by_median\n",
     );
     writeln!(
         md,
@@ -1449,7 +1470,8 @@ pub fn effort(runs: &[RunRecord], k: usize) -> Result<Option<EffortReport>> {
          Mann-Whitney p of the AUC against the paper's rule at the same budget and network, on the seeds both \
          have (\"Every comparison\" gives each one's shift, interval, Holm-adjusted p and equivalence test; \
          words such as \"significantly\" follow the adjusted p); effort: demonstrated transitions, questions asked (each a segment of up to segment_len steps, a \
-         context switch for a person) and the step of the last question (medians). Sustained: {k} more \
+         context switch for a person), the step of the last question, the share of the questions asked before learning \
+         starts and the step by which half of them were asked (medians). Sustained: {k} more \
          evaluations at the target after the first.\n"
     )?;
     for env in &envs {
@@ -1481,8 +1503,8 @@ pub fn effort(runs: &[RunRecord], k: usize) -> Result<Option<EffortReport>> {
             writeln!(
                 md,
                 "| rule | net | budget | seeds | AUC | effort multiple | first hit | sustained | final | p vs GDQN | \
-                 p vs BDQN | p vs ADQN | transitions | questions | last question |\n|---|---|---|---|---|---|---|---|\
-                 ---|---|---|---|---|---|---|"
+                 p vs BDQN | p vs ADQN | transitions | questions | last question | before learning | half asked by |\n\
+                 |---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"
             )?;
             let mut ordered = keys.clone();
             ordered.sort_by_key(|k| (k.3, k.2.clone(), rank_rule(&k.1), k.1.clone()));
@@ -1516,6 +1538,10 @@ pub fn effort(runs: &[RunRecord], k: usize) -> Result<Option<EffortReport>> {
                 let questions = median(&vals(|m| m.questions)).unwrap_or(f64::NAN);
                 let last: Vec<f64> = cell.iter().filter_map(|m| m.last_question).collect();
                 let last = median(&last);
+                let before: Vec<f64> = cell.iter().filter_map(|m| m.before_learning).collect();
+                let before = median(&before);
+                let half: Vec<f64> = cell.iter().filter_map(|m| m.half_asked_by).collect();
+                let half = median(&half);
                 // The same row in both tables: the key, the four readings, the three p values, the effort.
                 let readings = [&auc, &first, &sus, &fin];
                 let multiple = multiples.get(key);
@@ -1548,10 +1574,13 @@ pub fn effort(runs: &[RunRecord], k: usize) -> Result<Option<EffortReport>> {
                     write!(md_row, " {} |", fmt_p(*p))?;
                     write!(csv_row, ",{}", p.map_or(String::new(), |p| format!("{p}")))?;
                 }
+                let step = |v: Option<f64>| v.map_or("–".into(), |s| format!("{s:.0}"));
                 writeln!(
                     md,
-                    "{md_row} {transitions:.0} | {questions:.0} | {} |",
-                    last.map_or("–".into(), |s| format!("{s:.0}")),
+                    "{md_row} {transitions:.0} | {questions:.0} | {} | {} | {} |",
+                    step(last),
+                    before.map_or("–".into(), |b| format!("{:.0}%", 100.0 * b)),
+                    step(half),
                 )?;
                 let multiple_csv = multiple.map_or(",,".to_string(), |m| {
                     format!(
@@ -1563,8 +1592,10 @@ pub fn effort(runs: &[RunRecord], k: usize) -> Result<Option<EffortReport>> {
                 });
                 writeln!(
                     csv,
-                    "{csv_row},{transitions},{questions},{},{random},{expert},{multiple_csv}",
+                    "{csv_row},{transitions},{questions},{},{random},{expert},{multiple_csv},{},{}",
                     last.map_or(String::new(), |s| format!("{s}")),
+                    before.map_or(String::new(), |b| format!("{b}")),
+                    half.map_or(String::new(), |s| format!("{s}")),
                 )?;
             }
             writeln!(md)?;

@@ -652,6 +652,10 @@ pub struct RecordedConfig {
     /// The query rule, in canonical form ([`canonical_rule`]) so that one spec written two ways is one rule;
     /// `None` also when the key is empty (the method's own rule asks).
     pub query_rule: Option<String>,
+    /// Whether questions wait for `learning_starts` (`None` where the file has no such key).
+    pub queries_from_learning_starts: Option<bool>,
+    /// The step at which learning starts.
+    pub learning_starts: Option<u64>,
 }
 
 impl RecordedConfig {
@@ -670,6 +674,13 @@ impl RecordedConfig {
             query_rule: text_of("query_rule")
                 .filter(|rule| !rule.is_empty())
                 .map(canonical_rule),
+            queries_from_learning_starts: table
+                .get("queries_from_learning_starts")
+                .and_then(|v| v.as_bool()),
+            learning_starts: table
+                .get("learning_starts")
+                .and_then(|v| v.as_integer())
+                .and_then(|s| u64::try_from(s).ok()),
         }
     }
 }
@@ -1446,7 +1457,7 @@ mod tests {
         // What the configuration records, the rule in one spelling whichever way it was written.
         std::fs::write(
             dir.path().join(CONFIG_FILE),
-            "budget = 250\nt_query = 0.3\nquery_rule = \"paced( horizon = 0.50 )\"\n",
+            "budget = 250\nt_query = 0.3\nquery_rule = \"paced( horizon = 0.50 )\"\nqueries_from_learning_starts = true\nlearning_starts = 700\n",
         )
         .unwrap();
         for (relative, study) in [
@@ -1459,6 +1470,8 @@ mod tests {
                 expert: None,
                 budget: Some(250),
                 query_rule: Some("paced(horizon=0.5)".into()),
+                queries_from_learning_starts: Some(true),
+                learning_starts: Some(700),
             };
             assert_eq!(record.config, expected);
             assert_eq!(record.t_query_study(), study, "{relative}");
