@@ -156,7 +156,7 @@ fn rule_and_budget(run: &RunRecord) -> Option<(String, usize)> {
 
 /// Mean returns of the random policy (a uniform draw from the actions, or from the box) and of the shipped weak
 /// expert on `env`.
-fn references(env: &str) -> Result<(f64, f64)> {
+pub(super) fn references(env: &str) -> Result<(f64, f64)> {
     use arld_core::env::{self, rollouts};
     let mut rng = rand_pcg::Pcg64::seed_from_u64(REFERENCE_SEED);
     let seeds = |i: usize| Some(REFERENCE_SEED + i as u64);
