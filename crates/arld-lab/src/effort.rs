@@ -961,7 +961,6 @@ fn margin_section(measured: &Measured) -> String {
 /// the one-sided level, and the multiple of the effort the protocol's [`PAPER_SEEDS`] seeds detect.
 fn power(measured: &Measured) -> String {
     let (cells, _, envs) = measured.parts();
-    let m = envs.len().max(1);
     let joint = 0.8_f64.powf(1.0 / BASELINES.len() as f64);
     let mut out = format!(
         "## Power: the seeds a rule worth twice the effort needs\n\nFrom the design seeds {design} alone: the \
@@ -973,17 +972,40 @@ fn power(measured: &Measured) -> String {
          approximation, the test's efficiency 3/pi): for one comparison; for \"beats all three\" in one cell (the \
          intersection-union test: each of the three comparisons at {TEST_LEVEL}, each with power 0.8^(1/3) = \
          {joint:.3} so that all three succeed together with 0.8 at least when they are independent); and for a test \
-         of one cell per task, Holm over its {m} cells (the first step at {TEST_LEVEL}/{m}). Then the multiple of \
-         the expert's effort the same tests detect with {PAPER_SEEDS} seeds a rule (2 to the power of the \
-         detectable shift over the AUC per doubling).\n\n| task | robust sd of the AUC | AUC per doubling | seeds: \
-         one comparison | seeds: beats all three, one cell | seeds: beats all three, {m} cells | detectable at \
-         {PAPER_SEEDS} seeds: one comparison | detectable at {PAPER_SEEDS} seeds: beats all three, {m} cells \
-         |\n|---|---|---|---|---|---|---|---|",
+         of one cell per task, Holm over its cells, one per task of the same kind of action (the first step at \
+         {TEST_LEVEL} over their number). Then the multiple of the expert's effort the same tests detect with \
+         {PAPER_SEEDS} seeds a rule (2 to the power of the detectable shift over the AUC per doubling).\n",
         design = seed_span(&DESIGN_SEEDS),
         net = EFFORT_NET.name(),
     );
+    // One table per kind of action: a held-out test of one cell per task is a family of the tasks of its kind.
+    for boxed in [false, true] {
+        let kind: Vec<&String> = envs
+            .iter()
+            .filter(|env| arld_core::env::box_spec(env).is_ok() == boxed)
+            .collect();
+        if !kind.is_empty() {
+            out.push_str(&power_table(cells, &kind, joint));
+        }
+    }
+    out.push_str(
+        "\n\"–\": more effort bought no measurable AUC on the design seeds, so no rule is worth a multiple of \
+         it there.\n",
+    );
+    out
+}
+
+/// The power table of the tasks `envs` (of one kind of action): one row per task with its design seeds' spread
+/// and the AUC per doubling, then the seeds needed and the multiple detectable with [`PAPER_SEEDS`] seeds.
+fn power_table(cells: &BTreeMap<CellKey, Vec<RunMetrics>>, envs: &[&String], joint: f64) -> String {
+    let m = envs.len();
+    let mut out = format!(
+        "\n| task | robust sd of the AUC | AUC per doubling | seeds: one comparison | seeds: beats all three, one \
+         cell | seeds: beats all three, {m} cells | detectable at {PAPER_SEEDS} seeds: one comparison | \
+         detectable at {PAPER_SEEDS} seeds: beats all three, {m} cells |\n|---|---|---|---|---|---|---|---|"
+    );
     let design = |cell: &Vec<RunMetrics>| design_aucs(cell);
-    for env in envs {
+    for &env in envs {
         let variances: Vec<f64> = BASELINES
             .iter()
             .filter_map(|(label, _)| {
@@ -1034,10 +1056,7 @@ fn power(measured: &Measured) -> String {
             multiple(TEST_LEVEL / m as f64, joint),
         );
     }
-    out.push_str(
-        "\n\n\"–\": more effort bought no measurable AUC on the design seeds, so no rule is worth a multiple of \
-         it there.\n",
-    );
+    out.push('\n');
     out
 }
 

@@ -663,7 +663,11 @@ fn continuous_claims(cells: &[Cell], expert_mean: &dyn Fn(&str) -> Option<f64>) 
 /// mean return (`expert_mean`: the paper's on its tasks; `None` leaves a task out). Reproduced when every median
 /// final score is above it; not reproduced when some configuration's whole bootstrap interval lies below it;
 /// inconclusive otherwise.
-fn end_above_expert(cells: &[Cell], claim: &str, expert_mean: &dyn Fn(&str) -> Option<f64>) -> Claim {
+fn end_above_expert(
+    cells: &[Cell],
+    claim: &str,
+    expert_mean: &dyn Fn(&str) -> Option<f64>,
+) -> Claim {
     let (mut above, mut total, mut below) = (0, 0, Vec::new());
     for cell in cells.iter().filter(|c| {
         c.variant == DEFAULT_VARIANT && WITH_DEMONSTRATIONS.contains(&c.method.as_str())
@@ -882,7 +886,11 @@ pub fn write_verdict(cells: &[Cell], out_dir: &Path, k: usize) -> Result<(Vec<Pa
     let expert_mean = |env: &str| {
         arld_core::env::box_spec(env)
             .is_ok()
-            .then(|| super::effort::references(env).ok().map(|(_, expert)| expert))
+            .then(|| {
+                super::effort::references(env)
+                    .ok()
+                    .map(|(_, expert)| expert)
+            })
             .flatten()
     };
     let (claims_md, claims_csv) = claims_table(&claims(cells, &expert_mean));
