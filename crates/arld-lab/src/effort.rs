@@ -30,6 +30,7 @@
 
 use super::plot::{Band, Curve, FigureContent, Panel, XScale};
 use super::protocol::{
+    BOX_CANDIDATES, BOX_DESIGN_SEEDS, BOX_HELD_OUT_RULE, BOX_HELD_OUT_SEEDS, BOX_HELD_OUT_TASKS,
     DESIGN_SEEDS, EFFORT_NET, EFFORT_SCREEN_TASKS, HELD_OUT_SEEDS, OWN_RULE_CANDIDATES,
     PAPER_SEEDS, SECOND_HELD_OUT_CELLS, SECOND_HELD_OUT_RULE, SECOND_HELD_OUT_SEEDS, TEST_LEVEL,
     env_order, is_effort_variant, paper_budget, scaled_budget,
@@ -90,6 +91,8 @@ enum Group {
     Screen,
     HeldOut,
     SecondHeldOut,
+    /// The continuous held-out test's seeds.
+    BoxHeldOut,
 }
 
 impl Group {
@@ -98,6 +101,8 @@ impl Group {
             Group::HeldOut
         } else if SECOND_HELD_OUT_SEEDS.contains(&seed) {
             Group::SecondHeldOut
+        } else if BOX_HELD_OUT_SEEDS.contains(&seed) {
+            Group::BoxHeldOut
         } else {
             Group::Screen
         }
@@ -109,6 +114,7 @@ impl Group {
             Group::Screen => "false",
             Group::HeldOut => "true",
             Group::SecondHeldOut => "second",
+            Group::BoxHeldOut => "continuous",
         }
     }
 }
@@ -346,19 +352,19 @@ enum Family {
 
 impl Family {
     fn describe(&self) -> String {
-        let held_out = || format!("held-out seeds {}", seed_span(&HELD_OUT_SEEDS));
+        let held_out = |env: &str| format!("held-out seeds {}", seed_span(&held_out_seeds(env)));
         match self {
             Family::Screen(env) => format!("{env}, seeds outside the held-out ones"),
             Family::BudgetGrid(env) => {
                 format!("{env}, the other budgets, seeds outside the held-out ones")
             }
-            Family::PaperRules(env, Group::HeldOut) => {
-                format!("{env}, the paper rules among themselves, {}", held_out())
+            Family::PaperRules(env, Group::HeldOut | Group::BoxHeldOut) => {
+                format!("{env}, the paper rules among themselves, {}", held_out(env))
             }
             Family::PaperRules(env, _) => {
                 format!("{env}, the paper rules among themselves, seeds outside the held-out ones")
             }
-            Family::HeldOut(env) => format!("{env}, {}", held_out()),
+            Family::HeldOut(env) => format!("{env}, {}", held_out(env)),
             Family::SecondTest => format!(
                 "the second held-out test ({SECOND_HELD_OUT_RULE} against the paper rules, seeds {})",
                 seed_span(&SECOND_HELD_OUT_SEEDS)
@@ -586,7 +592,7 @@ fn comparisons(
                 Group::SecondHeldOut if paper_rule => Family::SecondPaper,
                 Group::SecondHeldOut => Family::SecondTest,
                 group if paper_rule => Family::PaperRules(env, group),
-                Group::HeldOut => Family::HeldOut(env),
+                Group::HeldOut | Group::BoxHeldOut => Family::HeldOut(env),
                 Group::Screen if key.3 == paper_budget(&env) && key.2 == EFFORT_NET.name() => {
                     Family::Screen(env)
                 }
@@ -689,6 +695,8 @@ enum ClaimFamily {
     HeldOut,
     /// The second held-out test: does its rule beat all three in each of its cells?
     SecondTest,
+    /// The continuous held-out test: does its rule beat all three on each of its tasks?
+    BoxTest,
 }
 
 impl Claim {
@@ -703,6 +711,7 @@ impl Claim {
                 Group::Screen => continue,
                 Group::HeldOut => ClaimFamily::HeldOut,
                 Group::SecondHeldOut => ClaimFamily::SecondTest,
+                Group::BoxHeldOut => ClaimFamily::BoxTest,
             };
             let one_sided: Vec<Option<f64>> = BASELINES
                 .iter()
@@ -730,10 +739,10 @@ impl Claim {
             let idx: Vec<usize> = (0..out.len())
                 .filter(|&i| out[i].family == family)
                 .collect();
-            let size = if family == ClaimFamily::SecondTest {
-                SECOND_HELD_OUT_CELLS.len()
-            } else {
-                0
+            let size = match family {
+                ClaimFamily::SecondTest => SECOND_HELD_OUT_CELLS.len(),
+                ClaimFamily::BoxTest => BOX_HELD_OUT_TASKS.len(),
+                _ => 0,
             };
             let adjusted = holm_padded(idx.iter().map(|&i| out[i].p).collect(), size);
             for (j, &i) in idx.iter().enumerate() {
@@ -1438,11 +1447,15 @@ pub fn effort(runs: &[RunRecord], k: usize) -> Result<Option<EffortReport>> {
     let mut cells: BTreeMap<CellKey, Vec<RunMetrics>> = BTreeMap::new();
     let mut refs: BTreeMap<String, (f64, f64)> = BTreeMap::new();
     let mut beyond_paper = false;
+    let mut cost: BTreeMap<String, Cost> = BTreeMap::new();
     for run in runs {
         let Some((rule, budget)) = rule_and_budget(run) else {
             continue;
         };
         beyond_paper |= run.variant != DEFAULT_VARIANT;
+        if let Some(summary) = &run.summary {
+            cost.entry(run.id.env.clone()).or_default().add(summary);
+        }
         let env = run.id.env.clone();
         if !refs.contains_key(&env) {
             refs.insert(env.clone(), references(&env)?);
@@ -1500,7 +1513,12 @@ pub fn effort(runs: &[RunRecord], k: usize) -> Result<Option<EffortReport>> {
             "## {env}\n\nrandom {random:.2}, expert {expert:.2}, the paper's budget {}.\n",
             paper_budget(env)
         )?;
-        for held_out in [Group::Screen, Group::HeldOut, Group::SecondHeldOut] {
+        for held_out in [
+            Group::Screen,
+            Group::HeldOut,
+            Group::SecondHeldOut,
+            Group::BoxHeldOut,
+        ] {
             let keys: Vec<&CellKey> = cells
                 .keys()
                 .filter(|k| &k.0 == env && k.4 == held_out)
@@ -1517,6 +1535,11 @@ pub fn effort(runs: &[RunRecord], k: usize) -> Result<Option<EffortReport>> {
                     md,
                     "### Second held-out seeds ({})\n",
                     seed_span(&SECOND_HELD_OUT_SEEDS)
+                )?,
+                Group::BoxHeldOut => writeln!(
+                    md,
+                    "### Continuous held-out seeds ({})\n",
+                    seed_span(&BOX_HELD_OUT_SEEDS)
                 )?,
             }
             writeln!(
@@ -1639,6 +1662,9 @@ pub fn effort(runs: &[RunRecord], k: usize) -> Result<Option<EffortReport>> {
     writeln!(body, "{}", design_choice(cells))?;
     writeln!(body, "{}", goal_verdict(&measured))?;
     writeln!(body, "{}", second_test(&measured))?;
+    writeln!(body, "{}", box_design_choice(cells))?;
+    writeln!(body, "{}", box_test(&measured))?;
+    writeln!(body, "{}", cost_section(&cost, envs))?;
     writeln!(body, "{}", comparison_tables(all))?;
     let figures = figures(cells, envs);
     Ok(Some(EffortReport {
@@ -2246,4 +2272,166 @@ pub fn write_effort(
         files.extend(super::plot::draw_figure(content, out_dir, name)?);
     }
     Ok(files)
+}
+
+/// The held-out seeds of `env`'s kind of task: the continuous test's for a task with actions in a box.
+fn held_out_seeds(env: &str) -> std::ops::Range<u64> {
+    if arld_core::env::box_spec(env).is_ok() {
+        BOX_HELD_OUT_SEEDS
+    } else {
+        HELD_OUT_SEEDS
+    }
+}
+
+/// The median AUC of each of [`BOX_CANDIDATES`] on [`BOX_DESIGN_SEEDS`] at `env`'s preset budget, best first; ties
+/// in the candidates' order.
+fn box_ranking(
+    cells: &BTreeMap<CellKey, Vec<RunMetrics>>,
+    env: &str,
+) -> Vec<(&'static str, f64, usize)> {
+    let mut ranked: Vec<(&'static str, f64, usize)> = BOX_CANDIDATES
+        .iter()
+        .filter_map(|&label| {
+            let cell = cells.get(&paper_cell(env, label, EFFORT_NET.name(), Group::Screen))?;
+            let aucs: Vec<f64> = cell
+                .iter()
+                .filter(|m| BOX_DESIGN_SEEDS.contains(&m.seed))
+                .map(|m| m.auc)
+                .collect();
+            Some((label, median(&aucs)?, aucs.len()))
+        })
+        .collect();
+    ranked.sort_by(|a, b| b.1.total_cmp(&a.1));
+    ranked
+}
+
+/// "The continuous rule's design choice": the candidates ranked by their median AUC on the design seeds on each
+/// task of the continuous held-out test. At one budget, the rank by median AUC is the rank by effort multiple
+/// (both read the same reference curve), without its censoring.
+fn box_design_choice(cells: &BTreeMap<CellKey, Vec<RunMetrics>>) -> String {
+    let mut out = format!(
+        "## The continuous rule's design choice\n\nThe candidates for the continuous held-out test (every rule of \
+         the continuous benchmark that is not the paper's), ranked by their median normalised AUC on the design \
+         seeds {} at the preset's budget: at one budget this is their rank by the effort multiple, without its \
+         censoring. The best one on the test's tasks is the rule the held-out seeds test \
+         (crates/arld-lab/src/protocol.rs, `BOX_HELD_OUT_RULE`).\n",
+        seed_span(&BOX_DESIGN_SEEDS)
+    );
+    for env in BOX_HELD_OUT_TASKS {
+        let ranked = box_ranking(cells, env);
+        if ranked.is_empty() {
+            let _ = writeln!(out, "\n{env}: no design runs yet.");
+            continue;
+        }
+        let _ = writeln!(
+            out,
+            "\n| {env} | median AUC | design seeds |\n|---|---|---|"
+        );
+        for (label, auc, n) in ranked {
+            let _ = writeln!(out, "| {label} | {auc:.3} | {n} |");
+        }
+    }
+    out
+}
+
+/// "The continuous held-out test": its rule against each paper rule on each of [`BOX_HELD_OUT_TASKS`] at the
+/// preset's budget, on [`BOX_HELD_OUT_SEEDS`]: the intersection-union test of "above all three", Holm-adjusted
+/// over the test's tasks, and each comparison's shift; reported whatever it says.
+fn box_test(measured: &Measured) -> String {
+    let (cells, comparisons, _) = measured.parts();
+    let mut out = format!(
+        "## The continuous held-out test\n\nFixed before its runs: the rule `{BOX_HELD_OUT_RULE}` (the design \
+         choice above) against GDQN, BDQN and ADQN at the preset's budget on {}, seeds {} ({} per cell). The \
+         claim: the rule's AUC lies above each of the three (the intersection-union test of three one-sided \
+         Mann-Whitney tests, each at {TEST_LEVEL}), Holm-adjusted over the test's tasks.\n",
+        BOX_HELD_OUT_TASKS.join(", "),
+        seed_span(&BOX_HELD_OUT_SEEDS),
+        BOX_HELD_OUT_SEEDS.count(),
+    );
+    let full = BOX_HELD_OUT_SEEDS.count();
+    for env in BOX_HELD_OUT_TASKS {
+        let key = |label: &str| paper_cell(env, label, EFFORT_NET.name(), Group::BoxHeldOut);
+        let have: Vec<usize> = std::iter::once(BOX_HELD_OUT_RULE)
+            .chain(BASELINES.iter().map(|(label, _)| *label))
+            .map(|label| cells.get(&key(label)).map_or(0, Vec::len))
+            .collect();
+        if have.iter().any(|&n| n < full) {
+            let _ = writeln!(
+                out,
+                "\n{env}: not complete yet ({} of {} runs).",
+                have.iter().sum::<usize>(),
+                full * have.len()
+            );
+            continue;
+        }
+        let claim = measured
+            .claims
+            .iter()
+            .find(|c| c.cell == key(BOX_HELD_OUT_RULE));
+        let verdict = match claim {
+            Some(c) if c.won() => "**the rule is above all three**",
+            Some(_) => "**not shown**: the rule is not above all three at this level",
+            None => "not tested",
+        };
+        let _ = writeln!(
+            out,
+            "\n{env}: intersection-union p {}, Holm over the tasks {}: {verdict}.\n",
+            fmt_p(claim.and_then(|c| c.p)),
+            fmt_p(claim.and_then(|c| c.holm)),
+        );
+        for (label, _) in BASELINES {
+            let text = find(comparisons, &key(BOX_HELD_OUT_RULE), &key(label)).map_or(
+                "not compared".to_string(),
+                |c| {
+                    format!(
+                        "shift {}, one-sided p {}: {}",
+                        c.shift_text(),
+                        fmt_p(c.p_greater),
+                        c.reading()
+                    )
+                },
+            );
+            let _ = writeln!(out, "- against {label}: {text}");
+        }
+    }
+    out
+}
+
+/// What one task's benchmark runs cost: how many, their wall time in seconds and their environment steps.
+#[derive(Default)]
+struct Cost {
+    runs: usize,
+    seconds: Vec<f64>,
+    steps: u64,
+}
+
+impl Cost {
+    fn add(&mut self, summary: &arld_core::train::run_dir::Summary) {
+        self.runs += 1;
+        self.seconds.push(summary.wall_time_s);
+        self.steps += summary.train_steps as u64;
+    }
+}
+
+/// "What the runs cost": per task, the benchmark's runs, their core-hours (each run uses one core) and steps per
+/// second, as their `summary.json` files record them (on whatever machine, under whatever load, they ran).
+fn cost_section(cost: &BTreeMap<String, Cost>, envs: &[String]) -> String {
+    let mut out = String::from(
+        "## What the runs cost\n\nThe benchmark's runs per task (every rule, budget and seed group of this report, \
+         the paper rules' runs at the paper's budget included), the core-hours their `summary.json` files record \
+         (wall time; a run uses one core) and the environment steps per second over all of them.\n\n| task | runs | \
+         core-hours | steps per second |\n|---|---|---|---|\n",
+    );
+    for env in envs {
+        let Some(c) = cost.get(env) else { continue };
+        let seconds = exact_sum(c.seconds.iter().copied());
+        let _ = writeln!(
+            out,
+            "| {env} | {} | {:.2} | {:.0} |",
+            c.runs,
+            seconds / 3600.0,
+            c.steps as f64 / seconds.max(f64::MIN_POSITIVE)
+        );
+    }
+    out
 }

@@ -282,6 +282,7 @@ pub const PAPER_SEEDS: u64 = 20;
 /// - `held_out_2`: its second held-out test ([`second_held_out_grids`], on seeds of its own);
 /// - `continuous`: the six methods on the three tasks with actions in a box ([`continuous_grid`]);
 /// - `effort_continuous`: the effort benchmark on those tasks ([`box_effort_grids`]);
+/// - `held_out_continuous`: its held-out test ([`box_held_out_grids`], on seeds of its own);
 /// - `ablations`: [`ABLATIONS`] on Acrobot and [`CARTPOLE_TARGET_ABLATION`] on CartPole, for DQN, BDQN and ADQN
 ///   x both nets (the methods part's runs are the baseline), then [`HARDER_ABLATIONS`] on [`HARDER_TASKS`].
 ///
@@ -372,6 +373,9 @@ pub fn paper_grids(seeds: u64) -> Vec<(&'static str, SweepGrid)> {
     for grid in box_effort_grids(&seed_list) {
         grids.push(("effort_continuous", grid));
     }
+    for grid in box_held_out_grids() {
+        grids.push(("held_out_continuous", grid));
+    }
     grids
 }
 
@@ -457,6 +461,79 @@ pub fn box_effort_grids(seeds: &[u64]) -> Vec<SweepGrid> {
     grids
 }
 
+/// The continuous effort benchmark's design seeds: its rule is chosen on these only (the first of
+/// [`DESIGN_SEEDS`]' use on the box tasks).
+pub const BOX_DESIGN_SEEDS: std::ops::Range<u64> = 0..10;
+
+/// The candidates of the continuous held-out test: the rules of [`BOX_EFFORT_RULES`] that are not the paper's, as
+/// their labels in effort.md. The one with the highest median normalised AUC on [`BOX_DESIGN_SEEDS`] on
+/// [`BOX_HELD_OUT_TASKS`] at the preset's budget is tested (effort.md, "The continuous rule's design choice").
+pub const BOX_CANDIDATES: [&str; 6] = [
+    "paced",
+    "paced(horizon=0.1)",
+    "calibrated",
+    "risk",
+    "thrifty",
+    "adaptive from learning_starts",
+];
+
+/// The continuous held-out test's tasks, at the preset's budget: the box tasks on which the expert's
+/// demonstrations decide whether the task is solved (the pendulum is solved without them).
+pub const BOX_HELD_OUT_TASKS: [&str; 1] = ["MountainCarContinuous-v0"];
+
+/// Held-out seeds of the continuous test, disjoint from every other seed group, fixed before any of them ran.
+pub const BOX_HELD_OUT_SEEDS: std::ops::Range<u64> = 300..340;
+
+/// The continuous held-out test's rule: the design choice (effort.md, "The continuous rule's design choice"),
+/// fixed here once the design seeds had run and before any held-out run (tests/effort.rs checks the two agree).
+pub const BOX_HELD_OUT_RULE: &str = "adaptive from learning_starts";
+
+/// The continuous held-out test ([`BOX_HELD_OUT_RULE`] against GDQN, BDQN and ADQN on [`BOX_HELD_OUT_TASKS`] at the
+/// preset's budget, seeds [`BOX_HELD_OUT_SEEDS`]). Every run varies `budget` (to the preset's own value), so that
+/// the held-out seeds live in variants of their own and never join the methods tables.
+pub fn box_held_out_grids() -> Vec<SweepGrid> {
+    let seeds: Vec<u64> = BOX_HELD_OUT_SEEDS.collect();
+    let rule = BOX_EFFORT_RULES
+        .iter()
+        .find(|r| rule_label(r) == BOX_HELD_OUT_RULE)
+        .copied()
+        .unwrap_or(BOX_HELD_OUT_RULE);
+    let mut grids = Vec::new();
+    for env in BOX_HELD_OUT_TASKS {
+        let budget = format!("budget={}", paper_budget(env));
+        let grid = |methods: Vec<Method>, vary: String| SweepGrid {
+            envs: vec![env.to_string()],
+            methods,
+            nets: vec![NetKind::Bootstrap],
+            seeds: seeds.clone(),
+            vary: vec![vary],
+            ..SweepGrid::default()
+        };
+        grids.push(grid(
+            vec![Method::Gdqn, Method::Bdqn, Method::Adqn],
+            budget.clone(),
+        ));
+        grids.push(grid(vec![Method::Adqn], format!("{budget};{rule}")));
+    }
+    grids
+}
+
+/// The label effort.md gives a rule of [`BOX_EFFORT_RULES`]: its spec, and "adaptive from learning_starts" for the
+/// late-asking variant.
+pub fn rule_label(vary: &str) -> String {
+    let mut label = String::new();
+    for part in vary.split(';') {
+        match part.split_once('=') {
+            Some(("query_rule", rule)) => label.insert_str(0, rule),
+            Some(("queries_from_learning_starts", "true")) => {
+                label.push_str(" from learning_starts")
+            }
+            _ => {}
+        }
+    }
+    label
+}
+
 /// The names of the parts of [`paper_grids`], in order.
 pub fn part_names() -> Vec<&'static str> {
     let mut names: Vec<&str> = paper_grids(1).into_iter().map(|(name, _)| name).collect();
@@ -528,6 +605,9 @@ mod tests {
                 6 * 20,
                 2 * 4 * 20,
                 4 * 20,
+                // The continuous held-out test: the paper's three rules and the chosen one, on its own seeds.
+                3 * 40,
+                40,
             ]
         );
         assert_eq!(
@@ -542,7 +622,8 @@ mod tests {
                 "held_out",
                 "held_out_2",
                 "continuous",
-                "effort_continuous"
+                "effort_continuous",
+                "held_out_continuous"
             ]
         );
         assert_eq!(paper_budget("CartPole-v0"), 200);
