@@ -10,16 +10,14 @@ use arld::agent::box_agent::BoxAgent;
 use arld::agent::{Agent, Learner};
 use arld::env;
 use arld::nn::QNet;
-use arld::train::{self, PausedRun, RunBuilder, RunLog, SeedPurpose, TrainConfig, seed_for};
+use arld::train::{self, OwnRun, PausedRun, RunLog, SeedPurpose, TrainConfig, seed_for};
 use rand::SeedableRng;
 use rand_pcg::Pcg64;
 use std::path::Path;
 
-/// A learner that Python runs drive: how its run starts, how it is lent to a callback, and what Python keeps
+/// A learner that Python runs drive (its run starts at [`OwnRun::builder`]): how it is lent to a callback, and what Python keeps
 /// of it at a pause.
-pub(crate) trait PyLearner: Learner<Action: PyAction> + Sized + 'static {
-    /// A run of `cfg` with this learner.
-    fn builder(cfg: &TrainConfig) -> RunBuilder<'_, Self>;
+pub(crate) trait PyLearner: OwnRun<Action: PyAction> + 'static {
     /// The agent and log as a callback borrows them.
     fn lend(agent: &Self, log: &RunLog<Self::Action>) -> LentParts;
     /// The network Python acts with, for the task `id`.
@@ -31,9 +29,6 @@ pub(crate) trait PyLearner: Learner<Action: PyAction> + Sized + 'static {
 }
 
 impl PyLearner for Agent {
-    fn builder(cfg: &TrainConfig) -> RunBuilder<'_, Self> {
-        RunBuilder::new(cfg)
-    }
     fn lend(agent: &Self, log: &RunLog) -> LentParts {
         LentParts::Discrete(agent as *const Agent, log as *const RunLog)
     }
@@ -57,9 +52,6 @@ impl PyLearner for Agent {
 }
 
 impl PyLearner for BoxAgent {
-    fn builder(cfg: &TrainConfig) -> RunBuilder<'_, Self> {
-        RunBuilder::for_box(cfg)
-    }
     fn lend(agent: &Self, log: &RunLog<Vec<f32>>) -> LentParts {
         LentParts::Box(agent as *const BoxAgent, log as *const RunLog<Vec<f32>>)
     }

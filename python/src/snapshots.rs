@@ -65,7 +65,7 @@ pub(crate) fn snapshot_parts<L: PyLearner>(
 ) -> anyhow::Result<(Net, String, Records)> {
     let mut agent = L::for_snapshot(cfg)?;
     agent.load_state(train::run::AGENT_STATE, state)?;
-    let position = train::resume_position::<L::Action>(state)?;
+    let position = train::session::resume_position::<L::Action>(state)?;
     Ok((
         agent.net(&cfg.env),
         serde_json::to_string(&position.curve)?,

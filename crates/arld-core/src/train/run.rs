@@ -8,9 +8,10 @@
 
 use super::eval::Evaluator;
 use super::run_dir::StartedBy;
+use super::session::record_failure;
 use super::{
     Algo, Checkpointer, QueryEvent, RunLog, SeedPurpose, Summary, TrainConfig, epsilon_at,
-    pretrain_update, push_demos, record_failure, run_dir, seed_for, steps_to_solve, update_checked,
+    pretrain_update, push_demos, run_dir, seed_for, steps_to_solve, update_checked,
 };
 use crate::agent::actor_critic::ActorCriticConfig;
 use crate::agent::box_agent::{BoxAgent, BoxLearnerConfig};
@@ -47,7 +48,7 @@ pub const AGENT_STATE: &str = "agent";
 ///   requested ([`crate::interrupt`]: SIGTERM/SIGINT), the whole state of the run goes to the checkpointer's run
 ///   directory; then a stop request ends the run with an [`crate::interrupt::Interrupted`] error.
 /// - [`Self::resume_from`]: the run continues from a snapshot, to the same results as an uninterrupted run. The
-///   log must then come from [`RunLog::resume`] at the snapshot's log position ([`super::resume_position`]).
+///   log must then come from [`RunLog::resume`] at the snapshot's log position ([`super::session::resume_position`]).
 /// - [`Self::start_from`]: a new run whose learner begins as another run's ended (its weights, target and
 ///   optimiser; everything else, the counters, replay, schedules and budget, begins afresh): Stable-Baselines3's
 ///   second `learn`.
@@ -91,6 +92,26 @@ impl<'a> RunBuilder<'a, BoxAgent> {
     /// [`RunBuilder::new`].
     pub fn for_box(cfg: &'a TrainConfig) -> Self {
         RunBuilder::for_learner(cfg, box_agent, box_env)
+    }
+}
+
+/// A learner with a run of its own: the builder of a run of `cfg` learned by it in the configuration's own
+/// environments ([`RunBuilder::new`] for the DQN family, [`RunBuilder::for_box`] for the box learners). The
+/// laboratory and Python start their runs here, whatever the kind of action.
+pub trait OwnRun: Learner + Sized {
+    /// A run of `cfg` learned by this learner, with no expert, demonstrations, snapshots or driver.
+    fn builder(cfg: &TrainConfig) -> RunBuilder<'_, Self>;
+}
+
+impl OwnRun for Agent {
+    fn builder(cfg: &TrainConfig) -> RunBuilder<'_, Self> {
+        RunBuilder::new(cfg)
+    }
+}
+
+impl OwnRun for BoxAgent {
+    fn builder(cfg: &TrainConfig) -> RunBuilder<'_, Self> {
+        RunBuilder::for_box(cfg)
     }
 }
 
