@@ -1024,35 +1024,20 @@ impl TrainConfig {
     /// [`ConfigInput::resolve`]). Limits on sizes keep a typo from asking for more memory than a machine has.
     pub fn validate(&self) -> Result<()> {
         let env = crate::env::task_spec(&self.env).map_err(|e| anyhow::anyhow!("{e}"))?;
-        let unit = |name: &str, v: f64| -> Result<()> {
-            ensure!(
-                (0.0..=1.0).contains(&v),
-                "{name} must be in [0, 1], got {v}"
-            );
-            Ok(())
-        };
-        let non_negative = |name: &str, v: f64| -> Result<()> {
-            ensure!(
-                v >= 0.0 && v.is_finite(),
-                "{name} must be non-negative and finite, got {v}"
-            );
-            Ok(())
-        };
-        let positive = |name: &str, v: f64| -> Result<()> {
-            ensure!(
-                v > 0.0 && v.is_finite(),
-                "{name} must be positive and finite, got {v}"
-            );
-            Ok(())
-        };
-        let count = |name: &str, v: usize, max: usize| -> Result<()> {
-            ensure!(
-                (1..=max).contains(&v),
-                "{name} must be between 1 and {max}, got {v}"
-            );
-            Ok(())
-        };
-        // Learning.
+        self.check_learning()?;
+        self.check_exploration_and_replay()?;
+        self.check_losses()?;
+        self.check_demonstrations()?;
+        self.check_query_rule()?;
+        self.check_expert()?;
+        // Evaluation and checkpoints.
+        count("eval_period", self.eval_period, MAX_STEPS)?;
+        count("eval_episodes", self.eval_episodes, MAX_EVAL_EPISODES)?;
+        self.check_memory(env.obs_dim())
+    }
+
+    /// The learning settings: discount, learning rate, steps, batches, target copies, the network's shape.
+    fn check_learning(&self) -> Result<()> {
         unit("gamma", self.gamma)?;
         positive("lr", self.lr)?;
         count("train_steps", self.train_steps, MAX_STEPS)?;
@@ -1073,12 +1058,14 @@ impl TrainConfig {
             self.hidden
         );
         positive("grad_clip", self.grad_clip)?;
-        self.box_settings.validate()?;
-        // Exploration.
+        self.box_settings.validate()
+    }
+
+    /// The ε schedule, and the replay memory (which checks its own settings: α, the priority bonuses ε).
+    fn check_exploration_and_replay(&self) -> Result<()> {
         unit("eps_start", self.eps_start)?;
         unit("eps_end", self.eps_end)?;
         unit("eps_fraction", self.eps_fraction)?;
-        // Replay: the memory checks its own settings (α, the priority bonuses ε).
         self.replay_config().validate()?;
         unit("beta0", self.beta0)?;
         ensure!(
@@ -1087,7 +1074,11 @@ impl TrainConfig {
             self.batch_size,
             self.replay_size
         );
-        // Losses.
+        Ok(())
+    }
+
+    /// The losses' weights and the n-step return.
+    fn check_losses(&self) -> Result<()> {
         non_negative("margin", self.margin)?;
         non_negative("lambda", self.lambda)?;
         non_negative("lambda_n", self.lambda_n)?;
@@ -1098,8 +1089,11 @@ impl TrainConfig {
              a box) n_step > 1 makes the n-step return the critics' target instead; leave lambda_n at 0",
             self.env
         );
-        non_negative("l2", self.l2)?;
-        // Demonstrations and queries.
+        non_negative("l2", self.l2)
+    }
+
+    /// Pre-training and its demonstrations, and the query window.
+    fn check_demonstrations(&self) -> Result<()> {
         ensure!(
             self.pretrain_steps <= MAX_STEPS,
             "pretrain_steps must be at most {MAX_STEPS}, got {}",
@@ -1112,8 +1106,12 @@ impl TrainConfig {
                 self.method
             );
         }
-        count("n_r", self.n_r, MAX_WINDOW)?;
-        // The query rule and its controller own t_query, N_r and the segment length.
+        count("n_r", self.n_r, MAX_WINDOW)
+    }
+
+    /// The query rule and its controller (they own t_query, N_r and the segment length): the signals the rule
+    /// reads must be ones this network and task give.
+    fn check_query_rule(&self) -> Result<()> {
         let rule = self
             .query_rule()
             .context("config key `query_rule` (or the method's own rule)")?;
@@ -1140,6 +1138,12 @@ impl TrainConfig {
             e => e.into(),
         })?;
         self.query_controller()?;
+        Ok(())
+    }
+
+    /// The expert a method needs (one that can demonstrate, when the method pre-trains on its demonstrations),
+    /// and how long it may take to answer.
+    fn check_expert(&self) -> Result<()> {
         if self.method.needs_expert() {
             ensure!(
                 !self.expert.trim().is_empty(),
@@ -1168,12 +1172,12 @@ impl TrainConfig {
             "expert_timeout must be a positive number of seconds, at most {max_timeout} (a year), got {}",
             self.expert_timeout
         );
-        // Evaluation and checkpoints.
-        count("eval_period", self.eval_period, MAX_STEPS)?;
-        count("eval_episodes", self.eval_episodes, MAX_EVAL_EPISODES)?;
-        // Memory: the replay memory is allocated whole at the start.
-        let bytes = self.replay_config().memory_bytes(env.obs_dim());
+        Ok(())
+    }
 
+    /// Memory: the replay memory, allocated whole at the start for observations of `obs_dim` values.
+    fn check_memory(&self, obs_dim: usize) -> Result<()> {
+        let bytes = self.replay_config().memory_bytes(obs_dim);
         ensure!(
             bytes <= MAX_REPLAY_BYTES,
             "replay_size {} with {} demonstration slots (n_demo + budget) would need {} of memory for the \
@@ -1344,6 +1348,42 @@ impl TrainConfig {
         };
         format!("{}_{}-{learner}_seed{}", self.env, self.method, self.seed)
     }
+}
+
+/// A value in [0, 1].
+fn unit(name: &str, v: f64) -> Result<()> {
+    ensure!(
+        (0.0..=1.0).contains(&v),
+        "{name} must be in [0, 1], got {v}"
+    );
+    Ok(())
+}
+
+/// A non-negative finite value.
+fn non_negative(name: &str, v: f64) -> Result<()> {
+    ensure!(
+        v >= 0.0 && v.is_finite(),
+        "{name} must be non-negative and finite, got {v}"
+    );
+    Ok(())
+}
+
+/// A positive finite value.
+fn positive(name: &str, v: f64) -> Result<()> {
+    ensure!(
+        v > 0.0 && v.is_finite(),
+        "{name} must be positive and finite, got {v}"
+    );
+    Ok(())
+}
+
+/// A count between 1 and `max`.
+fn count(name: &str, v: usize, max: usize) -> Result<()> {
+    ensure!(
+        (1..=max).contains(&v),
+        "{name} must be between 1 and {max}, got {v}"
+    );
+    Ok(())
 }
 
 #[cfg(test)]
