@@ -7,7 +7,7 @@ use crate::policy::Net;
 use crate::policy::WeightsFile;
 use arld::agent::actor_file::{ActorKind, TrainedActor};
 use arld::agent::box_agent::BoxAgent;
-use arld::agent::{Agent, Learner};
+use arld::agent::{DqnAgent, Learner};
 use arld::env;
 use arld::nn::QNet;
 use arld::train::{self, OwnRun, PausedRun, RunLog, SeedPurpose, TrainConfig, seed_for};
@@ -28,17 +28,17 @@ pub(crate) trait PyLearner: OwnRun<Action: PyAction> + 'static {
     fn from_weights(cfg: &TrainConfig, path: &Path) -> anyhow::Result<Self>;
 }
 
-impl PyLearner for Agent {
+impl PyLearner for DqnAgent {
     fn lend(agent: &Self, log: &RunLog) -> LentParts {
-        LentParts::Discrete(agent as *const Agent, log as *const RunLog)
+        LentParts::Discrete(agent as *const DqnAgent, log as *const RunLog)
     }
     fn net(&self, _id: &str) -> Net {
         Net::Q(Box::new(self.network().clone()))
     }
     fn for_snapshot(cfg: &TrainConfig) -> anyhow::Result<Self> {
         let spec = env::spec(&cfg.env)?;
-        Ok(Agent::new(
-            &cfg.agent_config(),
+        Ok(DqnAgent::new(
+            &cfg.dqn_agent_config(),
             spec.obs_dim,
             spec.n_actions,
             0,
@@ -47,7 +47,7 @@ impl PyLearner for Agent {
     fn from_weights(cfg: &TrainConfig, path: &Path) -> anyhow::Result<Self> {
         let (net, _meta) = QNet::load_file(path)?;
         let rng = Pcg64::seed_from_u64(seed_for(cfg.seed, SeedPurpose::Agent));
-        Ok(Agent::from_network(&cfg.agent_config(), net, rng))
+        Ok(DqnAgent::from_network(&cfg.dqn_agent_config(), net, rng))
     }
 }
 

@@ -13,7 +13,7 @@ use crate::records::eval_dict;
 use crate::remote::{Command, Pause, Remote, Report, Waited};
 use crate::snapshots::read_snapshot_file;
 use crate::web;
-use arld::agent::Agent;
+use arld::agent::DqnAgent;
 use arld::agent::box_agent::BoxAgent;
 use arld::env::{self, Env};
 use arld::expert::Expert;
@@ -417,7 +417,7 @@ pub(crate) fn start_run(py: Python<'_>, config: &str, request: RunRequest) -> Py
         if boxed {
             train_in_thread::<BoxAgent>(inputs, &mut remote, web_box)
         } else {
-            train_in_thread::<Agent>(inputs, &mut remote, web_discrete)
+            train_in_thread::<DqnAgent>(inputs, &mut remote, web_discrete)
         }
     };
     let thread = std::thread::Builder::new()

@@ -25,7 +25,7 @@ pub mod sweep;
 pub mod verdict;
 
 use anyhow::Result;
-use arld_core::agent::Agent;
+use arld_core::agent::DqnAgent;
 use arld_core::agent::box_agent::BoxAgent;
 use arld_core::env;
 use arld_core::expert::{
@@ -63,7 +63,7 @@ pub fn run_one(cfg: &TrainConfig, out_dir: Option<&Path>, progress: bool) -> Res
         arld_web::from_spec(&cfg.expert, &cfg.env, expert_seed, cfg.expert_timeout)
     })
     .map_err(|err| session::record_setup_failure(out_dir, err))?;
-    run_in::<Agent>(expert, demos, cfg, out_dir, progress)
+    run_in::<DqnAgent>(expert, demos, cfg, out_dir, progress)
 }
 
 /// Trains the run of `cfg` learned by `L` with its expert and demonstrations, into `out_dir` or in memory (see

@@ -1,7 +1,7 @@
 //! The agent: acting (ε-greedy over one bootstrapped head or a noise sample), learning (double-DQN TD loss plus
 //! the large-margin loss on demonstrations, Adam) and the test-time policy (majority vote or mean weights).
 //!
-//! One [`Agent`] owns the online and target networks, the optimiser, and every buffer an update needs, so a
+//! One [`DqnAgent`] owns the online and target networks, the optimiser, and every buffer an update needs, so a
 //! steady-state step allocates nothing. Losses follow docs/algorithm.md §2–§5:
 //! `L = Σ_k mean_b w_b [ℓ(δ_kb) + λ·demo_b·L_E,kb]` with
 //! `δ_kb = Q_k(s_b, a_b) − (r_b + γ(1 − d_b) Q⁻_k(s'_b, argmax_a Q_k(s'_b, a)))` and
@@ -35,10 +35,10 @@ pub enum TdLoss {
     Huber,
 }
 
-/// Everything an [`Agent`] needs to know: its network's output stage and its learning settings. A run builds
-/// it from its configuration (`TrainConfig::agent_config`); an agent can be built and tested without one.
+/// Everything an [`DqnAgent`] needs to know: its network's output stage and its learning settings. A run builds
+/// it from its configuration (`TrainConfig::dqn_agent_config`); an agent can be built and tested without one.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct AgentConfig {
+pub struct DqnAgentConfig {
     /// Plain, K bootstrapped heads, or noisy output.
     pub output: OutputKind,
     /// Widths of the hidden layers, 1 to [`crate::nn::MAX_DEPTH`] of them (the paper's: 64 and 64).
@@ -75,7 +75,7 @@ pub struct UpdateStats {
 }
 
 /// A DQN-family agent with a plain, bootstrapped or noisy output stage.
-pub struct Agent {
+pub struct DqnAgent {
     online: QNet,
     target: QNet,
     adam: Adam,
@@ -111,16 +111,16 @@ pub struct Agent {
     lambda_n: f32,
 }
 
-impl Agent {
+impl DqnAgent {
     /// A freshly initialised agent for an environment with `obs_dim` inputs and `n_actions` actions.
-    pub fn new(cfg: &AgentConfig, obs_dim: usize, n_actions: usize, seed: u64) -> Self {
+    pub fn new(cfg: &DqnAgentConfig, obs_dim: usize, n_actions: usize, seed: u64) -> Self {
         let mut rng = Pcg64::seed_from_u64(seed);
         let online = QNet::with_hidden(obs_dim, n_actions, cfg.output, &cfg.hidden, &mut rng);
         Self::from_network(cfg, online, rng)
     }
 
     /// An agent that starts from given online weights (for example a loaded checkpoint).
-    pub fn from_network(cfg: &AgentConfig, online: QNet, mut rng: Pcg64) -> Self {
+    pub fn from_network(cfg: &DqnAgentConfig, online: QNet, mut rng: Pcg64) -> Self {
         let target = online.clone();
         let n_actions = online.n_actions();
         let features = online.features_len();
@@ -333,15 +333,15 @@ impl Agent {
 
 /// The DQN family as a [`Learner`]: the methods above, and the batched test-time policy
 /// ([`test_policy_actions`]).
-impl Learner for Agent {
+impl Learner for DqnAgent {
     type Action = usize;
 
     fn begin_episode(&mut self) {
-        Agent::begin_episode(self);
+        DqnAgent::begin_episode(self);
     }
 
     fn act(&mut self, obs: &[f32], epsilon: f64, want: Needs) -> (usize, Signals) {
-        Agent::act(self, obs, epsilon, want)
+        DqnAgent::act(self, obs, epsilon, want)
     }
 
     fn learn(&mut self, batch: &Batch) -> (UpdateStats, &[f32]) {
@@ -369,7 +369,7 @@ impl Learner for Agent {
     }
 }
 
-impl Persist for Agent {
+impl Persist for DqnAgent {
     /// Writes everything that changes while the agent learns and acts (online and target weights, Adam's
     /// moments and step, the generator, the active head, the noise samples) into `state` under `prefix`.
     /// Scratch buffers are left out: every use overwrites them.
@@ -389,7 +389,7 @@ impl Persist for Agent {
         }
     }
 
-    /// Reads what [`Agent::save_state`] wrote into an agent built with the same configuration.
+    /// Reads what [`DqnAgent::save_state`] wrote into an agent built with the same configuration.
     fn load_state(&mut self, prefix: &str, state: &StateDict<'_>) -> Result<(), StateError> {
         self.online.load_state(&format!("{prefix}.online"), state)?;
         self.target.load_state(&format!("{prefix}.target"), state)?;
@@ -760,7 +760,7 @@ mod tests {
         let next_obs: Vec<f32> = (0..b * d).map(|i| (i as f32 * 0.53).cos() * 2.0).collect();
         let mut differ = false;
         for double_q in [false, true] {
-            let cfg = AgentConfig {
+            let cfg = DqnAgentConfig {
                 output: OutputKind::Plain,
                 hidden: HiddenLayers::new(&[crate::nn::HIDDEN; 2]).unwrap(),
                 batch_size: b,
@@ -775,7 +775,7 @@ mod tests {
                 l2: 0.0,
                 exact_factorised_var: false,
             };
-            let mut agent = Agent::new(&cfg, d, a, 7);
+            let mut agent = DqnAgent::new(&cfg, d, a, 7);
             agent.target = QNet::new(d, a, OutputKind::Plain, &mut Pcg64::seed_from_u64(99));
             let mut batch = batch_of(
                 vec![0, 1, 2, 3],

@@ -12,9 +12,9 @@
 //! What follows from the method is derived from it, never stored: the query rule ([`TrainConfig::query_rule`];
 //! BDQN's query probability is the task's `t_query`), whether the run pre-trains ([`Method::pretrains`]), and the
 //! demonstration counts of the preset. The agent and the replay memory receive their own parts
-//! ([`TrainConfig::agent_config`], [`TrainConfig::replay_config`]).
+//! ([`TrainConfig::dqn_agent_config`], [`TrainConfig::replay_config`]).
 
-use crate::agent::AgentConfig;
+use crate::agent::DqnAgentConfig;
 pub use crate::agent::TdLoss;
 use crate::nn::{HIDDEN, HiddenLayers, MAX_DEPTH, MAX_HIDDEN, OutputKind};
 use crate::query::{
@@ -1286,8 +1286,8 @@ impl TrainConfig {
     }
 
     /// The agent's part of the configuration.
-    pub fn agent_config(&self) -> AgentConfig {
-        AgentConfig {
+    pub fn dqn_agent_config(&self) -> DqnAgentConfig {
+        DqnAgentConfig {
             output: match self.net {
                 NetKind::Plain => OutputKind::Plain,
                 NetKind::Bootstrap => OutputKind::Bootstrap { heads: self.heads },
@@ -1924,7 +1924,7 @@ mod tests {
     #[test]
     fn hidden_widths_are_configurable_and_the_paper_keeps_64_64() {
         let paper = resolve("CartPole-v0", Method::Adqn, NetKind::Noisy, &[]).unwrap();
-        assert_eq!(paper.agent_config().hidden.as_slice(), [HIDDEN, HIDDEN]);
+        assert_eq!(paper.dqn_agent_config().hidden.as_slice(), [HIDDEN, HIDDEN]);
         assert_eq!(HIDDEN, 64);
         let wide = resolve(
             "CartPole-v0",
@@ -1933,12 +1933,12 @@ mod tests {
             &["hidden=[256, 32]"],
         )
         .unwrap();
-        assert_eq!(wide.agent_config().hidden.as_slice(), [256, 32]);
+        assert_eq!(wide.dqn_agent_config().hidden.as_slice(), [256, 32]);
         // Any depth from 1 to 8.
         for widths in [&[7][..], &[64, 64, 64], &[5, 9, 3, 11, 2, 4, 6, 8]] {
             let set = format!("hidden={widths:?}");
             let deep = resolve("CartPole-v0", Method::Dqn, NetKind::Plain, &[&set]).unwrap();
-            assert_eq!(deep.agent_config().hidden.as_slice(), widths);
+            assert_eq!(deep.dqn_agent_config().hidden.as_slice(), widths);
         }
         // config.toml records the widths and gives them back.
         let back: TrainConfig = toml::from_str(&wide.to_toml()).unwrap();

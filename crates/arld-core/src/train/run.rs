@@ -18,7 +18,7 @@ use crate::agent::box_agent::{BoxAgent, BoxLearnerConfig};
 use crate::agent::risk::RiskConfig;
 use crate::agent::sac::SacConfig;
 use crate::agent::td3::Td3Config;
-use crate::agent::{Agent, Learner};
+use crate::agent::{DqnAgent, Learner};
 use crate::env::{self, Action, BoxSpec, Env, TaskSpec};
 use crate::expert::demos::Demonstrations;
 use crate::expert::{Answer, EpisodeTrace, Expert, Progress, Query, RunEnd, RunHistory};
@@ -58,7 +58,7 @@ pub const AGENT_STATE: &str = "agent";
 ///   `cfg.train_steps` is then the horizon of the schedules (ε, β) and of the last evaluation, not a limit: past
 ///   it ε stays at `eps_end` and β at 1. Pausing and going on changes nothing in the run: it is the same loop,
 ///   so two stretches equal one of their total length.
-pub struct RunBuilder<'a, L: Learner = Agent> {
+pub struct RunBuilder<'a, L: Learner = DqnAgent> {
     cfg: &'a TrainConfig,
     /// Builds the agent for the task `spec` (its observations and actions), from the run's seed.
     make_agent: AgentMaker<L>,
@@ -103,7 +103,7 @@ pub trait OwnRun: Learner + Sized {
     fn builder(cfg: &TrainConfig) -> RunBuilder<'_, Self>;
 }
 
-impl OwnRun for Agent {
+impl OwnRun for DqnAgent {
     fn builder(cfg: &TrainConfig) -> RunBuilder<'_, Self> {
         RunBuilder::new(cfg)
     }
@@ -202,10 +202,10 @@ fn discrete_env(id: &str) -> Result<Box<dyn Env>> {
     Ok(env::make(id)?)
 }
 
-/// The DQN-family agent of `cfg` ([`TrainConfig::agent_config`]), seeded from the run's seed.
-fn dqn_agent(cfg: &TrainConfig, spec: &'static crate::env::EnvSpec) -> Agent {
-    Agent::new(
-        &cfg.agent_config(),
+/// The DQN-family agent of `cfg` ([`TrainConfig::dqn_agent_config`]), seeded from the run's seed.
+fn dqn_agent(cfg: &TrainConfig, spec: &'static crate::env::EnvSpec) -> DqnAgent {
+    DqnAgent::new(
+        &cfg.dqn_agent_config(),
         spec.obs_dim,
         spec.n_actions,
         seed_for(cfg.seed, SeedPurpose::Agent),
@@ -965,9 +965,10 @@ impl<'a, L: Learner> Run<'a, L> {
             log.scalar("train/margin_loss", step + 1, stats.margin_loss)?;
             log.scalar("train/epsilon", step + 1, epsilon_at(cfg, step) as f32)?;
             log.scalar(
+                // The tag keeps its name in the event files: it counts demonstrated transitions.
                 "query/budget_used",
                 step + 1,
-                parts.queries.budget_used() as f32,
+                parts.queries.transitions_used() as f32,
             )?;
             if let Some(thr) = parts.queries.rule().threshold() {
                 log.scalar("query/threshold", step + 1, thr)?;
@@ -1070,7 +1071,7 @@ impl<'a, L: Learner> Run<'a, L> {
         let view = StepView {
             step: self.st.step,
             episode: self.st.episode,
-            budget_used: self.parts.queries.budget_used(),
+            transitions_used: self.parts.queries.transitions_used(),
             log: self.log,
             agent: &self.parts.agent,
             last: &self.last,
@@ -1188,13 +1189,14 @@ pub enum Control {
 }
 
 /// Where a run stands after a step, for a [`Driver`].
-pub struct StepView<'a, L: Learner = Agent> {
+pub struct StepView<'a, L: Learner = DqnAgent> {
     /// Environment steps done.
     pub step: usize,
     /// Episodes finished.
     pub episode: usize,
-    /// Demonstrated transitions asked for so far (or queries, as `budget_unit` says).
-    pub budget_used: usize,
+    /// Demonstrated transitions the expert gave so far (whatever the budget's unit; the budget spent in its unit
+    /// is [`QueryController::budget_spent`](crate::query::QueryController::budget_spent)).
+    pub transitions_used: usize,
     pub log: &'a RunLog<L::Action>,
     pub agent: &'a L,
     /// The environment step just taken (what Stable-Baselines3's callbacks see of it).
@@ -1230,7 +1232,7 @@ impl<A> Default for LastStep<A> {
 
 /// Steers a run from outside ([`RunBuilder::driver`]) (e.g. a Python `learn` call that trains for a while, returns,
 /// and is called again).
-pub trait Driver<L: Learner = Agent> {
+pub trait Driver<L: Learner = DqnAgent> {
     /// Called after every environment step.
     fn after_step(&mut self, at: &StepView<'_, L>) -> Result<Control>;
     /// Called when `after_step` paused the run; returns [`Control::Continue`] or [`Control::Stop`] (a pause
@@ -1239,7 +1241,7 @@ pub trait Driver<L: Learner = Agent> {
 }
 
 /// A paused run, whole: its summary so far, the agent, the log, and a snapshot of everything on request.
-pub struct PausedRun<'a, L: Learner = Agent> {
+pub struct PausedRun<'a, L: Learner = DqnAgent> {
     pub summary: Summary,
     pub agent: &'a L,
     pub log: &'a mut RunLog<L::Action>,
@@ -1500,7 +1502,8 @@ fn snapshot<L: Learner>(
         "episode": st.episode,
         "episode_step": st.ep_len,
         "expert_in_control": parts.queries.expert_in_control(),
-        "budget_used": parts.queries.budget_used(),
+        // The snapshot's recorded key (demonstrated transitions), kept for the files already written.
+        "budget_used": parts.queries.transitions_used(),
     });
     checkpointer.save(&state, position)?;
     if stopping {
@@ -1534,7 +1537,7 @@ fn summarize<A: Action>(
         train_steps: st.step,
         final_score: log.curve().last().map(|p| p.mean).unwrap_or(f64::NAN),
         demos_pretrain: pretrain_demos,
-        demos_queried: queries.budget_used(),
+        demos_queried: queries.transitions_used(),
         episodes: st.episode,
         wall_time_s: wall,
         cpu_time_s: cpu,
