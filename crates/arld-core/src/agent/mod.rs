@@ -321,7 +321,7 @@ impl DqnAgent {
     }
 
     /// Hard copy of the online weights into the target network.
-    pub fn sync_target(&mut self) {
+    pub(crate) fn sync_target(&mut self) {
         self.target.copy_from(&self.online);
     }
 
@@ -332,7 +332,7 @@ impl DqnAgent {
 }
 
 /// The DQN family as a [`Learner`]: the methods above, and the batched test-time policy
-/// ([`test_policy_actions`]).
+/// (`test_policy_actions`).
 impl Learner for DqnAgent {
     type Action = usize;
 
@@ -451,7 +451,12 @@ pub fn test_policy_action(net: &QNet, q: &mut [f32], obs: &[f32]) -> usize {
 /// [`test_policy_action`] for `actions.len()` states at once (`obs` row-major), with one batched forward in
 /// `ws` (built for `net`, for at least that many rows). The forward computes every row exactly as the single
 /// state's forward does, so the actions are the same as [`test_policy_action`]'s one by one.
-pub fn test_policy_actions(net: &QNet, ws: &mut Workspace, obs: &[f32], actions: &mut [usize]) {
+pub(crate) fn test_policy_actions(
+    net: &QNet,
+    ws: &mut Workspace,
+    obs: &[f32],
+    actions: &mut [usize],
+) {
     let (n, a) = (actions.len(), net.n_actions());
     let q = net.forward(obs, n, None, ws);
     for (row, action) in actions.iter_mut().enumerate() {
@@ -494,7 +499,7 @@ fn vote<'q>(heads: usize, head: impl Fn(usize) -> &'q [f32]) -> usize {
 }
 
 /// Adds the gradient of the L2 regulariser `l2 · ‖θ‖²` (DQfD's λ3 term; 0 in the paper) to `grads`.
-pub fn add_l2_gradient(params: &[f32], grads: &mut [f32], l2: f32) {
+pub(crate) fn add_l2_gradient(params: &[f32], grads: &mut [f32], l2: f32) {
     for (g, &p) in grads.iter_mut().zip(params) {
         *g += 2.0 * l2 * p;
     }
@@ -502,7 +507,7 @@ pub fn add_l2_gradient(params: &[f32], grads: &mut [f32], l2: f32) {
 
 /// The constants of the loss.
 #[derive(Clone, Copy, Debug)]
-pub struct LossParams {
+pub(crate) struct LossParams {
     pub gamma: f32,
     pub loss: TdLoss,
     pub margin: f32,
@@ -513,7 +518,7 @@ pub struct LossParams {
 
 /// Network outputs for a batch, each laid out `[head][batch][action]`: Q(s, ·) under the online network,
 /// Q(s', ·) under the online network (for the double-Q argmax) and under the target network.
-pub struct Heads<'a> {
+pub(crate) struct Heads<'a> {
     pub q: &'a [f32],
     pub qn_online: &'a [f32],
     pub qn_target: &'a [f32],
@@ -528,7 +533,7 @@ pub struct Heads<'a> {
 /// `y_kb = r_b + γ(1 − d_b) Q⁻_k(s'_b, argmax_a Q_k(s'_b, a))` held constant. Writes `dL/dQ` into `dq` and the
 /// new priorities `mean_k |δ_kb|` into `abs_td`; returns the TD, margin and n-step parts of `L` (the n-step
 /// part, `λ1·ℓ(Q(s, a) − R_n − γ^n Q⁻(s_n, argmax Q(s_n)))`, only when `h.nstep` is given).
-pub fn double_dqn_loss(
+pub(crate) fn double_dqn_loss(
     p: &LossParams,
     batch: &Batch,
     h: Heads<'_>,
@@ -582,7 +587,7 @@ pub fn double_dqn_loss(
 }
 
 /// `max_a [q(a) + M·1(a ≠ a_E)] − q(a_E)` and the maximising action.
-pub fn margin_term(q: &[f32], expert_action: usize, margin: f32) -> (f32, usize) {
+pub(crate) fn margin_term(q: &[f32], expert_action: usize, margin: f32) -> (f32, usize) {
     let mut best = f32::NEG_INFINITY;
     let mut best_a = expert_action;
     for (i, &v) in q.iter().enumerate() {

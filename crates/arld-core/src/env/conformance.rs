@@ -35,19 +35,19 @@ pub struct Tolerance {
 
 impl Tolerance {
     /// Classic control is float64 arithmetic in the same order as Gymnasium: 1e-6 on everything, no divergence.
-    pub const CLASSIC_CONTROL: Tolerance = Tolerance {
+    pub(crate) const CLASSIC_CONTROL: Tolerance = Tolerance {
         abs: 1e-6,
         heuristic_divergence_allowed: 0.0,
     };
     /// Box2D runs in float32 and long episodes are chaotic: 1e-4, and up to 10% of the long heuristic
     /// episodes may drift away (conformance README).
-    pub const BOX2D: Tolerance = Tolerance {
+    pub(crate) const BOX2D: Tolerance = Tolerance {
         abs: 1e-4,
         heuristic_divergence_allowed: 0.1,
     };
 
     /// The tolerance that applies to an environment id.
-    pub fn for_env(id: &str) -> Tolerance {
+    pub(crate) fn for_env(id: &str) -> Tolerance {
         if id.starts_with("LunarLander") {
             Self::BOX2D
         } else {
@@ -353,7 +353,7 @@ struct Episode {
 
 /// The longest line of a trace file (a step line is a few hundred bytes; a start line with a recorded state a
 /// few kilobytes).
-pub const MAX_LINE_BYTES: usize = 1 << 20;
+pub(crate) const MAX_LINE_BYTES: usize = 1 << 20;
 
 /// Replays a trace file. See [`check_reader`].
 pub fn check_file(path: &Path) -> Result<Vec<EnvReport>, ConformanceError> {
@@ -395,8 +395,8 @@ pub fn check_reader(
         if text.trim().is_empty() {
             continue;
         }
-        let parsed: TraceLine =
-            serde_json::from_str(text).map_err(|err| malformed(file_name, line, err.to_string()))?;
+        let parsed: TraceLine = serde_json::from_str(text)
+            .map_err(|err| malformed(file_name, line, err.to_string()))?;
         match parsed {
             TraceLine::Meta {} => {}
             TraceLine::Start(start) => replay.start(line, start)?,

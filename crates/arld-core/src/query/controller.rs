@@ -5,7 +5,7 @@
 //! control for `segment_len` consecutive steps (the paper's "five consecutive expert demonstrations"), cut short
 //! by the end of the episode or of the budget. The rule is only consulted when the agent is about to act, never
 //! during expert control, and not once the budget is spent. A person may also take over unasked
-//! ([`QueryController::open_segment_by_person`]): that segment is charged exactly like a query's, but the rule
+//! (`QueryController::open_segment_by_person`): that segment is charged exactly like a query's, but the rule
 //! does not see it (no decision, no statistics) and it lasts until the person hands back, the episode ends or
 //! the budget is spent.
 //!
@@ -133,7 +133,7 @@ impl QueryController {
 
     /// The signals the next [`decide`](Self::decide) will read: the rule's, while the agent is about to act and
     /// budget is left; nothing otherwise, so the caller may skip computing them.
-    pub fn signals_wanted_now(&self) -> Needs {
+    pub(crate) fn signals_wanted_now(&self) -> Needs {
         if !self.expert_in_control() && self.budget_left() > 0 {
             self.needs()
         } else {
@@ -205,7 +205,7 @@ impl QueryController {
     ///
     /// # Panics
     /// Programming errors in the caller: calling this during expert control or with no budget left.
-    pub fn open_segment_by_person(&mut self) -> usize {
+    pub(crate) fn open_segment_by_person(&mut self) -> usize {
         assert!(
             !self.expert_in_control(),
             "open_segment_by_person called during expert control"
@@ -226,7 +226,7 @@ impl QueryController {
     ///
     /// # Panics
     /// If the expert is not in control (a caller bug: the budget would be spent outside a query).
-    pub fn record_expert_step(&mut self) {
+    pub(crate) fn record_expert_step(&mut self) {
         assert!(
             self.expert_in_control(),
             "record_expert_step called while the agent is in control"
@@ -248,7 +248,7 @@ impl QueryController {
     }
 
     /// Expert steps left in the running segment (0 while the agent is in control).
-    pub fn segment_left(&self) -> usize {
+    pub(crate) fn segment_left(&self) -> usize {
         self.segment_left
     }
 
@@ -288,7 +288,7 @@ impl QueryController {
         self.queries
     }
 
-    /// Number of segments a person opened unasked ([`Self::open_segment_by_person`]).
+    /// Number of segments a person opened unasked (`Self::open_segment_by_person`).
     pub fn takeovers(&self) -> usize {
         self.takeovers
     }
@@ -564,13 +564,19 @@ mod tests {
         assert_eq!(controller.segment_left(), 5);
         controller.withdraw();
         assert!(!controller.expert_in_control());
-        assert_eq!((controller.transitions_used(), controller.queries()), (0, 1));
+        assert_eq!(
+            (controller.transitions_used(), controller.queries()),
+            (0, 1)
+        );
         // Withdrawn mid-segment: the steps already taken stay charged.
         assert!(decide_with(&mut controller, None, &mut rng).query);
         controller.record_expert_step();
         controller.record_expert_step();
         controller.withdraw();
-        assert_eq!((controller.transitions_used(), controller.budget_left()), (2, 8));
+        assert_eq!(
+            (controller.transitions_used(), controller.budget_left()),
+            (2, 8)
+        );
     }
 
     #[test]

@@ -91,7 +91,7 @@ impl Method {
     }
 
     /// Does the method need an expert at all?
-    pub fn needs_expert(self) -> bool {
+    pub(crate) fn needs_expert(self) -> bool {
         self != Method::Dqn
     }
 
@@ -448,7 +448,7 @@ pub struct TrainConfig {
     /// and the run fails \[OURS: 30\].
     pub expert_timeout: f64,
     /// Demonstration file for pre-training; empty: collect from the expert at the start of the run;
-    /// `python:demos` ([`DEMOS_FROM_PYTHON`]): given to `arld.Agent(demos=...)` in Python, which only Python
+    /// `python:demos` (`DEMOS_FROM_PYTHON`): given to `arld.Agent(demos=...)` in Python, which only Python
     /// can supply again.
     pub demo_file: String,
 
@@ -581,7 +581,7 @@ const IDENTITY_KEYS: [&str; 4] = ["env", "method", "net", "seed"];
 /// The largest seed: a run's configuration is TOML, whose integers are signed 64-bit.
 pub const MAX_SEED: u64 = i64::MAX as u64;
 /// The config file size limit.
-pub const MAX_CONFIG_BYTES: u64 = 4 << 20;
+pub(crate) const MAX_CONFIG_BYTES: u64 = 4 << 20;
 
 /// A run's configuration as given (low level): its identity and the values of config files and `--set` pairs
 /// in the order given. [`ConfigInput::resolve`] makes the [`TrainConfig`] from it.
@@ -752,7 +752,7 @@ impl ConfigInput {
 
 /// `demo_file` of a run whose demonstrations were given in Python (`arld.Agent(demos=...)`): a record of where
 /// they came from, not a path.
-pub const DEMOS_FROM_PYTHON: &str = "python:demos";
+pub(crate) const DEMOS_FROM_PYTHON: &str = "python:demos";
 
 /// The paper's hidden widths (docs/algorithm.md §2), also those of a configuration that names none.
 fn paper_hidden() -> Vec<usize> {
@@ -1197,7 +1197,7 @@ impl TrainConfig {
     /// The run's query rule spec: `query_rule` if given, else the method's (§8–9): never (DQN, DQfD), greedy
     /// (GDQN), Bernoulli with probability `t_query` (BDQN), adaptive with threshold `t_query` over `n_r` steps
     /// (ADQN, ADQNP).
-    pub fn rule_spec(&self) -> Result<RuleSpec, QueryError> {
+    pub(crate) fn rule_spec(&self) -> Result<RuleSpec, QueryError> {
         if !self.query_rule.trim().is_empty() {
             return self.query_rule.parse();
         }
@@ -1211,7 +1211,7 @@ impl TrainConfig {
     }
 
     /// What the rule's parameters default to: this run's t_query, N_r, budget, segment length and length.
-    pub fn rule_defaults(&self) -> RuleDefaults {
+    pub(crate) fn rule_defaults(&self) -> RuleDefaults {
         RuleDefaults {
             t_query: self.t_query,
             n_r: self.n_r,
@@ -1222,13 +1222,13 @@ impl TrainConfig {
         }
     }
 
-    /// The run's query rule, built from [`Self::rule_spec`].
+    /// The run's query rule, built from `Self::rule_spec`.
     pub fn query_rule(&self) -> Result<Box<dyn QueryRule>, QueryError> {
         self.rule_spec()?.build(&self.rule_defaults())
     }
 
     /// The query rule under the run's budget and segment length.
-    pub fn query_controller(&self) -> Result<QueryController, QueryError> {
+    pub(crate) fn query_controller(&self) -> Result<QueryController, QueryError> {
         Ok(
             QueryController::new(self.query_rule()?, self.budget, self.segment_len)?
                 .counting(self.budget_unit),
@@ -1237,13 +1237,13 @@ impl TrainConfig {
 
     /// The most demonstrated transitions queries can bring during training (the budget, converted when it counts
     /// queries).
-    pub fn query_transitions(&self) -> usize {
+    pub(crate) fn query_transitions(&self) -> usize {
         self.budget_unit
             .max_transitions(self.budget, self.segment_len)
     }
 
     /// Demonstrations that enter replay before training: the pre-training set.
-    pub fn pretrain_demos(&self) -> usize {
+    pub(crate) fn pretrain_demos(&self) -> usize {
         if self.method.pretrains() {
             self.n_demo
         } else {
@@ -1311,7 +1311,7 @@ impl TrainConfig {
     /// The hidden widths of `hidden`. [`Self::validate`] checks them; a configuration read without that check
     /// (a snapshot's own) gets the paper's widths for a malformed value, so that loading its weights fails on
     /// their sizes instead of the network being built with impossible ones.
-    pub fn hidden_widths(&self) -> HiddenLayers {
+    pub(crate) fn hidden_widths(&self) -> HiddenLayers {
         HiddenLayers::new(&self.hidden)
             .filter(|h| h.iter().all(|w| (1..=MAX_HIDDEN).contains(w)))
             .or_else(|| HiddenLayers::new(&[HIDDEN, HIDDEN]))
@@ -1320,7 +1320,7 @@ impl TrainConfig {
 
     /// The demonstration file the run pre-trains on (`demo_file`), if it names one; an error for demonstrations
     /// that were given in Python ([`DEMOS_FROM_PYTHON`]), which a run outside Python cannot read again.
-    pub fn demo_path(&self) -> Result<Option<&std::path::Path>> {
+    pub(crate) fn demo_path(&self) -> Result<Option<&std::path::Path>> {
         match self.demo_file.as_str() {
             "" => Ok(None),
             DEMOS_FROM_PYTHON => anyhow::bail!(

@@ -152,7 +152,7 @@ pub(super) fn pretrain_update<L: Learner>(
      `lr` (now {lr}, e.g. --set lr={lower})",
     lower = .lr / 10.0
 )]
-pub struct Diverged {
+pub(crate) struct Diverged {
     pub at: String,
     pub what: &'static str,
     pub value: f32,

@@ -1,10 +1,10 @@
 //! One run of training, read top to bottom. [`RunBuilder`] gathers what a run is given (its environments, its
 //! expert and demonstrations, snapshots, a snapshot to continue from, a driver) and is the one entry point for the
-//! command line, sweeps, Slurm shards and Python. [`Run::execute`] is the whole algorithm of every method in the
+//! command line, sweeps, Slurm shards and Python. `Run::execute` is the whole algorithm of every method in the
 //! paper (DQN, DQfD, GDQN, BDQN, ADQN and ADQNP, with a plain, bootstrapped or noisy network): `resume`,
 //! `pretrain`, `begin_training`, then for each environment step `choose` (the agent acts, or the query rule asks
 //! the expert, or a person takes over unasked), `step_env`, `learn`, `report`, `snapshot_point` and `drive`, then `finish`. Each step returns what
-//! the loop does next ([`Choice`], [`Flow`]); none hides a `return`, `break` or `continue`.
+//! the loop does next (`Choice`, `Flow`); none hides a `return`, `break` or `continue`.
 
 use super::eval::Evaluator;
 use super::run_dir::StartedBy;
@@ -74,10 +74,11 @@ pub struct RunBuilder<'a, L: Learner = DqnAgent> {
 }
 
 /// Builds a run's agent for a task from the run's configuration (and seed).
-pub type AgentMaker<L> = fn(&TrainConfig, &'static <<L as Learner>::Action as Action>::Spec) -> L;
+pub(crate) type AgentMaker<L> =
+    fn(&TrainConfig, &'static <<L as Learner>::Action as Action>::Spec) -> L;
 
 /// Makes the environment `id` for a run of actions of the kind `A`.
-pub type EnvMaker<A> = fn(&str) -> Result<Box<dyn Env<A>>>;
+pub(crate) type EnvMaker<A> = fn(&str) -> Result<Box<dyn Env<A>>>;
 
 impl<'a> RunBuilder<'a> {
     /// A run of `cfg` in the configuration's own environments, with no expert, demonstrations, snapshots or
@@ -214,7 +215,7 @@ fn dqn_agent(cfg: &TrainConfig, spec: &'static crate::env::EnvSpec) -> DqnAgent 
 
 impl<'a> RunBuilder<'a> {
     /// A run of `cfg` whose agent of discrete actions `make_agent` builds, otherwise as [`RunBuilder::new`].
-    pub fn with_agent<L: Learner<Action = usize>>(
+    pub(crate) fn with_agent<L: Learner<Action = usize>>(
         cfg: &'a TrainConfig,
         make_agent: AgentMaker<L>,
     ) -> RunBuilder<'a, L> {
@@ -225,7 +226,7 @@ impl<'a> RunBuilder<'a> {
 impl<'a, L: Learner> RunBuilder<'a, L> {
     /// A run of `cfg` whose agent `make_agent` builds (any [`Learner`], of any kind of action), in environments
     /// `make_env` makes by id unless [`Self::env`] and [`Self::test_envs`] give them.
-    pub fn for_learner(
+    pub(crate) fn for_learner(
         cfg: &'a TrainConfig,
         make_agent: AgentMaker<L>,
         make_env: EnvMaker<L::Action>,

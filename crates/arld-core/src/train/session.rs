@@ -3,7 +3,7 @@
 //! removing only the files a run writes, resuming from its snapshot or restarting from step 0), whether a
 //! finished run is reused ([`reuse_or_clear`]), the run's log and the snapshot it continues from, refused when
 //! its recorded configuration differs ([`open`], [`open_log`]), and the failure record (`failed.json`:
-//! [`record_failure`]; a directory a failed attempt wrote nothing into is removed again: [`Session::close_failed`]).
+//! `record_failure`; a directory a failed attempt wrote nothing into is removed again: [`Session::close_failed`]).
 
 use super::log::{LogPosition, RunLog};
 use super::snapshot::{Checkpointer, SNAPSHOT_FILE};
@@ -43,8 +43,9 @@ impl Session {
             dir.display()
         );
         let created = !dir.exists();
-        std::fs::create_dir_all(dir)
-            .map_err(|e| anyhow::anyhow!("cannot create the run directory {}: {e}", dir.display()))?;
+        std::fs::create_dir_all(dir).map_err(|e| {
+            anyhow::anyhow!("cannot create the run directory {}: {e}", dir.display())
+        })?;
         let lock = DirLock::acquire(dir, run_dir::LOCK_FILE)?;
         Ok(Self {
             dir: dir.to_path_buf(),
@@ -78,9 +79,10 @@ impl Session {
             Begin::Resume => {
                 // Killed before its first snapshot: nothing to continue from, so the run starts again. Only a
                 // missing snapshot means that: anything else in its place is an error that keeps it.
-                let snapshot = crate::files::own_file_exists(&dir.join(SNAPSHOT_FILE)).map_err(|e| {
-                    anyhow::anyhow!("cannot resume the run: {e}; --restart starts it over")
-                })?;
+                let snapshot =
+                    crate::files::own_file_exists(&dir.join(SNAPSHOT_FILE)).map_err(|e| {
+                        anyhow::anyhow!("cannot resume the run: {e}; --restart starts it over")
+                    })?;
                 if snapshot {
                     return Ok(());
                 }
@@ -243,7 +245,7 @@ pub fn record_setup_failure(dir: Option<&Path>, err: anyhow::Error) -> anyhow::E
 /// Writes `failed.json` for the error `err` into the run directory `dir`, unless `err` is a stop request (the
 /// run is then interrupted, not failed). The run's own error matters more than this file: a write that fails
 /// is only warned about.
-pub fn record_failure(dir: &Path, err: &anyhow::Error, phase: &str, step: usize) {
+pub(crate) fn record_failure(dir: &Path, err: &anyhow::Error, phase: &str, step: usize) {
     if crate::interrupt::is_stop(err) {
         return;
     }
