@@ -439,18 +439,7 @@ impl Replay<'_> {
     /// A start line: ends the episode under way, resets (or sets) the environment as the trace did and compares
     /// the first observation.
     fn start(&mut self, line: usize, start: StartLine) -> Result<(), ConformanceError> {
-        let StartLine {
-            env: env_id,
-            case,
-            seed,
-            n_actions,
-            action_dim,
-            action_low,
-            action_high,
-            max_episode_steps,
-            obs,
-            state,
-        } = start;
+        let env_id = start.env;
         let file = self.file_name;
         let malformed = |msg| malformed(file, line, msg);
         if let Some(done) = self.episode.take() {
@@ -462,14 +451,19 @@ impl Replay<'_> {
             self.reports.push(EnvReport::new(&env_id));
         }
         let env = self.envs.get_mut(&env_id).expect("inserted above");
-        let bounds = (action_dim, action_low.as_deref(), action_high.as_deref());
-        env.check_start(n_actions, bounds, max_episode_steps)
+        let bounds = (
+            start.action_dim,
+            start.action_low.as_deref(),
+            start.action_high.as_deref(),
+        );
+        env.check_start(start.n_actions, bounds, start.max_episode_steps)
             .map_err(malformed)?;
-        let first_obs = match case.as_str() {
-            "seed" | "heuristic" => env.reset(seed),
+        let first_obs = match start.case.as_str() {
+            "seed" | "heuristic" => env.reset(start.seed),
             "set" => {
-                let state =
-                    state.ok_or_else(|| malformed("a `set` start line needs a `state`".into()))?;
+                let state = start
+                    .state
+                    .ok_or_else(|| malformed("a `set` start line needs a `state`".into()))?;
                 // Gymnasium: reset(seed=0), then the state is overwritten.
                 env.reset(0);
                 env.set_state(&state)
@@ -484,8 +478,8 @@ impl Replay<'_> {
         let report = report_for(&mut self.reports, &env_id);
         let mut current = Episode {
             env: env_id,
-            case,
-            seed,
+            case: start.case,
+            seed: start.seed,
             index: report.episodes,
             t: 0,
             ended: false,
@@ -493,7 +487,7 @@ impl Replay<'_> {
             exact: true,
         };
         report.episodes += 1;
-        compare_obs(report, &mut current, line, &first_obs, &obs).map_err(malformed)?;
+        compare_obs(report, &mut current, line, &first_obs, &start.obs).map_err(malformed)?;
         self.episode = Some(current);
         Ok(())
     }
@@ -501,15 +495,7 @@ impl Replay<'_> {
     /// A step line: steps the environment with the recorded action and compares what it gives back (nothing
     /// more once our episode ended before the trace's).
     fn step(&mut self, line: usize, step_line: StepLine) -> Result<(), ConformanceError> {
-        let StepLine {
-            env: env_id,
-            t,
-            action,
-            obs,
-            reward,
-            terminated,
-            truncated,
-        } = step_line;
+        let (t, action, reward) = (step_line.t, &step_line.action, step_line.reward);
         let file = self.file_name;
         let malformed = |msg| malformed(file, line, msg);
         let env_error = |err| env_failed(file, line, err);
@@ -517,28 +503,28 @@ impl Replay<'_> {
             .episode
             .as_mut()
             .ok_or_else(|| malformed("step line before any start line".into()))?;
-        if env_id != current.env {
+        if step_line.env != current.env {
             return Err(malformed(format!(
-                "step of {env_id} inside an episode of {}",
-                current.env
+                "step of {} inside an episode of {}",
+                step_line.env, current.env
             )));
         }
         if t != current.t + 1 {
             return Err(malformed(format!("step t={t} follows t={}", current.t)));
         }
         current.t = t;
-        let env = self.envs.get_mut(&env_id).expect("created at start");
-        env.check_action(&action).map_err(|problem| match problem {
+        let env = self.envs.get_mut(&current.env).expect("created at start");
+        env.check_action(action).map_err(|problem| match problem {
             Ok(msg) => malformed(msg),
             Err(err) => env_error(err),
         })?;
-        let report = report_for(&mut self.reports, &env_id);
+        let report = report_for(&mut self.reports, &current.env);
         if current.ended {
             return Ok(());
         }
-        let step = env.step(&action).map_err(env_error)?;
+        let step = env.step(action).map_err(env_error)?;
         report.steps += 1;
-        compare_obs(report, current, line, &step.obs, &obs).map_err(malformed)?;
+        compare_obs(report, current, line, &step.obs, &step_line.obs).map_err(malformed)?;
         let reward_deviation = (step.reward - reward).abs();
         report.max_reward_deviation = report.max_reward_deviation.max(reward_deviation);
         if step.reward != reward {
@@ -552,6 +538,7 @@ impl Replay<'_> {
                 format!("reward {} vs {reward}", step.reward),
             );
         }
+        let (terminated, truncated) = (step_line.terminated, step_line.truncated);
         if (step.terminated, step.truncated) != (terminated, truncated) {
             current.exact = false;
             diverge(
