@@ -1,5 +1,5 @@
-//! Experiments: running one configured run end to end ([`run_one`]: expert, demonstrations, training, run
-//! directory), sweeps over grids of runs ([`sweep`]) and their submission to Slurm as job arrays ([`slurm`]),
+//! Experiments: running one configured run end to end ([`run_one`]: expert, demonstrations, training, in the run
+//! directory that [`arld_core::train::session`] opens), sweeps over grids of runs ([`sweep`]) and their submission to Slurm as job arrays ([`slurm`]),
 //! the paper's experiment grids ([`protocol`]), statistics over seeds ([`stats`]), and reports with the paper's
 //! table and figures ([`report`]; which figures and what they show in [`figures`], how one is drawn in
 //! [`plot`]; hand-written documents that quote its tables in [`quote`]). Sweeps and reports read runs through
