@@ -8,7 +8,7 @@
 //! arrays into the operating system's cache) and the sync and rename a background thread does meanwhile. The
 //! checksum of format 2 is timed on its own too: a CRC-32C over the whole snapshot.
 
-use arld::agent::Agent;
+use arld::agent::DqnAgent;
 use arld::env;
 use arld::experiment::run_one;
 use arld::replay::{Replay, ReplayConfig, Transition};
@@ -35,7 +35,7 @@ fn full_replay_snapshot() -> f64 {
     let cfg = config(100_000, 0);
     let mut e = env::make(&cfg.env).unwrap();
     let (obs_dim, n_actions) = (e.obs_dim(), e.n_actions());
-    let agent = Agent::new(&cfg.agent_config(), obs_dim, n_actions, 1);
+    let agent = DqnAgent::new(&cfg.dqn_agent_config(), obs_dim, n_actions, 1);
     let mut replay = Replay::new(
         obs_dim,
         &ReplayConfig {

@@ -463,7 +463,7 @@ struct StopAfterEpisodes {
 impl Driver<BoxAgent> for StopAfterEpisodes {
     fn after_step(&mut self, at: &StepView<'_, BoxAgent>) -> anyhow::Result<Control> {
         if self.at.is_none() && at.episode == self.episodes {
-            self.at = Some((at.step, at.budget_used));
+            self.at = Some((at.step, at.transitions_used));
             return Ok(Control::Pause);
         }
         Ok(Control::Continue)

@@ -1,6 +1,6 @@
 //! Experts, demonstrations and DQfD pre-training.
 
-use arld::agent::Agent;
+use arld::agent::DqnAgent;
 use arld::expert::demos::Demonstrations;
 use arld::expert::pipeline::evaluate_expert;
 use arld::expert::{self, scripted::ScriptedExpert};
@@ -180,7 +180,7 @@ fn pretraining_agrees_with_the_expert_on_demonstrations() {
     let cfg = input.resolve().unwrap();
     let mut e = expert::from_spec("shipped:weak", "CartPole-v0", 0, 30.0).unwrap();
     let demos = Demonstrations::collect("CartPole-v0", e.as_mut(), cfg.n_demo, 0).unwrap();
-    let mut agent = Agent::new(&cfg.agent_config(), 4, 2, 1);
+    let mut agent = DqnAgent::new(&cfg.dqn_agent_config(), 4, 2, 1);
     let mut replay = Replay::new(
         4,
         &ReplayConfig {

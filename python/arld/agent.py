@@ -203,6 +203,34 @@ Hyperparameters = TypedDict("Hyperparameters", {
     "lambda": Optional[float],
 }, total=False)
 
+def _given_hyperparameters(given: Dict[str, Any], policy_kwargs: Optional[Dict[str, Any]]) -> Dict[str, Any]:
+    """The hyperparameters given to Agent(), in arld's names (None: not given), with SB3's policy_kwargs net_arch
+    as `hidden`; two names of one key, or net_arch and hidden of different widths, are refused."""
+    hyper: Dict[str, Any] = {}
+    for key, value in given.items():
+        name = _config_name(key, "Agent()")
+        if value is None:
+            continue
+        if name in hyper:
+            raise TypeError(f"{key!r} and another name for {name!r} were both given")
+        hyper[name] = value
+    if policy_kwargs:
+        unknown = set(policy_kwargs) - {"net_arch"}
+        if unknown:
+            raise TypeError(f"policy_kwargs: only net_arch is understood, not {', '.join(sorted(unknown))}")
+        if "net_arch" in policy_kwargs:
+            arch = policy_kwargs["net_arch"]
+            if isinstance(arch, (dict, str, bytes)) or not hasattr(arch, "__iter__"):
+                raise TypeError(
+                    f"policy_kwargs: net_arch is the list of the hidden layers' widths, e.g. [256, 256]; got {arch!r}"
+                )
+            arch = list(arch)
+            if "hidden" in hyper and list(hyper["hidden"]) != arch:
+                raise TypeError("policy_kwargs net_arch and hidden= give different widths: give one of them")
+            hyper["hidden"] = arch
+    return hyper
+
+
 class Agent:
     """An arld agent with Stable-Baselines3's shape: `Agent(method, env, net=..., expert=..., **hyperparameters)`.
 
@@ -343,29 +371,7 @@ class Agent:
         **hyperparameters: Unpack[Hyperparameters],
     ) -> None:
         given: Dict[str, Any] = dict(hyperparameters)
-        hyper: Dict[str, Any] = {}
-        for key, value in given.items():
-            name = _config_name(key, "Agent()")
-            if value is None:
-                continue
-            if name in hyper:
-                raise TypeError(f"{key!r} and another name for {name!r} were both given")
-            hyper[name] = value
-        if policy_kwargs:
-            unknown = set(policy_kwargs) - {"net_arch"}
-            if unknown:
-                raise TypeError(f"policy_kwargs: only net_arch is understood, not {', '.join(sorted(unknown))}")
-            if "net_arch" in policy_kwargs:
-                arch = policy_kwargs["net_arch"]
-                if isinstance(arch, (dict, str, bytes)) or not hasattr(arch, "__iter__"):
-                    raise TypeError(
-                        f"policy_kwargs: net_arch is the list of the hidden layers' widths, e.g. [256, 256]; "
-                        f"got {arch!r}"
-                    )
-                arch = list(arch)
-                if "hidden" in hyper and list(hyper["hidden"]) != arch:
-                    raise TypeError("policy_kwargs net_arch and hidden= give different widths: give one of them")
-                hyper["hidden"] = arch
+        hyper = _given_hyperparameters(given, policy_kwargs)
         if method not in METHODS:
             raise ValueError(f"unknown method {method!r}; known: {', '.join(METHODS)}")
         if defaults not in DEFAULTS:
@@ -400,6 +406,14 @@ class Agent:
         self._set_env(env)
         self.eval_env = None if eval_env is None else _as_env(eval_env, max_episode_steps)
         self._check_eval_env()
+        self._take_expert(expert, demos)
+        self._take_demos(demos)
+        self.config = self._resolve_given(given)  # fails early on a bad value
+        self._clear_run()
+
+    def _take_expert(self, expert: Optional[ExpertLike], demos: Any) -> None:
+        """The expert the method asks (a callable, a web expert, or a spec arld builds), checked against the method."""
+        method = self.method
         if expert is not None:
             self._expert, name = _expert_callable(expert, self._box)
             self._expert_name = name
@@ -414,6 +428,10 @@ class Agent:
             self._expert, self._expert_name = None, ""
             if method != "dqn" and not (method == "dqfd" and demos is not None):
                 raise ValueError(f"{method} needs an expert: pass expert= (or demos= for dqfd)")
+
+    def _take_demos(self, demos: Any) -> None:
+        """The demonstrations given for pre-training (dqfd, adqnp); with them DQfD runs no expert."""
+        method = self.method
         if demos is not None and method not in ("dqfd", "adqnp"):
             raise ValueError(f"{method} does not pre-train on demonstrations; demos= is for dqfd and adqnp")
         self._demos = None if demos is None else _demos(demos, self._box)
@@ -422,8 +440,11 @@ class Agent:
             # demonstrations came from instead of naming one.
             self._hyper["demo_file"] = "python:demos"
             self._expert, self._expert_name = None, ""
+
+    def _resolve_given(self, given: Dict[str, Any]) -> Dict[str, Any]:
+        """The configuration of the hyperparameters, refused in the names the caller used (`given`)."""
         try:
-            self.config = self._resolve(self._hyper)  # fails early on a bad value
+            return self._resolve(self._hyper)
         except ValueError as e:
             if "net_arch" in self.policy_kwargs and "hidden" in str(e):
                 raise ValueError(f"policy_kwargs net_arch (arld's hidden): {e}") from None
@@ -434,6 +455,9 @@ class Agent:
             if message != str(e):
                 raise ValueError(message) from None
             raise
+
+    def _clear_run(self) -> None:
+        """No run yet: no policy, run, snapshot to continue, run directory, episodes, evaluations or queries."""
         self._policy: Any = None
         self._run: Any = None
         self._resume: Optional[str] = None

@@ -7,19 +7,17 @@ use crate::policy::Net;
 use crate::policy::WeightsFile;
 use arld::agent::actor_file::{ActorKind, TrainedActor};
 use arld::agent::box_agent::BoxAgent;
-use arld::agent::{Agent, Learner};
+use arld::agent::{DqnAgent, Learner};
 use arld::env;
 use arld::nn::QNet;
-use arld::train::{self, PausedRun, RunBuilder, RunLog, SeedPurpose, TrainConfig, seed_for};
+use arld::train::{self, OwnRun, PausedRun, RunLog, SeedPurpose, TrainConfig, seed_for};
 use rand::SeedableRng;
 use rand_pcg::Pcg64;
 use std::path::Path;
 
-/// A learner that Python runs drive: how its run starts, how it is lent to a callback, and what Python keeps
+/// A learner that Python runs drive (its run starts at [`OwnRun::builder`]): how it is lent to a callback, and what Python keeps
 /// of it at a pause.
-pub(crate) trait PyLearner: Learner<Action: PyAction> + Sized + 'static {
-    /// A run of `cfg` with this learner.
-    fn builder(cfg: &TrainConfig) -> RunBuilder<'_, Self>;
+pub(crate) trait PyLearner: OwnRun<Action: PyAction> + 'static {
     /// The agent and log as a callback borrows them.
     fn lend(agent: &Self, log: &RunLog<Self::Action>) -> LentParts;
     /// The network Python acts with, for the task `id`.
@@ -30,20 +28,17 @@ pub(crate) trait PyLearner: Learner<Action: PyAction> + Sized + 'static {
     fn from_weights(cfg: &TrainConfig, path: &Path) -> anyhow::Result<Self>;
 }
 
-impl PyLearner for Agent {
-    fn builder(cfg: &TrainConfig) -> RunBuilder<'_, Self> {
-        RunBuilder::new(cfg)
-    }
+impl PyLearner for DqnAgent {
     fn lend(agent: &Self, log: &RunLog) -> LentParts {
-        LentParts::Discrete(agent as *const Agent, log as *const RunLog)
+        LentParts::Discrete(agent as *const DqnAgent, log as *const RunLog)
     }
     fn net(&self, _id: &str) -> Net {
         Net::Q(Box::new(self.network().clone()))
     }
     fn for_snapshot(cfg: &TrainConfig) -> anyhow::Result<Self> {
         let spec = env::spec(&cfg.env)?;
-        Ok(Agent::new(
-            &cfg.agent_config(),
+        Ok(DqnAgent::new(
+            &cfg.dqn_agent_config(),
             spec.obs_dim,
             spec.n_actions,
             0,
@@ -52,14 +47,11 @@ impl PyLearner for Agent {
     fn from_weights(cfg: &TrainConfig, path: &Path) -> anyhow::Result<Self> {
         let (net, _meta) = QNet::load_file(path)?;
         let rng = Pcg64::seed_from_u64(seed_for(cfg.seed, SeedPurpose::Agent));
-        Ok(Agent::from_network(&cfg.agent_config(), net, rng))
+        Ok(DqnAgent::from_network(&cfg.dqn_agent_config(), net, rng))
     }
 }
 
 impl PyLearner for BoxAgent {
-    fn builder(cfg: &TrainConfig) -> RunBuilder<'_, Self> {
-        RunBuilder::for_box(cfg)
-    }
     fn lend(agent: &Self, log: &RunLog<Vec<f32>>) -> LentParts {
         LentParts::Box(agent as *const BoxAgent, log as *const RunLog<Vec<f32>>)
     }

@@ -1,7 +1,7 @@
 //! The live agent and log of a run, lent to a callback while it runs on the run's thread ([`Lent`]), so that what
 //! the callback reads is that step's, without a copy per step.
 
-use arld::agent::Agent;
+use arld::agent::DqnAgent;
 use arld::agent::box_agent::BoxAgent;
 use arld::train::{EvalPoint, RunLog};
 use std::cell::Cell;
@@ -9,13 +9,13 @@ use std::cell::Cell;
 /// The live agent and log of a run, lent to a callback while it runs on the run's thread.
 #[derive(Clone, Copy)]
 pub(crate) enum LentParts {
-    Discrete(*const Agent, *const RunLog),
+    Discrete(*const DqnAgent, *const RunLog),
     Box(*const BoxAgent, *const RunLog<Vec<f32>>),
 }
 
 /// The live agent and log of a run, borrowed for the length of a call from its callback.
 pub(crate) enum LentRef<'a> {
-    Discrete(&'a Agent, &'a RunLog),
+    Discrete(&'a DqnAgent, &'a RunLog),
     Box(&'a BoxAgent, &'a RunLog<Vec<f32>>),
 }
 

@@ -78,7 +78,7 @@ pub(crate) enum PolicyKind {
         net: Box<QNet>,
         q: Vec<f32>,
         /// The exploring agent (its own generator, so asking it never changes the run) and ε.
-        explorer: Option<(Box<arld::agent::Agent>, f64)>,
+        explorer: Option<(Box<arld::agent::DqnAgent>, f64)>,
     },
     Actor(TrainedActor),
 }
@@ -105,7 +105,7 @@ impl Policy {
     /// A policy that also explores as the run `cfg` does at step `step`.
     pub(crate) fn exploring(net: QNet, cfg: &TrainConfig, step: usize) -> Self {
         let rng = Pcg64::seed_from_u64(seed_for(cfg.seed, SeedPurpose::Agent) ^ step as u64);
-        let agent = arld::agent::Agent::from_network(&cfg.agent_config(), net.clone(), rng);
+        let agent = arld::agent::DqnAgent::from_network(&cfg.dqn_agent_config(), net.clone(), rng);
         let eps = train::epsilon_at(cfg, step);
         let mut policy = Self::of_net(net);
         if let PolicyKind::Q { explorer, .. } = &mut policy.kind {

@@ -101,7 +101,7 @@ impl Remote {
                 (
                     at.step,
                     at.episode,
-                    at.budget_used,
+                    at.transitions_used,
                     at.log.query_events().len(),
                     last_eval,
                     taken,

@@ -13,10 +13,11 @@ use crate::records::eval_dict;
 use crate::remote::{Command, Pause, Remote, Report, Waited};
 use crate::snapshots::read_snapshot_file;
 use crate::web;
-use arld::agent::Agent;
+use arld::agent::DqnAgent;
 use arld::agent::box_agent::BoxAgent;
 use arld::env::{self, Env};
 use arld::expert::Expert;
+use arld::train::session::{self, Session};
 use arld::train::{self, Checkpointer, EvalPoint, TrainConfig};
 use pyo3::prelude::*;
 use pyo3::types::PyList;
@@ -333,26 +334,15 @@ impl Run {
     }
 }
 
-/// Takes the lock of the run directory `dir` (created if missing), as `arld train` does: one process, and in it
-/// one run, at a time. Refused naming the holder (and, when it is this process, how to end its run).
-pub(crate) fn lock_run_dir(dir: &Path) -> anyhow::Result<arld::dir_lock::DirLock> {
-    use arld::dir_lock::{DirLock, Holder};
-    anyhow::ensure!(
-        !dir.exists() || dir.is_dir(),
-        "the run directory {} exists and is not a directory",
-        dir.display()
-    );
-    std::fs::create_dir_all(dir)
-        .map_err(|e| anyhow::anyhow!("cannot create the run directory {}: {e}", dir.display()))?;
-    DirLock::acquire(dir, train::run_dir::LOCK_FILE).map_err(|e| {
-        let holder = std::fs::read_to_string(dir.join(train::run_dir::LOCK_FILE))
-            .ok()
-            .and_then(|text| serde_json::from_str::<Holder>(&text).ok());
-        match holder {
-            Some(h) if h.pid == std::process::id() => e.context(
-                "another Agent of this Python process runs in it; its close() ends that run",
-            ),
-            _ => e,
+/// Takes the lock of the run directory `dir` (created if missing) as `arld train` does ([`Session::lock`]): one
+/// process, and in it one run, at a time. Refused naming the holder (and, when it is this process, how to end its
+/// run).
+pub(crate) fn lock_run_dir(dir: &Path) -> anyhow::Result<Session> {
+    Session::lock(dir).map_err(|e| {
+        if session::held_by_this_process(dir) {
+            e.context("another Agent of this Python process runs in it; its close() ends that run")
+        } else {
+            e
         }
     })
 }
@@ -427,7 +417,7 @@ pub(crate) fn start_run(py: Python<'_>, config: &str, request: RunRequest) -> Py
         if boxed {
             train_in_thread::<BoxAgent>(inputs, &mut remote, web_box)
         } else {
-            train_in_thread::<Agent>(inputs, &mut remote, web_discrete)
+            train_in_thread::<DqnAgent>(inputs, &mut remote, web_discrete)
         }
     };
     let thread = std::thread::Builder::new()
@@ -575,7 +565,7 @@ pub(crate) fn train_in_thread<L: PyLearner>(
             || make(demo_env),
         )?,
     };
-    let mut log = train::open_log(
+    let mut log = session::open_log(
         log_dir.as_deref().map(Path::new),
         &cfg,
         resume_state.as_ref(),

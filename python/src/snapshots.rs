@@ -6,7 +6,7 @@ use crate::errors::value_error;
 use crate::learners::PyLearner;
 use crate::policy::{Net, Policy};
 use crate::records::Records;
-use arld::agent::Agent;
+use arld::agent::DqnAgent;
 use arld::agent::box_agent::BoxAgent;
 use arld::env::{self};
 use arld::train::{self, Checkpointer, TrainConfig};
@@ -31,7 +31,7 @@ pub(crate) fn snapshot_policy(py: Python<'_>, path: &str) -> PyResult<SnapshotPo
         let (net, curve, queries) = if env::box_spec(&cfg.env).is_ok() {
             snapshot_parts::<BoxAgent>(&cfg, &state)?
         } else {
-            snapshot_parts::<Agent>(&cfg, &state)?
+            snapshot_parts::<DqnAgent>(&cfg, &state)?
         };
         Ok((net, cfg, step, curve, queries))
     };
@@ -65,7 +65,7 @@ pub(crate) fn snapshot_parts<L: PyLearner>(
 ) -> anyhow::Result<(Net, String, Records)> {
     let mut agent = L::for_snapshot(cfg)?;
     agent.load_state(train::run::AGENT_STATE, state)?;
-    let position = train::resume_position::<L::Action>(state)?;
+    let position = train::session::resume_position::<L::Action>(state)?;
     Ok((
         agent.net(&cfg.env),
         serde_json::to_string(&position.curve)?,
@@ -81,7 +81,7 @@ pub(crate) fn fresh_policy(config: &str) -> PyResult<Policy> {
     let net = if env::box_spec(&cfg.env).is_ok() {
         <BoxAgent as PyLearner>::for_snapshot(&cfg).map(|a| a.net(&cfg.env))
     } else {
-        <Agent as PyLearner>::for_snapshot(&cfg).map(|a| a.net(&cfg.env))
+        <DqnAgent as PyLearner>::for_snapshot(&cfg).map(|a| a.net(&cfg.env))
     }
     .map_err(|e| value_error(format!("{e:#}")))?;
     Ok(Policy::of_run(net, &cfg, 0))

@@ -1,6 +1,7 @@
 //! `arld train`: one training run with the paper's presets, a config file and `--set` overrides.
 use arld::experiment::run_one;
 use arld::expert::web::WebOptions;
+use arld::train::session::{Begin, Session};
 use arld::train::{Algo, ConfigInput, Method, NetKind, TrainConfig};
 use clap::Args;
 use std::path::PathBuf;
@@ -197,51 +198,22 @@ pub fn run(args: TrainArgs) -> anyhow::Result<ExitCode> {
         .or_else(|| args.out.clone())
         .unwrap_or_else(|| PathBuf::from("runs").join(cfg.run_name()));
     // One process per run directory: the lock is taken before anything in it is removed or written.
-    anyhow::ensure!(
-        !dir.exists() || dir.is_dir(),
-        "the run directory {} exists and is not a directory",
-        dir.display()
-    );
-    let created = !dir.exists();
-    std::fs::create_dir_all(&dir)
-        .map_err(|e| anyhow::anyhow!("cannot create the run directory {}: {e}", dir.display()))?;
-    let lock = arld::dir_lock::DirLock::acquire(&dir, arld::train::run_dir::LOCK_FILE)?;
-    match &args.resume {
-        None => arld::train::run_dir::prepare_new_run(&dir, args.overwrite)?,
-        Some(resume) if args.restart => {
-            eprintln!(
-                "arld: starting the run in {} over from step 0 (--restart)",
-                resume.display()
-            );
-            arld::train::run_dir::prepare_restart(resume)?;
-        }
-        // Killed before its first snapshot: nothing to continue from, so the run starts again. Only a missing
-        // snapshot means that: anything else in its place is an error that keeps it.
-        Some(resume)
-            if !arld::files::own_file_exists(
-                &resume.join(arld::train::snapshot::SNAPSHOT_FILE),
-            )
-            .map_err(|e| {
-                anyhow::anyhow!("cannot resume the run: {e}; --restart starts it over")
-            })? =>
-        {
-            eprintln!(
-                "arld: {} has no snapshot yet (the run stopped before its first one): starting it again from step 0",
-                resume.display()
-            );
-            arld::train::run_dir::prepare_restart(resume)?;
-        }
-        Some(_) => {}
-    }
+    let session = Session::lock(&dir)?;
+    session.begin(match &args.resume {
+        None => Begin::New {
+            overwrite: args.overwrite,
+        },
+        Some(_) if args.restart => Begin::Restart,
+        Some(_) => Begin::Resume,
+    })?;
     arld::interrupt::install()?;
     let s = match run_one(&cfg, Some(&dir), !args.quiet) {
         Ok(s) => s,
         Err(err) if arld::interrupt::requested() => {
             // One line: what stopped the run, where it stands, how to continue.
             let signal = arld::interrupt::signal().map_or("a stop request", |(_, name)| name);
-            let snapshot = dir.join(arld::train::snapshot::SNAPSHOT_FILE);
             let message = format!("{err:#}").replace('\n', " ");
-            if snapshot.is_file() {
+            if session.has_snapshot() {
                 eprintln!(
                     "arld: {signal}: {message}; the run is incomplete; continue with: arld train --resume {}",
                     dir.display()
@@ -254,26 +226,9 @@ pub fn run(args: TrainArgs) -> anyhow::Result<ExitCode> {
         Err(err) => {
             // Whatever ended it, the run stays incomplete: no summary.json, its logs whole up to here.
             eprintln!("error: {}", arld::errors::error_line(&err));
-            if !dir.join(arld::train::run_dir::CONFIG_FILE).is_file() {
-                // Refused before the run wrote anything (bad demonstrations, an expert that cannot start): a
-                // directory this command created for it is removed again, so the same command can be given again.
-                if created {
-                    drop(lock);
-                    let _ = std::fs::remove_file(dir.join(arld::train::run_dir::FAILED_FILE));
-                    let _ = std::fs::remove_dir(&dir);
-                }
-                return Ok(ExitCode::FAILURE);
+            if let Some(incomplete) = session.close_failed() {
+                eprintln!("{incomplete}");
             }
-            let why = if dir.join(arld::train::run_dir::FAILED_FILE).is_file() {
-                format!("; {} records why", arld::train::run_dir::FAILED_FILE)
-            } else {
-                String::new()
-            };
-            eprintln!(
-                "the run in {} is incomplete: its logs (episodes.csv, queries.csv, eval.csv once an evaluation \
-                 ran) end where it stopped, and it has no summary.json{why}",
-                dir.display()
-            );
             return Ok(ExitCode::FAILURE);
         }
     };

@@ -11,7 +11,7 @@ use std::path::{Path, PathBuf};
 
 /// Who holds a lock (the lock file's contents).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct Holder {
+pub(crate) struct Holder {
     pub pid: u32,
     pub host: String,
     /// Seconds since the Unix epoch when the lock was taken.

@@ -28,7 +28,7 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), WriteError> {
 /// A file written in pieces in place of another, atomically: the bytes go to a temporary file beside the
 /// target, and [`AtomicFile::commit`] syncs it and renames it over the target. Until then the target keeps its
 /// old content; dropped without a commit (an error, a panic), the temporary file is removed.
-pub struct AtomicFile {
+pub(crate) struct AtomicFile {
     path: PathBuf,
     tmp: PathBuf,
     file: Option<BufWriter<File>>,
@@ -77,7 +77,7 @@ impl AtomicFile {
 
     /// Writes what is buffered to the temporary file (into the operating system's cache: a process killed from
     /// now on leaves the whole content there, though still under the temporary name).
-    pub fn flush_buffer(&mut self) -> Result<(), WriteError> {
+    pub(crate) fn flush_buffer(&mut self) -> Result<(), WriteError> {
         let result = self.writer().flush();
         result.map_err(|e| self.error(e))
     }
@@ -167,7 +167,7 @@ pub fn kind_name(kind: std::fs::FileType) -> &'static str {
 /// Whether a regular file is at `path` (`false`: nothing is), without following a symbolic link: anything else
 /// there (a link, a directory, a device, a pipe) is an error naming the path and what it is. For the files a
 /// program owns in its own directory, which it must never read or write through a link.
-pub fn own_file_exists(path: &Path) -> std::io::Result<bool> {
+pub(crate) fn own_file_exists(path: &Path) -> std::io::Result<bool> {
     match std::fs::symlink_metadata(path) {
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(false),
         Err(e) => Err(std::io::Error::new(
@@ -185,7 +185,7 @@ pub fn own_file_exists(path: &Path) -> std::io::Result<bool> {
 
 /// Opens a file the program owns for writing (see [`own_file_exists`]): created (and emptied) when `create`,
 /// else it must exist. Never through a symbolic link, never a device or a pipe.
-pub fn open_own_file(path: &Path, create: bool) -> std::io::Result<File> {
+pub(crate) fn open_own_file(path: &Path, create: bool) -> std::io::Result<File> {
     use std::os::unix::fs::OpenOptionsExt;
     own_file_exists(path)?;
     let file = std::fs::OpenOptions::new()
@@ -205,7 +205,7 @@ pub fn open_own_file(path: &Path, create: bool) -> std::io::Result<File> {
     Ok(file)
 }
 
-/// Reads a whole input file of at most `max_bytes` (opened by [`open_bounded`]: a file, or what a link names,
+/// Reads a whole input file of at most `max_bytes` (opened by `open_bounded`: a file, or what a link names,
 /// that is no regular file, or is longer, is an error naming it): every whole-file read of input has a bound, so
 /// that `/dev/zero` or a pipe that never ends cannot exhaust the memory, nor a pipe without a writer hang.
 pub fn read_bounded(path: &Path, max_bytes: u64) -> std::io::Result<Vec<u8>> {
@@ -238,7 +238,7 @@ pub fn read_text_bounded(path: &Path, max_bytes: u64) -> std::io::Result<String>
 /// (a longer file is an error naming it); the reader reads at most that many bytes (a file that grows while
 /// it is read is cut there). Every input arld reads (configurations, tables, demonstrations, datasets, weights,
 /// grids) is opened here or by [`read_bounded`], which builds on it.
-pub fn open_bounded(path: &Path, max_bytes: u64) -> std::io::Result<(File, u64)> {
+pub(crate) fn open_bounded(path: &Path, max_bytes: u64) -> std::io::Result<(File, u64)> {
     let named =
         |e: std::io::Error| std::io::Error::new(e.kind(), format!("{}: {e}", path.display()));
     let file = open_regular(path)?;
@@ -252,7 +252,7 @@ pub fn open_bounded(path: &Path, max_bytes: u64) -> std::io::Result<(File, u64)>
 /// Opens an input file for reading: a regular file, or what a link names if that is one. Anything else (a named
 /// pipe, a device, a directory, a socket) is an error naming the path and what it is, at once: opening a named
 /// pipe without a writer would wait for one forever.
-pub fn open_regular(path: &Path) -> std::io::Result<File> {
+pub(crate) fn open_regular(path: &Path) -> std::io::Result<File> {
     use std::os::unix::fs::OpenOptionsExt;
     let named =
         |e: std::io::Error| std::io::Error::new(e.kind(), format!("{}: {e}", path.display()));
@@ -286,7 +286,7 @@ fn too_long(path: &Path, max_bytes: u64) -> std::io::Error {
 /// Reads one line (without its `\n`, and a `\r` before it) of at most `max_bytes` into `line`; `false` at the
 /// end of the input. A longer line is an error ([`std::io::ErrorKind::InvalidData`]): a stream that never
 /// sends a line break cannot exhaust the memory.
-pub fn read_line_bounded(
+pub(crate) fn read_line_bounded(
     reader: &mut impl std::io::BufRead,
     line: &mut Vec<u8>,
     max_bytes: usize,
@@ -332,14 +332,14 @@ fn temporary_of(name: &str, target: &str) -> Option<u32> {
 }
 
 /// Whether `name` is a temporary file of a writer of `target` (see [`AtomicFile`]), exactly by its form.
-pub fn is_temporary_of(name: &str, target: &str) -> bool {
+pub(crate) fn is_temporary_of(name: &str, target: &str) -> bool {
     temporary_of(name, target).is_some()
 }
 
 /// Removes the temporary files that writers of `path` killed before their commit left beside it (nothing if
 /// its directory does not exist): the files of exactly their form ([`is_temporary_of`]) made by another process
 /// than this one (whose writers may be at work).
-pub fn remove_leftovers(path: &Path) -> std::io::Result<()> {
+pub(crate) fn remove_leftovers(path: &Path) -> std::io::Result<()> {
     let (Some(dir), Some(name)) = (path.parent(), path.file_name()) else {
         return Ok(());
     };

@@ -19,7 +19,7 @@
 //! Box2D calls glibc's, and CORE-MATH's differ from them on about 1.4% of inputs, enough for seeded LunarLander
 //! episodes to leave Gymnasium's trace (`tests/conformance.rs`). glibc's two builds of these functions agree on
 //! every float of magnitude below 17.25 (checked exhaustively with glibc 2.36; the first disagreement is
-//! `cosf(17.278738)`, next to a zero of the cosine). So they are glibc's below [`GLIBC_F32_TRIG_AGREES_BELOW`]
+//! `cosf(17.278738)`, next to a zero of the cosine). So they are glibc's below `GLIBC_F32_TRIG_AGREES_BELOW`
 //! and CORE-MATH's above: the same on every CPU, and Gymnasium's wherever Gymnasium's is the same on every CPU.
 //! A C library other than glibc would change them, as it would change Gymnasium's.
 //!
@@ -73,7 +73,7 @@ pub unsafe extern "C" fn __wrap_sincos(x: f64, s: *mut f64, c: *mut f64) {
 
 /// Below this magnitude glibc's AVX2/FMA and baseline builds of `sinf`, `cosf` and `sincosf` give the same
 /// result for every float (see the module docs).
-pub const GLIBC_F32_TRIG_AGREES_BELOW: f32 = 17.25;
+pub(crate) const GLIBC_F32_TRIG_AGREES_BELOW: f32 = 17.25;
 
 // The C library's own functions, which `--wrap` leaves reachable under these names.
 #[cfg(target_os = "linux")]

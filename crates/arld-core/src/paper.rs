@@ -50,7 +50,7 @@ pub fn task_index(env_id: &str) -> Option<usize> {
 
 /// The paper's task-specific parameters (its Table 4, "Task specific parameters").
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct TaskParameters {
+pub(crate) struct TaskParameters {
     pub gamma: f64,
     pub lr: f64,
     pub train_steps: usize,
@@ -66,7 +66,7 @@ pub struct TaskParameters {
 }
 
 /// Table 4, in the order of [`PAPER_TASKS`].
-pub const TASK_PARAMETERS: [TaskParameters; 4] = [
+pub(crate) const TASK_PARAMETERS: [TaskParameters; 4] = [
     TaskParameters {
         gamma: 0.9,
         lr: 1e-4,
@@ -114,7 +114,7 @@ pub const TASK_PARAMETERS: [TaskParameters; 4] = [
 ];
 
 /// The paper's parameters for an environment id, if it is one of the paper's tasks.
-pub fn task_parameters(env_id: &str) -> Option<&'static TaskParameters> {
+pub(crate) fn task_parameters(env_id: &str) -> Option<&'static TaskParameters> {
     task_index(env_id).map(|i| &TASK_PARAMETERS[i])
 }
 
@@ -177,7 +177,7 @@ pub const TABLE5_NETS: [(&str, &str); 2] = [("bootstrap", "B"), ("noisy", "N")];
 /// Table 5: median environment steps to solve over 20 seeds, indexed `[method][net group][task]` in the orders
 /// of [`TABLE5_METHODS`], [`TABLE5_NETS`] and [`PAPER_TASKS`] (a row holds a method's `-B` and `-N` lines of the
 /// table). 500000 on Lunar Lander means no solve within the training budget for at least half of the seeds.
-pub const TABLE5_MEDIAN_STEPS: [[[u64; 4]; 2]; 6] = [
+pub(crate) const TABLE5_MEDIAN_STEPS: [[[u64; 4]; 2]; 6] = [
     [
         [8000, 57000, 210000, 260000],
         [13000, 114000, 190000, 355000],

@@ -3,7 +3,7 @@
 //! Gymnasium seeds every environment with `np.random.default_rng(seed)`; to reproduce its episodes from a seed
 //! we need the same stream of doubles. Three pieces are ported (see docs/environments.md, "Seeding"):
 //!
-//! 1. [`SeedSequence`]: turns the integer seed into 32-bit words (least significant first), hashes them
+//! 1. `SeedSequence`: turns the integer seed into 32-bit words (least significant first), hashes them
 //!    into a 4-word entropy pool and expands the pool into as many output words as asked for
 //!    (`generate_state`). This is NumPy's `numpy.random.bit_generator.SeedSequence` without spawn keys.
 //! 2. The PCG64 bit generator ([`NumpyRng`]'s core): a 128-bit linear congruential generator with the standard
@@ -35,7 +35,7 @@ const XSHIFT: u32 = 16;
 
 /// NumPy's `SeedSequence` for entropy given as an unsigned integer (no spawn key).
 #[derive(Debug, Clone, PartialEq, Eq)]
-pub struct SeedSequence {
+pub(crate) struct SeedSequence {
     pool: [u32; POOL_SIZE],
 }
 
@@ -46,7 +46,7 @@ impl SeedSequence {
     }
 
     /// `SeedSequence(entropy)` for an integer of up to 128 bits (NumPy's own unseeded entropy is 128 bits).
-    pub fn from_u128(entropy: u128) -> Self {
+    pub(crate) fn from_u128(entropy: u128) -> Self {
         // `_int_to_uint32_array`: 32-bit words, least significant first; zero is one word [0].
         let mut words = [0u32; 4];
         let mut n_words = 0;
@@ -103,7 +103,7 @@ impl SeedSequence {
     }
 
     /// `generate_state(n_words, uint32)`: expands the pool into `out.len()` 32-bit words.
-    pub fn generate_state_u32(&self, out: &mut [u32]) {
+    pub(crate) fn generate_state_u32(&self, out: &mut [u32]) {
         let mut hash_const = INIT_B;
         for (i, slot) in out.iter_mut().enumerate() {
             let mut value = self.pool[i % POOL_SIZE] ^ hash_const;
@@ -114,7 +114,7 @@ impl SeedSequence {
     }
 
     /// `generate_state(n, uint64)`: the uint32 words viewed as little-endian uint64 pairs.
-    pub fn generate_state_u64(&self, out: &mut [u64]) {
+    pub(crate) fn generate_state_u64(&self, out: &mut [u64]) {
         let mut words = vec![0u32; out.len() * 2];
         self.generate_state_u32(&mut words);
         for (slot, pair) in out.iter_mut().zip(words.chunks_exact(2)) {
@@ -140,13 +140,13 @@ impl NumpyRng {
 
     /// `np.random.default_rng()` without a seed: 128 bits of OS entropy through SeedSequence, as NumPy does.
     /// Only for Gymnasium's "first reset without a seed"; everything reproducible passes a seed.
-    pub fn from_entropy() -> Self {
+    pub(crate) fn from_entropy() -> Self {
         let entropy: u128 = rand::random();
         Self::from_seed_sequence(&SeedSequence::from_u128(entropy))
     }
 
     /// `PCG64(seed_sequence)`: four 64-bit words become the initial state and the stream selector.
-    pub fn from_seed_sequence(seed_sequence: &SeedSequence) -> Self {
+    pub(crate) fn from_seed_sequence(seed_sequence: &SeedSequence) -> Self {
         let mut words = [0u64; 4];
         seed_sequence.generate_state_u64(&mut words);
         let init_state = (u128::from(words[0]) << 64) | u128::from(words[1]);
@@ -155,7 +155,7 @@ impl NumpyRng {
     }
 
     /// PCG's `srandom_r(initstate, initseq)`: odd increment from the sequence, two steps around adding the state.
-    pub fn from_pcg_seed(init_state: u128, init_sequence: u128) -> Self {
+    pub(crate) fn from_pcg_seed(init_state: u128, init_sequence: u128) -> Self {
         let mut rng = Self {
             state: 0,
             increment: (init_sequence << 1) | 1,
@@ -204,7 +204,7 @@ impl NumpyRng {
 
     /// One raw 64-bit draw (`bit_generator.random_raw()`): step, then XSL-RR output of the new state.
     #[inline]
-    pub fn next_raw_u64(&mut self) -> u64 {
+    pub(crate) fn next_raw_u64(&mut self) -> u64 {
         self.advance_lcg();
         let xored = ((self.state >> 64) as u64) ^ (self.state as u64);
         let rotation = (self.state >> 122) as u32;
@@ -225,7 +225,7 @@ impl NumpyRng {
     }
 
     /// `Generator.uniform(low, high, size=out.len())`: the draws in order.
-    pub fn uniform_fill(&mut self, low: f64, high: f64, out: &mut [f64]) {
+    pub(crate) fn uniform_fill(&mut self, low: f64, high: f64, out: &mut [f64]) {
         for slot in out {
             *slot = self.uniform(low, high);
         }

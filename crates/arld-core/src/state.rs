@@ -22,7 +22,7 @@ pub enum Array<'a> {
 }
 
 impl Array<'_> {
-    pub fn type_name(&self) -> &'static str {
+    pub(crate) fn type_name(&self) -> &'static str {
         match self {
             Array::F32(_) => "f32",
             Array::F64(_) => "f64",
@@ -46,7 +46,7 @@ impl Array<'_> {
     }
 
     /// Bytes of one element.
-    pub fn element_bytes(&self) -> usize {
+    pub(crate) fn element_bytes(&self) -> usize {
         match self {
             Array::F32(_) => 4,
             Array::F64(_) | Array::U64(_) => 8,
@@ -137,7 +137,7 @@ impl<'a> StateDict<'a> {
     typed_access!(put_u8, u8s, u8s_into, U8, u8, "u8");
 
     /// Stores a small value as JSON.
-    pub fn put_value<T: Serialize>(&mut self, name: &str, value: &T) {
+    pub(crate) fn put_value<T: Serialize>(&mut self, name: &str, value: &T) {
         let json = serde_json::to_value(value).expect("state values serialise to JSON");
         self.values.insert(name.to_string(), json);
     }
@@ -156,12 +156,12 @@ impl<'a> StateDict<'a> {
 
     /// Stores a value that holds 128-bit integers (generator states), as JSON text: a JSON value tree cannot
     /// hold them, JSON text can.
-    pub fn put_text<T: Serialize>(&mut self, name: &str, value: &T) {
+    pub(crate) fn put_text<T: Serialize>(&mut self, name: &str, value: &T) {
         let text = serde_json::to_string(value).expect("state values serialise to JSON");
         self.put_value(name, &text);
     }
 
-    /// Reads what [`StateDict::put_text`] stored.
+    /// Reads what `StateDict::put_text` stored.
     pub fn text<T: DeserializeOwned>(&self, name: &str) -> Result<T, StateError> {
         let text: String = self.value(name)?;
         serde_json::from_str(&text).map_err(|e| StateError::Value {

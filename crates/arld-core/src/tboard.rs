@@ -12,7 +12,7 @@ use std::path::{Path, PathBuf};
 use std::time::{SystemTime, UNIX_EPOCH};
 
 /// Appends scalar summaries to a TensorBoard event file.
-pub struct EventWriter {
+pub(crate) struct EventWriter {
     out: BufWriter<File>,
     path: PathBuf,
 }
@@ -38,7 +38,7 @@ impl EventWriter {
 
     /// Continues the event file at `path` from byte `len` (what was written before a snapshot); anything after
     /// it is cut off.
-    pub fn reopen(path: &Path, len: u64) -> std::io::Result<Self> {
+    pub(crate) fn reopen(path: &Path, len: u64) -> std::io::Result<Self> {
         let file = crate::files::open_own_file(path, false)?;
         file.set_len(len)?;
         let mut out = BufWriter::new(file);
@@ -102,7 +102,7 @@ fn wall_time() -> f64 {
 }
 
 /// TFRecord's checksum: CRC-32C, rotated right by 15 bits plus a constant.
-pub fn masked_crc32c(data: &[u8]) -> u32 {
+pub(crate) fn masked_crc32c(data: &[u8]) -> u32 {
     let crc = crc32c::crc32c(data);
     crc.rotate_right(15).wrapping_add(0xa282_ead8)
 }

@@ -1,5 +1,5 @@
-//! Experiments: running one configured run end to end ([`run_one`]: expert, demonstrations, training, run
-//! directory), sweeps over grids of runs ([`sweep`]) and their submission to Slurm as job arrays ([`slurm`]),
+//! Experiments: running one configured run end to end ([`run_one`]: expert, demonstrations, training, in the run
+//! directory that [`arld_core::train::session`] opens), sweeps over grids of runs ([`sweep`]) and their submission to Slurm as job arrays ([`slurm`]),
 //! the paper's experiment grids ([`protocol`]), statistics over seeds ([`stats`]), and reports with the paper's
 //! table and figures ([`report`]; which figures and what they show in [`figures`], how one is drawn in
 //! [`plot`]; hand-written documents that quote its tables in [`quote`]). Sweeps and reports read runs through
@@ -24,16 +24,15 @@ pub mod stats;
 pub mod sweep;
 pub mod verdict;
 
-use anyhow::{Context, Result};
-use arld_core::agent::Learner;
+use anyhow::Result;
+use arld_core::agent::DqnAgent;
+use arld_core::agent::box_agent::BoxAgent;
 use arld_core::env;
 use arld_core::expert::{
     self,
     demos::{DemoAction, Demonstrations},
 };
-use arld_core::train::{
-    self, Checkpointer, RunBuilder, RunLog, SeedPurpose, Summary, TrainConfig, seed_for,
-};
+use arld_core::train::{self, OwnRun, SeedPurpose, Summary, TrainConfig, seed_for, session};
 use std::path::Path;
 
 /// Builds the expert and the demonstrations a configuration needs, trains, and writes the run directory
@@ -42,15 +41,10 @@ use std::path::Path;
 /// `cfg.snapshot_every` steps and when asked to stop ([`arld_core::interrupt`]).
 ///
 /// A run that ends with an error leaves `failed.json` in its directory when it has one (training records the
-/// step it failed at; an error before training, such as an expert that cannot be started, is recorded here as
-/// the `setup` phase); the summary of a later attempt that finishes the run removes it.
+/// step it failed at; an error before training, such as an expert that cannot be started, is recorded as the
+/// `setup` phase: [`session::record_setup_failure`]); the summary of a later attempt that finishes the run
+/// removes it.
 pub fn run_one(cfg: &TrainConfig, out_dir: Option<&Path>, progress: bool) -> Result<Summary> {
-    let record_setup_failure = |err: anyhow::Error| {
-        if let Some(dir) = out_dir.filter(|dir| dir.is_dir()) {
-            train::record_failure(dir, &err, "setup", 0);
-        }
-        err
-    };
     let expert_seed = seed_for(cfg.seed, SeedPurpose::Expert);
     if let Ok(spec) = env::box_spec(&cfg.env) {
         let (expert, demos) = setup(cfg, || {
@@ -62,70 +56,42 @@ pub fn run_one(cfg: &TrainConfig, out_dir: Option<&Path>, progress: bool) -> Res
                 arld_web::start_box,
             )
         })
-        .map_err(record_setup_failure)?;
-        return run_in(
-            |cfg| RunBuilder::for_box(cfg),
-            expert,
-            demos,
-            cfg,
-            out_dir,
-            progress,
-        );
+        .map_err(|err| session::record_setup_failure(out_dir, err))?;
+        return run_in::<BoxAgent>(expert, demos, cfg, out_dir, progress);
     }
     let (expert, demos) = setup(cfg, || {
         arld_web::from_spec(&cfg.expert, &cfg.env, expert_seed, cfg.expert_timeout)
     })
-    .map_err(record_setup_failure)?;
-    run_in(
-        |cfg| RunBuilder::new(cfg),
-        expert,
-        demos,
-        cfg,
-        out_dir,
-        progress,
-    )
+    .map_err(|err| session::record_setup_failure(out_dir, err))?;
+    run_in::<DqnAgent>(expert, demos, cfg, out_dir, progress)
 }
 
-/// Trains the run `start` begins with its expert and demonstrations, into `out_dir` or in memory (see
-/// [`run_one`]), whatever the kind of its actions.
-fn run_in<L: Learner>(
-    start: for<'b> fn(&'b TrainConfig) -> RunBuilder<'b, L>,
+/// Trains the run of `cfg` learned by `L` with its expert and demonstrations, into `out_dir` or in memory (see
+/// [`run_one`]; the directory is opened by [`session::open`]), whatever the kind of its actions.
+fn run_in<L: OwnRun>(
     mut expert: Option<Box<dyn expert::Expert<L::Action>>>,
     demos: Option<Demonstrations<L::Action>>,
     cfg: &TrainConfig,
     out_dir: Option<&Path>,
     progress: bool,
 ) -> Result<Summary> {
+    let mut opened = session::open::<L::Action>(out_dir, cfg, progress)?;
+    let session::Opened {
+        log,
+        snapshot,
+        checkpointer,
+    } = &mut opened;
     let expert = expert
         .as_mut()
         .map(|e| &mut **e as &mut dyn expert::Expert<L::Action>);
-    let builder = start(cfg).expert(expert).demos(demos.as_ref());
-    let Some(dir) = out_dir else {
-        let (summary, _agent) = builder.train(&mut RunLog::in_memory())?;
-        return Ok(summary);
-    };
-    // A run directory with a snapshot continues from it (refused if it belongs to another configuration).
-    let mut checkpointer = Checkpointer::new(dir, cfg);
-    let opened = checkpointer.load().and_then(|snapshot| {
-        let log = train::open_log(Some(dir), cfg, snapshot.as_ref(), progress)?;
-        Ok((snapshot, log))
-    });
-    let (snapshot, mut log) = match opened {
-        Ok(opened) => opened,
-        Err(err) => {
-            if dir.is_dir() {
-                train::record_failure(dir, &err, "setup", 0);
-            }
-            return Err(err);
-        }
-    };
-    if snapshot.is_some() {
-        eprintln!("{}: continuing from its snapshot", dir.display());
-    }
-    let run = builder
-        .snapshots(&mut checkpointer)
+    let mut run = L::builder(cfg)
+        .expert(expert)
+        .demos(demos.as_ref())
         .resume_from(snapshot.as_ref());
-    let (summary, _agent) = run.train(&mut log)?;
+    if let Some(checkpointer) = checkpointer {
+        run = run.snapshots(checkpointer);
+    }
+    let (summary, _agent) = run.train(log)?;
     Ok(summary)
 }
 
@@ -160,26 +126,8 @@ fn setup<A: DemoAction>(
 /// with a snapshot continues; any other leftovers of a run are cleared first, so that no earlier run's files
 /// (checkpoints) mix into this one.
 pub fn run_or_reuse(cfg: &TrainConfig, dir: &Path, progress: bool) -> Result<Option<Summary>> {
-    use arld_core::train::run_dir;
-    if run_dir::is_complete(dir) {
-        let earlier = run_dir::read_config(dir, &run_dir::RunId::of(cfg)).with_context(|| {
-            format!(
-                "the finished run's {} is not valid",
-                dir.join(run_dir::CONFIG_FILE).display()
-            )
-        })?;
-        let differences = earlier.differences(cfg);
-        anyhow::ensure!(
-            differences.is_empty(),
-            "{} holds a finished run of another configuration; its values (and the ones asked for) differ in: \
-             {}; give another run directory, or the same settings",
-            dir.display(),
-            differences.join(", ")
-        );
+    if session::reuse_or_clear(cfg, dir)? {
         return Ok(None);
-    }
-    if !dir.join(train::snapshot::SNAPSHOT_FILE).is_file() {
-        run_dir::prepare_new_run(dir, true)?;
     }
     run_one(cfg, Some(dir), progress).map(Some)
 }

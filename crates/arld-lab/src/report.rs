@@ -266,6 +266,40 @@ pub fn report(dir: &Path, out_dir: &Path, sustain: usize) -> Result<ReportSummar
     }
     let (runs, mut notes) = load_runs(dir)?;
     let failed = run_dir::find_failed_runs(dir)?;
+    check_report_runs(dir, &runs, &failed)?;
+    std::fs::create_dir_all(out_dir)
+        .with_context(|| format!("cannot create {}", out_dir.display()))?;
+    notes.extend(sweep_completion_notes(dir)?);
+    notes.extend(run_notes(&runs));
+    let cells = super::verdict::cells(&runs, sustain);
+    let mut written = write_tables(&runs, &cells, out_dir, sustain)?;
+    let figure_lines = draw_figures(&runs, out_dir, &mut written.files, &mut notes)?;
+    let md = report_markdown(dir, &runs, &cells, &failed, &written, &figure_lines, &notes)?;
+    let report_path = out_dir.join("report.md");
+    write_atomic(&report_path, md.as_bytes())?;
+    let mut files = written.files;
+    files.push(report_path);
+    files.extend(super::quote::render_documents(out_dir)?);
+    if !failed.is_empty() {
+        notes.push(format!(
+            "{} runs failed and are left out (listed with their errors in report.md)",
+            failed.len()
+        ));
+    }
+    Ok(ReportSummary {
+        runs: runs.len(),
+        files,
+        notes,
+    })
+}
+
+/// Refuses a report of no complete run (naming failed runs, if any) or of a run whose evaluation mean is not a
+/// number (it would make every statistic of its cell meaningless), before anything is written.
+fn check_report_runs(
+    dir: &Path,
+    runs: &[RunRecord],
+    failed: &[(PathBuf, run_dir::Failure)],
+) -> Result<()> {
     if runs.is_empty() {
         let failed_note = match failed.first() {
             Some((first, failure)) => format!(
@@ -283,8 +317,7 @@ pub fn report(dir: &Path, out_dir: &Path, sustain: usize) -> Result<ReportSummar
             dir.display()
         );
     }
-    // A mean that is not a number would make every statistic of its cell meaningless: refuse before writing.
-    for run in &runs {
+    for run in runs {
         if let Some(bad) = run.eval.iter().find(|p| !p.mean.is_finite()) {
             bail!(
                 "{}: eval.csv has a mean of {} at step {}; every evaluation's mean return must be a finite number",
@@ -294,10 +327,15 @@ pub fn report(dir: &Path, out_dir: &Path, sustain: usize) -> Result<ReportSummar
             );
         }
     }
-    std::fs::create_dir_all(out_dir)
-        .with_context(|| format!("cannot create {}", out_dir.display()))?;
-    notes.extend(sweep_completion_notes(dir)?);
-    for run in &runs {
+    Ok(())
+}
+
+/// The report's notes on the runs themselves: a summary whose steps to solve differ from its eval.csv's, and
+/// how many runs are of older numerics (stated even when none are: a reader learns that every number
+/// regenerates on their own CPU).
+fn run_notes(runs: &[RunRecord]) -> Vec<String> {
+    let mut notes = Vec::new();
+    for run in runs {
         let ours = stats::first_hit(&run.eval, run.solve_threshold, run.train_steps);
         if let Some(recorded) = run.summary.as_ref().map(|s| s.steps_to_solve as u64)
             && recorded != ours
@@ -315,7 +353,6 @@ pub fn report(dir: &Path, out_dir: &Path, sustain: usize) -> Result<ReportSummar
                 != Some(arld_core::math::NUMERICS)
         })
         .count();
-    // Stated even when none are: a reader learns that every number regenerates on their own CPU.
     notes.push(if older > 0 {
         format!(
             "{older} of {} runs were computed by an older arld with the C library's elementary functions (no \
@@ -332,9 +369,26 @@ pub fn report(dir: &Path, out_dir: &Path, sustain: usize) -> Result<ReportSummar
             arld_core::math::NUMERICS
         )
     });
-    let cells = super::verdict::cells(&runs, sustain);
+    notes
+}
+
+/// What [`write_tables`] wrote: the files, and the Markdown of Table 5 and of the verdict that `report.md` shows.
+struct Tables {
+    files: Vec<PathBuf>,
+    table_md: String,
+    verdict_md: String,
+}
+
+/// Writes Table 5 (`table.md`, `table.csv`), every evaluation (`evaluations.csv.gz`), the verdict and the effort
+/// benchmark into `out_dir`.
+fn write_tables(
+    runs: &[RunRecord],
+    cells: &[Cell],
+    out_dir: &Path,
+    sustain: usize,
+) -> Result<Tables> {
     let mut files = Vec::new();
-    let (table_md, table_csv) = table5(&cells)?;
+    let (table_md, table_csv) = table5(cells)?;
     let table_md_path = out_dir.join("table.md");
     write_atomic(&table_md_path, table_md.as_bytes())?;
     let table_csv_path = out_dir.join("table.csv");
@@ -344,20 +398,32 @@ pub fn report(dir: &Path, out_dir: &Path, sustain: usize) -> Result<ReportSummar
     let evaluations_path = out_dir.join(EVALUATIONS_FILE);
     write_atomic(
         &evaluations_path,
-        &super::pack::gzip(evaluations_csv(&runs).as_bytes())?,
+        &super::pack::gzip(evaluations_csv(runs).as_bytes())?,
     )?;
     files.push(evaluations_path);
-
-    let (verdict_files, verdict_md) = super::verdict::write_verdict(&cells, out_dir, sustain)?;
+    let (verdict_files, verdict_md) = super::verdict::write_verdict(cells, out_dir, sustain)?;
     files.extend(verdict_files);
     files.extend(
-        super::effort::write_effort(&runs, out_dir, sustain)
+        super::effort::write_effort(runs, out_dir, sustain)
             .context("cannot write the effort benchmark")?,
     );
+    Ok(Tables {
+        files,
+        table_md,
+        verdict_md,
+    })
+}
 
-    let figures = figures::paper_figures(&runs);
+/// Draws the paper's figures into `out_dir` (adding their files to `files`; a figure whose runs are absent is
+/// skipped with a note) and returns the lines of `report.md` that show them.
+fn draw_figures(
+    runs: &[RunRecord],
+    out_dir: &Path,
+    files: &mut Vec<PathBuf>,
+    notes: &mut Vec<String>,
+) -> Result<Vec<String>> {
     let mut figure_lines = Vec::new();
-    for figure in &figures {
+    for figure in &figures::paper_figures(runs) {
         match &figure.content {
             None => notes.push(format!(
                 "figure {} skipped: {}",
@@ -374,7 +440,20 @@ pub fn report(dir: &Path, out_dir: &Path, sustain: usize) -> Result<ReportSummar
             }
         }
     }
+    Ok(figure_lines)
+}
 
+/// The text of `report.md`: the counts, Table 5, every configuration, the verdict, the paper's expert
+/// statistics, the figures, the failed runs and the notes.
+fn report_markdown(
+    dir: &Path,
+    runs: &[RunRecord],
+    cells: &[Cell],
+    failed: &[(PathBuf, run_dir::Failure)],
+    tables: &Tables,
+    figure_lines: &[String],
+    notes: &[String],
+) -> Result<String> {
     let mut md = String::new();
     writeln!(md, "# Report for {}\n", dir.display())?;
     writeln!(
@@ -392,14 +471,15 @@ pub fn report(dir: &Path, out_dir: &Path, sustain: usize) -> Result<ReportSummar
     }
     writeln!(
         md,
-        "## Steps to solve (paper's Table 5 layout)\n\n{table_md}"
+        "## Steps to solve (paper's Table 5 layout)\n\n{}",
+        tables.table_md
     )?;
     writeln!(
         md,
         "## All configurations\n\n{}",
-        all_groups_markdown(&cells)
+        all_groups_markdown(cells)
     )?;
-    writeln!(md, "{verdict_md}")?;
+    writeln!(md, "{}", tables.verdict_md)?;
     writeln!(md, "## Expert statistics in the paper\n")?;
     writeln!(
         md,
@@ -422,33 +502,19 @@ pub fn report(dir: &Path, out_dir: &Path, sustain: usize) -> Result<ReportSummar
         md,
         "Median over seeds with the interquartile range shaded; dashed lines mark the solve threshold.\n"
     )?;
-    for line in &figure_lines {
+    for line in figure_lines {
         writeln!(md, "{line}")?;
     }
     if !failed.is_empty() {
-        md.push_str(&failed_runs_markdown(dir, &failed));
+        md.push_str(&failed_runs_markdown(dir, failed));
     }
     if !notes.is_empty() {
         writeln!(md, "## Notes\n")?;
-        for note in &notes {
+        for note in notes {
             writeln!(md, "- {note}")?;
         }
     }
-    let report_path = out_dir.join("report.md");
-    write_atomic(&report_path, md.as_bytes())?;
-    files.push(report_path);
-    files.extend(super::quote::render_documents(out_dir)?);
-    if !failed.is_empty() {
-        notes.push(format!(
-            "{} runs failed and are left out (listed with their errors in report.md)",
-            failed.len()
-        ));
-    }
-    Ok(ReportSummary {
-        runs: runs.len(),
-        files,
-        notes,
-    })
+    Ok(md)
 }
 
 /// The `Failed runs` section of `report.md`: each failed run below `root`, where it failed and the first line of

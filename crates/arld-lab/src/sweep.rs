@@ -639,6 +639,8 @@ pub fn run_sweep(
     run_sweep_inner(specs, dir, jobs, run_fn, true)
 }
 
+/// [`run_sweep`], with `results.csv` collected at the end when `collect` (a shard leaves that to the whole
+/// sweep): the runs still to do, the ones an identical finished run gives, then the rest on `jobs` threads.
 fn run_sweep_inner(
     specs: &[RunSpec],
     dir: &Path,
@@ -652,7 +654,35 @@ fn run_sweep_inner(
     }
     std::fs::create_dir_all(dir)
         .with_context(|| format!("cannot create sweep directory {}", dir.display()))?;
-    // A run with a summary whose files are damaged is run again, and said so (never silently left out).
+    let (mut pending, damaged) = pending_runs(specs, dir);
+    let already_complete = specs.len() - pending.len();
+    let reused = reuse_identical_runs(&mut pending, dir);
+    let bar = sweep_bar(specs.len(), already_complete);
+    let (completed, failures) = run_pending(&pending, dir, jobs, run_fn, &bar);
+    bar.finish_and_clear();
+    let collected = if collect {
+        collect_results(dir).map(|c| c.path)
+    } else {
+        Ok(dir.join(RESULTS_FILE))
+    };
+    refuse_failures(failures, specs.len(), &collected)?;
+    Ok(SweepOutcome {
+        total: specs.len(),
+        already_complete,
+        reused,
+        completed,
+        results_csv: collected?,
+        damaged,
+    })
+}
+
+/// The runs of `specs` still to do in `dir`, seed by seed (every configuration gets its first seeds early, so
+/// a partial sweep already reports on all), and the finished runs among them whose files are damaged (run
+/// again, and said so: never silently left out). A finished run of an older arld (stale) is run again too.
+fn pending_runs<'s>(
+    specs: &'s [RunSpec],
+    dir: &Path,
+) -> (Vec<&'s RunSpec>, Vec<(PathBuf, String)>) {
     let mut damaged = Vec::new();
     let mut stale = Vec::new();
     let mut pending: Vec<&RunSpec> = specs
@@ -687,7 +717,6 @@ fn run_sweep_inner(
             first.display(),
         );
     }
-    // Seed by seed: every configuration gets its first seeds early, so a partial sweep already reports on all.
     let mut seed_order: Vec<u64> = Vec::new();
     for spec in specs {
         if !seed_order.contains(&spec.id.seed) {
@@ -695,10 +724,13 @@ fn run_sweep_inner(
         }
     }
     pending.sort_by_key(|spec| seed_order.iter().position(|&s| s == spec.id.seed));
-    let already_complete = specs.len() - pending.len();
-    // A pending run whose resolved configuration equals a finished run's (a variant whose override is the
-    // default, such as `tq0.3` where 0.3 is the task's t_query) takes that run's files: runs are
-    // deterministic, so running it again would only write the same bytes.
+    (pending, damaged)
+}
+
+/// Takes out of `pending` each run whose resolved configuration equals a finished run's (a variant whose
+/// override is the default, such as `tq0.3` where 0.3 is the task's t_query): it takes that run's files, since
+/// runs are deterministic and running it again would only write the same bytes. Returns how many did.
+fn reuse_identical_runs(pending: &mut Vec<&RunSpec>, dir: &Path) -> usize {
     let mut reused = 0;
     pending.retain(|spec| {
         let path = dir.join(spec.dir_name());
@@ -734,18 +766,13 @@ fn run_sweep_inner(
             }
         }
     });
-    let jobs = if jobs == 0 {
-        std::thread::available_parallelism().map_or(1, |n| n.get())
-    } else {
-        jobs
-    };
-    let jobs = jobs.min(pending.len()).max(1);
+    reused
+}
 
+/// The sweep's overall progress bar (runs done of `total`, ETA), drawn only when stderr is a terminal.
+fn sweep_bar(total: usize, done: usize) -> ProgressBar {
     let bar = if std::io::stderr().is_terminal() {
-        ProgressBar::with_draw_target(
-            Some(specs.len() as u64),
-            ProgressDrawTarget::stderr_with_hz(2),
-        )
+        ProgressBar::with_draw_target(Some(total as u64), ProgressDrawTarget::stderr_with_hz(2))
     } else {
         ProgressBar::hidden()
     };
@@ -755,20 +782,34 @@ fn run_sweep_inner(
         )
         .expect("the progress template is valid"),
     );
-    bar.set_position(already_complete as u64);
+    bar.set_position(done as u64);
     bar.reset_eta();
+    bar
+}
 
+/// Runs the `pending` runs on `jobs` threads (0: one per available core), each taking the next run until none
+/// is left or a stop is asked (the runs in progress then snapshot themselves; no new run starts). A failing
+/// run does not stop the others. Returns how many finished and the failures, sorted by run directory.
+fn run_pending(
+    pending: &[&RunSpec],
+    dir: &Path,
+    jobs: usize,
+    run_fn: &RunFn,
+    bar: &ProgressBar,
+) -> (usize, Vec<RunFailure>) {
+    let jobs = if jobs == 0 {
+        std::thread::available_parallelism().map_or(1, |n| n.get())
+    } else {
+        jobs
+    };
+    let jobs = jobs.min(pending.len()).max(1);
     let next = AtomicUsize::new(0);
     let failures = Mutex::new(Vec::<RunFailure>::new());
     let completed = AtomicUsize::new(0);
     std::thread::scope(|scope| {
         for _ in 0..jobs {
             scope.spawn(|| {
-                loop {
-                    // Asked to stop: the runs in progress snapshot themselves; no new run starts.
-                    if arld_core::interrupt::requested() {
-                        break;
-                    }
+                while !arld_core::interrupt::requested() {
                     let index = next.fetch_add(1, Ordering::Relaxed);
                     let Some(spec) = pending.get(index) else {
                         break;
@@ -786,12 +827,9 @@ fn run_sweep_inner(
                             bar.suspend(|| {
                                 eprintln!("run {} failed: {}", run_dir.display(), failure.error)
                             });
-                            failures
-                                .lock()
-                                .unwrap_or_else(|e| e.into_inner())
-                                .push(failure);
-                            let failed = failures.lock().unwrap_or_else(|e| e.into_inner()).len();
-                            bar.set_message(format!("({failed} failed)"));
+                            let mut failures = failures.lock().unwrap_or_else(|e| e.into_inner());
+                            failures.push(failure);
+                            bar.set_message(format!("({} failed)", failures.len()));
                         }
                     }
                     bar.inc(1);
@@ -799,40 +837,35 @@ fn run_sweep_inner(
             });
         }
     });
-    bar.finish_and_clear();
-
-    let collected = if collect {
-        collect_results(dir).map(|c| c.path)
-    } else {
-        Ok(dir.join(RESULTS_FILE))
-    };
     let mut failures = failures.into_inner().unwrap_or_else(|e| e.into_inner());
     failures.sort_by(|a, b| a.run_dir.cmp(&b.run_dir));
-    if !failures.is_empty() {
-        let list: Vec<String> = failures
-            .iter()
-            .map(|f| format!("  {}: {}", f.run_dir.display(), f.error))
-            .collect();
-        let note = match &collected {
-            Ok(path) => format!("results of the complete runs are in {}", path.display()),
-            Err(err) => format!("results.csv could not be written either: {err:#}"),
-        };
-        bail!(
-            "{} of {} runs failed (rerun the same sweep to retry only those; {note}):\n{}",
-            failures.len(),
-            specs.len(),
-            list.join("\n")
-        );
+    (completed.into_inner(), failures)
+}
+
+/// The error naming every failed run of the sweep's `total` (rerunning the sweep retries only those), with
+/// where the complete runs' results are (`collected`); none when no run failed.
+fn refuse_failures(
+    failures: Vec<RunFailure>,
+    total: usize,
+    collected: &Result<PathBuf>,
+) -> Result<()> {
+    if failures.is_empty() {
+        return Ok(());
     }
-    let collected = collected?;
-    Ok(SweepOutcome {
-        total: specs.len(),
-        already_complete,
-        reused,
-        completed: completed.into_inner(),
-        results_csv: collected,
-        damaged,
-    })
+    let list: Vec<String> = failures
+        .iter()
+        .map(|f| format!("  {}: {}", f.run_dir.display(), f.error))
+        .collect();
+    let note = match collected {
+        Ok(path) => format!("results of the complete runs are in {}", path.display()),
+        Err(err) => format!("results.csv could not be written either: {err:#}"),
+    };
+    bail!(
+        "{} of {} runs failed (rerun the same sweep to retry only those; {note}):\n{}",
+        failures.len(),
+        total,
+        list.join("\n")
+    )
 }
 
 /// A finished run in the sweep directory, other than `spec`'s own, with the same environment, method, network

@@ -1,14 +1,14 @@
 //! What the actor-critic learners for actions in a box (TD3 in `td3.rs`, SAC in `sac.rs`) share: the interface a
 //! run drives them through (`ActorCriticLearner`; they learn from the replay's batches, [`Batch`]) and what an
-//! update measures ([`BoxUpdate`]); the one learner behind it ([`BoxLearner`]: the shared core and an
-//! [`Algorithm`]'s own part, TD3's or SAC's); the settings both have ([`ActorCriticConfig`]); what both hold
-//! ([`ActorCritic`]: the settings, the box, the actor, the critics, the generator and the per-sample buffers,
+//! update measures (`BoxUpdate`); the one learner behind it ([`BoxLearner`]: the shared core and an
+//! `Algorithm`'s own part, TD3's or SAC's); the settings both have ([`ActorCriticConfig`]); what both hold
+//! (`ActorCritic`: the settings, the box, the actor, the critics, the generator and the per-sample buffers,
 //! with the critics' regression towards the clipped double-Q target), the sizes their networks are built to
-//! ([`Sizes`]), the actor with its optimiser and buffers ([`Actor`]), the box itself ([`ActionBox`]: the map
+//! (`Sizes`), the actor with its optimiser and buffers (`Actor`), the box itself (`ActionBox`: the map
 //! between a tanh output in (-1, 1) and an action), the critic ensemble with its target and optimiser
-//! ([`Critics`]: K heads on a shared torso, the regression step that returns priorities, the gradient with
+//! (`Critics`: K heads on a shared torso, the regression step that returns priorities, the gradient with
 //! respect to the action, and the two uncertainties read from its heads), and the behaviour cloning loss with
-//! the Q-filter on demonstrated samples ([`behaviour_cloning`]; Nair et al. 2018).
+//! the Q-filter on demonstrated samples (`behaviour_cloning`; Nair et al. 2018).
 //!
 //! Every buffer is sized once for the largest batch, so an update allocates nothing.
 
@@ -176,7 +176,7 @@ impl ActorCriticConfig {
     /// The shared defaults with the learning rate `lr` for the actor and the critics: 256-256 networks, two
     /// heads, Polyak rate 0.005, batches of up to 256, no cloning (with the Q-filter when it is turned on) and
     /// no demonstration bonus.
-    pub fn with_learning_rate(lr: f32) -> Self {
+    pub(crate) fn with_learning_rate(lr: f32) -> Self {
         ActorCriticConfig {
             hidden: vec![256, 256],
             heads: 2,
@@ -200,7 +200,7 @@ impl ActorCriticConfig {
 
 /// What one actor-critic update measured.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct BoxUpdate {
+pub(crate) struct BoxUpdate {
     /// Mean over the batch and the heads of the weighted squared TD error.
     pub critic_loss: f32,
     /// The actor's loss without the cloning term, when the actor moved in this update (TD3: `-mean Q` of its
@@ -242,7 +242,7 @@ impl ActionBox {
     }
 
     /// Maps rows of tanh outputs to the box, in place.
-    pub fn to_box(&self, y: &mut [f32]) {
+    pub(crate) fn to_box(&self, y: &mut [f32]) {
         let dim = self.dim();
         for (i, v) in y.iter_mut().enumerate() {
             let d = i % dim;
@@ -251,7 +251,7 @@ impl ActionBox {
     }
 
     /// The tanh output of action value `a` in dimension `d` (the inverse of [`Self::to_box`]).
-    pub fn to_unit(&self, a: f32, d: usize) -> f32 {
+    pub(crate) fn to_unit(&self, a: f32, d: usize) -> f32 {
         (a - self.low[d]) / self.half[d] - 1.0
     }
 }
@@ -350,7 +350,7 @@ impl Persist for Critics {
     }
 }
 
-/// Offset of the probe actions of [`Critics::argmax_disagreement`] from the centre action, as a fraction of the
+/// Offset of the probe actions of `Critics::argmax_disagreement` from the centre action, as a fraction of the
 /// box's half-width.
 pub const PROBE_OFFSET: f32 = 0.5;
 
@@ -443,14 +443,14 @@ impl Critics {
 
     /// The loss gradient with respect to the heads of the last online [`Self::evaluate`] of `n` rows, to fill
     /// before [`Self::backward_to_actions`].
-    pub fn d_q(&mut self, n: usize) -> &mut [f32] {
+    pub(crate) fn d_q(&mut self, n: usize) -> &mut [f32] {
         &mut self.d_q[..n * self.heads]
     }
 
     /// Back-propagates [`Self::d_q`] through the last online evaluation of `n` rows: returns the input gradient,
     /// rows of `obs_dim + act_dim` values whose last `act_dim` are `dL/da` (the critic's own parameter gradients
     /// are computed and dropped).
-    pub fn backward_to_actions(&mut self, n: usize) -> &[f32] {
+    pub(crate) fn backward_to_actions(&mut self, n: usize) -> &[f32] {
         let width = self.obs_dim + self.act_dim;
         let d_input = &mut self.d_input[..n * width];
         self.net.backward(
@@ -463,7 +463,7 @@ impl Critics {
     }
 
     /// Moves the target towards the online network by Polyak averaging.
-    pub fn soft_update(&mut self, tau: f32) {
+    pub(crate) fn soft_update(&mut self, tau: f32) {
         self.target.soft_update(&self.net, tau);
     }
 
@@ -646,7 +646,7 @@ impl<R: Rng> ActorCritic<R> {
     /// `r + gamma^n (min(Q'_1, Q'_2)(s', a') - alpha log_probs)` at the next actions `next_actions` (`entropy`
     /// holds `(alpha, log_probs)`; without it the target has no entropy term), with `r`, `s'` and `gamma^n` of
     /// [`Batch::returns`]. Returns the loss; the new priorities are in `priorities`.
-    pub fn critic_step(
+    pub(crate) fn critic_step(
         &mut self,
         batch: &Batch<Vec<f32>>,
         gamma: f32,
@@ -676,7 +676,11 @@ impl<R: Rng> ActorCritic<R> {
 
     /// The critics' value of each demonstrated action of `batch` (`value` aggregates a row of the heads), into
     /// `q_demo`, for the Q-filter.
-    pub fn value_demonstrations(&mut self, batch: &Batch<Vec<f32>>, value: impl Fn(&[f32]) -> f32) {
+    pub(crate) fn value_demonstrations(
+        &mut self,
+        batch: &Batch<Vec<f32>>,
+        value: impl Fn(&[f32]) -> f32,
+    ) {
         let (n, k) = (batch.len(), self.critics.heads);
         let q = self
             .critics
@@ -688,7 +692,7 @@ impl<R: Rng> ActorCritic<R> {
 
     /// [`behaviour_cloning`] of the actor's tanh outputs `y` at `batch`, with the Q-filter of `q_demo` and
     /// `q_pi` when `filtering`.
-    pub fn behaviour_cloning(
+    pub(crate) fn behaviour_cloning(
         &self,
         weight: f32,
         batch: &Batch<Vec<f32>>,

@@ -154,7 +154,7 @@ impl TrainedActor {
 
     /// Reads an actor from the bytes of its file, checked as [`TrainedActor::load`] checks a file (`name` names
     /// it in errors).
-    pub fn from_bytes(bytes: &[u8], name: &str) -> Result<(Self, BTreeMap<String, String>)> {
+    pub(crate) fn from_bytes(bytes: &[u8], name: &str) -> Result<(Self, BTreeMap<String, String>)> {
         let what = || format!("the actor {name}");
         let (_, header) = safetensors::SafeTensors::read_metadata(bytes)
             .with_context(|| format!("{} is not a safetensors file", what()))?;

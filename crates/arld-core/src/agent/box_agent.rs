@@ -8,7 +8,7 @@
 //!   draw comes from the learner's generator, so the run's seed fixes the actions.
 //! - Uncertainty: the standard deviation of the critic heads at the action taken (`critic_spread`), computed
 //!   only when the query rule asks for it.
-//! - Risk (only with a risk critic, [`BoxAgent::with_risk_critic`], which a run adds when its query rule reads the
+//! - Risk (only with a risk critic, `BoxAgent::with_risk_critic`, which a run adds when its query rule reads the
 //!   risk): `1 - Q_R` at the action taken ([`super::risk`]); the critic takes one TD step on every batch, before
 //!   the learner's update, with the policy's test actions at the next observations.
 //! - Learning: the learner reads the replay batch as it is: the n-step return, its observation and `gamma^n`
@@ -85,7 +85,7 @@ impl BoxAgent {
 
     /// The agent with a risk critic of `config`, its weights drawn from a generator seeded with `seed` (a stream
     /// of its own, so that the learner's draws stay what they are without one).
-    pub fn with_risk_critic(mut self, config: RiskConfig, seed: u64) -> Self {
+    pub(crate) fn with_risk_critic(mut self, config: RiskConfig, seed: u64) -> Self {
         let critic = RiskCritic::new(config, self.obs_dim, self.low.len(), seed);
         self.risk = Some(critic);
         self

@@ -1,5 +1,5 @@
 //! [`Learner`]: what a run asks of an agent, whatever its family. The run loop (`train::run`) calls only this
-//! interface; the DQN family ([`super::Agent`]: plain, bootstrapped or noisy output) is its first
+//! interface; the DQN family ([`super::DqnAgent`]: plain, bootstrapped or noisy output) is its first
 //! implementation. An actor-critic family fits the same calls: it acts (with its own exploration), learns from
 //! a replay batch, gives a test-time action, the uncertainty signals its critics can give, and its state.
 

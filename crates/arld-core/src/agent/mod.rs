@@ -1,7 +1,7 @@
 //! The agent: acting (ε-greedy over one bootstrapped head or a noise sample), learning (double-DQN TD loss plus
 //! the large-margin loss on demonstrations, Adam) and the test-time policy (majority vote or mean weights).
 //!
-//! One [`Agent`] owns the online and target networks, the optimiser, and every buffer an update needs, so a
+//! One [`DqnAgent`] owns the online and target networks, the optimiser, and every buffer an update needs, so a
 //! steady-state step allocates nothing. Losses follow docs/algorithm.md §2–§5:
 //! `L = Σ_k mean_b w_b [ℓ(δ_kb) + λ·demo_b·L_E,kb]` with
 //! `δ_kb = Q_k(s_b, a_b) − (r_b + γ(1 − d_b) Q⁻_k(s'_b, argmax_a Q_k(s'_b, a)))` and
@@ -35,10 +35,10 @@ pub enum TdLoss {
     Huber,
 }
 
-/// Everything an [`Agent`] needs to know: its network's output stage and its learning settings. A run builds
-/// it from its configuration (`TrainConfig::agent_config`); an agent can be built and tested without one.
+/// Everything an [`DqnAgent`] needs to know: its network's output stage and its learning settings. A run builds
+/// it from its configuration (`TrainConfig::dqn_agent_config`); an agent can be built and tested without one.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct AgentConfig {
+pub struct DqnAgentConfig {
     /// Plain, K bootstrapped heads, or noisy output.
     pub output: OutputKind,
     /// Widths of the hidden layers, 1 to [`crate::nn::MAX_DEPTH`] of them (the paper's: 64 and 64).
@@ -75,7 +75,7 @@ pub struct UpdateStats {
 }
 
 /// A DQN-family agent with a plain, bootstrapped or noisy output stage.
-pub struct Agent {
+pub struct DqnAgent {
     online: QNet,
     target: QNet,
     adam: Adam,
@@ -111,16 +111,16 @@ pub struct Agent {
     lambda_n: f32,
 }
 
-impl Agent {
+impl DqnAgent {
     /// A freshly initialised agent for an environment with `obs_dim` inputs and `n_actions` actions.
-    pub fn new(cfg: &AgentConfig, obs_dim: usize, n_actions: usize, seed: u64) -> Self {
+    pub fn new(cfg: &DqnAgentConfig, obs_dim: usize, n_actions: usize, seed: u64) -> Self {
         let mut rng = Pcg64::seed_from_u64(seed);
         let online = QNet::with_hidden(obs_dim, n_actions, cfg.output, &cfg.hidden, &mut rng);
         Self::from_network(cfg, online, rng)
     }
 
     /// An agent that starts from given online weights (for example a loaded checkpoint).
-    pub fn from_network(cfg: &AgentConfig, online: QNet, mut rng: Pcg64) -> Self {
+    pub fn from_network(cfg: &DqnAgentConfig, online: QNet, mut rng: Pcg64) -> Self {
         let target = online.clone();
         let n_actions = online.n_actions();
         let features = online.features_len();
@@ -321,7 +321,7 @@ impl Agent {
     }
 
     /// Hard copy of the online weights into the target network.
-    pub fn sync_target(&mut self) {
+    pub(crate) fn sync_target(&mut self) {
         self.target.copy_from(&self.online);
     }
 
@@ -332,16 +332,16 @@ impl Agent {
 }
 
 /// The DQN family as a [`Learner`]: the methods above, and the batched test-time policy
-/// ([`test_policy_actions`]).
-impl Learner for Agent {
+/// (`test_policy_actions`).
+impl Learner for DqnAgent {
     type Action = usize;
 
     fn begin_episode(&mut self) {
-        Agent::begin_episode(self);
+        DqnAgent::begin_episode(self);
     }
 
     fn act(&mut self, obs: &[f32], epsilon: f64, want: Needs) -> (usize, Signals) {
-        Agent::act(self, obs, epsilon, want)
+        DqnAgent::act(self, obs, epsilon, want)
     }
 
     fn learn(&mut self, batch: &Batch) -> (UpdateStats, &[f32]) {
@@ -369,7 +369,7 @@ impl Learner for Agent {
     }
 }
 
-impl Persist for Agent {
+impl Persist for DqnAgent {
     /// Writes everything that changes while the agent learns and acts (online and target weights, Adam's
     /// moments and step, the generator, the active head, the noise samples) into `state` under `prefix`.
     /// Scratch buffers are left out: every use overwrites them.
@@ -389,7 +389,7 @@ impl Persist for Agent {
         }
     }
 
-    /// Reads what [`Agent::save_state`] wrote into an agent built with the same configuration.
+    /// Reads what [`DqnAgent::save_state`] wrote into an agent built with the same configuration.
     fn load_state(&mut self, prefix: &str, state: &StateDict<'_>) -> Result<(), StateError> {
         self.online.load_state(&format!("{prefix}.online"), state)?;
         self.target.load_state(&format!("{prefix}.target"), state)?;
@@ -451,7 +451,12 @@ pub fn test_policy_action(net: &QNet, q: &mut [f32], obs: &[f32]) -> usize {
 /// [`test_policy_action`] for `actions.len()` states at once (`obs` row-major), with one batched forward in
 /// `ws` (built for `net`, for at least that many rows). The forward computes every row exactly as the single
 /// state's forward does, so the actions are the same as [`test_policy_action`]'s one by one.
-pub fn test_policy_actions(net: &QNet, ws: &mut Workspace, obs: &[f32], actions: &mut [usize]) {
+pub(crate) fn test_policy_actions(
+    net: &QNet,
+    ws: &mut Workspace,
+    obs: &[f32],
+    actions: &mut [usize],
+) {
     let (n, a) = (actions.len(), net.n_actions());
     let q = net.forward(obs, n, None, ws);
     for (row, action) in actions.iter_mut().enumerate() {
@@ -494,7 +499,7 @@ fn vote<'q>(heads: usize, head: impl Fn(usize) -> &'q [f32]) -> usize {
 }
 
 /// Adds the gradient of the L2 regulariser `l2 · ‖θ‖²` (DQfD's λ3 term; 0 in the paper) to `grads`.
-pub fn add_l2_gradient(params: &[f32], grads: &mut [f32], l2: f32) {
+pub(crate) fn add_l2_gradient(params: &[f32], grads: &mut [f32], l2: f32) {
     for (g, &p) in grads.iter_mut().zip(params) {
         *g += 2.0 * l2 * p;
     }
@@ -502,7 +507,7 @@ pub fn add_l2_gradient(params: &[f32], grads: &mut [f32], l2: f32) {
 
 /// The constants of the loss.
 #[derive(Clone, Copy, Debug)]
-pub struct LossParams {
+pub(crate) struct LossParams {
     pub gamma: f32,
     pub loss: TdLoss,
     pub margin: f32,
@@ -513,7 +518,7 @@ pub struct LossParams {
 
 /// Network outputs for a batch, each laid out `[head][batch][action]`: Q(s, ·) under the online network,
 /// Q(s', ·) under the online network (for the double-Q argmax) and under the target network.
-pub struct Heads<'a> {
+pub(crate) struct Heads<'a> {
     pub q: &'a [f32],
     pub qn_online: &'a [f32],
     pub qn_target: &'a [f32],
@@ -528,7 +533,7 @@ pub struct Heads<'a> {
 /// `y_kb = r_b + γ(1 − d_b) Q⁻_k(s'_b, argmax_a Q_k(s'_b, a))` held constant. Writes `dL/dQ` into `dq` and the
 /// new priorities `mean_k |δ_kb|` into `abs_td`; returns the TD, margin and n-step parts of `L` (the n-step
 /// part, `λ1·ℓ(Q(s, a) − R_n − γ^n Q⁻(s_n, argmax Q(s_n)))`, only when `h.nstep` is given).
-pub fn double_dqn_loss(
+pub(crate) fn double_dqn_loss(
     p: &LossParams,
     batch: &Batch,
     h: Heads<'_>,
@@ -582,7 +587,7 @@ pub fn double_dqn_loss(
 }
 
 /// `max_a [q(a) + M·1(a ≠ a_E)] − q(a_E)` and the maximising action.
-pub fn margin_term(q: &[f32], expert_action: usize, margin: f32) -> (f32, usize) {
+pub(crate) fn margin_term(q: &[f32], expert_action: usize, margin: f32) -> (f32, usize) {
     let mut best = f32::NEG_INFINITY;
     let mut best_a = expert_action;
     for (i, &v) in q.iter().enumerate() {
@@ -760,7 +765,7 @@ mod tests {
         let next_obs: Vec<f32> = (0..b * d).map(|i| (i as f32 * 0.53).cos() * 2.0).collect();
         let mut differ = false;
         for double_q in [false, true] {
-            let cfg = AgentConfig {
+            let cfg = DqnAgentConfig {
                 output: OutputKind::Plain,
                 hidden: HiddenLayers::new(&[crate::nn::HIDDEN; 2]).unwrap(),
                 batch_size: b,
@@ -775,7 +780,7 @@ mod tests {
                 l2: 0.0,
                 exact_factorised_var: false,
             };
-            let mut agent = Agent::new(&cfg, d, a, 7);
+            let mut agent = DqnAgent::new(&cfg, d, a, 7);
             agent.target = QNet::new(d, a, OutputKind::Plain, &mut Pcg64::seed_from_u64(99));
             let mut batch = batch_of(
                 vec![0, 1, 2, 3],

@@ -24,7 +24,7 @@ use crate::task::Goal;
 
 /// A risk critic's settings.
 #[derive(Debug, Clone, PartialEq)]
-pub struct RiskConfig {
+pub(crate) struct RiskConfig {
     /// Hidden widths (the critics').
     pub hidden: Vec<usize>,
     pub lr: f32,
@@ -39,7 +39,7 @@ pub struct RiskConfig {
 }
 
 /// The risk critic: its network, target, optimiser and the buffers of an update.
-pub struct RiskCritic {
+pub(crate) struct RiskCritic {
     config: RiskConfig,
     net: Mlp,
     target: Mlp,

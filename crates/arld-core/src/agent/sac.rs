@@ -82,8 +82,8 @@ pub struct SacPart {
 pub type Sac = BoxLearner<SacPart>;
 
 /// The clip of the actor's log standard deviation (the authors' code).
-pub const LOG_STD_MIN: f32 = -20.0;
-pub const LOG_STD_MAX: f32 = 2.0;
+pub(crate) const LOG_STD_MIN: f32 = -20.0;
+pub(crate) const LOG_STD_MAX: f32 = 2.0;
 
 /// `log(2 pi) / 2`.
 const HALF_LOG_TWO_PI: f32 = 0.918_938_5;

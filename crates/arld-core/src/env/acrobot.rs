@@ -155,7 +155,7 @@ impl ClassicTask<4> for AcrobotPhysics {
 /// Torque on the elbow against the first link's angular velocity: the second link then swings the other way,
 /// which pumps energy into the first link's swing until the tip clears the bar (about 75 steps).
 /// Observation: [cos th1, sin th1, cos th2, sin th2, dth1, dth2]; actions: torque -1, 0, +1.
-pub fn pump(obs: &[f32]) -> usize {
+pub(crate) fn pump(obs: &[f32]) -> usize {
     if obs[4] > 0.0 { 0 } else { 2 }
 }
 

@@ -103,7 +103,7 @@ impl ClassicTask<4> for CartPolePhysics {
 
 /// Push the cart towards where the pole is falling, with a little position and velocity feedback to keep the
 /// cart near the centre. Observation: [x, x_dot, theta, theta_dot].
-pub fn balance(obs: &[f32]) -> usize {
+pub(crate) fn balance(obs: &[f32]) -> usize {
     let u = 0.1 * obs[0] + 0.5 * obs[1] + 10.0 * obs[2] + 2.0 * obs[3];
     usize::from(u > 0.0)
 }

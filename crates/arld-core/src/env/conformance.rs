@@ -35,19 +35,19 @@ pub struct Tolerance {
 
 impl Tolerance {
     /// Classic control is float64 arithmetic in the same order as Gymnasium: 1e-6 on everything, no divergence.
-    pub const CLASSIC_CONTROL: Tolerance = Tolerance {
+    pub(crate) const CLASSIC_CONTROL: Tolerance = Tolerance {
         abs: 1e-6,
         heuristic_divergence_allowed: 0.0,
     };
     /// Box2D runs in float32 and long episodes are chaotic: 1e-4, and up to 10% of the long heuristic
     /// episodes may drift away (conformance README).
-    pub const BOX2D: Tolerance = Tolerance {
+    pub(crate) const BOX2D: Tolerance = Tolerance {
         abs: 1e-4,
         heuristic_divergence_allowed: 0.1,
     };
 
     /// The tolerance that applies to an environment id.
-    pub fn for_env(id: &str) -> Tolerance {
+    pub(crate) fn for_env(id: &str) -> Tolerance {
         if id.starts_with("LunarLander") {
             Self::BOX2D
         } else {
@@ -176,29 +176,37 @@ pub enum ConformanceError {
 #[serde(tag = "kind", rename_all = "lowercase")]
 enum TraceLine {
     Meta {},
-    Start {
-        env: String,
-        case: String,
-        seed: u64,
-        /// Discrete actions: their number.
-        n_actions: Option<usize>,
-        /// Actions in a box: the dimension and bounds.
-        action_dim: Option<usize>,
-        action_low: Option<Vec<f32>>,
-        action_high: Option<Vec<f32>>,
-        max_episode_steps: usize,
-        obs: Vec<f64>,
-        state: Option<Vec<f64>>,
-    },
-    Step {
-        env: String,
-        t: usize,
-        action: TraceAction,
-        obs: Vec<f64>,
-        reward: f64,
-        terminated: bool,
-        truncated: bool,
-    },
+    Start(StartLine),
+    Step(StepLine),
+}
+
+/// The start of an episode in a trace: how the environment was reset, and the first observation.
+#[derive(Debug, Deserialize)]
+struct StartLine {
+    env: String,
+    case: String,
+    seed: u64,
+    /// Discrete actions: their number.
+    n_actions: Option<usize>,
+    /// Actions in a box: the dimension and bounds.
+    action_dim: Option<usize>,
+    action_low: Option<Vec<f32>>,
+    action_high: Option<Vec<f32>>,
+    max_episode_steps: usize,
+    obs: Vec<f64>,
+    state: Option<Vec<f64>>,
+}
+
+/// One step of an episode in a trace: the action and what the environment gave back.
+#[derive(Debug, Deserialize)]
+struct StepLine {
+    env: String,
+    t: usize,
+    action: TraceAction,
+    obs: Vec<f64>,
+    reward: f64,
+    terminated: bool,
+    truncated: bool,
 }
 
 /// A recorded action: an index (discrete actions) or a float32 vector (a box).
@@ -345,7 +353,7 @@ struct Episode {
 
 /// The longest line of a trace file (a step line is a few hundred bytes; a start line with a recorded state a
 /// few kilobytes).
-pub const MAX_LINE_BYTES: usize = 1 << 20;
+pub(crate) const MAX_LINE_BYTES: usize = 1 << 20;
 
 /// Replays a trace file. See [`check_reader`].
 pub fn check_file(path: &Path) -> Result<Vec<EnvReport>, ConformanceError> {
@@ -361,24 +369,15 @@ pub fn check_file(path: &Path) -> Result<Vec<EnvReport>, ConformanceError> {
 /// Replays a trace streamed from `reader` (`file_name` is used in messages) against the registered
 /// environments; returns one report per environment in order of first appearance.
 pub fn check_reader(
-    reader: impl BufRead,
+    mut reader: impl BufRead,
     file_name: &str,
 ) -> Result<Vec<EnvReport>, ConformanceError> {
-    let mut envs: HashMap<String, Replayed> = HashMap::new();
-    let mut reports: Vec<EnvReport> = Vec::new();
-    let mut episode: Option<Episode> = None;
-    let malformed = |line: usize, msg: String| ConformanceError::Malformed {
-        file: file_name.to_string(),
-        line,
-        msg,
+    let mut replay = Replay {
+        file_name,
+        envs: HashMap::new(),
+        reports: Vec::new(),
+        episode: None,
     };
-    let env_error = |line: usize, error: EnvError| ConformanceError::Env {
-        file: file_name.to_string(),
-        line,
-        error,
-    };
-
-    let mut reader = reader;
     let mut bytes = Vec::new();
     for index in 0.. {
         let line = index + 1;
@@ -391,148 +390,173 @@ pub fn check_reader(
         if !more {
             break;
         }
-        let text = std::str::from_utf8(&bytes).map_err(|_| malformed(line, "not UTF-8".into()))?;
+        let text = std::str::from_utf8(&bytes)
+            .map_err(|_| malformed(file_name, line, "not UTF-8".into()))?;
         if text.trim().is_empty() {
             continue;
         }
-        let parsed: TraceLine =
-            serde_json::from_str(text).map_err(|err| malformed(line, err.to_string()))?;
+        let parsed: TraceLine = serde_json::from_str(text)
+            .map_err(|err| malformed(file_name, line, err.to_string()))?;
         match parsed {
             TraceLine::Meta {} => {}
-            TraceLine::Start {
-                env: env_id,
-                case,
-                seed,
-                n_actions,
-                action_dim,
-                action_low,
-                action_high,
-                max_episode_steps,
-                obs,
-                state,
-            } => {
-                if let Some(done) = episode.take() {
-                    finish_episode(&mut reports, done);
-                }
-                if !envs.contains_key(&env_id) {
-                    let built = Replayed::make(&env_id).map_err(|err| env_error(line, err))?;
-                    envs.insert(env_id.clone(), built);
-                    reports.push(EnvReport::new(&env_id));
-                }
-                let env = envs.get_mut(&env_id).expect("inserted above");
-                let bounds = (action_dim, action_low.as_deref(), action_high.as_deref());
-                env.check_start(n_actions, bounds, max_episode_steps)
-                    .map_err(|msg| malformed(line, msg))?;
-                let first_obs = match case.as_str() {
-                    "seed" | "heuristic" => env.reset(seed),
-                    "set" => {
-                        let state = state.ok_or_else(|| {
-                            malformed(line, "a `set` start line needs a `state`".into())
-                        })?;
-                        // Gymnasium: reset(seed=0), then the state is overwritten.
-                        env.reset(0);
-                        env.set_state(&state).map_err(|err| env_error(line, err))?
-                    }
-                    other => {
-                        return Err(malformed(
-                            line,
-                            format!("unknown case '{other}' (expected seed, set or heuristic)"),
-                        ));
-                    }
-                };
-                let report = report_for(&mut reports, &env_id);
-                let mut current = Episode {
-                    env: env_id,
-                    case,
-                    seed,
-                    index: report.episodes,
-                    t: 0,
-                    ended: false,
-                    diverged: false,
-                    exact: true,
-                };
-                report.episodes += 1;
-                compare_obs(report, &mut current, line, &first_obs, &obs)
-                    .map_err(|msg| malformed(line, msg))?;
-                episode = Some(current);
-            }
-            TraceLine::Step {
-                env: env_id,
-                t,
-                action,
-                obs,
-                reward,
-                terminated,
-                truncated,
-            } => {
-                let current = episode
-                    .as_mut()
-                    .ok_or_else(|| malformed(line, "step line before any start line".into()))?;
-                if env_id != current.env {
-                    return Err(malformed(
-                        line,
-                        format!("step of {env_id} inside an episode of {}", current.env),
-                    ));
-                }
-                if t != current.t + 1 {
-                    return Err(malformed(
-                        line,
-                        format!("step t={t} follows t={}", current.t),
-                    ));
-                }
-                current.t = t;
-                let env = envs.get_mut(&env_id).expect("created at start");
-                env.check_action(&action).map_err(|problem| match problem {
-                    Ok(msg) => malformed(line, msg),
-                    Err(err) => env_error(line, err),
-                })?;
-                let report = report_for(&mut reports, &env_id);
-                if current.ended {
-                    continue;
-                }
-                let step = match env.step(&action) {
-                    Ok(step) => step,
-                    Err(err) => return Err(env_error(line, err)),
-                };
-                report.steps += 1;
-                compare_obs(report, current, line, &step.obs, &obs)
-                    .map_err(|msg| malformed(line, msg))?;
-                let reward_deviation = (step.reward - reward).abs();
-                report.max_reward_deviation = report.max_reward_deviation.max(reward_deviation);
-                if step.reward != reward {
-                    current.exact = false;
-                }
-                if reward_deviation > report.tolerance.abs || reward_deviation.is_nan() {
-                    diverge(
-                        report,
-                        current,
-                        line,
-                        format!("reward {} vs {reward}", step.reward),
-                    );
-                }
-                if (step.terminated, step.truncated) != (terminated, truncated) {
-                    current.exact = false;
-                    diverge(
-                        report,
-                        current,
-                        line,
-                        format!(
-                            "terminated/truncated {}/{} vs {terminated}/{truncated}",
-                            step.terminated, step.truncated
-                        ),
-                    );
-                }
-                if (step.terminated || step.truncated) && !(terminated || truncated) {
-                    // Our episode is over, the trace's is not: the rest of it cannot be replayed.
-                    current.ended = true;
-                }
-            }
+            TraceLine::Start(start) => replay.start(line, start)?,
+            TraceLine::Step(step) => replay.step(line, step)?,
         }
     }
-    if let Some(done) = episode.take() {
-        finish_episode(&mut reports, done);
+    if let Some(done) = replay.episode.take() {
+        finish_episode(&mut replay.reports, done);
     }
-    Ok(reports)
+    Ok(replay.reports)
+}
+
+/// A trace being replayed: the environments it names, a report for each, and the episode under way.
+struct Replay<'f> {
+    file_name: &'f str,
+    envs: HashMap<String, Replayed>,
+    reports: Vec<EnvReport>,
+    episode: Option<Episode>,
+}
+
+/// The error of a line of the trace `file` that is not what a trace holds.
+fn malformed(file: &str, line: usize, msg: String) -> ConformanceError {
+    ConformanceError::Malformed {
+        file: file.to_string(),
+        line,
+        msg,
+    }
+}
+
+/// The error of our environment at a line of the trace `file`.
+fn env_failed(file: &str, line: usize, error: EnvError) -> ConformanceError {
+    ConformanceError::Env {
+        file: file.to_string(),
+        line,
+        error,
+    }
+}
+
+impl Replay<'_> {
+    /// A start line: ends the episode under way, resets (or sets) the environment as the trace did and compares
+    /// the first observation.
+    fn start(&mut self, line: usize, start: StartLine) -> Result<(), ConformanceError> {
+        let env_id = start.env;
+        let file = self.file_name;
+        let malformed = |msg| malformed(file, line, msg);
+        if let Some(done) = self.episode.take() {
+            finish_episode(&mut self.reports, done);
+        }
+        if !self.envs.contains_key(&env_id) {
+            let built = Replayed::make(&env_id).map_err(|err| env_failed(file, line, err))?;
+            self.envs.insert(env_id.clone(), built);
+            self.reports.push(EnvReport::new(&env_id));
+        }
+        let env = self.envs.get_mut(&env_id).expect("inserted above");
+        let bounds = (
+            start.action_dim,
+            start.action_low.as_deref(),
+            start.action_high.as_deref(),
+        );
+        env.check_start(start.n_actions, bounds, start.max_episode_steps)
+            .map_err(malformed)?;
+        let first_obs = match start.case.as_str() {
+            "seed" | "heuristic" => env.reset(start.seed),
+            "set" => {
+                let state = start
+                    .state
+                    .ok_or_else(|| malformed("a `set` start line needs a `state`".into()))?;
+                // Gymnasium: reset(seed=0), then the state is overwritten.
+                env.reset(0);
+                env.set_state(&state)
+                    .map_err(|err| env_failed(file, line, err))?
+            }
+            other => {
+                return Err(malformed(format!(
+                    "unknown case '{other}' (expected seed, set or heuristic)"
+                )));
+            }
+        };
+        let report = report_for(&mut self.reports, &env_id);
+        let mut current = Episode {
+            env: env_id,
+            case: start.case,
+            seed: start.seed,
+            index: report.episodes,
+            t: 0,
+            ended: false,
+            diverged: false,
+            exact: true,
+        };
+        report.episodes += 1;
+        compare_obs(report, &mut current, line, &first_obs, &start.obs).map_err(malformed)?;
+        self.episode = Some(current);
+        Ok(())
+    }
+
+    /// A step line: steps the environment with the recorded action and compares what it gives back (nothing
+    /// more once our episode ended before the trace's).
+    fn step(&mut self, line: usize, step_line: StepLine) -> Result<(), ConformanceError> {
+        let (t, action, reward) = (step_line.t, &step_line.action, step_line.reward);
+        let file = self.file_name;
+        let malformed = |msg| malformed(file, line, msg);
+        let env_error = |err| env_failed(file, line, err);
+        let current = self
+            .episode
+            .as_mut()
+            .ok_or_else(|| malformed("step line before any start line".into()))?;
+        if step_line.env != current.env {
+            return Err(malformed(format!(
+                "step of {} inside an episode of {}",
+                step_line.env, current.env
+            )));
+        }
+        if t != current.t + 1 {
+            return Err(malformed(format!("step t={t} follows t={}", current.t)));
+        }
+        current.t = t;
+        let env = self.envs.get_mut(&current.env).expect("created at start");
+        env.check_action(action).map_err(|problem| match problem {
+            Ok(msg) => malformed(msg),
+            Err(err) => env_error(err),
+        })?;
+        let report = report_for(&mut self.reports, &current.env);
+        if current.ended {
+            return Ok(());
+        }
+        let step = env.step(action).map_err(env_error)?;
+        report.steps += 1;
+        compare_obs(report, current, line, &step.obs, &step_line.obs).map_err(malformed)?;
+        let reward_deviation = (step.reward - reward).abs();
+        report.max_reward_deviation = report.max_reward_deviation.max(reward_deviation);
+        if step.reward != reward {
+            current.exact = false;
+        }
+        if reward_deviation > report.tolerance.abs || reward_deviation.is_nan() {
+            diverge(
+                report,
+                current,
+                line,
+                format!("reward {} vs {reward}", step.reward),
+            );
+        }
+        let (terminated, truncated) = (step_line.terminated, step_line.truncated);
+        if (step.terminated, step.truncated) != (terminated, truncated) {
+            current.exact = false;
+            diverge(
+                report,
+                current,
+                line,
+                format!(
+                    "terminated/truncated {}/{} vs {terminated}/{truncated}",
+                    step.terminated, step.truncated
+                ),
+            );
+        }
+        if (step.terminated || step.truncated) && !(terminated || truncated) {
+            // Our episode is over, the trace's is not: the rest of it cannot be replayed.
+            current.ended = true;
+        }
+        Ok(())
+    }
 }
 
 fn report_for<'a>(reports: &'a mut [EnvReport], env: &str) -> &'a mut EnvReport {

@@ -14,7 +14,7 @@ use crate::rng::NumpyRng;
 use crate::task::{Action, Goal};
 
 /// The registered facts of every continuous-action task (each one's entry in the task registry points here).
-pub static CONTINUOUS_SPECS: [BoxSpec; 3] = [
+pub(crate) static CONTINUOUS_SPECS: [BoxSpec; 3] = [
     BoxSpec {
         id: "Pendulum-v1",
         obs_dim: 3,
@@ -75,7 +75,7 @@ pub trait ContinuousDynamics: Send {
 }
 
 /// An episodic task with a box of float32 actions: a task's physics, its reset generator and its time limit
-/// ([`Simulated::with_spec`] of the task's spec and physics; the registry, [`super::make_continuous`], pairs them).
+/// (`Simulated::with_spec` of the task's spec and physics; the registry, [`super::make_continuous`], pairs them).
 pub type ContinuousEnv = Simulated<Box<dyn ContinuousDynamics>>;
 
 impl Physics for Box<dyn ContinuousDynamics> {

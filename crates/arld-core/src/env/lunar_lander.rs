@@ -15,7 +15,7 @@
 //! - [`LunarLander`]: the [`Env`] implementation: NumPy-exact random draws (terrain, initial push,
 //!   engine dispersion), engine impulses, observation normalisation, reward shaping, the time limit.
 //! - [`LunarLanderContinuous`]: the same world with continuous engines, for [`super::continuous::ContinuousEnv`];
-//!   [`Engines`] reads either kind of action as Gymnasium does.
+//!   `Engines` reads either kind of action as Gymnasium does.
 //! - [`heuristic_action`] and [`heuristic_throttle`]: Gymnasium's built-in heuristic controller (discrete and
 //!   continuous), used as the scripted expert.
 //!
@@ -36,7 +36,7 @@ use crate::rng::NumpyRng;
 const FPS: f64 = 50.0;
 const SCALE: f64 = 30.0;
 /// Gymnasium's default gravity (m/s², vertical).
-pub const DEFAULT_GRAVITY: f32 = -10.0;
+pub(crate) const DEFAULT_GRAVITY: f32 = -10.0;
 const MAIN_ENGINE_POWER: f64 = 13.0;
 const SIDE_ENGINE_POWER: f64 = 0.6;
 /// Bound of the random force applied to the lander at the start (newtons).
@@ -433,7 +433,7 @@ fn shaping(s: &[f64; OBS_DIM]) -> f64 {
 /// The engines one step fires: the main engine's and the side engines' throttles (Gymnasium's `m_power` and
 /// `s_power`, 0 when an engine is off) and the side engines' direction (-1 left, +1 right).
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Engines {
+pub(crate) struct Engines {
     main: f64,
     side: f64,
     direction: f64,
@@ -616,7 +616,7 @@ impl LunarLanderPhysics {
 
 /// Gymnasium's LunarLander with continuous engines (`LunarLanderContinuous-v3`, that is
 /// `gym.make("LunarLander-v3", continuous=True)`): the same world, an action `[main, lateral]` in [-1, 1]²
-/// (see [`Engines::continuous`]).
+/// (see `Engines::continuous`).
 pub struct LunarLanderContinuous(LunarLanderPhysics);
 
 impl Default for LunarLanderContinuous {

@@ -20,7 +20,7 @@ pub mod classic;
 pub mod conformance;
 pub mod continuous;
 pub mod lunar_lander;
-pub mod mountain_car;
+pub(crate) mod mountain_car;
 pub mod mountain_car_continuous;
 pub mod pendulum;
 pub mod registry;
@@ -740,7 +740,7 @@ pub struct Simulated<P: Physics> {
 
 impl<P: Physics> Simulated<P> {
     /// The task `spec` with `physics`.
-    pub fn with_spec(spec: &'static <P::Action as Action>::Spec, physics: P) -> Self {
+    pub(crate) fn with_spec(spec: &'static <P::Action as Action>::Spec, physics: P) -> Self {
         Simulated {
             spec,
             rng: EnvRng::default(),
@@ -757,7 +757,7 @@ impl<P: Physics> Simulated<P> {
 
 impl<D: Dynamics> Simulated<D> {
     /// The registered environment `id` with `physics`; panics if `id` is not registered (built-in ids are).
-    pub fn with_physics(id: &str, physics: D) -> Self {
+    pub(crate) fn with_physics(id: &str, physics: D) -> Self {
         Simulated::with_spec(spec(id).unwrap_or_else(|err| panic!("{err}")), physics)
     }
 }
@@ -844,7 +844,7 @@ impl EnvRng {
     }
 
     /// Applies the reset seed and returns the generator to draw the initial state from.
-    pub fn reseed(&mut self, seed: Option<u64>) -> &mut NumpyRng {
+    pub(crate) fn reseed(&mut self, seed: Option<u64>) -> &mut NumpyRng {
         match seed {
             Some(seed) => self.rng.insert(NumpyRng::new(seed)),
             None => self.rng.get_or_insert_with(NumpyRng::from_entropy),
@@ -880,7 +880,7 @@ impl EpisodeClock {
 
     /// Checks that a step may run now (an episode is running).
     #[inline]
-    pub fn check_running(&self) -> Result<(), EnvError> {
+    pub(crate) fn check_running(&self) -> Result<(), EnvError> {
         if self.running {
             Ok(())
         } else {
@@ -892,7 +892,7 @@ impl EpisodeClock {
     /// when `elapsed >= max_episode_steps` (as `TimeLimit` does). After a terminal or truncated step the episode
     /// needs a reset.
     #[inline]
-    pub fn finish_step(&mut self, reward: f64, terminated: bool) -> Outcome {
+    pub(crate) fn finish_step(&mut self, reward: f64, terminated: bool) -> Outcome {
         self.elapsed_steps += 1;
         let truncated = self.elapsed_steps >= self.max_episode_steps;
         if terminated || truncated {

@@ -86,7 +86,7 @@ pub(super) fn geometry(position: f64, goal: f64, force: Option<f64>) -> super::G
 }
 
 /// Accelerate in the direction of motion. Observation: [position, velocity]; actions: 0 left, 1 none, 2 right.
-pub fn push_with_motion(obs: &[f32]) -> usize {
+pub(crate) fn push_with_motion(obs: &[f32]) -> usize {
     if obs[1] >= 0.0 { 2 } else { 0 }
 }
 

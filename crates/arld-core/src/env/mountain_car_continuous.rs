@@ -7,7 +7,7 @@
 //! Gymnasium computes one step in Python on NumPy scalars, and the types change along the episode: the state is a
 //! float64 array after reset but a float32 array after every step, and a float32 action's products with Python
 //! numbers stay float32 (NumPy 2's rule: a Python float is cast to the other operand's type). So each value here
-//! carries the type NumPy gives it ([`Scalar`]), and each operation rounds as NumPy's would.
+//! carries the type NumPy gives it (`Scalar`), and each operation rounds as NumPy's would.
 
 use super::continuous::{ContinuousDynamics, state_of_len};
 // The valley, the speed limit and the goal velocity of MountainCar-v0.

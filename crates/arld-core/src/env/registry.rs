@@ -76,7 +76,7 @@ pub struct Task {
 
 impl Task {
     /// Whether the task's actions are in a box.
-    pub fn is_box(&self) -> bool {
+    pub(crate) fn is_box(&self) -> bool {
         matches!(self.body, Body::Box { .. })
     }
 

@@ -5,7 +5,7 @@
 //! control for `segment_len` consecutive steps (the paper's "five consecutive expert demonstrations"), cut short
 //! by the end of the episode or of the budget. The rule is only consulted when the agent is about to act, never
 //! during expert control, and not once the budget is spent. A person may also take over unasked
-//! ([`QueryController::open_segment_by_person`]): that segment is charged exactly like a query's, but the rule
+//! (`QueryController::open_segment_by_person`): that segment is charged exactly like a query's, but the rule
 //! does not see it (no decision, no statistics) and it lasts until the person hands back, the episode ends or
 //! the budget is spent.
 //!
@@ -81,7 +81,7 @@ pub struct QueryController {
     rule: Box<dyn QueryRule>,
     budget: usize,
     unit: BudgetUnit,
-    budget_used: usize,
+    transitions_used: usize,
     segment_len: usize,
     /// Expert steps left in the current segment; the expert is in control while this is positive.
     segment_left: usize,
@@ -108,7 +108,7 @@ impl QueryController {
             rule,
             budget,
             unit: BudgetUnit::Transitions,
-            budget_used: 0,
+            transitions_used: 0,
             segment_len,
             segment_left: 0,
             queries: 0,
@@ -133,7 +133,7 @@ impl QueryController {
 
     /// The signals the next [`decide`](Self::decide) will read: the rule's, while the agent is about to act and
     /// budget is left; nothing otherwise, so the caller may skip computing them.
-    pub fn signals_wanted_now(&self) -> Needs {
+    pub(crate) fn signals_wanted_now(&self) -> Needs {
         if !self.expert_in_control() && self.budget_left() > 0 {
             self.needs()
         } else {
@@ -205,7 +205,7 @@ impl QueryController {
     ///
     /// # Panics
     /// Programming errors in the caller: calling this during expert control or with no budget left.
-    pub fn open_segment_by_person(&mut self) -> usize {
+    pub(crate) fn open_segment_by_person(&mut self) -> usize {
         assert!(
             !self.expert_in_control(),
             "open_segment_by_person called during expert control"
@@ -226,13 +226,13 @@ impl QueryController {
     ///
     /// # Panics
     /// If the expert is not in control (a caller bug: the budget would be spent outside a query).
-    pub fn record_expert_step(&mut self) {
+    pub(crate) fn record_expert_step(&mut self) {
         assert!(
             self.expert_in_control(),
             "record_expert_step called while the agent is in control"
         );
         self.segment_left -= 1;
-        self.budget_used += 1;
+        self.transitions_used += 1;
     }
 
     /// Ends the current segment, if any (expert control never crosses an episode boundary), and tells the rule.
@@ -248,7 +248,7 @@ impl QueryController {
     }
 
     /// Expert steps left in the running segment (0 while the agent is in control).
-    pub fn segment_left(&self) -> usize {
+    pub(crate) fn segment_left(&self) -> usize {
         self.segment_left
     }
 
@@ -262,16 +262,17 @@ impl QueryController {
         self.unit
     }
 
-    /// Demonstrated transitions so far.
-    pub fn budget_used(&self) -> usize {
-        self.budget_used
+    /// Demonstrated transitions the expert gave so far, whatever the budget's unit ([`Self::budget_spent`]: in
+    /// its unit).
+    pub fn transitions_used(&self) -> usize {
+        self.transitions_used
     }
 
     /// Budget spent, in its unit: demonstrated transitions, or queries asked (a query nobody answered included)
     /// and takeovers.
     pub fn budget_spent(&self) -> usize {
         match self.unit {
-            BudgetUnit::Transitions => self.budget_used,
+            BudgetUnit::Transitions => self.transitions_used,
             BudgetUnit::Queries => self.queries + self.takeovers,
         }
     }
@@ -287,7 +288,7 @@ impl QueryController {
         self.queries
     }
 
-    /// Number of segments a person opened unasked ([`Self::open_segment_by_person`]).
+    /// Number of segments a person opened unasked (`Self::open_segment_by_person`).
     pub fn takeovers(&self) -> usize {
         self.takeovers
     }
@@ -303,7 +304,7 @@ impl Persist for QueryController {
     /// queries (and takeovers, once there were any: a run without them writes what it always did), and the
     /// rule's own state (the adaptive rule's window, under `{prefix}.window` as before rules were an interface).
     fn save_state<'a>(&'a self, prefix: &str, state: &mut StateDict<'a>) {
-        let mut counters = vec![self.budget_used, self.segment_left, self.queries];
+        let mut counters = vec![self.transitions_used, self.segment_left, self.queries];
         if self.takeovers > 0 {
             counters.push(self.takeovers);
         }
@@ -315,7 +316,7 @@ impl Persist for QueryController {
     fn load_state(&mut self, prefix: &str, state: &StateDict<'_>) -> Result<(), StateError> {
         let name = format!("{prefix}.counters");
         let counters: Vec<usize> = state.value(&name)?;
-        let (budget_used, segment_left, queries, takeovers) = match counters[..] {
+        let (transitions_used, segment_left, queries, takeovers) = match counters[..] {
             [b, s, q] => (b, s, q, 0),
             [b, s, q, t] => (b, s, q, t),
             _ => {
@@ -326,11 +327,11 @@ impl Persist for QueryController {
             }
         };
         (
-            self.budget_used,
+            self.transitions_used,
             self.segment_left,
             self.queries,
             self.takeovers,
-        ) = (budget_used, segment_left, queries, takeovers);
+        ) = (transitions_used, segment_left, queries, takeovers);
         self.rule.load_state(prefix, state)
     }
 }
@@ -510,8 +511,8 @@ mod tests {
             let episodes = simulate(&mut controller, &episode_lengths, &mut rng);
 
             let expert_steps = episodes.iter().flatten().filter(|a| **a != Actor::Agent).count();
-            prop_assert!(controller.budget_used() <= budget);
-            prop_assert_eq!(controller.budget_used(), expert_steps);
+            prop_assert!(controller.transitions_used() <= budget);
+            prop_assert_eq!(controller.transitions_used(), expert_steps);
             prop_assert_eq!(controller.budget_left(), budget - expert_steps);
 
             // Per query: at most segment_len steps, consecutive, within one episode, and a full segment unless
@@ -563,13 +564,19 @@ mod tests {
         assert_eq!(controller.segment_left(), 5);
         controller.withdraw();
         assert!(!controller.expert_in_control());
-        assert_eq!((controller.budget_used(), controller.queries()), (0, 1));
+        assert_eq!(
+            (controller.transitions_used(), controller.queries()),
+            (0, 1)
+        );
         // Withdrawn mid-segment: the steps already taken stay charged.
         assert!(decide_with(&mut controller, None, &mut rng).query);
         controller.record_expert_step();
         controller.record_expert_step();
         controller.withdraw();
-        assert_eq!((controller.budget_used(), controller.budget_left()), (2, 8));
+        assert_eq!(
+            (controller.transitions_used(), controller.budget_left()),
+            (2, 8)
+        );
     }
 
     #[test]
@@ -588,7 +595,7 @@ mod tests {
         // Four transitions charged (12 - 4 left), no query of the rule, one takeover.
         assert_eq!(
             (
-                controller.budget_used(),
+                controller.transitions_used(),
                 controller.budget_left(),
                 controller.queries(),
                 controller.takeovers()
@@ -603,7 +610,7 @@ mod tests {
         let mut back =
             QueryController::new(rule("adaptive(n_r=10000,t_query=0.5)"), 12, 5).unwrap();
         back.load_state("q", &state).unwrap();
-        assert_eq!((back.budget_used(), back.takeovers()), (4, 1));
+        assert_eq!((back.transitions_used(), back.takeovers()), (4, 1));
         let fresh = QueryController::new(rule("greedy"), 12, 5).unwrap();
         let mut plain = StateDict::default();
         fresh.save_state("q", &mut plain);
@@ -628,7 +635,7 @@ mod tests {
         let actors: Vec<Actor> = episodes.into_iter().flatten().collect();
         assert!(actors[..budget].iter().all(|a| *a != Actor::Agent));
         assert!(actors[budget..].iter().all(|a| *a == Actor::Agent));
-        assert_eq!(controller.budget_used(), budget);
+        assert_eq!(controller.transitions_used(), budget);
     }
 
     #[test]
@@ -666,16 +673,16 @@ mod tests {
             (controller.budget_spent(), controller.budget_left()),
             (3, 0)
         );
-        assert_eq!(controller.budget_used(), 9);
+        assert_eq!(controller.transitions_used(), 9);
         assert!(
-            controller.budget_used() <= BudgetUnit::Queries.max_transitions(3, 5),
+            controller.transitions_used() <= BudgetUnit::Queries.max_transitions(3, 5),
             "the replay's demonstration part is sized by max_transitions"
         );
         // Counting transitions, the same budget of 3 would have given 3 transitions only.
         let mut by_transitions = QueryController::new(rule("greedy"), 3, 5).unwrap();
         simulate(&mut by_transitions, &[7, 2, 30], &mut rng);
         assert_eq!(
-            (by_transitions.budget_used(), by_transitions.queries()),
+            (by_transitions.transitions_used(), by_transitions.queries()),
             (3, 1)
         );
     }

@@ -64,7 +64,7 @@ impl Default for OrderStatistics {
 
 impl OrderStatistics {
     /// Seed of the priority generator used by [`OrderStatistics::new`].
-    pub const DEFAULT_SEED: u64 = 0x5EED_0F0B_5EED_0F0B;
+    pub(crate) const DEFAULT_SEED: u64 = 0x5EED_0F0B_5EED_0F0B;
 
     /// An empty multiset with the default priority seed.
     pub fn new() -> Self {
@@ -72,7 +72,7 @@ impl OrderStatistics {
     }
 
     /// An empty multiset whose treap priorities come from `seed` (the shape changes, the answers do not).
-    pub fn with_seed(seed: u64) -> Self {
+    pub(crate) fn with_seed(seed: u64) -> Self {
         Self {
             nodes: Vec::new(),
             free_slots: Vec::new(),
@@ -147,7 +147,7 @@ impl OrderStatistics {
     }
 
     /// How many stored values are strictly below `value` (compared with `total_cmp`), duplicates counted.
-    pub fn count_below(&self, value: f32) -> usize {
+    pub(crate) fn count_below(&self, value: f32) -> usize {
         let mut below = 0u32;
         let mut current = self.root;
         while current != NIL {
@@ -163,7 +163,7 @@ impl OrderStatistics {
     }
 
     /// The `k`-th smallest value, 0-based, or `None` if `k >= len()`.
-    pub fn kth_smallest(&self, k: usize) -> Option<f32> {
+    pub(crate) fn kth_smallest(&self, k: usize) -> Option<f32> {
         let len = self.len();
         if k >= len {
             None

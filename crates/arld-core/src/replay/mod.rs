@@ -30,20 +30,20 @@
 //! weights are 1. Raw priorities are still recorded (see [`Replay::priority`]), but the trees are
 //! not maintained.
 //!
-//! [`Replay::sample_demo_only`] draws from the demonstration part alone (DQfD pre-training,
+//! `Replay::sample_demo_only` draws from the demonstration part alone (DQfD pre-training,
 //! docs/algorithm.md §9), prioritized among demonstrations: `N` and the weight normaliser are then
 //! taken over the demonstrations only.
 //!
 //! **n-step returns** (DQfD's optional n-step loss, off in the paper): with `n_step > 0` the memory computes each
-//! transition's n-step return itself (see [`nstep`]): a pushed transition waits until its return is known, and
+//! transition's n-step return itself (see `nstep`): a pushed transition waits until its return is known, and
 //! [`Replay::end_episode`] stores the rest of an episode with shortened horizons.
 //!
 //! Storage is a set of flat arrays preallocated for `demo_capacity + capacity` slots
 //! (observations as `[slot][obs_dim]`), and sampling writes into a reusable [`Batch`], so steady
 //! state training allocates nothing here. All randomness comes from the caller's generator.
 
-pub mod nstep;
-pub mod sum_tree;
+pub(crate) mod nstep;
+pub(crate) mod sum_tree;
 
 pub use sum_tree::SumMinTree;
 
@@ -96,7 +96,7 @@ impl Default for ReplayConfig {
 impl ReplayConfig {
     /// Bytes the memory allocates up front for observations of length `obs_dim` (every slot's arrays and
     /// both trees; a tree of `c` leaves has `2 · next_power_of_two(c)` nodes of two `f64`).
-    pub fn memory_bytes(&self, obs_dim: usize) -> f64 {
+    pub(crate) fn memory_bytes(&self, obs_dim: usize) -> f64 {
         let slots = self.capacity as f64 + self.demo_capacity as f64;
         let obs_rows = if self.n_step > 0 { 3.0 } else { 2.0 };
         let per_slot = obs_rows * obs_dim as f64 * 4.0 // obs, next_obs (and the n-step observation)
@@ -214,7 +214,7 @@ impl<A: Action> Batch<A> {
     }
 
     /// The observations the targets of [`Self::returns`] bootstrap from, `[sample][obs_dim]`.
-    pub fn bootstrap_obs(&self) -> &[f32] {
+    pub(crate) fn bootstrap_obs(&self) -> &[f32] {
         match self.nstep_rewards.is_empty() {
             true => &self.next_obs,
             false => &self.nstep_next_obs,
@@ -223,7 +223,7 @@ impl<A: Action> Batch<A> {
 
     /// The discount of sample `r`'s bootstrapped value in the target of [`Self::returns`]: `gamma^n` with
     /// n-step returns, otherwise `gamma`; 0 at a bootstrap cut.
-    pub fn discount(&self, r: usize, gamma: f32) -> f32 {
+    pub(crate) fn discount(&self, r: usize, gamma: f32) -> f32 {
         match (self.nstep_rewards.is_empty(), self.terminal[r]) {
             (false, _) => self.nstep_discounts[r],
             (true, true) => 0.0,
@@ -333,14 +333,14 @@ impl Replay {
     /// An empty memory for observations of length `obs_dim`.
     ///
     /// # Panics
-    /// If `cfg` fails [`ReplayConfig::validate`]; use [`Replay::try_new`] for configurations that
+    /// If `cfg` fails [`ReplayConfig::validate`]; use `Replay::try_new` for configurations that
     /// come from the user.
     pub fn new(obs_dim: usize, cfg: &ReplayConfig) -> Self {
         Self::try_new(obs_dim, cfg).unwrap_or_else(|e| panic!("{e}"))
     }
 
     /// An empty memory, or the configuration error.
-    pub fn try_new(obs_dim: usize, cfg: &ReplayConfig) -> Result<Self, ReplayError> {
+    pub(crate) fn try_new(obs_dim: usize, cfg: &ReplayConfig) -> Result<Self, ReplayError> {
         Self::try_with_action_width(obs_dim, 1, cfg)
     }
 }
@@ -348,7 +348,7 @@ impl Replay {
 impl<A: Action> Replay<A> {
     /// An empty memory for observations of `obs_dim` numbers and actions of `action_width` numbers each (the
     /// task's [`crate::task::TaskSpec::action_width`]), or the configuration error.
-    pub fn try_with_action_width(
+    pub(crate) fn try_with_action_width(
         obs_dim: usize,
         action_width: usize,
         cfg: &ReplayConfig,
@@ -598,7 +598,7 @@ impl<A: Action> Replay<A> {
     ///
     /// # Panics
     /// If no demonstration is stored.
-    pub fn sample_demo_only(
+    pub(crate) fn sample_demo_only(
         &mut self,
         batch_size: usize,
         beta: f32,

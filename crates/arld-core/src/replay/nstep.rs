@@ -10,7 +10,7 @@ use std::collections::VecDeque;
 /// The n-step return of a transition (DQfD): `reward = Σ_{i<k} γ^i r_{t+i}`, the observation `k` steps
 /// later, and `discount = γ^k`, or 0 when the episode terminated within those `k ≤ n` steps.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct NStepReturn<'a> {
+pub(crate) struct NStepReturn<'a> {
     pub reward: f32,
     pub next_obs: &'a [f32],
     pub discount: f32,

@@ -99,7 +99,7 @@ impl SumMinTree {
     ///
     /// # Panics
     /// If the slices differ in length or the total is not positive.
-    pub fn find_prefix_many(&self, us: &[f64], leaves: &mut [usize]) {
+    pub(crate) fn find_prefix_many(&self, us: &[f64], leaves: &mut [usize]) {
         assert_eq!(
             us.len(),
             leaves.len(),
@@ -149,7 +149,7 @@ impl SumMinTree {
     ///
     /// # Panics
     /// As [`SumMinTree::set`].
-    pub fn set_many(&mut self, updates: &[(usize, f64)]) {
+    pub(crate) fn set_many(&mut self, updates: &[(usize, f64)]) {
         for updates in updates.chunks(CHUNK) {
             let mut nodes = [0usize; CHUNK];
             for (node, &(leaf, value)) in nodes.iter_mut().zip(updates) {

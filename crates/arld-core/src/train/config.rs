@@ -12,9 +12,9 @@
 //! What follows from the method is derived from it, never stored: the query rule ([`TrainConfig::query_rule`];
 //! BDQN's query probability is the task's `t_query`), whether the run pre-trains ([`Method::pretrains`]), and the
 //! demonstration counts of the preset. The agent and the replay memory receive their own parts
-//! ([`TrainConfig::agent_config`], [`TrainConfig::replay_config`]).
+//! ([`TrainConfig::dqn_agent_config`], [`TrainConfig::replay_config`]).
 
-use crate::agent::AgentConfig;
+use crate::agent::DqnAgentConfig;
 pub use crate::agent::TdLoss;
 use crate::nn::{HIDDEN, HiddenLayers, MAX_DEPTH, MAX_HIDDEN, OutputKind};
 use crate::query::{
@@ -91,7 +91,7 @@ impl Method {
     }
 
     /// Does the method need an expert at all?
-    pub fn needs_expert(self) -> bool {
+    pub(crate) fn needs_expert(self) -> bool {
         self != Method::Dqn
     }
 
@@ -448,7 +448,7 @@ pub struct TrainConfig {
     /// and the run fails \[OURS: 30\].
     pub expert_timeout: f64,
     /// Demonstration file for pre-training; empty: collect from the expert at the start of the run;
-    /// `python:demos` ([`DEMOS_FROM_PYTHON`]): given to `arld.Agent(demos=...)` in Python, which only Python
+    /// `python:demos` (`DEMOS_FROM_PYTHON`): given to `arld.Agent(demos=...)` in Python, which only Python
     /// can supply again.
     pub demo_file: String,
 
@@ -581,7 +581,7 @@ const IDENTITY_KEYS: [&str; 4] = ["env", "method", "net", "seed"];
 /// The largest seed: a run's configuration is TOML, whose integers are signed 64-bit.
 pub const MAX_SEED: u64 = i64::MAX as u64;
 /// The config file size limit.
-pub const MAX_CONFIG_BYTES: u64 = 4 << 20;
+pub(crate) const MAX_CONFIG_BYTES: u64 = 4 << 20;
 
 /// A run's configuration as given (low level): its identity and the values of config files and `--set` pairs
 /// in the order given. [`ConfigInput::resolve`] makes the [`TrainConfig`] from it.
@@ -752,7 +752,7 @@ impl ConfigInput {
 
 /// `demo_file` of a run whose demonstrations were given in Python (`arld.Agent(demos=...)`): a record of where
 /// they came from, not a path.
-pub const DEMOS_FROM_PYTHON: &str = "python:demos";
+pub(crate) const DEMOS_FROM_PYTHON: &str = "python:demos";
 
 /// The paper's hidden widths (docs/algorithm.md §2), also those of a configuration that names none.
 fn paper_hidden() -> Vec<usize> {
@@ -1024,35 +1024,20 @@ impl TrainConfig {
     /// [`ConfigInput::resolve`]). Limits on sizes keep a typo from asking for more memory than a machine has.
     pub fn validate(&self) -> Result<()> {
         let env = crate::env::task_spec(&self.env).map_err(|e| anyhow::anyhow!("{e}"))?;
-        let unit = |name: &str, v: f64| -> Result<()> {
-            ensure!(
-                (0.0..=1.0).contains(&v),
-                "{name} must be in [0, 1], got {v}"
-            );
-            Ok(())
-        };
-        let non_negative = |name: &str, v: f64| -> Result<()> {
-            ensure!(
-                v >= 0.0 && v.is_finite(),
-                "{name} must be non-negative and finite, got {v}"
-            );
-            Ok(())
-        };
-        let positive = |name: &str, v: f64| -> Result<()> {
-            ensure!(
-                v > 0.0 && v.is_finite(),
-                "{name} must be positive and finite, got {v}"
-            );
-            Ok(())
-        };
-        let count = |name: &str, v: usize, max: usize| -> Result<()> {
-            ensure!(
-                (1..=max).contains(&v),
-                "{name} must be between 1 and {max}, got {v}"
-            );
-            Ok(())
-        };
-        // Learning.
+        self.check_learning()?;
+        self.check_exploration_and_replay()?;
+        self.check_losses()?;
+        self.check_demonstrations()?;
+        self.check_query_rule()?;
+        self.check_expert()?;
+        // Evaluation and checkpoints.
+        count("eval_period", self.eval_period, MAX_STEPS)?;
+        count("eval_episodes", self.eval_episodes, MAX_EVAL_EPISODES)?;
+        self.check_memory(env.obs_dim())
+    }
+
+    /// The learning settings: discount, learning rate, steps, batches, target copies, the network's shape.
+    fn check_learning(&self) -> Result<()> {
         unit("gamma", self.gamma)?;
         positive("lr", self.lr)?;
         count("train_steps", self.train_steps, MAX_STEPS)?;
@@ -1073,12 +1058,14 @@ impl TrainConfig {
             self.hidden
         );
         positive("grad_clip", self.grad_clip)?;
-        self.box_settings.validate()?;
-        // Exploration.
+        self.box_settings.validate()
+    }
+
+    /// The ε schedule, and the replay memory (which checks its own settings: α, the priority bonuses ε).
+    fn check_exploration_and_replay(&self) -> Result<()> {
         unit("eps_start", self.eps_start)?;
         unit("eps_end", self.eps_end)?;
         unit("eps_fraction", self.eps_fraction)?;
-        // Replay: the memory checks its own settings (α, the priority bonuses ε).
         self.replay_config().validate()?;
         unit("beta0", self.beta0)?;
         ensure!(
@@ -1087,7 +1074,11 @@ impl TrainConfig {
             self.batch_size,
             self.replay_size
         );
-        // Losses.
+        Ok(())
+    }
+
+    /// The losses' weights and the n-step return.
+    fn check_losses(&self) -> Result<()> {
         non_negative("margin", self.margin)?;
         non_negative("lambda", self.lambda)?;
         non_negative("lambda_n", self.lambda_n)?;
@@ -1098,8 +1089,11 @@ impl TrainConfig {
              a box) n_step > 1 makes the n-step return the critics' target instead; leave lambda_n at 0",
             self.env
         );
-        non_negative("l2", self.l2)?;
-        // Demonstrations and queries.
+        non_negative("l2", self.l2)
+    }
+
+    /// Pre-training and its demonstrations, and the query window.
+    fn check_demonstrations(&self) -> Result<()> {
         ensure!(
             self.pretrain_steps <= MAX_STEPS,
             "pretrain_steps must be at most {MAX_STEPS}, got {}",
@@ -1112,8 +1106,12 @@ impl TrainConfig {
                 self.method
             );
         }
-        count("n_r", self.n_r, MAX_WINDOW)?;
-        // The query rule and its controller own t_query, N_r and the segment length.
+        count("n_r", self.n_r, MAX_WINDOW)
+    }
+
+    /// The query rule and its controller (they own t_query, N_r and the segment length): the signals the rule
+    /// reads must be ones this network and task give.
+    fn check_query_rule(&self) -> Result<()> {
         let rule = self
             .query_rule()
             .context("config key `query_rule` (or the method's own rule)")?;
@@ -1140,6 +1138,12 @@ impl TrainConfig {
             e => e.into(),
         })?;
         self.query_controller()?;
+        Ok(())
+    }
+
+    /// The expert a method needs (one that can demonstrate, when the method pre-trains on its demonstrations),
+    /// and how long it may take to answer.
+    fn check_expert(&self) -> Result<()> {
         if self.method.needs_expert() {
             ensure!(
                 !self.expert.trim().is_empty(),
@@ -1168,12 +1172,12 @@ impl TrainConfig {
             "expert_timeout must be a positive number of seconds, at most {max_timeout} (a year), got {}",
             self.expert_timeout
         );
-        // Evaluation and checkpoints.
-        count("eval_period", self.eval_period, MAX_STEPS)?;
-        count("eval_episodes", self.eval_episodes, MAX_EVAL_EPISODES)?;
-        // Memory: the replay memory is allocated whole at the start.
-        let bytes = self.replay_config().memory_bytes(env.obs_dim());
+        Ok(())
+    }
 
+    /// Memory: the replay memory, allocated whole at the start for observations of `obs_dim` values.
+    fn check_memory(&self, obs_dim: usize) -> Result<()> {
+        let bytes = self.replay_config().memory_bytes(obs_dim);
         ensure!(
             bytes <= MAX_REPLAY_BYTES,
             "replay_size {} with {} demonstration slots (n_demo + budget) would need {} of memory for the \
@@ -1193,7 +1197,7 @@ impl TrainConfig {
     /// The run's query rule spec: `query_rule` if given, else the method's (§8–9): never (DQN, DQfD), greedy
     /// (GDQN), Bernoulli with probability `t_query` (BDQN), adaptive with threshold `t_query` over `n_r` steps
     /// (ADQN, ADQNP).
-    pub fn rule_spec(&self) -> Result<RuleSpec, QueryError> {
+    pub(crate) fn rule_spec(&self) -> Result<RuleSpec, QueryError> {
         if !self.query_rule.trim().is_empty() {
             return self.query_rule.parse();
         }
@@ -1207,7 +1211,7 @@ impl TrainConfig {
     }
 
     /// What the rule's parameters default to: this run's t_query, N_r, budget, segment length and length.
-    pub fn rule_defaults(&self) -> RuleDefaults {
+    pub(crate) fn rule_defaults(&self) -> RuleDefaults {
         RuleDefaults {
             t_query: self.t_query,
             n_r: self.n_r,
@@ -1218,13 +1222,13 @@ impl TrainConfig {
         }
     }
 
-    /// The run's query rule, built from [`Self::rule_spec`].
+    /// The run's query rule, built from `Self::rule_spec`.
     pub fn query_rule(&self) -> Result<Box<dyn QueryRule>, QueryError> {
         self.rule_spec()?.build(&self.rule_defaults())
     }
 
     /// The query rule under the run's budget and segment length.
-    pub fn query_controller(&self) -> Result<QueryController, QueryError> {
+    pub(crate) fn query_controller(&self) -> Result<QueryController, QueryError> {
         Ok(
             QueryController::new(self.query_rule()?, self.budget, self.segment_len)?
                 .counting(self.budget_unit),
@@ -1233,13 +1237,13 @@ impl TrainConfig {
 
     /// The most demonstrated transitions queries can bring during training (the budget, converted when it counts
     /// queries).
-    pub fn query_transitions(&self) -> usize {
+    pub(crate) fn query_transitions(&self) -> usize {
         self.budget_unit
             .max_transitions(self.budget, self.segment_len)
     }
 
     /// Demonstrations that enter replay before training: the pre-training set.
-    pub fn pretrain_demos(&self) -> usize {
+    pub(crate) fn pretrain_demos(&self) -> usize {
         if self.method.pretrains() {
             self.n_demo
         } else {
@@ -1282,8 +1286,8 @@ impl TrainConfig {
     }
 
     /// The agent's part of the configuration.
-    pub fn agent_config(&self) -> AgentConfig {
-        AgentConfig {
+    pub fn dqn_agent_config(&self) -> DqnAgentConfig {
+        DqnAgentConfig {
             output: match self.net {
                 NetKind::Plain => OutputKind::Plain,
                 NetKind::Bootstrap => OutputKind::Bootstrap { heads: self.heads },
@@ -1307,7 +1311,7 @@ impl TrainConfig {
     /// The hidden widths of `hidden`. [`Self::validate`] checks them; a configuration read without that check
     /// (a snapshot's own) gets the paper's widths for a malformed value, so that loading its weights fails on
     /// their sizes instead of the network being built with impossible ones.
-    pub fn hidden_widths(&self) -> HiddenLayers {
+    pub(crate) fn hidden_widths(&self) -> HiddenLayers {
         HiddenLayers::new(&self.hidden)
             .filter(|h| h.iter().all(|w| (1..=MAX_HIDDEN).contains(w)))
             .or_else(|| HiddenLayers::new(&[HIDDEN, HIDDEN]))
@@ -1316,7 +1320,7 @@ impl TrainConfig {
 
     /// The demonstration file the run pre-trains on (`demo_file`), if it names one; an error for demonstrations
     /// that were given in Python ([`DEMOS_FROM_PYTHON`]), which a run outside Python cannot read again.
-    pub fn demo_path(&self) -> Result<Option<&std::path::Path>> {
+    pub(crate) fn demo_path(&self) -> Result<Option<&std::path::Path>> {
         match self.demo_file.as_str() {
             "" => Ok(None),
             DEMOS_FROM_PYTHON => anyhow::bail!(
@@ -1344,6 +1348,42 @@ impl TrainConfig {
         };
         format!("{}_{}-{learner}_seed{}", self.env, self.method, self.seed)
     }
+}
+
+/// A value in [0, 1].
+fn unit(name: &str, v: f64) -> Result<()> {
+    ensure!(
+        (0.0..=1.0).contains(&v),
+        "{name} must be in [0, 1], got {v}"
+    );
+    Ok(())
+}
+
+/// A non-negative finite value.
+fn non_negative(name: &str, v: f64) -> Result<()> {
+    ensure!(
+        v >= 0.0 && v.is_finite(),
+        "{name} must be non-negative and finite, got {v}"
+    );
+    Ok(())
+}
+
+/// A positive finite value.
+fn positive(name: &str, v: f64) -> Result<()> {
+    ensure!(
+        v > 0.0 && v.is_finite(),
+        "{name} must be positive and finite, got {v}"
+    );
+    Ok(())
+}
+
+/// A count between 1 and `max`.
+fn count(name: &str, v: usize, max: usize) -> Result<()> {
+    ensure!(
+        (1..=max).contains(&v),
+        "{name} must be between 1 and {max}, got {v}"
+    );
+    Ok(())
 }
 
 #[cfg(test)]
@@ -1884,7 +1924,7 @@ mod tests {
     #[test]
     fn hidden_widths_are_configurable_and_the_paper_keeps_64_64() {
         let paper = resolve("CartPole-v0", Method::Adqn, NetKind::Noisy, &[]).unwrap();
-        assert_eq!(paper.agent_config().hidden.as_slice(), [HIDDEN, HIDDEN]);
+        assert_eq!(paper.dqn_agent_config().hidden.as_slice(), [HIDDEN, HIDDEN]);
         assert_eq!(HIDDEN, 64);
         let wide = resolve(
             "CartPole-v0",
@@ -1893,12 +1933,12 @@ mod tests {
             &["hidden=[256, 32]"],
         )
         .unwrap();
-        assert_eq!(wide.agent_config().hidden.as_slice(), [256, 32]);
+        assert_eq!(wide.dqn_agent_config().hidden.as_slice(), [256, 32]);
         // Any depth from 1 to 8.
         for widths in [&[7][..], &[64, 64, 64], &[5, 9, 3, 11, 2, 4, 6, 8]] {
             let set = format!("hidden={widths:?}");
             let deep = resolve("CartPole-v0", Method::Dqn, NetKind::Plain, &[&set]).unwrap();
-            assert_eq!(deep.agent_config().hidden.as_slice(), widths);
+            assert_eq!(deep.dqn_agent_config().hidden.as_slice(), widths);
         }
         // config.toml records the widths and gives them back.
         let back: TrainConfig = toml::from_str(&wide.to_toml()).unwrap();

@@ -53,7 +53,7 @@ impl<A: Action> Evaluator<A> {
     }
 
     /// Puts back the generators [`Self::generators`] returned.
-    pub fn set_generators(&mut self, generators: &[Option<[u64; 6]>]) -> Result<()> {
+    pub(crate) fn set_generators(&mut self, generators: &[Option<[u64; 6]>]) -> Result<()> {
         ensure!(
             generators.len() == self.envs.len(),
             "the snapshot has {} test environments, the run {}",

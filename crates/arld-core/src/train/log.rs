@@ -63,7 +63,7 @@ impl<A: Action> RunLog<A> {
     }
 
     /// A log in memory with a progress bar (when `progress` and standard error is a terminal).
-    pub fn in_memory_with_progress(total_steps: u64, progress: bool) -> Self {
+    pub(crate) fn in_memory_with_progress(total_steps: u64, progress: bool) -> Self {
         Self {
             progress: progress_bar(total_steps, progress),
             ..Self::in_memory()
@@ -232,14 +232,14 @@ impl<A: Action> RunLog<A> {
 
     /// A log in memory only ([`RunLog::in_memory`]) that continues a run from `position`: it knows the queries
     /// asked before the snapshot.
-    pub fn in_memory_resumed(position: &LogPosition<A>) -> Self {
+    pub(crate) fn in_memory_resumed(position: &LogPosition<A>) -> Self {
         let mut log = Self::in_memory();
         log.query_events = position.query_events.clone();
         log
     }
 
     /// Sets the label shown before the progress bar.
-    pub fn set_prefix(&self, prefix: String) {
+    pub(crate) fn set_prefix(&self, prefix: String) {
         self.progress.set_prefix(prefix);
     }
 
@@ -272,7 +272,7 @@ impl<A: Action> RunLog<A> {
     }
 
     /// What opened the segment in progress (the last query or takeover logged).
-    pub fn last_started_by(&self) -> Option<super::run_dir::StartedBy> {
+    pub(crate) fn last_started_by(&self) -> Option<super::run_dir::StartedBy> {
         self.query_events.last().map(|q| q.started_by)
     }
 

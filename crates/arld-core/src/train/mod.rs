@@ -1,7 +1,8 @@
 //! Training: one run of any method in the paper, from its configuration ([`TrainConfig`], every
 //! hyperparameter) to its summary and run directory. [`RunBuilder`] (in [`run`]) is the one entry point and the
 //! loop itself; [`eval`] runs the test episodes; the pieces the loop shares with pre-training and tests
-//! (the ε schedule, DQfD pre-training, a checked update) are here.
+//! (the ε schedule, DQfD pre-training, a checked update) are here. [`session`] alone opens a run directory (lock,
+//! overwrite, resume or restart, the run's log, the failure record) for the command line, the laboratory and Python.
 
 pub mod config;
 pub mod eval;
@@ -9,14 +10,16 @@ pub mod log;
 pub mod run;
 pub mod run_dir;
 pub mod seeds;
+pub mod session;
 pub mod snapshot;
 
 pub use config::{Algo, ConfigInput, Method, NetKind, TdLoss, TrainConfig};
 pub use eval::Evaluator;
 pub use log::{LogPosition, RunLog};
-pub use run::{Control, Driver, LastStep, PausedRun, RunBuilder, StepView};
+pub use run::{Control, Driver, LastStep, OwnRun, PausedRun, RunBuilder, StepView};
 pub use run_dir::{EvalPoint, QueryEvent, Summary, steps_to_solve};
 pub use seeds::{SeedPurpose, seed_for};
+pub use session::Session;
 pub use snapshot::Checkpointer;
 
 use crate::agent::Learner;
@@ -24,7 +27,6 @@ use crate::env::Env;
 use crate::expert::Expert;
 use crate::expert::demos::{DemoAction, Demonstrations};
 use crate::replay::{Batch, Replay};
-use crate::state::StateDict;
 use anyhow::{Result, ensure};
 use rand_pcg::Pcg64;
 
@@ -36,55 +38,6 @@ pub fn epsilon_at(cfg: &TrainConfig, step: usize) -> f64 {
     let horizon = (cfg.eps_fraction * cfg.train_steps as f64).max(1.0);
     let frac = (step as f64 / horizon).min(1.0);
     cfg.eps_start + frac * (cfg.eps_end - cfg.eps_start)
-}
-
-/// The log position recorded in a snapshot.
-pub fn resume_position<A: crate::task::Action>(state: &StateDict) -> Result<log::LogPosition<A>> {
-    Ok(state.value("log")?)
-}
-
-/// The log of a run of `cfg`: in memory without `dir`; in `dir`, continuing its files when the run continues
-/// from `snapshot` and `dir` holds that run (its config.toml must record `cfg`, or the run is refused, naming the
-/// keys that differ), else a new run's files. The command line, sweeps and Python all open a run's log here.
-pub fn open_log<A: crate::task::Action>(
-    dir: Option<&std::path::Path>,
-    cfg: &TrainConfig,
-    snapshot: Option<&StateDict>,
-    progress: bool,
-) -> Result<RunLog<A>> {
-    let steps = cfg.train_steps as u64;
-    let Some(dir) = dir else {
-        return Ok(match snapshot {
-            Some(state) => RunLog::in_memory_resumed(&resume_position(state)?),
-            None => RunLog::in_memory_with_progress(steps, progress),
-        });
-    };
-    match snapshot {
-        Some(state) if dir.join(run_dir::CONFIG_FILE).is_file() => {
-            let differences = run_dir::read_written_config(dir)?.differences(cfg);
-            ensure!(
-                differences.is_empty(),
-                "{} holds another run (its config.toml differs: {}); give another directory",
-                dir.display(),
-                differences.join(", ")
-            );
-            RunLog::resume(dir, &resume_position(state)?, steps, progress)
-        }
-        _ => RunLog::create(dir, &cfg.to_toml(), steps, progress),
-    }
-}
-
-/// Writes `failed.json` for the error `err` into the run directory `dir`, unless `err` is a stop request (the
-/// run is then interrupted, not failed). The run's own error matters more than this file: a write that fails
-/// is only warned about.
-pub fn record_failure(dir: &std::path::Path, err: &anyhow::Error, phase: &str, step: usize) {
-    if crate::interrupt::is_stop(err) {
-        return;
-    }
-    let failure = run_dir::Failure::new(err, phase, step);
-    if let Err(write_err) = run_dir::write_failure(dir, &failure) {
-        eprintln!("warning: the run failed, and recording why failed too: {write_err:#}");
-    }
 }
 
 /// DQfD pre-training (§9): the demonstrations enter replay permanently, then `pretrain_steps` updates sample
@@ -199,7 +152,7 @@ pub(super) fn pretrain_update<L: Learner>(
      `lr` (now {lr}, e.g. --set lr={lower})",
     lower = .lr / 10.0
 )]
-pub struct Diverged {
+pub(crate) struct Diverged {
     pub at: String,
     pub what: &'static str,
     pub value: f32,

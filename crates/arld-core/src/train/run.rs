@@ -1,23 +1,24 @@
 //! One run of training, read top to bottom. [`RunBuilder`] gathers what a run is given (its environments, its
 //! expert and demonstrations, snapshots, a snapshot to continue from, a driver) and is the one entry point for the
-//! command line, sweeps, Slurm shards and Python. [`Run::execute`] is the whole algorithm of every method in the
+//! command line, sweeps, Slurm shards and Python. `Run::execute` is the whole algorithm of every method in the
 //! paper (DQN, DQfD, GDQN, BDQN, ADQN and ADQNP, with a plain, bootstrapped or noisy network): `resume`,
 //! `pretrain`, `begin_training`, then for each environment step `choose` (the agent acts, or the query rule asks
 //! the expert, or a person takes over unasked), `step_env`, `learn`, `report`, `snapshot_point` and `drive`, then `finish`. Each step returns what
-//! the loop does next ([`Choice`], [`Flow`]); none hides a `return`, `break` or `continue`.
+//! the loop does next (`Choice`, `Flow`); none hides a `return`, `break` or `continue`.
 
 use super::eval::Evaluator;
 use super::run_dir::StartedBy;
+use super::session::record_failure;
 use super::{
     Algo, Checkpointer, QueryEvent, RunLog, SeedPurpose, Summary, TrainConfig, epsilon_at,
-    pretrain_update, push_demos, record_failure, run_dir, seed_for, steps_to_solve, update_checked,
+    pretrain_update, push_demos, run_dir, seed_for, steps_to_solve, update_checked,
 };
 use crate::agent::actor_critic::ActorCriticConfig;
 use crate::agent::box_agent::{BoxAgent, BoxLearnerConfig};
 use crate::agent::risk::RiskConfig;
 use crate::agent::sac::SacConfig;
 use crate::agent::td3::Td3Config;
-use crate::agent::{Agent, Learner};
+use crate::agent::{DqnAgent, Learner};
 use crate::env::{self, Action, BoxSpec, Env, TaskSpec};
 use crate::expert::demos::Demonstrations;
 use crate::expert::{Answer, EpisodeTrace, Expert, Progress, Query, RunEnd, RunHistory};
@@ -47,7 +48,7 @@ pub const AGENT_STATE: &str = "agent";
 ///   requested ([`crate::interrupt`]: SIGTERM/SIGINT), the whole state of the run goes to the checkpointer's run
 ///   directory; then a stop request ends the run with an [`crate::interrupt::Interrupted`] error.
 /// - [`Self::resume_from`]: the run continues from a snapshot, to the same results as an uninterrupted run. The
-///   log must then come from [`RunLog::resume`] at the snapshot's log position ([`super::resume_position`]).
+///   log must then come from [`RunLog::resume`] at the snapshot's log position ([`super::session::resume_position`]).
 /// - [`Self::start_from`]: a new run whose learner begins as another run's ended (its weights, target and
 ///   optimiser; everything else, the counters, replay, schedules and budget, begins afresh): Stable-Baselines3's
 ///   second `learn`.
@@ -57,7 +58,7 @@ pub const AGENT_STATE: &str = "agent";
 ///   `cfg.train_steps` is then the horizon of the schedules (ε, β) and of the last evaluation, not a limit: past
 ///   it ε stays at `eps_end` and β at 1. Pausing and going on changes nothing in the run: it is the same loop,
 ///   so two stretches equal one of their total length.
-pub struct RunBuilder<'a, L: Learner = Agent> {
+pub struct RunBuilder<'a, L: Learner = DqnAgent> {
     cfg: &'a TrainConfig,
     /// Builds the agent for the task `spec` (its observations and actions), from the run's seed.
     make_agent: AgentMaker<L>,
@@ -73,10 +74,11 @@ pub struct RunBuilder<'a, L: Learner = Agent> {
 }
 
 /// Builds a run's agent for a task from the run's configuration (and seed).
-pub type AgentMaker<L> = fn(&TrainConfig, &'static <<L as Learner>::Action as Action>::Spec) -> L;
+pub(crate) type AgentMaker<L> =
+    fn(&TrainConfig, &'static <<L as Learner>::Action as Action>::Spec) -> L;
 
 /// Makes the environment `id` for a run of actions of the kind `A`.
-pub type EnvMaker<A> = fn(&str) -> Result<Box<dyn Env<A>>>;
+pub(crate) type EnvMaker<A> = fn(&str) -> Result<Box<dyn Env<A>>>;
 
 impl<'a> RunBuilder<'a> {
     /// A run of `cfg` in the configuration's own environments, with no expert, demonstrations, snapshots or
@@ -91,6 +93,26 @@ impl<'a> RunBuilder<'a, BoxAgent> {
     /// [`RunBuilder::new`].
     pub fn for_box(cfg: &'a TrainConfig) -> Self {
         RunBuilder::for_learner(cfg, box_agent, box_env)
+    }
+}
+
+/// A learner with a run of its own: the builder of a run of `cfg` learned by it in the configuration's own
+/// environments ([`RunBuilder::new`] for the DQN family, [`RunBuilder::for_box`] for the box learners). The
+/// laboratory and Python start their runs here, whatever the kind of action.
+pub trait OwnRun: Learner + Sized {
+    /// A run of `cfg` learned by this learner, with no expert, demonstrations, snapshots or driver.
+    fn builder(cfg: &TrainConfig) -> RunBuilder<'_, Self>;
+}
+
+impl OwnRun for DqnAgent {
+    fn builder(cfg: &TrainConfig) -> RunBuilder<'_, Self> {
+        RunBuilder::new(cfg)
+    }
+}
+
+impl OwnRun for BoxAgent {
+    fn builder(cfg: &TrainConfig) -> RunBuilder<'_, Self> {
+        RunBuilder::for_box(cfg)
     }
 }
 
@@ -181,10 +203,10 @@ fn discrete_env(id: &str) -> Result<Box<dyn Env>> {
     Ok(env::make(id)?)
 }
 
-/// The DQN-family agent of `cfg` ([`TrainConfig::agent_config`]), seeded from the run's seed.
-fn dqn_agent(cfg: &TrainConfig, spec: &'static crate::env::EnvSpec) -> Agent {
-    Agent::new(
-        &cfg.agent_config(),
+/// The DQN-family agent of `cfg` ([`TrainConfig::dqn_agent_config`]), seeded from the run's seed.
+fn dqn_agent(cfg: &TrainConfig, spec: &'static crate::env::EnvSpec) -> DqnAgent {
+    DqnAgent::new(
+        &cfg.dqn_agent_config(),
         spec.obs_dim,
         spec.n_actions,
         seed_for(cfg.seed, SeedPurpose::Agent),
@@ -193,7 +215,7 @@ fn dqn_agent(cfg: &TrainConfig, spec: &'static crate::env::EnvSpec) -> Agent {
 
 impl<'a> RunBuilder<'a> {
     /// A run of `cfg` whose agent of discrete actions `make_agent` builds, otherwise as [`RunBuilder::new`].
-    pub fn with_agent<L: Learner<Action = usize>>(
+    pub(crate) fn with_agent<L: Learner<Action = usize>>(
         cfg: &'a TrainConfig,
         make_agent: AgentMaker<L>,
     ) -> RunBuilder<'a, L> {
@@ -204,7 +226,7 @@ impl<'a> RunBuilder<'a> {
 impl<'a, L: Learner> RunBuilder<'a, L> {
     /// A run of `cfg` whose agent `make_agent` builds (any [`Learner`], of any kind of action), in environments
     /// `make_env` makes by id unless [`Self::env`] and [`Self::test_envs`] give them.
-    pub fn for_learner(
+    pub(crate) fn for_learner(
         cfg: &'a TrainConfig,
         make_agent: AgentMaker<L>,
         make_env: EnvMaker<L::Action>,
@@ -944,9 +966,10 @@ impl<'a, L: Learner> Run<'a, L> {
             log.scalar("train/margin_loss", step + 1, stats.margin_loss)?;
             log.scalar("train/epsilon", step + 1, epsilon_at(cfg, step) as f32)?;
             log.scalar(
+                // The tag keeps its name in the event files: it counts demonstrated transitions.
                 "query/budget_used",
                 step + 1,
-                parts.queries.budget_used() as f32,
+                parts.queries.transitions_used() as f32,
             )?;
             if let Some(thr) = parts.queries.rule().threshold() {
                 log.scalar("query/threshold", step + 1, thr)?;
@@ -1049,7 +1072,7 @@ impl<'a, L: Learner> Run<'a, L> {
         let view = StepView {
             step: self.st.step,
             episode: self.st.episode,
-            budget_used: self.parts.queries.budget_used(),
+            transitions_used: self.parts.queries.transitions_used(),
             log: self.log,
             agent: &self.parts.agent,
             last: &self.last,
@@ -1167,13 +1190,14 @@ pub enum Control {
 }
 
 /// Where a run stands after a step, for a [`Driver`].
-pub struct StepView<'a, L: Learner = Agent> {
+pub struct StepView<'a, L: Learner = DqnAgent> {
     /// Environment steps done.
     pub step: usize,
     /// Episodes finished.
     pub episode: usize,
-    /// Demonstrated transitions asked for so far (or queries, as `budget_unit` says).
-    pub budget_used: usize,
+    /// Demonstrated transitions the expert gave so far (whatever the budget's unit; the budget spent in its unit
+    /// is [`QueryController::budget_spent`](crate::query::QueryController::budget_spent)).
+    pub transitions_used: usize,
     pub log: &'a RunLog<L::Action>,
     pub agent: &'a L,
     /// The environment step just taken (what Stable-Baselines3's callbacks see of it).
@@ -1209,7 +1233,7 @@ impl<A> Default for LastStep<A> {
 
 /// Steers a run from outside ([`RunBuilder::driver`]) (e.g. a Python `learn` call that trains for a while, returns,
 /// and is called again).
-pub trait Driver<L: Learner = Agent> {
+pub trait Driver<L: Learner = DqnAgent> {
     /// Called after every environment step.
     fn after_step(&mut self, at: &StepView<'_, L>) -> Result<Control>;
     /// Called when `after_step` paused the run; returns [`Control::Continue`] or [`Control::Stop`] (a pause
@@ -1218,7 +1242,7 @@ pub trait Driver<L: Learner = Agent> {
 }
 
 /// A paused run, whole: its summary so far, the agent, the log, and a snapshot of everything on request.
-pub struct PausedRun<'a, L: Learner = Agent> {
+pub struct PausedRun<'a, L: Learner = DqnAgent> {
     pub summary: Summary,
     pub agent: &'a L,
     pub log: &'a mut RunLog<L::Action>,
@@ -1479,7 +1503,8 @@ fn snapshot<L: Learner>(
         "episode": st.episode,
         "episode_step": st.ep_len,
         "expert_in_control": parts.queries.expert_in_control(),
-        "budget_used": parts.queries.budget_used(),
+        // The snapshot's recorded key (demonstrated transitions), kept for the files already written.
+        "budget_used": parts.queries.transitions_used(),
     });
     checkpointer.save(&state, position)?;
     if stopping {
@@ -1513,7 +1538,7 @@ fn summarize<A: Action>(
         train_steps: st.step,
         final_score: log.curve().last().map(|p| p.mean).unwrap_or(f64::NAN),
         demos_pretrain: pretrain_demos,
-        demos_queried: queries.budget_used(),
+        demos_queried: queries.transitions_used(),
         episodes: st.episode,
         wall_time_s: wall,
         cpu_time_s: cpu,

@@ -3,7 +3,7 @@
 //!
 //! A run directory holds `config.toml` (the resolved configuration), `eval.csv` (the evaluation curve:
 //! `step,mean,std,min,max`), `episodes.csv`, `queries.csv`, `answers.jsonl` (every step the expert took, as a
-//! transition with its question: [`AnswerStep`]), a TensorBoard event file, `weights.safetensors`,
+//! transition with its question: `AnswerStep`), a TensorBoard event file, `weights.safetensors`,
 //! optional `checkpoints/step_NNNNNNNN.safetensors`, and `summary.json` ([`Summary`]), written last: a run is
 //! complete exactly when it exists ([`is_complete`]). A run that ended with an error instead leaves `failed.json`
 //! ([`Failure`]: the error chain, the step, the time, the arld version and commit), which the summary of a later
@@ -33,13 +33,13 @@ pub const EPISODES_FILE: &str = "episodes.csv";
 /// One row per query (CSV).
 pub const QUERIES_FILE: &str = "queries.csv";
 /// One line per step the expert took (JSON lines of [`AnswerStep`]).
-pub const ANSWERS_FILE: &str = "answers.jsonl";
+pub(crate) const ANSWERS_FILE: &str = "answers.jsonl";
 /// The summary, written last: its presence marks the run complete.
 pub const SUMMARY_FILE: &str = "summary.json";
 /// Why the run ended with an error ([`Failure`]); removed when a later attempt finishes the run.
 pub const FAILED_FILE: &str = "failed.json";
 /// The final online weights.
-pub const WEIGHTS_FILE: &str = "weights.safetensors";
+pub(crate) const WEIGHTS_FILE: &str = "weights.safetensors";
 /// Periodic weights (`checkpoint_every`).
 pub const CHECKPOINTS_DIR: &str = "checkpoints";
 /// Header of [`EPISODES_FILE`].
@@ -55,7 +55,7 @@ pub const T_QUERY_VARIANT_PREFIX: &str = "tq";
 pub const EXPERT_VARIANT_PREFIX: &str = "expert-";
 
 /// Path of the checkpoint written after `step` environment steps.
-pub fn checkpoint_path(dir: &Path, step: usize) -> PathBuf {
+pub(crate) fn checkpoint_path(dir: &Path, step: usize) -> PathBuf {
     dir.join(CHECKPOINTS_DIR)
         .join(format!("step_{step:08}.safetensors"))
 }
@@ -73,7 +73,7 @@ const EVENTS_PREFIX: &str = "events.out.tfevents.";
 pub const LOCK_FILE: &str = ".arld.lock";
 
 /// Whether `name` is the name of a run's TensorBoard event file (one file name, no path).
-pub fn is_events_file(name: &str) -> bool {
+pub(crate) fn is_events_file(name: &str) -> bool {
     name.starts_with(EVENTS_PREFIX) && !name.contains('/') && name != ".." && name.len() < 256
 }
 
@@ -97,7 +97,7 @@ fn own_files() -> [&'static str; 10] {
 /// Checks that every entry of `dir` a run writes is what the run would have put there: a regular file (its
 /// files, its event files) or a real directory (`checkpoints`). A symbolic link, a device, a pipe or a
 /// directory in such a place is an error naming it: a run never writes through a link to a file elsewhere.
-pub fn check_own_entries(dir: &Path) -> Result<()> {
+pub(crate) fn check_own_entries(dir: &Path) -> Result<()> {
     for name in own_files() {
         crate::files::own_file_exists(&dir.join(name))?;
     }
@@ -163,7 +163,7 @@ fn is_checkpoint_entry(name: &str) -> bool {
 /// Removes what writers of the run's files killed before their commit left in `dir` and its checkpoints
 /// folder (their temporary files, exactly by name; a writer of this process is left alone): done when a run
 /// starts, resumes and finishes.
-pub fn remove_leftovers(dir: &Path) -> Result<()> {
+pub(crate) fn remove_leftovers(dir: &Path) -> Result<()> {
     let tidy = |path: &Path| {
         crate::files::remove_leftovers(path)
             .with_context(|| format!("cannot tidy {}", dir.display()))
@@ -196,7 +196,7 @@ pub fn remove_leftovers(dir: &Path) -> Result<()> {
 /// the files a run writes are removed by name, and only if it holds nothing else (`--overwrite` never deletes
 /// anything a run did not write: another file, a folder, a link, or a file of the user's inside `checkpoints`
 /// is refused, naming it, before anything is removed).
-pub fn prepare_new_run(dir: &Path, overwrite: bool) -> Result<()> {
+pub(crate) fn prepare_new_run(dir: &Path, overwrite: bool) -> Result<()> {
     let meta = match std::fs::symlink_metadata(dir) {
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(()),
         meta => meta.with_context(|| format!("cannot inspect {}", dir.display()))?,
@@ -303,7 +303,7 @@ pub fn prepare_new_run(dir: &Path, overwrite: bool) -> Result<()> {
 /// Clears the directory of an unfinished run for a new attempt from step 0 (a run stopped before its first
 /// snapshot), as [`prepare_new_run`] with `overwrite` does, but keeps its `failed.json`: an earlier attempt's
 /// failure stays recorded until an attempt finishes the run.
-pub fn prepare_restart(dir: &Path) -> Result<()> {
+pub(crate) fn prepare_restart(dir: &Path) -> Result<()> {
     let failed = dir.join(FAILED_FILE);
     let kept = if crate::files::own_file_exists(&failed)? {
         Some(
@@ -355,7 +355,7 @@ impl EvalPoint {
 
 /// One query: the agent asked the expert to take over (a row of [`QUERIES_FILE`]), or a person took over unasked
 /// (`started_by` [`StartedBy::Person`]: kept with the run's questions, and in its snapshots, so that the
-/// person's steps in [`ANSWERS_FILE`] are tied to it, but never a row of [`QUERIES_FILE`], which holds the
+/// person's steps in `ANSWERS_FILE` are tied to it, but never a row of [`QUERIES_FILE`], which holds the
 /// rule's questions only and keeps its columns).
 ///
 /// Its actions are of the run's kind `A`: a discrete run's columns are the indices as they always were, a box
@@ -396,11 +396,11 @@ pub enum StartedBy {
 
 impl StartedBy {
     /// Whether the query rule opened the segment.
-    pub fn is_rule(&self) -> bool {
+    pub(crate) fn is_rule(&self) -> bool {
         *self == StartedBy::Rule
     }
 
-    /// The name written to [`AnswerStep::started_by`].
+    /// The name written to `AnswerStep::started_by`.
     pub fn as_str(self) -> &'static str {
         match self {
             StartedBy::Rule => STARTED_BY_RULE,
@@ -429,9 +429,9 @@ impl<A: Action> QueryEvent<A> {
 }
 
 /// Who started the expert's segment a step belongs to, as [`AnswerStep::started_by`] says it: the query rule.
-pub const STARTED_BY_RULE: &str = "rule";
+pub(crate) const STARTED_BY_RULE: &str = "rule";
 /// ... or a person who took over unasked.
-pub const STARTED_BY_PERSON: &str = "person";
+pub(crate) const STARTED_BY_PERSON: &str = "person";
 
 /// One line of [`ANSWERS_FILE`]: a step the expert took, as the transition the run stored as a demonstration
 /// (observation, action, reward, next observation, how the episode ended there), with the question that opened
@@ -441,7 +441,7 @@ pub const STARTED_BY_PERSON: &str = "person";
 /// answers kept for use again (`python -m arld.minari export` writes them as a Minari dataset).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(bound = "")]
-pub struct AnswerStep<A: Action = usize> {
+pub(crate) struct AnswerStep<A: Action = usize> {
     pub step: usize,
     /// The transition, written as the fields of a demonstration file's line (`episode` to `truncated`).
     #[serde(flatten)]
@@ -496,7 +496,7 @@ impl<A: Action> AnswerStep<A> {
     }
 
     /// The step as one line of [`ANSWERS_FILE`].
-    pub fn json_line(&self) -> Result<String> {
+    pub(crate) fn json_line(&self) -> Result<String> {
         let mut line = serde_json::to_string(self)?;
         line.push('\n');
         Ok(line)
@@ -787,7 +787,7 @@ pub fn read_config(dir: &Path, id: &RunId) -> Result<TrainConfig> {
 /// The configuration of the run in `dir` exactly as its `config.toml` has it: neither resolved over a preset nor
 /// validated (a run driven from Python records an expert that only Python supplies); a key that an older file
 /// lacks is not taken from a preset, as [`read_config`] takes it.
-pub fn read_written_config(dir: &Path) -> Result<TrainConfig> {
+pub(crate) fn read_written_config(dir: &Path) -> Result<TrainConfig> {
     let path = dir.join(CONFIG_FILE);
     let bytes = crate::files::read_bounded(&path, MAX_KEY_FILE_BYTES)
         .with_context(|| format!("cannot read {}", path.display()))?;
@@ -931,7 +931,7 @@ pub fn copy_finished_run(from: &Path, to: &Path, config: &TrainConfig) -> Result
 }
 
 /// Reads `summary.json` of a run directory.
-pub fn read_summary(dir: &Path) -> Result<Summary> {
+pub(crate) fn read_summary(dir: &Path) -> Result<Summary> {
     let path = dir.join(SUMMARY_FILE);
     let bytes = crate::files::read_bounded(&path, MAX_KEY_FILE_BYTES)
         .with_context(|| format!("cannot read {}", path.display()))?;
@@ -1016,7 +1016,7 @@ impl Failure {
 }
 
 /// Writes `failed.json` into the run directory `dir`.
-pub fn write_failure(dir: &Path, failure: &Failure) -> Result<()> {
+pub(crate) fn write_failure(dir: &Path, failure: &Failure) -> Result<()> {
     let json = serde_json::to_string_pretty(failure)?;
     Ok(write_atomic(&dir.join(FAILED_FILE), json.as_bytes())?)
 }
@@ -1063,7 +1063,7 @@ pub fn write_curve(dir: &Path, curve: &[EvalPoint]) -> Result<()> {
 }
 
 /// Reads `eval.csv` of a run directory, in step order.
-pub fn read_curve(dir: &Path) -> Result<Vec<EvalPoint>> {
+pub(crate) fn read_curve(dir: &Path) -> Result<Vec<EvalPoint>> {
     let path = dir.join(EVAL_FILE);
     let bytes = crate::files::read_bounded(&path, MAX_LOG_BYTES)
         .with_context(|| format!("cannot read {}", path.display()))?;
@@ -1118,7 +1118,7 @@ pub fn parse_query_steps(bytes: &[u8], path: &Path) -> Result<Vec<u64>> {
 
 /// The uncertainty logged with each question in `queries.csv` (step, uncertainty, threshold; rows without an
 /// uncertainty left out), in the log's order; empty when the run has no query log.
-pub fn read_query_uncertainties(dir: &Path) -> Result<Vec<(u64, f32, Option<f32>)>> {
+pub(crate) fn read_query_uncertainties(dir: &Path) -> Result<Vec<(u64, f32, Option<f32>)>> {
     let path = dir.join(QUERIES_FILE);
     if !path.is_file() {
         return Ok(Vec::new());
@@ -1129,7 +1129,7 @@ pub fn read_query_uncertainties(dir: &Path) -> Result<Vec<(u64, f32, Option<f32>
 }
 
 /// The step, uncertainty and threshold columns of the bytes of a `queries.csv` at `path` (named in errors).
-pub fn parse_query_uncertainties(
+pub(crate) fn parse_query_uncertainties(
     bytes: &[u8],
     path: &Path,
 ) -> Result<Vec<(u64, f32, Option<f32>)>> {
@@ -1176,7 +1176,7 @@ pub fn parse_query_uncertainties(
 }
 
 /// Where a run of a sweep lives below the sweep directory: `ENV/METHOD-NET[/VARIANT]/seedN`, e.g.
-/// `CartPole-v0/adqn-bootstrap/tq0.05/seed3`. [`variant_from_path`] reads the variant back.
+/// `CartPole-v0/adqn-bootstrap/tq0.05/seed3`. `variant_from_path` reads the variant back.
 pub fn sweep_run_path(
     env: &str,
     method: Method,
@@ -1195,7 +1195,12 @@ pub fn sweep_run_path(
 
 /// The variant label from a run's path inside a sweep: the components between `METHOD-NET` and `seedN`
 /// ([`DEFAULT_VARIANT`] for a run outside that layout).
-pub fn variant_from_path(relative: &Path, method: Method, net: NetKind, seed: u64) -> String {
+pub(crate) fn variant_from_path(
+    relative: &Path,
+    method: Method,
+    net: NetKind,
+    seed: u64,
+) -> String {
     let parts: Vec<String> = relative
         .components()
         .map(|c| c.as_os_str().to_string_lossy().into_owned())
@@ -1211,7 +1216,7 @@ pub fn variant_from_path(relative: &Path, method: Method, net: NetKind, seed: u6
 }
 
 /// Reads one complete run directory; `relative` is its path below the directory being reported on.
-pub fn read_run(dir: &Path, relative: &Path) -> Result<RunRecord> {
+pub(crate) fn read_run(dir: &Path, relative: &Path) -> Result<RunRecord> {
     let summary = read_summary(dir)?;
     // config.toml is optional for a report: it only adds t_query, the expert and the eval period.
     let config_path = dir.join(CONFIG_FILE);

@@ -26,10 +26,10 @@ use std::time::Instant;
 /// The snapshot's file in a run directory.
 pub const SNAPSHOT_FILE: &str = "snapshot.safetensors";
 /// The small description written next to it.
-pub const SNAPSHOT_INFO_FILE: &str = "snapshot.json";
+pub(crate) const SNAPSHOT_INFO_FILE: &str = "snapshot.json";
 /// Version of the snapshot format; a snapshot of another format is refused (format 1, before the checksum,
 /// is still read).
-pub const FORMAT_VERSION: u32 = 2;
+pub(crate) const FORMAT_VERSION: u32 = 2;
 
 /// The largest snapshot read (the replay memory a configuration may ask for is at most 16 GiB).
 const MAX_SNAPSHOT_BYTES: u64 = 64 << 30;

@@ -28,7 +28,7 @@ use super::{Needs, QueryContext, QueryError, QueryRule, RuleInfo, Verdict};
 use crate::query::OrderStatistics;
 use crate::state::{StateDict, StateError};
 
-/// Bernoulli with the paced probability [`QueryContext::paced_probability`].
+/// Bernoulli with the paced probability `QueryContext::paced_probability`.
 #[derive(Clone, Copy, Debug)]
 pub struct PacedRule {
     pub horizon: f64,

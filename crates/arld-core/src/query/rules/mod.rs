@@ -51,7 +51,7 @@ pub enum BudgetUnit {
 
 impl BudgetUnit {
     /// The most demonstrated transitions a budget of `budget` units can bring, with `segment_len` steps per query.
-    pub fn max_transitions(self, budget: usize, segment_len: usize) -> usize {
+    pub(crate) fn max_transitions(self, budget: usize, segment_len: usize) -> usize {
         match self {
             BudgetUnit::Transitions => budget,
             BudgetUnit::Queries => budget.saturating_mul(segment_len),
@@ -154,12 +154,12 @@ impl Needs {
         oracle: false,
     };
     /// The paper's uncertainty only.
-    pub const UNCERTAINTY: Needs = Needs {
+    pub(crate) const UNCERTAINTY: Needs = Needs {
         uncertainty: true,
         ..Needs::NOTHING
     };
     /// The expert's view only ([`OracleView`]).
-    pub const ORACLE: Needs = Needs {
+    pub(crate) const ORACLE: Needs = Needs {
         oracle: true,
         ..Needs::NOTHING
     };
@@ -211,7 +211,7 @@ impl QueryContext<'_> {
     }
 
     /// Budget units one query spends when its segment runs whole: `segment_len` transitions, or one query.
-    pub fn units_per_query(&self) -> f64 {
+    pub(crate) fn units_per_query(&self) -> f64 {
         match self.unit {
             BudgetUnit::Transitions => self.segment_len as f64,
             BudgetUnit::Queries => 1.0,
@@ -220,14 +220,14 @@ impl QueryContext<'_> {
 
     /// The share of the budget a rule paced over the first `horizon` of the run (a fraction, 0 < horizon <= 1)
     /// may have spent after this decision: `budget * min(1, (step + 1) / (horizon * train_steps))`.
-    pub fn pro_rata(&self, horizon: f64) -> f64 {
+    pub(crate) fn pro_rata(&self, horizon: f64) -> f64 {
         let until = (horizon * self.train_steps as f64).max(1.0);
         self.budget as f64 * ((self.step + 1) as f64 / until).min(1.0)
     }
 
     /// The query probability that spends the budget left evenly over the decisions left until `horizon` of the
     /// run (after it, until the run's end): `left / (units_per_query * steps_left)`, at most 1.
-    pub fn paced_probability(&self, horizon: f64) -> f64 {
+    pub(crate) fn paced_probability(&self, horizon: f64) -> f64 {
         let until = (horizon * self.train_steps as f64).ceil() as usize;
         let end = if self.step < until {
             until
@@ -253,7 +253,7 @@ pub struct Verdict {
 
 impl Verdict {
     /// No query, nothing compared.
-    pub const NO: Verdict = Verdict {
+    pub(crate) const NO: Verdict = Verdict {
         query: false,
         threshold: None,
         score: None,
@@ -314,7 +314,7 @@ pub struct RuleDefaults {
 
 impl RuleDefaults {
     /// The fraction of agent decisions that would spend the budget evenly over the run.
-    pub fn target_rate(&self) -> f64 {
+    pub(crate) fn target_rate(&self) -> f64 {
         let per_query = match self.unit {
             BudgetUnit::Transitions => self.segment_len as f64,
             BudgetUnit::Queries => 1.0,
@@ -325,7 +325,7 @@ impl RuleDefaults {
 
 /// A rule spec's parameters, each read once by the rule's builder; leftovers are an error.
 #[derive(Debug)]
-pub struct Params {
+pub(crate) struct Params {
     rule: &'static str,
     values: BTreeMap<String, f64>,
 }
@@ -415,7 +415,7 @@ pub const RULES: &[RuleInfo] = &[
 ];
 
 /// The names of every rule.
-pub fn rule_names() -> Vec<&'static str> {
+pub(crate) fn rule_names() -> Vec<&'static str> {
     RULES.iter().map(|r| r.name).collect()
 }
 

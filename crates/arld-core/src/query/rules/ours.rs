@@ -2,7 +2,7 @@
 //!
 //! - [`RankedPacedRule`] (`ranked`): chance paced over the first `horizon` of the run, tilted toward the
 //!   states the agent is most uncertain about. At each decision with p the paced probability
-//!   ([`super::QueryContext::paced_probability`]) and r the fraction of the last `n_r` uncertainties below the
+//!   (`super::QueryContext::paced_probability`) and r the fraction of the last `n_r` uncertainties below the
 //!   current one, it asks with probability `min(1, 2 r p)`: the expected spend stays the paced one (r is about
 //!   uniform on [0, 1]), but a question lands where the agent is unsure relative to its recent states, and no
 //!   question is asked before `start` of the run (say, before the network has learned anything).

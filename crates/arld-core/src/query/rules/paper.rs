@@ -168,13 +168,17 @@ impl AdaptiveQuantileRule {
 
     /// Writes the window (oldest first) under `prefix`. The ranking tree is not written: its answers depend only
     /// on the values in the window, so it is rebuilt from them.
-    pub fn save_window<'a>(&'a self, prefix: &str, state: &mut StateDict<'a>) {
+    pub(crate) fn save_window<'a>(&'a self, prefix: &str, state: &mut StateDict<'a>) {
         let window: Vec<f32> = self.recent.iter().copied().collect();
         state.put_f32(&format!("{prefix}.window"), window);
     }
 
     /// Reads what [`Self::save_window`] wrote.
-    pub fn load_window(&mut self, prefix: &str, state: &StateDict<'_>) -> Result<(), StateError> {
+    pub(crate) fn load_window(
+        &mut self,
+        prefix: &str,
+        state: &StateDict<'_>,
+    ) -> Result<(), StateError> {
         let window = state.f32s(&format!("{prefix}.window"))?;
         self.recent.clear();
         self.ranked.clear();
