@@ -135,8 +135,17 @@ impl Lanes for Avx2 {
     }
     #[inline(always)]
     unsafe fn store_first(p: *mut f32, v: __m256, lanes: usize) {
-        // SAFETY: the caller guarantees `lanes` writable floats; the masked-out lanes are not accessed.
-        unsafe { _mm256_maskstore_ps(p, avx2_mask(lanes), v) }
+        // SAFETY: the caller guarantees `lanes` writable floats; only those are written.
+        unsafe {
+            if lanes == 8 {
+                _mm256_storeu_ps(p, v);
+            } else if lanes > 4 {
+                _mm_storeu_ps(p, _mm256_castps256_ps128(v));
+                store_first_of_4(p.add(4), _mm256_extractf128_ps::<1>(v), lanes - 4);
+            } else {
+                store_first_of_4(p, _mm256_castps256_ps128(v), lanes);
+            }
+        }
     }
     const TRANSPOSES_BLOCKS: bool = true;
     #[inline(always)]
@@ -182,6 +191,26 @@ unsafe fn avx_transpose8(src: *const f32, src_stride: usize, dst: *mut f32, dst_
                 dst.add((c + 4) * dst_stride),
                 _mm256_permute2f128_ps::<0x31>(s[c], s[4 + c]),
             );
+        }
+    }
+}
+
+/// Stores the first `lanes` (1 to 4) lanes of `v` at `p` with plain stores (4, 2 and 1 floats wide): AMD
+/// CPUs run the masked store `vmaskmovps` in microcode, tens of cycles for each output row of a narrow layer.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+unsafe fn store_first_of_4(p: *mut f32, v: __m128, lanes: usize) {
+    debug_assert!((1..=4).contains(&lanes));
+    // SAFETY: the caller guarantees `lanes` writable floats at `p`; each store below writes inside them.
+    unsafe {
+        match lanes {
+            4 => _mm_storeu_ps(p, v),
+            3 => {
+                _mm_storel_epi64(p.cast(), _mm_castps_si128(v));
+                _mm_store_ss(p.add(2), _mm_movehl_ps(v, v));
+            }
+            2 => _mm_storel_epi64(p.cast(), _mm_castps_si128(v)),
+            _ => _mm_store_ss(p, v),
         }
     }
 }
@@ -271,8 +300,8 @@ impl<const N: usize> Lanes for Fma4<N> {
     }
     #[inline(always)]
     unsafe fn store(p: *mut f32, v: __m128) {
-        // SAFETY: the caller guarantees `N` writable floats; the masked-out lanes are not accessed.
-        unsafe { _mm_maskstore_ps(p, Self::mask(), v) }
+        // SAFETY: the caller guarantees `N` writable floats; only those are written.
+        unsafe { store_first_of_4(p, v, N) }
     }
     #[inline(always)]
     unsafe fn fma(a: __m128, b: __m128, c: __m128) -> __m128 {
@@ -356,12 +385,17 @@ pub(crate) fn product<S: Lanes>(dst: &mut [f32], a: Strided, b: &[f32], init: Op
         // Fewer columns than a vector, and a left operand whose rows are adjacent (`Xᵀ` of a layer's input
         // for a gradient of a 1-7 column layer: a critic's value, the actions of a Q-network): the vectors run
         // across rows instead, so no lane idles. The rows left over go through the column blocks below.
+        // Blocks of `RV` vectors of rows by up to 4 columns: at least 8 accumulators (the FMA latency times
+        // two pipes) where the rows allow, within the register file (16 ymm registers: 4 x 2 for one or two
+        // columns, else 2 x 4).
         if S::WIDTH >= 8 && p.a_rs == 1 && n < S::WIDTH {
-            let done = if S::REGISTERS >= 32 {
-                row_vector_blocks::<S, 4>(&p, 0, m)
-            } else {
-                row_vector_blocks::<S, 2>(&p, 0, m)
+            let done = match n {
+                1 => row_vector_blocks::<S, 8>(&p, 0, m),
+                2 => row_vector_blocks::<S, 4>(&p, 0, m),
+                _ if S::REGISTERS >= 32 => row_vector_blocks::<S, 4>(&p, 0, m),
+                _ => 0,
             };
+            let done = row_vector_blocks::<S, 2>(&p, done, m);
             let done = row_vector_blocks::<S, 1>(&p, done, m);
             p.dst = p.dst.add(done * n);
             p.a = p.a.add(done);
@@ -371,32 +405,33 @@ pub(crate) fn product<S: Lanes>(dst: &mut [f32], a: Strided, b: &[f32], init: Op
             }
         }
         let full = n / S::WIDTH * S::WIDTH;
-        // Block width in vectors: 4 rows x C vectors of accumulators, plus C loaded vectors and one
-        // broadcast, must fit the register file: C = 4 (21 registers) only with 32 of them, else C = 2.
-        // Fewer than 4 rows (a single-state forward) run one row at a time, where 4 vectors always fit.
+        // Block shape: R rows x C vectors of accumulators, plus C loaded vectors and one broadcast, must fit
+        // the register file, with more accumulators than the FMA latency times the two pipes (8) so that the
+        // pipes never wait: 4 x 4 (21 registers) with 32 of them, 6 x 2 (15) with 16. Fewer than 4 rows (a
+        // single-state forward) run one row at a time, where 4 vectors always fit.
         let mut col = if S::REGISTERS < 32 && m >= 4 {
-            column_blocks::<S, 2>(&p, m, full)
+            column_blocks::<S, 6, 2>(&p, m, full)
         } else {
-            column_blocks::<S, 4>(&p, m, full)
+            column_blocks::<S, 4, 4>(&p, m, full)
         };
-        // AVX2's rest (under 16 columns, or 32 for fewer than 4 rows): 9-15 columns as one block of two
-        // vectors whose second is masked, 1-8 as one (masked) vector over 8 rows at a time, so that 8
-        // accumulators hide the FMA latency as in the full blocks.
+        // AVX2's rest (under 16 columns, or 32 for fewer than 4 rows): 9-15 columns as blocks of two vectors
+        // whose second is masked, 1-8 as one (masked) vector over 12 rows at a time, so that 12 accumulators
+        // hide the FMA latency as in the full blocks.
         #[cfg(target_arch = "x86_64")]
         if S::WIDTH == Avx2::WIDTH {
             while col + 2 * S::WIDTH <= n {
-                rows_blocked::<S, 4, 2, false>(&p, m, col, S::WIDTH);
+                rows_blocked::<S, 6, 2, false>(&p, m, col, S::WIDTH);
                 col += 2 * S::WIDTH;
             }
             match n - col {
                 0 => {}
-                rest @ 1..=8 => rows_blocked::<S, 8, 1, true>(&p, m, col, rest),
-                rest => rows_blocked::<S, 4, 2, true>(&p, m, col, rest - S::WIDTH),
+                rest @ 1..=8 => rows_blocked::<S, 12, 1, true>(&p, m, col, rest),
+                rest => rows_blocked::<S, 6, 2, true>(&p, m, col, rest - S::WIDTH),
             }
             col = n;
         }
         while col + S::WIDTH <= full {
-            rows_blocked::<S, 4, 1, false>(&p, m, col, S::WIDTH);
+            rows_blocked::<S, 8, 1, false>(&p, m, col, S::WIDTH);
             col += S::WIDTH;
         }
         // An 8-column rest of a 16-lane level in AVX2 vectors (the 10 heads' 40 columns), not lane by lane,
@@ -443,13 +478,17 @@ struct Operands {
     k: usize,
 }
 
-/// Blocks of `C` vectors from column 0 while they fit in `full`; returns the first column left.
+/// Blocks of `R` rows by `C` vectors from column 0 while they fit in `full`; returns the first column left.
 #[inline(always)]
-unsafe fn column_blocks<S: Lanes, const C: usize>(p: &Operands, m: usize, full: usize) -> usize {
+unsafe fn column_blocks<S: Lanes, const R: usize, const C: usize>(
+    p: &Operands,
+    m: usize,
+    full: usize,
+) -> usize {
     let mut col = 0;
     while col + C * S::WIDTH <= full {
         // SAFETY: forwarded from `product`.
-        unsafe { rows_blocked::<S, 4, C, false>(p, m, col, S::WIDTH) };
+        unsafe { rows_blocked::<S, R, C, false>(p, m, col, S::WIDTH) };
         col += C * S::WIDTH;
     }
     col
