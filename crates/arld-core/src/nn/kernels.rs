@@ -20,6 +20,19 @@
 
 #[cfg(target_arch = "x86_64")]
 use std::arch::x86_64::*;
+use std::cell::Cell;
+
+thread_local! {
+    /// Floating-point operations of the products run on this thread (see [`product_flops`]).
+    static PRODUCT_FLOPS: Cell<u64> = const { Cell::new(0) };
+}
+
+/// The floating-point operations of every matrix product ([`product`]) this thread has run: two per
+/// multiply-add, `2 m k n` for an `m x k` by `k x n` product. A benchmark reads it before and after a piece
+/// of work to count that work's arithmetic (the per-step account of `benches/box_update.rs`).
+pub fn product_flops() -> u64 {
+    PRODUCT_FLOPS.with(Cell::get)
+}
 
 /// A vector of `WIDTH` f32 lanes and the four operations the kernel needs.
 ///
@@ -364,6 +377,7 @@ pub(crate) fn product<S: Lanes>(dst: &mut [f32], a: Strided, b: &[f32], init: Op
     if m == 0 || n == 0 {
         return;
     }
+    PRODUCT_FLOPS.with(|flops| flops.set(flops.get() + 2 * (m * k * n) as u64));
     assert!(
         (m - 1) * a.row_stride + k.saturating_sub(1) * a.col_stride < a.data.len() || k == 0,
         "product: left view exceeds its slice"
