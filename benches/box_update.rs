@@ -57,6 +57,12 @@ const ACCUMULATORS: usize = 12;
 /// One call of a level's peak loop.
 type FmaRounds = unsafe fn(f32) -> f32;
 
+/// One critic forward and backward pass of the account's kernel table.
+type CriticPass = Box<dyn FnMut()>;
+
+/// A learner's product FLOPs per learning step by part, from a run's configuration.
+type UpdateParts = fn(&TrainConfig) -> Vec<(&'static str, u64)>;
+
 /// A learner's settings at a hidden width.
 type ConfigOfWidth = fn(usize) -> BoxLearnerConfig;
 
@@ -303,13 +309,15 @@ fn forward_flops(sizes: &[usize], batch: usize) -> u64 {
 /// The account (see the module docs).
 fn account() {
     let Some((peak_loop, peak_call_flops)) = level_peak() else {
-        println!("the account compares with the FMA peak of a vector level; ARLD_SIMD=scalar has none");
+        println!(
+            "the account compares with the FMA peak of a vector level; ARLD_SIMD=scalar has none"
+        );
         return;
     };
     let level = simd_level().name();
     // The kernels against the peak, interleaved.
     let mut rng = Pcg64::seed_from_u64(5);
-    let mut passes: Vec<(usize, u64, Box<dyn FnMut()>)> = Vec::new();
+    let mut passes: Vec<(usize, u64, CriticPass)> = Vec::new();
     for width in WIDTHS {
         let sizes = [OBS_DIM + ACTION_DIM, width, width, HEADS];
         let net = Mlp::new(&sizes, OutputActivation::Linear, &mut rng);
@@ -335,7 +343,10 @@ fn account() {
         }
     }
     let peak_flops = peak_call_flops as f64 / peak;
-    println!("kernels at {level}: fma_peak {:.1} GFLOP/s", peak_flops / 1e9);
+    println!(
+        "kernels at {level}: fma_peak {:.1} GFLOP/s",
+        peak_flops / 1e9
+    );
     println!("| kernel | width | GFLOP/s | share of the peak |");
     println!("|---|---|---|---|");
     for ((width, flops, _), seconds) in passes.iter().zip(&best) {
@@ -356,7 +367,7 @@ struct Learning {
     name: &'static str,
     env: &'static str,
     net: NetKind,
-    update_parts: Option<fn(&TrainConfig) -> Vec<(&'static str, u64)>>,
+    update_parts: Option<UpdateParts>,
 }
 
 /// TD3's product FLOPs per learning step on Pendulum-v1 in the run `cfg` (its hidden widths, batch and critic
@@ -371,14 +382,19 @@ fn td3_update_parts(cfg: &TrainConfig) -> Vec<(&'static str, u64)> {
         sizes.push(output);
         sizes
     };
-    let (actor, critic) = (sizes(OBS_DIM, ACTION_DIM), sizes(OBS_DIM + ACTION_DIM, cfg.heads));
+    let (actor, critic) = (
+        sizes(OBS_DIM, ACTION_DIM),
+        sizes(OBS_DIM + ACTION_DIM, cfg.heads),
+    );
     let critic_input_grads = forward_flops(&critic, batch);
-    let actor_update = forward_flops(&critic, batch)
-        + critic_input_grads
-        + fwd_bwd_flops(&actor, batch);
+    let actor_update =
+        forward_flops(&critic, batch) + critic_input_grads + fwd_bwd_flops(&actor, batch);
     vec![
         ("critic", fwd_bwd_flops(&critic, batch)),
-        ("targets", forward_flops(&actor, batch) + forward_flops(&critic, batch)),
+        (
+            "targets",
+            forward_flops(&actor, batch) + forward_flops(&critic, batch),
+        ),
         ("actor", actor_update / Td3Config::default().policy_delay),
         ("acting", forward_flops(&actor, 1)),
     ]
@@ -443,14 +459,17 @@ fn step_account(peak_flops: f64, level: &str) {
             update_parts: None,
         },
     ];
-    println!("per-step account at {level} ({STEPS}-step runs, updates from step {STARTS}; MFLOP and µs per step)");
+    println!(
+        "per-step account at {level} ({STEPS}-step runs, updates from step {STARTS}; MFLOP and µs per step)"
+    );
     println!("| learner | width | part | MFLOP | µs | share of the step's FLOP limit |");
     println!("|---|---|---|---|---|---|");
     for learning in &learners {
         for width in WIDTHS {
             let cfg = run_config(learning, Method::Dqn, width, STEPS, STARTS);
             let (run_s, run_f) = run_cost(&cfg);
-            let (rest_s, rest_f) = run_cost(&run_config(learning, Method::Dqn, width, STEPS, STEPS));
+            let (rest_s, rest_f) =
+                run_cost(&run_config(learning, Method::Dqn, width, STEPS, STEPS));
             let (query_s, query_f) =
                 run_cost(&run_config(learning, Method::Adqn, width, STEPS, STARTS));
             let updates = (STEPS - STARTS) as f64;

@@ -421,9 +421,11 @@ pub(crate) fn product<S: Lanes>(dst: &mut [f32], a: Strided, b: &[f32], init: Op
         let full = n / S::WIDTH * S::WIDTH;
         // Block shape: R rows x C vectors of accumulators, plus C loaded vectors and one broadcast, must fit
         // the register file, with more accumulators than the FMA latency times the two pipes (8) so that the
-        // pipes never wait: 4 x 4 (21 registers) with 32 of them, 6 x 2 (15) with 16. Fewer than 4 rows (a
-        // single-state forward) run one row at a time, where 4 vectors always fit.
-        let mut col = if S::REGISTERS < 32 && m >= 4 {
+        // pipes never wait: 6 x 4 (29 registers) with 32 of them, 6 x 2 (15) with 16. One or two rows (a
+        // single-state forward) run in blocks of 4 vectors, which always fit.
+        let mut col = if S::REGISTERS >= 32 {
+            column_blocks::<S, 6, 4>(&p, m, full)
+        } else if m >= 3 {
             column_blocks::<S, 6, 2>(&p, m, full)
         } else {
             column_blocks::<S, 4, 4>(&p, m, full)
@@ -580,8 +582,10 @@ unsafe fn row_vector_block<S: Lanes, const RV: usize, const CG: usize>(
     }
 }
 
-/// Columns `col..` of all `m` rows in blocks of `C` vectors, `R` rows at a time, then 4, then 1. `MASKED`: the
-/// last vector holds only its first `lanes` columns.
+/// Columns `col..` of all `m` rows in blocks of `C` vectors, `R` rows at a time; the rows left (fewer than `R`)
+/// in one block of 8, 5 or 4 rows where they fit and then one of the 1-3 left, so that a batch of 32 rows in
+/// blocks of 6 keeps 2 rows together rather than running them one at a time (one row's `C` accumulators
+/// cannot hide the FMA latency). `MASKED`: the last vector holds only its first `lanes` columns.
 #[inline(always)]
 unsafe fn rows_blocked<S: Lanes, const R: usize, const C: usize, const MASKED: bool>(
     p: &Operands,
@@ -596,13 +600,26 @@ unsafe fn rows_blocked<S: Lanes, const R: usize, const C: usize, const MASKED: b
             block::<S, R, C, MASKED>(p, row, col, lanes);
             row += R;
         }
-        while R > 4 && row + 4 <= m {
+        if R > 8 && row + 8 <= m {
+            block::<S, 8, C, MASKED>(p, row, col, lanes);
+            row += 8;
+        }
+        if R > 5 && row + 5 <= m {
+            block::<S, 5, C, MASKED>(p, row, col, lanes);
+            row += 5;
+        }
+        if R > 4 && row + 4 <= m {
             block::<S, 4, C, MASKED>(p, row, col, lanes);
             row += 4;
         }
-        while row < m {
-            block::<S, 1, C, MASKED>(p, row, col, lanes);
-            row += 1;
+        match m - row {
+            0 => {}
+            1 => block::<S, 1, C, MASKED>(p, row, col, lanes),
+            2 => block::<S, 2, C, MASKED>(p, row, col, lanes),
+            rest => {
+                debug_assert_eq!(rest, 3);
+                block::<S, 3, C, MASKED>(p, row, col, lanes)
+            }
         }
     }
 }
