@@ -276,8 +276,9 @@ impl Lanes for Avx512 {
     }
 }
 
-/// The first `N` (1 to 4) lanes of a 4-lane vector (FMA; masked loads and stores from AVX touch only those `N`
-/// floats): the column rest below 8 columns of the AVX-512 level, so no output runs lane by lane there.
+/// The first `N` (1 to 4) lanes of a 4-lane vector (FMA; masked loads from AVX and plain 4-, 2- and 1-float
+/// stores touch only those `N` floats): the column rest below 8 columns of the AVX-512 level, so no output runs
+/// lane by lane there.
 /// The unused lanes compute on zeros and are never stored.
 #[cfg(target_arch = "x86_64")]
 pub(crate) struct Fma4<const N: usize>;
