@@ -4,6 +4,11 @@
 //! place, which fails if it exists) and removed when the holder ends. A lock whose holder is gone (a process of
 //! this host that no longer exists, e.g. after SIGKILL) is stale: it is taken over with a warning. A lock held
 //! from another host cannot be checked from here and is never taken over.
+//!
+//! Taking over is serialised by an advisory lock (`flock`) on the directory itself: between reading a stale
+//! holder and removing its file, no other taker can remove or replace the file, so that of several processes
+//! taking over one stale lock at once exactly one holds it and every other is refused, naming it. The kernel
+//! releases the advisory lock with its process, so it never goes stale itself.
 
 use anyhow::{Context, Result, bail};
 use serde::{Deserialize, Serialize};
@@ -62,6 +67,21 @@ impl DirLock {
     }
 
     fn link(temp: &Path, path: &Path) -> Result<Self> {
+        // The usual case, with nobody holding the lock: taken at once.
+        match std::fs::hard_link(temp, path) {
+            Ok(()) => {
+                return Ok(DirLock {
+                    path: path.to_path_buf(),
+                });
+            }
+            Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {}
+            Err(e) => {
+                return Err(e)
+                    .with_context(|| format!("cannot create the lock file {}", path.display()));
+            }
+        }
+        // Held, or stale: decided while no other taker looks at the file.
+        let _takeover = Takeover::of(path.parent().unwrap_or(Path::new(".")))?;
         // Two attempts: the second after removing a stale lock.
         for _ in 0..2 {
             match std::fs::hard_link(temp, path) {
@@ -114,6 +134,40 @@ impl DirLock {
     }
 }
 
+/// The advisory lock on a directory that serialises taking over its lock files; released when dropped (or when
+/// the process ends).
+struct Takeover(std::fs::File);
+
+impl Takeover {
+    fn of(dir: &Path) -> Result<Self> {
+        let file = std::fs::File::open(dir)
+            .with_context(|| format!("cannot open the directory {}", dir.display()))?;
+        loop {
+            // SAFETY: `flock` on a descriptor this function owns; it touches no memory.
+            let rc = unsafe { libc::flock(std::os::fd::AsRawFd::as_raw_fd(&file), libc::LOCK_EX) };
+            if rc == 0 {
+                return Ok(Takeover(file));
+            }
+            let err = std::io::Error::last_os_error();
+            if err.kind() != std::io::ErrorKind::Interrupted {
+                return Err(err).with_context(|| {
+                    format!(
+                        "cannot lock the directory {} to take over its lock",
+                        dir.display()
+                    )
+                });
+            }
+        }
+    }
+}
+
+impl Drop for Takeover {
+    fn drop(&mut self) {
+        // SAFETY: as in `of`; closing the file would release it too.
+        unsafe { libc::flock(std::os::fd::AsRawFd::as_raw_fd(&self.0), libc::LOCK_UN) };
+    }
+}
+
 impl Drop for DirLock {
     fn drop(&mut self) {
         let _ = std::fs::remove_file(&self.path);
@@ -133,6 +187,51 @@ pub fn host_name() -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Many takers of one stale lock at once: exactly one holds it, every other is refused naming the holder
+    /// (before the takeover was serialised, one taker could remove another's fresh lock, so that two held it, or
+    /// find the stale file gone and refuse, so that none did).
+    #[test]
+    fn a_stale_lock_taken_over_by_many_at_once_has_one_holder() {
+        let stale = Holder {
+            pid: u32::MAX,
+            host: host_name(),
+            since_unix: 0,
+        };
+        for round in 0..300 {
+            let dir = tempfile::tempdir().unwrap();
+            std::fs::write(
+                dir.path().join(".lock"),
+                serde_json::to_string(&stale).unwrap(),
+            )
+            .unwrap();
+            let takers = 6;
+            let barrier = std::sync::Barrier::new(takers);
+            let outcomes: Vec<Result<DirLock, String>> = std::thread::scope(|scope| {
+                let handles: Vec<_> = (0..takers)
+                    .map(|_| {
+                        scope.spawn(|| {
+                            barrier.wait();
+                            DirLock::acquire(dir.path(), ".lock").map_err(|e| format!("{e:#}"))
+                        })
+                    })
+                    .collect();
+                handles.into_iter().map(|h| h.join().unwrap()).collect()
+            });
+            let held = outcomes.iter().filter(|o| o.is_ok()).count();
+            let refusals: Vec<&String> = outcomes.iter().filter_map(|o| o.as_ref().err()).collect();
+            assert_eq!(
+                held, 1,
+                "round {round}: {held} holders; refusals: {refusals:?}"
+            );
+            for refusal in refusals {
+                assert!(
+                    refusal.contains("is in use by another arld process"),
+                    "round {round}: {refusal}"
+                );
+            }
+        }
+    }
 
     #[test]
     fn a_held_lock_is_refused_and_a_stale_one_taken_over() {

@@ -35,6 +35,7 @@ use super::protocol::{
     PAPER_SEEDS, SECOND_HELD_OUT_CELLS, SECOND_HELD_OUT_RULE, SECOND_HELD_OUT_SEEDS, TEST_LEVEL,
     env_order, is_effort_variant, paper_budget, scaled_budget,
 };
+use super::reference::{REFERENCE_EPISODES, REFERENCE_SEED, references};
 use super::stats::{
     Decimal, OnCurve, bootstrap_median_interval, budget_equivalent, detectable_difference,
     equivalence_p, exact_sum, final_score, hodges_lehmann, holm, intersection_union, mann_whitney,
@@ -48,10 +49,6 @@ use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::path::Path;
 
-/// Episodes behind the random policy's and the expert's reference returns.
-pub const REFERENCE_EPISODES: usize = 100;
-/// Seed of the reference episodes (episode i resets with `REFERENCE_SEED + i`).
-pub const REFERENCE_SEED: u64 = 1_000_000;
 const BOOTSTRAP_RESAMPLES: usize = 10_000;
 const BOOTSTRAP_SEED: u64 = 0;
 /// The paper's rules, as the baselines every rule is compared with: (label, method).
@@ -158,42 +155,6 @@ fn rule_and_budget(run: &RunRecord) -> Option<(String, usize)> {
         label.push_str(" from learning_starts");
     }
     Some((label, budget))
-}
-
-/// Mean returns of the random policy (a uniform draw from the actions, or from the box) and of the shipped weak
-/// expert on `env`.
-pub(super) fn references(env: &str) -> Result<(f64, f64)> {
-    use arld_core::env::{self, rollouts};
-    let mut rng = rand_pcg::Pcg64::seed_from_u64(REFERENCE_SEED);
-    let seeds = |i: usize| Some(REFERENCE_SEED + i as u64);
-    let random = match env::box_spec(env) {
-        Ok(spec) => rollouts(
-            env::make_box(env)?.as_mut(),
-            REFERENCE_EPISODES,
-            seeds,
-            |_| {
-                let (low, high) = (spec.action_low.iter(), spec.action_high.iter());
-                let action = low.zip(high).map(|(&l, &h)| rng.random_range(l..=h));
-                Ok::<_, anyhow::Error>(action.collect())
-            },
-        )?,
-        Err(_) => {
-            let mut e = env::make(env)?;
-            let n_actions = e.n_actions();
-            rollouts(e.as_mut(), REFERENCE_EPISODES, seeds, |_| {
-                Ok::<_, anyhow::Error>(rng.random_range(0..n_actions))
-            })?
-        }
-    };
-    let stats = arld_core::expert::pipeline::evaluate_spec(
-        "shipped:weak",
-        env,
-        REFERENCE_EPISODES,
-        REFERENCE_SEED,
-        30.0,
-    )?;
-    let random_mean = random.iter().map(|e| e.ret).sum::<f64>() / random.len() as f64;
-    Ok((random_mean, stats.mean))
 }
 
 /// What `run` measured; its evaluation means are finite ([`super::report::report`] refuses a run otherwise).

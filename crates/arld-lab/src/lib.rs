@@ -18,6 +18,7 @@ pub mod pack;
 pub mod plot;
 pub mod protocol;
 pub mod quote;
+pub mod reference;
 pub mod report;
 pub mod slurm;
 pub mod stats;

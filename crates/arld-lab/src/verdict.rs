@@ -887,7 +887,7 @@ pub fn write_verdict(cells: &[Cell], out_dir: &Path, k: usize) -> Result<(Vec<Pa
         arld_core::env::box_spec(env)
             .is_ok()
             .then(|| {
-                super::effort::references(env)
+                super::reference::references(env)
                     .ok()
                     .map(|(_, expert)| expert)
             })
@@ -1095,10 +1095,15 @@ mod tests {
         let claim = beats_claim(
             &cells,
             "c".into(),
-            "adqn",
-            &["dqn", "gdqn", "bdqn"],
+            ("adqn", &["dqn", "gdqn", "bdqn"]),
             &["CartPole-v0"],
             "bootstrap",
+            Standard::table5(
+                "adqn",
+                &["dqn", "gdqn", "bdqn"],
+                &["CartPole-v0"],
+                "bootstrap",
+            ),
         );
         assert_eq!(claim.verdict, Verdict::NotReproduced, "{claim:?}");
         assert!(claim.ours.contains("DQN on CartPole-v0"), "{}", claim.ours);
@@ -1106,10 +1111,10 @@ mod tests {
         let claim = beats_claim(
             &cells,
             "c".into(),
-            "adqn",
-            &["gdqn", "bdqn"],
+            ("adqn", &["gdqn", "bdqn"]),
             &["CartPole-v0"],
             "bootstrap",
+            Standard::table5("adqn", &["gdqn", "bdqn"], &["CartPole-v0"], "bootstrap"),
         );
         assert_eq!(claim.verdict, Verdict::Reproduced, "{claim:?}");
         assert_eq!(claim.ours, "first hit 1/1, sustained 1/1, median curve 1/1");

@@ -27,8 +27,9 @@ pub(crate) trait ActorCriticLearner: Send {
     fn name(&self) -> &'static str;
     /// The behaviour action at `obs` (with the learner's own exploration), into `action`.
     fn act(&mut self, obs: &[f32], action: &mut [f32]);
-    /// The test-time action at `obs` (no exploration), into `action`.
-    fn test_action(&mut self, obs: &[f32], action: &mut [f32]);
+    /// The test-time actions (no exploration) at the rows of `obs`, into the rows of `actions` (any number of
+    /// rows; each row's action is the one a single-row call gives, bit for bit).
+    fn test_action(&mut self, obs: &[f32], actions: &mut [f32]);
     /// One update from `batch` (its targets discounted by `gamma` per step, [`Batch::discount`]): what it
     /// measured and the new priority of each sample.
     ///
@@ -62,8 +63,9 @@ pub(crate) trait Algorithm: Send {
     const NAME: &'static str;
     /// The behaviour action at `obs` (with the algorithm's own exploration), into `action`.
     fn act(&mut self, core: &mut Core, obs: &[f32], action: &mut [f32]);
-    /// The test-time action at `obs` (no exploration) as the tanh output the box scales, into `unit`.
-    fn test_unit(&self, core: &mut Core, obs: &[f32], unit: &mut [f32]);
+    /// The test-time actions (no exploration) at the rows of `obs` as the tanh outputs the box scales, into the
+    /// rows of `units`: one batched forward pass of the actor, at most its workspace's batch of rows.
+    fn test_units(&self, core: &mut Core, obs: &[f32], units: &mut [f32]);
     /// One update from `batch`: what it measured; the new priorities are left in the core's `priorities`.
     fn learn(&mut self, core: &mut Core, batch: &Batch<Vec<f32>>, gamma: f32) -> BoxUpdate;
     /// Writes what the algorithm holds beyond the core under `prefix`.
@@ -95,7 +97,7 @@ impl<A> BoxLearner<A> {
     where
         A: Algorithm,
     {
-        self.algo.test_unit(&mut self.core, obs, &mut self.centre);
+        self.algo.test_units(&mut self.core, obs, &mut self.centre);
         let core = &mut self.core;
         core.critics
             .argmax_disagreement(obs, &self.centre, &core.action_box)
@@ -111,9 +113,13 @@ impl<A: Algorithm> ActorCriticLearner for BoxLearner<A> {
         self.algo.act(&mut self.core, obs, action);
     }
 
-    fn test_action(&mut self, obs: &[f32], action: &mut [f32]) {
-        self.algo.test_unit(&mut self.core, obs, action);
-        self.core.action_box.to_box(action);
+    fn test_action(&mut self, obs: &[f32], actions: &mut [f32]) {
+        let (d, a) = (self.core.obs_dim, self.core.action_dim());
+        let rows = self.core.actor.ws.max_batch();
+        for (obs, actions) in obs.chunks(rows * d).zip(actions.chunks_mut(rows * a)) {
+            self.algo.test_units(&mut self.core, obs, actions);
+        }
+        self.core.action_box.to_box(actions);
     }
 
     fn learn(&mut self, batch: &Batch<Vec<f32>>, gamma: f32) -> (BoxUpdate, &[f32]) {
@@ -449,16 +455,12 @@ impl Critics {
 
     /// Back-propagates [`Self::d_q`] through the last online evaluation of `n` rows: returns the input gradient,
     /// rows of `obs_dim + act_dim` values whose last `act_dim` are `dL/da` (the critic's own parameter gradients
-    /// are computed and dropped).
+    /// are not computed: the update that follows changes only the actor).
     pub(crate) fn backward_to_actions(&mut self, n: usize) -> &[f32] {
         let width = self.obs_dim + self.act_dim;
         let d_input = &mut self.d_input[..n * width];
-        self.net.backward(
-            &mut self.ws,
-            &self.d_q[..n * self.heads],
-            &mut self.grads,
-            Some(d_input),
-        );
+        self.net
+            .backward_input(&mut self.ws, &self.d_q[..n * self.heads], d_input);
         d_input
     }
 

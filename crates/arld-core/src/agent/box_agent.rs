@@ -157,11 +157,7 @@ impl Learner for BoxAgent {
     fn test_actions(&mut self, obs: &[f32], actions: &mut BoxColumn) {
         let (d, a) = (self.obs_dim, self.low.len());
         let rows = obs.len() / d;
-        let values = actions.rows_mut(rows, a);
-        for r in 0..rows {
-            self.learner
-                .test_action(&obs[r * d..(r + 1) * d], &mut values[r * a..(r + 1) * a]);
-        }
+        self.learner.test_action(obs, actions.rows_mut(rows, a));
     }
 
     /// Writes the actor (the policy a run keeps) as safetensors: one tensor `actor.params` with every weight

@@ -111,7 +111,8 @@ impl RiskCritic {
     }
 
     /// The TD target of each sample of `batch` (see the module docs), with `policy` writing the policy's test
-    /// action at a next observation into its second argument.
+    /// actions at the rows of the batch's next observations into the rows of its second argument (one batched
+    /// pass of the policy, not one per sample).
     ///
     /// # Panics
     /// If the batch is larger than the configured maximum or its vectors disagree in length.
@@ -121,12 +122,7 @@ impl RiskCritic {
         policy: &mut dyn FnMut(&[f32], &mut [f32]),
     ) -> &[f32] {
         let (n, d, a) = self.check(batch);
-        for r in 0..n {
-            policy(
-                &batch.next_obs[r * d..(r + 1) * d],
-                &mut self.next_actions[r * a..(r + 1) * a],
-            );
-        }
+        policy(&batch.next_obs[..n * d], &mut self.next_actions[..n * a]);
         let y = forward(
             &self.target,
             &mut self.ws,
@@ -257,9 +253,11 @@ mod tests {
         RiskCritic::new(config, 2, 1, 11)
     }
 
-    /// A policy that depends on the state: `tanh(s_0 - s_1)`.
-    fn policy(obs: &[f32], action: &mut [f32]) {
-        action[0] = (obs[0] - obs[1]).tanh();
+    /// A policy that depends on the state: `tanh(s_0 - s_1)`, at every row of two observations.
+    fn policy(obs: &[f32], actions: &mut [f32]) {
+        for (obs, action) in obs.chunks_exact(2).zip(actions) {
+            *action = (obs[0] - obs[1]).tanh();
+        }
     }
 
     /// `Q_R` of `net` at one row, from a forward pass of its own.
@@ -388,7 +386,7 @@ mod tests {
         let expected = |s: usize, a: f32| if a > 0.0 { v[s] } else { outcome(&v, s - 1) };
 
         let mut risk = critic(&[32, 32], 3e-3, gamma, 0.05, 64);
-        let mut always_right = |_: &[f32], action: &mut [f32]| action[0] = 1.0;
+        let mut always_right = |_: &[f32], actions: &mut [f32]| actions.fill(1.0);
         let mut draw = Pcg64::seed_from_u64(4);
         for _ in 0..4000 {
             let mut b = Batch::default();

@@ -304,12 +304,15 @@ impl Algorithm for SacPart {
         action.copy_from_slice(&self.actions[..a]);
     }
 
-    /// The test-time action at `obs`: `tanh(mu)`.
-    fn test_unit(&self, core: &mut Core, obs: &[f32], unit: &mut [f32]) {
+    /// The test-time actions at the rows of `obs`: `tanh(mu)`.
+    fn test_units(&self, core: &mut Core, obs: &[f32], units: &mut [f32]) {
         let a = core.action_dim();
-        let out = core.actor.forward(obs, 1);
-        for (v, mu) in unit.iter_mut().zip(&out[..a]) {
-            *v = mu.tanh();
+        let rows = units.len() / a;
+        let out = core.actor.forward(obs, rows);
+        for (unit, out) in units.chunks_exact_mut(a).zip(out.chunks_exact(2 * a)) {
+            for (v, mu) in unit.iter_mut().zip(&out[..a]) {
+                *v = mu.tanh();
+            }
         }
     }
 

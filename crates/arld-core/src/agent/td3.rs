@@ -155,7 +155,7 @@ impl Algorithm for Td3Part {
 
     /// The behaviour action at `obs`: the actor's plus Gaussian exploration noise, clipped to the box.
     fn act(&mut self, core: &mut Core, obs: &[f32], action: &mut [f32]) {
-        self.test_unit(core, obs, action);
+        self.test_units(core, obs, action);
         let b = &core.action_box;
         b.to_box(action);
         for (d, a) in action.iter_mut().enumerate() {
@@ -165,9 +165,10 @@ impl Algorithm for Td3Part {
         }
     }
 
-    /// The test-time action at `obs`: the actor's, without noise.
-    fn test_unit(&self, core: &mut Core, obs: &[f32], unit: &mut [f32]) {
-        unit.copy_from_slice(core.actor.forward(obs, 1));
+    /// The test-time actions at the rows of `obs`: the actor's, without noise.
+    fn test_units(&self, core: &mut Core, obs: &[f32], units: &mut [f32]) {
+        let rows = units.len() / core.action_dim();
+        units.copy_from_slice(core.actor.forward(obs, rows));
     }
 
     /// One update from `batch`: the critics always, the actor and the targets every `policy_delay` updates.

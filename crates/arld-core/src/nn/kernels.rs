@@ -20,6 +20,19 @@
 
 #[cfg(target_arch = "x86_64")]
 use std::arch::x86_64::*;
+use std::cell::Cell;
+
+thread_local! {
+    /// Floating-point operations of the products run on this thread (see [`product_flops`]).
+    static PRODUCT_FLOPS: Cell<u64> = const { Cell::new(0) };
+}
+
+/// The floating-point operations of every matrix product ([`product`]) this thread has run: two per
+/// multiply-add, `2 m k n` for an `m x k` by `k x n` product. A benchmark reads it before and after a piece
+/// of work to count that work's arithmetic (the per-step account of `benches/box_update.rs`).
+pub fn product_flops() -> u64 {
+    PRODUCT_FLOPS.with(Cell::get)
+}
 
 /// A vector of `WIDTH` f32 lanes and the four operations the kernel needs.
 ///
@@ -135,8 +148,17 @@ impl Lanes for Avx2 {
     }
     #[inline(always)]
     unsafe fn store_first(p: *mut f32, v: __m256, lanes: usize) {
-        // SAFETY: the caller guarantees `lanes` writable floats; the masked-out lanes are not accessed.
-        unsafe { _mm256_maskstore_ps(p, avx2_mask(lanes), v) }
+        // SAFETY: the caller guarantees `lanes` writable floats; only those are written.
+        unsafe {
+            if lanes == 8 {
+                _mm256_storeu_ps(p, v);
+            } else if lanes > 4 {
+                _mm_storeu_ps(p, _mm256_castps256_ps128(v));
+                store_first_of_4(p.add(4), _mm256_extractf128_ps::<1>(v), lanes - 4);
+            } else {
+                store_first_of_4(p, _mm256_castps256_ps128(v), lanes);
+            }
+        }
     }
     const TRANSPOSES_BLOCKS: bool = true;
     #[inline(always)]
@@ -182,6 +204,26 @@ unsafe fn avx_transpose8(src: *const f32, src_stride: usize, dst: *mut f32, dst_
                 dst.add((c + 4) * dst_stride),
                 _mm256_permute2f128_ps::<0x31>(s[c], s[4 + c]),
             );
+        }
+    }
+}
+
+/// Stores the first `lanes` (1 to 4) lanes of `v` at `p` with plain stores (4, 2 and 1 floats wide): AMD
+/// CPUs run the masked store `vmaskmovps` in microcode, tens of cycles for each output row of a narrow layer.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+unsafe fn store_first_of_4(p: *mut f32, v: __m128, lanes: usize) {
+    debug_assert!((1..=4).contains(&lanes));
+    // SAFETY: the caller guarantees `lanes` writable floats at `p`; each store below writes inside them.
+    unsafe {
+        match lanes {
+            4 => _mm_storeu_ps(p, v),
+            3 => {
+                _mm_storel_epi64(p.cast(), _mm_castps_si128(v));
+                _mm_store_ss(p.add(2), _mm_movehl_ps(v, v));
+            }
+            2 => _mm_storel_epi64(p.cast(), _mm_castps_si128(v)),
+            _ => _mm_store_ss(p, v),
         }
     }
 }
@@ -234,8 +276,9 @@ impl Lanes for Avx512 {
     }
 }
 
-/// The first `N` (1 to 4) lanes of a 4-lane vector (FMA; masked loads and stores from AVX touch only those `N`
-/// floats): the column rest below 8 columns of the AVX-512 level, so no output runs lane by lane there.
+/// The first `N` (1 to 4) lanes of a 4-lane vector (FMA; masked loads from AVX and plain 4-, 2- and 1-float
+/// stores touch only those `N` floats): the column rest below 8 columns of the AVX-512 level, so no output runs
+/// lane by lane there.
 /// The unused lanes compute on zeros and are never stored.
 #[cfg(target_arch = "x86_64")]
 pub(crate) struct Fma4<const N: usize>;
@@ -271,8 +314,8 @@ impl<const N: usize> Lanes for Fma4<N> {
     }
     #[inline(always)]
     unsafe fn store(p: *mut f32, v: __m128) {
-        // SAFETY: the caller guarantees `N` writable floats; the masked-out lanes are not accessed.
-        unsafe { _mm_maskstore_ps(p, Self::mask(), v) }
+        // SAFETY: the caller guarantees `N` writable floats; only those are written.
+        unsafe { store_first_of_4(p, v, N) }
     }
     #[inline(always)]
     unsafe fn fma(a: __m128, b: __m128, c: __m128) -> __m128 {
@@ -335,6 +378,7 @@ pub(crate) fn product<S: Lanes>(dst: &mut [f32], a: Strided, b: &[f32], init: Op
     if m == 0 || n == 0 {
         return;
     }
+    PRODUCT_FLOPS.with(|flops| flops.set(flops.get() + 2 * (m * k * n) as u64));
     assert!(
         (m - 1) * a.row_stride + k.saturating_sub(1) * a.col_stride < a.data.len() || k == 0,
         "product: left view exceeds its slice"
@@ -356,12 +400,17 @@ pub(crate) fn product<S: Lanes>(dst: &mut [f32], a: Strided, b: &[f32], init: Op
         // Fewer columns than a vector, and a left operand whose rows are adjacent (`Xᵀ` of a layer's input
         // for a gradient of a 1-7 column layer: a critic's value, the actions of a Q-network): the vectors run
         // across rows instead, so no lane idles. The rows left over go through the column blocks below.
+        // Blocks of `RV` vectors of rows by up to 4 columns: at least 8 accumulators (the FMA latency times
+        // two pipes) where the rows allow, within the register file (16 ymm registers: 4 x 2 for one or two
+        // columns, else 2 x 4).
         if S::WIDTH >= 8 && p.a_rs == 1 && n < S::WIDTH {
-            let done = if S::REGISTERS >= 32 {
-                row_vector_blocks::<S, 4>(&p, 0, m)
-            } else {
-                row_vector_blocks::<S, 2>(&p, 0, m)
+            let done = match n {
+                1 => row_vector_blocks::<S, 8>(&p, 0, m),
+                2 => row_vector_blocks::<S, 4>(&p, 0, m),
+                _ if S::REGISTERS >= 32 => row_vector_blocks::<S, 4>(&p, 0, m),
+                _ => 0,
             };
+            let done = row_vector_blocks::<S, 2>(&p, done, m);
             let done = row_vector_blocks::<S, 1>(&p, done, m);
             p.dst = p.dst.add(done * n);
             p.a = p.a.add(done);
@@ -371,32 +420,35 @@ pub(crate) fn product<S: Lanes>(dst: &mut [f32], a: Strided, b: &[f32], init: Op
             }
         }
         let full = n / S::WIDTH * S::WIDTH;
-        // Block width in vectors: 4 rows x C vectors of accumulators, plus C loaded vectors and one
-        // broadcast, must fit the register file: C = 4 (21 registers) only with 32 of them, else C = 2.
-        // Fewer than 4 rows (a single-state forward) run one row at a time, where 4 vectors always fit.
-        let mut col = if S::REGISTERS < 32 && m >= 4 {
-            column_blocks::<S, 2>(&p, m, full)
+        // Block shape: R rows x C vectors of accumulators, plus C loaded vectors and one broadcast, must fit
+        // the register file, with more accumulators than the FMA latency times the two pipes (8) so that the
+        // pipes never wait: 6 x 4 (29 registers) with 32 of them, 6 x 2 (15) with 16. One or two rows (a
+        // single-state forward) run in blocks of 4 vectors, which always fit.
+        let mut col = if S::REGISTERS >= 32 {
+            column_blocks::<S, 6, 4>(&p, m, full)
+        } else if m >= 3 {
+            column_blocks::<S, 6, 2>(&p, m, full)
         } else {
-            column_blocks::<S, 4>(&p, m, full)
+            column_blocks::<S, 4, 4>(&p, m, full)
         };
-        // AVX2's rest (under 16 columns, or 32 for fewer than 4 rows): 9-15 columns as one block of two
-        // vectors whose second is masked, 1-8 as one (masked) vector over 8 rows at a time, so that 8
-        // accumulators hide the FMA latency as in the full blocks.
+        // AVX2's rest (under 16 columns, or 32 for fewer than 4 rows): 9-15 columns as blocks of two vectors
+        // whose second is masked, 1-8 as one (masked) vector over 12 rows at a time, so that 12 accumulators
+        // hide the FMA latency as in the full blocks.
         #[cfg(target_arch = "x86_64")]
         if S::WIDTH == Avx2::WIDTH {
             while col + 2 * S::WIDTH <= n {
-                rows_blocked::<S, 4, 2, false>(&p, m, col, S::WIDTH);
+                rows_blocked::<S, 6, 2, false>(&p, m, col, S::WIDTH);
                 col += 2 * S::WIDTH;
             }
             match n - col {
                 0 => {}
-                rest @ 1..=8 => rows_blocked::<S, 8, 1, true>(&p, m, col, rest),
-                rest => rows_blocked::<S, 4, 2, true>(&p, m, col, rest - S::WIDTH),
+                rest @ 1..=8 => rows_blocked::<S, 12, 1, true>(&p, m, col, rest),
+                rest => rows_blocked::<S, 6, 2, true>(&p, m, col, rest - S::WIDTH),
             }
             col = n;
         }
         while col + S::WIDTH <= full {
-            rows_blocked::<S, 4, 1, false>(&p, m, col, S::WIDTH);
+            rows_blocked::<S, 8, 1, false>(&p, m, col, S::WIDTH);
             col += S::WIDTH;
         }
         // An 8-column rest of a 16-lane level in AVX2 vectors (the 10 heads' 40 columns), not lane by lane,
@@ -443,13 +495,17 @@ struct Operands {
     k: usize,
 }
 
-/// Blocks of `C` vectors from column 0 while they fit in `full`; returns the first column left.
+/// Blocks of `R` rows by `C` vectors from column 0 while they fit in `full`; returns the first column left.
 #[inline(always)]
-unsafe fn column_blocks<S: Lanes, const C: usize>(p: &Operands, m: usize, full: usize) -> usize {
+unsafe fn column_blocks<S: Lanes, const R: usize, const C: usize>(
+    p: &Operands,
+    m: usize,
+    full: usize,
+) -> usize {
     let mut col = 0;
     while col + C * S::WIDTH <= full {
         // SAFETY: forwarded from `product`.
-        unsafe { rows_blocked::<S, 4, C, false>(p, m, col, S::WIDTH) };
+        unsafe { rows_blocked::<S, R, C, false>(p, m, col, S::WIDTH) };
         col += C * S::WIDTH;
     }
     col
@@ -527,8 +583,10 @@ unsafe fn row_vector_block<S: Lanes, const RV: usize, const CG: usize>(
     }
 }
 
-/// Columns `col..` of all `m` rows in blocks of `C` vectors, `R` rows at a time, then 4, then 1. `MASKED`: the
-/// last vector holds only its first `lanes` columns.
+/// Columns `col..` of all `m` rows in blocks of `C` vectors, `R` rows at a time; the rows left (fewer than `R`)
+/// in one block of 8, 5 or 4 rows where they fit and then one of the 1-3 left, so that a batch of 32 rows in
+/// blocks of 6 keeps 2 rows together rather than running them one at a time (one row's `C` accumulators
+/// cannot hide the FMA latency). `MASKED`: the last vector holds only its first `lanes` columns.
 #[inline(always)]
 unsafe fn rows_blocked<S: Lanes, const R: usize, const C: usize, const MASKED: bool>(
     p: &Operands,
@@ -543,13 +601,26 @@ unsafe fn rows_blocked<S: Lanes, const R: usize, const C: usize, const MASKED: b
             block::<S, R, C, MASKED>(p, row, col, lanes);
             row += R;
         }
-        while R > 4 && row + 4 <= m {
+        if R > 8 && row + 8 <= m {
+            block::<S, 8, C, MASKED>(p, row, col, lanes);
+            row += 8;
+        }
+        if R > 5 && row + 5 <= m {
+            block::<S, 5, C, MASKED>(p, row, col, lanes);
+            row += 5;
+        }
+        if R > 4 && row + 4 <= m {
             block::<S, 4, C, MASKED>(p, row, col, lanes);
             row += 4;
         }
-        while row < m {
-            block::<S, 1, C, MASKED>(p, row, col, lanes);
-            row += 1;
+        match m - row {
+            0 => {}
+            1 => block::<S, 1, C, MASKED>(p, row, col, lanes),
+            2 => block::<S, 2, C, MASKED>(p, row, col, lanes),
+            rest => {
+                debug_assert_eq!(rest, 3);
+                block::<S, 3, C, MASKED>(p, row, col, lanes)
+            }
         }
     }
 }

@@ -188,7 +188,20 @@ impl Mlp {
         grads: &mut [f32],
         dx: Option<&mut [f32]>,
     ) {
-        at_simd_level!(Mlp; self, backward_impl(ws: &mut MlpWorkspace, dy: &[f32], grads: &mut [f32], dx: Option<&mut [f32]>));
+        let grads = Some(grads);
+        at_simd_level!(Mlp; self, backward_impl(ws: &mut MlpWorkspace, dy: &[f32], grads: Option<&mut [f32]>, dx: Option<&mut [f32]>));
+    }
+
+    /// The input gradient `dL/dx` alone (`batch * input_dim`) of the last [`Self::forward`] in `ws` for the loss
+    /// gradient `dy`: the products of [`Self::backward`] that lead to the input, without the parameter
+    /// gradients (an actor's update goes back through the critic to the action but does not change the
+    /// critic). `dx` holds the same bytes as [`Self::backward`]'s.
+    ///
+    /// # Panics
+    /// As [`Self::backward`].
+    pub fn backward_input(&self, ws: &mut MlpWorkspace, dy: &[f32], dx: &mut [f32]) {
+        let (grads, dx) = (None, Some(dx));
+        at_simd_level!(Mlp; self, backward_impl(ws: &mut MlpWorkspace, dy: &[f32], grads: Option<&mut [f32]>, dx: Option<&mut [f32]>));
     }
 
     #[inline(always)]
@@ -196,7 +209,7 @@ impl Mlp {
         &self,
         ws: &mut MlpWorkspace,
         dy: &[f32],
-        grads: &mut [f32],
+        mut grads: Option<&mut [f32]>,
         dx: Option<&mut [f32]>,
     ) {
         let batch = ws.batch;
@@ -208,11 +221,13 @@ impl Mlp {
             batch * self.output_dim(),
             "backward: dy must match the output"
         );
-        assert_eq!(
-            grads.len(),
-            self.params.len(),
-            "backward: gradients must match the network"
-        );
+        if let Some(grads) = &grads {
+            assert_eq!(
+                grads.len(),
+                self.params.len(),
+                "backward: gradients must match the network"
+            );
+        }
         let MlpWorkspace {
             activations,
             grad_a,
@@ -229,16 +244,18 @@ impl Mlp {
             }
         }
         let (mut dz_buf, mut da_buf) = (grad_a, grad_b);
-        let mut offset_end = grads.len();
+        let mut offset_end = self.params.len();
         for layer in (0..=last).rev() {
             let (n_in, n_out) = (self.sizes[layer], self.sizes[layer + 1]);
             let start = offset_end - (n_in * n_out + n_out);
-            let (g_w, g_b) = grads[start..offset_end].split_at_mut(n_in * n_out);
-            offset_end = start;
             let input = &activations[layer][..batch * n_in];
             let dz = &dz_buf[..batch * n_out];
-            column_sums(dz, g_b);
-            product::<S>(g_w, Strided::transposed(input, batch, n_in), dz, None);
+            if let Some(grads) = grads.as_deref_mut() {
+                let (g_w, g_b) = grads[start..offset_end].split_at_mut(n_in * n_out);
+                column_sums(dz, g_b);
+                product::<S>(g_w, Strided::transposed(input, batch, n_in), dz, None);
+            }
+            offset_end = start;
             if layer == 0 && dx.is_none() {
                 break;
             }
@@ -352,6 +369,10 @@ mod tests {
         let mut grads = vec![0.0; net.parameters().len()];
         let mut dx = vec![0.0; x.len()];
         net.backward(&mut ws, &c, &mut grads, Some(&mut dx));
+        // The input gradient alone (checked below through `dx`) is the same bytes.
+        let mut dx_alone = vec![f32::NAN; x.len()];
+        net.backward_input(&mut ws, &c, &mut dx_alone);
+        assert_eq!(dx_alone, dx, "backward_input differs from backward's dx");
         // Central differences of the float32 network (losses summed in float64), step 1e-3. Where the step
         // crosses a ReLU kink the two one-sided slopes disagree and the derivative is not defined there: such
         // points are skipped, and there must be few of them.

@@ -51,6 +51,7 @@ use rand::Rng;
 pub use adam::{Adam, Grads, clip_grad_norm};
 pub(crate) use io::with_sorted_metadata;
 pub use io::{MAX_MODEL_FILE_BYTES, ModelFileError, parse_model};
+pub use kernels::product_flops;
 pub use layout::{HiddenLayers, MAX_DEPTH, OutputKind};
 pub use mlp::{Mlp, MlpWorkspace, OutputActivation};
 pub use noisy::{NoiseSample, noise_transform};
