@@ -2,7 +2,9 @@
 //! on CartPole-v0 (turn-based, with a question left unanswered until its timeout) and LunarLander-v2 (real time),
 //! and a scripted person (tests/e2e/person.mjs, Playwright) answers by pressing keys; in a real-time CartPole run
 //! another (tests/e2e/takeover.mjs) also takes over unasked and hands back (and in another run is stopped while
-//! holding control, then resumed). The runs must complete, and
+//! holding control, then resumed); at the continuous lander tests/e2e/segments.mjs checks the agent's proposal at
+//! every step, the line after each segment and a retry, and tests/e2e/lander_pad.mjs lands it with a scripted
+//! gamepad. The runs must complete, and
 //! queries.csv must show the person's answers. The script itself checks the drawing is not blank, that requests
 //! without the token get 403 and that a watching tab's messages are refused; screenshots go to
 //! target/e2e-screenshots/.

@@ -40,6 +40,12 @@
 //! asked. The page ([`protocol`] describes its messages) is plain HTML, CSS and JavaScript embedded
 //! in the binary; at the end it shows how the run ended and what the person gave ([`Person::finish`]).
 //!
+//! At every step of a segment the page shows the agent's proposal there ([`Query::propose`]: its test-time action,
+//! a ghost of it on the drawing and the controls). In real time a question's segment is played ahead on a copy of the
+//! environment (`WebExpert::play_ahead`): a line after it says how it went ([`protocol::SegmentEnd`]), and in the
+//! breath after it the person may play it again from its start state; the run then takes the attempt kept, step for
+//! step, and charges the dropped ones ([`Person::retried_steps`]).
+//!
 //! Actions in a box (the continuous tasks: [`WebExpert::start_box`]) take the same path: [`PageAction`] says how
 //! each kind of action is described to the page, checked when it comes back and replayed on a copy; the page
 //! sets a box action with keys held toward a bound, a slider per dimension or a gamepad's sticks and triggers, and
