@@ -109,6 +109,7 @@ fn write_fake_run(spec: &RunSpec, dir: &Path, interrupt: bool) -> Result<()> {
                 response_s: None,
                 answered: true,
                 started_by: run_dir::StartedBy::Rule,
+                retried: 0,
             };
             queries.push_str(&event.csv_row());
         }

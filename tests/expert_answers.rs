@@ -3,7 +3,7 @@
 //! time; an action out of range is an error, not a panic.
 
 use anyhow::Result;
-use arld::expert::{Answer, Expert, Progress, Query};
+use arld::expert::{Answer, Expert, Person, Progress, Query};
 use arld::train::{ConfigInput, Method, NetKind, RunBuilder, RunLog, TrainConfig};
 
 /// Leaves every other opening question unanswered and answers everything else with action 1.
@@ -157,6 +157,12 @@ impl Expert for Watching {
     fn describe(&self) -> String {
         "watching:test".into()
     }
+    fn person(&mut self) -> Option<&mut dyn Person> {
+        Some(self)
+    }
+}
+
+impl Person for Watching {
     fn shows_uncertainty(&self) -> bool {
         self.shows
     }
@@ -216,13 +222,7 @@ struct TakesOver {
     held: usize,
 }
 
-impl Expert for TakesOver {
-    fn act(&mut self, _obs: &[f32]) -> Result<usize> {
-        Ok(0)
-    }
-    fn describe(&self) -> String {
-        "takes-over:test".into()
-    }
+impl Person for TakesOver {
     fn observe(&mut self, p: &Progress) {
         self.last_step = p.step;
     }
@@ -230,6 +230,18 @@ impl Expert for TakesOver {
         let now = !self.asked && self.last_step >= self.at;
         self.asked |= now;
         now
+    }
+}
+
+impl Expert for TakesOver {
+    fn person(&mut self) -> Option<&mut dyn Person> {
+        Some(self)
+    }
+    fn act(&mut self, _obs: &[f32]) -> Result<usize> {
+        Ok(0)
+    }
+    fn describe(&self) -> String {
+        "takes-over:test".into()
     }
     fn answer(&mut self, query: &Query) -> Result<Answer> {
         if !query.taken_over {

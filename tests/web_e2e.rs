@@ -2,7 +2,9 @@
 //! on CartPole-v0 (turn-based, with a question left unanswered until its timeout) and LunarLander-v2 (real time),
 //! and a scripted person (tests/e2e/person.mjs, Playwright) answers by pressing keys; in a real-time CartPole run
 //! another (tests/e2e/takeover.mjs) also takes over unasked and hands back (and in another run is stopped while
-//! holding control, then resumed). The runs must complete, and
+//! holding control, then resumed); at the continuous lander tests/e2e/segments.mjs checks the agent's proposal at
+//! every step, the line after each segment and a retry, and tests/e2e/lander_pad.mjs lands it with a scripted
+//! gamepad. The runs must complete, and
 //! queries.csv must show the person's answers. The script itself checks the drawing is not blank, that requests
 //! without the token get 403 and that a watching tab's messages are refused; screenshots go to
 //! target/e2e-screenshots/.
@@ -1250,4 +1252,230 @@ fn listening_everywhere_prints_a_reachable_url_and_waits_for_the_page() {
         "the run did not wait for the page: {stderr}"
     );
     assert!(!run.join("queries.csv").is_file() || queries(&run).is_empty());
+}
+
+/// Starts `arld train` of a real-time LunarLanderContinuous-v3 run (ADQN, run seed 0) in a new directory, asked at
+/// every step while budget is left (the greedy rule), with segments of `segment_s` seconds at 20 steps a second,
+/// a budget of `budget` transitions over `train_steps` steps. Returns the run directory, the process and the URL.
+fn start_greedy_lander(segment_s: &str, budget: u64, train_steps: u64) -> (PathBuf, Child, String) {
+    let run = tempfile::tempdir().unwrap().keep().join("run");
+    let sets = [
+        format!("train_steps={train_steps}"),
+        format!("budget={budget}"),
+        format!("eval_period={train_steps}"),
+        "query_rule=greedy".to_string(),
+    ];
+    let mut args: Vec<std::ffi::OsString> = [
+        "train",
+        "--env",
+        "LunarLanderContinuous-v3",
+        "--method",
+        "adqn",
+        "--seed",
+        "0",
+        "--expert",
+        "web",
+        "--web-fps",
+        "20",
+        "--web-segment-s",
+        segment_s,
+        "--listen",
+        "127.0.0.1:0",
+    ]
+    .iter()
+    .map(Into::into)
+    .collect();
+    for set in sets {
+        args.extend(["--set".into(), set.into()]);
+    }
+    args.extend(["-o".into(), run.as_os_str().to_owned()]);
+    let args: Vec<&std::ffi::OsStr> = args.iter().map(|a| a.as_os_str()).collect();
+    let (arld, url) = start_arld(&args, Stdio::inherit());
+    (run, arld, url)
+}
+
+/// The answers of each question, in the order asked: the lines of answers.jsonl grouped by `question_step`.
+fn answers_by_question(lines: &[serde_json::Value]) -> Vec<Vec<&serde_json::Value>> {
+    let mut groups: Vec<Vec<&serde_json::Value>> = Vec::new();
+    for l in lines {
+        match groups.last_mut() {
+            Some(g) if g[0]["question_step"] == l["question_step"] => g.push(l),
+            _ => groups.push(vec![l]),
+        }
+    }
+    groups
+}
+
+/// How a segment's answers ended, as the page's line must say it for the lander: computed here from the run's own
+/// record of the steps (the last step's `terminated` and reward: +100 for coming to rest, -100 for a crash).
+fn lander_outcome(steps: &[&serde_json::Value]) -> serde_json::Value {
+    let last = steps.last().unwrap();
+    match (last["terminated"].as_bool(), last["truncated"].as_bool()) {
+        (Some(true), _) if last["reward"].as_f64().unwrap() > 0.0 => "landed".into(),
+        (Some(true), _) => "crashed".into(),
+        (_, Some(true)) => "time up".into(),
+        _ => serde_json::Value::Null,
+    }
+}
+
+/// The agent's proposal at every step of a segment, the line after each segment and a retry, at the continuous
+/// lander (tests/e2e/segments.mjs): every step the person played carried the agent's proposal (its test-time
+/// action, which changes with the state), drawn as a ghost on the canvas and on the sliders; each segment's line
+/// gives its steps, return and outcome as the run recorded them (answers.jsonl, summed here); the first question
+/// was retried and the retry kept: its answers are the retry's (the side engine held, which the first attempt never
+/// fired), marked with the dropped attempt's steps, and both attempts are charged to the budget and the person's
+/// time; the second question kept its first attempt.
+#[test]
+fn a_person_sees_the_agents_proposal_every_step_how_each_segment_went_and_may_retry_it() {
+    let _one_browser = check_prerequisites();
+    let (run, mut arld, url) = start_greedy_lander("10", 1000, 1500);
+    let shots = shots_dir("segments");
+    let report = run_script("segments.mjs", &url, &shots);
+    let status = wait(&mut arld, Duration::from_secs(240), "arld");
+    assert!(status.success(), "arld failed: {report}");
+    let spec = arld::env::box_spec("LunarLanderContinuous-v3").unwrap();
+
+    // The ghost: every played step carried a proposal in the box, and they changed with the state.
+    let plays = report["plays"].as_array().unwrap();
+    assert!(plays.len() >= 50, "{report}");
+    let proposals: Vec<Vec<f64>> = plays.iter().map(|p| floats(&p["proposal"])).collect();
+    for p in &proposals {
+        assert_eq!(p.len(), 2, "a step without the agent's proposal: {report}");
+        for (d, a) in p.iter().enumerate() {
+            assert!((f64::from(spec.action_low[d])..=f64::from(spec.action_high[d])).contains(a));
+        }
+    }
+    assert!(
+        proposals.windows(2).any(|w| w[0] != w[1]),
+        "the proposal never changed: {report}"
+    );
+    // Mid-segment the page drew it: the sliders' marks where the proposal puts them, and its outline.
+    let mid = &report["mid"];
+    let shown = floats(&mid["prompt"]["proposal"]);
+    for d in 0..2 {
+        let mark = &mid["marks"][d];
+        assert_eq!(mark["hidden"], false, "{mid}");
+        let left: f64 = mark["left"]
+            .as_str()
+            .unwrap()
+            .trim_end_matches('%')
+            .parse()
+            .unwrap();
+        let (lo, hi) = (
+            f64::from(spec.action_low[d]),
+            f64::from(spec.action_high[d]),
+        );
+        let want = 100.0 * (shown[d].clamp(lo, hi) - lo) / (hi - lo);
+        // (The browser keeps a style's percentage to 4 decimals.)
+        assert!(
+            (left - want).abs() < 1e-3,
+            "dimension {d}: {left}% for {want}%: {mid}"
+        );
+        assert!(
+            mark["shown"].as_str().unwrap().contains("(agent: "),
+            "{mid}"
+        );
+    }
+    assert!(
+        mid["ghostPixels"].as_u64() > Some(100),
+        "no ghost drawn: {mid}"
+    );
+
+    // The lines, and what the run recorded of each question.
+    let segments = report["segments"].as_array().unwrap();
+    assert!(segments.len() >= 3, "{report}");
+    let (first, retried, second) = (&segments[0], &segments[1], &segments[2]);
+    assert_eq!(
+        (first["attempt"].as_u64(), retried["attempt"].as_u64()),
+        (Some(1), Some(2))
+    );
+    assert_eq!(second["attempt"], 1);
+    let lines = answer_lines(&run);
+    let questions = answers_by_question(&lines);
+    assert!(questions.len() >= 2, "{report}");
+    let dropped = first["steps"].as_u64().unwrap();
+    for (answers, line, retried_steps) in [
+        (&questions[0], retried, Some(dropped)),
+        (&questions[1], second, None),
+    ] {
+        assert_eq!(
+            answers.len() as u64,
+            line["steps"].as_u64().unwrap(),
+            "{line}"
+        );
+        let sum: f64 = answers.iter().map(|l| l["reward"].as_f64().unwrap()).sum();
+        let shown = line["return"].as_f64().unwrap();
+        assert!(
+            (sum - shown).abs() < 1e-6 * answers.len() as f64 + 1e-9,
+            "{sum} vs {line}"
+        );
+        assert_eq!(line["outcome"], lander_outcome(answers), "{line}");
+        for l in answers {
+            assert_eq!(l["retried"].as_u64(), retried_steps, "{l}");
+        }
+    }
+    // The kept retry is the one with the side engine held; the first attempt never touched it.
+    assert!(
+        questions[0].iter().any(|l| floats(&l["action"])[1] > 0.5),
+        "the first question's answers are not the retry's: {:?}",
+        questions[0]
+    );
+    assert!(
+        questions[1]
+            .iter()
+            .all(|l| floats(&l["action"]) == [0.0, 0.0])
+    );
+    // Both attempts charged: the budget spent is the steps stored plus the dropped ones; the run stores only
+    // the kept ones.
+    let s = summary(&run);
+    assert_eq!(s["demos_queried"].as_u64(), Some(lines.len() as u64));
+    assert_eq!(
+        report["lastStatus"]["budget_used"].as_u64(),
+        Some(lines.len() as u64 + dropped),
+        "{report}"
+    );
+    // The person's time holds both attempts' play at 20 steps a second.
+    let played = (dropped + questions[0].len() as u64 + questions[1].len() as u64) as f64 / 20.0;
+    assert!(s["person_s"].as_f64().unwrap() >= played, "{s}");
+}
+
+/// A scripted person lands the continuous lander through the page with a gamepad (tests/e2e/lander_pad.mjs): the
+/// pad moved by Gymnasium's heuristic controller (the script's own port of its formula) reading the state the page
+/// showed 4 steps earlier (200 ms at 20 steps a second, about 250 ms with the page's own lag: a person's
+/// reaction), paced by the run's steps, not by a clock. Asked at every step (the greedy rule) with segments longer
+/// than an episode, the person's segments are whole episodes from their first step. Each segment that ended with
+/// its episode landed, as the run recorded it (answers.jsonl: the last step terminated with the +100 of coming to
+/// rest) and as the page's line said, and scored above 100: the landing's +100 and the shaping of a controlled
+/// descent onto the pad less the engines' fuel (the heuristic scores 200-300 on these episodes at such delays).
+/// The run's seed is fixed (0): its first episodes land at every delay from 3 to 7 steps, so a loaded machine's
+/// lag does not decide the outcome.
+#[test]
+fn a_scripted_person_with_a_gamepad_lands_the_continuous_lander() {
+    let _one_browser = check_prerequisites();
+    let (run, mut arld, url) = start_greedy_lander("60", 1500, 1500);
+    let shots = shots_dir("lander-pad");
+    let report = run_script_with("lander_pad.mjs", &url, &shots, &["--episodes", "2"]);
+    let status = wait(&mut arld, Duration::from_secs(300), "arld");
+    assert!(status.success(), "arld failed: {report}");
+    let ended: Vec<&serde_json::Value> = report["segments"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|s| !s["outcome"].is_null())
+        .collect();
+    assert!(ended.len() >= 2, "{report}");
+    assert!(ended.iter().all(|s| s["outcome"] == "landed"), "{report}");
+    let lines = answer_lines(&run);
+    let landed: Vec<_> = answers_by_question(&lines)
+        .into_iter()
+        .filter(|q| q.last().unwrap()["terminated"] == true)
+        .collect();
+    assert_eq!(landed.len(), ended.len(), "{report}");
+    for q in &landed {
+        assert_eq!(lander_outcome(q), "landed");
+        let ret: f64 = q.iter().map(|l| l["reward"].as_f64().unwrap()).sum();
+        assert!(ret > 100.0, "a return of {ret} over {} steps", q.len());
+        assert!(q.iter().all(|l| l["expert"] == "web"));
+    }
+    assert!(report["steps"].as_u64() > Some(200), "{report}");
 }

@@ -17,8 +17,8 @@ export function parseArgs(argv) {
 }
 
 /// Headless Chromium with a fresh profile under `shots` (removed by `close`), its first page, and the errors the
-/// page throws. `pad`: add the scripted pad.
-export async function openBrowser(shots, { viewport = { width: 1000, height: 820 }, pad = false } = {}) {
+/// page throws. `pad`: add the scripted pad; `tap`: record the server's messages (see below).
+export async function openBrowser(shots, { viewport = { width: 1000, height: 820 }, pad = false, tap = false } = {}) {
   fs.mkdirSync(shots, { recursive: true });
   const userDataDir = fs.mkdtempSync(path.join(shots, ".chromium-"));
   const browser = await chromium.launchPersistentContext(userDataDir, {
@@ -37,6 +37,26 @@ export async function openBrowser(shots, { viewport = { width: 1000, height: 820
         buttons: window.__pad.buttons.map((v) => ({ pressed: v > 0.5, touched: v > 0, value: v })),
       });
       Object.defineProperty(Navigator.prototype, "getGamepads", { value: () => [read(), null, null, null], configurable: true });
+    });
+  }
+  if (tap) {
+    // Every message the server sends, as the page receives it: the prompts in window.__prompts (each step's id,
+    // state, proposal), and each message to window.__onmsg when the script sets one (an in-page person reacts at
+    // once to each step, paced by the run's steps, not by a clock).
+    await browser.addInitScript(() => {
+      window.__prompts = [];
+      const Native = window.WebSocket;
+      class Tapped extends Native {
+        constructor(...args) {
+          super(...args);
+          this.addEventListener("message", (ev) => {
+            const m = JSON.parse(ev.data);
+            if (m.type === "prompt" && m.prompt) window.__prompts.push(m.prompt);
+            if (window.__onmsg) window.__onmsg(m);
+          });
+        }
+      }
+      window.WebSocket = Tapped;
     });
   }
   const page = browser.pages()[0] || (await browser.newPage());

@@ -23,22 +23,28 @@
 //! takes that key only when the next one comes, so an undone key never reaches the training loop. A question goes back to the agent ([`Answer::Unanswered`]) when the person hands
 //! it back or, with a `timeout`, when nobody answers in time (after a hand-back the agent's questions in the next
 //! [`HANDBACK_QUIET_STEPS`] steps of the episode go back to it unasked). In real time the person may also take
-//! over unasked ("Take over", key T, while the agent acts: [`Expert::wants_control`]; offered only then, not while
+//! over unasked ("Take over", key T, while the agent acts: [`Person::wants_control`]; offered only then, not while
 //! a question opens, and a request not yet taken can be cancelled: [`server::Takeover`]): from the state the agent is
 //! in, a segment opens as a question's does (a fresh key, the countdown, then the held key), charged to the budget
 //! the same way and logged with `started_by: "person"`, until they hand back (Esc), the episode ends or the budget
 //! is spent. The person may pause the run; their time
 //! leaves out pauses and time with no tab open. A Python program's run handed back to it between two steps
-//! ([`Expert::handed_over`]: `learn` returned, or a stop) shows where it stands until it goes on. A stop request
+//! ([`Person::handed_over`]: `learn` returned, or a stop) shows where it stands until it goes on. A stop request
 //! (Ctrl-C, SIGTERM) ends any wait at once with [`arld_core::interrupt::Interrupted`], so that the run snapshots with
 //! the question open. Resumed, the run asks it again; a real-time segment that was in progress goes on only after
 //! a fresh key and the countdown, as at its opening (the person had no control while the run was stopped), and
-//! the charts start from the run's course before the stop ([`Expert::resumed_history`]): the test-return curve
+//! the charts start from the run's course before the stop ([`Person::resumed_history`]): the test-return curve
 //! from its evaluations (the snapshot's curve, which `eval.csv` holds too) and the uncertainty chart from the
 //! uncertainties logged with its questions in `queries.csv`, the only ones a run keeps with their steps (the
 //! rule's window in the snapshot has no steps), so before the resume the chart shows the steps where the agent
 //! asked. The page ([`protocol`] describes its messages) is plain HTML, CSS and JavaScript embedded
-//! in the binary; at the end it shows how the run ended and what the person gave ([`Expert::finish`]).
+//! in the binary; at the end it shows how the run ended and what the person gave ([`Person::finish`]).
+//!
+//! At every step of a segment the page shows the agent's proposal there ([`Query::propose`]: its test-time action,
+//! a ghost of it on the drawing and the controls). In real time a question's segment is played ahead on a copy of the
+//! environment (`WebExpert::play_ahead`): a line after it says how it went ([`protocol::SegmentEnd`]), and in the
+//! breath after it the person may play it again from its start state; the run then takes the attempt kept, step for
+//! step, and charges the dropped ones ([`Person::retried_steps`]).
 //!
 //! Actions in a box (the continuous tasks: [`WebExpert::start_box`]) take the same path: [`PageAction`] says how
 //! each kind of action is described to the page, checked when it comes back and replayed on a copy; the page
@@ -56,10 +62,14 @@ use anyhow::{Context, Result, bail};
 use arld_core::env::{Env, EpisodeStart};
 use arld_core::expert::process::WireAction;
 pub use arld_core::expert::web_options::{DEFAULT_LISTEN, WebOptions};
-use arld_core::expert::{Answer, Expert, Progress, Query, RunEnd, RunHistory};
+use arld_core::expert::{Answer, Expert, Person, Progress, Query, RunEnd, RunHistory};
+use arld_core::query::BudgetUnit;
 use frames::FrameSource;
-use protocol::{ActionCheck, ActionKeys, BoxControls, EndScreen, Hello, Prompt, ServerMsg, Status};
+use protocol::{
+    ActionCheck, ActionKeys, BoxControls, EndScreen, Hello, Prompt, SegmentEnd, ServerMsg, Status,
+};
 use server::{Input, KeyInput, Shared};
+use std::collections::VecDeque;
 use std::io::Write;
 use std::net::{IpAddr, SocketAddr};
 use std::sync::{Arc, mpsc};
@@ -338,6 +348,9 @@ struct Effort {
     /// Segments the person took over unasked (absent from the state of runs without any).
     #[serde(default, skip_serializing_if = "is_zero")]
     takeovers: usize,
+    /// Segments the person played again (absent from the state of runs without any).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    retries: usize,
 }
 
 fn is_zero(n: &usize) -> bool {
@@ -366,11 +379,11 @@ pub struct WebExpert<A: PageAction = usize> {
     /// Whether a stop was requested (Ctrl-C, SIGTERM): [`arld_core::interrupt::requested`] unless the program
     /// that owns the signals says otherwise ([`WebExpert::set_stop_check`]).
     stop_requested: Box<dyn FnMut() -> bool + Send>,
-    /// Whether the page shows a hand-over note ([`Expert::handed_over`]), lifted when the run goes on.
+    /// Whether the page shows a hand-over note ([`Person::handed_over`]), lifted when the run goes on.
     handed: bool,
     /// Where the person last handed a question back: the episode (its number) and its steps then.
     handed_back: Option<(usize, usize)>,
-    /// The episode in progress, by number (from [`Expert::observe`]).
+    /// The episode in progress, by number (from [`Person::observe`]).
     episode: usize,
     /// Real time: when the person's last segment ended.
     segment_ended: Option<Instant>,
@@ -385,6 +398,23 @@ pub struct WebExpert<A: PageAction = usize> {
     resumed: bool,
     /// The last answer's gesture was the action itself (a real-time segment then starts without the countdown).
     answered_acting: bool,
+    /// Real time: the person's segment, played on a copy and kept: its actions after the first, each with the
+    /// observation it was chosen at, which the run takes one a step ([`WebExpert::play_ahead`]).
+    queue: VecDeque<(A, Vec<f32>)>,
+    /// The last answer came from [`Self::queue`] (its step was shown as the person played it).
+    fed: bool,
+    /// Steps of the attempts the person retried at the question just answered, for [`Person::retried_steps`].
+    retried: usize,
+}
+
+/// A segment played on a copy: each step's action with the observation it acted on, their return, and the last
+/// step's reward and ending.
+struct Played<A> {
+    steps: Vec<(A, Vec<f32>)>,
+    ret: f64,
+    last_reward: f64,
+    terminated: bool,
+    truncated: bool,
 }
 
 impl WebExpert {
@@ -460,6 +490,9 @@ impl<A: PageAction> WebExpert<A> {
             taking_over: false,
             resumed: false,
             answered_acting: false,
+            queue: VecDeque::new(),
+            fed: false,
+            retried: 0,
         })
     }
 
@@ -523,8 +556,8 @@ impl<A: PageAction> WebExpert<A> {
         env: &dyn Env<A>,
         obs: &[f32],
         agent_action: Option<serde_json::Value>,
-        steps_left: usize,
-        undo: bool,
+        (steps_left, undo): (usize, bool),
+        proposal: Option<serde_json::Value>,
     ) -> Result<u64> {
         self.next_prompt += 1;
         let id = self.next_prompt;
@@ -538,6 +571,7 @@ impl<A: PageAction> WebExpert<A> {
             starts_in: None,
             obs: obs.to_vec(),
             takeover: self.taking_over,
+            proposal,
         }));
         Ok(id)
     }
@@ -548,8 +582,8 @@ impl<A: PageAction> WebExpert<A> {
             query.env,
             query.obs,
             agent_action(query),
-            query.steps_left,
-            false,
+            (query.steps_left, false),
+            proposal(query, query.obs),
         )
     }
 
@@ -602,7 +636,7 @@ impl<A: PageAction> WebExpert<A> {
                     return Ok(Some(Answer::Unanswered { waited_s }));
                 }
                 Input::Undo if undo => return Ok(None),
-                Input::Undo => {}
+                Input::Undo | Input::Retry => {}
                 Input::Action { action, acting } => {
                     let action = self.action_of(&action)?;
                     self.answered_acting = acting;
@@ -706,7 +740,8 @@ impl<A: PageAction> WebExpert<A> {
             if ended {
                 return Ok(answer);
             }
-            let shown = self.show_question(&*copy, &obs, None, query.steps_left - 1, true);
+            let ghost = proposal(query, &obs);
+            let shown = self.show_question(&*copy, &obs, None, (query.steps_left - 1, true), ghost);
             let next = shown.and_then(|id| self.wait_for_key(id, true));
             match next {
                 // Undone: this step is asked again from its own state.
@@ -730,38 +765,33 @@ impl<A: PageAction> WebExpert<A> {
     /// later steps take the held key (or the no-op action) at the set rate. So does the first step after a resume
     /// (`resumed`) of a segment in progress: the person had no control while the run was stopped. The countdown is
     /// needed unless the answer's gesture was the action itself (a fresh action key, a stick or trigger leaving
-    /// rest: the person acts already), and always after a resume.
+    /// rest: the person acts already), and always after a resume. A question's segment is played ahead on a copy
+    /// where the environment can be copied ([`Self::play_ahead`]: the person may retry it), and the run then
+    /// takes its steps as played; a takeover (open-ended) and a resumed segment are played on the run itself.
     fn ask_realtime(&mut self, query: &Query<'_, A>, fps: f64, resumed: bool) -> Result<Answer<A>> {
+        if query.agent_action.is_none()
+            && !resumed
+            && let Some(action) = self.next_queued(query)
+        {
+            return Ok(Answer::Action {
+                action,
+                response_s: None,
+            });
+        }
         if query.agent_action.is_some() || resumed {
             let id = self.show_query(query)?;
-            let answer = loop {
-                if let Some(answer) = self.wait_for_key(id, false)? {
-                    break answer;
-                }
-            };
+            let answer = self.wait_for_fresh_key(id)?;
             let Answer::Action { response_s, .. } = answer else {
                 return Ok(answer);
             };
-            if !self.answered_acting || resumed {
-                self.publish_prompt(Some(&Prompt {
-                    id,
-                    agent_action: agent_action(query),
-                    steps_left: query.steps_left,
-                    waits: false,
-                    undo: false,
-                    starts_in: Some(REALTIME_COUNTDOWN.as_secs_f64()),
-                    obs: query.obs.to_vec(),
-                    takeover: self.taking_over,
-                }));
-                let started = Instant::now();
-                let mut paused = Duration::ZERO;
-                while started.elapsed().saturating_sub(paused) < REALTIME_COUNTDOWN {
-                    self.stopped("during the countdown to a real-time segment")?;
-                    paused += self.wait_while_paused()?;
-                    std::thread::sleep(STOP_POLL.min(REALTIME_COUNTDOWN / 10));
-                }
+            self.count_down(query, id, resumed)?;
+            if !query.taken_over
+                && !resumed
+                && let Some(copy) = self.copy_of(query)
+            {
+                let action = self.play_ahead(query, fps, copy)?;
+                return Ok(Answer::Action { action, response_s });
             }
-            self.last_tick = Instant::now();
             return Ok(Answer::Action {
                 action: self.held(),
                 response_s,
@@ -779,6 +809,7 @@ impl<A: PageAction> WebExpert<A> {
             starts_in: None,
             obs: query.obs.to_vec(),
             takeover: self.taking_over,
+            proposal: proposal(query, query.obs),
         }));
         self.stopped("during a real-time segment")?;
         self.wait_while_paused()?;
@@ -792,6 +823,190 @@ impl<A: PageAction> WebExpert<A> {
             action: self.held(),
             response_s: None,
         })
+    }
+
+    /// Waits for the person's fresh key for prompt `id` (the page never sends an undo in real time).
+    fn wait_for_fresh_key(&mut self, id: u64) -> Result<Answer<A>> {
+        loop {
+            if let Some(answer) = self.wait_for_key(id, false)? {
+                return Ok(answer);
+            }
+        }
+    }
+
+    /// Real time, after the key that answers prompt `id`: the countdown, unless the key was the action itself
+    /// (and always after a resume); then the segment's clock starts.
+    fn count_down(&mut self, query: &Query<'_, A>, id: u64, resumed: bool) -> Result<()> {
+        if !self.answered_acting || resumed {
+            self.publish_prompt(Some(&Prompt {
+                id,
+                agent_action: agent_action(query),
+                steps_left: query.steps_left,
+                waits: false,
+                undo: false,
+                starts_in: Some(REALTIME_COUNTDOWN.as_secs_f64()),
+                obs: query.obs.to_vec(),
+                takeover: self.taking_over,
+                proposal: proposal(query, query.obs),
+            }));
+            let started = Instant::now();
+            let mut paused = Duration::ZERO;
+            while started.elapsed().saturating_sub(paused) < REALTIME_COUNTDOWN {
+                self.stopped("during the countdown to a real-time segment")?;
+                paused += self.wait_while_paused()?;
+                std::thread::sleep(STOP_POLL.min(REALTIME_COUNTDOWN / 10));
+            }
+        }
+        self.last_tick = Instant::now();
+        Ok(())
+    }
+
+    /// The next step of the segment played ahead, when the run is where the person played it (else the rest is
+    /// dropped and the person plays on the run itself).
+    fn next_queued(&mut self, query: &Query<'_, A>) -> Option<A> {
+        let (action, obs) = self.queue.pop_front()?;
+        if obs != query.obs {
+            self.queue.clear();
+            return None;
+        }
+        self.fed = true;
+        Some(action)
+    }
+
+    /// Real time, a question's segment played on a copy of the environment (`copy`: its state at the question)
+    /// at `fps`, the agent's proposal shown at every step; then how it went ([`ServerMsg::Segment`]), and, while
+    /// budget is left for another attempt, the chance to play it again from the same state during the breath
+    /// after it (R on the page). The run takes the attempt kept: its first action is returned, the rest wait in
+    /// [`Self::queue`]; the dropped attempts' steps are charged to the budget ([`Person::retried_steps`]). A
+    /// hand-back (or a timeout) at a retry's question keeps the attempt before it.
+    fn play_ahead(
+        &mut self,
+        query: &Query<'_, A>,
+        fps: f64,
+        (mut env, mut obs): (Box<dyn Env<A>>, Vec<f32>),
+    ) -> Result<A> {
+        let (mut allowed, mut attempt, mut dropped) = (query.steps_left, 1, 0);
+        loop {
+            let played = self.play(query, fps, &mut *env, &mut obs, allowed)?;
+            let steps = played.steps.len();
+            let room = retry_room(query, dropped + steps, attempt);
+            self.next_prompt += 1;
+            let id = self.next_prompt;
+            self.publish_prompt(None);
+            let line = SegmentEnd {
+                id,
+                steps,
+                ret: played.ret,
+                outcome: protocol::segment_outcome(
+                    query.env.id(),
+                    played.terminated,
+                    played.truncated,
+                    played.last_reward,
+                ),
+                retry_s: (room > 0).then_some(REALTIME_BREATH.as_secs_f64()),
+                attempt,
+            };
+            self.server
+                .shared
+                .publish(ServerMsg::Segment(&line).to_json(), |_, _| {});
+            let again = room > 0 && self.wait_for_retry(id)?;
+            if again {
+                (env, obs) = self
+                    .copy_of(query)
+                    .context("the segment's start state cannot be rebuilt for a retry")?;
+                let id = self.show_query(query)?;
+                if let Answer::Action { .. } = self.wait_for_fresh_key(id)? {
+                    self.count_down(query, id, false)?;
+                    dropped += steps;
+                    attempt += 1;
+                    self.effort.retries += 1;
+                    allowed = room.min(query.steps_left);
+                    continue;
+                }
+            }
+            let mut steps = played.steps.into_iter();
+            let (first, _) = steps.next().expect("a segment plays at least one step");
+            self.queue = steps.collect();
+            self.retried = dropped;
+            self.fed = true;
+            return Ok(first);
+        }
+    }
+
+    /// Plays up to `max` steps on `env` (a copy, at `obs`) at `fps`: at each the held action (or the no-op),
+    /// with the state and the agent's proposal shown. Returns each step's action with the observation it acted
+    /// on, and how the steps went.
+    fn play(
+        &mut self,
+        query: &Query<'_, A>,
+        fps: f64,
+        env: &mut dyn Env<A>,
+        obs: &mut [f32],
+        max: usize,
+    ) -> Result<Played<A>> {
+        let mut played = Played {
+            steps: Vec::with_capacity(max),
+            ret: 0.0,
+            last_reward: 0.0,
+            terminated: false,
+            truncated: false,
+        };
+        for k in 0..max {
+            if k > 0 {
+                self.next_prompt += 1;
+                self.publish_frame(env, obs)?;
+                self.publish_prompt(Some(&Prompt {
+                    id: self.next_prompt,
+                    agent_action: None,
+                    steps_left: max - k,
+                    waits: false,
+                    undo: false,
+                    starts_in: None,
+                    obs: obs.to_vec(),
+                    takeover: false,
+                    proposal: proposal(query, obs),
+                }));
+                self.stopped("during a real-time segment")?;
+                self.wait_while_paused()?;
+                self.pace(fps);
+            }
+            let action = self.held();
+            let before = obs.to_vec();
+            let out = env
+                .step_into(action.borrow(), obs)
+                .context("a copy of the environment failed to step")?;
+            played.steps.push((action, before));
+            played.ret += out.reward;
+            played.last_reward = out.reward;
+            (played.terminated, played.truncated) = (out.terminated, out.truncated);
+            if out.terminated || out.truncated {
+                break;
+            }
+        }
+        self.publish_frame(env, obs)?;
+        Ok(played)
+    }
+
+    /// After a segment: whether the person asks to play it again (segment `id`) within the breath (pauses
+    /// excluded); other keys are dropped.
+    fn wait_for_retry(&mut self, id: u64) -> Result<bool> {
+        let started = Instant::now();
+        let mut paused = Duration::ZERO;
+        loop {
+            self.stopped("after a segment")?;
+            paused += self.wait_while_paused()?;
+            let left = REALTIME_BREATH.saturating_sub(started.elapsed().saturating_sub(paused));
+            if left.is_zero() {
+                return Ok(false);
+            }
+            match self.server.keys.recv_timeout(left.min(STOP_POLL)) {
+                Ok(key) if key.id == id && key.input == Input::Retry => return Ok(true),
+                Ok(_) | Err(mpsc::RecvTimeoutError::Timeout) => {}
+                Err(mpsc::RecvTimeoutError::Disconnected) => {
+                    bail!("the web expert's server stopped after a segment")
+                }
+            }
+        }
     }
 
     /// Real time: waits for the next step's time at `fps` steps a second after the last one; keeps the rate, but
@@ -835,6 +1050,11 @@ impl<A: PageAction> WebExpert<A> {
     /// steps and asked for it, so there is no replay, no breath and no quiet interval.
     fn ask(&mut self, query: &Query<'_, A>) -> Result<Answer<A>> {
         self.lift_hand_over();
+        self.fed = false;
+        if query.agent_action.is_some() {
+            // A segment opens: the steps of one played ahead are the run's already (or it ended early).
+            self.queue.clear();
+        }
         let resumed = std::mem::take(&mut self.resumed);
         if resumed && query.agent_action.is_none() {
             // A segment in progress at the stop: the page shows where the run stands before the person goes on.
@@ -882,7 +1102,8 @@ impl<A: PageAction> WebExpert<A> {
         match answer {
             Answer::Action { .. } => {
                 self.last_person = Some((query.episode.start, query.episode.actions.len() + 1));
-                if self.server.options.fps.is_some() && query.steps_left <= 1 {
+                // (A segment played ahead had its breath after its last step was played.)
+                if self.server.options.fps.is_some() && query.steps_left <= 1 && !self.fed {
                     self.segment_ended = Some(Instant::now());
                 }
             }
@@ -954,6 +1175,23 @@ fn replay_from(
     from.max(len.saturating_sub(cap))
 }
 
+/// The agent's test-time action at `obs` (a state of the query's segment), as the page shows it, when the run
+/// gives it ([`Query::propose`]).
+fn proposal<A: PageAction>(query: &Query<'_, A>, obs: &[f32]) -> Option<serde_json::Value> {
+    let propose = query.propose?;
+    serde_json::to_value(propose(obs)).ok()
+}
+
+/// Steps another attempt at `query` may take, after `spent` steps given to it in `attempts` attempts: the budget
+/// left then (counting queries, an attempt costs one query).
+fn retry_room<A: PageAction>(query: &Query<'_, A>, spent: usize, attempts: usize) -> usize {
+    match query.unit {
+        BudgetUnit::Transitions => query.budget_left.saturating_sub(spent),
+        BudgetUnit::Queries if query.budget_left >= attempts => usize::MAX,
+        BudgetUnit::Queries => 0,
+    }
+}
+
 /// The agent's proposal of `query`, as the page shows it.
 fn agent_action<A: PageAction>(query: &Query<'_, A>) -> Option<serde_json::Value> {
     query
@@ -994,10 +1232,6 @@ impl<A: PageAction> Expert<A> for WebExpert<A> {
         result
     }
 
-    fn person_seconds(&self) -> Option<f64> {
-        Some(self.effort.person_s)
-    }
-
     fn state(&self) -> Option<String> {
         Some(serde_json::to_string(&self.effort).expect("counts serialise"))
     }
@@ -1009,6 +1243,22 @@ impl<A: PageAction> Expert<A> for WebExpert<A> {
         Ok(())
     }
 
+    fn person(&mut self) -> Option<&mut dyn Person<A>> {
+        Some(self)
+    }
+}
+
+impl<A: PageAction> Person<A> for WebExpert<A> {
+    fn person_seconds(&self) -> Option<f64> {
+        Some(self.effort.person_s)
+    }
+
+    fn shows_proposals(&self) -> bool {
+        true
+    }
+    fn retried_steps(&mut self) -> usize {
+        std::mem::take(&mut self.retried)
+    }
     fn shows_uncertainty(&self) -> bool {
         true
     }
@@ -1043,6 +1293,8 @@ impl<A: PageAction> Expert<A> for WebExpert<A> {
     fn observe(&mut self, p: &Progress<'_, A>) {
         self.lift_hand_over();
         self.episode = p.episode;
+        // A step of a segment played ahead: the page showed it as the person played it.
+        let fed = std::mem::take(&mut self.fed);
         // Real time: the person may take over while the agent acts and budget is left; in watch mode the agent's
         // steps go at the real-time rate (outside any question: not the person's answering time).
         let mut watching = false;
@@ -1100,7 +1352,8 @@ impl<A: PageAction> Expert<A> for WebExpert<A> {
             .is_none_or(|t| now.duration_since(t).as_secs_f64() >= 1.0 / UPDATES_PER_S);
         // While a segment runs the steps are slow (the person's pace): show each one. Otherwise the latest
         // status waits for the next update, or for a question (which shows where the run stands).
-        if !due && !p.queries.expert_in_control() && !watching && p.step < p.train_steps {
+        let shown = fed || !p.queries.expert_in_control();
+        if !due && shown && !watching && p.step < p.train_steps {
             self.unsent = Some(status);
             return;
         }
@@ -1113,7 +1366,7 @@ impl<A: PageAction> Expert<A> for WebExpert<A> {
         // The frame shows the state the agent acts in next (a table source needs no observation here: it
         // shows the one of the last question), unless the page is a step ahead, showing the state after the
         // person's next key (carried to the next step).
-        if self.carried.is_some() {
+        if self.carried.is_some() || fed {
             return;
         }
         if let Err(err) = self.publish_frame(p.env, &[]) {

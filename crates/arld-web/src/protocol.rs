@@ -293,6 +293,51 @@ pub struct Prompt {
     pub obs: Vec<f32>,
     /// The segment is the person's takeover (not a question of the agent): they hand back when done.
     pub takeover: bool,
+    /// The agent's proposal at this step's state (its test-time action: an index, or a box's numbers), shown as
+    /// a ghost at every step of a segment; `None` where the run does not give it.
+    pub proposal: Option<serde_json::Value>,
+}
+
+/// How a real-time segment went, shown after it (see [`ServerMsg::Segment`]).
+#[derive(Clone, Debug, Serialize)]
+pub struct SegmentEnd {
+    /// The id the page sends back to retry this segment ([`ClientMsg::Retry`]).
+    pub id: u64,
+    /// Steps played and the sum of their rewards.
+    pub steps: usize,
+    #[serde(rename = "return")]
+    pub ret: f64,
+    /// How the segment ended for a task with a goal: see [`segment_outcome`].
+    pub outcome: Option<&'static str>,
+    /// Whether the person may retry it now (there is budget for another attempt), and for how long (seconds).
+    pub retry_s: Option<f64>,
+    /// The attempt this was (1 for the first).
+    pub attempt: usize,
+}
+
+/// How a segment ended, in a task with a goal: for the landers `landed` or `crashed`, for the mountain cars
+/// `reached the flag`, for CartPole `the pole fell`, for Acrobot `swung up`, and `time up` when the episode was
+/// cut by its time limit; `None` when the episode goes on (or for a task without a goal, Pendulum). `terminated`
+/// and `truncated` are the last step's, `last_reward` its reward: a lander that comes to rest gets +100 on that
+/// step, one that crashes or flies off -100 (Gymnasium's rewards), which outweighs the shaping.
+pub fn segment_outcome(
+    env: &str,
+    terminated: bool,
+    truncated: bool,
+    last_reward: f64,
+) -> Option<&'static str> {
+    if !terminated {
+        return truncated.then_some("time up");
+    }
+    let family = env.split('-').next().unwrap_or(env);
+    Some(match family {
+        "LunarLander" | "LunarLanderContinuous" if last_reward > 0.0 => "landed",
+        "LunarLander" | "LunarLanderContinuous" => "crashed",
+        "MountainCar" | "MountainCarContinuous" => "reached the flag",
+        "CartPole" => "the pole fell",
+        "Acrobot" => "swung up",
+        _ => "the episode ended",
+    })
 }
 
 /// Everything the server sends.
@@ -363,6 +408,8 @@ pub enum ServerMsg<'a> {
     },
     /// The run goes on after `handed`.
     Resumed,
+    /// Real time: how the person's segment went, and whether they may retry it.
+    Segment(&'a SegmentEnd),
     /// Real time: whether the person can take over now (the agent acts) and whether they asked to.
     Takeover {
         offered: bool,
@@ -417,6 +464,11 @@ pub enum ClientMsg {
         #[serde(default)]
         cancel: bool,
     },
+    /// Real time: play the segment `id` names ([`SegmentEnd::id`]) again from its start state; its answers
+    /// replace the first attempt's.
+    Retry {
+        id: u64,
+    },
 }
 
 impl ClientMsg {
@@ -431,6 +483,7 @@ impl ClientMsg {
             | ClientMsg::Takeover { .. }
             | ClientMsg::Pass { .. }
             | ClientMsg::Undo { .. }
+            | ClientMsg::Retry { .. }
             | ClientMsg::Pause { .. }
             | ClientMsg::Watch { .. } => None,
         };

@@ -58,6 +58,8 @@ pub enum Input {
     HandBack,
     /// Take back the last key.
     Undo,
+    /// Play the last segment again from its start state.
+    Retry,
 }
 
 /// What the training thread last published, for tabs that connect later.
@@ -816,6 +818,7 @@ fn handle(shared: &Shared, id: u64, text: &str) -> Result<(), String> {
         ClientMsg::Pass { id } => send_key(shared, board, id, Input::HandBack),
         ClientMsg::Takeover { cancel } => shared.request_takeover(&mut board, cancel),
         ClientMsg::Undo { id } => send_key(shared, board, id, Input::Undo),
+        ClientMsg::Retry { id } => send_key(shared, board, id, Input::Retry),
     }
 }
 

@@ -4,7 +4,7 @@
 //! interactive (a person answering in a browser, an external process), so nothing here assumes it answers
 //! instantly or always. During training the loop asks through [`Expert::answer`] with a [`Query`] (the
 //! observation, the environment to draw, the agent's own proposal); the [`Answer`] may be that nobody answered,
-//! and [`Expert::observe`] lets an interactive expert follow the run. Kinds: [`CheckpointExpert`] (a trained
+//! and [`Person::observe`] lets an interactive expert follow the run. Kinds: [`CheckpointExpert`] (a trained
 //! network acting greedily), [`NoisyExpert`] (acts at random with probability p), [`scripted`] controllers,
 //! the web expert (a person in a browser: the `arld-web` crate, whose options [`web_options`] parses) and
 //! [`process::ProcessExpert`] (another program speaking JSON lines). [`from_spec`] builds one from a short spec
@@ -14,6 +14,7 @@
 pub mod boxed;
 pub mod demos;
 pub mod minari;
+pub mod person;
 pub mod pipeline;
 pub mod process;
 pub mod scripted;
@@ -21,9 +22,11 @@ pub mod shipped;
 pub mod web_options;
 
 use crate::agent::test_policy_action;
+pub use person::Person;
+
 use crate::env::{Action, Env, EnvSpec};
 use crate::nn::QNet;
-use crate::query::{OracleView, QueryController};
+use crate::query::{BudgetUnit, OracleView, QueryController};
 use anyhow::{Context, Result, bail, ensure};
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64;
@@ -58,37 +61,11 @@ pub trait Expert<A: Action = usize>: Send {
     fn peek(&mut self, _obs: &[f32]) -> Option<OracleView> {
         None
     }
-    /// Called by the training loop after every step, so that an interactive expert can show the run as it goes.
-    /// It must be cheap and must not change anything the run depends on.
-    fn observe(&mut self, _progress: &Progress<'_, A>) {}
-    /// Polled once per step where the agent is about to act and budget is left: whether the expert takes over
-    /// unasked from this state (a person pressed "Take over" on the page; human-gated control as in HG-DAgger and
-    /// HIL-SERL). When it says yes, the run opens a segment charged like a question's (the query rule does not
-    /// see it) and asks [`Expert::answer`] at once, with the agent's proposal, until the expert hands back
-    /// ([`Answer::Unanswered`]), the episode ends or the budget is spent. It must be cheap and draw nothing;
-    /// programs never take over.
-    fn wants_control(&mut self) -> bool {
-        false
-    }
-    /// Called once when a resumed run goes on, before anything else is shown: what the run kept of its course
-    /// before the stop (a person's page draws its charts from it).
-    fn resumed_history(&mut self, _history: &RunHistory) {}
-    /// Whether the expert shows the agent's uncertainty at every step (a person's page): the agent then
-    /// computes it even where no query rule reads it (a segment aside), so that it goes on after the budget is
-    /// spent. Programs say no: the agent computes only what its rule needs.
-    fn shows_uncertainty(&self) -> bool {
-        false
-    }
-    /// Seconds a person spent answering (recorded in the run's summary); `None` for programs.
-    fn person_seconds(&self) -> Option<f64> {
+    /// The hooks of an expert who is a person ([`Person`]: the web expert): `None` for programs, which only
+    /// answer.
+    fn person(&mut self) -> Option<&mut dyn Person<A>> {
         None
     }
-    /// Called once when the run has finished, with its outcome (an interactive expert shows it).
-    fn finish(&mut self, _end: &RunEnd) {}
-    /// Called when a driven run (a Python program's `learn`) is handed back to its program between two steps:
-    /// `end` says where it stands, `note` why (training returned, or a stop). The run may go on later; an
-    /// interactive expert shows the note until the next step or question.
-    fn handed_over(&mut self, _end: &RunEnd, _note: &str) {}
     /// The state that changes as the expert answers (a generator), as text for a run's snapshot; `None` for
     /// an expert whose answers depend only on the observation.
     fn state(&self) -> Option<String> {
@@ -114,12 +91,22 @@ pub struct Query<'a, A: Action = usize> {
     pub episode: EpisodeTrace<'a, A>,
     /// The agent's own proposal, on the step that opens the segment (`None` on the later steps).
     pub agent_action: Option<A::Ref<'a>>,
+    /// The agent's test-time action (no exploration, nothing drawn) at any observation, for a person who is shown
+    /// it at every step ([`Person::shows_proposals`]); `None` for other experts.
+    pub propose: Option<&'a Propose<'a, A>>,
     /// Expert steps left in the segment, this one included.
     pub steps_left: usize,
-    /// Whether the segment is a takeover the expert asked for ([`Expert::wants_control`]), not a question of the
+    /// The budget not yet spent, in its unit (counting transitions, the segment's steps left included): what a
+    /// person's retry of the segment may spend ([`Person::retried_steps`]).
+    pub budget_left: usize,
+    pub unit: BudgetUnit,
+    /// Whether the segment is a takeover the expert asked for ([`Person::wants_control`]), not a question of the
     /// query rule.
     pub taken_over: bool,
 }
+
+/// The agent's test-time action at an observation ([`Query::propose`]).
+pub type Propose<'a, A> = dyn Fn(&[f32]) -> A + 'a;
 
 /// The episode in progress: how it began and the actions taken since.
 #[derive(Debug)]
@@ -136,7 +123,7 @@ impl<A: Action> Clone for EpisodeTrace<'_, A> {
 
 impl<A: Action> Copy for EpisodeTrace<'_, A> {}
 
-/// What a resumed run kept of its course before the stop, for [`Expert::resumed_history`].
+/// What a resumed run kept of its course before the stop, for [`Person::resumed_history`].
 #[derive(Clone, Debug, Default)]
 pub struct RunHistory {
     /// The evaluations so far: step and mean test return, in step order.
@@ -146,7 +133,7 @@ pub struct RunHistory {
     pub uncertainty: Vec<(u64, f32, Option<f32>)>,
 }
 
-/// How a run ended, for [`Expert::finish`].
+/// How a run ended, for [`Person::finish`].
 #[derive(Clone, Debug)]
 pub struct RunEnd {
     pub solved: bool,
@@ -169,7 +156,7 @@ pub enum Answer<A = usize> {
     Unanswered { waited_s: f64 },
 }
 
-/// Where a run stands after a step, for [`Expert::observe`].
+/// Where a run stands after a step, for [`Person::observe`].
 pub struct Progress<'a, A: Action = usize> {
     /// Environment steps done.
     pub step: usize,

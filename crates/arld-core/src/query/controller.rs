@@ -88,6 +88,9 @@ pub struct QueryController {
     queries: usize,
     /// Segments a person opened unasked ([`Self::open_segment_by_person`]); not queries of the rule.
     takeovers: usize,
+    /// Steps a person gave in attempts they retried, and the attempts ([`Self::charge_retried`]).
+    retried_steps: usize,
+    retries: usize,
 }
 
 impl QueryController {
@@ -113,6 +116,8 @@ impl QueryController {
             segment_left: 0,
             queries: 0,
             takeovers: 0,
+            retried_steps: 0,
+            retries: 0,
         })
     }
 
@@ -235,6 +240,23 @@ impl QueryController {
         self.transitions_used += 1;
     }
 
+    /// A person answered the question that opened the running segment after retrying it: the `steps` of the
+    /// attempts they dropped were given too, so they are charged (a retry costs a query, counting queries), and
+    /// the segment is cut to the budget left.
+    pub fn charge_retried(&mut self, steps: usize) {
+        self.retried_steps += steps;
+        self.retries += 1;
+        let left = self.budget_left();
+        if self.unit == BudgetUnit::Transitions {
+            self.segment_left = self.segment_left.min(left);
+        }
+    }
+
+    /// Steps a person gave in attempts they retried (charged to the budget, never stored).
+    pub fn retried_steps(&self) -> usize {
+        self.retried_steps
+    }
+
     /// Ends the current segment, if any (expert control never crosses an episode boundary), and tells the rule.
     pub fn end_episode(&mut self) {
         self.segment_left = 0;
@@ -272,15 +294,15 @@ impl QueryController {
     /// and takeovers.
     pub fn budget_spent(&self) -> usize {
         match self.unit {
-            BudgetUnit::Transitions => self.transitions_used,
-            BudgetUnit::Queries => self.queries + self.takeovers,
+            BudgetUnit::Transitions => self.transitions_used + self.retried_steps,
+            BudgetUnit::Queries => self.queries + self.takeovers + self.retries,
         }
     }
 
     /// Budget not yet spent, in its unit (counting transitions, the remaining steps of a running segment are
     /// included).
     pub fn budget_left(&self) -> usize {
-        self.budget - self.budget_spent()
+        self.budget.saturating_sub(self.budget_spent())
     }
 
     /// Number of queries made so far (by the rule; takeovers are counted apart).
@@ -305,8 +327,11 @@ impl Persist for QueryController {
     /// rule's own state (the adaptive rule's window, under `{prefix}.window` as before rules were an interface).
     fn save_state<'a>(&'a self, prefix: &str, state: &mut StateDict<'a>) {
         let mut counters = vec![self.transitions_used, self.segment_left, self.queries];
-        if self.takeovers > 0 {
+        if self.takeovers > 0 || self.retries > 0 {
             counters.push(self.takeovers);
+        }
+        if self.retries > 0 {
+            counters.extend([self.retried_steps, self.retries]);
         }
         state.put_value(&format!("{prefix}.counters"), &counters);
         self.rule.save_state(prefix, state);
@@ -316,13 +341,14 @@ impl Persist for QueryController {
     fn load_state(&mut self, prefix: &str, state: &StateDict<'_>) -> Result<(), StateError> {
         let name = format!("{prefix}.counters");
         let counters: Vec<usize> = state.value(&name)?;
-        let (transitions_used, segment_left, queries, takeovers) = match counters[..] {
-            [b, s, q] => (b, s, q, 0),
-            [b, s, q, t] => (b, s, q, t),
+        let (transitions_used, segment_left, queries, takeovers, retried) = match counters[..] {
+            [b, s, q] => (b, s, q, 0, (0, 0)),
+            [b, s, q, t] => (b, s, q, t, (0, 0)),
+            [b, s, q, t, rs, r] => (b, s, q, t, (rs, r)),
             _ => {
                 return Err(StateError::Value {
                     name,
-                    msg: format!("{} counters, expected 3 or 4", counters.len()),
+                    msg: format!("{} counters, expected 3, 4 or 6", counters.len()),
                 });
             }
         };
@@ -331,7 +357,8 @@ impl Persist for QueryController {
             self.segment_left,
             self.queries,
             self.takeovers,
-        ) = (transitions_used, segment_left, queries, takeovers);
+            (self.retried_steps, self.retries),
+        ) = (transitions_used, segment_left, queries, takeovers, retried);
         self.rule.load_state(prefix, state)
     }
 }
@@ -577,6 +604,46 @@ mod tests {
             (controller.transitions_used(), controller.budget_left()),
             (2, 8)
         );
+    }
+
+    /// A person's retried attempts are charged (steps counting transitions, one query counting queries), never
+    /// stored, cut the segment to the budget left, and survive a snapshot.
+    #[test]
+    fn retried_steps_are_charged_and_cut_the_segment_to_the_budget() {
+        let mut rng = Pcg64::seed_from_u64(0);
+        let mut controller = QueryController::new(rule("greedy"), 12, 5).unwrap();
+        assert!(decide_with(&mut controller, None, &mut rng).query);
+        // Two attempts of 5 and 4 steps dropped: 9 charged, 3 left, so the kept attempt has 3 steps at most.
+        controller.charge_retried(5);
+        controller.charge_retried(4);
+        assert_eq!(
+            (controller.budget_left(), controller.segment_left()),
+            (3, 3)
+        );
+        (0..3).for_each(|_| controller.record_expert_step());
+        assert_eq!(
+            (controller.transitions_used(), controller.retried_steps()),
+            (3, 9)
+        );
+        assert_eq!(
+            (controller.budget_spent(), controller.budget_left()),
+            (12, 0)
+        );
+        let mut state = StateDict::default();
+        controller.save_state("q", &mut state);
+        let mut back = QueryController::new(rule("greedy"), 12, 5).unwrap();
+        back.load_state("q", &state).unwrap();
+        assert_eq!(
+            (back.transitions_used(), back.retried_steps(), back.budget_left()),
+            (3, 9, 0)
+        );
+        // Counting queries, a retry costs one query.
+        let mut queries = QueryController::new(rule("greedy"), 3, 5)
+            .unwrap()
+            .counting(BudgetUnit::Queries);
+        assert!(decide_with(&mut queries, None, &mut rng).query);
+        queries.charge_retried(5);
+        assert_eq!((queries.budget_spent(), queries.segment_left()), (2, 5));
     }
 
     #[test]

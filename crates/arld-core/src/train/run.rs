@@ -21,11 +21,14 @@ use crate::agent::td3::Td3Config;
 use crate::agent::{DqnAgent, Learner};
 use crate::env::{self, Action, BoxSpec, Env, TaskSpec};
 use crate::expert::demos::Demonstrations;
-use crate::expert::{Answer, EpisodeTrace, Expert, Progress, Query, RunEnd, RunHistory};
+use crate::expert::{
+    Answer, EpisodeTrace, Expert, Person, Progress, Propose, Query, RunEnd, RunHistory,
+};
 use crate::interrupt;
 use crate::query::{DecisionInput, Needs, OracleView, QueryController};
 use crate::replay::{Batch, Replay, ReplayConfig, Transition};
 use crate::state::{Persist, StateDict};
+use crate::task::ActionColumn;
 use anyhow::{Context, Result, ensure};
 use cpu_time::ThreadTime;
 use rand::SeedableRng;
@@ -671,18 +674,16 @@ impl<'a, L: Learner> Run<'a, L> {
             return Ok(turn);
         }
         let (cfg, step) = (self.cfg, self.st.step);
-        let parts = &mut self.parts;
         let epsilon = acting_epsilon(cfg, step);
         if cfg.queries_from_learning_starts && step + 1 < cfg.learning_starts {
             // Ablation: no queries before the first update; the rule does not see these steps.
+            let parts = &mut self.parts;
             let action = parts.agent.act(&parts.obs, epsilon, Needs::NOTHING).0;
             return Ok((Turn::Agent(action), None));
         }
-        let mut want = parts.queries.signals_wanted_now();
-        want.uncertainty |= self
-            .expert
-            .as_deref()
-            .is_some_and(|e| e.shows_uncertainty());
+        let mut want = self.parts.queries.signals_wanted_now();
+        want.uncertainty |= self.person().is_some_and(|p| p.shows_uncertainty());
+        let parts = &mut self.parts;
         let (agent_action, signals) = parts.agent.act(&parts.obs, epsilon, want);
         let oracle = if want.oracle {
             Some(peek_expert(
@@ -714,7 +715,7 @@ impl<'a, L: Learner> Run<'a, L> {
         Ok((turn, signals.uncertainty))
     }
 
-    /// A person takes over unasked ([`Expert::wants_control`], polled only while budget is left): a segment
+    /// A person takes over unasked ([`Person::wants_control`], polled only while budget is left): a segment
     /// opens, charged like a question's ([`QueryController::open_segment_by_person`]), and the expert is asked
     /// with the agent's proposal. The query rule does not decide at this step and its statistics (the adaptive
     /// window) do not see it. `None`: the agent (or the rule) decides as usual.
@@ -723,13 +724,13 @@ impl<'a, L: Learner> Run<'a, L> {
         if parts.queries.budget_left() == 0 {
             return None;
         }
-        let expert = self.expert.as_deref_mut()?;
-        if !expert.wants_control() {
+        let person = self.expert.as_deref_mut()?.person()?;
+        if !person.wants_control() {
             return None;
         }
         // The agent's uncertainty at the takeover is logged with it, where the rule or the page reads it.
         let want = Needs {
-            uncertainty: parts.queries.needs().uncertainty || expert.shows_uncertainty(),
+            uncertainty: parts.queries.needs().uncertainty || person.shows_uncertainty(),
             ..Needs::NOTHING
         };
         let epsilon = acting_epsilon(self.cfg, self.st.step);
@@ -750,11 +751,10 @@ impl<'a, L: Learner> Run<'a, L> {
         let agent_action = question.agent_action.clone();
         let asked = ask_expert(
             &mut self.expert,
-            &self.parts.obs,
+            &mut self.parts,
             &*self.env,
             self.st.episode(self.env_seed),
-            Some(agent_action.borrow()),
-            &self.parts.queries,
+            Some(&agent_action),
             !question.started_by.is_rule(),
         );
         let answer = match asked {
@@ -766,6 +766,12 @@ impl<'a, L: Learner> Run<'a, L> {
                 return Err(err);
             }
         };
+        // A person who retried their segment gave the steps of the attempts they dropped too: they are charged
+        // to the budget (never stored), and the log says how many.
+        let retried = self.person().map_or(0, |p| p.retried_steps());
+        if retried > 0 {
+            self.parts.queries.charge_retried(retried);
+        }
         let (expert_action, response_s) = match answer {
             Answer::Action { action, response_s } => (Some(action), response_s),
             Answer::Unanswered { waited_s } => {
@@ -785,6 +791,7 @@ impl<'a, L: Learner> Run<'a, L> {
             response_s,
             answered,
             started_by: question.started_by,
+            retried,
         })?;
         Ok(action_taken.unwrap_or(agent_action))
     }
@@ -795,11 +802,10 @@ impl<'a, L: Learner> Run<'a, L> {
     fn ask_in_segment(&mut self) -> Result<L::Action> {
         let answer = ask_expert(
             &mut self.expert,
-            &self.parts.obs,
+            &mut self.parts,
             &*self.env,
             self.st.episode(self.env_seed),
             None,
-            &self.parts.queries,
             self.log.last_started_by() == Some(StartedBy::Person),
         )?;
         let waited_s = match answer {
@@ -824,6 +830,7 @@ impl<'a, L: Learner> Run<'a, L> {
             response_s: Some(waited_s),
             answered: false,
             started_by: StartedBy::Rule,
+            retried: 0,
         })?;
         Ok(agent_action)
     }
@@ -984,9 +991,9 @@ impl<'a, L: Learner> Run<'a, L> {
     /// page), the uncertainties logged with the questions (the only ones a run keeps with their steps). The
     /// charts are no reason to refuse a resume: a query log that cannot be read leaves a warning and no points.
     fn show_where_resumed(&mut self) {
-        if let Some(expert) = self.expert.as_deref_mut() {
+        if let Some(person) = self.expert.as_deref_mut().and_then(|e| e.person()) {
             let logged = match self.log.dir() {
-                Some(dir) if expert.shows_uncertainty() => {
+                Some(dir) if person.shows_uncertainty() => {
                     super::run_dir::read_query_uncertainties(dir)
                 }
                 _ => Ok(Vec::new()),
@@ -996,8 +1003,8 @@ impl<'a, L: Learner> Run<'a, L> {
                 Vec::new()
             });
             let curve = self.log.curve().iter().map(|p| (p.step, p.mean)).collect();
-            expert.resumed_history(&RunHistory { curve, uncertainty });
-            expert.observe(&Progress {
+            person.resumed_history(&RunHistory { curve, uncertainty });
+            person.observe(&Progress {
                 step: self.st.step,
                 train_steps: self.cfg.train_steps,
                 episode: self.st.episode,
@@ -1017,8 +1024,8 @@ impl<'a, L: Learner> Run<'a, L> {
             let point = parts.evaluator.evaluate(&mut parts.agent, done)?;
             self.log.eval(point)?;
         }
-        if let Some(expert) = self.expert.as_deref_mut() {
-            expert.observe(&Progress {
+        if let Some(person) = self.expert.as_deref_mut().and_then(|e| e.person()) {
+            person.observe(&Progress {
                 step: done,
                 train_steps: cfg.train_steps,
                 episode: self.st.episode,
@@ -1093,7 +1100,7 @@ impl<'a, L: Learner> Run<'a, L> {
     /// has nobody to hand it to: it stops.
     fn pause(&mut self) -> Result<Control> {
         let mut summary = self.summary();
-        summary.person_s = self.expert.as_deref().and_then(|e| e.person_seconds());
+        summary.person_s = self.person().and_then(|p| p.person_seconds());
         self.write_summary(&summary)?;
         self.clock.stamp(&mut self.st);
         let expert_state = self.expert.as_deref().and_then(|e| e.state());
@@ -1125,15 +1132,16 @@ impl<'a, L: Learner> Run<'a, L> {
     /// snapshot removed.
     fn finish(&mut self) -> Result<Summary> {
         let mut summary = self.summary();
-        if let Some(expert) = self.expert.as_deref_mut() {
-            summary.person_s = expert.person_seconds();
-            expert.finish(&RunEnd {
+        let dir = self.log.dir().map(|d| d.to_path_buf());
+        if let Some(person) = self.person() {
+            summary.person_s = person.person_seconds();
+            person.finish(&RunEnd {
                 solved: summary.solved,
                 steps_to_solve: summary.steps_to_solve,
                 // The steps trained: fewer than configured when a Python program closes its run early.
                 train_steps: summary.train_steps,
                 final_score: summary.final_score,
-                dir: self.log.dir().map(|d| d.to_path_buf()),
+                dir,
             });
         }
         self.write_summary(&summary)?;
@@ -1154,6 +1162,11 @@ impl<'a, L: Learner> Run<'a, L> {
             &self.clock,
             self.demos.map(|d| d.transitions.len()).unwrap_or(0),
         )
+    }
+
+    /// The person's hooks of the run's expert, when it is a person.
+    fn person(&mut self) -> Option<&mut dyn Person<L::Action>> {
+        self.expert.as_deref_mut()?.person()
     }
 
     /// The kind of the run's expert, for the query log.
@@ -1262,7 +1275,7 @@ impl<L: Learner> PausedRun<'_, L> {
     }
 
     /// Tells the run's expert that the run is handed to its program, and why (`note`): a person's page shows
-    /// where the run stands until it goes on ([`Expert::handed_over`]).
+    /// where the run stands until it goes on ([`Person::handed_over`]).
     pub fn hand_over(&mut self, note: &str) {
         let end = RunEnd {
             solved: self.summary.solved,
@@ -1271,8 +1284,8 @@ impl<L: Learner> PausedRun<'_, L> {
             final_score: self.summary.final_score,
             dir: self.log.dir().map(|d| d.to_path_buf()),
         };
-        if let Some(expert) = self.expert.as_deref_mut() {
-            expert.handed_over(&end, note);
+        if let Some(person) = self.expert.as_deref_mut().and_then(|e| e.person()) {
+            person.handed_over(&end, note);
         }
     }
 }
@@ -1599,38 +1612,54 @@ fn peek_expert<A: Action>(
     })
 }
 
-/// Asks the expert for the action at `obs` (one step of a segment; `agent_action` on the step that opens it) and
-/// checks that the answer is an action of the environment.
-fn ask_expert<'q, A: Action>(
-    expert: &mut Option<&mut dyn Expert<A>>,
-    obs: &'q [f32],
-    env: &'q dyn Env<A>,
-    episode: EpisodeTrace<'q, A>,
-    agent_action: Option<A::Ref<'q>>,
-    queries: &QueryController,
+/// Asks the expert for the action at the run's observation (one step of a segment; `agent_action` on the step
+/// that opens it) and checks that the answer is an action of the environment. A person who is shown the agent's
+/// proposal at every step gets the agent's test-time action to ask ([`Query::propose`]).
+fn ask_expert<L: Learner>(
+    expert: &mut Option<&mut dyn Expert<L::Action>>,
+    parts: &mut Parts<L>,
+    env: &dyn Env<L::Action>,
+    episode: EpisodeTrace<'_, L::Action>,
+    agent_action: Option<&L::Action>,
     taken_over: bool,
-) -> Result<Answer<A>> {
+) -> Result<Answer<L::Action>> {
     let expert = expert
         .as_deref_mut()
         .context("the query rule asked for the expert, but none was given")?;
+    let proposes = expert.person().is_some_and(|p| p.shows_proposals());
+    let Parts {
+        agent,
+        queries,
+        obs,
+        ..
+    } = parts;
+    let agent = std::cell::RefCell::new((agent, <L::Action as Action>::Column::default()));
+    let propose = |obs: &[f32]| {
+        let (agent, column) = &mut *agent.borrow_mut();
+        agent.test_actions(obs, column);
+        L::Action::owned(column.get(0))
+    };
     let query = Query {
         obs,
         env,
         episode,
-        agent_action,
+        agent_action: agent_action.map(|a| a.borrow()),
         steps_left: queries.segment_left(),
+        budget_left: queries.budget_left(),
+        unit: queries.unit(),
         taken_over,
+        propose: proposes.then_some(&propose as &Propose<'_, L::Action>),
     };
     let answer = expert
         .answer(&query)
         .with_context(|| format!("the expert ({}) failed to answer", expert.describe()))?;
     if let Answer::Action { action, .. } = &answer
-        && let Err(why) = A::check(action.borrow(), env.spec())
+        && let Err(why) = L::Action::check(action.borrow(), env.spec())
     {
         anyhow::bail!(
             "the expert ({}) answered action {}, but {why}",
             expert.describe(),
-            A::to_field(action.borrow())
+            L::Action::to_field(action.borrow())
         );
     }
     Ok(answer)

@@ -381,6 +381,14 @@ pub struct QueryEvent<A: Action = usize> {
     /// snapshots, as before takeovers).
     #[serde(default, skip_serializing_if = "StartedBy::is_rule")]
     pub started_by: StartedBy,
+    /// Steps of the person's attempts at this question that they retried and dropped (charged to the budget,
+    /// never stored); absent when they kept their first attempt, as before retries.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub retried: usize,
+}
+
+fn is_zero(n: &usize) -> bool {
+    *n == 0
 }
 
 /// What opened an expert's segment.
@@ -460,6 +468,10 @@ pub(crate) struct AnswerStep<A: Action = usize> {
     /// What opened the segment: [`STARTED_BY_RULE`], the query rule asked, or [`STARTED_BY_PERSON`], a person
     /// took over unasked.
     pub started_by: String,
+    /// Steps of the person's attempts at the question that their retry replaced ([`QueryEvent::retried`]):
+    /// these steps are the retry's; absent when the first attempt was kept.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub retried: usize,
 }
 
 impl<A: Action> AnswerStep<A> {
@@ -492,6 +504,7 @@ impl<A: Action> AnswerStep<A> {
                 .map_or(StartedBy::Rule, |q| q.started_by)
                 .as_str()
                 .to_string(),
+            retried: question.map_or(0, |q| q.retried),
         }
     }
 

@@ -10,7 +10,7 @@ const arld = (window.arld = {
   client: null, hello: null, controller: null, status: null, frame: null, prompt: null, paused: false,
   uncertainty: [], curve: [], ended: null, outcome: null, errors: [], connected: false, obsHistory: [],
   replaying: false, replays: [], countdowns: 0, undos: 0, handed: null, takeovers: 0,
-  takeover: { offered: false, pending: false }, watch: false,
+  takeover: { offered: false, pending: false }, watch: false, segments: [], retries: 0, ghosts: 0,
 });
 let socket = null;
 let replay = null; // the replay being played: {frames, at, timer, live}
@@ -68,6 +68,10 @@ function receive(m) {
         banner(`Time is up: the agent took that question back (${h.timeout} s to answer).`, 4000);
       }
       arld.prompt = m.prompt; showPrompt();
+      // The agent's proposal at this step is drawn over the state (a ghost of its action).
+      if (arld.prompt && arld.prompt.proposal !== null && arld.prompt.proposal !== undefined) arld.ghosts++;
+      if (arld.frame && arld.frame.geometry && !replay) draw();
+      if (arld.prompt && arld.prompt.waits) closeRetry();
       break;
     }
     case "error": arld.errors.push(m.message); banner(m.message, 3000); break;
@@ -81,6 +85,7 @@ function receive(m) {
       showPrompt(); showRole(); showEnd(); banner(null);
       break;
     case "watch": arld.watch = m.on; showWatch(); break;
+    case "segment": showSegment(m); break;
     case "takeover": arld.takeover = { offered: m.offered, pending: m.pending }; showPrompt(); break;
     case "resumed": arld.handed = null; arld.outcome = null; $("end").hidden = true; banner(null); showRole(); showPrompt(); break;
   }
@@ -231,7 +236,7 @@ function showPrompt() {
   $("prompt-text").textContent = text;
   document.querySelectorAll("#buttons button").forEach((b) => {
     b.disabled = !p || !controls() || arld.ended !== null || arld.handed !== null || !!replay;
-    b.classList.toggle("proposed", !!p && p.agent_action === Number(b.dataset.action));
+    b.classList.toggle("proposed", ghostAction() === Number(b.dataset.action));
     b.classList.toggle("held", held === Number(b.dataset.action));
   });
   showAxes();
@@ -342,6 +347,47 @@ function takeOver() {
 }
 $("takeover").addEventListener("click", () => takeOver());
 
+// The agent's proposal at the step shown: its test-time action at every step of a segment (`proposal`), or at a
+// question its own proposal; null when there is none (no question open, or a replay plays).
+function ghostAction() {
+  const p = arld.prompt;
+  if (!p || replay) return null;
+  if (p.proposal !== null && p.proposal !== undefined) return p.proposal;
+  return p.agent_action === undefined ? null : p.agent_action;
+}
+
+// Real time: after each of the person's segments, how it went (its steps, return and, for a task with a goal,
+// landed or crashed, the flag reached), and while the run allows it, a retry from the segment's start state (R):
+// the new answers replace the first ones, and both are charged to the budget.
+let retryOpen = null; // {id, until, timer}
+function showSegment(m) {
+  arld.segments.push(m);
+  const el = $("segment-line");
+  el.hidden = false;
+  el.className = m.outcome === "landed" || m.outcome === "reached the flag" ? "landed" : m.outcome === "crashed" ? "crashed" : "";
+  const attempt = m.attempt > 1 ? ` (attempt ${m.attempt})` : "";
+  $("segment-text").textContent = `Your segment${attempt}: ${m.steps} step${m.steps === 1 ? "" : "s"}, return ${fmt(m["return"], 1)}` +
+    (m.outcome ? `: ${m.outcome}.` : ".") + (m.retry_s ? " R plays it again from its start." : "");
+  closeRetry();
+  if (m.retry_s && controls()) {
+    retryOpen = { id: m.id, timer: setTimeout(closeRetry, m.retry_s * 1000) };
+    $("retry").disabled = false;
+  }
+}
+function closeRetry() {
+  if (retryOpen) clearTimeout(retryOpen.timer);
+  retryOpen = null;
+  $("retry").disabled = true;
+}
+function retry() {
+  if (!retryOpen || !controls() || arld.ended) return;
+  arld.retries++;
+  send({ type: "retry", id: retryOpen.id });
+  $("segment-text").textContent += " Retrying: press a key when ready.";
+  closeRetry();
+}
+$("retry").addEventListener("click", () => retry());
+
 // Hands the open question (or the person's takeover) back to the agent.
 function pass() {
   const p = arld.prompt;
@@ -424,6 +470,7 @@ document.addEventListener("keydown", (e) => {
   if ((e.key === "p" || e.key === "P") && actionOfKey(e.key) === null) { $("pause").click(); return; }
   if ((e.key === "v" || e.key === "V") && actionOfKey(e.key) === null) { if (!e.repeat) $("watch").click(); return; }
   if ((e.key === "t" || e.key === "T") && actionOfKey(e.key) === null) { if (!e.repeat) takeOver(); return; }
+  if ((e.key === "r" || e.key === "R") && actionOfKey(e.key) === null) { if (!e.repeat) retry(); return; }
   const a = actionOfKey(e.key);
   if (a === null) return;
   e.preventDefault();
@@ -560,7 +607,11 @@ function axesSetup() {
     slider.addEventListener("input", () => setAxis(d, Number(slider.value), "slider"));
     const value = document.createElement("output");
     value.id = `axis-value-${d}`;
-    row.append(title, slider, value);
+    const track = document.createElement("span"), ghost = document.createElement("span");
+    track.className = "track";
+    ghost.className = "ghost"; ghost.id = `axis-ghost-${d}`; ghost.hidden = true; ghost.title = "the agent's value";
+    track.append(slider, ghost);
+    row.append(title, track, value);
     el.appendChild(row);
   });
   const sendButton = document.createElement("button");
@@ -601,8 +652,12 @@ function showAxes() {
     const d = Number(s.dataset.dim);
     if (Number(s.value) !== axes[d]) s.value = axes[d];
     s.disabled = !controls() || arld.ended !== null;
-    const proposed = p && Array.isArray(p.agent_action) ? ` (agent: ${Number(p.agent_action[d]).toFixed(2)})` : "";
+    const g = ghostAction(), ghost = $(`axis-ghost-${d}`);
+    const proposed = Array.isArray(g) ? ` (agent: ${Number(g[d]).toFixed(2)})` : "";
     $(`axis-value-${d}`).textContent = `${axes[d].toFixed(2)}${proposed}`;
+    // The agent's value on the slider: a ghost mark where it would set the dimension.
+    ghost.hidden = !Array.isArray(g);
+    if (Array.isArray(g)) ghost.style.left = `${(100 * (clampTo(d, g[d]) - h.box.low[d])) / (h.box.high[d] - h.box.low[d])}%`;
   });
   $("send-axes").disabled = off || !p.waits;
 }
@@ -812,8 +867,18 @@ function draw() {
   ctx.fillStyle = "#ffffff";
   ctx.fillRect(0, 0, cv.width, cv.height);
   if (!g) return;
-  ({ CartPole: drawCartPole, Acrobot: drawAcrobot, MountainCar: drawMountainCar, LunarLander: drawLander, Pendulum: drawPendulum })[g.kind](g);
+  const ghost = ghostAction();
+  ({ CartPole: drawCartPole, Acrobot: drawAcrobot, MountainCar: drawMountainCar, LunarLander: drawLander, Pendulum: drawPendulum })[g.kind](g, ghost);
+  // The agent's proposal named in the canvas' bottom left corner (the drawings above outline it where they can).
+  if (ghost !== null) {
+    ctx.setTransform(1, 0, 0, 1, 0, 0);
+    ctx.font = "14px system-ui"; ctx.textAlign = "left"; ctx.fillStyle = "#6d28d9";
+    ctx.fillText(`agent: ${actionName(ghost)} (outlined)`, 10, cv.height - 10);
+  }
 }
+// A ghost's outline: dashed, violet, lightly filled.
+const GHOST_FILL = "rgba(167, 139, 250, 0.25)", GHOST_LINE = "#a78bfa";
+function dashed(draw) { ctx.save(); ctx.setLineDash([5, 4]); draw(); ctx.restore(); }
 
 // A world-to-canvas map: `scale` pixels per unit, world point (ox, oy) at canvas (px, py), y up.
 function view(scale, ox, oy, px, py) {
@@ -857,7 +922,7 @@ function drawAcrobot(g) {
   for (const [x, y] of [[0, 0], p1]) { ctx.beginPath(); ctx.arc(v.x(x), v.y(y), 0.1 * v.s, 0, 2 * Math.PI); ctx.fill(); }
 }
 
-function drawMountainCar(g) {
+function drawMountainCar(g, ghost) {
   const xs = g.hill.map((p) => p[0]), lo = Math.min(...xs), hi = Math.max(...xs);
   const v = view(cv.width / (hi - lo), lo, 0, 0, cv.height - 20);
   poly(v, [...g.hill, [hi, -0.1], [lo, -0.1]], "#e5e7eb", null);
@@ -875,6 +940,11 @@ function drawMountainCar(g) {
   if (g.force !== undefined && g.force !== 0) {
     const dir = Math.sign(g.force), from = dir * 22, to = from + g.force * 60;
     arrow(from, -14, to, -14, "#f97316");
+  }
+  // The agent's push, above the car: its force (continuous), or its direction (discrete: left, none, right).
+  if (ghost !== null) {
+    const f = Array.isArray(ghost) ? Math.max(-1, Math.min(1, ghost[0])) : ghost - 1;
+    if (f !== 0) dashed(() => arrow(Math.sign(f) * 22, -34, Math.sign(f) * 22 + f * 60, -34, GHOST_LINE));
   }
   ctx.restore();
   if (g.force !== undefined) gauge([`force ${g.force.toFixed(2)}`]);
@@ -897,7 +967,7 @@ function gauge(lines, colour = "#111827") {
   lines.forEach((l, i) => ctx.fillText(l, 10, 20 + 18 * i));
 }
 
-function drawPendulum(g) {
+function drawPendulum(g, ghost) {
   // The pivot at the centre; theta from upright, counter-clockwise (as Gymnasium draws it).
   const cx = cv.width / 2, cy = cv.height / 2, L = Math.min(cv.width, cv.height) * 0.38;
   const tip = [cx - L * Math.sin(g.theta), cy - L * Math.cos(g.theta)];
@@ -916,10 +986,17 @@ function drawPendulum(g) {
     const ex = cx + r * Math.cos(end), ey = cy + r * Math.sin(end), t = ccw ? end - Math.PI / 2 : end + Math.PI / 2;
     arrow(ex - Math.cos(t) * 2, ey - Math.sin(t) * 2, ex + Math.cos(t) * 6, ey + Math.sin(t) * 6, "#f97316");
   }
+  // The agent's torque: the same arc, dashed, further out.
+  const gt = Array.isArray(ghost) ? Math.max(-g.max_torque, Math.min(g.max_torque, ghost[0])) : 0;
+  if (gt !== 0) {
+    const r = 0.45 * L, sweep = (Math.abs(gt) / g.max_torque) * 1.5 * Math.PI, start = -Math.PI / 2;
+    const ccw = gt > 0, end = ccw ? start - sweep : start + sweep;
+    dashed(() => { ctx.strokeStyle = GHOST_LINE; ctx.lineWidth = 4; ctx.beginPath(); ctx.arc(cx, cy, r, start, end, ccw); ctx.stroke(); });
+  }
   gauge([`torque ${g.torque.toFixed(2)} (of ±${g.max_torque})`]);
 }
 
-function drawLander(g) {
+function drawLander(g, ghost) {
   // Gymnasium's viewport, with 1.5 m of sky above it: the lander starts at its top edge.
   const scale = Math.min(cv.width / g.width, cv.height / (g.height + 1.5));
   const v = view(scale, g.width / 2, 0, cv.width / 2, cv.height);
@@ -935,11 +1012,23 @@ function drawLander(g) {
   const hull = g.hull, cx = hull.reduce((a, p) => a + p[0], 0) / hull.length, cy = hull.reduce((a, p) => a + p[1], 0) / hull.length;
   // The hull's frame: "up" from the bottom edge (points 2-3) to the top edge (points 0, 5); "right" along the bottom.
   const right = norm([hull[3][0] - hull[2][0], hull[3][1] - hull[2][1]]), up = [-right[1], right[0]];
-  const flame = (at, dir, len) => {
+  const flame = (at, dir, len, fill = "#f97316", line = "#fde047") => {
     const side = [-dir[1] * 0.12, dir[0] * 0.12];
-    poly(v, [[at[0] + side[0], at[1] + side[1]], [at[0] - side[0], at[1] - side[1]], [at[0] + dir[0] * len, at[1] + dir[1] * len]], "#f97316", "#fde047");
+    poly(v, [[at[0] + side[0], at[1] + side[1]], [at[0] - side[0], at[1] - side[1]], [at[0] + dir[0] * len, at[1] + dir[1] * len]], fill, line);
   };
   const local = (x, y) => [cx + right[0] * x + up[0] * y, cy + right[1] * x + up[1] * y];
+  // The agent's engines, outlined: a continuous action as the lander reads it (the main engine fires above 0 at
+  // 50-100%, a side engine beyond ±0.5), a discrete one at full length.
+  if (ghost !== null) {
+    const [gm, gs] = Array.isArray(ghost)
+      ? [ghost[0] > 0 ? (Math.min(ghost[0], 1) + 1) / 2 : 0, Math.abs(ghost[1]) > 0.5 ? Math.sign(ghost[1]) * Math.min(Math.abs(ghost[1]), 1) : 0]
+      : [ghost === 2 ? 1 : 0, ghost === 1 ? -1 : ghost === 3 ? 1 : 0];
+    dashed(() => {
+      if (gm > 0) flame(local(0, -0.45), [-up[0], -up[1]], 0.9 * gm + 0.3, GHOST_FILL, GHOST_LINE);
+      if (gs < 0) flame(local(0.6, 0.25), right, 0.5 * -gs + 0.2, GHOST_FILL, GHOST_LINE);
+      if (gs > 0) flame(local(-0.6, 0.25), [-right[0], -right[1]], 0.5 * gs + 0.2, GHOST_FILL, GHOST_LINE);
+    });
+  }
   // Continuous actions: each flame as long as its engine's throttle (the main engine 50-100%, a side engine's
   // signed: negative is the left engine's); discrete: the engine that fired, at full length.
   const [main, side] = g.throttle || [g.engine === 2 ? 1 : 0, g.engine === 1 ? -1 : g.engine === 3 ? 1 : 0];
