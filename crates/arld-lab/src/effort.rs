@@ -2330,30 +2330,34 @@ fn box_test(measured: &Measured) -> String {
             .iter()
             .find(|c| c.cell == key(BOX_HELD_OUT_RULE));
         let verdict = match claim {
-            Some(c) if c.won() => "**the rule is above all three**",
-            Some(_) => "**not shown**: the rule is not above all three at this level",
+            Some(c) if c.won() => "above all three",
+            Some(_) => "not shown: not above all three at this level",
             None => "not tested",
         };
         let _ = writeln!(
             out,
-            "\n{env}: intersection-union p {}, Holm over the tasks {}: {verdict}.\n",
-            fmt_p(claim.and_then(|c| c.p)),
-            fmt_p(claim.and_then(|c| c.holm)),
+            "\n| {env} | shift | one-sided p | Holm p over the tasks | reading |\n|---|---|---|---|---|"
         );
         for (label, _) in BASELINES {
-            let text = find(comparisons, &key(BOX_HELD_OUT_RULE), &key(label)).map_or(
-                "not compared".to_string(),
+            let row = find(comparisons, &key(BOX_HELD_OUT_RULE), &key(label)).map_or(
+                "| – | – | – | not compared |".to_string(),
                 |c| {
                     format!(
-                        "shift {}, one-sided p {}: {}",
+                        "| {} | {} | – | {} |",
                         c.shift_text(),
                         fmt_p(c.p_greater),
                         c.reading()
                     )
                 },
             );
-            let _ = writeln!(out, "- against {label}: {text}");
+            let _ = writeln!(out, "| against {label} {row}");
         }
+        let _ = writeln!(
+            out,
+            "| above all three (intersection-union) | – | {} | {} | {verdict} |",
+            fmt_p(claim.and_then(|c| c.p)),
+            fmt_p(claim.and_then(|c| c.holm)),
+        );
     }
     out
 }

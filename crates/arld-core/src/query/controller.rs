@@ -634,7 +634,11 @@ mod tests {
         let mut back = QueryController::new(rule("greedy"), 12, 5).unwrap();
         back.load_state("q", &state).unwrap();
         assert_eq!(
-            (back.transitions_used(), back.retried_steps(), back.budget_left()),
+            (
+                back.transitions_used(),
+                back.retried_steps(),
+                back.budget_left()
+            ),
             (3, 9, 0)
         );
         // Counting queries, a retry costs one query.
