@@ -66,36 +66,30 @@ impl DirLock {
         result
     }
 
+    /// Links the written holder `temp` into place at `path`: `None` when a lock file is there already.
+    fn try_link(temp: &Path, path: &Path) -> Result<Option<Self>> {
+        match std::fs::hard_link(temp, path) {
+            Ok(()) => Ok(Some(DirLock {
+                path: path.to_path_buf(),
+            })),
+            Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => Ok(None),
+            Err(e) => {
+                Err(e).with_context(|| format!("cannot create the lock file {}", path.display()))
+            }
+        }
+    }
+
     fn link(temp: &Path, path: &Path) -> Result<Self> {
         // The usual case, with nobody holding the lock: taken at once.
-        match std::fs::hard_link(temp, path) {
-            Ok(()) => {
-                return Ok(DirLock {
-                    path: path.to_path_buf(),
-                });
-            }
-            Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {}
-            Err(e) => {
-                return Err(e)
-                    .with_context(|| format!("cannot create the lock file {}", path.display()));
-            }
+        if let Some(lock) = Self::try_link(temp, path)? {
+            return Ok(lock);
         }
         // Held, or stale: decided while no other taker looks at the file.
         let _takeover = Takeover::of(path.parent().unwrap_or(Path::new(".")))?;
         // Two attempts: the second after removing a stale lock.
         for _ in 0..2 {
-            match std::fs::hard_link(temp, path) {
-                Ok(()) => {
-                    return Ok(DirLock {
-                        path: path.to_path_buf(),
-                    });
-                }
-                Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {}
-                Err(e) => {
-                    return Err(e).with_context(|| {
-                        format!("cannot create the lock file {}", path.display())
-                    });
-                }
+            if let Some(lock) = Self::try_link(temp, path)? {
+                return Ok(lock);
             }
             let text = crate::files::read_text_bounded(path, 1 << 20).unwrap_or_default();
             let holder: Option<Holder> = serde_json::from_str(&text).ok();

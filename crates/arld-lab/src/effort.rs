@@ -119,6 +119,17 @@ impl Group {
 /// One cell's key: task, rule label, network, budget, seed group.
 type CellKey = (String, String, String, usize, Group);
 
+/// The key of the cell beside `key`'s with the rule `label` (the same task, network, budget and seed group).
+fn with_rule(key: &CellKey, label: &str) -> CellKey {
+    (
+        key.0.clone(),
+        label.to_string(),
+        key.2.clone(),
+        key.3,
+        key.4,
+    )
+}
+
 /// The key of `rule`'s cell at the paper's budget for `env` with network `net`, in seed group `held_out`.
 fn paper_cell(env: &str, rule: &str, net: &str, held_out: Group) -> CellKey {
     (
@@ -151,7 +162,7 @@ fn rule_and_budget(run: &RunRecord) -> Option<(String, usize)> {
             .map(|(l, _)| l.to_string())
             .expect("a querying method"),
     };
-    if run.config.queries_from_learning_starts == Some(true) {
+    if run.config.asking.from_learning_starts == Some(true) {
         label.push_str(" from learning_starts");
     }
     Some((label, budget))
@@ -210,7 +221,7 @@ fn metrics(run: &RunRecord, reference: (f64, f64), k: usize) -> RunMetrics {
 /// The share of `run`'s questions asked before the step at which learning starts.
 fn spent_before(run: &RunRecord) -> Option<f64> {
     let steps = run.query_steps.as_ref().filter(|q| !q.is_empty())?;
-    let start = run.config.learning_starts?;
+    let start = run.config.asking.learning_starts?;
     let before = steps.iter().filter(|&&s| s < start).count();
     Some(before as f64 / steps.len() as f64)
 }
@@ -481,12 +492,7 @@ impl Comparison {
 
 /// Holm's adjustment of the unpaired, equivalence and paired p-values within each family.
 fn adjust(comparisons: &mut [Comparison]) {
-    let families: std::collections::BTreeSet<Family> =
-        comparisons.iter().map(|c| c.family.clone()).collect();
-    for family in families {
-        let idx: Vec<usize> = (0..comparisons.len())
-            .filter(|&i| comparisons[i].family == family)
-            .collect();
+    for (family, idx) in by_family(comparisons, |c| c.family.clone()) {
         // The second held-out test's family is its fixed set of comparisons: while some have not run, they count
         // as tests that found nothing (p = 1), so that a partial family is never adjusted more leniently.
         let size = if family == Family::SecondTest {
@@ -508,6 +514,15 @@ fn adjust(comparisons: &mut [Comparison]) {
             comparisons[i].paired_holm = w[j];
         }
     }
+}
+
+/// The indices of `items` in groups of one family each, the families in their order.
+fn by_family<T, F: Ord>(items: &[T], family: impl Fn(&T) -> F) -> BTreeMap<F, Vec<usize>> {
+    let mut groups: BTreeMap<F, Vec<usize>> = BTreeMap::new();
+    for (i, item) in items.iter().enumerate() {
+        groups.entry(family(item)).or_default().push(i);
+    }
+    groups
 }
 
 /// Holm's adjustment of `p` in a family fixed at `size` tests: those not run yet count as p = 1.
@@ -537,13 +552,7 @@ fn comparisons(
             if rank <= rank_rule(label) {
                 continue;
             }
-            let base = (
-                key.0.clone(),
-                label.to_string(),
-                key.2.clone(),
-                key.3,
-                key.4,
-            );
+            let base = with_rule(key, label);
             let Some(other) = cells.get(&base) else {
                 continue;
             };
@@ -677,14 +686,7 @@ impl Claim {
             let one_sided: Vec<Option<f64>> = BASELINES
                 .iter()
                 .map(|(label, _)| {
-                    let base = (
-                        key.0.clone(),
-                        label.to_string(),
-                        key.2.clone(),
-                        key.3,
-                        key.4,
-                    );
-                    find(comparisons, key, &base).and_then(|c| c.p_greater)
+                    find(comparisons, key, &with_rule(key, label)).and_then(|c| c.p_greater)
                 })
                 .collect();
             out.push(Claim {
@@ -694,12 +696,7 @@ impl Claim {
                 holm: None,
             });
         }
-        let families: std::collections::BTreeSet<ClaimFamily> =
-            out.iter().map(|c| c.family.clone()).collect();
-        for family in families {
-            let idx: Vec<usize> = (0..out.len())
-                .filter(|&i| out[i].family == family)
-                .collect();
+        for (family, idx) in by_family(&out, |c| c.family.clone()) {
             let size = match family {
                 ClaimFamily::SecondTest => SECOND_HELD_OUT_CELLS.len(),
                 ClaimFamily::BoxTest => BOX_HELD_OUT_TASKS.len(),

@@ -562,34 +562,31 @@ pub fn claims(cells: &[Cell], expert_mean: &dyn Fn(&str) -> Option<f64>) -> Vec<
     let mut out = Vec::new();
     for (net, _) in TABLE5_NETS {
         let s = net_suffix(net);
-        out.push(beats_claim(
-            cells,
-            format!(
-                "ADQN-{s} needs the fewest steps among DQN, GDQN, BDQN and ADQN (no pre-training)"
+        let stated: [(String, (&str, &[&str]), &[&str]); 3] = [
+            (
+                format!(
+                    "ADQN-{s} needs the fewest steps among DQN, GDQN, BDQN and ADQN (no pre-training)"
+                ),
+                ("adqn", trio),
+                &all_tasks,
             ),
-            ("adqn", trio),
-            &all_tasks,
-            net,
-            Standard::table5("adqn", trio, &all_tasks, net),
-        ));
-        out.push(beats_claim(
-            cells,
-            format!("ADQN-{s} is faster than DQfD-{s} except on CartPole"),
-            ("adqn", &["dqfd"]),
-            &harder,
-            net,
-            Standard::table5("adqn", &["dqfd"], &harder, net),
-        ));
-        out.push(beats_claim(
-            cells,
-            format!(
-                "ADQNP-{s} improves over DQfD-{s} on the harder tasks (MountainCar, LunarLander)"
+            (
+                format!("ADQN-{s} is faster than DQfD-{s} except on CartPole"),
+                ("adqn", &["dqfd"]),
+                &harder,
             ),
-            ("adqnp", &["dqfd"]),
-            &hardest,
-            net,
-            Standard::table5("adqnp", &["dqfd"], &hardest, net),
-        ));
+            (
+                format!(
+                    "ADQNP-{s} improves over DQfD-{s} on the harder tasks (MountainCar, LunarLander)"
+                ),
+                ("adqnp", &["dqfd"]),
+                &hardest,
+            ),
+        ];
+        for (claim, (a, others), on) in stated {
+            let standard = Standard::table5(a, others, on, net);
+            out.push(beats_claim(cells, claim, (a, others), on, net, standard));
+        }
     }
     out.push(end_above_expert(
         cells,
@@ -620,43 +617,41 @@ fn continuous_claims(cells: &[Cell], expert_mean: &dyn Fn(&str) -> Option<f64>) 
         .filter(|env| *env != "Pendulum-v1")
         .collect();
     let trio = &NO_PRETRAINING[..3];
-    vec![
-        beats_claim(
-            cells,
-            "Continuous: ADQN needs the fewest steps among DQN, GDQN, BDQN and ADQN (no pre-training)".into(),
+    let read_again: [(&str, (&str, &[&str]), &[&str]); 3] = [
+        (
+            "Continuous: ADQN needs the fewest steps among DQN, GDQN, BDQN and ADQN (no pre-training)",
             ("adqn", trio),
             &tasks,
-            net,
-            Standard::every(&tasks),
         ),
-        beats_claim(
-            cells,
-            "Continuous: ADQN is faster than DQfD".into(),
+        (
+            "Continuous: ADQN is faster than DQfD",
             ("adqn", &["dqfd"]),
             &tasks,
-            net,
-            Standard::every(&tasks),
         ),
-        beats_claim(
-            cells,
-            "Continuous: ADQNP improves over DQfD on the harder tasks (the car, the lander)".into(),
+        (
+            "Continuous: ADQNP improves over DQfD on the harder tasks (the car, the lander)",
             ("adqnp", &["dqfd"]),
             &harder,
-            net,
-            Standard::every(&harder),
         ),
-        end_above_expert(
-            cells,
-            "Continuous: methods with demonstrations end above the expert",
-            &|env| {
-                if tasks.contains(&env) {
-                    expert_mean(env)
-                } else {
-                    None
-                }
-            },
-        ),
-    ]
+    ];
+    let mut out: Vec<Claim> = read_again
+        .into_iter()
+        .map(|(claim, methods, on)| {
+            beats_claim(cells, claim.into(), methods, on, net, Standard::every(on))
+        })
+        .collect();
+    out.push(end_above_expert(
+        cells,
+        "Continuous: methods with demonstrations end above the expert",
+        &|env| {
+            if tasks.contains(&env) {
+                expert_mean(env)
+            } else {
+                None
+            }
+        },
+    ));
+    out
 }
 
 /// "Methods with demonstrations end above the expert": each such configuration's final score against the expert's

@@ -665,9 +665,14 @@ pub struct RecordedConfig {
     /// The query rule, in canonical form ([`canonical_rule`]) so that one spec written two ways is one rule;
     /// `None` also when the key is empty (the method's own rule asks).
     pub query_rule: Option<String>,
-    /// Whether questions wait for `learning_starts` (`None` where the file has no such key).
-    pub queries_from_learning_starts: Option<bool>,
-    /// The step at which learning starts.
+    /// When its questions may come.
+    pub asking: RecordedAsking,
+}
+
+/// When a run's questions may come, as its `config.toml` records it: from `learning_starts` on only, and that step.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct RecordedAsking {
+    pub from_learning_starts: Option<bool>,
     pub learning_starts: Option<u64>,
 }
 
@@ -687,13 +692,15 @@ impl RecordedConfig {
             query_rule: text_of("query_rule")
                 .filter(|rule| !rule.is_empty())
                 .map(canonical_rule),
-            queries_from_learning_starts: table
-                .get("queries_from_learning_starts")
-                .and_then(|v| v.as_bool()),
-            learning_starts: table
-                .get("learning_starts")
-                .and_then(|v| v.as_integer())
-                .and_then(|s| u64::try_from(s).ok()),
+            asking: RecordedAsking {
+                from_learning_starts: table
+                    .get("queries_from_learning_starts")
+                    .and_then(|v| v.as_bool()),
+                learning_starts: table
+                    .get("learning_starts")
+                    .and_then(|v| v.as_integer())
+                    .and_then(|s| u64::try_from(s).ok()),
+            },
         }
     }
 }
@@ -1488,8 +1495,10 @@ mod tests {
                 expert: None,
                 budget: Some(250),
                 query_rule: Some("paced(horizon=0.5)".into()),
-                queries_from_learning_starts: Some(true),
-                learning_starts: Some(700),
+                asking: RecordedAsking {
+                    from_learning_starts: Some(true),
+                    learning_starts: Some(700),
+                },
             };
             assert_eq!(record.config, expected);
             assert_eq!(record.t_query_study(), study, "{relative}");
