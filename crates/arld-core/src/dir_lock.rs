@@ -54,7 +54,10 @@ impl DirLock {
     pub fn acquire(dir: &Path, name: &str) -> Result<Self> {
         let path = dir.join(name);
         let me = Holder::this_process();
-        let temp = dir.join(format!("{name}.{}.tmp", me.pid));
+        // A name of this call's own: threads of one process take locks too.
+        static CALLS: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+        let call = CALLS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        let temp = dir.join(format!("{name}.{}.{call}.tmp", me.pid));
         // Written without following a link someone put at the temporary name.
         crate::files::open_own_file(&temp, true)
             .and_then(|mut f| {

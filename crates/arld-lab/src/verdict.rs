@@ -979,7 +979,9 @@ pub fn runs_from_evaluations_csv(path: &Path) -> Result<Vec<RunRecord>> {
                 env,
                 seed,
             };
-            let threshold = arld_core::env::spec(&id.env)?.solve_threshold;
+            // Any built-in task, of either kind of action; one without a threshold is never solved.
+            let (_, _, threshold) = arld_core::env::registry::task(&id.env)?.facts();
+            let threshold = threshold.unwrap_or(f64::INFINITY);
             Ok(RunRecord::from_curve(
                 path.to_path_buf(),
                 id,

@@ -138,7 +138,7 @@ impl QueryController {
 
     /// The signals the next [`decide`](Self::decide) will read: the rule's, while the agent is about to act and
     /// budget is left; nothing otherwise, so the caller may skip computing them.
-    pub(crate) fn signals_wanted_now(&self) -> Needs {
+    pub fn signals_wanted_now(&self) -> Needs {
         if !self.expert_in_control() && self.budget_left() > 0 {
             self.needs()
         } else {
@@ -231,7 +231,7 @@ impl QueryController {
     ///
     /// # Panics
     /// If the expert is not in control (a caller bug: the budget would be spent outside a query).
-    pub(crate) fn record_expert_step(&mut self) {
+    pub fn record_expert_step(&mut self) {
         assert!(
             self.expert_in_control(),
             "record_expert_step called while the agent is in control"
