@@ -551,6 +551,9 @@ fn net_suffix(net: &str) -> &'static str {
         .map_or("?", |(_, s)| s)
 }
 
+/// A claim as stated: its text, the method and its rivals, and the tasks it is read on.
+type Stated<'a, T> = (T, (&'a str, &'a [&'a str]), &'a [&'a str]);
+
 /// The claims of the paper's results section, tested on `cells`: on the paper's tasks, then read again on the
 /// tasks with actions in a box (learned by TD3 or SAC), where `expert_mean` gives the shipped weak expert's mean
 /// return.
@@ -562,7 +565,7 @@ pub fn claims(cells: &[Cell], expert_mean: &dyn Fn(&str) -> Option<f64>) -> Vec<
     let mut out = Vec::new();
     for (net, _) in TABLE5_NETS {
         let s = net_suffix(net);
-        let stated: [(String, (&str, &[&str]), &[&str]); 3] = [
+        let stated: [Stated<String>; 3] = [
             (
                 format!(
                     "ADQN-{s} needs the fewest steps among DQN, GDQN, BDQN and ADQN (no pre-training)"
@@ -617,7 +620,7 @@ fn continuous_claims(cells: &[Cell], expert_mean: &dyn Fn(&str) -> Option<f64>) 
         .filter(|env| *env != "Pendulum-v1")
         .collect();
     let trio = &NO_PRETRAINING[..3];
-    let read_again: [(&str, (&str, &[&str]), &[&str]); 3] = [
+    let read_again: [Stated<&str>; 3] = [
         (
             "Continuous: ADQN needs the fewest steps among DQN, GDQN, BDQN and ADQN (no pre-training)",
             ("adqn", trio),
