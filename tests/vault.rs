@@ -16,6 +16,26 @@ use std::time::{Duration, Instant};
 
 const ARLD: &str = env!("CARGO_BIN_EXE_arld");
 
+/// A short CartPole-v0 run into `dir` with a checkpoint half-way, with `--overwrite` when asked.
+fn short_train(dir: &str, overwrite: bool) -> Output {
+    let mut a = vec![
+        "train",
+        "--quiet",
+        "--env",
+        "CartPole-v0",
+        "--set",
+        "train_steps=1000",
+        "--set",
+        "checkpoint_every=500",
+        "-o",
+        dir,
+    ];
+    if overwrite {
+        a.push("--overwrite");
+    }
+    arld(&a)
+}
+
 fn arld(args: &[&str]) -> Output {
     Command::new(ARLD).args(args).output().expect("run arld")
 }
@@ -371,24 +391,7 @@ fn overwrite_removes_only_what_a_run_writes() {
     let work = tempfile::tempdir().unwrap();
     let dir = work.path().join("run");
     let d = dir.display().to_string();
-    let args = |overwrite: bool| {
-        let mut a = vec![
-            "train",
-            "--quiet",
-            "--env",
-            "CartPole-v0",
-            "--set",
-            "train_steps=1000",
-            "--set",
-            "checkpoint_every=500",
-            "-o",
-            &d,
-        ];
-        if overwrite {
-            a.push("--overwrite");
-        }
-        arld(&a)
-    };
+    let args = |overwrite: bool| short_train(&d, overwrite);
     let out = args(false);
     assert!(out.status.success(), "{}", stderr(&out));
     assert!(dir.join("checkpoints/step_00000500.safetensors").is_file());
@@ -1208,24 +1211,7 @@ fn overwrite_leaves_files_that_only_look_like_a_runs() {
     let work = tempfile::tempdir().unwrap();
     let dir = work.path().join("run");
     let d = dir.display().to_string();
-    let train = |overwrite: bool| {
-        let mut a = vec![
-            "train",
-            "--quiet",
-            "--env",
-            "CartPole-v0",
-            "--set",
-            "train_steps=1000",
-            "--set",
-            "checkpoint_every=500",
-            "-o",
-            &d,
-        ];
-        if overwrite {
-            a.push("--overwrite");
-        }
-        arld(&a)
-    };
+    let train = |overwrite: bool| short_train(&d, overwrite);
     assert!(train(false).status.success());
     for mine in [
         ".important.tmp.bak",
