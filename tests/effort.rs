@@ -97,6 +97,10 @@ fn rule_dir(env: &str, rule: &str) -> PathBuf {
         "adaptive from learning_starts" => runs
             .join("adqn-bootstrap")
             .join("query_rule-adaptive-queries_from_learning_starts-true"),
+        // ADQN reading the critics' action disagreement (the box learners' other uncertainty).
+        "adaptive on action disagreement" => runs
+            .join("adqn-bootstrap")
+            .join("query_rule-adaptive-uncertainty-action_disagreement"),
         spec => runs
             .join("adqn-bootstrap")
             .join(format!("query_rule-{}", spelled(spec))),
@@ -720,6 +724,10 @@ fn cell_dirs(
         "adaptive from learning_starts" => (
             format!("adqn-{net}"),
             Some("adaptive-queries_from_learning_starts-true".to_string()),
+        ),
+        "adaptive on action disagreement" => (
+            format!("adqn-{net}"),
+            Some("adaptive-uncertainty-action_disagreement".to_string()),
         ),
         spec => (format!("adqn-{net}"), Some(spelled(spec))),
     };

@@ -185,6 +185,7 @@ Hyperparameters = TypedDict("Hyperparameters", {
     "target_entropy": Optional[float],
     "alpha_lr": Optional[float],
     "initial_alpha": Optional[float],
+    "uncertainty": Optional[str],
     "target_period_in_steps": Optional[bool],
     "exact_factorised_var": Optional[bool],
     "expert_timeout": Optional[float],
@@ -312,6 +313,8 @@ class Agent:
     - target_entropy: SAC's entropy target [-dim(A)]
     - alpha_lr: SAC's temperature learning rate [learning_rate]
     - initial_alpha: SAC's temperature before the first update [1]
+    - uncertainty: what a Box learner's query rule reads, "critic_variance" (the critic heads' standard deviation at
+      the action) or "action_disagreement" (the heads' disagreement about the best action) ["critic_variance"]
     - learning_starts: environment steps before the first update [500/1000]
     - train_freq: environment steps per update [1]
     - max_grad_norm: global gradient-norm clip (grad_clip) [10]

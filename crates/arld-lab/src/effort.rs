@@ -33,7 +33,7 @@ use super::protocol::{
     BOX_CANDIDATES, BOX_DESIGN_SEEDS, BOX_HELD_OUT_RULE, BOX_HELD_OUT_SEEDS, BOX_HELD_OUT_TASKS,
     DESIGN_SEEDS, EFFORT_NET, EFFORT_SCREEN_TASKS, HELD_OUT_SEEDS, OWN_RULE_CANDIDATES,
     PAPER_SEEDS, SECOND_HELD_OUT_CELLS, SECOND_HELD_OUT_RULE, SECOND_HELD_OUT_SEEDS, TEST_LEVEL,
-    env_order, is_effort_variant, paper_budget, scaled_budget,
+    UNCERTAINTY_LABEL, env_order, is_effort_variant, paper_budget, scaled_budget,
 };
 use super::reference::{REFERENCE_EPISODES, REFERENCE_SEED, references};
 use super::stats::{
@@ -164,6 +164,9 @@ fn rule_and_budget(run: &RunRecord) -> Option<(String, usize)> {
     };
     if run.config.asking.from_learning_starts == Some(true) {
         label.push_str(" from learning_starts");
+    }
+    if run.config.uncertainty.as_deref() == Some("action_disagreement") {
+        label.push_str(UNCERTAINTY_LABEL);
     }
     Some((label, budget))
 }

@@ -412,6 +412,12 @@ pub const BOX_EFFORT_RULES: [&str; 6] = [
     "query_rule=adaptive;queries_from_learning_starts=true",
 ];
 
+/// ADQN's adaptive rule on the box tasks reading the other uncertainty the critic ensemble gives: the heads'
+/// disagreement about the best action (docs/algorithm.md section 16) instead of their variance at the agent's action.
+/// Added after the continuous held-out test was fixed ([`BOX_HELD_OUT_RULE`]), so not among its candidates.
+pub const BOX_UNCERTAINTY_RULES: [&str; 1] =
+    ["query_rule=adaptive;uncertainty=action_disagreement"];
+
 /// The rules of [`BOX_EFFORT_RULES`] that read ThriftyDAgger's risk, which only a task with a goal has.
 const BOX_RISK_RULES: [&str; 2] = ["query_rule=risk", "query_rule=thrifty"];
 
@@ -441,6 +447,7 @@ pub fn box_effort_grids(seeds: &[u64]) -> Vec<SweepGrid> {
         let rules = BOX_EFFORT_RULES
             .iter()
             .filter(|r| has_goal || !BOX_RISK_RULES.contains(r))
+            .chain(BOX_UNCERTAINTY_RULES.iter())
             .map(|r| r.to_string());
         grids.push(grid(env, vec![Method::Adqn], rules.collect()));
         let budgets: Vec<String> = EFFORT_BUDGET_SCALES
@@ -518,8 +525,11 @@ pub fn box_held_out_grids() -> Vec<SweepGrid> {
     grids
 }
 
-/// The label effort.md gives a rule of [`BOX_EFFORT_RULES`]: its spec, and "adaptive from learning_starts" for the
-/// late-asking variant.
+/// What effort.md appends to the label of a rule that reads the box learner's action disagreement.
+pub const UNCERTAINTY_LABEL: &str = " on action disagreement";
+
+/// The label effort.md gives a rule of [`BOX_EFFORT_RULES`] or [`BOX_UNCERTAINTY_RULES`]: its spec, with " from
+/// learning_starts" for the late-asking variant and [`UNCERTAINTY_LABEL`] for the other uncertainty.
 pub fn rule_label(vary: &str) -> String {
     let mut label = String::new();
     for part in vary.split(';') {
@@ -528,6 +538,7 @@ pub fn rule_label(vary: &str) -> String {
             Some(("queries_from_learning_starts", "true")) => {
                 label.push_str(" from learning_starts")
             }
+            Some(("uncertainty", "action_disagreement")) => label.push_str(UNCERTAINTY_LABEL),
             _ => {}
         }
     }

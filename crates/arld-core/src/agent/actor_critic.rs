@@ -41,6 +41,9 @@ pub(crate) trait ActorCriticLearner: Send {
     /// The standard deviation of the critic heads at `(obs, action)` (the uncertainty a query rule can read).
     /// Draws no random number.
     fn critic_spread(&mut self, obs: &[f32], action: &[f32]) -> f32;
+    /// The critic heads' disagreement about the best action near the test action at `obs`
+    /// ([`BoxLearner::disagreement`]; the other uncertainty a query rule can read). Draws no random number.
+    fn action_disagreement(&mut self, obs: &[f32]) -> f32;
     /// The learner's generator, for a caller's draws in sequence with the learner's own.
     fn rng(&mut self) -> &mut Pcg64;
     /// The policy network a run keeps (TD3: the tanh actor; SAC: the means and log standard deviations of its
@@ -133,6 +136,10 @@ impl<A: Algorithm> ActorCriticLearner for BoxLearner<A> {
 
     fn critic_spread(&mut self, obs: &[f32], action: &[f32]) -> f32 {
         self.core.critics.spread(obs, action)
+    }
+
+    fn action_disagreement(&mut self, obs: &[f32]) -> f32 {
+        self.disagreement(obs)
     }
 
     fn rng(&mut self) -> &mut Pcg64 {

@@ -6,8 +6,9 @@
 //!   the learner's behaviour action (TD3: the actor's action plus Gaussian noise; SAC: a sample of its policy):
 //!   actor-critic learners explore by themselves, so a DQN's ε-greedy schedule below 1 does not apply. Every
 //!   draw comes from the learner's generator, so the run's seed fixes the actions.
-//! - Uncertainty: the standard deviation of the critic heads at the action taken (`critic_spread`), computed
-//!   only when the query rule asks for it.
+//! - Uncertainty, computed only when the query rule asks for it ([`BoxUncertainty`]): the standard deviation of
+//!   the critic heads at the action taken (`critic_spread`), or the heads' disagreement about the best action
+//!   near the test action (`action_disagreement`).
 //! - Risk (only with a risk critic, `BoxAgent::with_risk_critic`, which a run adds when its query rule reads the
 //!   risk): `1 - Q_R` at the action taken ([`super::risk`]); the critic takes one TD step on every batch, before
 //!   the learner's update, with the policy's test actions at the next observations.
@@ -29,6 +30,7 @@ use crate::state::{Persist, StateDict, StateError};
 use crate::task::BoxColumn;
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64;
+use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::path::Path;
 
@@ -43,6 +45,21 @@ pub struct BoxAgent {
     q_filter: bool,
     /// ThriftyDAgger's risk critic, when the run's query rule reads the risk.
     risk: Option<RiskCritic>,
+    /// What the uncertainty signal measures.
+    uncertainty: BoxUncertainty,
+}
+
+/// The uncertainty a box learner reports to the query rule (docs/algorithm.md §15): what its critic ensemble
+/// disagrees about.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum BoxUncertainty {
+    /// The critic heads' standard deviation at the agent's action (the critics' variance, as RCMP's).
+    #[default]
+    CriticVariance,
+    /// The heads' disagreement about the best action near the test action (each head's argmax over probe
+    /// actions; their standard deviation, in half-widths of the box).
+    ActionDisagreement,
 }
 
 /// Which actor-critic learner a [`BoxAgent`] holds, with its settings.
@@ -80,7 +97,14 @@ impl BoxAgent {
             gamma,
             q_filter,
             risk: None,
+            uncertainty: BoxUncertainty::default(),
         }
+    }
+
+    /// The agent reporting `uncertainty` to the query rule.
+    pub fn with_uncertainty(mut self, uncertainty: BoxUncertainty) -> Self {
+        self.uncertainty = uncertainty;
+        self
     }
 
     /// The agent with a risk critic of `config`, its weights drawn from a generator seeded with `seed` (a stream
@@ -117,9 +141,10 @@ impl Learner for BoxAgent {
         } else {
             self.learner.act(obs, &mut action);
         }
-        let uncertainty = want
-            .uncertainty
-            .then(|| self.learner.critic_spread(obs, &action));
+        let uncertainty = want.uncertainty.then(|| match self.uncertainty {
+            BoxUncertainty::CriticVariance => self.learner.critic_spread(obs, &action),
+            BoxUncertainty::ActionDisagreement => self.learner.action_disagreement(obs),
+        });
         let risk = match (&mut self.risk, want.risk) {
             (Some(critic), true) => Some(critic.risk(obs, &action)),
             _ => None,
@@ -305,5 +330,49 @@ mod tests {
                 "{name}: 100 updates before the snapshot, 100 after"
             );
         }
+    }
+
+    #[test]
+    fn the_uncertainty_signal_is_the_chosen_measure_and_draws_nothing() {
+        // Two learners from one seed, trained alike, one reporting each measure: at every state they act alike (the
+        // measure draws no random number) and each signal is its learner's measure at that state and action.
+        let (mut variance, mut disagreement) = (
+            pendulum_agent(false, 5),
+            pendulum_agent(false, 5).with_uncertainty(BoxUncertainty::ActionDisagreement),
+        );
+        let (mut memory_a, mut memory_b) = (replay(), replay());
+        train(&mut variance, &mut memory_a, 0..2_000);
+        train(&mut disagreement, &mut memory_b, 0..2_000);
+        let want = Needs {
+            uncertainty: true,
+            ..Needs::default()
+        };
+        let (mut spread_seen, mut disagreement_seen) = (0.0f32, 0.0f32);
+        // The states of a test episode, from the environment's start states.
+        let mut env = make_continuous("Pendulum-v1").unwrap();
+        let (mut obs, mut next) = (vec![0.0; 3], vec![0.0; 3]);
+        env.reset_into(Some(11), &mut obs);
+        for k in 0..200 {
+            let (a, sa) = variance.act(&obs, 0.0, want);
+            let (b, sb) = disagreement.act(&obs, 0.0, want);
+            assert_eq!(a, b, "the learners acted differently at state {k}");
+            let spread = variance.learner.critic_spread(&obs, &a);
+            let apart = disagreement.learner.action_disagreement(&obs);
+            assert_eq!(sa.uncertainty, Some(spread));
+            assert_eq!(sb.uncertainty, Some(apart));
+            (spread_seen, disagreement_seen) =
+                (spread_seen.max(spread), disagreement_seen.max(apart));
+            let out = env.step_into(&a, &mut next).unwrap();
+            obs.copy_from_slice(&next);
+            if out.terminated || out.truncated {
+                env.reset_into(None, &mut obs);
+            }
+        }
+        // Along an episode both measures see the heads differ; the disagreement is in half-widths, at most 1.
+        assert!(spread_seen > 0.0, "the heads' values never differed");
+        assert!(
+            disagreement_seen > 0.0 && disagreement_seen <= 1.0,
+            "{disagreement_seen}"
+        );
     }
 }

@@ -154,11 +154,6 @@ impl Sac {
         };
         BoxLearner::from_parts(core, algo)
     }
-
-    /// The critics' disagreement about the best action near the test action at `obs` (`BoxLearner::disagreement`).
-    pub fn action_disagreement(&mut self, obs: &[f32]) -> f32 {
-        self.disagreement(obs)
-    }
 }
 
 impl SacPart {

@@ -73,11 +73,6 @@ pub struct Td3Part {
 pub type Td3 = BoxLearner<Td3Part>;
 
 impl Td3 {
-    /// The critics' disagreement about the best action near the actor's at `obs` (`BoxLearner::disagreement`).
-    pub fn action_disagreement(&mut self, obs: &[f32]) -> f32 {
-        self.disagreement(obs)
-    }
-
     /// A learner for observations of `obs_dim` values and actions in the box `[low, high]`, with its weights
     /// drawn from `rng` (actor first, then critic; the targets start as copies).
     ///

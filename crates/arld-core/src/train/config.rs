@@ -145,6 +145,13 @@ impl Algo {
     }
 }
 
+pub use crate::agent::box_agent::BoxUncertainty;
+
+fixed_names!(BoxUncertainty, "box uncertainty", {
+    CriticVariance => "critic_variance",
+    ActionDisagreement => "action_disagreement",
+});
+
 /// The settings of TD3 and SAC beyond the shared ones (network, learning rate, batch, discount), as config keys:
 /// each `None` stands for its default, which [`BoxSettings::value`] gives with its source.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
@@ -173,6 +180,9 @@ pub struct BoxSettings {
     /// SAC: the temperature before the first update \[SAC: 1\].
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub initial_alpha: Option<f64>,
+    /// The uncertainty the learner reports to the query rule \[OURS: critic_variance\].
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub uncertainty: Option<BoxUncertainty>,
 }
 
 /// Which box learner a setting of [`BoxSettings`] belongs to (`None`: both).
@@ -183,6 +193,7 @@ fn box_setting_owner(key: &str) -> Option<Option<Algo>> {
             Some(Some(Algo::Td3))
         }
         "target_entropy" | "alpha_lr" | "initial_alpha" => Some(Some(Algo::Sac)),
+        "uncertainty" => Some(None),
         _ => None,
     }
 }
@@ -253,12 +264,13 @@ impl BoxSettings {
             target_entropy: self.target_entropy.filter(|_| keep(5)),
             alpha_lr: self.alpha_lr.filter(|_| keep(6)),
             initial_alpha: self.initial_alpha.filter(|_| keep(7)),
+            uncertainty: self.uncertainty.filter(|_| keep(8)),
         }
     }
 
     /// Each key's value in a run with learning rate `lr` and actions of `action_dim` dimensions: the given one or
     /// its default.
-    pub fn values(&self, lr: f64, action_dim: usize) -> [(&'static str, toml::Value); 8] {
+    pub fn values(&self, lr: f64, action_dim: usize) -> [(&'static str, toml::Value); 9] {
         // The defaults are the learners' own (`Td3Config::default`, `SacConfig::default`).
         let (td3, sac) = (
             crate::agent::td3::Td3Config::default(),
@@ -288,6 +300,10 @@ impl BoxSettings {
             ),
             ("alpha_lr", toml::Value::Float(self.alpha_lr.unwrap_or(lr))),
             ("initial_alpha", f(self.initial_alpha, sac.initial_alpha)),
+            (
+                "uncertainty",
+                toml::Value::String(self.uncertainty.unwrap_or_default().name().to_string()),
+            ),
         ]
     }
 }
@@ -788,6 +804,10 @@ fn unused_by(key: &str, method: Method, net: NetKind, boxed: bool, algo: Algo) -
             _ if !boxed => Some(format!(
                 "`{key}` is a setting of the learners of a task with actions in a box (TD3, SAC), and a task \
                  with discrete actions learns with the DQN family"
+            )),
+            None if key == "uncertainty" && !method.queries() => Some(format!(
+                "`uncertainty` chooses what the query rule reads, and {method} does not ask the expert during \
+                 training"
             )),
             Some(owner) if owner != algo => Some(format!(
                 "`{key}` is a setting of {owner}, and this run learns with {algo} (choose the learner with --algo \
@@ -1498,6 +1518,27 @@ mod tests {
         assert_eq!(set.box_settings.tau, Some(0.01));
         let text = set.to_toml();
         assert!(text.contains("policy_delay = 3"), "{text}");
+        // The uncertainty the rule reads: written when chosen, left out at its default, refused where nothing
+        // reads it.
+        let chosen = |sets: &[&str]| {
+            resolve("Pendulum-v1", Method::Adqn, NetKind::Bootstrap, sets)
+                .unwrap()
+                .to_toml()
+        };
+        let text = chosen(&["uncertainty=\"action_disagreement\""]);
+        assert!(
+            text.contains("uncertainty = \"action_disagreement\""),
+            "{text}"
+        );
+        let text = chosen(&["uncertainty=\"critic_variance\""]);
+        assert!(!text.contains("uncertainty"), "{text}");
+        let e = error(
+            "Pendulum-v1",
+            Method::Dqfd,
+            NetKind::Bootstrap,
+            &["uncertainty=\"action_disagreement\""],
+        );
+        assert!(e.contains("does not ask the expert"), "{e}");
         // `algo` wins wherever it stands: SAC's keys after or before it.
         let sac = resolve(
             "Pendulum-v1",

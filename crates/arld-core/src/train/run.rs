@@ -179,7 +179,8 @@ pub fn box_agent(cfg: &TrainConfig, spec: &'static BoxSpec) -> BoxAgent {
         spec.action_high,
         cfg.gamma as f32,
         seed,
-    );
+    )
+    .with_uncertainty(settings.uncertainty.unwrap_or_default());
     // The configuration was validated: its rule builds, and reads the risk only in a task with a goal.
     let reads_risk = cfg.query_rule().is_ok_and(|rule| rule.needs().risk);
     if !reads_risk {

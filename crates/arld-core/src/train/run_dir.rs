@@ -667,6 +667,8 @@ pub struct RecordedConfig {
     pub query_rule: Option<String>,
     /// When its questions may come.
     pub asking: RecordedAsking,
+    /// What the query rule read in a box task (`critic_variance`, `action_disagreement`); `None` at the default.
+    pub uncertainty: Option<String>,
 }
 
 /// When a run's questions may come, as its `config.toml` records it: from `learning_starts` on only, and that step.
@@ -701,6 +703,7 @@ impl RecordedConfig {
                     .and_then(|v| v.as_integer())
                     .and_then(|s| u64::try_from(s).ok()),
             },
+            uncertainty: text_of("uncertainty").map(str::to_string),
         }
     }
 }
@@ -1499,6 +1502,7 @@ mod tests {
                     from_learning_starts: Some(true),
                     learning_starts: Some(700),
                 },
+                uncertainty: None,
             };
             assert_eq!(record.config, expected);
             assert_eq!(record.t_query_study(), study, "{relative}");
