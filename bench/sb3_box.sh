@@ -9,7 +9,7 @@
 # their ratio, by wall clock and by CPU time (the steadier figure on a loaded machine), and writes
 # bench/out/sb3_ALGO_WIDTH.json.
 #
-# Usage: [VENV=DIR] bench/sb3_box.sh [td3|sac] [WIDTH] [STEPS]     (defaults: td3 64 5000)
+# Usage: [VENV=DIR] [ARLD=PATH TAG=NAME] bench/sb3_box.sh [td3|sac] [WIDTH] [STEPS]     (defaults: td3 64 5000)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 algo="${1:-td3}"
@@ -20,15 +20,19 @@ out=bench/out
 mkdir -p "$out"
 source bench/sb3_venv.sh
 
-cargo build --release --quiet
+# ARLD=PATH measures another build of arld (an earlier commit's, for a before-and-after), named TAG in the output.
+arld="${ARLD:-./target/release/arld}"
+[ -n "${ARLD:-}" ] || cargo build --release --quiet
+tag="${TAG:+_$TAG}"
 echo "== arld: Pendulum-v1, $algo, $width-$width, batch 256, train_freq 1, uniform replay, $steps steps (median of 3 runs)"
-read -r arld_sps arld_cpu < <(python3 - "$steps" "$out/arld_${algo}_$width" "$algo" "$width" "$lr" <<'PY'
-import json, shutil, statistics, subprocess, sys
+read -r arld_sps arld_cpu < <(ARLD_BIN="$arld" python3 - "$steps" "$out/arld_${algo}_$width" "$algo" "$width" "$lr" <<'PY'
+import json, os, shutil, statistics, subprocess, sys
+arld = os.environ["ARLD_BIN"]
 steps, out, algo, width, lr = sys.argv[1:6]
 rates, cpus = [], []
 for _ in range(3):
     shutil.rmtree(out, ignore_errors=True)
-    subprocess.run(["./target/release/arld", "train", "--env", "Pendulum-v1", "--method", "dqn", "--algo", algo,
+    subprocess.run([arld, "train", "--env", "Pendulum-v1", "--method", "dqn", "--algo", algo,
                     "--seed", "0", "--quiet", "--set", f"train_steps={steps}", "--set", "batch_size=256",
                     "--set", f"hidden=[{width}, {width}]", "--set", "heads=2", "--set", "train_freq=1",
                     "--set", "prioritized=false", "--set", "n_step=1", "--set", "learning_starts=100",
@@ -69,4 +73,4 @@ model.learn(total_timesteps=steps)
 print(steps / (time.perf_counter() - start), time.process_time() - cpu_start)
 PY
 )
-python3 bench/ratio.py "$arld_sps" "$sb3_sps" "$arld_cpu" "$sb3_cpu" "$steps" "$out/sb3_${algo}_$width.json"
+python3 bench/ratio.py "$arld_sps" "$sb3_sps" "$arld_cpu" "$sb3_cpu" "$steps" "$out/sb3_${algo}_$width$tag.json"

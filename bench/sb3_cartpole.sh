@@ -7,7 +7,7 @@
 # steps with no evaluation in between. Prints both speeds and their ratio, by wall clock and by CPU time (the
 # steadier figure on a loaded machine), and writes bench/out/sb3_cartpole.json.
 #
-# Usage: [VENV=DIR] bench/sb3_cartpole.sh [STEPS]      (default 20000; SB3 needs about 30 s per 20k steps on one core)
+# Usage: [VENV=DIR] [ARLD=PATH TAG=NAME] bench/sb3_cartpole.sh [STEPS]      (default 20000; SB3 needs about 30 s per 20k steps on one core)
 # SB3 runs in the virtual environment VENV if given (it must already have torch, gymnasium and stable-baselines3,
 # e.g. the checkout's .venv made by .ci/run); otherwise the checkout's .venv if it has them; otherwise SB3 (with
 # torch and Gymnasium) is installed into bench/.venv on the first run.
@@ -19,17 +19,21 @@ mkdir -p "$out"
 
 source bench/sb3_venv.sh
 
-cargo build --release --quiet
+# ARLD=PATH measures another build of arld (an earlier commit's, for a before-and-after), named TAG in the output.
+arld="${ARLD:-./target/release/arld}"
+[ -n "${ARLD:-}" ] || cargo build --release --quiet
+tag="${TAG:+_$TAG}"
 echo "== arld: CartPole-v1, dqn, plain 64-64, batch 32, train_freq 1, uniform replay, $steps steps (median of 3 runs)"
 # The run's own steps/s (wall clock) and CPU seconds of its training thread (summary.json), median of three runs:
 # on this class of shared virtual machine one run can be a third slower than the next.
-read -r arld_sps arld_cpu < <(python3 - "$steps" "$out/arld_cartpole" <<'PY'
-import json, shutil, statistics, subprocess, sys
+read -r arld_sps arld_cpu < <(ARLD_BIN="$arld" python3 - "$steps" "$out/arld_cartpole" <<'PY'
+import json, os, shutil, statistics, subprocess, sys
+arld = os.environ["ARLD_BIN"]
 steps, out = sys.argv[1], sys.argv[2]
 rates, cpus = [], []
 for _ in range(3):
     shutil.rmtree(out, ignore_errors=True)
-    subprocess.run(["./target/release/arld", "train", "--env", "CartPole-v1", "--method", "dqn", "--net", "plain",
+    subprocess.run([arld, "train", "--env", "CartPole-v1", "--method", "dqn", "--net", "plain",
                     "--seed", "0", "--quiet", "--set", f"train_steps={steps}", "--set", "batch_size=32",
                     "--set", "train_freq=1", "--set", "prioritized=false", "--set", "learning_starts=100",
                     "--set", "double_q=false", "--set", "loss=huber", "--set", "lr=0.0001",
@@ -63,4 +67,4 @@ model.learn(total_timesteps=steps)
 print(steps / (time.perf_counter() - start), time.process_time() - cpu_start)
 PY
 )
-python3 bench/ratio.py "$arld_sps" "$sb3_sps" "$arld_cpu" "$sb3_cpu" "$steps" "$out/sb3_cartpole.json"
+python3 bench/ratio.py "$arld_sps" "$sb3_sps" "$arld_cpu" "$sb3_cpu" "$steps" "$out/sb3_cartpole$tag.json"
