@@ -13,8 +13,8 @@
 //!
 //! The library's two clients sit above every layer: the binary's command modules (`src/cli`, used from
 //! `src/main.rs`; they name the library through the root package's `arld::…`, which re-exports the three
-//! crates) and the Python bindings (`python/src`, whose `arld::…` is the core and which may use the web expert
-//! but not the laboratory). They reach the library only through its public API and may use any of it; the
+//! crates) and the Python bindings (`python/src`, which name the core by its own name, `arld_core::…`, and may
+//! use the web expert but not the laboratory). They reach the library only through its public API and may use any of it; the
 //! library never names them (no `crate::cli`, no `arld_python`). Within the binary, a command file
 //! (`src/cli/train_cmd.rs`, ...) does not use another: what two commands share belongs in the library or in
 //! `src/cli/mod.rs`. No source file pulls in another by `#[path]` or `include!`, which would pass code around
@@ -434,15 +434,14 @@ fn imports_go_down_the_layers_and_no_file_depends_on_itself() {
                 continue;
             }
             if anchor == "arld" {
-                // The library as its clients see it: the root package's re-exports (the binary) or the core (the
-                // bindings, which name arld-core `arld`).
+                // The library as the binary sees it: the root package's re-exports. The library's crates and the
+                // bindings name the crates they use by their own names.
                 let full = match file.krate {
-                    Crate::Library => {
+                    Crate::Binary => from_facade(&segments),
+                    Crate::Library | Crate::Python => {
                         violations.push(format!("{shown} names the library as arld::"));
                         continue;
                     }
-                    Crate::Binary => from_facade(&segments),
-                    Crate::Python => segments,
                 };
                 if let Some(target) = resolve(Crate::Library, &full) {
                     edges.entry(node.clone()).or_default().insert(target);
