@@ -35,7 +35,7 @@ use arld::replay::Batch;
 use arld::task::BoxColumn;
 use std::time::Instant;
 
-use arld::experiment::run_one;
+use arld::lab::run_one;
 use arld::nn::{SimdLevel, product_flops, simd_level};
 use arld::train::{ConfigInput, Method, NetKind, TrainConfig};
 use criterion::{BenchmarkId, Criterion, Throughput, criterion_group};
