@@ -27,7 +27,8 @@
 use std::hint::black_box;
 
 use arld::agent::Learner;
-use arld::agent::box_agent::{BoxAgent, BoxLearnerConfig};
+use arld::agent::algo::BoxLearnerConfig;
+use arld::agent::box_agent::BoxAgent;
 use arld::agent::sac::SacConfig;
 use arld::agent::td3::Td3Config;
 use arld::nn::{Mlp, MlpWorkspace, OutputActivation};

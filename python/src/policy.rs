@@ -178,7 +178,7 @@ impl Policy {
                 arld_core::nn::OutputKind::Bootstrap { .. } => "bootstrap",
                 _ => "noisy",
             },
-            PolicyKind::Actor(actor) => actor.kind().learner(),
+            PolicyKind::Actor(actor) => actor.algo().name(),
         }
     }
 
