@@ -27,7 +27,8 @@
 use std::hint::black_box;
 
 use arld::agent::Learner;
-use arld::agent::box_agent::{BoxAgent, BoxLearnerConfig};
+use arld::agent::algo::BoxLearnerConfig;
+use arld::agent::box_agent::BoxAgent;
 use arld::agent::sac::SacConfig;
 use arld::agent::td3::Td3Config;
 use arld::nn::{Mlp, MlpWorkspace, OutputActivation};
@@ -35,7 +36,7 @@ use arld::replay::Batch;
 use arld::task::BoxColumn;
 use std::time::Instant;
 
-use arld::experiment::run_one;
+use arld::lab::run_one;
 use arld::nn::{SimdLevel, product_flops, simd_level};
 use arld::train::{ConfigInput, Method, NetKind, TrainConfig};
 use criterion::{BenchmarkId, Criterion, Throughput, criterion_group};

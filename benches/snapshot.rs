@@ -10,7 +10,7 @@
 
 use arld::agent::DqnAgent;
 use arld::env;
-use arld::experiment::run_one;
+use arld::lab::run_one;
 use arld::replay::{Replay, ReplayConfig, Transition};
 use arld::state::{Persist, StateDict};
 use arld::train::{Checkpointer, ConfigInput, Method, NetKind, TrainConfig};

@@ -1,6 +1,6 @@
 //! Whole-run speed: environment steps per second of a full training run (acting, stepping, replay, one
 //! prioritized double-DQN update per step), with 10 bootstrapped heads on CartPole-v0 and LunarLander-v2.
-use arld::experiment::run_one;
+use arld::lab::run_one;
 use arld::train::{ConfigInput, Method, NetKind};
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 

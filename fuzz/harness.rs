@@ -154,7 +154,7 @@ pub fn run_dir(data: &[u8]) -> bool {
     true
 }
 
-/// A packed task directory's files (arld::experiment::pack::TASK_FILES, in that order, separated by
+/// A packed task directory's files (arld::lab::pack::TASK_FILES, in that order, separated by
 /// [`SEPARATOR`]), its CSV tables uncompressed: the harness compresses them, so that the fuzzer changes the
 /// tables' text rather than gzip's bytes.
 pub fn packed(data: &[u8]) -> bool {
@@ -162,7 +162,7 @@ pub fn packed(data: &[u8]) -> bool {
     let Some(parts) = parts::<8>(data) else {
         return false;
     };
-    let files: Vec<Vec<u8>> = arld::experiment::pack::TASK_FILES
+    let files: Vec<Vec<u8>> = arld::lab::pack::TASK_FILES
         .iter()
         .zip(parts)
         .map(|(name, part)| {
@@ -176,7 +176,7 @@ pub fn packed(data: &[u8]) -> bool {
         })
         .collect();
     let files: [&[u8]; 8] = std::array::from_fn(|i| files[i].as_slice());
-    arld::experiment::pack::decode_tables(files).is_ok()
+    arld::lab::pack::decode_tables(files).is_ok()
 }
 
 /// A message a page sends the web expert's server (JSON text), parsed and checked as the server parses each

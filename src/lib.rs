@@ -5,12 +5,12 @@
 //!   level: [`train`], [`env`], [`agent`], ...;
 //! - the web expert (`arld-web`) as [`expert::web`], beside the other kinds of expert; [`expert::from_spec`] and
 //!   [`expert::build`] here build every kind, the web expert included;
-//! - the laboratory (`arld-lab`: configured runs, sweeps, Slurm, reports, verdict, figures) as [`experiment`].
+//! - the laboratory (`arld-lab`: configured runs, sweeps, Slurm, reports, verdict, figures) as [`lab`].
 //!
 //! The binary `arld` (src/main.rs, src/cli) is a thin command-line layer over them.
 
 pub use arld_core::*;
-pub use arld_lab as experiment;
+pub use arld_lab as lab;
 
 /// Experts: the core's kinds, the web expert, and the factory that builds every kind from its spec.
 pub mod expert {

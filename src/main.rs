@@ -41,15 +41,15 @@ enum Command {
         cmd: cli::expert_cmd::ExpertCommand,
     },
     /// Run a grid of runs (environments x methods x networks x seeds) in parallel; resumable.
-    Sweep(Box<cli::experiment_cmd::SweepArgs>),
+    Sweep(Box<cli::lab_cmd::SweepArgs>),
     /// Tables (median steps to solve next to the paper's) and figures from a directory of runs.
-    Report(cli::experiment_cmd::ReportArgs),
+    Report(cli::lab_cmd::ReportArgs),
     /// The paper's experimental protocol, sweep plus report, with one command (--quick: a few minutes).
-    Reproduce(cli::experiment_cmd::ReproduceArgs),
+    Reproduce(cli::lab_cmd::ReproduceArgs),
     /// Runs as a compact dataset: pack run directories into tables per task, and unpack them byte for byte.
     Runs {
         #[command(subcommand)]
-        cmd: cli::experiment_cmd::RunsCommand,
+        cmd: cli::lab_cmd::RunsCommand,
     },
     /// Demonstrations: collect expert episodes into a file that DQfD pre-training reads, or convert a Minari
     /// dataset into one.
@@ -71,10 +71,10 @@ fn main() -> std::process::ExitCode {
         Command::Train(args) => cli::train_cmd::run(args),
         Command::Expert { cmd } => cli::expert_cmd::run_expert(cmd),
         Command::Demo { cmd } => cli::expert_cmd::run_demo(cmd),
-        Command::Sweep(args) => cli::experiment_cmd::run_sweep(*args),
-        Command::Report(args) => cli::experiment_cmd::run_report(args),
-        Command::Reproduce(args) => cli::experiment_cmd::run_reproduce(args),
-        Command::Runs { cmd } => cli::experiment_cmd::run_runs(cmd),
+        Command::Sweep(args) => cli::lab_cmd::run_sweep(*args),
+        Command::Report(args) => cli::lab_cmd::run_report(args),
+        Command::Reproduce(args) => cli::lab_cmd::run_reproduce(args),
+        Command::Runs { cmd } => cli::lab_cmd::run_runs(cmd),
     };
     match result {
         Ok(code) => code,

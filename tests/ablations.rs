@@ -1,7 +1,7 @@
 //! The ablation keys of the open choices (docs/algorithm.md section 8): each changes what it says and only that,
 //! checked on real runs against counts recomputed from the run's own episode and query logs.
 
-use arld::experiment::run_one;
+use arld::lab::run_one;
 use arld::train::{ConfigInput, Method, NetKind, TrainConfig, run_dir};
 use std::path::Path;
 

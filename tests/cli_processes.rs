@@ -97,7 +97,7 @@ fn concurrent_killed_and_damaged_sweeps_end_with_the_uninterrupted_results() {
     let stderr = String::from_utf8_lossy(&second.stderr);
     assert!(!second.status.success(), "the second sweep ran: {stderr}");
     assert!(!stderr.contains("panicked"), "{stderr}");
-    let host = arld::experiment::sweep::host_name();
+    let host = arld::lab::sweep::host_name();
     assert!(
         stderr.contains(&format!("process {}", first.id())) && stderr.contains(&host),
         "the message names the holder (pid {}, host {host}): {stderr}",

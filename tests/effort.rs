@@ -1,5 +1,5 @@
 //! The effort benchmark's readings recomputed from the committed per-run files, independently of
-//! `src/experiment/effort.rs`: each run's normalised AUC from its `eval.csv` and the reference returns that
+//! `crates/arld-lab/src/effort.rs`: each run's normalised AUC from its `eval.csv` and the reference returns that
 //! `effort.csv` states, the cell's median over seeds, and the own rule's design choice (the candidate with the
 //! highest mean, over the screening tasks, of its median AUC on the design seeds).
 
@@ -233,7 +233,7 @@ fn the_design_choice_is_the_candidate_with_the_highest_mean_median_auc() {
     assert!(md.contains(&expected), "effort.md does not say: {expected}");
     assert_eq!(
         best.map(|(_, c)| c),
-        Some(arld::experiment::protocol::HELD_OUT_RULE),
+        Some(arld::lab::protocol::HELD_OUT_RULE),
         "the rule fixed for the held-out test is not the design seeds' choice"
     );
 }
@@ -242,7 +242,7 @@ fn the_design_choice_is_the_candidate_with_the_highest_mean_median_auc() {
 /// the design seeds (0-9) at the preset's budget on each task of the test, recomputed from the runs.
 #[test]
 fn the_continuous_held_out_rule_is_the_design_seeds_choice() {
-    use arld::experiment::protocol::{BOX_CANDIDATES, BOX_HELD_OUT_RULE, BOX_HELD_OUT_TASKS};
+    use arld::lab::protocol::{BOX_CANDIDATES, BOX_HELD_OUT_RULE, BOX_HELD_OUT_TASKS};
     let rows = effort_rows();
     for env in BOX_HELD_OUT_TASKS {
         let row = rows
@@ -461,7 +461,7 @@ fn the_screen_lists_the_rules_that_differ_from_the_paper_rules() {
 /// paper's 20): every run of the benchmark's grids and of the held-out test is under results/runs, finished.
 #[test]
 fn every_run_of_the_effort_protocol_is_committed() {
-    use arld::experiment::protocol::{PAPER_SEEDS, effort_grids, held_out_grids};
+    use arld::lab::protocol::{PAPER_SEEDS, effort_grids, held_out_grids};
     let seeds: Vec<u64> = (0..PAPER_SEEDS).collect();
     let mut expected = 0;
     let mut missing = Vec::new();
@@ -716,7 +716,7 @@ fn cell_dirs(
     group: &str,
 ) -> BTreeMap<u64, PathBuf> {
     let runs = common::committed_runs().join(env);
-    let paper = arld::experiment::protocol::paper_budget(env).to_string();
+    let paper = arld::lab::protocol::paper_budget(env).to_string();
     let (method_dir, spec) = match rule {
         "greedy (GDQN)" => (format!("gdqn-{net}"), None),
         "bernoulli (BDQN)" => (format!("bdqn-{net}"), None),

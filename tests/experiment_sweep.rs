@@ -2,8 +2,8 @@
 //! the training code writes (config.toml, eval.csv, episodes.csv, queries.csv, summary.json last).
 
 use anyhow::{Result, bail};
-use arld::experiment::report;
-use arld::experiment::sweep::{self, RunSpec, SweepGrid};
+use arld::lab::report;
+use arld::lab::sweep::{self, RunSpec, SweepGrid};
 use arld::train::run_dir::{self, EvalPoint, Summary};
 use arld::train::{Method, NetKind};
 use std::collections::BTreeSet;
@@ -389,8 +389,7 @@ fn report_writes_table_with_paper_values_and_figures() {
     let dir = tempfile::tempdir().unwrap();
     report_fixture(dir.path());
     let out = dir.path().join("report");
-    let summary =
-        report::report(dir.path(), &out, arld::experiment::verdict::DEFAULT_SUSTAIN).unwrap();
+    let summary = report::report(dir.path(), &out, arld::lab::verdict::DEFAULT_SUSTAIN).unwrap();
     // To look at the figures: ARLD_TEST_KEEP_REPORT=/some/dir cargo test --test experiment_sweep report_writes
     if let Ok(keep) = std::env::var("ARLD_TEST_KEEP_REPORT") {
         std::fs::create_dir_all(&keep).unwrap();
@@ -486,8 +485,7 @@ fn group_medians_follow_the_design_for_every_configuration() {
     report_fixture(dir.path());
     let (runs, notes) = run_dir::load_runs(dir.path()).unwrap();
     assert!(notes.is_empty(), "{notes:?}");
-    for group in arld::experiment::verdict::cells(&runs, arld::experiment::verdict::DEFAULT_SUSTAIN)
-    {
+    for group in arld::lab::verdict::cells(&runs, arld::lab::verdict::DEFAULT_SUSTAIN) {
         // Rebuild the specs of this group and compute the median by hand from the designed solve steps.
         let mut steps: Vec<u64> = runs
             .iter()
@@ -527,8 +525,7 @@ fn group_medians_follow_the_design_for_every_configuration() {
     }
     // summary.json and eval.csv agree on every fake run, so the report raises no disagreement.
     let out = dir.path().join("report");
-    let summary =
-        report::report(dir.path(), &out, arld::experiment::verdict::DEFAULT_SUSTAIN).unwrap();
+    let summary = report::report(dir.path(), &out, arld::lab::verdict::DEFAULT_SUSTAIN).unwrap();
     assert!(
         !summary
             .notes

@@ -3,7 +3,7 @@
 //!
 //! The library is three crates, read here as one tree of modules: the core (`crates/arld-core`, whose top-level
 //! modules are the lower layers), the web expert (`crates/arld-web`, the layer `web`) and the laboratory
-//! (`crates/arld-lab`, the layer `experiment`, the names the `arld` library gives them). Every `crate::…`,
+//! (`crates/arld-lab`, the layer `lab`, the names the `arld` library gives them). Every `crate::…`,
 //! `super::…`, `self::…`, `arld_core::…`, `arld_web::…` and `arld_lab::…` path in the library's code (comments
 //! and `#[cfg(test)]` items left out, wherever they stand) is resolved to the source file it names. Two checks
 //! follow: a path from one top-level module to another must go to a lower layer, and the graph of files must
@@ -13,8 +13,8 @@
 //!
 //! The library's two clients sit above every layer: the binary's command modules (`src/cli`, used from
 //! `src/main.rs`; they name the library through the root package's `arld::…`, which re-exports the three
-//! crates) and the Python bindings (`python/src`, whose `arld::…` is the core and which may use the web expert
-//! but not the laboratory). They reach the library only through its public API and may use any of it; the
+//! crates) and the Python bindings (`python/src`, which name the core by its own name, `arld_core::…`, and may
+//! use the web expert but not the laboratory). They reach the library only through its public API and may use any of it; the
 //! library never names them (no `crate::cli`, no `arld_python`). Within the binary, a command file
 //! (`src/cli/train_cmd.rs`, ...) does not use another: what two commands share belongs in the library or in
 //! `src/cli/mod.rs`. No source file pulls in another by `#[path]` or `include!`, which would pass code around
@@ -44,7 +44,7 @@ const LAYERS: [&[&str]; 9] = [
     // The crate arld-web.
     &["web"],
     // The crate arld-lab.
-    &["experiment"],
+    &["lab"],
 ];
 
 fn layer(module: &str) -> usize {
@@ -274,11 +274,11 @@ impl SourceFile {
 const LIBRARY_CRATES: [(&str, &str, &[&str]); 3] = [
     ("crates/arld-core/src", "arld_core", &[]),
     ("crates/arld-web/src", "arld_web", &["web"]),
-    ("crates/arld-lab/src", "arld_lab", &["experiment"]),
+    ("crates/arld-lab/src", "arld_lab", &["lab"]),
 ];
 
 /// The library's module named by a path from the root package's `arld::…` (the binary's view): the laboratory
-/// is `arld::experiment`, the web expert `arld::expert::web`, the core's modules are at the top.
+/// is `arld::lab`, the web expert `arld::expert::web`, the core's modules are at the top.
 fn from_facade(segments: &[String]) -> Vec<String> {
     match segments {
         [expert, web, rest @ ..] if expert == "expert" && web == "web" => {
@@ -379,7 +379,7 @@ fn imports_go_down_the_layers_and_no_file_depends_on_itself() {
         })
         .map(|l| l.trim_end_matches(';').trim().to_string())
         .collect();
-    declared.extend(["web".to_string(), "experiment".to_string()]);
+    declared.extend(["web".to_string(), "lab".to_string()]);
     let layered: BTreeSet<String> = LAYERS
         .iter()
         .flat_map(|l| l.iter())
@@ -424,7 +424,7 @@ fn imports_go_down_the_layers_and_no_file_depends_on_itself() {
                     .map(|p| p.to_string())
                     .chain(segments)
                     .collect();
-                if file.krate == Crate::Python && full[0] == "experiment" {
+                if file.krate == Crate::Python && full[0] == "lab" {
                     violations.push(format!("{shown} uses the laboratory"));
                 }
                 if let Some(target) = resolve(Crate::Library, &full) {
@@ -434,15 +434,14 @@ fn imports_go_down_the_layers_and_no_file_depends_on_itself() {
                 continue;
             }
             if anchor == "arld" {
-                // The library as its clients see it: the root package's re-exports (the binary) or the core (the
-                // bindings, which name arld-core `arld`).
+                // The library as the binary sees it: the root package's re-exports. The library's crates and the
+                // bindings name the crates they use by their own names.
                 let full = match file.krate {
-                    Crate::Library => {
+                    Crate::Binary => from_facade(&segments),
+                    Crate::Library | Crate::Python => {
                         violations.push(format!("{shown} names the library as arld::"));
                         continue;
                     }
-                    Crate::Binary => from_facade(&segments),
-                    Crate::Python => segments,
                 };
                 if let Some(target) = resolve(Crate::Library, &full) {
                     edges.entry(node.clone()).or_default().insert(target);
@@ -542,12 +541,12 @@ fn imports_go_down_the_layers_and_no_file_depends_on_itself() {
     assert!(edges[&path(&["nn", "adam"])].contains(&path(&["nn", "simd"])));
     assert!(edges[&vec!["train".to_string()]].contains(&vec!["agent".to_string()]));
     assert!(
-        edges[&vec!["experiment".to_string(), "report".to_string()]]
-            .contains(&vec!["experiment".to_string(), "sweep".to_string()])
+        edges[&vec!["lab".to_string(), "report".to_string()]]
+            .contains(&vec!["lab".to_string(), "sweep".to_string()])
     );
     // ... across the crates: the web expert uses the core's experts, the laboratory the web expert ...
     assert!(edges[&path(&["web"])].contains(&path(&["expert"])));
-    assert!(edges[&path(&["experiment"])].contains(&path(&["web"])));
+    assert!(edges[&path(&["lab"])].contains(&path(&["web"])));
     // ... and its clients: the train command uses the training loop and the web expert's options, the bindings
     // the environments and the web expert.
     assert!(edges[&path(&["main", "cli", "train_cmd"])].contains(&path(&["train"])));

@@ -3,7 +3,7 @@
 //! Each test trains real agents (optimised test builds make this take seconds) and asserts the paper's success
 //! criterion: the 20-episode test mean reaches the task's threshold within the training budget.
 
-use arld::experiment::run_one;
+use arld::lab::run_one;
 use arld::train::{ConfigInput, Method, NetKind, Summary, TrainConfig};
 
 fn config(env: &str, method: Method, net: NetKind, seed: u64, overrides: &[&str]) -> TrainConfig {

@@ -2,11 +2,11 @@
 //! in a box; what a run of each kind needs besides (its built-in tasks, its experts from a spec, its demonstrations).
 
 use crate::records::Records;
-use arld::env::{self, Env, EnvError};
-use arld::expert::Expert;
-use arld::expert::demos::DemoAction;
-use arld::expert::process::WireAction;
-use arld::train::{QueryEvent, SeedPurpose, TrainConfig, seed_for};
+use arld_core::env::{self, Env, EnvError};
+use arld_core::expert::Expert;
+use arld_core::expert::demos::DemoAction;
+use arld_core::expert::process::WireAction;
+use arld_core::train::{QueryEvent, SeedPurpose, TrainConfig, seed_for};
 use pyo3::prelude::*;
 
 /// The actions of demonstrations given in Python: one integer per transition, or one row of numbers (a box).
@@ -104,7 +104,7 @@ impl PyAction for Vec<f32> {
     }
 
     fn spec_expert(cfg: &TrainConfig) -> anyhow::Result<Box<dyn Expert<Vec<f32>>>> {
-        arld::expert::boxed::from_spec(
+        arld_core::expert::boxed::from_spec(
             &cfg.expert,
             env::box_spec(&cfg.env)?,
             seed_for(cfg.seed, SeedPurpose::Expert),

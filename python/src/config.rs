@@ -1,7 +1,7 @@
 //! Configurations: the keys, and a configuration resolved from the paper's preset and Python's values (as JSON).
 
 use crate::errors::value_error;
-use arld::train::{ConfigInput, TrainConfig};
+use arld_core::train::{ConfigInput, TrainConfig};
 use pyo3::prelude::*;
 
 /// Every configuration key (the CLI's `--set` keys), in order.

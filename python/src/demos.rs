@@ -1,8 +1,8 @@
 //! Demonstrations given in Python as rows, turned into the library's.
 
 use crate::actions::{DemoActions, PyAction};
-use arld::expert::demos::{DemoColumns, Demonstrations};
-use arld::train::TrainConfig;
+use arld_core::expert::demos::{DemoColumns, Demonstrations};
+use arld_core::train::TrainConfig;
 use pyo3::prelude::*;
 
 /// Demonstrations given as rows: (obs, action, reward, next_obs, terminated) per transition, in episode order.

@@ -3,8 +3,8 @@
 
 use crate::actions::PyAction;
 use crate::errors::{ErrorSlot, value_error};
-use arld::env::{self, Env, EnvError, Outcome, TaskSpec};
-use arld::rng::NumpyRng;
+use arld_core::env::{self, Env, EnvError, Outcome, TaskSpec};
+use arld_core::rng::NumpyRng;
 use pyo3::prelude::*;
 use std::sync::Mutex;
 

@@ -35,7 +35,7 @@ impl ErrorSlot {
         err: anyhow::Error,
         fallback: fn(String) -> PyErr,
     ) -> PyErr {
-        let context = arld::errors::error_line(&err);
+        let context = arld_core::errors::error_line(&err);
         match self.0.lock().unwrap_or_else(|e| e.into_inner()).take() {
             Some(original) => {
                 let note = format!("arld: {context}");

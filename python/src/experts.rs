@@ -2,8 +2,8 @@
 
 use crate::actions::PyAction;
 use crate::errors::ErrorSlot;
-use arld::expert::Expert;
-use arld::interrupt::Interrupted;
+use arld_core::expert::Expert;
+use arld_core::interrupt::Interrupted;
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 

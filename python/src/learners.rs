@@ -5,12 +5,12 @@ use crate::actions::PyAction;
 use crate::lent::LentParts;
 use crate::policy::Net;
 use crate::policy::WeightsFile;
-use arld::agent::actor_file::{ActorKind, TrainedActor};
-use arld::agent::box_agent::BoxAgent;
-use arld::agent::{DqnAgent, Learner};
-use arld::env;
-use arld::nn::QNet;
-use arld::train::{self, OwnRun, PausedRun, RunLog, SeedPurpose, TrainConfig, seed_for};
+use arld_core::agent::actor_file::TrainedActor;
+use arld_core::agent::box_agent::BoxAgent;
+use arld_core::agent::{DqnAgent, Learner};
+use arld_core::env;
+use arld_core::nn::QNet;
+use arld_core::train::{self, OwnRun, PausedRun, RunLog, SeedPurpose, TrainConfig, seed_for};
 use rand::SeedableRng;
 use rand_pcg::Pcg64;
 use std::path::Path;
@@ -57,10 +57,8 @@ impl PyLearner for BoxAgent {
     }
     fn net(&self, id: &str) -> Net {
         let spec = env::box_spec(id).expect("a box run's task is registered");
-        let kind = ActorKind::of_learner(self.learner_name())
-            .expect("a box agent's learner is TD3 or SAC");
         Net::Actor(Box::new(TrainedActor::new(
-            kind,
+            self.algo(),
             self.actor().clone(),
             spec.action_low,
             spec.action_high,

@@ -1,9 +1,9 @@
 //! The live agent and log of a run, lent to a callback while it runs on the run's thread ([`Lent`]), so that what
 //! the callback reads is that step's, without a copy per step.
 
-use arld::agent::DqnAgent;
-use arld::agent::box_agent::BoxAgent;
-use arld::train::{EvalPoint, RunLog};
+use arld_core::agent::DqnAgent;
+use arld_core::agent::box_agent::BoxAgent;
+use arld_core::train::{EvalPoint, RunLog};
 use std::cell::Cell;
 
 /// The live agent and log of a run, lent to a callback while it runs on the run's thread.

@@ -2,7 +2,7 @@
 //! the library's types and calls the library; the Python package `arld` (in `arld/__init__.py`) gives it the
 //! interface a Stable-Baselines3 user expects.
 //!
-//! The training loop is the library's ([`arld::train::RunBuilder`]). Python is called back only to step an
+//! The training loop is the library's ([`arld_core::train::RunBuilder`]). Python is called back only to step an
 //! environment ([`envs::PyEnv`]: any object with `reset(seed) -> list[float]` and `step(action) -> (obs, reward,
 //! terminated, truncated)`) and to ask an expert ([`experts::PyExpert`]: a callable `obs -> action`). Both are
 //! generic over the kind of action ([`actions::PyAction`]): a discrete index (the DQN family learns) or a list of
@@ -52,8 +52,8 @@ use pyo3::prelude::*;
 #[pymodule]
 pub(crate) fn _arld(m: &Bound<'_, PyModule>) -> PyResult<()> {
     // The library's version and the git commit it was built from (`arld.__version__`, `_arld.git_commit`).
-    m.add("__version__", arld::VERSION)?;
-    m.add("git_commit", arld::GIT_COMMIT)?;
+    m.add("__version__", arld_core::VERSION)?;
+    m.add("git_commit", arld_core::GIT_COMMIT)?;
     m.add_function(wrap_pyfunction!(register_env, m)?)?;
     m.add_function(wrap_pyfunction!(register_box_env, m)?)?;
     m.add_function(wrap_pyfunction!(is_box_env, m)?)?;

@@ -2,9 +2,9 @@
 //! and a run's current network ([`Net`]).
 
 use crate::errors::{runtime_error, value_error};
-use arld::agent::actor_file::TrainedActor;
-use arld::nn::QNet;
-use arld::train::{self, SeedPurpose, TrainConfig, seed_for};
+use arld_core::agent::actor_file::TrainedActor;
+use arld_core::nn::QNet;
+use arld_core::train::{self, SeedPurpose, TrainConfig, seed_for};
 use pyo3::prelude::*;
 use rand::SeedableRng;
 use rand_pcg::Pcg64;
@@ -78,7 +78,7 @@ pub(crate) enum PolicyKind {
         net: Box<QNet>,
         q: Vec<f32>,
         /// The exploring agent (its own generator, so asking it never changes the run) and ε.
-        explorer: Option<(Box<arld::agent::DqnAgent>, f64)>,
+        explorer: Option<(Box<arld_core::agent::DqnAgent>, f64)>,
     },
     Actor(TrainedActor),
 }
@@ -105,7 +105,8 @@ impl Policy {
     /// A policy that also explores as the run `cfg` does at step `step`.
     pub(crate) fn exploring(net: QNet, cfg: &TrainConfig, step: usize) -> Self {
         let rng = Pcg64::seed_from_u64(seed_for(cfg.seed, SeedPurpose::Agent) ^ step as u64);
-        let agent = arld::agent::DqnAgent::from_network(&cfg.dqn_agent_config(), net.clone(), rng);
+        let agent =
+            arld_core::agent::DqnAgent::from_network(&cfg.dqn_agent_config(), net.clone(), rng);
         let eps = train::epsilon_at(cfg, step);
         let mut policy = Self::of_net(net);
         if let PolicyKind::Q { explorer, .. } = &mut policy.kind {
@@ -137,7 +138,7 @@ impl Policy {
         self.check(&obs)?;
         Ok(match &mut self.kind {
             PolicyKind::Q { net, q, .. } => {
-                PolicyAction::Index(arld::agent::test_policy_action(net, q, &obs))
+                PolicyAction::Index(arld_core::agent::test_policy_action(net, q, &obs))
             }
             PolicyKind::Actor(actor) => PolicyAction::Vector(actor.act(&obs)),
         })
@@ -161,7 +162,7 @@ impl Policy {
                     agent.begin_episode();
                 }
                 Ok(PolicyAction::Index(
-                    agent.act(&obs, *eps, arld::query::Needs::NOTHING).0,
+                    agent.act(&obs, *eps, arld_core::query::Needs::NOTHING).0,
                 ))
             }
             PolicyKind::Actor(actor) => Ok(PolicyAction::Vector(actor.act(&obs))),
@@ -173,11 +174,11 @@ impl Policy {
     fn net(&self) -> &'static str {
         match &self.kind {
             PolicyKind::Q { net, .. } => match net.kind() {
-                arld::nn::OutputKind::Plain => "plain",
-                arld::nn::OutputKind::Bootstrap { .. } => "bootstrap",
+                arld_core::nn::OutputKind::Plain => "plain",
+                arld_core::nn::OutputKind::Bootstrap { .. } => "bootstrap",
                 _ => "noisy",
             },
-            PolicyKind::Actor(actor) => actor.kind().learner(),
+            PolicyKind::Actor(actor) => actor.algo().name(),
         }
     }
 
@@ -194,7 +195,7 @@ impl Policy {
     /// the file holds; returns the policy and the file's metadata.
     #[staticmethod]
     fn load(path: &str) -> PyResult<(Policy, Metadata)> {
-        let actor = arld::agent::actor_file::holds_an_actor(Path::new(path))
+        let actor = arld_core::agent::actor_file::holds_an_actor(Path::new(path))
             .map_err(|e| value_error(format!("cannot read {path}: {e:#}")))?;
         if actor {
             let (actor, meta) = load_weights(path)?;

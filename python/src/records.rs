@@ -1,8 +1,8 @@
 //! A run's records as Python reads them: its queries ([`Records`], of either kind of action) and evaluations, as
 //! dicts.
 
-use arld::env::Action;
-use arld::train::{EvalPoint, QueryEvent};
+use arld_core::env::Action;
+use arld_core::train::{EvalPoint, QueryEvent};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
 

@@ -13,12 +13,12 @@ use crate::records::eval_dict;
 use crate::remote::{Command, Pause, Remote, Report, Waited};
 use crate::snapshots::read_snapshot_file;
 use crate::web;
-use arld::agent::DqnAgent;
-use arld::agent::box_agent::BoxAgent;
-use arld::env::{self, Env};
-use arld::expert::Expert;
-use arld::train::session::{self, Session};
-use arld::train::{self, Checkpointer, EvalPoint, TrainConfig};
+use arld_core::agent::DqnAgent;
+use arld_core::agent::box_agent::BoxAgent;
+use arld_core::env::{self, Env};
+use arld_core::expert::Expert;
+use arld_core::train::session::{self, Session};
+use arld_core::train::{self, Checkpointer, EvalPoint, TrainConfig};
 use pyo3::prelude::*;
 use pyo3::types::PyList;
 use std::path::Path;
@@ -257,7 +257,7 @@ impl Run {
                     .iter()
                     .map(|obs| {
                         check(obs, net.obs_dim())?;
-                        Ok(arld::agent::test_policy_action(net, &mut q, obs))
+                        Ok(arld_core::agent::test_policy_action(net, &mut q, obs))
                     })
                     .collect::<PyResult<Vec<usize>>>()?;
                 Ok(actions.into_pyobject(py)?.into_any().unbind())
@@ -545,7 +545,7 @@ pub(crate) fn train_in_thread<L: PyLearner>(
         }
         Some(path) => {
             given_learner = L::from_weights(&cfg, Path::new(path))?;
-            let mut state = arld::state::StateDict::default();
+            let mut state = arld_core::state::StateDict::default();
             given_learner.save_state(train::run::AGENT_STATE, &mut state);
             Some(state)
         }

@@ -6,10 +6,10 @@ use crate::errors::value_error;
 use crate::learners::PyLearner;
 use crate::policy::{Net, Policy};
 use crate::records::Records;
-use arld::agent::DqnAgent;
-use arld::agent::box_agent::BoxAgent;
-use arld::env::{self};
-use arld::train::{self, Checkpointer, TrainConfig};
+use arld_core::agent::DqnAgent;
+use arld_core::agent::box_agent::BoxAgent;
+use arld_core::env::{self};
+use arld_core::train::{self, Checkpointer, TrainConfig};
 use pyo3::prelude::*;
 use pyo3::types::PyList;
 use std::path::Path;
@@ -46,7 +46,7 @@ pub(crate) fn snapshot_policy(py: Python<'_>, path: &str) -> PyResult<SnapshotPo
 /// The snapshot file `path` (a saved run) with the configuration it recorded.
 pub(crate) fn read_snapshot_file(
     path: &str,
-) -> anyhow::Result<(TrainConfig, arld::state::StateDict<'static>)> {
+) -> anyhow::Result<(TrainConfig, arld_core::state::StateDict<'static>)> {
     let text = train::snapshot::recorded_config(Path::new(path))?;
     let cfg: TrainConfig = toml::from_str(&text)?;
     // The snapshot machinery reads `snapshot.safetensors` in a directory: a private copy there.
@@ -61,7 +61,7 @@ pub(crate) fn read_snapshot_file(
 /// The network, the evaluations (JSON text) and the queries of a run's snapshot `state`, for the learner `L`.
 pub(crate) fn snapshot_parts<L: PyLearner>(
     cfg: &TrainConfig,
-    state: &arld::state::StateDict<'_>,
+    state: &arld_core::state::StateDict<'_>,
 ) -> anyhow::Result<(Net, String, Records)> {
     let mut agent = L::for_snapshot(cfg)?;
     agent.load_state(train::run::AGENT_STATE, state)?;

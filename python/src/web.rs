@@ -11,7 +11,7 @@
 //! per dimension; `labels=` names the dimensions (else arld's names for a task it knows, e.g. Pendulum's torque).
 //! The URL is printed once the run has accepted the environment (a refused environment prints none).
 
-use arld::expert::Expert;
+use arld_core::expert::Expert;
 use arld_web::frames::{FrameSource, ObservationTable, RenderedFrames, RgbImage};
 use arld_web::protocol::ActionKeys;
 use arld_web::{Page, PageAction, WebExpert, WebOptions, WebServer};
@@ -183,7 +183,7 @@ impl GymAction for usize {
     }
 
     fn gym_page(gym: &Gym<'_>, id: &str, web: &PyWebExpert, keep: Keep) -> PyResult<Page> {
-        let spec = arld::env::spec(id).map_err(|e| PyValueError::new_err(e.to_string()))?;
+        let spec = arld_core::env::spec(id).map_err(|e| PyValueError::new_err(e.to_string()))?;
         let (keys, labels) = (web.keys.as_ref(), web.labels.as_deref());
         let (actions, noop) = gym_actions(gym, spec.n_actions, keys, labels)?;
         let frames: Box<dyn FrameSource> = match rendered(gym, keep)? {

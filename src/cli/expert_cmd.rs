@@ -1,10 +1,10 @@
 //! `arld expert ...` and `arld demo ...`: the expert pipeline, expert statistics, demonstration collection, and
 //! Minari datasets written as demonstration files.
 use anyhow::{Context, Result};
-use arld::experiment::run_or_reuse;
 use arld::expert::demos::{DemoAction, Demonstrations};
 use arld::expert::pipeline::{Candidate, evaluate_spec, select_experts};
 use arld::expert::{self, SPEC_HELP};
+use arld::lab::run_or_reuse;
 use arld::train::{ConfigInput, Method, NetKind};
 use clap::{Args, Subcommand};
 use std::path::{Path, PathBuf};

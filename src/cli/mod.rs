@@ -1,7 +1,7 @@
 //! Subcommands of the `arld` binary, one file each.
 pub mod env_cmd;
-pub mod experiment_cmd;
 pub mod expert_cmd;
+pub mod lab_cmd;
 pub mod train_cmd;
 
 /// A command-line count from 1 to `max`: clap names the flag and the range when a value is out of it.

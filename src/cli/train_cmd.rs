@@ -1,6 +1,6 @@
 //! `arld train`: one training run with the paper's presets, a config file and `--set` overrides.
-use arld::experiment::run_one;
 use arld::expert::web::WebOptions;
+use arld::lab::run_one;
 use arld::train::session::{Begin, Session};
 use arld::train::{Algo, ConfigInput, Method, NetKind, TrainConfig};
 use clap::Args;

@@ -35,7 +35,7 @@ pub fn committed_runs() -> &'static Path {
     static DIR: OnceLock<PathBuf> = OnceLock::new();
     DIR.get_or_init(|| {
         let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("results/runs");
-        arld::experiment::pack::unpack(&dir, &dir).unwrap_or_else(|e| {
+        arld::lab::pack::unpack(&dir, &dir).unwrap_or_else(|e| {
             panic!(
                 "cannot unpack the committed runs in {}: {e:#}",
                 dir.display()

@@ -23,8 +23,6 @@ use crate::state::{Persist, StateDict, StateError};
 /// critics' disagreement, its generator, its policy network and its state. [`BoxLearner`] is the one
 /// implementation, for every [`Algorithm`].
 pub(crate) trait ActorCriticLearner: Send {
-    /// The learner's name in a weights file and a snapshot.
-    fn name(&self) -> &'static str;
     /// The behaviour action at `obs` (with the learner's own exploration), into `action`.
     fn act(&mut self, obs: &[f32], action: &mut [f32]);
     /// The test-time actions (no exploration) at the rows of `obs`, into the rows of `actions` (any number of
@@ -62,8 +60,6 @@ pub(crate) type Core = ActorCritic<Pcg64>;
 /// What an actor-critic algorithm (TD3, SAC) adds to the shared [`Core`]: its acting, its update and its state
 /// beyond the core. Every method is handed the core it works on.
 pub(crate) trait Algorithm: Send {
-    /// The learner's name in a weights file and a snapshot.
-    const NAME: &'static str;
     /// The behaviour action at `obs` (with the algorithm's own exploration), into `action`.
     fn act(&mut self, core: &mut Core, obs: &[f32], action: &mut [f32]);
     /// The test-time actions (no exploration) at the rows of `obs` as the tanh outputs the box scales, into the
@@ -108,10 +104,6 @@ impl<A> BoxLearner<A> {
 }
 
 impl<A: Algorithm> ActorCriticLearner for BoxLearner<A> {
-    fn name(&self) -> &'static str {
-        A::NAME
-    }
-
     fn act(&mut self, obs: &[f32], action: &mut [f32]) {
         self.algo.act(&mut self.core, obs, action);
     }

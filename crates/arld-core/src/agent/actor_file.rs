@@ -8,7 +8,8 @@
 //! comma-separated), beside the caller's own metadata (a run's id and step).
 
 use super::actor_critic::ActionBox;
-use crate::nn::{Mlp, MlpWorkspace, OutputActivation};
+use super::algo::Algo;
+use crate::nn::{Mlp, MlpWorkspace};
 use anyhow::{Context, Result, bail, ensure};
 use rand::SeedableRng;
 use rand_pcg::Pcg64;
@@ -22,46 +23,26 @@ const MAX_ACTOR_FILE_BYTES: u64 = 1 << 30;
 /// The header fields the format owns; the rest is the caller's metadata.
 const OWN_FIELDS: [&str; 4] = ["kind", "sizes", "action_low", "action_high"];
 
-/// Which actor a file holds: TD3's (tanh of every output) or SAC's (tanh of the means, the first half of the
-/// outputs).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum ActorKind {
-    Td3,
-    Sac,
+/// The header's `kind` of an actor of `algo`: `td3-actor`, `sac-actor`.
+fn kind_field(algo: Algo) -> String {
+    format!("{}-actor", algo.name())
 }
 
-impl ActorKind {
-    /// The learner's name: `td3` or `sac`.
-    pub fn learner(self) -> &'static str {
-        match self {
-            ActorKind::Td3 => "td3",
-            ActorKind::Sac => "sac",
-        }
-    }
-
-    /// The kind of the learner named `name` (`td3` or `sac`).
-    pub fn of_learner(name: &str) -> Result<Self> {
-        Ok(match name {
-            "td3" => ActorKind::Td3,
-            "sac" => ActorKind::Sac,
-            other => bail!("`{other}` is not an actor-critic learner (td3 or sac)"),
-        })
-    }
-
-    /// Outputs of the actor for `action_dim` dimensions.
-    fn outputs(self, action_dim: usize) -> usize {
-        match self {
-            ActorKind::Td3 => action_dim,
-            ActorKind::Sac => 2 * action_dim,
-        }
-    }
+/// The learner whose actor a header's `kind` names, if any.
+fn algo_of_kind(kind: &str) -> Option<Algo> {
+    Algo::ALL.into_iter().find(|&algo| kind_field(algo) == kind)
 }
 
-/// Writes `actor` (of the learner `kind`, acting in `[low, high]`) to `path` atomically, with `metadata`; the same
+/// Outputs of `algo`'s actor for `action_dim` dimensions.
+fn outputs(algo: Algo, action_dim: usize) -> usize {
+    algo.actor().0 * action_dim
+}
+
+/// Writes `actor` (of the learner `algo`, acting in `[low, high]`) to `path` atomically, with `metadata`; the same
 /// actor and metadata give the same bytes.
 pub fn write(
     path: &Path,
-    kind: ActorKind,
+    algo: Algo,
     actor: &Mlp,
     low: &[f32],
     high: &[f32],
@@ -84,7 +65,7 @@ pub fn write(
         .iter()
         .map(usize::to_string)
         .collect::<Vec<_>>();
-    header.insert("kind".into(), format!("{}-actor", kind.learner()));
+    header.insert("kind".into(), kind_field(algo));
     header.insert("sizes".into(), sizes.join(","));
     header.insert("action_low".into(), list(low));
     header.insert("action_high".into(), list(high));
@@ -116,29 +97,29 @@ pub fn holds_an_actor(path: &Path) -> Result<bool> {
     let header: serde_json::Value = serde_json::from_slice(&header)
         .context("its header is not JSON: not a safetensors file")?;
     let kind = header["__metadata__"]["kind"].as_str().unwrap_or("");
-    Ok(matches!(kind, "td3-actor" | "sac-actor"))
+    Ok(algo_of_kind(kind).is_some())
 }
 
 /// A trained actor acting with its test policy (no exploration): TD3's action, or SAC's `tanh` of its means,
 /// mapped into the box, as the run's test episodes act.
 #[derive(Clone, Debug)]
 pub struct TrainedActor {
-    kind: ActorKind,
+    algo: Algo,
     net: Mlp,
     ws: MlpWorkspace,
     action_box: ActionBox,
 }
 
 impl TrainedActor {
-    /// The actor `net` of the learner `kind`, acting in `[low, high]`.
+    /// The actor `net` of the learner `algo`, acting in `[low, high]`.
     ///
     /// # Panics
     /// If the box is empty or inverted, or the network's widths do not fit it (the callers hold a learner's own
     /// actor or a file [`Self::load`] checked).
-    pub fn new(kind: ActorKind, net: Mlp, low: &[f32], high: &[f32]) -> Self {
-        assert_eq!(net.output_dim(), kind.outputs(low.len()));
+    pub fn new(algo: Algo, net: Mlp, low: &[f32], high: &[f32]) -> Self {
+        assert_eq!(net.output_dim(), outputs(algo, low.len()));
         TrainedActor {
-            kind,
+            algo,
             ws: MlpWorkspace::new(&net, 1),
             net,
             action_box: ActionBox::new(low, high),
@@ -167,10 +148,9 @@ impl TrainedActor {
                 )
             })
         };
-        let kind = match field("kind")?.as_str() {
-            "td3-actor" => ActorKind::Td3,
-            "sac-actor" => ActorKind::Sac,
-            other => bail!("{} holds a `{other}`, not a TD3 or SAC actor", what()),
+        let kind = field("kind")?;
+        let Some(algo) = algo_of_kind(kind) else {
+            bail!("{} holds a `{kind}`, not a TD3 or SAC actor", what());
         };
         let sizes = field("sizes")?
             .split(',')
@@ -204,13 +184,13 @@ impl TrainedActor {
             "{}: the box {low:?} to {high:?} is not a box (finite bounds, low below high in every dimension)",
             what()
         );
-        let outputs = kind.outputs(low.len());
+        let outputs = outputs(algo, low.len());
         ensure!(
             sizes[sizes.len() - 1] == outputs,
             "{} has {} outputs, but a {} actor in a box of {} dimensions has {outputs}",
             what(),
             sizes[sizes.len() - 1],
-            kind.learner(),
+            algo.name(),
             low.len()
         );
         let tensors = safetensors::SafeTensors::deserialize(bytes)
@@ -218,11 +198,7 @@ impl TrainedActor {
         let params = tensors
             .tensor("actor.params")
             .with_context(|| format!("{} has no tensor `actor.params`", what()))?;
-        let output = match kind {
-            ActorKind::Td3 => OutputActivation::Tanh,
-            ActorKind::Sac => OutputActivation::Linear,
-        };
-        let mut net = Mlp::new(&sizes, output, &mut Pcg64::seed_from_u64(0));
+        let mut net = Mlp::new(&sizes, algo.actor().1, &mut Pcg64::seed_from_u64(0));
         ensure!(
             params.dtype() == Dtype::F32 && params.data().len() == 4 * net.parameters().len(),
             "{}: `actor.params` holds {} bytes, but layers {sizes:?} need {} float32 numbers",
@@ -246,13 +222,13 @@ impl TrainedActor {
             .into_iter()
             .filter(|(key, _)| !OWN_FIELDS.contains(&key.as_str()))
             .collect();
-        Ok((TrainedActor::new(kind, net, &low, &high), metadata))
+        Ok((TrainedActor::new(algo, net, &low, &high), metadata))
     }
 
     /// Writes the actor to `path` ([`write`]) with `metadata`.
     pub fn save(&self, path: &Path, metadata: &BTreeMap<String, String>) -> Result<()> {
         let b = &self.action_box;
-        write(path, self.kind, &self.net, &b.low, &b.high, metadata)
+        write(path, self.algo, &self.net, &b.low, &b.high, metadata)
     }
 
     /// The test policy's action at `obs` (which has [`Self::obs_dim`] numbers).
@@ -262,16 +238,15 @@ impl TrainedActor {
     pub fn act(&mut self, obs: &[f32]) -> Vec<f32> {
         let a = self.action_box.dim();
         let out = self.net.forward(obs, 1, &mut self.ws);
-        let mut action = match self.kind {
-            ActorKind::Td3 => out.to_vec(),
-            ActorKind::Sac => out[..a].iter().map(|mu| mu.tanh()).collect(),
-        };
+        let mut action = vec![0.0; a];
+        self.algo.test_units(out, a, &mut action);
         self.action_box.to_box(&mut action);
         action
     }
 
-    pub fn kind(&self) -> ActorKind {
-        self.kind
+    /// The learner whose actor this is.
+    pub fn algo(&self) -> Algo {
+        self.algo
     }
 
     pub fn obs_dim(&self) -> usize {
@@ -291,6 +266,7 @@ impl TrainedActor {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::nn::OutputActivation;
 
     /// A file written by [`write`] reads back as the same actor: the same actions at random observations, the
     /// caller's metadata without the format's own fields, the same bytes when written again (the header's keys
@@ -300,10 +276,10 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let mut rng = Pcg64::seed_from_u64(3);
         for (kind, output, dim) in [
-            (ActorKind::Td3, OutputActivation::Tanh, 2),
-            (ActorKind::Sac, OutputActivation::Linear, 1),
+            (Algo::Td3, OutputActivation::Tanh, 2),
+            (Algo::Sac, OutputActivation::Linear, 1),
         ] {
-            let net = Mlp::new(&[3, 7, 5, kind.outputs(dim)], output, &mut rng);
+            let net = Mlp::new(&[3, 7, 5, outputs(kind, dim)], output, &mut rng);
             let (low, high) = (vec![-2.0; dim], vec![1.5; dim]);
             let meta = BTreeMap::from([
                 ("run".to_string(), "x".to_string()),
@@ -314,7 +290,7 @@ mod tests {
             let (mut read, read_meta) = TrainedActor::load(&path).unwrap();
             let mut original = TrainedActor::new(kind, net, &low, &high);
             assert_eq!(read_meta, BTreeMap::from([("run".into(), "x".into())]));
-            assert_eq!(read.kind(), kind);
+            assert_eq!(read.algo(), kind);
             for i in 0..20 {
                 let obs = [i as f32 * 0.3 - 3.0, 1.0 / (i as f32 + 1.0), -0.5];
                 let (a, b) = (read.act(&obs), original.act(&obs));

@@ -18,10 +18,9 @@
 //!   errors of the first critic head.
 
 use super::actor_critic::ActorCriticLearner;
-use super::actor_file::{self, ActorKind};
+use super::actor_file;
+use super::algo::{Algo, BoxLearnerConfig};
 use super::risk::{RiskConfig, RiskCritic};
-use super::sac::{Sac, SacConfig};
-use super::td3::{Td3, Td3Config};
 use super::{Learner, UpdateStats};
 use crate::nn::Mlp;
 use crate::query::{Needs, Signals};
@@ -36,6 +35,8 @@ use std::path::Path;
 
 /// A learner of actions in a box: an `ActorCriticLearner` learner behind [`Learner`].
 pub struct BoxAgent {
+    /// Which learner `learner` is.
+    algo: Algo,
     learner: Box<dyn ActorCriticLearner>,
     obs_dim: usize,
     low: Vec<f32>,
@@ -62,13 +63,6 @@ pub enum BoxUncertainty {
     ActionDisagreement,
 }
 
-/// Which actor-critic learner a [`BoxAgent`] holds, with its settings.
-#[derive(Debug, Clone, PartialEq)]
-pub enum BoxLearnerConfig {
-    Td3(Td3Config),
-    Sac(SacConfig),
-}
-
 impl BoxAgent {
     /// The learner of `config` for observations of `obs_dim` numbers and actions in `[low, high]`, discounting
     /// by `gamma`, its weights and every later draw from `seed`.
@@ -81,15 +75,10 @@ impl BoxAgent {
         seed: u64,
     ) -> Self {
         let rng = Pcg64::seed_from_u64(seed);
-        let q_filter = match &config {
-            BoxLearnerConfig::Td3(config) => config.common.q_filter,
-            BoxLearnerConfig::Sac(config) => config.common.q_filter,
-        };
-        let learner: Box<dyn ActorCriticLearner> = match config {
-            BoxLearnerConfig::Td3(config) => Box::new(Td3::new(config, obs_dim, low, high, rng)),
-            BoxLearnerConfig::Sac(config) => Box::new(Sac::new(config, obs_dim, low, high, rng)),
-        };
+        let algo = config.algo();
+        let (learner, q_filter) = config.learner(obs_dim, low, high, rng);
         BoxAgent {
+            algo,
             learner,
             obs_dim,
             low: low.to_vec(),
@@ -121,9 +110,9 @@ impl BoxAgent {
         self.learner.actor()
     }
 
-    /// The learner inside: `td3` or `sac`.
-    pub fn learner_name(&self) -> &'static str {
-        self.learner.name()
+    /// The learner inside: TD3 or SAC.
+    pub fn algo(&self) -> Algo {
+        self.algo
     }
 }
 
@@ -188,10 +177,9 @@ impl Learner for BoxAgent {
     /// Writes the actor (the policy a run keeps) as safetensors: one tensor `actor.params` with every weight
     /// and bias layer by layer, its layer sizes, the learner and the box in the header.
     fn save_weights(&self, path: &Path, metadata: &BTreeMap<String, String>) -> anyhow::Result<()> {
-        let kind = ActorKind::of_learner(self.learner.name())?;
         actor_file::write(
             path,
-            kind,
+            self.algo,
             self.learner.actor(),
             &self.low,
             &self.high,
@@ -202,7 +190,7 @@ impl Learner for BoxAgent {
 
 impl Persist for BoxAgent {
     fn save_state<'a>(&'a self, prefix: &str, state: &mut StateDict<'a>) {
-        let name = format!("{prefix}.{}", self.learner.name());
+        let name = format!("{prefix}.{}", self.algo.name());
         self.learner.save_state(&name, state);
         if let Some(critic) = &self.risk {
             critic.save_state(&format!("{prefix}.risk_critic"), state);
@@ -210,7 +198,7 @@ impl Persist for BoxAgent {
     }
 
     fn load_state(&mut self, prefix: &str, state: &StateDict<'_>) -> Result<(), StateError> {
-        let name = format!("{prefix}.{}", self.learner.name());
+        let name = format!("{prefix}.{}", self.algo.name());
         self.learner.load_state(&name, state)?;
         match &mut self.risk {
             Some(critic) => critic.load_state(&format!("{prefix}.risk_critic"), state),
@@ -222,6 +210,8 @@ impl Persist for BoxAgent {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::agent::sac::SacConfig;
+    use crate::agent::td3::Td3Config;
     use crate::env::{Env, make_continuous};
     use crate::replay::{Replay, ReplayConfig, Transition};
     use crate::train::eval::Evaluator;

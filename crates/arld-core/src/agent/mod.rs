@@ -9,12 +9,14 @@
 
 pub mod actor_critic;
 pub mod actor_file;
+pub mod algo;
 pub mod box_agent;
 mod learner;
 pub mod risk;
 pub mod sac;
 pub mod td3;
 
+pub use algo::Algo;
 pub use learner::Learner;
 
 use crate::nn::{

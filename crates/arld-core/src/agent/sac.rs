@@ -135,8 +135,7 @@ impl Sac {
             config.initial_alpha > 0.0,
             "SAC needs a positive temperature"
         );
-        let actor = (2, OutputActivation::Linear);
-        let core = ActorCritic::new(config.common, obs_dim, (low, high), actor, rng);
+        let core = ActorCritic::new(config.common, obs_dim, (low, high), SacPart::ACTOR, rng);
         let (a, n) = (core.action_dim(), core.config.max_batch);
         let algo = SacPart {
             target_entropy: config.target_entropy.unwrap_or(-(a as f32)),
@@ -157,6 +156,19 @@ impl Sac {
 }
 
 impl SacPart {
+    /// The actor's outputs per dimension of the action and their activation: the mean and the log standard
+    /// deviation of the Gaussian, unbounded.
+    pub(crate) const ACTOR: (usize, OutputActivation) = (2, OutputActivation::Linear);
+
+    /// The test-time actions' tanh outputs from the actor's outputs `out` (rows of `2 * a`): `tanh(mu)`.
+    pub(crate) fn units_of(out: &[f32], a: usize, units: &mut [f32]) {
+        for (unit, out) in units.chunks_exact_mut(a).zip(out.chunks_exact(2 * a)) {
+            for (v, mu) in unit.iter_mut().zip(&out[..a]) {
+                *v = mu.tanh();
+            }
+        }
+    }
+
     /// The entropy temperature `alpha`.
     pub fn alpha(&self) -> f32 {
         self.log_alpha.exp()
@@ -288,8 +300,6 @@ impl SacPart {
 }
 
 impl Algorithm for SacPart {
-    const NAME: &'static str = "sac";
-
     /// The behaviour action at `obs`: a sample of the policy.
     fn act(&mut self, core: &mut Core, obs: &[f32], action: &mut [f32]) {
         let a = core.action_dim();
@@ -302,13 +312,7 @@ impl Algorithm for SacPart {
     /// The test-time actions at the rows of `obs`: `tanh(mu)`.
     fn test_units(&self, core: &mut Core, obs: &[f32], units: &mut [f32]) {
         let a = core.action_dim();
-        let rows = units.len() / a;
-        let out = core.actor.forward(obs, rows);
-        for (unit, out) in units.chunks_exact_mut(a).zip(out.chunks_exact(2 * a)) {
-            for (v, mu) in unit.iter_mut().zip(&out[..a]) {
-                *v = mu.tanh();
-            }
-        }
+        Self::units_of(core.actor.forward(obs, units.len() / a), a, units);
     }
 
     /// One update from `batch`: critics, actor, temperature, target.

@@ -80,8 +80,7 @@ impl Td3 {
     /// If the box is empty or inverted, or the configuration has fewer than two heads or a zero batch (callers
     /// validate configurations first).
     pub fn new(config: Td3Config, obs_dim: usize, low: &[f32], high: &[f32], rng: Pcg64) -> Self {
-        let actor = (1, OutputActivation::Tanh);
-        let core = ActorCritic::new(config.common, obs_dim, (low, high), actor, rng);
+        let core = ActorCritic::new(config.common, obs_dim, (low, high), Td3Part::ACTOR, rng);
         let len = core.config.max_batch * core.action_dim();
         let algo = Td3Part {
             policy_delay: config.policy_delay,
@@ -98,6 +97,14 @@ impl Td3 {
 }
 
 impl Td3Part {
+    /// The actor's outputs per dimension of the action and their activation: the tanh action itself.
+    pub(crate) const ACTOR: (usize, OutputActivation) = (1, OutputActivation::Tanh);
+
+    /// The test-time actions' tanh outputs from the actor's outputs `out`: the outputs themselves.
+    pub(crate) fn units_of(out: &[f32], _a: usize, units: &mut [f32]) {
+        units.copy_from_slice(&out[..units.len()]);
+    }
+
     /// The actor's loss at the batch's observations, `-mean over the batch and the heads of Q(s, pi(s))` plus the
     /// behaviour cloning term with the Q-filter on its demonstrated samples (the heads' mean compares the
     /// demonstrated action with the actor's), and its gradient with respect to the actor's parameters in
@@ -146,8 +153,6 @@ impl Td3Part {
 }
 
 impl Algorithm for Td3Part {
-    const NAME: &'static str = "td3";
-
     /// The behaviour action at `obs`: the actor's plus Gaussian exploration noise, clipped to the box.
     fn act(&mut self, core: &mut Core, obs: &[f32], action: &mut [f32]) {
         self.test_units(core, obs, action);
@@ -162,8 +167,8 @@ impl Algorithm for Td3Part {
 
     /// The test-time actions at the rows of `obs`: the actor's, without noise.
     fn test_units(&self, core: &mut Core, obs: &[f32], units: &mut [f32]) {
-        let rows = units.len() / core.action_dim();
-        units.copy_from_slice(core.actor.forward(obs, rows));
+        let a = core.action_dim();
+        Self::units_of(core.actor.forward(obs, units.len() / a), a, units);
     }
 
     /// One update from `batch`: the critics always, the actor and the targets every `policy_delay` updates.

@@ -195,7 +195,8 @@ impl Expert<Vec<f32>> for GaussianNoise {
 mod tests {
     use super::*;
     use crate::agent::Learner;
-    use crate::agent::box_agent::{BoxAgent, BoxLearnerConfig};
+    use crate::agent::algo::BoxLearnerConfig;
+    use crate::agent::box_agent::BoxAgent;
     use crate::agent::sac::SacConfig;
     use crate::agent::td3::Td3Config;
     use crate::env::box_spec;

@@ -15,7 +15,7 @@
 //! ([`TrainConfig::dqn_agent_config`], [`TrainConfig::replay_config`]).
 
 use crate::agent::DqnAgentConfig;
-pub use crate::agent::TdLoss;
+pub use crate::agent::{Algo, TdLoss};
 use crate::nn::{HIDDEN, HiddenLayers, MAX_DEPTH, MAX_HIDDEN, OutputKind};
 use crate::query::{
     BudgetUnit, QueryController, QueryError, QueryRule, RuleDefaults, RuleSpec, check_signals,
@@ -119,30 +119,6 @@ fn parse_named<T: Copy>(s: &str, all: &[T], name: fn(T) -> &'static str, what: &
             let known: Vec<&str> = all.iter().map(|&v| name(v)).collect();
             format!("unknown {what} '{s}'; known: {}", known.join(", "))
         })
-}
-
-/// The actor-critic learner of a task with actions in a box (docs/algorithm.md §15-17).
-#[derive(
-    Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize, clap::ValueEnum,
-)]
-#[serde(rename_all = "lowercase")]
-pub enum Algo {
-    /// TD3 (Fujimoto et al. 2018).
-    #[default]
-    Td3,
-    /// Soft actor-critic (Haarnoja et al. 2018).
-    Sac,
-}
-
-fixed_names!(Algo, "actor-critic learner", {
-    Td3 => "td3",
-    Sac => "sac",
-});
-
-impl Algo {
-    fn is_td3(&self) -> bool {
-        *self == Algo::Td3
-    }
 }
 
 pub use crate::agent::box_agent::BoxUncertainty;

@@ -14,7 +14,8 @@ use super::{
     pretrain_update, push_demos, run_dir, seed_for, steps_to_solve, update_checked,
 };
 use crate::agent::actor_critic::ActorCriticConfig;
-use crate::agent::box_agent::{BoxAgent, BoxLearnerConfig};
+use crate::agent::algo::BoxLearnerConfig;
+use crate::agent::box_agent::BoxAgent;
 use crate::agent::risk::RiskConfig;
 use crate::agent::sac::SacConfig;
 use crate::agent::td3::Td3Config;
@@ -124,7 +125,8 @@ impl OwnRun for BoxAgent {
 /// from the run's seed. A method that pre-trains (dqfd, adqnp) clones the demonstrated actions with the weight
 /// `lambda` and the Q-filter (off while pre-training; docs/algorithm.md §17); the others do not clone. A run whose
 /// query rule reads the risk gets a risk critic (docs/algorithm.md §20) of the critics' widths, learning rate,
-/// batch and Polyak rate, discounting by the run's gamma, its weights from a stream of its own.
+/// batch and Polyak rate, discounting by the run's gamma, its weights from a stream of its own. The one place the
+/// configuration's keys become the chosen learner's settings ([`BoxLearnerConfig`]).
 pub fn box_agent(cfg: &TrainConfig, spec: &'static BoxSpec) -> BoxAgent {
     let (hidden, heads, lr) = (cfg.hidden.clone(), cfg.heads.max(2), cfg.lr as f32);
     let bc_weight = if cfg.method.pretrains() {

@@ -1,13 +1,12 @@
-//! `arld sweep`, `arld report` and `arld reproduce`: many seeded runs in parallel, and their tables and figures.
+//! The laboratory's commands (arld-lab): `arld sweep`, `arld report`, `arld reproduce` and `arld runs`: many
+//! seeded runs in parallel, their tables and figures, and the runs' packs.
 use anyhow::{Context, Result, bail};
-use arld::experiment::protocol::{paper_grids, part_names};
-use arld::experiment::report::report;
-use arld::experiment::run_spec;
-use arld::experiment::slurm::{self, SlurmOptions};
-use arld::experiment::sweep::{
-    RunState, Shard, SweepGrid, SweepOutcome, run_grid_shard, sweep_status,
-};
-use arld::experiment::verdict;
+use arld::lab::protocol::{paper_grids, part_names};
+use arld::lab::report::report;
+use arld::lab::run_spec;
+use arld::lab::slurm::{self, SlurmOptions};
+use arld::lab::sweep::{RunState, Shard, SweepGrid, SweepOutcome, run_grid_shard, sweep_status};
+use arld::lab::verdict;
 use clap::Args;
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -108,7 +107,7 @@ pub struct ReportArgs {
     #[arg(long, short)]
     out: Option<PathBuf>,
     /// Evaluations a sustained solve must hold for after reaching the target (the "sustained" reading).
-    #[arg(long, default_value_t = arld::experiment::verdict::DEFAULT_SUSTAIN)]
+    #[arg(long, default_value_t = arld::lab::verdict::DEFAULT_SUSTAIN)]
     sustain: usize,
     /// Read DIR as an evaluations.csv.gz and write only the readings, claims and ablations tables (no figures).
     #[arg(long)]
@@ -129,7 +128,7 @@ pub struct ReproduceArgs {
     #[arg(long)]
     env: Vec<String>,
     /// Seeds per configuration (0..SEEDS).
-    #[arg(long, default_value_t = 20, value_parser = clap::value_parser!(u64).range(1..=arld::experiment::sweep::MAX_SEEDS))]
+    #[arg(long, default_value_t = 20, value_parser = clap::value_parser!(u64).range(1..=arld::lab::sweep::MAX_SEEDS))]
     seeds: u64,
     /// A few minutes on CartPole-v0: the methods comparison with 3 seeds.
     #[arg(long)]
@@ -215,7 +214,7 @@ fn submit_slurm(args: &SweepArgs, grid: &SweepGrid, out: &std::path::Path) -> Re
         print!("{script}");
         return Ok(ExitCode::SUCCESS);
     }
-    arld::experiment::sweep::prepare_sweep_dir(grid, out)?;
+    arld::lab::sweep::prepare_sweep_dir(grid, out)?;
     std::fs::create_dir_all(out.join("slurm"))?;
     let path = out.join("slurm").join("job.sh");
     arld::files::write_atomic(&path, script.as_bytes())?;
@@ -380,11 +379,7 @@ pub fn run_reproduce(args: ReproduceArgs) -> Result<ExitCode> {
         bail!("nothing to run: no part of the protocol covers {envs:?}");
     }
     let report_dir = args.report.unwrap_or_else(|| args.out.join("report"));
-    print_report(
-        &args.out,
-        &report_dir,
-        arld::experiment::verdict::DEFAULT_SUSTAIN,
-    )
+    print_report(&args.out, &report_dir, arld::lab::verdict::DEFAULT_SUSTAIN)
 }
 
 /// `arld runs`: a directory of runs as a compact dataset and back.
@@ -415,7 +410,7 @@ Binary files (weights, snapshots, event files) are not packed; the run directori
 }
 
 pub fn run_runs(cmd: RunsCommand) -> Result<ExitCode> {
-    use arld::experiment::pack;
+    use arld::lab::pack;
     match cmd {
         RunsCommand::Pack { dir } => {
             let s = pack::pack(&dir)?;
