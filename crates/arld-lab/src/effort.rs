@@ -43,6 +43,7 @@ use super::stats::{
 };
 use super::verdict::FINAL_EVALUATIONS;
 use anyhow::Result;
+use arld_core::train::BoxUncertainty;
 use arld_core::train::run_dir::{DEFAULT_VARIANT, RunRecord, canonical_rule};
 use rand::{Rng, SeedableRng};
 use std::collections::BTreeMap;
@@ -165,7 +166,7 @@ fn rule_and_budget(run: &RunRecord) -> Option<(String, usize)> {
     if run.config.asking.from_learning_starts == Some(true) {
         label.push_str(" from learning_starts");
     }
-    if run.config.uncertainty.as_deref() == Some("action_disagreement") {
+    if run.config.asking.uncertainty == Some(BoxUncertainty::ActionDisagreement) {
         label.push_str(UNCERTAINTY_LABEL);
     }
     Some((label, budget))

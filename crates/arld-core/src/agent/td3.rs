@@ -72,6 +72,16 @@ pub struct Td3Part {
 /// The TD3 learner: the shared core (actor, critics with their target, optimisers, generator) and TD3's part.
 pub type Td3 = BoxLearner<Td3Part>;
 
+impl Td3Part {
+    /// The actor's outputs per dimension of the action and their activation: the tanh action itself.
+    pub(crate) const ACTOR: (usize, OutputActivation) = (1, OutputActivation::Tanh);
+
+    /// The test-time actions' tanh outputs from the actor's outputs `out`: the outputs themselves.
+    pub(crate) fn units_of(out: &[f32], _a: usize, units: &mut [f32]) {
+        units.copy_from_slice(&out[..units.len()]);
+    }
+}
+
 impl Td3 {
     /// A learner for observations of `obs_dim` values and actions in the box `[low, high]`, with its weights
     /// drawn from `rng` (actor first, then critic; the targets start as copies).
@@ -97,14 +107,6 @@ impl Td3 {
 }
 
 impl Td3Part {
-    /// The actor's outputs per dimension of the action and their activation: the tanh action itself.
-    pub(crate) const ACTOR: (usize, OutputActivation) = (1, OutputActivation::Tanh);
-
-    /// The test-time actions' tanh outputs from the actor's outputs `out`: the outputs themselves.
-    pub(crate) fn units_of(out: &[f32], _a: usize, units: &mut [f32]) {
-        units.copy_from_slice(&out[..units.len()]);
-    }
-
     /// The actor's loss at the batch's observations, `-mean over the batch and the heads of Q(s, pi(s))` plus the
     /// behaviour cloning term with the Q-filter on its demonstrated samples (the heads' mean compares the
     /// demonstrated action with the actor's), and its gradient with respect to the actor's parameters in

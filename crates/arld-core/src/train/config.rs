@@ -1508,13 +1508,11 @@ mod tests {
         );
         let text = chosen(&["uncertainty=\"critic_variance\""]);
         assert!(!text.contains("uncertainty"), "{text}");
-        let e = error(
-            "Pendulum-v1",
-            Method::Dqfd,
-            NetKind::Bootstrap,
-            &["uncertainty=\"action_disagreement\""],
-        );
-        assert!(e.contains("does not ask the expert"), "{e}");
+        for silent in [Method::Dqn, Method::Dqfd] {
+            let sets = ["uncertainty=\"action_disagreement\""];
+            let e = error("Pendulum-v1", silent, NetKind::Bootstrap, &sets);
+            assert!(e.contains("does not ask the expert"), "{silent}: {e}");
+        }
         // `algo` wins wherever it stands: SAC's keys after or before it.
         let sac = resolve(
             "Pendulum-v1",

@@ -13,7 +13,7 @@ pub mod seeds;
 pub mod session;
 pub mod snapshot;
 
-pub use config::{Algo, ConfigInput, Method, NetKind, TdLoss, TrainConfig};
+pub use config::{Algo, BoxUncertainty, ConfigInput, Method, NetKind, TdLoss, TrainConfig};
 pub use eval::Evaluator;
 pub use log::{LogPosition, RunLog};
 pub use run::{Control, Driver, LastStep, OwnRun, PausedRun, RunBuilder, StepView};

@@ -13,7 +13,7 @@
 //! Inside a sweep, runs live at `ENV/METHOD-NET[/VARIANT]/seedN` ([`sweep_run_path`]); [`load_runs`] finds the
 //! complete runs below a directory and reads each into a [`RunRecord`] for reports.
 
-use super::config::{Algo, ConfigInput, Method, NetKind, TrainConfig};
+use super::config::{Algo, BoxUncertainty, ConfigInput, Method, NetKind, TrainConfig};
 use crate::expert::demos::DemoStep;
 pub use crate::files::write_atomic;
 use crate::query::RuleSpec;
@@ -667,15 +667,15 @@ pub struct RecordedConfig {
     pub query_rule: Option<String>,
     /// When its questions may come.
     pub asking: RecordedAsking,
-    /// What the query rule read in a box task (`critic_variance`, `action_disagreement`); `None` at the default.
-    pub uncertainty: Option<String>,
 }
 
-/// When a run's questions may come, as its `config.toml` records it: from `learning_starts` on only, and that step.
+/// When a run's questions may come, as its `config.toml` records it: from `learning_starts` on only, and that step;
+/// and what a box task's query rule read (`None`: the default, the critics' variance).
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct RecordedAsking {
     pub from_learning_starts: Option<bool>,
     pub learning_starts: Option<u64>,
+    pub uncertainty: Option<BoxUncertainty>,
 }
 
 impl RecordedConfig {
@@ -702,8 +702,8 @@ impl RecordedConfig {
                     .get("learning_starts")
                     .and_then(|v| v.as_integer())
                     .and_then(|s| u64::try_from(s).ok()),
+                uncertainty: text_of("uncertainty").and_then(|u| u.parse().ok()),
             },
-            uncertainty: text_of("uncertainty").map(str::to_string),
         }
     }
 }
@@ -1501,8 +1501,8 @@ mod tests {
                 asking: RecordedAsking {
                     from_learning_starts: Some(true),
                     learning_starts: Some(700),
+                    uncertainty: None,
                 },
-                uncertainty: None,
             };
             assert_eq!(record.config, expected);
             assert_eq!(record.t_query_study(), study, "{relative}");
