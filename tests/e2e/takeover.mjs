@@ -86,7 +86,7 @@ const breath = args.breath ? { granted: 0, refused: 0, banners: [], t: null, seg
 let stopped = null;
 let running = 0;
 // --watch: the stretches sampled while the agent acted (no prompt), and the last sample.
-const watch = args.watch ? { on: false, measured: false, steps: 0, seconds: 0, personS: 0, samples: 0, last: null, afterAt: null } : null;
+const watch = args.watch ? { on: false, measured: false, steps: 0, seconds: 0, personS: 0, samples: 0, skipped: 0, last: null, afterAt: null } : null;
 for (;;) {
   await page.waitForTimeout(5);
   const s = await state();
@@ -140,14 +140,20 @@ for (;;) {
       await page.keyboard.press("v");
       watch.on = await page.waitForFunction(() => arld.watch, null, { timeout: 2000 }).then(() => true, () => false);
     }
-    // Samples after the takeover (from 300 ms on: the status that counts the hand-back's own step comes a step later).
-    const sample = !p && watch.on && phase === "after" && s.status && Date.now() - (watch.afterAt ??= Date.now()) > 300
-      ? { at: Date.now(), step: s.status.step, personS: s.status.person_s } : null;
-    if (sample && watch.last) {
+    // Samples after the takeover (from 300 ms on: the status that counts the hand-back's own step comes a step later),
+    // while the agent acts: no prompt and no replay. A stretch between two samples counts only if no question opened
+    // in it (the run's query count and the person's answers unchanged): a question in a new episode, after the quiet
+    // steps of the hand-back's, is the person's time, which the run adds when the question closes.
+    const sample = !p && !s.replaying && watch.on && phase === "after" && s.status && Date.now() - (watch.afterAt ??= Date.now()) > 300
+      ? { at: Date.now(), step: s.status.step, personS: s.status.person_s, queries: s.status.queries, answered: s.status.answered } : null;
+    if (sample && watch.last && sample.queries === watch.last.queries && sample.answered === watch.last.answered) {
       watch.steps += sample.step - watch.last.step;
       watch.seconds += (sample.at - watch.last.at) / 1000;
       watch.personS += sample.personS - watch.last.personS;
       watch.samples++;
+      if (sample.personS - watch.last.personS > 0.05) (watch.jumps ??= []).push({ from: watch.last, to: sample });
+    } else if (sample && watch.last) {
+      watch.skipped++;
     }
     watch.last = sample;
   }
