@@ -90,9 +90,10 @@ pub fn snapshot(data: &[u8]) -> bool {
     arld::train::snapshot::read_snapshot(data, &cfg).is_ok()
 }
 
-/// The `--set` overrides of the run whose snapshot is fuzz/seeds/snapshot/'s seed.
+/// The `--set` overrides of the run whose snapshot is fuzz/seeds/snapshot/'s seed (long enough that fuzz/run.sh
+/// sees its first snapshot before the run ends and removes it: 2,000 steps take 40 ms).
 pub const SNAPSHOT_SEED_CONFIG: [&str; 4] = [
-    "train_steps=2000",
+    "train_steps=200000",
     "snapshot_every=300",
     "replay_size=400",
     "learning_starts=100",

@@ -25,7 +25,10 @@ if [[ " ${targets[*]} " == *" snapshot "* ]]; then
   ../target/release/arld train --quiet --env CartPole-v0 --method dqn --net bootstrap --seed 0 $sets \
     -o "$run/run" &
   pid=$!
-  while [ ! -e "$run/run/snapshot.json" ]; do sleep 0.05; done
+  while [ ! -e "$run/run/snapshot.json" ]; do
+    kill -0 "$pid" 2>/dev/null || { echo "error: the seed run ended before its first snapshot" >&2; exit 1; }
+    sleep 0.05
+  done
   kill -KILL "$pid"
   wait "$pid" || true
   mkdir -p seeds/snapshot
