@@ -605,15 +605,15 @@ mod tests {
                 20,
                 // The continuous part: three box tasks x six methods.
                 3 * 6 * 20,
-                // The continuous effort benchmark, per task: its rules (no risk on Pendulum-v1), the budget
-                // grid of BDQN and ADQN, and paced random at every budget.
-                4 * 20,
+                // The continuous effort benchmark, per task: its rules (no risk on Pendulum-v1) and the other
+                // uncertainty's, the budget grid of BDQN and ADQN, and paced random at every budget.
+                (4 + BOX_UNCERTAINTY_RULES.len()) * 20,
                 2 * 4 * 20,
                 4 * 20,
-                6 * 20,
+                (6 + BOX_UNCERTAINTY_RULES.len()) * 20,
                 2 * 4 * 20,
                 4 * 20,
-                6 * 20,
+                (6 + BOX_UNCERTAINTY_RULES.len()) * 20,
                 2 * 4 * 20,
                 4 * 20,
                 // The continuous held-out test: the paper's three rules and the chosen one, on its own seeds.
