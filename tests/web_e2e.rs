@@ -543,6 +543,40 @@ fn answer_lines(run: &Path) -> Vec<serde_json::Value> {
         .collect()
 }
 
+/// The person's takeovers in answers.jsonl, in order: each one's lines (those `started_by` the person, grouped by
+/// the step the takeover opened at). Every takeover but the last must have ended with its episode (the script
+/// takes over again when the episode ends too soon: tests/e2e/takeover.mjs's `early`), so every later line is of
+/// a later episode; and there are as many as the script reports.
+fn takeovers<'a>(
+    lines: &'a [serde_json::Value],
+    report: &serde_json::Value,
+) -> Vec<Vec<&'a serde_json::Value>> {
+    let mut groups: Vec<Vec<&serde_json::Value>> = Vec::new();
+    for l in lines.iter().filter(|l| l["started_by"] == "person") {
+        match groups.last_mut() {
+            Some(g) if g[0]["question_step"] == l["question_step"] => g.push(l),
+            _ => groups.push(vec![l]),
+        }
+    }
+    let early = report["takeover"]["early"].as_array().map_or(0, Vec::len);
+    assert_eq!(
+        groups.len(),
+        early + 1,
+        "takeovers logged, and reported: {report}"
+    );
+    for g in &groups[..early] {
+        let episode = g[0]["episode"].as_u64().unwrap();
+        let last = g.last().unwrap()["step"].as_u64().unwrap();
+        for l in lines.iter().filter(|l| l["step"].as_u64().unwrap() > last) {
+            assert!(
+                l["episode"].as_u64().unwrap() > episode,
+                "an early takeover's episode went on: {l}"
+            );
+        }
+    }
+    groups
+}
+
 /// Steps and budget (transitions) of [`start_realtime_cartpole`]'s run.
 const REALTIME_STEPS: u64 = 4000;
 const REALTIME_BUDGET: u64 = 60;
@@ -619,9 +653,14 @@ fn a_person_takes_over_unasked_in_real_time_and_hands_back() {
 
     // answers.jsonl: the person's steps, started by them, in one stretch from the state they took over in.
     let lines = answer_lines(&run);
-    let (person, rule): (Vec<_>, Vec<_>) = lines.iter().partition(|l| l["started_by"] == "person");
+    let rule: Vec<_> = lines
+        .iter()
+        .filter(|l| l["started_by"] != "person")
+        .collect();
     assert!(!rule.is_empty(), "no question of the rule was answered");
     assert!(rule.iter().all(|l| l["started_by"] == "rule"));
+    let all_takeovers = takeovers(&lines, &report);
+    let person = all_takeovers.last().unwrap();
     let opened = person[0]["question_step"].as_u64().unwrap();
     assert!(
         person.len() >= 5,
@@ -660,7 +699,9 @@ fn a_person_takes_over_unasked_in_real_time_and_hands_back() {
         .records()
         .map(|r| r.unwrap()[0].parse().unwrap())
         .collect();
-    assert!(!asked.contains(&opened));
+    for t in &all_takeovers {
+        assert!(!asked.contains(&t[0]["question_step"].as_u64().unwrap()));
+    }
     for l in &rule {
         assert!(asked.contains(&l["question_step"].as_u64().unwrap()));
     }
@@ -670,7 +711,11 @@ fn a_person_takes_over_unasked_in_real_time_and_hands_back() {
     assert_eq!(s["demos_queried"].as_u64(), Some(lines.len() as u64));
     assert!(lines.len() as u64 <= REALTIME_BUDGET);
     assert_eq!(s["train_steps"], REALTIME_STEPS);
-    assert_eq!(report["endScreen"]["rows"]["Takeovers"], "1", "{report}");
+    assert_eq!(
+        report["endScreen"]["rows"]["Takeovers"],
+        all_takeovers.len().to_string(),
+        "{report}"
+    );
     // Watch mode (on after the first question): while the agent acted, its steps went at most at the real-time
     // rate of 20 a second (a quarter more for the page's sampling), and none of that time was the person's (but
     // for the bookkeeping of the agent's questions that went back to it unasked meanwhile: microseconds each).
@@ -778,10 +823,8 @@ fn a_stop_while_a_person_holds_control_loses_nothing_and_resume_gives_it_back() 
     let csv_before = std::fs::read_to_string(run.join("queries.csv")).unwrap();
     let answers_before = std::fs::read_to_string(run.join("answers.jsonl")).unwrap();
     let lines_before = answer_lines(&run);
-    let person_before: Vec<_> = lines_before
-        .iter()
-        .filter(|l| l["started_by"] == "person")
-        .collect();
+    let takeovers_before = takeovers(&lines_before, &before);
+    let person_before = takeovers_before.last().unwrap();
     assert!(person_before.len() >= 6, "{before}");
     let opened = person_before[0]["question_step"].as_u64().unwrap();
     // The step the run stopped at: the one after the last logged.
@@ -815,7 +858,7 @@ fn a_stop_while_a_person_holds_control_loses_nothing_and_resume_gives_it_back() 
             Some(lines_before.len() as u64),
             "{after}"
         );
-        assert_eq!(shown["takeovers"], 1, "{after}");
+        assert_eq!(shown["takeovers"], takeovers_before.len(), "{after}");
     }
     assert_eq!(
         resumed["beforeKey"]["prompt"]["id"], resumed["prompt"]["id"],
@@ -831,9 +874,14 @@ fn a_stop_while_a_person_holds_control_loses_nothing_and_resume_gives_it_back() 
     let answers_after = std::fs::read_to_string(run.join("answers.jsonl")).unwrap();
     assert!(answers_after.starts_with(&answers_before));
     let lines = answer_lines(&run);
+    let early: usize = takeovers_before[..takeovers_before.len() - 1]
+        .iter()
+        .map(Vec::len)
+        .sum();
     let takeover: Vec<u64> = lines
         .iter()
         .filter(|l| l["started_by"] == "person")
+        .skip(early)
         .map(|l| {
             assert_eq!(
                 l["question_step"].as_u64(),
@@ -860,7 +908,11 @@ fn a_stop_while_a_person_holds_control_loses_nothing_and_resume_gives_it_back() 
     assert_eq!(s["demos_queried"].as_u64(), Some(lines.len() as u64));
     assert!(lines.len() as u64 <= REALTIME_BUDGET);
     assert_eq!(s["train_steps"], REALTIME_STEPS);
-    assert_eq!(after["endScreen"]["rows"]["Takeovers"], "1", "{after}");
+    assert_eq!(
+        after["endScreen"]["rows"]["Takeovers"],
+        takeovers_before.len().to_string(),
+        "{after}"
+    );
 }
 
 /// A person answers Pendulum-v1 (a torque in [-2, 2]) on the page in real time with each continuous control:

@@ -23,6 +23,8 @@
 // go back to it unasked, so it acts) they sample the run's status for two seconds: the report's "watch" has the steps
 // and seconds of those samples and the person's seconds that grew meanwhile (none should: watching is not
 // answering); then V again: full speed (also once no budget is left).
+// T is pressed only with the pole near upright. A takeover the episode ends before the person had what is measured
+// (the stop's N steps, or 5) is listed in takeover.early ({openedAtStep, steps}) and the person takes over again.
 // Prints one JSON line: {"takeover": {...what the page showed of it...}, "questions": N, "endScreen": {...}}.
 import { chromium } from "playwright-core";
 import fs from "node:fs";
@@ -67,6 +69,7 @@ async function holdKey(a) {
 }
 const state = () => page.evaluate(() => ({
   prompt: arld.prompt, status: arld.status, ended: arld.ended, replaying: arld.replaying,
+  theta: arld.frame && arld.frame.geometry && arld.frame.geometry.kind === "CartPole" ? arld.frame.geometry.theta : null,
   button: { hidden: document.getElementById("takeover").hidden, disabled: document.getElementById("takeover").disabled },
 }));
 const panel = () => page.evaluate(() => ({
@@ -159,6 +162,9 @@ for (;;) {
   }
   if (!p) {
     await holdKey(null);
+    // (Only with the pole near upright, as the page draws it: the takeover opens at the agent's next step, a few
+    // steps later under load, and a barely trained agent may have the pole falling by then.)
+    const calm = s.theta === null || Math.abs(s.theta) < 0.04;
     if (phase === "before" && questions >= 1 && s.status && s.status.budget - s.status.budget_used > holdSteps + 10) {
       // The agent acts: the button is offered, and T takes over from here.
       if (s.button.hidden || s.button.disabled) continue;
@@ -183,6 +189,7 @@ for (;;) {
         await page.waitForFunction(() => !arld.paused, null, { timeout: 5000 });
         continue;
       }
+      if (!calm) continue;
       takeover = { ...(takeover || {}), pressedAtStep: s.status.step, offered: await panel() };
       await page.keyboard.press("t");
       phase = "asked";
@@ -210,7 +217,7 @@ for (;;) {
   }
   if (p.takeover) {
     if (p.waits && p.agent_action !== null && p.id > lastId) {
-      if (!takeover || phase === "after") fail(`a takeover nobody asked for: ${JSON.stringify(p)}`);
+      if (phase !== "asked") fail(`a takeover nobody asked for: ${JSON.stringify(p)}`);
       // The takeover's opening prompt: the state the agent was in, with its proposal; a fresh key starts it.
       const first = cartpole(p.obs);
       Object.assign(takeover, { openedAtStep: s.status.step, obs: p.obs, agentAction: p.agent_action, stepsLeft: p.steps_left,
@@ -263,9 +270,19 @@ for (;;) {
     continue;
   }
   if (phase === "running") {
-    // The episode ended during the takeover (its segment ends there) and the agent asks: say so, go on.
-    takeover.endedByEpisode = true;
-    phase = "after";
+    // The episode ended during the takeover (its segment ends there) and the agent asks. The agent may have handed
+    // over a pole already falling (it is barely trained): if the person had too few steps for what is measured
+    // (the stop's N, or 5), that takeover counts in "early" and the person takes over again once the agent acts.
+    const needed = args.stop ? Number(args.stop) : 5;
+    if (running < needed && !(args.resumed && takeover.resumed)) {
+      takeover.early = [...(takeover.early || []), { openedAtStep: takeover.openedAtStep, steps: running }];
+      delete takeover.inProgress;
+      running = 0;
+      phase = "before";
+    } else {
+      takeover.endedByEpisode = true;
+      phase = "after";
+    }
   }
   // T was pressed while the agent was about to ask (between two of its segments): its question comes first and
   // the request is used up; T is pressed again once the agent acts.
