@@ -313,3 +313,28 @@ def test_pendulum_adqnp_pre_trains_then_asks_within_its_budget(tmp_path):
     assert len(asked) == 100
     for step in asked:
         assert np.allclose(step["action"], swing_up(step["obs"]), atol=1e-6), step
+
+
+def test_the_uncertainty_a_box_rule_reads_is_chosen_recorded_and_refused_where_it_has_no_meaning(tmp_path):
+    """`uncertainty=` chooses what ADQN's rule reads on a Box task: the critic heads' spread at the agent's action
+    (the default) or their disagreement about the best action, a probe spread in half-widths (in [0, 1]). Each run
+    records its choice in config.toml, and the two ask differently; a discrete task, a method that does not ask and
+    an unknown name are refused, naming the key."""
+    asked = {}
+    for measure in ("critic_variance", "action_disagreement"):
+        model = arld.Agent("adqn", gym.make("Pendulum-v1"), expert=swing_up, seed=4, uncertainty=measure, budget=150,
+                           learning_starts=300, train_steps=1500, eval_period=500, hidden=[32, 32], batch_size=32,
+                           **TD3)
+        model.learn(1500, log_dir=tmp_path / measure)
+        config = (tmp_path / measure / "config.toml").read_text()
+        assert f'uncertainty = "{measure}"' in config, config
+        asked[measure] = [(q["step"], q["uncertainty"]) for q in model.queries]
+        assert asked[measure], f"no query with {measure}"
+    assert all(0.0 <= u <= 1.0 for _, u in asked["action_disagreement"]), asked["action_disagreement"]
+    assert asked["action_disagreement"] != asked["critic_variance"]
+    with pytest.raises(ValueError, match="uncertainty"):
+        arld.Agent("adqn", gym.make("CartPole-v1"), expert=lambda obs: 0, uncertainty="action_disagreement")
+    with pytest.raises(ValueError, match="uncertainty"):
+        arld.Agent("dqfd", gym.make("Pendulum-v1"), expert=swing_up, uncertainty="action_disagreement")
+    with pytest.raises(ValueError, match="critic_variance"):
+        arld.Agent("adqn", gym.make("Pendulum-v1"), expert=swing_up, uncertainty="entropy")
